@@ -1,0 +1,294 @@
+"""Reading clips: a video file (OpenCV), a folder of images, or a numpy array.
+
+Frames come out as ``(T, H, W, C)`` uint8 in RGB order (``C = 3``) or grey (``C = 1``).
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..tiledb import SourceInfo
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
+
+Progress = Callable[[int, int | None], None]
+
+
+class ClipError(ValueError):
+    """A clip cannot be read or does not hold usable frames."""
+
+
+@dataclass
+class Clip:
+    """Decoded frames plus where they came from."""
+
+    frames: np.ndarray          # (T, H, W, C) uint8
+    fps: float
+    filename: str
+    sha256: str
+    frame_start: int = 0
+    frame_step: int = 1
+    crop: tuple[int, ...] = ()
+    source_size: tuple[int, ...] = ()
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.frames.shape[0])
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(self.frames.shape[1:])  # type: ignore[return-value]
+
+    def source_info(self) -> SourceInfo:
+        t, h, w, c = self.frames.shape
+        return SourceInfo(filename=self.filename, sha256=self.sha256, fps=self.fps, width=w, height=h,
+                          channels=c, n_frames=t, frame_start=self.frame_start, frame_step=self.frame_step,
+                          crop=self.crop, source_size=self.source_size)
+
+
+def load_clip(source: str | os.PathLike | np.ndarray, *, start: int = 0, stop: int | None = None,
+              step: int = 1, crop: Sequence[int] | None = None, size: Sequence[int] | None = None,
+              color: bool = True, fps: float | None = None, isolate: bool = False,
+              progress: Progress | None = None) -> Clip:
+    """Read a clip and return its frames as a :class:`Clip`.
+
+    Parameters
+    ----------
+    source : path or ndarray
+        A video file OpenCV can decode, a folder of images (sorted by name), or an array
+        ``(T, H, W)`` / ``(T, H, W, 1)`` / ``(T, H, W, 3)`` (uint8, or floats on 0..255; RGB order).
+    start, stop, step : int
+        Frame range, as in ``range(start, stop, step)`` over the source frames.
+    crop : (x, y, w, h), optional
+        Region kept, in source pixels, applied before ``size``.
+    size : (w, h), optional
+        Resize every frame to this size (area interpolation).
+    color : bool
+        RGB frames when true, single-channel grey when false.
+    fps : float, optional
+        Frame rate to record (default: the file's, or 25 for images and arrays).
+    isolate : bool
+        Decode a video file in a child process, so that a decoder crash on a hostile file
+        becomes a :class:`ClipError` instead of taking down the caller.
+    progress : callable(done, total), optional
+        Called as frames are decoded.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> clip = load_clip(np.zeros((10, 32, 48, 3), np.uint8), size=(24, 16))
+    >>> clip.frames.shape
+    (10, 16, 24, 3)
+    """
+    start = _nonneg_int("start", start)
+    step = _nonneg_int("step", step)
+    if step < 1:
+        raise ValueError(f"step must be at least 1, not {step}")
+    if stop is not None:
+        stop = _nonneg_int("stop", stop)
+        if stop <= start:
+            raise ValueError(f"stop ({stop}) must be greater than start ({start})")
+    crop_t = _tuple4("crop", crop) if crop is not None else None
+    size_t = _size("size", size) if size is not None else None
+
+    if isinstance(source, np.ndarray):
+        frames = _from_array(source)[start:stop:step]
+        name, digest, src_fps = "<array>", hashlib.sha256(np.ascontiguousarray(source).data).hexdigest(), 25.0
+    else:
+        path = os.fspath(source)
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"{path}: no such clip file or folder")
+        name = os.path.basename(os.path.normpath(path))
+        if os.path.isdir(path):
+            frames, digest = _from_folder(path, start, stop, step, progress)
+            src_fps = 25.0
+        elif isolate:
+            frames, src_fps, digest = _decode_isolated(path, start, stop, step)
+        else:
+            frames, src_fps, digest = _from_video(path, start, stop, step, progress)
+    if frames.shape[0] == 0:
+        raise ClipError(f"{name}: no frames in range start={start} stop={stop} step={step}")
+    if frames.shape[0] < 2:
+        raise ClipError(f"{name}: only one frame in range; a dynamic texture needs at least 2")
+    source_size = (frames.shape[2], frames.shape[1])
+    frames = _crop_resize_color(frames, crop_t, size_t, color, name)
+    return Clip(frames=frames, fps=float(fps if fps is not None else src_fps), filename=name, sha256=digest,
+                frame_start=start, frame_step=step, crop=crop_t or (), source_size=source_size)
+
+
+# -- sources ----------------------------------------------------------------------
+def _from_array(arr: np.ndarray) -> np.ndarray:
+    if arr.ndim == 3:
+        arr = arr[..., None]
+    if arr.ndim != 4 or arr.shape[-1] not in (1, 3):
+        raise ClipError(f"clip array must be (T, H, W), (T, H, W, 1) or (T, H, W, 3), not {arr.shape}")
+    if arr.dtype == np.uint8:
+        return arr
+    if arr.dtype.kind not in "fiu":
+        raise ClipError(f"clip array dtype {arr.dtype} is not numeric")
+    if arr.size and (not np.isfinite(arr).all() or arr.min() < 0 or arr.max() > 255):
+        raise ClipError("clip array values must be finite and within 0..255")
+    return np.rint(arr).astype(np.uint8)
+
+
+def _file_digest(path: str, h: "hashlib._Hash | None" = None) -> "hashlib._Hash":
+    h = h or hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h
+
+
+def _from_folder(path: str, start: int, stop: int | None, step: int, progress: Progress | None):
+    import cv2
+    names = sorted(n for n in os.listdir(path) if n.lower().endswith(IMAGE_SUFFIXES))
+    if not names:
+        raise ClipError(f"{path}: folder holds no images ({', '.join(IMAGE_SUFFIXES)})")
+    names = names[start:stop:step]
+    h = hashlib.sha256()
+    frames = []
+    for i, n in enumerate(names):
+        full = os.path.join(path, n)
+        img = cv2.imread(full, cv2.IMREAD_COLOR)
+        if img is None:
+            raise ClipError(f"{full}: cannot decode image")
+        if frames and img.shape != frames[0].shape:
+            raise ClipError(f"{full}: size {img.shape[1]}x{img.shape[0]} differs from the first image's "
+                            f"{frames[0].shape[1]}x{frames[0].shape[0]}")
+        _file_digest(full, h)
+        frames.append(cv2.cvtColor(img, cv2.COLOR_BGR2RGB))
+        if progress:
+            progress(i + 1, len(names))
+    return np.stack(frames) if frames else np.zeros((0, 1, 1, 3), np.uint8), h.hexdigest()
+
+
+def _from_video(path: str, start: int, stop: int | None, step: int, progress: Progress | None):
+    import cv2
+    if os.path.getsize(path) == 0:
+        raise ClipError(f"{path}: file is empty")
+    cap = cv2.VideoCapture(path)
+    try:
+        if not cap.isOpened():
+            raise ClipError(f"{path}: OpenCV cannot open it as a video")
+        fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        if not np.isfinite(fps) or fps <= 0 or fps > 1000:
+            fps = 25.0
+        total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0) or None
+        want = None if total is None else len(range(start, total if stop is None else min(stop, total), step))
+        frames = []
+        index = 0
+        while stop is None or index < stop:
+            ok, img = cap.read()
+            if not ok or img is None:
+                break
+            if index >= start and (index - start) % step == 0:
+                if img.ndim == 2:
+                    img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+                frames.append(cv2.cvtColor(img, cv2.COLOR_BGR2RGB))
+                if progress:
+                    progress(len(frames), want)
+            index += 1
+    finally:
+        cap.release()
+    if index == 0:
+        raise ClipError(f"{path}: no frame could be decoded")
+    if frames and any(f.shape != frames[0].shape for f in frames):
+        raise ClipError(f"{path}: frame size changes within the clip")
+    out = np.stack(frames) if frames else np.zeros((0, 1, 1, 3), np.uint8)
+    return out, fps, _file_digest(path).hexdigest()
+
+
+def _decode_worker(path: str, start: int, stop: int | None, step: int, out_npy: str) -> None:
+    frames, fps, digest = _from_video(path, start, stop, step, None)
+    np.save(out_npy, frames)
+    with open(out_npy + ".meta", "w") as f:
+        f.write(f"{fps!r}\n{digest}\n")
+
+
+def _decode_isolated(path: str, start: int, stop: int | None, step: int):
+    import multiprocessing as mp
+    ctx = mp.get_context("spawn")
+    with tempfile.TemporaryDirectory(prefix="dynatex-decode-") as tmp:
+        out = os.path.join(tmp, "frames.npy")
+        q = ctx.Queue()
+        proc = ctx.Process(target=_isolated_entry, args=(q, path, start, stop, step, out), daemon=True)
+        proc.start()
+        proc.join()
+        if proc.exitcode != 0:
+            err = q.get(timeout=1) if not q.empty() else None
+            if err is not None:
+                kind, msg = err
+                raise (FileNotFoundError if kind == "FileNotFoundError" else ClipError)(msg)
+            raise ClipError(f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
+                            "re-encode the clip (for example to FFV1 or H.264) and try again")
+        frames = np.load(out)
+        with open(out + ".meta") as f:
+            fps_s, digest = f.read().split("\n")[:2]
+    return frames, float(fps_s), digest
+
+
+def _isolated_entry(q, path, start, stop, step, out) -> None:
+    try:
+        _decode_worker(path, start, stop, step, out)
+    except Exception as exc:  # reported to the parent, which re-raises it
+        q.put((type(exc).__name__, str(exc)))
+        q.close()
+        q.join_thread()
+        raise SystemExit(3)
+
+
+# -- geometry -----------------------------------------------------------------------
+def _crop_resize_color(frames: np.ndarray, crop, size, color: bool, name: str) -> np.ndarray:
+    t, h, w, c = frames.shape
+    if crop is not None:
+        x, y, cw, ch = crop
+        if cw < 1 or ch < 1 or x + cw > w or y + ch > h:
+            raise ValueError(f"crop {crop} does not fit the {w}x{h} frames of {name}")
+        frames = frames[:, y:y + ch, x:x + cw]
+    if size is not None and (frames.shape[2], frames.shape[1]) != tuple(size):
+        import cv2
+        out = np.empty((t, size[1], size[0], c), np.uint8)
+        for i in range(t):
+            r = cv2.resize(frames[i], tuple(size), interpolation=cv2.INTER_AREA)
+            out[i] = r.reshape(out.shape[1:])
+        frames = out
+    if color and frames.shape[-1] == 1:
+        frames = np.repeat(frames, 3, axis=-1)
+    elif not color and frames.shape[-1] == 3:
+        import cv2
+        grey = np.empty(frames.shape[:3] + (1,), np.uint8)
+        for i in range(t):
+            grey[i, ..., 0] = cv2.cvtColor(np.ascontiguousarray(frames[i]), cv2.COLOR_RGB2GRAY)
+        frames = grey
+    return np.ascontiguousarray(frames)
+
+
+def _nonneg_int(name: str, v) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+        raise ValueError(f"{name} must be a non-negative integer, not {v!r}")
+    return int(v)
+
+
+def _tuple4(name: str, v) -> tuple[int, int, int, int]:
+    try:
+        t = tuple(int(x) for x in v)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be four integers (x, y, w, h), not {v!r}") from None
+    if len(t) != 4 or min(t) < 0:
+        raise ValueError(f"{name} must be four non-negative integers (x, y, w, h), not {v!r}")
+    return t  # type: ignore[return-value]
+
+
+def _size(name: str, v) -> tuple[int, int]:
+    try:
+        t = tuple(int(x) for x in v)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be (width, height), not {v!r}") from None
+    if len(t) != 2 or min(t) < 1 or max(t) > 16384:
+        raise ValueError(f"{name} must be (width, height) with each in 1..16384, not {v!r}")
+    return t  # type: ignore[return-value]

@@ -1,0 +1,139 @@
+"""What every player mode shares: opening a texture, the frame contract, state, backends."""
+from __future__ import annotations
+
+import os
+from typing import Any, ClassVar, Iterator
+
+import numpy as np
+
+from ..tiledb import Texture, TileDB
+
+BACKENDS = ("opencl", "numpy")
+
+
+class Player:
+    """Base class of the player modes.
+
+    A player opens one texture of a database, builds and warms its kernels in the
+    constructor and then produces ``(H, W, 3)`` uint8 frames with :meth:`next_frame`.
+    Controls are plain attributes checked on assignment; a change takes effect on the
+    next frame. :meth:`get_state` / :meth:`set_state` save and restore everything that
+    decides future frames (position, controls, random generator).
+
+    Subclasses set ``mode``, implement ``_render(out)`` and ``_get_state``/``_set_state``.
+    """
+
+    mode: ClassVar[str] = ""
+
+    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
+                 backend: str = "opencl", device: str | None = None) -> None:
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, not {backend!r}")
+        self.backend = backend
+        self._own_db = not isinstance(db, TileDB)
+        self.db = TileDB(db) if self._own_db else db
+        try:
+            self.texture: Texture = self.db.texture(texture)
+        except BaseException:
+            self.close()
+            raise
+        self.queue = None
+        self.ctx = None
+        if backend == "opencl":
+            from . import opencl
+            import pyopencl as cl
+            self.ctx = opencl.get_context(device)
+            self.queue = cl.CommandQueue(self.ctx)
+        self.frame_index = 0
+
+    # -- frame contract --------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(height, width, 3)`` of the frames this player produces."""
+        raise NotImplementedError
+
+    def next_frame(self, out: np.ndarray | None = None) -> np.ndarray:
+        """Produce the next frame as ``(H, W, 3)`` uint8, into ``out`` when given."""
+        if out is None:
+            out = np.empty(self.shape, np.uint8)
+        else:
+            check_out(out, self.shape)
+        self._render(out)
+        self.frame_index += 1
+        return out
+
+    def frames(self, count: int) -> Iterator[np.ndarray]:
+        """Yield ``count`` new frames (each a fresh array)."""
+        count = check_int("count", count, 0)
+        for _ in range(count):
+            yield self.next_frame()
+
+    def _render(self, out: np.ndarray) -> None:
+        raise NotImplementedError
+
+    # -- state -----------------------------------------------------------------
+    def get_state(self) -> dict[str, Any]:
+        """Everything that decides future frames, as plain Python and numpy values."""
+        state = self._get_state()
+        state["mode"] = self.mode
+        state["texture"] = self.texture.name
+        state["frame_index"] = self.frame_index
+        return state
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore a state from :meth:`get_state` of a player of the same mode and texture."""
+        if not isinstance(state, dict) or state.get("mode") != self.mode:
+            raise ValueError(f"state must come from a {self.mode!r} player")
+        if state.get("texture") != self.texture.name:
+            raise ValueError(f"state is for texture {state.get('texture')!r}, not {self.texture.name!r}")
+        self._set_state(state)
+        self.frame_index = int(state["frame_index"])
+
+    def _get_state(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def _set_state(self, state: dict[str, Any]) -> None:
+        raise NotImplementedError
+
+    # -- lifetime ----------------------------------------------------------------
+    def close(self) -> None:
+        if self.queue is not None:
+            self.queue.finish()
+        if getattr(self, "_own_db", False) and getattr(self, "db", None) is not None:
+            self.db.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def check_out(out: Any, shape: tuple[int, ...]) -> None:
+    if not isinstance(out, np.ndarray):
+        raise TypeError(f"out must be a numpy array, not {type(out).__name__}")
+    if out.dtype != np.uint8 or out.shape != tuple(shape):
+        raise ValueError(f"out must be uint8 with shape {tuple(shape)}, got {out.dtype} {out.shape}")
+    if not out.flags.c_contiguous or not out.flags.writeable:
+        raise ValueError("out must be C-contiguous and writeable")
+
+
+def check_float(name: str, value: Any, lo: float | None = None, hi: float | None = None) -> float:
+    """``value`` as a finite float in ``[lo, hi]``, else a ValueError naming ``name``."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a number, not {value!r}") from None
+    if not np.isfinite(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
+        rng = f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
+        raise ValueError(f"{name} must be a finite number in {rng}, not {value!r}")
+    return v
+
+
+def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, not {value!r}")
+    v = int(value)
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise ValueError(f"{name} must be in [{lo}, {'inf' if hi is None else hi}], not {v}")
+    return v

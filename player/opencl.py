@@ -1,0 +1,182 @@
+"""OpenCL plumbing shared by every player: device choice, one context per device,
+programs built once from ``player/kernels/*.cl`` and kernels fetched once.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import warnings
+from importlib import resources
+from typing import Mapping
+
+import numpy as np
+
+try:
+    import pyopencl as cl
+except ImportError as _exc:  # pragma: no cover - pyopencl is a hard dependency
+    cl = None
+    _IMPORT_ERROR: Exception | None = _exc
+else:
+    _IMPORT_ERROR = None
+
+log = logging.getLogger(__name__)
+
+_FIX = "install an OpenCL platform with `pip install 'pyopencl[pocl]'`, or pass backend='numpy'"
+
+
+class OpenCLUnavailableError(RuntimeError):
+    """No usable OpenCL platform or device."""
+
+
+class KernelBuildError(RuntimeError):
+    """An OpenCL program failed to build; the message carries the compiler log."""
+
+
+_lock = threading.Lock()
+_contexts: dict[str, "cl.Context"] = {}
+_programs: dict[tuple, "Program"] = {}
+_kernel_fetches = 0
+
+
+def list_devices() -> list[tuple[str, str]]:
+    """``(platform name, device name)`` of every OpenCL device, in ``PYOPENCL_CTX`` index order."""
+    _require_pyopencl()
+    out = []
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:
+        return out
+    for p in platforms:
+        try:
+            devices = p.get_devices()
+        except cl.Error:
+            continue
+        out.extend((p.name, d.name) for d in devices)
+    return out
+
+
+def get_context(device: str | None = None) -> "cl.Context":
+    """The shared context for ``device``.
+
+    ``device`` is ``None`` (``PYOPENCL_CTX`` if set, else PoCL, else the first device),
+    ``"pocl"``, an index ``"P:D"`` (platform, device) or a substring of a device or platform name.
+    """
+    _require_pyopencl()
+    key = device if device is not None else "env:" + os.environ.get("PYOPENCL_CTX", "")
+    with _lock:
+        ctx = _contexts.get(key)
+        if ctx is None:
+            ctx = cl.Context([_pick_device(device)])
+            _contexts[key] = ctx
+        return ctx
+
+
+def _pick_device(device: str | None) -> "cl.Device":
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error as exc:
+        raise OpenCLUnavailableError(f"no OpenCL platform found ({exc}); {_FIX}") from None
+    pairs = []
+    for p in platforms:
+        try:
+            pairs.extend((p, d) for d in p.get_devices())
+        except cl.Error:
+            continue
+    if not pairs:
+        raise OpenCLUnavailableError(f"no OpenCL device found; {_FIX}")
+    if device is None:
+        env = os.environ.get("PYOPENCL_CTX")
+        if env:
+            return _match(pairs, platforms, env, "PYOPENCL_CTX")
+        for p, d in pairs:
+            if "portable computing language" in p.name.lower() or "pocl" in p.vendor.lower():
+                return d
+        return pairs[0][1]
+    return _match(pairs, platforms, device, "device")
+
+
+def _match(pairs, platforms, spec: str, what: str) -> "cl.Device":
+    spec = spec.strip()
+    if spec.lower() == "pocl":
+        spec = "portable computing language"
+    parts = spec.split(":")
+    if all(p.isdigit() for p in parts if p) and parts[0]:
+        try:
+            plat = platforms[int(parts[0])]
+            devs = plat.get_devices()
+            return devs[int(parts[1]) if len(parts) > 1 and parts[1] else 0]
+        except (IndexError, cl.Error):
+            raise OpenCLUnavailableError(f"{what}={spec!r}: no such OpenCL platform/device index") from None
+    low = spec.lower()
+    for p, d in pairs:
+        if low in d.name.lower() or low in p.name.lower():
+            return d
+    names = "; ".join(f"{p.name}: {d.name}" for p, d in pairs)
+    raise OpenCLUnavailableError(f"{what}={spec!r} matches no OpenCL device (available: {names})")
+
+
+def _require_pyopencl() -> None:
+    if cl is None:
+        raise OpenCLUnavailableError(f"pyopencl cannot be imported ({_IMPORT_ERROR}); {_FIX}")
+
+
+def device_shares_host_memory(ctx: "cl.Context") -> bool:
+    dev = ctx.devices[0]
+    try:
+        return bool(dev.host_unified_memory)
+    except cl.Error:
+        return dev.type & cl.device_type.CPU != 0
+
+
+class Program:
+    """A built ``.cl`` file; :meth:`kernel` fetches each kernel once and reuses it."""
+
+    def __init__(self, ctx: "cl.Context", filename: str, defines: Mapping[str, object]) -> None:
+        self.filename = filename
+        self.options = [f"-D{k}={_define(v)}" for k, v in sorted(defines.items())]
+        source = resources.files("dynatex.player.kernels").joinpath(filename).read_text()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                self.program = cl.Program(ctx, source).build(options=self.options)
+            except cl.RuntimeError as exc:
+                logtext = str(exc).strip()
+                raise KernelBuildError(
+                    f"building player/kernels/{filename} with {' '.join(self.options)} failed:\n{logtext}") from None
+        for w in caught:
+            log.debug("OpenCL compiler output for %s: %s", filename, w.message)
+        self._kernels: dict[str, cl.Kernel] = {}
+        self.builds = 1
+
+    def kernel(self, name: str) -> "cl.Kernel":
+        k = self._kernels.get(name)
+        if k is None:
+            global _kernel_fetches
+            k = self._kernels[name] = getattr(self.program, name)
+            _kernel_fetches += 1
+        return k
+
+
+def build_program(ctx: "cl.Context", filename: str, defines: Mapping[str, object] | None = None) -> Program:
+    """The program ``filename`` built for ``ctx`` with ``defines``; built only the first time."""
+    defines = dict(defines or {})
+    key = (ctx.int_ptr, filename, tuple(sorted((k, _define(v)) for k, v in defines.items())))
+    with _lock:
+        prog = _programs.get(key)
+        if prog is None:
+            prog = _programs[key] = Program(ctx, filename, defines)
+        return prog
+
+
+def build_count() -> tuple[int, int]:
+    """``(programs built, kernels fetched)`` in this process; tests use it to prove reuse."""
+    return len(_programs), _kernel_fetches
+
+
+def _define(v: object) -> str:
+    if isinstance(v, bool):
+        return "1" if v else "0"
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v)) + "f"
+    return str(v)

@@ -1,0 +1,124 @@
+"""Validation helpers shared by the readers: every failure names the file and object."""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import h5py
+import numpy as np
+
+from .errors import TileDBFormatError
+from .schema import MAX_ELEMENTS
+
+_KINDS = {"f": "floating point", "i": "signed integer", "u": "unsigned integer",
+          "iu": "integer", "S": "string"}
+
+
+class Checker:
+    """Reads objects out of an open HDF5 file and raises :class:`TileDBFormatError` on any defect."""
+
+    def __init__(self, filename: str) -> None:
+        self.filename = filename
+
+    def fail(self, objpath: str, problem: str) -> None:
+        raise TileDBFormatError(problem, filename=self.filename, objpath=objpath)
+
+    def group(self, parent: h5py.Group, name: str) -> h5py.Group:
+        path = _join(parent.name, name)
+        try:
+            obj = parent.get(name)
+        except Exception as exc:  # h5py raises KeyError/OSError/RuntimeError on damaged links
+            self.fail(path, f"cannot be read ({exc})")
+        if obj is None:
+            self.fail(path, "missing group")
+        if not isinstance(obj, h5py.Group):
+            self.fail(path, "expected a group")
+        return obj
+
+    def dataset(self, parent: h5py.Group, name: str, *, kind: str, shape: Sequence[int | None],
+                finite: bool = True, read: bool = True) -> Any:
+        """Check dtype kind and shape (``None`` = any length), then read the array.
+
+        With ``read=False`` the h5py dataset itself is returned (for lazy, chunked access).
+        """
+        path = _join(parent.name, name)
+        try:
+            obj = parent.get(name)
+        except Exception as exc:
+            self.fail(path, f"cannot be read ({exc})")
+        if obj is None:
+            self.fail(path, "missing dataset")
+        if not isinstance(obj, h5py.Dataset):
+            self.fail(path, "expected a dataset")
+        try:
+            dt = obj.dtype
+            dshape = obj.shape
+        except Exception as exc:
+            self.fail(path, f"cannot be read ({exc})")
+        if dt.kind not in kind:
+            self.fail(path, f"dtype {dt} is not {_KINDS.get(kind, kind)}")
+        if dshape is None or len(dshape) != len(shape):
+            self.fail(path, f"has shape {dshape}, expected {len(shape)} dimensions")
+        for got, want in zip(dshape, shape):
+            if want is not None and got != want:
+                self.fail(path, f"has shape {dshape}, expected {tuple(shape)}")
+        if int(np.prod(dshape, dtype=np.int64)) > MAX_ELEMENTS:
+            self.fail(path, f"declares an implausible shape {dshape}")
+        if not read:
+            return obj
+        try:
+            arr = obj[()]
+        except Exception as exc:
+            self.fail(path, f"data cannot be read, the file may be truncated or corrupt ({exc})")
+        if finite and arr.dtype.kind == "f" and not np.isfinite(arr).all():
+            self.fail(path, "contains NaN or infinite values")
+        return arr
+
+    def attr(self, obj: h5py.HLObject, name: str, kind: type, default: Any = ...) -> Any:
+        """Read attribute ``name`` as ``kind`` (int, float, str, tuple)."""
+        path = f"{obj.name}@{name}"
+        try:
+            present = name in obj.attrs
+            value = obj.attrs[name] if present else None
+        except Exception as exc:
+            self.fail(path, f"cannot be read ({exc})")
+        if not present:
+            if default is ...:
+                self.fail(path, "missing attribute")
+            return default
+        try:
+            if kind is str:
+                if isinstance(value, bytes):
+                    value = value.decode("utf-8")
+                if not isinstance(value, str):
+                    raise TypeError(type(value).__name__)
+                return value
+            if kind is tuple:
+                return tuple(np.asarray(value).ravel().tolist())
+            arr = np.asarray(value)
+            if arr.ndim != 0:
+                raise TypeError(f"expected a scalar, got shape {arr.shape}")
+            if kind is int:
+                if arr.dtype.kind not in "iub":
+                    raise TypeError(f"expected an integer, got {arr.dtype}")
+                return int(arr)
+            if kind is float:
+                if arr.dtype.kind not in "iuf":
+                    raise TypeError(f"expected a number, got {arr.dtype}")
+                out = float(arr)
+                if not np.isfinite(out):
+                    raise ValueError("not finite")
+                return out
+            if kind is bool:
+                return bool(arr)
+        except (TypeError, ValueError, UnicodeDecodeError) as exc:
+            self.fail(path, f"has an invalid value ({exc})")
+        raise TypeError(f"unsupported attribute kind {kind!r}")
+
+    def index_range(self, path: str, arr: np.ndarray, stop: int) -> None:
+        """Every integer in ``arr`` must lie in ``[0, stop)``."""
+        if arr.size and (arr.min() < 0 or arr.max() >= stop):
+            self.fail(path, f"holds indices outside [0, {stop})")
+
+
+def _join(parent: str, name: str) -> str:
+    return parent.rstrip("/") + "/" + name

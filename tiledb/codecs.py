@@ -1,0 +1,14 @@
+"""Which module reads and writes each method group.
+
+A codec module has ``write(group, model)`` and ``read(group, check, source) -> model``;
+``read`` validates everything it returns.
+"""
+from __future__ import annotations
+
+from types import ModuleType
+
+from . import lds, schema
+
+CODECS: dict[str, ModuleType] = {
+    schema.METHOD_LDS: lds,
+}

@@ -1,0 +1,181 @@
+"""Reading a tile database: :func:`open_db` validates on open and hands out textures."""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import h5py
+
+from . import frames as _frames
+from . import schema
+from . import source as _source
+from ._check import Checker
+from .codecs import CODECS
+from .errors import (MethodNotFoundError, TextureNotFoundError, TileDBFormatError,
+                     TileDBNotFoundError, TileDBVersionError)
+from .frames import FrameStore
+from .source import SourceInfo
+
+
+class Texture:
+    """One named texture of an open database: its source description and method data."""
+
+    def __init__(self, db: TileDB, name: str, group: h5py.Group) -> None:
+        self._db = db
+        self.name = name
+        self._group = group
+        check = db._check
+        self.source: SourceInfo = _source.read(check.group(group, schema.SOURCE), check)
+        self.methods: tuple[str, ...] = tuple(m for m in CODECS if m in group)
+
+    def __repr__(self) -> str:
+        s = self.source
+        return (f"<Texture {self.name!r} {s.width}x{s.height}x{s.channels} "
+                f"{s.n_frames} frames, methods={list(self.methods)}>")
+
+    @property
+    def objpath(self) -> str:
+        return self._group.name
+
+    def has(self, method: str) -> bool:
+        return method in self.methods
+
+    def read(self, method: str) -> Any:
+        """Read and validate the model stored for ``method`` (for example ``"lds"``)."""
+        if method not in CODECS:
+            raise ValueError(f"method must be one of {sorted(CODECS)}, not {method!r}")
+        if method not in self.methods:
+            raise MethodNotFoundError(
+                f"texture {self.name!r} has no {method!r} data (it has: {', '.join(self.methods) or 'none'}); "
+                f"run `dynatex analyze --methods {method}`",
+                filename=self._db.filename, objpath=self._group.name)
+        check = self._db._check
+        return CODECS[method].read(check.group(self._group, method), check, self.source)
+
+    @property
+    def has_frames(self) -> bool:
+        return schema.FRAMES in self._group
+
+    def frames(self) -> FrameStore:
+        """The stored source frames, read lazily."""
+        if not self.has_frames:
+            raise MethodNotFoundError(f"texture {self.name!r} stores no frames",
+                                      filename=self._db.filename, objpath=self._group.name)
+        return _frames.read(self._group, schema.FRAMES, self._db._check, self.source)
+
+
+class TileDB:
+    """A read-only, validated tile database. Use :func:`open_db` or the constructor.
+
+    Examples
+    --------
+    >>> from dynatex.tiledb import open_db
+    >>> with open_db("water.h5") as db:            # doctest: +SKIP
+    ...     model = db.texture("water").read("lds")
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.filename = os.fspath(path)
+        self._check = Checker(self.filename)
+        if not os.path.exists(self.filename):
+            raise TileDBNotFoundError("no such database file", filename=self.filename)
+        if os.path.isdir(self.filename):
+            raise TileDBFormatError("is a folder, not a database file", filename=self.filename)
+        try:
+            self._file = h5py.File(self.filename, "r")
+        except OSError as exc:
+            raise TileDBFormatError(f"not a readable HDF5 file, it may be truncated or corrupt ({_short(exc)})",
+                                    filename=self.filename) from None
+        try:
+            self._validate_root()
+            self._textures: dict[str, Texture] = {}
+            group = self._check.group(self._file, schema.TEXTURES)
+            try:
+                names = sorted(group.keys())
+            except Exception as exc:
+                self._check.fail(group.name, f"cannot be listed ({_short(exc)})")
+            for name in names:
+                if not schema.TEXTURE_NAME_RE.match(name):
+                    self._check.fail(f"{group.name}/{name}", "invalid texture name")
+                self._textures[name] = Texture(self, name, self._check.group(group, name))
+        except BaseException:
+            self._file.close()
+            raise
+
+    def _validate_root(self) -> None:
+        f = self._file
+        fmt = self._check.attr(f, schema.ATTR_FORMAT, str, None)
+        if fmt != schema.FORMAT_NAME:
+            raise TileDBFormatError(f"not a dynatex tile database (format attribute is {fmt!r})",
+                                    filename=self.filename, objpath="/")
+        version = self._check.attr(f, schema.ATTR_VERSION, tuple)
+        if len(version) != 2:
+            self._check.fail("/@" + schema.ATTR_VERSION, f"expected (major, minor), got {version}")
+        self.version = (int(version[0]), int(version[1]))
+        if self.version[0] != schema.FORMAT_VERSION[0]:
+            raise TileDBVersionError(
+                f"format version {self.version[0]}.{self.version[1]} is not supported by this dynatex "
+                f"(it reads major version {schema.FORMAT_VERSION[0]}); upgrade dynatex or re-run the analysis",
+                filename=self.filename, objpath="/")
+
+    # -- mapping-like access -------------------------------------------------
+    @property
+    def textures(self) -> tuple[str, ...]:
+        return tuple(self._textures)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._textures
+
+    def __iter__(self):
+        return iter(self._textures.values())
+
+    def __len__(self) -> int:
+        return len(self._textures)
+
+    def texture(self, name: str | None = None) -> Texture:
+        """The texture called ``name``; ``None`` picks the only one (an error when there are several)."""
+        if name is None:
+            if len(self._textures) == 1:
+                return next(iter(self._textures.values()))
+            if not self._textures:
+                raise TextureNotFoundError("holds no textures", filename=self.filename)
+            raise TextureNotFoundError(f"holds several textures ({', '.join(self._textures)}); name one",
+                                       filename=self.filename)
+        try:
+            return self._textures[name]
+        except KeyError:
+            raise TextureNotFoundError(
+                f"no texture named {name!r} (available: {', '.join(self._textures) or 'none'})",
+                filename=self.filename, objpath=f"/{schema.TEXTURES}/{name}") from None
+
+    def validate(self) -> None:
+        """Read and validate every method and frame store of every texture (open checks only the structure)."""
+        for tex in self:
+            for method in tex.methods:
+                tex.read(method)
+            if tex.has_frames:
+                store = tex.frames()
+                if len(store):
+                    store[len(store) - 1]
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> TileDB:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<TileDB {self.filename!r} v{self.version[0]}.{self.version[1]} textures={list(self._textures)}>"
+
+
+def open_db(path: str | os.PathLike) -> TileDB:
+    """Open and validate a tile database for reading."""
+    return TileDB(path)
+
+
+def _short(exc: BaseException) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
