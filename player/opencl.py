@@ -89,11 +89,39 @@ def _pick_device(device: str | None) -> "cl.Device":
         env = os.environ.get("PYOPENCL_CTX")
         if env:
             return _match(pairs, platforms, env, "PYOPENCL_CTX")
-        for p, d in pairs:
-            if "portable computing language" in p.name.lower() or "pocl" in p.vendor.lower():
+        pocl = [(p, d) for p, d in pairs if _is_pocl(p)]
+        others = [(p, d) for p, d in pairs if not _is_pocl(p)]
+        failures = []
+        for p, d in pocl + others:
+            err = _probe_build(d)
+            if err is None:
                 return d
-        return pairs[0][1]
+            failures.append(f"{p.name} {p.version.split()[-1] if p.version else ''} / {d.name}: {err}")
+        raise OpenCLUnavailableError(
+            "no OpenCL device here can compile kernels (" + "; ".join(failures) + "). "
+            "PoCL's LLVM may not know this CPU: run ./install.sh (it adds the system PoCL, "
+            "`apt-get install pocl-opencl-icd`), or pass backend='numpy'")
     return _match(pairs, platforms, device, "device")
+
+
+def _is_pocl(platform: "cl.Platform") -> bool:
+    return "portable computing language" in platform.name.lower() or "pocl" in platform.vendor.lower()
+
+
+_PROBE_SOURCE = "__kernel void probe(__global float *a) { a[get_global_id(0)] *= 2.0f; }"
+
+
+def _probe_build(device: "cl.Device") -> str | None:
+    """None when ``device`` compiles a trivial kernel, else the first line of the failure."""
+    try:
+        ctx = cl.Context([device])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            cl.Program(ctx, _PROBE_SOURCE).build()
+    except cl.Error as exc:
+        lines = [ln.strip() for ln in str(exc).splitlines() if "error" in ln.lower() and ln.strip()]
+        return (lines[-1] if lines else str(exc).splitlines()[0])[:160]
+    return None
 
 
 def _match(pairs, platforms, spec: str, what: str) -> "cl.Device":

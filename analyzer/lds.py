@@ -1,0 +1,225 @@
+"""Learning linear dynamic textures (Doretto & Soatto), with stability enforced.
+
+``x(t+1) = A x(t) + B v(t)``, ``frame(t) = C x(t) + mean``: ``C`` from an SVD of the
+mean-subtracted clip (through the small ``tau x tau`` Gram matrix, or a randomized SVD),
+``A`` by least squares on the states, ``B`` from the residuals with the
+``1/sqrt(tau - 1)`` normalisation the seed's pseudocode leaves out, so that the
+synthesized state covariance matches the training one.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from ..tiledb import LDSModel
+from .video import Clip
+
+SVD_METHODS = ("auto", "gram", "randomized")
+DEFAULT_N = 50
+DEFAULT_MAX_RADIUS = 0.995
+
+Progress = Callable[[int, int | None], None]
+
+
+def learn_lds(clip: Clip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | None = None,
+              energy: float = 0.9, svd: str = "auto", max_radius: float = DEFAULT_MAX_RADIUS,
+              calibrate: bool = True, seed: int = 0, progress: Progress | None = None) -> LDSModel:
+    """Learn a linear dynamic texture from a clip.
+
+    Parameters
+    ----------
+    clip : Clip or ndarray
+        Frames ``(T, H, W, C)`` uint8 (or a :class:`~dynatex.analyzer.Clip`).
+    n : int or "auto"
+        State order. ``"auto"`` picks the smallest order whose components hold ``energy``
+        of the clip's variance (at least 2, at most ``min(T - 1, 50)``).
+    k : int, optional
+        Rank of the driving noise, ``1 <= k <= n`` (default ``n``).
+    energy : float
+        Variance fraction for ``n="auto"``, in (0, 1].
+    svd : {"auto", "gram", "randomized"}
+        ``"gram"`` diagonalises the ``T x T`` Gram matrix (exact); ``"randomized"`` uses a
+        randomized range finder (for long clips); ``"auto"`` picks gram for ``T <= 1500``.
+    max_radius : float
+        Largest pole magnitude allowed; least-squares poles beyond it are pulled back to it.
+    calibrate : bool
+        Scale ``Q`` so that the stationary state variance equals the training states'
+        (stability clipping otherwise changes the texture's energy).
+    seed : int
+        Seed of the randomized SVD.
+    progress : callable(done, total), optional
+        Called after each of the 5 stages.
+
+    Returns
+    -------
+    LDSModel
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.arange(40)[:, None, None, None]
+    >>> x = np.arange(16)[None, None, :, None]
+    >>> frames = (128 + 60 * np.sin(0.3 * t + 0.5 * x) + 0 * np.arange(8)[None, :, None, None]).astype(np.uint8)
+    >>> model = learn_lds(np.repeat(frames, 3, axis=3), n=4)
+    >>> model.basis.shape, bool(model.info["spectral_radius"] < 1)
+    ((4, 384), True)
+    """
+    frames = clip.frames if isinstance(clip, Clip) else np.asarray(clip)
+    if frames.ndim != 4 or frames.dtype != np.uint8:
+        raise ValueError(f"clip must be (T, H, W, C) uint8 frames, not {frames.dtype} {frames.shape}")
+    tau = frames.shape[0]
+    if tau < 3:
+        raise ValueError(f"clip has {tau} frames; learning an LDS needs at least 3")
+    if svd not in SVD_METHODS:
+        raise ValueError(f"svd must be one of {SVD_METHODS}, not {svd!r}")
+    if not 0 < energy <= 1:
+        raise ValueError(f"energy must be in (0, 1], not {energy!r}")
+    if not 0 < max_radius < 1:
+        raise ValueError(f"max_radius must be in (0, 1), not {max_radius!r}")
+    auto = isinstance(n, str)
+    if auto and n != "auto":
+        raise ValueError(f"n must be a positive integer or 'auto', not {n!r}")
+    if not auto:
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n must be a positive integer or 'auto', not {n!r}")
+        if n > tau - 1:
+            raise ValueError(f"n={n} is larger than the clip allows: it has {tau} frames, so n <= {tau - 1}")
+    step = _stepper(progress, 5)
+
+    # One float32 copy of the clip, mean-subtracted in place.
+    y = frames.reshape(tau, -1).astype(np.float32)
+    mean = y.mean(axis=0, dtype=np.float64).astype(np.float32)
+    y -= mean
+    total_energy = float(np.einsum("ij,ij->", y, y, dtype=np.float64))
+    if total_energy == 0.0:
+        raise ValueError("clip is constant: every frame is the same, there is no dynamics to learn")
+    step()
+
+    method = svd if svd != "auto" else ("gram" if tau <= 1500 else "randomized")
+    rank_cap = min(tau - 1, DEFAULT_N) if auto else int(n)
+    if method == "gram":
+        basis, sv, states = _svd_gram(y, rank_cap if not auto else tau - 1)
+    else:
+        basis, sv, states = _svd_randomized(y, rank_cap, seed)
+    del y
+    step()
+
+    if auto:
+        cum = np.cumsum(sv ** 2) / total_energy
+        n = int(np.clip(np.searchsorted(cum, energy) + 1, 2, rank_cap))
+    n = int(n)
+    keep = sv[:n] > sv[0] * 1e-6
+    if not keep.all():
+        raise ValueError(f"n={n} exceeds the clip's rank ({int(keep.sum())} independent components); use a smaller n")
+    basis = np.ascontiguousarray(basis[:n])
+    x = states[:n].astype(np.float64)
+    k = n if k is None else k
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= n:
+        raise ValueError(f"k must be an integer in 1..n={n}, not {k!r}")
+    step()
+
+    x0, x1 = x[:, :-1], x[:, 1:]
+    a_raw = np.linalg.lstsq(x0.T, x1.T, rcond=None)[0].T
+    a, radius_raw, n_clipped = stabilize(a_raw, max_radius)
+    resid = x1 - a @ x0
+    u, s, _ = np.linalg.svd(resid, full_matrices=False)
+    b = u[:, :k] * (s[:k] / np.sqrt(tau - 1))
+    cov = stationary_covariance(a, b @ b.T)
+    train_cov = x @ x.T / tau
+    q_gain = float(np.trace(train_cov) / np.trace(cov)) if calibrate else 1.0
+    b *= np.sqrt(q_gain)
+    cov *= q_gain
+    step()
+
+    info = {
+        "svd": method, "n_auto": bool(auto), "energy": float(energy),
+        "energy_captured": float(np.sum(sv[:n] ** 2) / total_energy),
+        "spectral_radius_raw": float(radius_raw),
+        "spectral_radius": float(np.max(np.abs(np.linalg.eigvals(a)))),
+        "max_radius": float(max_radius), "poles_clipped": int(n_clipped),
+        "q_gain": q_gain, "fit_residual": float(np.linalg.norm(resid) / np.linalg.norm(x1)),
+        "tau": int(tau),
+    }
+    model = LDSModel(mean=mean, basis=basis, singular_values=sv.astype(np.float64), A=a, B=b,
+                     x0=x[:, 0].copy(), states=x, stationary_cov=cov, info=info)
+    step()
+    return model
+
+
+def stabilize(a: np.ndarray, max_radius: float) -> tuple[np.ndarray, float, int]:
+    """Pull every pole of ``a`` with magnitude above ``max_radius`` back onto that circle.
+
+    Returns the stabilized matrix, the original spectral radius and how many poles moved.
+    """
+    lam, v = np.linalg.eig(a)
+    mags = np.abs(lam)
+    radius = float(mags.max())
+    over = mags > max_radius
+    if not over.any():
+        return a.copy(), radius, 0
+    lam = np.where(over, lam / mags * max_radius, lam)
+    a_s = (v * lam) @ np.linalg.inv(v)
+    return np.ascontiguousarray(a_s.real), radius, int(over.sum())
+
+
+def stationary_covariance(a: np.ndarray, q: np.ndarray, *, tol: float = 1e-12) -> np.ndarray:
+    """Solve ``P = A P A.T + Q`` for a stable ``A`` by the doubling iteration."""
+    p = q.copy()
+    ak = a.copy()
+    for _ in range(64):
+        inc = ak @ p @ ak.T
+        p = p + inc
+        ak = ak @ ak
+        if np.abs(inc).max() <= tol * max(np.abs(p).max(), 1e-300):
+            break
+    return (p + p.T) / 2
+
+
+def _svd_gram(y: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    gram = (y @ y.T).astype(np.float64)
+    ev, v = np.linalg.eigh(gram)
+    order = np.argsort(ev)[::-1]
+    ev, v = np.clip(ev[order], 0, None), v[:, order]
+    sv = np.sqrt(ev)
+    n = min(n, int(np.sum(sv > sv[0] * 1e-7)))
+    basis = (v[:, :n].T.astype(np.float32) @ y) / sv[:n, None].astype(np.float32)
+    states = sv[:n, None] * v[:, :n].T
+    basis, states = _fix_signs(basis, states)
+    return basis, sv[: y.shape[0] - 1], states
+
+
+def _svd_randomized(y: np.ndarray, n: int, seed: int, oversample: int = 10, power: int = 2):
+    tau = y.shape[0]
+    rng = np.random.default_rng(seed)
+    width = min(n + oversample, tau)
+    # Range of y.T (pixels x width), refined by power iterations.
+    q, _ = np.linalg.qr(y.T @ rng.standard_normal((tau, width)).astype(np.float32))
+    for _ in range(power):
+        q, _ = np.linalg.qr(y.T @ (y @ q))
+    small = (y @ q).T.astype(np.float64)       # width x tau
+    ub, s, vt = np.linalg.svd(small, full_matrices=False)
+    basis = (q @ ub[:, :n].astype(np.float32)).T
+    states = s[:n, None] * vt[:n]
+    basis, states = _fix_signs(np.ascontiguousarray(basis), states)
+    return basis, s, states
+
+
+def _fix_signs(basis: np.ndarray, states: np.ndarray):
+    """Make each component's largest entry positive, so results do not depend on the solver's signs."""
+    idx = np.argmax(np.abs(basis), axis=1)
+    sign = np.sign(basis[np.arange(basis.shape[0]), idx])
+    sign[sign == 0] = 1
+    return basis * sign[:, None].astype(basis.dtype), states * sign[:, None]
+
+
+def _stepper(progress: Progress | None, total: int) -> Callable[[], None]:
+    done = 0
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        if progress:
+            progress(done, total)
+
+    return step

@@ -1,0 +1,912 @@
+"""Objective quality measures for synthesized dynamic textures.
+
+Every function takes clips as arrays ``(T, H, W)`` or ``(T, H, W, C)`` (uint8, or floats on
+the 0..255 scale; ``C`` is 1 or 3) and keyword-only options. See ``analyzer/METRICS.md``
+for the definition, units, range and good/bad values of each measure.
+
+- Long-run stability: :func:`stability` (energy ratio per time window, NaN/inf count).
+- Seam visibility: :func:`seam_visibility` with :func:`grid_labels`.
+- Temporal discontinuity: :func:`temporal_discontinuity`, :func:`frame_step_ratio`.
+- Likeness to the source: :func:`spectrum_distance` (:func:`st_power_spectrum`),
+  :func:`patch_coherence`, :func:`patch_completeness` (both at once: :func:`patch_distances`).
+- Coverage and repetition: :func:`frame_coverage`, :func:`index_coverage`,
+  :func:`repetition_lag` (:func:`repetition_profile`).
+- All of them at once: :func:`evaluate`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+__all__ = [
+    "StabilityReport", "check_frames", "count_nonfinite", "evaluate", "frame_coverage", "frame_step_ratio",
+    "grid_labels", "index_coverage", "patch_coherence", "patch_completeness", "patch_distances",
+    "repetition_lag", "repetition_profile", "seam_visibility", "spectrum_distance", "st_power_spectrum",
+    "stability", "temporal_discontinuity",
+]
+
+_LUMA = np.array([0.299, 0.587, 0.114], np.float32)
+_CHUNK = 32          # frames converted to float at a time (bounds memory on long clips)
+_THUMB = 32          # longer side of the thumbnails used by coverage and repetition
+
+
+# -- input checks -------------------------------------------------------------------------
+def check_frames(frames: Any, *, name: str = "frames", min_frames: int = 1,
+                 allow_nonfinite: bool = False) -> np.ndarray:
+    """Return ``frames`` as a ``(T, H, W, C)`` array, or raise a ValueError/TypeError naming ``name``.
+
+    Parameters
+    ----------
+    frames : array_like
+        ``(T, H, W)`` or ``(T, H, W, C)`` with ``C`` in (1, 3); uint8 or a real dtype (0..255 scale).
+    name : str
+        What to call the array in error messages.
+    min_frames : int
+        Fewest frames accepted.
+    allow_nonfinite : bool
+        Accept NaN/inf values (only :func:`stability` and :func:`count_nonfinite` do).
+
+    Examples
+    --------
+    >>> check_frames(np.zeros((4, 8, 6), np.uint8)).shape
+    (4, 8, 6, 1)
+    """
+    if not isinstance(frames, np.ndarray):
+        if isinstance(frames, (list, tuple)):
+            frames = np.asarray(frames)
+        else:
+            raise TypeError(f"{name} must be a numpy array of frames, not {type(frames).__name__}")
+    if frames.dtype.kind not in "uif" or frames.dtype == np.bool_:
+        raise TypeError(f"{name} must hold numbers (uint8 or float), not {frames.dtype}")
+    if frames.ndim == 3:
+        frames = frames[..., None]
+    if frames.ndim != 4 or frames.shape[-1] not in (1, 3):
+        raise ValueError(f"{name} must be (T, H, W) or (T, H, W, C) with C in (1, 3), not shape {frames.shape}")
+    if frames.shape[0] < min_frames:
+        what = "is empty (no frames)" if frames.shape[0] == 0 else f"has {frames.shape[0]} frame(s)"
+        raise ValueError(f"{name} {what}; at least {min_frames} needed")
+    if frames.shape[1] < 1 or frames.shape[2] < 1:
+        raise ValueError(f"{name} has empty frames ({frames.shape[2]}x{frames.shape[1]} pixels)")
+    if not allow_nonfinite and frames.dtype.kind == "f":
+        bad = count_nonfinite(frames)
+        if bad:
+            raise ValueError(f"{name} holds NaN or inf in {bad} frame(s)")
+    return frames
+
+
+def _check_int(name: str, value: Any, lo: int, hi: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, not {value!r}")
+    v = int(value)
+    if v < lo or (hi is not None and v > hi):
+        raise ValueError(f"{name} must be in [{lo}, {'inf' if hi is None else hi}], not {v}")
+    return v
+
+
+def _check_pos_float(name: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a number, not {value!r}") from None
+    if not math.isfinite(v) or v <= 0:
+        raise ValueError(f"{name} must be a positive finite number, not {value!r}")
+    return v
+
+
+def _pair(name: str, value: Any, lo: int) -> tuple[int, int]:
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        value = (value, value)
+    try:
+        a, b = value
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be an integer or a pair of integers, not {value!r}") from None
+    return _check_int(f"{name}[0]", a, lo), _check_int(f"{name}[1]", b, lo)
+
+
+def _same_size(a: np.ndarray, b: np.ndarray, what: str) -> None:
+    if a.shape[1:3] != b.shape[1:3]:
+        raise ValueError(f"{what} needs output and source of the same frame size; output is "
+                         f"{a.shape[2]}x{a.shape[1]}, source {b.shape[2]}x{b.shape[1]}")
+
+
+def count_nonfinite(frames: Any) -> int:
+    """Number of frames that hold at least one NaN or inf value.
+
+    Examples
+    --------
+    >>> f = np.zeros((3, 2, 2), np.float32); f[1, 0, 0] = np.nan
+    >>> count_nonfinite(f)
+    1
+    """
+    arr = np.asarray(frames)
+    if arr.dtype.kind != "f" or arr.size == 0:
+        return 0
+    bad = 0
+    for i in range(0, arr.shape[0], _CHUNK):
+        c = arr[i:i + _CHUNK]
+        bad += int((~np.isfinite(c.reshape(c.shape[0], -1))).any(axis=1).sum())
+    return bad
+
+
+# -- helpers: float chunks, grey, downscaling ------------------------------------------------
+def _chunks(frames: np.ndarray, start: int = 0, stop: int | None = None):
+    stop = frames.shape[0] if stop is None else stop
+    for i in range(start, stop, _CHUNK):
+        yield i, frames[i:min(i + _CHUNK, stop)].astype(np.float32)
+
+
+def _grey(frames: np.ndarray, factor: int = 1, size: tuple[int, int] | None = None) -> np.ndarray:
+    """``(T, H', W')`` float32 luma, area-downscaled by ``factor`` (or to ``size`` = (w, h))."""
+    import cv2
+    t, h, w, c = frames.shape
+    if size is None:
+        size = (max(1, w // factor), max(1, h // factor))
+    out = np.empty((t, size[1], size[0]), np.float32)
+    for i, chunk in _chunks(frames):
+        g = chunk[..., 0] if c == 1 else chunk @ _LUMA
+        if size == (w, h):
+            out[i:i + len(g)] = g
+        else:
+            for k in range(len(g)):
+                out[i + k] = cv2.resize(g[k], size, interpolation=cv2.INTER_AREA)
+    return out
+
+
+def _auto_downscale(source: np.ndarray, downscale: int | None) -> int:
+    if downscale is None:
+        return max(1, min(source.shape[1], source.shape[2]) // 128)
+    return _check_int("downscale", downscale, 1)
+
+
+def _thumb_size(shape: tuple[int, ...]) -> tuple[int, int]:
+    h, w = shape[1], shape[2]
+    s = min(1.0, _THUMB / max(h, w))
+    return max(1, round(w * s)), max(1, round(h * s))
+
+
+def _step_rms(frames: np.ndarray) -> np.ndarray:
+    """RMS difference (grey levels, over pixels and channels) between consecutive frames, ``(T-1,)``."""
+    t = frames.shape[0]
+    out = np.empty(max(t - 1, 0), np.float64)
+    prev = None
+    for i, chunk in _chunks(frames):
+        if prev is not None:
+            chunk = np.concatenate([prev, chunk])
+            first = i - 1
+        else:
+            first = i
+        d = np.diff(chunk, axis=0).reshape(chunk.shape[0] - 1, -1)
+        out[first:first + len(d)] = np.sqrt(np.einsum("ij,ij->i", d, d, dtype=np.float64) / d.shape[1])
+        prev = chunk[-1:]
+    return out
+
+
+def _median_step(frames: np.ndarray, name: str) -> float:
+    steps = _step_rms(frames)
+    ref = float(np.median(steps))
+    if ref <= 0:
+        raise ValueError(f"{name} does not change from frame to frame (median frame difference is 0)")
+    return ref
+
+
+# -- long-run stability -----------------------------------------------------------------
+@dataclass(frozen=True)
+class StabilityReport:
+    """Result of :func:`stability`.
+
+    ``ratios[k]`` is the mean dynamic energy of output window ``k`` over that of the source
+    (NaN for a window whose frames are all non-finite).
+    """
+
+    ratios: np.ndarray
+    window: int
+    n_frames: int
+    nonfinite_frames: int
+
+    @property
+    def min_ratio(self) -> float:
+        r = self.ratios[np.isfinite(self.ratios)]
+        return float(r.min()) if r.size else float("nan")
+
+    @property
+    def max_ratio(self) -> float:
+        r = self.ratios[np.isfinite(self.ratios)]
+        return float(r.max()) if r.size else float("nan")
+
+    @property
+    def final_ratio(self) -> float:
+        return float(self.ratios[-1])
+
+    def is_stable(self, *, low: float = 0.5, high: float = 2.0) -> bool:
+        """True when every frame is finite and every window's ratio lies in ``[low, high]``."""
+        return bool(self.nonfinite_frames == 0 and np.isfinite(self.ratios).all()
+                    and self.ratios.min() >= low and self.ratios.max() <= high)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"window": self.window, "n_frames": self.n_frames, "nonfinite_frames": self.nonfinite_frames,
+                "min_ratio": _json_float(self.min_ratio), "max_ratio": _json_float(self.max_ratio),
+                "final_ratio": _json_float(self.final_ratio), "stable": self.is_stable(),
+                "ratios": [_json_float(v) for v in self.ratios]}
+
+
+def stability(output: np.ndarray | Iterable[np.ndarray], source: np.ndarray, *, window: int = 25) -> StabilityReport:
+    """Long-run stability: output energy over source energy, per window of ``window`` frames.
+
+    The dynamic energy of a frame is its mean squared deviation (over pixels and channels)
+    from the source's mean frame. A model that decays to its mean image drives the ratio
+    towards 0; one that blows up drives it far above 1; NaN/inf frames are counted.
+
+    Parameters
+    ----------
+    output : ndarray or iterable of frames
+        ``(T, H, W[, C])``, or any iterable of ``(H, W[, C])`` frames (a long run is
+        consumed one frame at a time, never held in memory). Floats may hold NaN/inf.
+    source : ndarray
+        ``(T, H, W[, C])`` source clip, same frame size and channels as ``output``.
+    window : int
+        Frames per window (the last window may be shorter).
+
+    Returns
+    -------
+    StabilityReport
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> src = rng.integers(0, 256, (20, 8, 8, 3)).astype(np.uint8)
+    >>> rep = stability(src, src, window=20)
+    >>> np.round(rep.ratios, 6).tolist(), rep.nonfinite_frames, rep.is_stable()
+    ([1.0], 0, True)
+    """
+    window = _check_int("window", window, 1)
+    source = check_frames(source, name="source", min_frames=2)
+    mean = np.zeros(source.shape[1:], np.float64)
+    for _, chunk in _chunks(source):
+        mean += chunk.sum(axis=0, dtype=np.float64)
+    mean = (mean / source.shape[0]).astype(np.float32)
+    src_e = float(np.mean(_energies(source, mean)))
+    if src_e <= 0:
+        raise ValueError("source has no temporal variation (every frame equals the mean frame)")
+
+    if isinstance(output, np.ndarray):
+        output = check_frames(output, name="output", allow_nonfinite=True)
+        if output.shape[1:] != source.shape[1:]:
+            raise ValueError(f"stability needs output frames shaped like the source's {source.shape[1:]}, "
+                             f"not {output.shape[1:]}")
+        energies = _energies(output, mean)
+    else:
+        energies = _energies_iter(output, mean)
+    n = energies.size
+    if n == 0:
+        raise ValueError("output is empty (no frames)")
+    bad = ~np.isfinite(energies)
+    ratios = []
+    for i in range(0, n, window):
+        e, b = energies[i:i + window], bad[i:i + window]
+        ratios.append(float(e[~b].mean()) / src_e if (~b).any() else float("nan"))
+    return StabilityReport(ratios=np.asarray(ratios), window=window, n_frames=n, nonfinite_frames=int(bad.sum()))
+
+
+def _energies(frames: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    out = np.empty(frames.shape[0], np.float64)
+    for i, chunk in _chunks(frames):
+        d = (chunk - mean).reshape(chunk.shape[0], -1)
+        with np.errstate(invalid="ignore", over="ignore"):
+            e = np.einsum("ij,ij->i", d, d, dtype=np.float64) / d.shape[1]
+        out[i:i + len(e)] = np.where(np.isfinite(e), e, np.nan)
+    return out
+
+
+def _energies_iter(frames: Iterable[np.ndarray], mean: np.ndarray) -> np.ndarray:
+    out: list[float] = []
+    for k, f in enumerate(frames):
+        a = np.asarray(f)
+        if a.ndim == 2:
+            a = a[..., None]
+        if a.shape != mean.shape:
+            raise ValueError(f"output frame {k} has shape {a.shape}, not the source's {mean.shape}")
+        if a.dtype.kind not in "uif":
+            raise TypeError(f"output frame {k} must hold numbers, not {a.dtype}")
+        out.append(float(_energies(a[None], mean)[0]))
+    return np.asarray(out, np.float64)
+
+
+# -- seam visibility ----------------------------------------------------------------------
+def grid_labels(shape: Sequence[int], tile: int | Sequence[int], *, offset: Sequence[int] = (0, 0)) -> np.ndarray:
+    """Label map of a tile grid: pixel ``(y, x)`` gets the index of its tile.
+
+    Parameters
+    ----------
+    shape : (H, W)
+        Frame size.
+    tile : int or (th, tw)
+        Tile height and width in pixels.
+    offset : (oy, ox)
+        Grid shift: tile boundaries sit where ``(y + oy) % th == 0`` (and likewise for x).
+
+    Examples
+    --------
+    >>> grid_labels((4, 6), (2, 3))
+    array([[0, 0, 0, 1, 1, 1],
+           [0, 0, 0, 1, 1, 1],
+           [2, 2, 2, 3, 3, 3],
+           [2, 2, 2, 3, 3, 3]], dtype=int32)
+    """
+    h, w = _pair("shape", tuple(shape), 1)
+    th, tw = _pair("tile", tile, 1)
+    oy, ox = _pair("offset", tuple(offset), 0)
+    ry = (np.arange(h) + oy) // th
+    rx = (np.arange(w) + ox) // tw
+    ry -= ry[0]
+    rx -= rx[0]
+    return (ry[:, None] * (rx[-1] + 1) + rx[None, :]).astype(np.int32)
+
+
+def seam_visibility(frames: np.ndarray, labels: np.ndarray | None = None, *, wrap: bool = False,
+                    eps: float = 1e-3) -> np.ndarray:
+    """Gradient energy across boundaries over gradient energy in the interior, per frame.
+
+    Every pair of 4-neighbour pixels is an *edge*. An edge whose two pixels carry different
+    ``labels`` is a boundary edge (a tile, block or quilt-cut seam); with ``wrap=True`` the
+    frame is a torus and the edges from the last column to the first and from the last row
+    to the first (the border of a tileable texture) are boundary edges too. For each frame,
+    the mean squared RGB difference across boundary edges is divided by that across all
+    other edges. 1 means the seams look like the texture; above 1 they show.
+
+    Parameters
+    ----------
+    frames : ndarray
+        ``(T, H, W[, C])`` output clip.
+    labels : ndarray, optional
+        ``(H, W)`` integer (or boolean) region map: tile index, quilt block index, mask.
+        ``None`` with ``wrap=True`` measures only the wrap-around border.
+    wrap : bool
+        Also count the wrap-around border as a boundary.
+    eps : float
+        Added to both energies (grey levels squared), so flat frames give 1, not 0/0.
+
+    Returns
+    -------
+    ndarray
+        ``(T,)`` ratios; ``.mean()`` is the clip's seam visibility.
+
+    Examples
+    --------
+    >>> f = np.zeros((2, 4, 4), np.uint8); f[:, :, 2:] = 50    # a step at column 2
+    >>> seam_visibility(f, grid_labels((4, 4), (4, 2))).round(0).tolist()
+    [2500001.0, 2500001.0]
+    """
+    frames = check_frames(frames, name="frames")
+    eps = _check_pos_float("eps", eps)
+    t, h, w, c = frames.shape
+    if labels is None:
+        if not wrap:
+            raise ValueError("labels is None and wrap is False: there is no boundary to measure")
+        labels = np.zeros((h, w), np.int32)
+    labels = np.asarray(labels)
+    if labels.ndim != 2 or labels.dtype.kind not in "uib":
+        raise TypeError(f"labels must be a 2-D integer or boolean map, not {labels.dtype} {labels.shape}")
+    if labels.shape != (h, w):
+        raise ValueError(f"labels map is {labels.shape[1]}x{labels.shape[0]} but frames are {w}x{h}")
+    if wrap:
+        bh = labels != np.roll(labels, -1, axis=1)
+        bh[:, -1] = True
+        bv = labels != np.roll(labels, -1, axis=0)
+        bv[-1, :] = True
+    else:
+        bh = labels[:, 1:] != labels[:, :-1]
+        bv = labels[1:, :] != labels[:-1, :]
+    nb = int(bh.sum() + bv.sum())
+    ni = int(bh.size + bv.size - nb)
+    if nb == 0:
+        raise ValueError("boundaries: no boundary lies inside the frame (a single region covers it)")
+    if ni == 0:
+        raise ValueError("boundaries: every pixel edge is a boundary; there is no interior to compare with")
+    mh, mv = bh.ravel().astype(np.float32), bv.ravel().astype(np.float32)
+    out = np.empty(t, np.float64)
+    for i, f in _chunks(frames):
+        n = f.shape[0]
+        if wrap:
+            dh = np.roll(f, -1, axis=2) - f
+            dv = np.roll(f, -1, axis=1) - f
+        else:
+            dh = f[:, :, 1:] - f[:, :, :-1]
+            dv = f[:, 1:] - f[:, :-1]
+        eh = np.einsum("...c,...c->...", dh, dh).reshape(n, -1)
+        ev = np.einsum("...c,...c->...", dv, dv).reshape(n, -1)
+        b = eh @ mh + ev @ mv
+        tot = eh.sum(axis=1, dtype=np.float64) + ev.sum(axis=1, dtype=np.float64)
+        out[i:i + n] = (b / nb + eps) / ((tot - b) / ni + eps)
+    return out
+
+
+# -- temporal discontinuity ---------------------------------------------------------------
+def temporal_discontinuity(output: np.ndarray, events: Sequence[int], *, source: np.ndarray | None = None) -> np.ndarray:
+    """Frame difference at events (loop wrap, reversal, jump) over the source's median frame difference.
+
+    For each event ``e`` (the index of the first frame after the jump), the RMS difference
+    (grey levels, over pixels and channels) between output frames ``e - 1`` and ``e`` is
+    divided by the median RMS difference between consecutive source frames (of the output
+    itself when ``source`` is None). About 1: the jump looks like an ordinary frame step.
+
+    Parameters
+    ----------
+    output : ndarray
+        ``(T, H, W[, C])`` output clip.
+    events : sequence of int
+        Frame indices in ``1 .. T-1``.
+    source : ndarray, optional
+        ``(T', H', W'[, C])`` source clip giving the reference frame step (any size).
+
+    Returns
+    -------
+    ndarray
+        ``(len(events),)`` ratios.
+
+    Examples
+    --------
+    >>> ramp = np.repeat(np.arange(0, 40, 2, dtype=np.uint8), 4).reshape(20, 2, 2)
+    >>> loop = np.concatenate([ramp[:10], ramp[:10]])
+    >>> temporal_discontinuity(loop, [10], source=ramp).tolist()
+    [9.0]
+    """
+    output = check_frames(output, name="output", min_frames=2)
+    ev = _events(events, output.shape[0])
+    ref = _median_step(output if source is None else check_frames(source, name="source", min_frames=2),
+                       "output" if source is None else "source")
+    out = np.empty(len(ev), np.float64)
+    for k, e in enumerate(ev):
+        d = output[e].astype(np.float64) - output[e - 1].astype(np.float64)
+        out[k] = math.sqrt(float(np.mean(d * d))) / ref
+    return out
+
+
+def _events(events: Any, t: int) -> list[int]:
+    if isinstance(events, (int, np.integer)) and not isinstance(events, bool):
+        events = [events]
+    try:
+        ev = list(events)
+    except TypeError:
+        raise TypeError(f"events must be a sequence of frame indices, not {events!r}") from None
+    out = []
+    for e in ev:
+        if isinstance(e, bool) or not isinstance(e, (int, np.integer)):
+            raise TypeError(f"events must be integers, not {e!r}")
+        if not 1 <= e <= t - 1:
+            raise ValueError(f"event {int(e)} is outside the output's frames 1..{t - 1} "
+                             "(an event is the index of the first frame after a jump)")
+        out.append(int(e))
+    return out
+
+
+def frame_step_ratio(output: np.ndarray, source: np.ndarray) -> float:
+    """Median consecutive-frame difference of the output over that of the source.
+
+    About 1 when the output moves like the source; far above 1 when it jumps every frame
+    (frames shuffled in time); near 0 when it freezes.
+
+    Examples
+    --------
+    >>> ramp = np.repeat(np.arange(0, 40, 2, dtype=np.uint8), 4).reshape(20, 2, 2)
+    >>> frame_step_ratio(ramp[::2], ramp)
+    2.0
+    """
+    output = check_frames(output, name="output", min_frames=2)
+    source = check_frames(source, name="source", min_frames=2)
+    return float(np.median(_step_rms(output))) / _median_step(source, "source")
+
+
+# -- likeness: spatio-temporal power spectrum ------------------------------------------------
+def st_power_spectrum(frames: np.ndarray, *, cuboid: Sequence[int] = (16, 32), downscale: int = 1) -> np.ndarray:
+    """Binned spatio-temporal power spectrum (Welch estimate) of a clip's luma.
+
+    The luma, area-downscaled by ``downscale``, is cut into cuboids of ``cuboid[0]`` frames
+    by ``cuboid[1]`` x ``cuboid[1]`` pixels, overlapping by half in every axis. Each cuboid
+    loses its mean, is multiplied by a 3-D Hann window and Fourier transformed; power is
+    averaged over cuboids and then over the coefficients of each bin: temporal frequency
+    ``|f_t| * cuboid[0]`` (rows, 0 .. cuboid[0]/2) by radial spatial frequency
+    ``round(|f_xy| * cuboid[1])`` (columns, 0 .. cuboid[1]/2; corners beyond are dropped).
+
+    Returns
+    -------
+    ndarray
+        ``(cuboid[0] // 2 + 1, cuboid[1] // 2 + 1)`` mean power per coefficient (grey levels^2).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> st_power_spectrum(rng.normal(128, 20, (16, 32, 32)).clip(0, 255), cuboid=(8, 16)).shape
+    (5, 9)
+    """
+    frames = check_frames(frames, name="frames")
+    ct, cs = _pair("cuboid", cuboid, 2)
+    downscale = _check_int("downscale", downscale, 1)
+    grey = _grey(frames, downscale)
+    return _spectrum(grey, ct, cs)
+
+
+def _spectrum(grey: np.ndarray, ct: int, cs: int) -> np.ndarray:
+    from numpy.lib.stride_tricks import sliding_window_view
+    t, h, w = grey.shape
+    if t < ct or h < cs or w < cs:
+        raise ValueError(f"clip ({t} frames of {w}x{h} after downscaling) is smaller than the "
+                         f"spectrum cuboid ({ct} frames of {cs}x{cs})")
+    win = (np.hanning(ct + 2)[1:-1, None, None] * np.hanning(cs + 2)[1:-1][None, :, None]
+           * np.hanning(cs + 2)[1:-1][None, None, :]).astype(np.float32)
+    st, ss = max(1, ct // 2), max(1, cs // 2)
+    acc = np.zeros((ct, cs, cs // 2 + 1), np.float64)
+    count = 0
+    for t0 in range(0, t - ct + 1, st):
+        block = grey[t0:t0 + ct]
+        cub = sliding_window_view(block, (cs, cs), axis=(1, 2))[:, ::ss, ::ss]   # (ct, ny, nx, cs, cs)
+        cub = np.moveaxis(cub, 0, 2).reshape(-1, ct, cs, cs)
+        cub = cub - cub.mean(axis=(1, 2, 3), keepdims=True)
+        spec = np.fft.rfftn(cub * win, axes=(1, 2, 3))
+        acc += (spec.real ** 2 + spec.imag ** 2).sum(axis=0)
+        count += cub.shape[0]
+    acc /= count
+    ft = np.rint(np.abs(np.fft.fftfreq(ct)) * ct).astype(int)
+    fy = np.fft.fftfreq(cs)
+    fx = np.fft.rfftfreq(cs)
+    fr = np.rint(np.sqrt(fy[:, None] ** 2 + fx[None, :] ** 2) * cs).astype(int)
+    nt, nr = ct // 2 + 1, cs // 2 + 1
+    keep = np.broadcast_to(fr <= nr - 1, acc.shape)
+    idx = (ft[:, None, None] * nr + fr[None, :, :])
+    idx = np.broadcast_to(idx, acc.shape)[keep]
+    sums = np.bincount(idx, weights=acc[keep], minlength=nt * nr)
+    cnts = np.bincount(idx, minlength=nt * nr)
+    return (sums / np.maximum(cnts, 1)).reshape(nt, nr)
+
+
+def spectrum_distance(output: np.ndarray, source: np.ndarray, *, cuboid: Sequence[int] = (16, 32),
+                      downscale: int | None = None, floor: float = 1e-3) -> float:
+    """RMS difference, in dB, between the binned spatio-temporal power spectra of output and source.
+
+    Both spectra come from :func:`st_power_spectrum` with the same cuboid and downscale
+    factor, so clips of different sizes and lengths compare. The DC bin is left out; each
+    bin's power gets ``floor`` times the source's mean bin power added before the log, which
+    bounds the distance when the output has no power in a bin (a frozen clip). 0 dB is
+    identical statistics.
+
+    Parameters
+    ----------
+    output, source : ndarray
+        ``(T, H, W[, C])`` clips.
+    cuboid : (frames, pixels)
+        Cuboid size; shrunk to fit the shorter or smaller of the two clips.
+    downscale : int, optional
+        Area-downscale factor (default ``max(1, min(H, W) // 128)`` of the source).
+    floor : float
+        Relative power floor.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> clip = rng.normal(128, 20, (16, 32, 32)).clip(0, 255)
+    >>> spectrum_distance(clip, clip, cuboid=(8, 16))
+    0.0
+    """
+    output = check_frames(output, name="output", min_frames=2)
+    source = check_frames(source, name="source", min_frames=2)
+    floor = _check_pos_float("floor", floor)
+    f = _auto_downscale(source, downscale)
+    ct, cs = _pair("cuboid", cuboid, 2)
+    go, gs = _grey(output, f), _grey(source, f)
+    ct = min(ct, go.shape[0], gs.shape[0])
+    cs = min(cs, *go.shape[1:], *gs.shape[1:])
+    if ct < 4 or cs < 4:
+        raise ValueError(f"clips too small for a power spectrum: need at least 4 frames and 4x4 pixels "
+                         f"after downscaling by {f}, got {ct} frames and {cs} pixels")
+    po, ps = _spectrum(go, ct, cs), _spectrum(gs, ct, cs)
+    mask = np.ones(po.shape, bool)
+    mask[0, 0] = False
+    fl = floor * float(ps[mask].mean()) + 1e-12
+    d = 10.0 * np.log10((po[mask] + fl) / (ps[mask] + fl))
+    return float(np.sqrt(np.mean(d * d)))
+
+
+# -- likeness: patch coherence and completeness ----------------------------------------------
+def _patches(grey: np.ndarray, pt: int, ps: int, st: int, ss: int) -> tuple[np.ndarray, tuple[int, int, int]]:
+    from numpy.lib.stride_tricks import sliding_window_view
+    t, h, w = grey.shape
+    if t < pt or h < ps or w < ps:
+        raise ValueError(f"clip ({t} frames of {w}x{h} after downscaling) is smaller than one patch "
+                         f"({pt} frames of {ps}x{ps})")
+    v = sliding_window_view(grey, (pt, ps, ps))[::st, ::ss, ::ss]
+    return v, v.shape[:3]
+
+
+def _project(view: np.ndarray, idx: np.ndarray | None, mean: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """Patches of ``view`` (all, or the flat indices ``idx``) centred and projected on ``basis``."""
+    grid = view.shape[:3]
+    d = mean.size
+    if idx is None:
+        idx = np.arange(int(np.prod(grid)))
+    out = np.empty((len(idx), basis.shape[1]), np.float32)
+    for i in range(0, len(idx), 8192):
+        sel = np.unravel_index(idx[i:i + 8192], grid)
+        p = view[sel].reshape(-1, d) - mean
+        out[i:i + len(p)] = p @ basis
+    return out
+
+
+def _nn_dist(q: np.ndarray, db: np.ndarray) -> np.ndarray:
+    """Euclidean distance from each row of ``q`` to its nearest row of ``db`` (brute force, chunked).
+
+    The search runs on float32 dot products; the winner's distance is then recomputed
+    exactly, so a patch found in ``db`` has distance 0.
+    """
+    best = np.full(len(q), np.inf, np.float32)
+    arg = np.zeros(len(q), np.int64)
+    dbn = np.einsum("ij,ij->i", db, db)
+    for j in range(0, len(db), 16384):
+        d2 = dbn[None, j:j + 16384] - 2.0 * (q @ db[j:j + 16384].T)
+        k = d2.argmin(axis=1)
+        v = d2[np.arange(len(q)), k]
+        better = v < best
+        best[better] = v[better]
+        arg[better] = k[better] + j
+    diff = q.astype(np.float64) - db[arg].astype(np.float64)
+    return np.sqrt(np.einsum("ij,ij->i", diff, diff))
+
+
+def patch_distances(output: np.ndarray, source: np.ndarray, *, patch: Sequence[int] = (3, 5),
+                    stride: Sequence[int] = (2, 3), n_samples: int = 1000, n_components: int = 16,
+                    downscale: int | None = None, seed: int = 0) -> tuple[float, float]:
+    """Nearest-neighbour spatio-temporal patch coherence and completeness, ``(coherence, completeness)``.
+
+    Both clips become luma, area-downscaled by ``downscale``. A patch is ``patch[0]`` frames
+    by ``patch[1]`` x ``patch[1]`` pixels, taken on a grid of ``stride[0]`` frames and
+    ``stride[1]`` pixels. Patches are centred on the source's mean patch and projected on
+    the source patches' ``n_components`` leading principal components. *Coherence*:
+    ``n_samples`` output patches drawn at random (``seed``) from the output's grid, each
+    matched to its nearest patch of the source grid. *Completeness*: the same with the roles
+    swapped. Each is the mean nearest distance expressed as RMS grey levels per patch pixel
+    (0 = every patch found exactly).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> clip = rng.integers(0, 256, (8, 16, 16)).astype(np.uint8)
+    >>> [round(v, 3) for v in patch_distances(clip, clip, n_samples=50, downscale=1)]
+    [0.0, 0.0]
+    """
+    output = check_frames(output, name="output")
+    source = check_frames(source, name="source")
+    pt, ps = _pair("patch", patch, 1)
+    st, ss = _pair("stride", stride, 1)
+    n_samples = _check_int("n_samples", n_samples, 1)
+    n_components = _check_int("n_components", n_components, 1)
+    seed = _check_int("seed", seed, 0)
+    f = _auto_downscale(source, downscale)
+    vo, go = _patches(_grey(output, f), pt, ps, st, ss)
+    vs, gs = _patches(_grey(source, f), pt, ps, st, ss)
+    d = pt * ps * ps
+    rng = np.random.default_rng(seed)
+    n_src, n_out = int(np.prod(gs)), int(np.prod(go))
+    fit_idx = rng.choice(n_src, size=min(n_src, 20000), replace=False)
+    sel = np.unravel_index(fit_idx, gs)
+    fit = vs[sel].reshape(-1, d).astype(np.float64)
+    mean = fit.mean(axis=0)
+    cov = np.cov(fit - mean, rowvar=False) if len(fit) > 1 else np.zeros((d, d))
+    cov = np.atleast_2d(cov)
+    vals, vecs = np.linalg.eigh(cov)
+    k = min(n_components, d)
+    basis = np.ascontiguousarray(vecs[:, ::-1][:, :k]).astype(np.float32)
+    mean32 = mean.astype(np.float32)
+    src_all = _project(vs, None, mean32, basis)
+    out_all = _project(vo, None, mean32, basis)
+    q_out = out_all[rng.choice(n_out, size=min(n_out, n_samples), replace=False)]
+    q_src = src_all[rng.choice(n_src, size=min(n_src, n_samples), replace=False)]
+    coherence = float(_nn_dist(q_out, src_all).mean()) / math.sqrt(d)
+    completeness = float(_nn_dist(q_src, out_all).mean()) / math.sqrt(d)
+    return coherence, completeness
+
+
+def patch_coherence(output: np.ndarray, source: np.ndarray, **options: Any) -> float:
+    """Mean distance from output patches to their nearest source patch (see :func:`patch_distances`).
+
+    Low: every piece of the output looks like some piece of the source.
+
+    Examples
+    --------
+    >>> clip = np.random.default_rng(0).integers(0, 256, (8, 16, 16)).astype(np.uint8)
+    >>> round(patch_coherence(clip, clip, n_samples=50, downscale=1), 3)
+    0.0
+    """
+    return patch_distances(output, source, **options)[0]
+
+
+def patch_completeness(output: np.ndarray, source: np.ndarray, **options: Any) -> float:
+    """Mean distance from source patches to their nearest output patch (see :func:`patch_distances`).
+
+    Low: every piece of the source shows up somewhere in the output.
+
+    Examples
+    --------
+    >>> clip = np.random.default_rng(0).integers(0, 256, (8, 16, 16)).astype(np.uint8)
+    >>> round(patch_completeness(clip, clip, n_samples=50, downscale=1), 3)
+    0.0
+    """
+    return patch_distances(output, source, **options)[1]
+
+
+# -- coverage and repetition ------------------------------------------------------------------
+def index_coverage(indices: Any, n_source: int) -> float:
+    """Share of the ``n_source`` source frames (or tiles) that appear in ``indices``.
+
+    Examples
+    --------
+    >>> index_coverage([0, 1, 1, 3], 8)
+    0.375
+    """
+    n_source = _check_int("n_source", n_source, 1)
+    idx = np.asarray(indices)
+    if idx.size == 0:
+        raise ValueError("indices is empty")
+    if idx.dtype.kind not in "ui":
+        raise TypeError(f"indices must be integers, not {idx.dtype}")
+    if idx.min() < 0 or idx.max() >= n_source:
+        raise ValueError(f"indices must lie in 0..{n_source - 1}, found {int(idx.min())}..{int(idx.max())}")
+    return float(np.unique(idx).size) / n_source
+
+
+def frame_coverage(output: np.ndarray, source: np.ndarray) -> float:
+    """Share of source frames that are the nearest source frame of at least one output frame.
+
+    Frames are compared as luma thumbnails (longer side 32 pixels) by Euclidean distance.
+    1 when the output shows every source frame; ``1/T`` for a frozen frame.
+
+    Examples
+    --------
+    >>> clip = np.random.default_rng(0).integers(0, 256, (10, 8, 8)).astype(np.uint8)
+    >>> frame_coverage(clip, clip), frame_coverage(clip[[3] * 10], clip)
+    (1.0, 0.1)
+    """
+    output = check_frames(output, name="output")
+    source = check_frames(source, name="source")
+    _same_size(output, source, "frame_coverage")
+    size = _thumb_size(source.shape)
+    to = _grey(output, size=size).reshape(output.shape[0], -1)
+    ts = _grey(source, size=size).reshape(source.shape[0], -1)
+    return index_coverage(_nearest_rows(to, ts), source.shape[0])
+
+
+def _nearest_rows(q: np.ndarray, db: np.ndarray) -> np.ndarray:
+    q64, db64 = q.astype(np.float64), db.astype(np.float64)
+    dbn = np.einsum("ij,ij->i", db64, db64)
+    out = np.empty(len(q), np.int64)
+    for i in range(0, len(q), 1024):
+        out[i:i + 1024] = np.argmin(dbn[None, :] - 2.0 * (q64[i:i + 1024] @ db64.T), axis=1)
+    return out
+
+
+def repetition_profile(output: np.ndarray, *, source: np.ndarray | None = None,
+                       max_lag: int | None = None) -> np.ndarray:
+    """Mean frame difference at each lag, over the reference's median consecutive-frame difference.
+
+    ``profile[L - 1]`` is the mean over ``t`` of the RMS difference between luma thumbnails
+    (longer side 32 pixels) of output frames ``t`` and ``t + L``, divided by the median
+    difference between consecutive thumbnails of ``source`` (of the output when None).
+
+    Parameters
+    ----------
+    output : ndarray
+        ``(T, H, W[, C])`` clip, at least 2 frames.
+    source : ndarray, optional
+        Reference clip (any size) for the normalisation.
+    max_lag : int, optional
+        Largest lag (default ``T // 2``, at most ``T - 1``).
+
+    Examples
+    --------
+    >>> clip = np.random.default_rng(0).integers(0, 256, (12, 8, 8)).astype(np.uint8)
+    >>> prof = repetition_profile(np.concatenate([clip[:4]] * 3))
+    >>> int(np.argmin(prof)) + 1, float(prof.min())
+    (4, 0.0)
+    """
+    output = check_frames(output, name="output", min_frames=2)
+    t = output.shape[0]
+    max_lag = max(1, t // 2) if max_lag is None else _check_int("max_lag", max_lag, 1, t - 1)
+    to = _grey(output, size=_thumb_size(output.shape)).reshape(t, -1).astype(np.float64)
+    if source is None:
+        ref_thumbs = to
+    else:
+        source = check_frames(source, name="source", min_frames=2)
+        ref_thumbs = _grey(source, size=_thumb_size(source.shape)).reshape(source.shape[0], -1).astype(np.float64)
+    dr = np.diff(ref_thumbs, axis=0)
+    ref = float(np.median(np.sqrt(np.mean(dr * dr, axis=1))))
+    if ref <= 0:
+        ref = 1e-3   # a frozen reference: any change counts as large
+    d = to.shape[1]
+    norms = np.einsum("ij,ij->i", to, to)
+    sums = np.zeros(max_lag + 1)
+    counts = np.zeros(max_lag + 1)
+    for i0 in range(0, t, 512):
+        i1 = min(t, i0 + 512)
+        j1 = min(t, i1 + max_lag)
+        d2 = norms[i0:i1, None] + norms[None, i0:j1] - 2.0 * (to[i0:i1] @ to[i0:j1].T)
+        lag = np.arange(i0, j1)[None, :] - np.arange(i0, i1)[:, None]
+        m = (lag >= 1) & (lag <= max_lag)
+        rms = np.sqrt(np.maximum(d2[m], 0.0) / d)
+        sums += np.bincount(lag[m], weights=rms, minlength=max_lag + 1)
+        counts += np.bincount(lag[m], minlength=max_lag + 1)
+    prof = sums[1:] / counts[1:] / ref
+    prof[prof < 1e-9] = 0.0
+    return prof
+
+
+def repetition_lag(output: np.ndarray, *, source: np.ndarray | None = None, tolerance: float = 0.25,
+                   max_lag: int | None = None) -> int | None:
+    """Earliest lag at which the output repeats itself, or None when it does not within ``max_lag``.
+
+    The output repeats at lag ``L`` when :func:`repetition_profile` at ``L`` is at most
+    ``tolerance`` (a fraction of the reference's median consecutive-frame difference).
+
+    Examples
+    --------
+    >>> clip = np.random.default_rng(0).integers(0, 256, (30, 8, 8)).astype(np.uint8)
+    >>> repetition_lag(np.concatenate([clip[:5]] * 6), source=clip), repetition_lag(clip)
+    (5, None)
+    """
+    tolerance = _check_pos_float("tolerance", tolerance)
+    prof = repetition_profile(output, source=source, max_lag=max_lag)
+    hits = np.flatnonzero(prof <= tolerance)
+    return int(hits[0]) + 1 if hits.size else None
+
+
+# -- everything at once ---------------------------------------------------------------------
+def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | None = None, wrap: bool = False,
+             events: Sequence[int] | None = None, window: int = 25, downscale: int | None = None,
+             seed: int = 0, n_samples: int = 1000) -> dict[str, Any]:
+    """Every metric of this module for one output against its source, as a JSON-ready dict.
+
+    Size-bound metrics (stability, frame coverage) are None when the frame sizes differ;
+    when the output holds NaN/inf, only stability is computed.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> clip = rng.integers(0, 256, (20, 32, 32, 3)).astype(np.uint8)
+    >>> rep = evaluate(clip, clip, window=20)
+    >>> rep["stability"]["final_ratio"], rep["frame_coverage"], rep["spectrum_distance_db"]
+    (1.0, 1.0, 0.0)
+    """
+    source = check_frames(source, name="source", min_frames=2)
+    output = check_frames(output, name="output", min_frames=2, allow_nonfinite=True)
+    same = output.shape[1:] == source.shape[1:]
+    report: dict[str, Any] = {
+        "output_frames": int(output.shape[0]), "source_frames": int(source.shape[0]),
+        "output_size": [int(output.shape[2]), int(output.shape[1])],
+        "source_size": [int(source.shape[2]), int(source.shape[1])],
+    }
+    report["stability"] = stability(output, source, window=window).as_dict() if same else None
+    if report["stability"] is not None and report["stability"]["nonfinite_frames"]:
+        return report
+    output = check_frames(output, name="output", min_frames=2)
+    if labels is not None or wrap:
+        r = seam_visibility(output, labels, wrap=wrap)
+        report["seam_visibility"] = {"mean": float(r.mean()), "max": float(r.max())}
+    else:
+        report["seam_visibility"] = None
+    if events:
+        r = temporal_discontinuity(output, events, source=source)
+        report["temporal_discontinuity"] = {"events": [int(e) for e in events], "ratios": r.tolist(),
+                                            "max": float(r.max())}
+    else:
+        report["temporal_discontinuity"] = None
+    report["frame_step_ratio"] = frame_step_ratio(output, source)
+    report["spectrum_distance_db"] = spectrum_distance(output, source, downscale=downscale)
+    coh, comp = patch_distances(output, source, downscale=downscale, seed=seed, n_samples=n_samples)
+    report["patch_coherence"] = coh
+    report["patch_completeness"] = comp
+    report["frame_coverage"] = frame_coverage(output, source) if same else None
+    report["repetition_lag"] = repetition_lag(output, source=source)
+    return report
+
+
+def _json_float(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None

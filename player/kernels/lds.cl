@@ -1,0 +1,61 @@
+// LDS projection: frame = basis^T (w * x) + mean, written as saturated uint8.
+//
+// The basis is stored blocked for streaming: for block b of BLOCK consecutive values,
+// its n x BLOCK sub-matrix is contiguous (row i at offset (b * n + i) * BLOCK), so one
+// work-item reads one contiguous run and consecutive work-items read consecutive runs.
+//
+// Defines: BLOCK (16), HALF (1: basis stored as half floats), CHANNELS (1 or 3).
+
+#if BLOCK != 16
+#error "BLOCK must be 16"
+#endif
+
+#if HALF
+typedef half basis_t;
+#define LOAD_ROW(i) vload_half16(0, row + (size_t)(i) * BLOCK)
+#else
+typedef float basis_t;
+#define LOAD_ROW(i) vload16(0, row + (size_t)(i) * BLOCK)
+#endif
+
+__kernel void project(__global const basis_t *restrict basis,
+                      __global const float *restrict mean,
+                      __constant float *restrict coef,
+                      __global uchar *restrict out,
+                      const int n,
+                      const int values)
+{
+    const size_t b = get_global_id(0);
+    __global const basis_t *row = basis + b * (size_t)n * BLOCK;
+    float16 acc = vload16(b, mean);
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        acc += coef[i] * LOAD_ROW(i);
+        acc += coef[i + 1] * LOAD_ROW(i + 1);
+        acc += coef[i + 2] * LOAD_ROW(i + 2);
+        acc += coef[i + 3] * LOAD_ROW(i + 3);
+    }
+    for (; i < n; ++i)
+        acc += coef[i] * LOAD_ROW(i);
+    uchar16 px = convert_uchar16_sat_rte(acc);
+    const size_t first = b * BLOCK;
+#if CHANNELS == 3
+    if (first + BLOCK <= (size_t)values) {
+        vstore16(px, b, out);
+    } else {
+        uchar tmp[16];
+        vstore16(px, 0, tmp);
+        for (size_t j = 0; first + j < (size_t)values; ++j)
+            out[first + j] = tmp[j];
+    }
+#else
+    uchar tmp[16];
+    vstore16(px, 0, tmp);
+    for (size_t j = 0; j < BLOCK && first + j < (size_t)values; ++j) {
+        const size_t o = 3 * (first + j);
+        out[o] = tmp[j];
+        out[o + 1] = tmp[j];
+        out[o + 2] = tmp[j];
+    }
+#endif
+}
