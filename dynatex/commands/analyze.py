@@ -1,0 +1,106 @@
+"""``dynatex analyze CLIP -o DB.h5``: learn models from a clip and store them."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+from ..analyzer.methods import METHODS, get_method
+from ..analyzer.video import load_clip
+from ..tiledb import DatabaseWriter
+from ._common import UsageError, positive_int, size_arg, tqdm_progress
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    p = sub.add_parser("analyze", help="learn models from a clip and write a tile database",
+                       description="Read a clip, run the chosen methods and write them into a tile "
+                                   "database (other textures already in it are kept).")
+    p.add_argument("clip", help="video file, folder of images, or .npy array (T, H, W[, C]) uint8")
+    p.add_argument("-o", "--output", required=True, help="tile database to create or update (.h5)")
+    p.add_argument("--name", help="texture name (default: the clip's file name without extension)")
+    p.add_argument("--methods", default="lds",
+                   help=f"comma-separated methods to run: {', '.join(METHODS)} (default: lds)")
+    p.add_argument("--overwrite", action="store_true", help="start a new database instead of updating one")
+    g = p.add_argument_group("clip input")
+    g.add_argument("--start", type=int, default=0, help="first frame (default 0)")
+    g.add_argument("--stop", type=int, default=None, help="stop before this frame")
+    g.add_argument("--step", type=positive_int, default=1, help="take every STEP-th frame")
+    g.add_argument("--crop", type=_crop_arg, default=None, metavar="X,Y,W,H", help="keep this region")
+    g.add_argument("--resize", type=size_arg, default=None, metavar="WxH", help="resize frames")
+    g.add_argument("--grey", action="store_true", help="analyse in grey levels instead of colour")
+    g = p.add_argument_group("lds")
+    g.add_argument("--n", default="50", help="state order, or 'auto' (default 50)")
+    g.add_argument("--k", type=positive_int, default=None, help="noise rank (default n)")
+    g.add_argument("--energy", type=float, default=0.9, help="variance kept by --n auto (default 0.9)")
+    g.add_argument("--svd", choices=("auto", "gram", "randomized"), default="auto")
+    g.add_argument("--max-radius", type=float, default=0.995, help="largest pole magnitude (default 0.995)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
+    return p
+
+
+def _crop_arg(text: str) -> tuple[int, int, int, int]:
+    try:
+        vals = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y,W,H, not {text!r}") from None
+    if len(vals) != 4:
+        raise argparse.ArgumentTypeError(f"expected X,Y,W,H, not {text!r}")
+    return vals  # type: ignore[return-value]
+
+
+def method_params(name: str, args: argparse.Namespace) -> dict:
+    """Keyword arguments of method ``name``'s learn function, from the command line."""
+    if name == "lds":
+        n = args.n if args.n == "auto" else _int("--n", args.n)
+        return {"n": n, "k": args.k, "energy": args.energy, "svd": args.svd, "max_radius": args.max_radius}
+    return {}
+
+
+def _int(flag: str, text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise UsageError(f"{flag} must be an integer or 'auto', not {text!r}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    names = [m.strip() for m in args.methods.split(",") if m.strip()]
+    if not names:
+        raise UsageError("--methods names no method")
+    methods = [get_method(m) for m in names]
+    texture = args.name or os.path.splitext(os.path.basename(os.path.normpath(args.clip)))[0]
+    show = not args.quiet
+    source = args.clip
+    if source.endswith(".npy") and os.path.isfile(source):
+        import numpy as np
+        source = np.load(source, allow_pickle=False)
+    t0 = time.perf_counter()
+    # Open (and so validate) an existing database before the long work.
+    with DatabaseWriter(args.output, overwrite=args.overwrite) as writer:
+        clip = load_clip(source, start=args.start, stop=args.stop, step=args.step, crop=args.crop,
+                         size=args.resize, color=not args.grey, isolate=isinstance(source, str) and os.path.isfile(source),
+                         progress=tqdm_progress("decode", show))
+        writer.put_texture(texture, clip.source_info())
+        if any(m.needs_frames for m in methods):
+            writer.put_frames(texture, clip.frames)
+        for m in methods:
+            t = time.perf_counter()
+            model = m.function()(clip, progress=tqdm_progress(m.name, show), **method_params(m.name, args))
+            writer.put_method(texture, m.name, model)
+            if show:
+                print(f"{m.name}: {_summary(m.name, model)} ({time.perf_counter() - t:.1f} s)", file=sys.stderr)
+    if show:
+        t, h, w, c = clip.frames.shape
+        print(f"wrote texture {texture!r} ({w}x{h}x{c}, {t} frames, methods {', '.join(names)}) "
+              f"to {args.output} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _summary(name: str, model) -> str:
+    info = getattr(model, "info", {}) or {}
+    if name == "lds":
+        return (f"n={model.n} k={model.k}, energy {info.get('energy_captured', 0):.3f}, "
+                f"spectral radius {info.get('spectral_radius_raw', 0):.4f} -> {info.get('spectral_radius', 0):.4f} "
+                f"({info.get('poles_clipped', 0)} poles clipped)")
+    return ""

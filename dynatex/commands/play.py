@@ -1,0 +1,122 @@
+"""``dynatex play DB.h5``: render frames of a texture to a video or PNG files."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+from ..player import MODES, open_player
+from ._common import UsageError, positive_int, size_arg
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    p = sub.add_parser("play", help="render frames of a texture to a video or PNG frames",
+                       description="Play a texture with the real-time player and write the frames to an "
+                                   "MP4/AVI video (OpenCV) or to numbered PNG files (an output ending in "
+                                   "'.png' or a folder).")
+    p.add_argument("database")
+    p.add_argument("--texture", help="texture name (optional when the database holds one)")
+    p.add_argument("--mode", default="lds", choices=sorted(MODES))
+    p.add_argument("--frames", type=positive_int, default=250, help="frames to render (default 250)")
+    p.add_argument("--size", type=size_arg, default=None, metavar="WxH",
+                   help="output size, for modes that synthesize any size")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--fps", type=float, default=None, help="frame rate of the video (default: the source's)")
+    p.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
+    p.add_argument("--device", default=None, help="OpenCL device (index P:D, or a name substring)")
+    p.add_argument("-o", "--output", required=True, help="out.mp4 / out.avi, frame_%%04d.png, or a folder")
+    g = p.add_argument_group("lds controls")
+    g.add_argument("--speed", type=float, default=1.0, help="in [-3, 3]; negative plays backwards")
+    g.add_argument("--intensity", type=float, default=1.0, help=">= 0, scale of the driving noise")
+    g.add_argument("--scales", default=None, metavar="C,M,F", help="coarse,medium,fine weights in [0, 10]")
+    g.add_argument("--precision", choices=("float32", "float16"), default="float32")
+    return p
+
+
+def player_options(args: argparse.Namespace) -> dict:
+    """Constructor options of the chosen mode, from the command line."""
+    opts = {"backend": args.backend, "device": args.device, "seed": args.seed}
+    if args.mode == "lds":
+        opts["precision"] = args.precision
+    if args.size is not None and args.mode == "lds":
+        raise UsageError("--size is not supported by mode lds (it plays at the clip's resolution)")
+    return opts
+
+
+def apply_controls(player, args: argparse.Namespace) -> None:
+    if args.mode == "lds":
+        player.speed = args.speed
+        player.intensity = args.intensity
+        if args.scales is not None:
+            try:
+                player.scales = [float(v) for v in args.scales.split(",")]
+            except ValueError:
+                raise UsageError(f"--scales must be three numbers C,M,F, not {args.scales!r}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    writer = FrameWriter(args.output)
+    with open_player(args.database, args.texture, mode=args.mode, **player_options(args)) as player:
+        apply_controls(player, args)
+        fps = args.fps or player.texture.source.fps
+        t0 = time.perf_counter()
+        frame = np.empty(player.shape, np.uint8)
+        try:
+            for _ in range(args.frames):
+                player.next_frame(out=frame)
+                writer.write(frame, fps)
+        finally:
+            writer.close()
+        dt = time.perf_counter() - t0
+    print(f"wrote {args.frames} frames ({player.shape[1]}x{player.shape[0]}) to {args.output} "
+          f"in {dt:.2f} s", file=sys.stderr)
+    return 0
+
+
+class FrameWriter:
+    """Writes RGB frames to a video (OpenCV VideoWriter) or numbered PNGs."""
+
+    def __init__(self, output: str) -> None:
+        self.output = output
+        self.index = 0
+        self._video = None
+        low = output.lower()
+        if low.endswith(".png"):
+            self.kind = "png"
+            self.pattern = output if "%" in output else output[:-4] + "_%05d.png"
+        elif os.path.isdir(output) or output.endswith(os.sep):
+            os.makedirs(output, exist_ok=True)
+            self.kind = "png"
+            self.pattern = os.path.join(output, "frame_%05d.png")
+        elif low.endswith((".mp4", ".avi", ".mkv")):
+            self.kind = "video"
+        else:
+            raise UsageError(f"output {output!r}: use .mp4, .avi, .mkv, a .png pattern or a folder")
+        folder = os.path.dirname(os.path.abspath(self.pattern if self.kind == "png" else output))
+        if not os.path.isdir(folder):
+            raise UsageError(f"output folder {folder} does not exist")
+
+    def write(self, frame: np.ndarray, fps: float) -> None:
+        import cv2
+        bgr = cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)
+        if self.kind == "png":
+            path = self.pattern % self.index
+            if not cv2.imwrite(path, bgr):
+                raise OSError(f"cannot write {path}")
+        else:
+            if self._video is None:
+                fourcc = {".mp4": "mp4v", ".avi": "MJPG", ".mkv": "XVID"}[os.path.splitext(self.output)[1].lower()]
+                self._video = cv2.VideoWriter(self.output, cv2.VideoWriter_fourcc(*fourcc), float(fps),
+                                              (frame.shape[1], frame.shape[0]))
+                if not self._video.isOpened():
+                    raise OSError(f"OpenCV cannot write video {self.output}")
+            self._video.write(bgr)
+        self.index += 1
+
+    def close(self) -> None:
+        if self._video is not None:
+            self._video.release()
+            self._video = None
