@@ -353,8 +353,11 @@ def seam_visibility(frames: np.ndarray, labels: np.ndarray | None = None, *, wra
     ``labels`` is a boundary edge (a tile, block or quilt-cut seam); with ``wrap=True`` the
     frame is a torus and the edges from the last column to the first and from the last row
     to the first (the border of a tileable texture) are boundary edges too. For each frame,
-    the mean squared RGB difference across boundary edges is divided by that across all
-    other edges. 1 means the seams look like the texture; above 1 they show.
+    the summed squared RGB difference across boundary edges is divided by what those edges
+    would hold if they looked like the interior: their count times the mean squared
+    difference of interior edges of the same direction (horizontal or vertical), so that
+    anisotropic textures do not bias the ratio. 1 means the seams look like the texture;
+    above 1 they show.
 
     Parameters
     ----------
@@ -399,11 +402,12 @@ def seam_visibility(frames: np.ndarray, labels: np.ndarray | None = None, *, wra
     else:
         bh = labels[:, 1:] != labels[:, :-1]
         bv = labels[1:, :] != labels[:-1, :]
-    nb = int(bh.sum() + bv.sum())
-    ni = int(bh.size + bv.size - nb)
+    nbh, nbv = int(bh.sum()), int(bv.sum())
+    nih, niv = bh.size - nbh, bv.size - nbv
+    nb = nbh + nbv
     if nb == 0:
         raise ValueError("boundaries: no boundary lies inside the frame (a single region covers it)")
-    if ni == 0:
+    if nih + niv == 0:
         raise ValueError("boundaries: every pixel edge is a boundary; there is no interior to compare with")
     mh, mv = bh.ravel().astype(np.float32), bv.ravel().astype(np.float32)
     out = np.empty(t, np.float64)
@@ -417,9 +421,15 @@ def seam_visibility(frames: np.ndarray, labels: np.ndarray | None = None, *, wra
             dv = f[:, 1:] - f[:, :-1]
         eh = np.einsum("...c,...c->...", dh, dh).reshape(n, -1)
         ev = np.einsum("...c,...c->...", dv, dv).reshape(n, -1)
-        b = eh @ mh + ev @ mv
-        tot = eh.sum(axis=1, dtype=np.float64) + ev.sum(axis=1, dtype=np.float64)
-        out[i:i + n] = (b / nb + eps) / ((tot - b) / ni + eps)
+        b_h, b_v = (eh @ mh).astype(np.float64), (ev @ mv).astype(np.float64)
+        i_h = eh.sum(axis=1, dtype=np.float64) - b_h
+        i_v = ev.sum(axis=1, dtype=np.float64) - b_v
+        pooled = (i_h + i_v) / (nih + niv)
+        mean_h = i_h / nih if nih else pooled
+        mean_v = i_v / niv if niv else pooled
+        # what the boundary edges would hold if they looked like interior edges of the same direction
+        expected = nbh * mean_h + nbv * mean_v
+        out[i:i + n] = (b_h + b_v + eps * nb) / (expected + eps * nb)
     return out
 
 
@@ -812,6 +822,7 @@ def repetition_profile(output: np.ndarray, *, source: np.ndarray | None = None,
     t = output.shape[0]
     max_lag = max(1, t // 2) if max_lag is None else _check_int("max_lag", max_lag, 1, t - 1)
     to = _grey(output, size=_thumb_size(output.shape)).reshape(t, -1).astype(np.float64)
+    to -= to.mean(axis=0)         # smaller norms: less cancellation in the Gram-matrix distances
     if source is None:
         ref_thumbs = to
     else:
@@ -835,7 +846,7 @@ def repetition_profile(output: np.ndarray, *, source: np.ndarray | None = None,
         sums += np.bincount(lag[m], weights=rms, minlength=max_lag + 1)
         counts += np.bincount(lag[m], minlength=max_lag + 1)
     prof = sums[1:] / counts[1:] / ref
-    prof[prof < 1e-9] = 0.0
+    prof[prof < 1e-6] = 0.0       # rounding of the Gram-matrix distances
     return prof
 
 

@@ -208,3 +208,25 @@ def _define(v: object) -> str:
     if isinstance(v, (float, np.floating)):
         return repr(float(v)) + "f"
     return str(v)
+
+
+def _main(argv: list[str] | None = None) -> int:
+    """``python -m dynatex.player [--check]``: list devices; with --check exit 1 if none can build."""
+    import argparse
+    parser = argparse.ArgumentParser(prog="python -m dynatex.player")
+    parser.add_argument("--check", action="store_true", help="exit 1 unless a device can compile kernels")
+    args = parser.parse_args(argv)
+    try:
+        for plat, dev in list_devices():
+            print(f"{plat}: {dev}")
+        ctx = get_context()
+    except OpenCLUnavailableError as exc:
+        print(f"no usable OpenCL device: {exc}")
+        return 1
+    d = ctx.devices[0]
+    print(f"default device: {d.platform.name} {d.platform.version}: {d.name}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(_main())

@@ -1,0 +1,254 @@
+"""Unit tests of dynatex.analyzer.metrics: definitions on tiny arrays, input checks, doctests."""
+from __future__ import annotations
+
+import doctest
+import json
+
+import numpy as np
+import pytest
+
+from dynatex.analyzer import metrics as m
+
+
+def _noise(t=12, h=16, w=16, c=3, seed=0):
+    return np.random.default_rng(seed).integers(0, 256, (t, h, w, c)).astype(np.uint8)
+
+
+def test_doctests():
+    res = doctest.testmod(m, extraglobs={"np": np}, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert res.attempted > 20
+    assert res.failed == 0
+
+
+# -- check_frames -----------------------------------------------------------------------------
+def test_check_frames_shapes():
+    assert m.check_frames(np.zeros((3, 4, 5), np.uint8)).shape == (3, 4, 5, 1)
+    assert m.check_frames(np.zeros((3, 4, 5, 3), np.float32)).shape == (3, 4, 5, 3)
+
+
+@pytest.mark.parametrize("bad, exc, msg", [
+    (np.zeros((0, 4, 4, 3), np.uint8), ValueError, "empty"),
+    (np.zeros((4, 4), np.uint8), ValueError, "shape"),
+    (np.zeros((2, 4, 4, 2), np.uint8), ValueError, "C in"),
+    (np.zeros((2, 4, 4), bool), TypeError, "numbers"),
+    ("clip.avi", TypeError, "numpy array"),
+])
+def test_check_frames_rejects(bad, exc, msg):
+    with pytest.raises(exc, match=msg):
+        m.check_frames(bad, name="output")
+
+
+def test_nonfinite_rejected_except_by_stability():
+    f = np.full((4, 4, 4), 10.0)
+    f[2, 1, 1] = np.inf
+    assert m.count_nonfinite(f) == 1
+    with pytest.raises(ValueError, match="NaN or inf in 1 frame"):
+        m.frame_step_ratio(f, _noise(c=1, h=4, w=4))
+
+
+# -- stability --------------------------------------------------------------------------------
+def test_stability_self_is_one_and_decay_to_mean_is_zero():
+    src = _noise(t=20)
+    rep = m.stability(src, src, window=20)
+    assert rep.ratios == pytest.approx([1.0])
+    mean = src.astype(np.float64).mean(axis=0)
+    rep0 = m.stability(np.repeat(mean[None], 10, axis=0), src, window=5)
+    assert rep0.max_ratio == pytest.approx(0.0, abs=1e-6)
+    assert not rep0.is_stable()
+
+
+def test_stability_streams_iterables_and_counts_nonfinite():
+    src = _noise(t=10).astype(np.float32)
+    frames = [f for f in src] + [np.full(src.shape[1:], np.nan, np.float32)] * 3
+    rep = m.stability(iter(frames), src, window=5)
+    assert rep.n_frames == 13 and rep.nonfinite_frames == 3
+    assert np.isnan(rep.ratios[-1])          # the last window holds only NaN frames
+    assert not rep.is_stable()
+    d = rep.as_dict()
+    assert d["final_ratio"] is None and d["stable"] is False
+    json.dumps(d)                             # JSON-ready
+
+
+def test_stability_errors():
+    src = _noise()
+    with pytest.raises(ValueError, match="shaped like the source"):
+        m.stability(_noise(h=8), src)
+    with pytest.raises(ValueError, match="no temporal variation"):
+        m.stability(src, np.repeat(src[:1], 5, axis=0))
+    with pytest.raises(ValueError, match="window must be"):
+        m.stability(src, src, window=0)
+    with pytest.raises(ValueError, match="empty"):
+        m.stability(iter([]), src)
+    with pytest.raises(ValueError, match="frame 0 has shape"):
+        m.stability(iter([np.zeros((3, 3, 3))]), src)
+
+
+# -- seams ------------------------------------------------------------------------------------
+def test_grid_labels_offset_and_count():
+    lab = m.grid_labels((10, 12), (4, 5), offset=(2, 1))
+    assert lab.shape == (10, 12)
+    assert lab[0, 0] == 0 and lab[1, 0] == 0 and lab[2, 0] != 0      # row boundary at y=2
+    assert lab[0, 3] == 0 and lab[0, 4] != 0                         # column boundary at x=4
+    with pytest.raises(ValueError, match="tile"):
+        m.grid_labels((10, 12), 0)
+
+
+def test_seam_visibility_sees_a_step_only_on_the_boundary():
+    f = np.zeros((2, 8, 8), np.uint8)
+    f[:, :, 4:] = 100
+    on = m.seam_visibility(f, m.grid_labels((8, 8), (8, 4)))
+    off = m.seam_visibility(f, m.grid_labels((8, 8), (8, 4), offset=(0, 2)))
+    assert (on > 1e6).all()
+    assert (off < 1e-5).all()
+
+
+def test_seam_visibility_wrap_border():
+    # a horizontal ramp is seamless inside but jumps at the wrap-around border
+    ramp = np.tile(np.arange(0, 64, 4, dtype=np.uint8), (3, 16, 1))
+    r = m.seam_visibility(ramp, wrap=True)
+    assert r.min() > 50
+    # a periodic texture tiles without a seam
+    x = np.arange(16)
+    per = np.tile((100 + 50 * np.sin(2 * np.pi * x / 16)).astype(np.uint8), (3, 16, 1))
+    assert m.seam_visibility(per, wrap=True).max() < 1.5
+
+
+def test_seam_visibility_errors():
+    f = _noise()
+    with pytest.raises(ValueError, match="no boundary"):
+        m.seam_visibility(f, m.grid_labels((16, 16), 64))
+    with pytest.raises(ValueError, match="labels map is 8x8 but frames are 16x16"):
+        m.seam_visibility(f, np.zeros((8, 8), int))
+    with pytest.raises(ValueError, match="no boundary to measure"):
+        m.seam_visibility(f)
+    with pytest.raises(TypeError, match="labels must be"):
+        m.seam_visibility(f, np.zeros((16, 16), np.float32))
+    checker = (np.indices((16, 16)).sum(axis=0) % 2)
+    with pytest.raises(ValueError, match="no interior"):
+        m.seam_visibility(f, checker)
+
+
+# -- temporal ---------------------------------------------------------------------------------
+def test_temporal_discontinuity_definition():
+    ramp = np.repeat(np.arange(0, 60, 3, dtype=np.uint8), 4).reshape(20, 2, 2)
+    jump = np.concatenate([ramp[:10], ramp[15:]])          # skips 5 steps at frame 10
+    assert m.temporal_discontinuity(jump, [10], source=ramp) == pytest.approx([6.0])
+    assert m.temporal_discontinuity(jump, [3, 12], source=ramp) == pytest.approx([1.0, 1.0])
+    # without a source, the output's own median step is the reference
+    assert m.temporal_discontinuity(jump, 10) == pytest.approx([6.0])
+
+
+def test_temporal_discontinuity_errors():
+    f = _noise()
+    with pytest.raises(ValueError, match="event 12 is outside"):
+        m.temporal_discontinuity(f, [12])
+    with pytest.raises(ValueError, match="event 0 is outside"):
+        m.temporal_discontinuity(f, [0])
+    with pytest.raises(TypeError, match="integers"):
+        m.temporal_discontinuity(f, [1.5])
+    with pytest.raises(ValueError, match="does not change"):
+        m.temporal_discontinuity(f, [3], source=np.repeat(f[:1], 4, axis=0))
+
+
+def test_frame_step_ratio():
+    ramp = np.repeat(np.arange(0, 60, 3, dtype=np.uint8), 4).reshape(20, 2, 2)
+    assert m.frame_step_ratio(ramp, ramp) == pytest.approx(1.0)
+    assert m.frame_step_ratio(ramp[::3], ramp) == pytest.approx(3.0)
+    assert m.frame_step_ratio(np.repeat(ramp[:1], 5, axis=0), ramp) == 0.0
+
+
+# -- spectrum and patches ----------------------------------------------------------------------
+def test_spectrum_shape_and_different_sizes():
+    rng = np.random.default_rng(3)
+    a = rng.normal(128, 20, (20, 40, 48)).clip(0, 255)
+    b = rng.normal(128, 20, (24, 64, 32)).clip(0, 255)
+    assert m.st_power_spectrum(a, cuboid=(8, 16)).shape == (5, 9)
+    # two draws of the same white noise have the same spectrum, whatever their sizes
+    assert m.spectrum_distance(a, b, cuboid=(8, 16), downscale=1) < 0.5
+    # a smoothed version does not
+    import cv2
+    c = np.stack([cv2.GaussianBlur(f.astype(np.float32), (0, 0), 2) for f in b])
+    assert m.spectrum_distance(c, b, cuboid=(8, 16), downscale=1) > 5
+
+
+def test_spectrum_errors():
+    f = _noise(t=3, h=3, w=3)
+    with pytest.raises(ValueError, match="too small"):
+        m.spectrum_distance(f, f)
+    with pytest.raises(ValueError, match="smaller than the spectrum cuboid"):
+        m.st_power_spectrum(_noise(t=4), cuboid=(8, 8))
+    with pytest.raises(TypeError, match="cuboid"):
+        m.spectrum_distance(_noise(), _noise(), cuboid="big")
+
+
+def test_patch_distances_self_zero_and_swapped_roles():
+    src = _noise(t=10, h=24, w=24, seed=1)
+    assert m.patch_distances(src, src, downscale=1) == pytest.approx((0.0, 0.0), abs=1e-4)
+    half = src[:5]
+    coh, comp = m.patch_distances(half, src, downscale=1, n_samples=200)
+    # every patch of the first half is in the source; not every source patch is in the half
+    assert coh == pytest.approx(0.0, abs=1e-4)
+    assert comp > 10
+    assert m.patch_coherence(half, src, downscale=1, n_samples=200) == coh
+    assert m.patch_completeness(half, src, downscale=1, n_samples=200) == comp
+
+
+def test_patch_errors():
+    with pytest.raises(ValueError, match="smaller than one patch"):
+        m.patch_distances(_noise(t=2), _noise())
+    with pytest.raises(ValueError, match="n_samples"):
+        m.patch_distances(_noise(), _noise(), n_samples=0)
+    with pytest.raises(TypeError, match="seed"):
+        m.patch_distances(_noise(), _noise(), seed="x")
+
+
+# -- coverage and repetition ------------------------------------------------------------------
+def test_coverage():
+    src = _noise(t=10)
+    assert m.frame_coverage(src, src) == 1.0
+    assert m.frame_coverage(src[[2, 2, 2, 5]], src) == pytest.approx(0.2)
+    assert m.index_coverage(np.arange(5), 10) == 0.5
+    with pytest.raises(ValueError, match="same frame size"):
+        m.frame_coverage(_noise(h=8), src)
+    with pytest.raises(ValueError, match="0..9"):
+        m.index_coverage([3, 10], 10)
+    with pytest.raises(ValueError, match="empty"):
+        m.index_coverage([], 10)
+
+
+def test_repetition():
+    src = _noise(t=40, seed=2)
+    looped = np.concatenate([src[:7]] * 6)
+    assert m.repetition_lag(looped) == 7
+    assert m.repetition_lag(src) is None
+    prof = m.repetition_profile(looped, max_lag=20)
+    assert prof.shape == (20,) and prof[6] == 0.0 and prof[13] == 0.0 and prof[:6].min() > 0.5
+    assert m.repetition_lag(np.repeat(src[:1], 10, axis=0)) == 1
+    with pytest.raises(ValueError, match="max_lag"):
+        m.repetition_profile(src, max_lag=40)
+    with pytest.raises(ValueError, match="tolerance"):
+        m.repetition_lag(src, tolerance=-1)
+
+
+# -- evaluate ---------------------------------------------------------------------------------
+def test_evaluate_report_is_json_and_complete():
+    src = _noise(t=24, h=32, w=32)
+    rep = m.evaluate(src, src, labels=m.grid_labels((32, 32), 8), events=[5, 10], window=12, downscale=1)
+    json.dumps(rep)
+    assert rep["stability"]["stable"] is True
+    assert rep["seam_visibility"]["mean"] > 0
+    assert rep["temporal_discontinuity"]["events"] == [5, 10]
+    assert rep["frame_coverage"] == 1.0 and rep["repetition_lag"] is None
+    assert rep["patch_coherence"] == pytest.approx(0.0, abs=1e-4) and rep["spectrum_distance_db"] == 0.0
+
+
+def test_evaluate_other_size_and_nonfinite():
+    src = _noise(t=48, h=64, w=64)
+    other = _noise(t=40, h=72, w=80, seed=5)
+    rep = m.evaluate(other, src, downscale=1)
+    assert rep["stability"] is None and rep["frame_coverage"] is None
+    assert rep["spectrum_distance_db"] < 1.0            # same white-noise statistics
+    bad = src[:24].astype(np.float32)
+    bad[3, 0, 0, 0] = np.nan
+    rep = m.evaluate(bad, src, window=12)
+    assert rep["stability"]["nonfinite_frames"] == 1 and "patch_coherence" not in rep
