@@ -107,10 +107,17 @@ def test_seam_visibility_wrap_border():
     ramp = np.tile(np.arange(0, 64, 4, dtype=np.uint8), (3, 16, 1))
     r = m.seam_visibility(ramp, wrap=True)
     assert r.min() > 50
-    # a periodic texture tiles without a seam
-    x = np.arange(16)
-    per = np.tile((100 + 50 * np.sin(2 * np.pi * x / 16)).astype(np.uint8), (3, 16, 1))
-    assert m.seam_visibility(per, wrap=True).max() < 1.5
+    # a periodic (toroidal) texture tiles without a seam; a crop of a larger texture does not
+    rng = np.random.default_rng(4)
+    spec = np.fft.fft2(rng.normal(0, 1, (96, 96)))
+    fy, fx = np.meshgrid(np.fft.fftfreq(96), np.fft.fftfreq(96), indexing="ij")
+    field = np.real(np.fft.ifft2(spec * np.exp(-(fx ** 2 + fy ** 2) / (2 * 0.06 ** 2))))
+    field = (128 + 40 * field / field.std()).clip(0, 255)
+    periodic = np.repeat(field[None], 2, axis=0)
+    crop = np.repeat(field[None, :64, :64], 2, axis=0)
+    good, bad = m.seam_visibility(periodic, wrap=True).mean(), m.seam_visibility(crop, wrap=True).mean()
+    assert 0.7 < good < 1.4
+    assert bad > 3 * good
 
 
 def test_seam_visibility_errors():
