@@ -42,8 +42,8 @@ class Texture:
 
     def read(self, method: str) -> Any:
         """Read and validate the model stored for ``method`` (for example ``"lds"``)."""
-        if method not in CODECS:
-            raise ValueError(f"method must be one of {sorted(CODECS)}, not {method!r}")
+        if method not in schema.METHODS:
+            raise ValueError(f"method must be one of {', '.join(schema.METHODS)}, not {method!r}")
         if method not in self.methods:
             raise MethodNotFoundError(
                 f"texture {self.name!r} has no {method!r} data (it has: {', '.join(self.methods) or 'none'}); "

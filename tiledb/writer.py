@@ -107,7 +107,8 @@ class DatabaseWriter:
     # -- commit / abort ----------------------------------------------------------
     def commit(self) -> None:
         """Carry over untouched textures, validate the new file, and rename it onto ``path``."""
-        assert self._file is not None, "writer already closed"
+        if self._file is None:
+            raise RuntimeError("writer already committed or aborted")
         try:
             if self._old is not None:
                 for name in self._old.textures:
@@ -143,7 +144,8 @@ class DatabaseWriter:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:
-            self.commit()
+            if self._file is not None:  # not already committed or aborted
+                self.commit()
         else:
             self.abort()
 
