@@ -14,8 +14,8 @@ import numpy as np
 
 from ..tiledb import LDSModel, TileDB
 from .base import Player, check_float
+from .projection import BLOCK, Projector
 
-BLOCK = 16
 PRECISIONS = ("float32", "float16")
 MAX_INTENSITY = 100.0
 MAX_WEIGHT = 10.0
@@ -119,45 +119,15 @@ class LDSPlayer(Player):
         self._weights = np.ones(self.n)
         self._A_edit = self._A
         self._w = np.ones(self.n)
-        self._coef = np.zeros(max(self.n, 1), np.float32)
         basis = model.basis
         if precision == "float16":
             basis = basis.astype(np.float16)
-        self.basis_bytes = basis.nbytes
-        if self.backend == "numpy":
-            self._basis = basis.astype(np.float32) if precision == "float16" else basis
-            self._mean = model.mean
-        else:
-            self._setup_opencl(basis, model.mean)
+        self._proj = Projector(basis, model.mean, shape=self._shape, channels=self._channels,
+                               ctx=self.ctx, queue=self.queue)
+        self._coef = self._proj.coef
+        self.basis_bytes = self._proj.basis_bytes
         self.reseed(seed)
         self._warm()
-
-    def _setup_opencl(self, basis: np.ndarray, mean: np.ndarray) -> None:
-        import pyopencl as cl
-        from .opencl import build_program
-        n, p = basis.shape
-        blocks = -(-p // BLOCK)
-        padded = blocks * BLOCK
-        blocked = np.zeros((blocks, n, BLOCK), basis.dtype)
-        full = p // BLOCK
-        blocked[:full] = basis[:, : full * BLOCK].reshape(n, full, BLOCK).transpose(1, 0, 2)
-        if padded != p:
-            blocked[full, :, : p - full * BLOCK] = basis[:, full * BLOCK:]
-        mean_p = np.zeros(padded, np.float32)
-        mean_p[:p] = mean
-        mf = cl.mem_flags
-        self._d_basis = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blocked)
-        del blocked
-        self._d_mean = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p)
-        self._d_coef = cl.Buffer(self.ctx, mf.READ_ONLY, self._coef.nbytes)
-        out_bytes = padded * (3 // self._channels)
-        self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, out_bytes)
-        prog = build_program(self.ctx, "lds.cl", {"BLOCK": BLOCK, "HALF": self.precision == "float16",
-                                                  "CHANNELS": self._channels})
-        self._kernel = prog.kernel("project")
-        self._kernel.set_args(self._d_basis, self._d_mean, self._d_coef, self._d_out,
-                              np.int32(n), np.int32(p))
-        self._gsize = (blocks,)
 
     def _warm(self) -> None:
         scratch = np.empty(self._shape, np.uint8)
@@ -273,20 +243,7 @@ class LDSPlayer(Player):
 
     def _project(self, x: np.ndarray, out: np.ndarray) -> None:
         np.multiply(self._w, x, out=self._coef[: self.n], casting="same_kind")
-        if self.backend == "numpy":
-            frame = self._coef[: self.n] @ self._basis
-            frame += self._mean
-            np.rint(frame, out=frame)
-            np.clip(frame, 0, 255, out=frame)
-            if self._channels == 3:
-                out.reshape(-1)[...] = frame
-            else:
-                out[...] = frame.reshape(self._shape[0], self._shape[1], 1)
-            return
-        import pyopencl as cl
-        cl.enqueue_copy(self.queue, self._d_coef, self._coef, is_blocking=False)
-        cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, None)
-        cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
+        self._proj.run(out)
 
     # -- state ---------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:

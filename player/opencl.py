@@ -158,7 +158,7 @@ def device_shares_host_memory(ctx: "cl.Context") -> bool:
 
 
 class Program:
-    """A built ``.cl`` file; :meth:`kernel` fetches each kernel once and reuses it."""
+    """A ``.cl`` file built once per context and set of defines (see :func:`build_program`)."""
 
     def __init__(self, ctx: "cl.Context", filename: str, defines: Mapping[str, object]) -> None:
         self.filename = filename
@@ -174,15 +174,19 @@ class Program:
                     f"building player/kernels/{filename} with {' '.join(self.options)} failed:\n{logtext}") from None
         for w in caught:
             log.debug("OpenCL compiler output for %s: %s", filename, w.message)
-        self._kernels: dict[str, cl.Kernel] = {}
-        self.builds = 1
 
     def kernel(self, name: str) -> "cl.Kernel":
-        k = self._kernels.get(name)
-        if k is None:
-            global _kernel_fetches
-            k = self._kernels[name] = getattr(self.program, name)
-            _kernel_fetches += 1
+        """A new kernel object for ``name``, with its own arguments.
+
+        Fetch it once per owner (a player, at open) and reuse it for every launch: kernel
+        arguments live in the kernel object, so two players must not share one.
+        """
+        global _kernel_fetches
+        try:
+            k = cl.Kernel(self.program, name)
+        except cl.Error as exc:
+            raise KernelBuildError(f"player/kernels/{self.filename} has no kernel {name!r} ({exc})") from None
+        _kernel_fetches += 1
         return k
 
 
