@@ -1,0 +1,246 @@
+"""``dynatex evaluate SOURCE OUTPUT``: quality metrics of a synthesized texture against its source."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import sys
+from typing import Any
+
+import numpy as np
+
+from ._common import UsageError, positive_int, size_arg
+
+DB_SUFFIXES = (".h5", ".hdf5")
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "evaluate", help="measure the quality of a synthesized texture against its source",
+        description="Compare OUTPUT with SOURCE: long-run stability, seam visibility, temporal "
+                    "discontinuity at events, spectrum and patch likeness, coverage and repetition "
+                    "(see analyzer/METRICS.md). OUTPUT is a video, a folder of images or a .npy array, "
+                    "or a tile database (.h5) played with --texture/--mode/--frames/--seed/--size.")
+    p.add_argument("source", help="source clip: video file, folder of images, or .npy (T, H, W[, C]) uint8")
+    p.add_argument("output", help="synthesized clip (video, folder, .npy) or a tile database (.h5)")
+    p.add_argument("--boundaries", default=None, metavar="SPEC",
+                   help="seams to measure: grid:WxH[+X+Y] (a tile grid of W x H pixels, shifted by X,Y), "
+                        "border (the wrap-around border of a tileable texture), or an image whose distinct "
+                        "colours label regions (a seam lies wherever neighbouring labels differ)")
+    p.add_argument("--wrap", action="store_true", help="also count the wrap-around border as a seam")
+    p.add_argument("--events", default=None, metavar="LIST",
+                   help="frames that follow a jump (loop wrap, reversal): comma-separated indices, "
+                        "or every:N for every N-th frame")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    g = p.add_argument_group("database output (the player)")
+    g.add_argument("--texture", help="texture name (optional when the database holds one)")
+    g.add_argument("--mode", default="lds", help="player mode (default lds)")
+    g.add_argument("--frames", type=positive_int, default=None,
+                   help="frames to play from a database (default 300), or to read from a video")
+    g.add_argument("--seed", type=int, default=0, help="player seed, also the patch-sampling seed")
+    g.add_argument("--size", type=size_arg, default=None, metavar="WxH",
+                   help="output size, for modes that synthesize any size")
+    g.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
+    g = p.add_argument_group("source and metrics")
+    g.add_argument("--source-size", type=size_arg, default=None, metavar="WxH",
+                   help="resize the source frames (default: as stored, or as the database recorded)")
+    g.add_argument("--window", type=positive_int, default=25, help="frames per stability window (default 25)")
+    g.add_argument("--downscale", type=positive_int, default=None,
+                   help="downscale factor for spectrum and patches (default min(H, W) // 128, at least 1)")
+    g.add_argument("--samples", type=positive_int, default=1000, help="patches sampled per direction (default 1000)")
+    return p
+
+
+# -- argument parsing ---------------------------------------------------------------------------
+_GRID = re.compile(r"^grid:(\d+)x(\d+)(?:\+(\d+)\+(\d+))?$", re.IGNORECASE)
+
+
+def parse_events(text: str, n_frames: int) -> list[int]:
+    """``"10,20"`` or ``"every:10"`` -> frame indices (checked against ``n_frames``)."""
+    text = text.strip()
+    if text.lower().startswith("every:"):
+        try:
+            step = int(text[6:])
+        except ValueError:
+            raise UsageError(f"--events every:N needs an integer N, not {text!r}") from None
+        if step < 1:
+            raise UsageError(f"--events every:N needs N >= 1, not {step}")
+        events = list(range(step, n_frames, step))
+        if not events:
+            raise UsageError(f"--events {text}: no event inside the output's {n_frames} frames")
+        return events
+    try:
+        events = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise UsageError(f"--events must be comma-separated frame indices, not {text!r}") from None
+    if not events:
+        raise UsageError("--events names no frame")
+    for e in events:
+        if not 1 <= e <= n_frames - 1:
+            raise UsageError(f"--events: frame {e} is outside the output's frames 1..{n_frames - 1}")
+    return events
+
+
+def parse_boundaries(spec: str, shape: tuple[int, int]) -> tuple[np.ndarray | None, bool]:
+    """``--boundaries`` -> (label map or None, wrap) for frames of ``shape`` = (H, W)."""
+    from ..analyzer.metrics import grid_labels
+    h, w = shape
+    if spec.lower() == "border":
+        return None, True
+    mt = _GRID.match(spec)
+    if mt:
+        tw, th = int(mt.group(1)), int(mt.group(2))
+        ox, oy = int(mt.group(3) or 0), int(mt.group(4) or 0)
+        if tw < 1 or th < 1:
+            raise UsageError(f"--boundaries {spec}: tile size must be at least 1x1")
+        labels = grid_labels((h, w), (th, tw), offset=(oy, ox))
+        if labels.max() == 0:
+            raise UsageError(f"--boundaries {spec}: the grid has no seam inside the {w}x{h} frame")
+        return labels, False
+    if spec.lower().startswith("grid:"):
+        raise UsageError(f"--boundaries grid must be grid:WxH or grid:WxH+X+Y, not {spec!r}")
+    if not os.path.isfile(spec):
+        raise UsageError(f"--boundaries {spec!r} is neither grid:WxH, border, nor an existing image file")
+    import cv2
+    img = cv2.imread(spec, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise UsageError(f"--boundaries {spec}: cannot read it as an image")
+    if img.shape[:2] != (h, w):
+        raise UsageError(f"--boundaries {spec}: mask is {img.shape[1]}x{img.shape[0]} but the output frames "
+                         f"are {w}x{h}")
+    if img.ndim == 2:
+        labels = img.astype(np.int64)
+    else:
+        flat = img.reshape(h * w, -1).astype(np.int64)
+        labels = np.unique(flat, axis=0, return_inverse=True)[1].reshape(h, w)
+    return labels, False
+
+
+# -- inputs ------------------------------------------------------------------------------------
+def _load(path: str, **opts: Any) -> np.ndarray:
+    from ..analyzer.video import load_clip
+    if path.endswith(".npy") and os.path.isfile(path):
+        arr = np.load(path, allow_pickle=False)
+        src: Any = arr
+    else:
+        src = path
+    return load_clip(src, isolate=isinstance(src, str) and os.path.isfile(src), **opts).frames
+
+
+def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any]]:
+    """Frames from the player, and the load options that reproduce the texture's source frames."""
+    import inspect
+
+    from ..player import open_player, player_class
+    opts: dict[str, Any] = {"seed": args.seed, "backend": args.backend}
+    if args.size is not None:
+        params = inspect.signature(player_class(args.mode).__init__).parameters
+        if "size" not in params and not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+            raise UsageError(f"--size is not supported by mode {args.mode} (it plays at the clip's resolution)")
+        opts["size"] = args.size
+    n = args.frames or 300
+    with open_player(args.output, args.texture, mode=args.mode, **opts) as player:
+        src = player.texture.source
+        frames = np.empty((n,) + tuple(player.shape), np.uint8)
+        for i in range(n):
+            player.next_frame(out=frames[i])
+    source_opts: dict[str, Any] = {
+        "start": int(src.frame_start), "step": int(src.frame_step),
+        "stop": int(src.frame_start + src.n_frames * src.frame_step),
+        "size": (int(src.width), int(src.height)), "color": int(src.channels) == 3,
+    }
+    if src.crop:
+        source_opts["crop"] = tuple(int(v) for v in src.crop)
+    return frames, source_opts
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..analyzer import metrics
+    is_db = args.output.lower().endswith(DB_SUFFIXES)
+    if not is_db:
+        for flag, val in (("--texture", args.texture), ("--size", args.size)):
+            if val is not None:
+                raise UsageError(f"{flag} applies to a database output (.h5), not to {args.output}")
+    if is_db:
+        output, source_opts = play_database(args)
+    else:
+        output = _load(args.output, **({"stop": args.frames} if args.frames else {}))
+        source_opts = {}
+    if args.source_size is not None:
+        source_opts["size"] = args.source_size
+    source = _load(args.source, **source_opts)
+    t, h, w = output.shape[:3]
+    if output.shape[-1] != source.shape[-1]:        # grey against colour: compare in colour
+        output, source = (np.repeat(a, 3, axis=-1) if a.shape[-1] == 1 else a for a in (output, source))
+    labels, wrap = (None, False) if args.boundaries is None else parse_boundaries(args.boundaries, (h, w))
+    wrap = wrap or args.wrap
+    events = parse_events(args.events, t) if args.events else None
+    report = metrics.evaluate(output, source, labels=labels, wrap=wrap, events=events, window=args.window,
+                              downscale=args.downscale, seed=max(0, args.seed), n_samples=args.samples)
+    report["source"] = args.source
+    report["output"] = args.output
+    if is_db:
+        report["player"] = {"texture": args.texture, "mode": args.mode, "seed": args.seed,
+                            "frames": int(t), "backend": args.backend}
+    if args.json:
+        print(json.dumps(report, indent=2, allow_nan=False))
+    else:
+        print(format_table(report))
+    return 0
+
+
+# -- the readable table ----------------------------------------------------------------------------
+def _fmt(v: Any, digits: int = 3) -> str:
+    if v is None:
+        return "n/a"
+    if isinstance(v, float):
+        return "nan" if not math.isfinite(v) else f"{v:.{digits}f}"
+    return str(v)
+
+
+def format_table(report: dict[str, Any]) -> str:
+    """The report as aligned ``metric  value  what good looks like`` lines."""
+    rows: list[tuple[str, str, str]] = []
+    st = report.get("stability")
+    same = "n/a: output size differs from the source"
+    if st is None:
+        rows.append(("stability energy ratio", same, ""))
+    else:
+        rows.append(("stability energy ratio min/max",
+                     f"{_fmt(st['min_ratio'])} / {_fmt(st['max_ratio'])}", "0.5..2 (decay -> 0, blow-up >> 1)"))
+        rows.append(("stability final window", _fmt(st["final_ratio"]), "about 1"))
+        rows.append(("non-finite frames", str(st["nonfinite_frames"]), "0"))
+        if st["nonfinite_frames"]:
+            rows.append(("other metrics", "skipped: the output holds NaN/inf", ""))
+    if "frame_step_ratio" in report:
+        sv = report["seam_visibility"]
+        rows.append(("seam visibility mean/max",
+                     "n/a (no --boundaries)" if sv is None else f"{_fmt(sv['mean'])} / {_fmt(sv['max'])}",
+                     "about 1 (> 1.5 visible)"))
+        td = report["temporal_discontinuity"]
+        rows.append(("temporal discontinuity max",
+                     "n/a (no --events)" if td is None else f"{_fmt(td['max'])} over {len(td['events'])} events",
+                     "about 1 (> 2 a visible jump)"))
+        rows.append(("frame step ratio", _fmt(report["frame_step_ratio"]), "about 1 (0 frozen, >> 1 jumpy)"))
+        rows.append(("spectrum distance (dB)", _fmt(report["spectrum_distance_db"], 2), "< 1 good, > 3 unlike"))
+        rows.append(("patch coherence (grey levels)", _fmt(report["patch_coherence"], 2), "low (0 = copies)"))
+        rows.append(("patch completeness (grey levels)", _fmt(report["patch_completeness"], 2), "low (0 = all used)"))
+        cov = report["frame_coverage"]
+        rows.append(("frame coverage", same if cov is None else _fmt(cov), "near 1 for a player of frames"))
+        lag = report["repetition_lag"]
+        rows.append(("repetition lag (frames)", "none found" if lag is None else str(lag), "none, or long"))
+    head = (f"{report['output']} ({report['output_frames']} frames, {report['output_size'][0]}x"
+            f"{report['output_size'][1]}) against {report['source']} ({report['source_frames']} frames, "
+            f"{report['source_size'][0]}x{report['source_size'][1]})")
+    w0 = max(len(r[0]) for r in rows)
+    w1 = max(len(r[1]) for r in rows)
+    lines = [head, f"{'metric':<{w0}}  {'value':<{w1}}  good", "-" * (w0 + w1 + 30)]
+    lines += [f"{a:<{w0}}  {b:<{w1}}  {c}".rstrip() for a, b, c in rows]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    from ..cli import main
+    sys.exit(main(["evaluate", *sys.argv[1:]]))

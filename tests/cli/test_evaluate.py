@@ -1,0 +1,157 @@
+"""``dynatex evaluate``: table and JSON reports, video/array/database outputs, bad input (exit 2)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dynatex.cli import main
+
+
+def _texture(t: int = 40, h: int = 48, w: int = 64, seed: int = 0) -> np.ndarray:
+    """A smooth drifting texture, RGB uint8."""
+    import cv2
+    rng = np.random.default_rng(seed)
+    big = cv2.GaussianBlur(rng.normal(0, 1, (h + t, w + t)).astype(np.float32), (0, 0), 3)
+    big /= big.std()
+    frames = np.stack([big[i // 2:i // 2 + h, i:i + w] for i in range(t)])
+    return np.repeat((128 + 40 * frames).clip(0, 255).astype(np.uint8)[..., None], 3, axis=-1)
+
+
+def _write_video(path: Path, frames: np.ndarray) -> Path:
+    import cv2
+    wr = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 25, (frames.shape[2], frames.shape[1]))
+    assert wr.isOpened()
+    for f in frames:
+        wr.write(np.ascontiguousarray(f[..., ::-1]))
+    wr.release()
+    return path
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("evaluate")
+    src = _texture()
+    np.save(d / "src.npy", src)
+    np.save(d / "loop.npy", src[np.arange(40) % 10])
+    np.save(d / "small.npy", src[:, :32, :32])
+    _write_video(d / "src.avi", src)
+    return d
+
+
+def _run(capsys, *argv) -> tuple[int, str, str]:
+    rc = main(["evaluate", *map(str, argv)])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_json_report_video_against_itself(files, capsys):
+    rc, out, _ = _run(capsys, files / "src.avi", files / "src.avi", "--boundaries", "grid:16x16+3+3",
+                      "--events", "10,20", "--json")
+    assert rc == 0
+    rep = json.loads(out)
+    assert rep["output_frames"] == 40 and rep["output_size"] == [64, 48]
+    assert rep["stability"]["stable"] is True
+    assert rep["spectrum_distance_db"] == 0.0
+    assert rep["frame_coverage"] == 1.0 and rep["repetition_lag"] is None
+    assert rep["temporal_discontinuity"]["events"] == [10, 20]
+    assert 0.7 < rep["seam_visibility"]["mean"] < 1.3
+
+
+def test_table_flags_a_loop(files, capsys):
+    rc, out, _ = _run(capsys, files / "src.npy", files / "loop.npy", "--events", "every:10")
+    assert rc == 0
+    lines = {ln.split("  ")[0].strip(): ln for ln in out.splitlines()}
+    assert "repetition lag (frames)" in lines and " 10 " in lines["repetition lag (frames)"] + " "
+    assert "0.250" in lines["frame coverage"]           # 10 of 40 source frames
+    assert "over 3 events" in lines["temporal discontinuity max"]
+
+
+def test_other_size_output_skips_size_bound_metrics(files, capsys):
+    rc, out, _ = _run(capsys, files / "src.npy", files / "small.npy", "--json")
+    assert rc == 0
+    rep = json.loads(out)
+    assert rep["stability"] is None and rep["frame_coverage"] is None
+    assert rep["patch_coherence"] == pytest.approx(0.0, abs=1e-3)     # a crop: all its patches are source patches
+    rc, out, _ = _run(capsys, files / "src.npy", files / "small.npy")
+    assert rc == 0 and "n/a: output size differs" in out
+
+
+def test_png_label_mask(files, capsys, tmp_path):
+    import cv2
+    mask = np.zeros((48, 64, 3), np.uint8)
+    mask[:, 30:] = (255, 0, 0)
+    mask[20:, :] = (0, 255, 0)
+    cv2.imwrite(str(tmp_path / "mask.png"), mask)
+    rc, out, _ = _run(capsys, files / "src.npy", files / "src.npy", "--boundaries", tmp_path / "mask.png", "--json")
+    assert rc == 0
+    assert 0.6 < json.loads(out)["seam_visibility"]["mean"] < 1.5
+    cv2.imwrite(str(tmp_path / "small.png"), mask[:10, :10])
+    rc, _, err = _run(capsys, files / "src.npy", files / "src.npy", "--boundaries", tmp_path / "small.png")
+    assert rc == 2 and "mask is 10x10 but the output frames are 64x48" in err
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--boundaries", "grid:100x100"], "no seam inside the 64x48 frame"),
+    (["--boundaries", "grid:axb"], "grid:WxH"),
+    (["--boundaries", "nowhere.png"], "neither grid:WxH, border, nor an existing image"),
+    (["--events", "40"], "outside the output's frames 1..39"),
+    (["--events", "3,x"], "comma-separated frame indices"),
+    (["--events", "every:0"], "N >= 1"),
+    (["--texture", "water"], "--texture applies to a database output"),
+])
+def test_bad_options_exit_2(files, capsys, extra, message):
+    rc, out, err = _run(capsys, files / "src.npy", files / "src.npy", *extra)
+    assert rc == 2
+    assert message in err and "Traceback" not in err
+    assert out == ""
+
+
+def test_bad_files_exit_2(files, capsys, tmp_path):
+    empty = tmp_path / "empty.avi"
+    empty.write_bytes(b"")
+    rc, _, err = _run(capsys, files / "src.npy", empty)
+    assert rc == 2 and "empty" in err
+    rc, _, err = _run(capsys, files / "src.npy", tmp_path / "missing.avi")
+    assert rc == 2 and "no such clip" in err
+    np.save(tmp_path / "one.npy", np.zeros((1, 8, 8, 3), np.uint8))
+    rc, _, err = _run(capsys, files / "src.npy", tmp_path / "one.npy")
+    assert rc == 2 and "only one frame" in err
+
+
+@pytest.mark.clips
+def test_real_clip_against_its_loop(clips_dir, capsys, tmp_path):
+    from dynatex.analyzer import load_clip
+    src = clips_dir / "steam_vapour_pot_128px.avi"
+    frames = load_clip(src).frames
+    np.save(tmp_path / "loop.npy", frames[np.arange(frames.shape[0]) % 10])
+    rc, out, _ = _run(capsys, src, tmp_path / "loop.npy", "--events", "every:10", "--json")
+    assert rc == 0
+    rep = json.loads(out)
+    assert rep["repetition_lag"] == 10
+    assert rep["temporal_discontinuity"]["max"] > 1.5
+    assert rep["patch_completeness"] > 2 * rep["patch_coherence"]
+
+
+def test_database_output_lds(files, capsys, tmp_path):
+    pytest.importorskip("h5py")
+    db = tmp_path / "tex.h5"
+    rc = main(["analyze", str(files / "src.npy"), "-o", str(db), "--n", "10", "-q"])
+    capsys.readouterr()
+    assert rc == 0
+    rc, out, err = _run(capsys, files / "src.npy", db, "--frames", "60", "--backend", "numpy", "--seed", "3",
+                        "--json")
+    assert rc == 0, err
+    rep = json.loads(out)
+    assert rep["output_frames"] == 60 and rep["output_size"] == [64, 48]
+    assert rep["player"]["mode"] == "lds"
+    assert rep["stability"]["nonfinite_frames"] == 0
+    assert 0.2 < rep["stability"]["min_ratio"] and rep["stability"]["max_ratio"] < 5
+    # the same seed gives the same frames, so the same report
+    rc, out2, _ = _run(capsys, files / "src.npy", db, "--frames", "60", "--backend", "numpy", "--seed", "3",
+                       "--json")
+    assert json.loads(out2)["stability"] == rep["stability"]
+    rc, _, err = _run(capsys, files / "src.npy", db, "--size", "32x32", "--backend", "numpy")
+    assert rc == 2 and "--size is not supported by mode lds" in err
