@@ -2,5 +2,9 @@
 from __future__ import annotations
 
 from .video import Clip, ClipError, load_clip
+from .metrics import (frame_coverage, patch_distances, repetition_lag, seam_visibility, spectrum_distance,
+                      stability, temporal_discontinuity)
 
 __all__ = ["Clip", "ClipError", "load_clip"]
+__all__ += ["frame_coverage", "patch_distances", "repetition_lag", "seam_visibility", "spectrum_distance",
+            "stability", "temporal_discontinuity"]
