@@ -1,0 +1,98 @@
+"""The projection ``frame = mean + sum_i coef_i * basis[i]`` to uint8, shared by the modes
+whose frames are a linear combination of stored rows (``lds``, ``mixture``).
+
+OpenCL: kernel ``project`` of ``kernels/lds.cl`` over a blocked copy of the basis (for
+each block of ``BLOCK`` values, its ``n x BLOCK`` sub-matrix is contiguous), built once and
+with its arguments set once; per frame one small upload of the coefficients, one launch
+and one blocking copy into the caller's buffer. numpy: the reference implementation.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+BLOCK = 16
+
+
+def blocked_basis(basis: np.ndarray, block: int = BLOCK) -> np.ndarray:
+    """``(n, P)`` -> ``(ceil(P / block), n, block)``, zero-padded: the kernel's streaming layout."""
+    n, p = basis.shape
+    blocks = -(-p // block)
+    out = np.zeros((blocks, n, block), basis.dtype)
+    full = p // block
+    out[:full] = basis[:, : full * block].reshape(n, full, block).transpose(1, 0, 2)
+    if blocks != full:
+        out[full, :, : p - full * block] = basis[:, full * block:]
+    return out
+
+
+class Projector:
+    """Projects coefficient vectors through a fixed basis into ``(H, W, 3)`` uint8 frames.
+
+    Parameters
+    ----------
+    basis : (n, P) float32 or float16
+        Rows to combine; ``P = H * W * channels``. float16 halves the bytes read per frame.
+    mean : (P,) float32
+        Added to every frame.
+    shape : (H, W, 3)
+        Output frame shape.
+    channels : {1, 3}
+        Values per pixel in ``basis``; grey frames are replicated to RGB.
+    ctx, queue : pyopencl Context and CommandQueue, or None for the numpy reference.
+
+    The coefficients are written into :attr:`coef` (float32, length ``max(n, 1)``) and
+    :meth:`run` projects them.
+    """
+
+    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
+                 ctx=None, queue=None) -> None:
+        self.n, self.values = basis.shape
+        self.shape = tuple(shape)
+        self.channels = channels
+        self.half = basis.dtype == np.float16
+        self.basis_bytes = basis.nbytes
+        self.coef = np.zeros(max(self.n, 1), np.float32)
+        self.queue = queue
+        if ctx is None:
+            self._basis = basis.astype(np.float32) if self.half else basis
+            self._mean = mean
+            return
+        import pyopencl as cl
+        from .opencl import build_program
+        blocked = blocked_basis(basis)
+        blocks = blocked.shape[0]
+        padded = blocks * BLOCK
+        mean_p = np.zeros(padded, np.float32)
+        mean_p[: self.values] = mean
+        mf = cl.mem_flags
+        self._d_basis = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blocked)
+        del blocked
+        self._d_mean = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p)
+        self._d_coef = cl.Buffer(ctx, mf.READ_ONLY, self.coef.nbytes)
+        self._d_out = cl.Buffer(ctx, mf.WRITE_ONLY, padded * (3 // channels))
+        prog = build_program(ctx, "lds.cl", {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels})
+        self._kernel = prog.kernel("project")
+        self._kernel.set_args(self._d_basis, self._d_mean, self._d_coef, self._d_out,
+                              np.int32(self.n), np.int32(self.values))
+        self._gsize = (blocks,)
+
+    @property
+    def is_opencl(self) -> bool:
+        return self.queue is not None
+
+    def run(self, out: np.ndarray) -> None:
+        """Project :attr:`coef` into ``out`` ((H, W, 3) uint8, C-contiguous)."""
+        if self.queue is None:
+            frame = self.coef[: self.n] @ self._basis
+            frame += self._mean
+            np.rint(frame, out=frame)
+            np.clip(frame, 0, 255, out=frame)
+            if self.channels == 3:
+                out.reshape(-1)[...] = frame
+            else:
+                out[...] = frame.reshape(self.shape[0], self.shape[1], 1)
+            return
+        import pyopencl as cl
+        cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=False)
+        cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, None)
+        cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
