@@ -25,6 +25,7 @@ class Method:
 
 METHODS: dict[str, Method] = {
     "lds": Method("lds", "lds:learn_lds", False, "linear dynamic texture (Doretto & Soatto)"),
+    "mixture": Method("mixture", "mixture:learn_mixture", False, "subspace mixture + global coordination + AR(p) (Liu, Lin & Ahuja)"),
 }
 
 

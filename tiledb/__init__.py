@@ -11,12 +11,15 @@ from .errors import (MethodNotFoundError, TextureNotFoundError, TileDBError, Til
                      TileDBNotFoundError, TileDBVersionError)
 from .frames import FrameStore
 from .lds import LDSModel
+from .quilt import QuiltModel
+from .mixture import MixtureModel
 from .schema import FORMAT_NAME, FORMAT_VERSION
 from .source import SourceInfo
 from .writer import DatabaseWriter
 
 __all__ = [
-    "DatabaseWriter", "FORMAT_NAME", "FORMAT_VERSION", "FrameStore", "LDSModel", "MethodNotFoundError",
+    "DatabaseWriter", "FORMAT_NAME", "FORMAT_VERSION", "FrameStore", "LDSModel", "MethodNotFoundError", "MixtureModel",
+    "QuiltModel",
     "SourceInfo", "Texture", "TextureNotFoundError", "TileDB", "TileDBError", "TileDBFormatError",
     "TileDBNotFoundError", "TileDBVersionError", "open_db",
 ]

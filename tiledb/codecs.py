@@ -7,8 +7,10 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from . import lds, schema
+from . import lds, mixture, quilt, schema
 
 CODECS: dict[str, ModuleType] = {
     schema.METHOD_LDS: lds,
+    schema.METHOD_QUILT: quilt,
+    schema.METHOD_MIXTURE: mixture,
 }

@@ -1,0 +1,418 @@
+"""Learning subspace-mixture dynamic textures (Liu, Lin & Ahuja).
+
+1. A reduced PCA space of ``q`` dimensions (the SVD helpers of :mod:`.lds`), for tractability.
+2. A mixture of ``S`` probabilistic PCA components of dimension ``d`` fitted by EM
+   (Tipping & Bishop; the M-step uses the closed-form ML solution for each component's
+   responsibility-weighted covariance). Local coordinates ``z_s`` are the orthonormal
+   coordinates in each component's principal subspace (a per-axis rescaling of the
+   posterior mean, so the coordination absorbs the difference).
+3. Global coordination (Teh & Roweis): ``u_nj = r_ns z^i_ns`` (``z^0 = 1``), LLE weights over
+   ``K`` neighbours, and the generalized eigenproblem ``A v = lambda B v`` with
+   ``A = U^T (I-W)^T (I-W) U`` and ``B = U^T U / N``, restricted to the centring constraint
+   ``1^T U L = 0``; unit covariance ``L^T B L = I`` is the eigenvectors' normalisation.
+4. AR(p) on the global coordinates, ``p = 1..pmax`` fitted by least squares on a common
+   sample (Neumaier & Schneider) and chosen by Schwarz's criterion; an unstable fit is
+   pulled back by scaling ``A_i -> c^i A_i``, which scales every pole by ``c``.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from ..tiledb import MixtureModel
+from ..tiledb.mixture import companion_radius
+from .lds import _stepper, _svd_gram, _svd_randomized
+from .video import Clip
+
+Progress = Callable[[int, int | None], None]
+
+DEFAULT_COMPONENTS = 3
+DEFAULT_DIM = 10
+DEFAULT_PCA_DIM = 50
+DEFAULT_NEIGHBORS = 12
+DEFAULT_PMAX = 5
+DEFAULT_MAX_RADIUS = 0.995
+LLE_REG = 1e-3
+
+
+def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONENTS, dim: int = DEFAULT_DIM,
+                  global_dim: int | None = None, pca_dim: int = DEFAULT_PCA_DIM,
+                  neighbors: int = DEFAULT_NEIGHBORS, pmax: int = DEFAULT_PMAX,
+                  max_radius: float = DEFAULT_MAX_RADIUS, max_iter: int = 200, tol: float = 1e-6,
+                  seed: int = 0, progress: Progress | None = None) -> MixtureModel:
+    """Learn a subspace-mixture dynamic texture from a clip.
+
+    Parameters
+    ----------
+    clip : Clip or ndarray
+        Frames ``(T, H, W, C)`` uint8.
+    components : int
+        Number ``S`` of PPCA components (>= 1; needs ``S * (dim + 1) < T``).
+    dim : int
+        Dimension ``d`` of each component (``1 <= d < pca_dim``).
+    global_dim : int, optional
+        Dimension ``D`` of the global coordinates (default ``dim``; at most ``S (d + 1) - 1``).
+    pca_dim : int
+        Dimension ``q`` of the reduced PCA space the mixture is fitted in (capped by the clip's rank).
+    neighbors : int
+        ``K`` nearest neighbours of the LLE reconstruction weights (``1 <= K < T``).
+    pmax : int
+        Largest AR order tried; Schwarz's criterion picks ``p`` in ``1..pmax``.
+    max_radius : float
+        Largest pole magnitude of the AR process, in (0, 1).
+    max_iter, tol : int, float
+        EM stops after ``max_iter`` iterations or when the log-likelihood gains less than
+        ``tol`` (relative).
+    seed : int
+        Seed of the EM initialisation (k-means++) and the randomized SVD.
+    progress : callable(done, total), optional
+        Called after each of the 5 stages.
+
+    Returns
+    -------
+    MixtureModel
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.arange(60)[:, None, None, None]
+    >>> x = np.arange(16)[None, None, :, None]
+    >>> frames = (128 + 60 * np.sin(0.3 * t + 0.5 * x) + 0 * np.arange(8)[None, :, None, None]).astype(np.uint8)
+    >>> m = learn_mixture(np.repeat(frames, 3, axis=3), components=2, dim=2, pca_dim=6, neighbors=6, pmax=3)
+    >>> m.stacked_basis.shape, m.global_coords.shape, 1 <= m.order <= 3
+    ((6, 384), (60, 2), True)
+    """
+    frames = clip.frames if isinstance(clip, Clip) else np.asarray(clip)
+    if frames.ndim != 4 or frames.dtype != np.uint8:
+        raise ValueError(f"clip must be (T, H, W, C) uint8 frames, not {frames.dtype} {frames.shape}")
+    tau = frames.shape[0]
+    components = _pos_int("components", components)
+    dim = _pos_int("dim", dim)
+    pca_dim = _pos_int("pca_dim", pca_dim)
+    neighbors = _pos_int("neighbors", neighbors)
+    pmax = _pos_int("pmax", pmax)
+    max_iter = _pos_int("max_iter", max_iter)
+    seed = _pos_int("seed", seed, lo=0)
+    global_dim = dim if global_dim is None else _pos_int("global_dim", global_dim)
+    if not 0 < max_radius < 1:
+        raise ValueError(f"max_radius must be in (0, 1), not {max_radius!r}")
+    if not 0 < tol < 1:
+        raise ValueError(f"tol must be in (0, 1), not {tol!r}")
+    if tau < 4:
+        raise ValueError(f"clip has {tau} frames; a subspace mixture needs at least 4")
+    if components * (dim + 1) >= tau:
+        raise ValueError(f"components={components} with dim={dim} needs more than components * (dim + 1) = "
+                         f"{components * (dim + 1)} frames, the clip has {tau}; use fewer components or a smaller dim")
+    if dim >= pca_dim:
+        raise ValueError(f"dim={dim} must be smaller than pca_dim={pca_dim}")
+    if global_dim > components * (dim + 1) - 1:
+        raise ValueError(f"global_dim={global_dim} exceeds components * (dim + 1) - 1 = {components * (dim + 1) - 1}")
+    if neighbors >= tau:
+        raise ValueError(f"neighbors={neighbors} must be smaller than the number of frames ({tau})")
+    if not tau - pmax > global_dim * pmax + 1 + global_dim:
+        raise ValueError(f"pmax={pmax} is too large for {tau} frames of {global_dim}-dimensional global "
+                         f"coordinates (needs T - pmax > (pmax + 1) * global_dim + 1); use a smaller pmax")
+    step = _stepper(progress, 5)
+
+    # 1. Reduced PCA space.
+    y = frames.reshape(tau, -1).astype(np.float32)
+    mean = y.mean(axis=0, dtype=np.float64).astype(np.float32)
+    y -= mean
+    total = float(np.einsum("ij,ij->", y, y, dtype=np.float64))
+    if total <= 1e-6 * y.shape[1]:
+        raise ValueError("clip is constant: every frame is the same, there is no appearance variation to model")
+    cap = min(pca_dim, tau - 1)
+    if tau <= 1500:
+        basis, sv, states = _svd_gram(y, cap)
+    else:
+        basis, sv, states = _svd_randomized(y, cap, seed)
+    del y
+    q = int(min(cap, np.sum(sv > sv[0] * 1e-6)))
+    if dim >= q:
+        raise ValueError(f"dim={dim} must be smaller than the clip's rank in the reduced space ({q}); "
+                         f"use a smaller dim")
+    basis = np.ascontiguousarray(basis[:q])
+    x = np.ascontiguousarray(states[:q].T)                        # (T, q)
+    step()
+
+    # 2. Mixture of PPCA.
+    ppca = fit_mppca(x, components, dim, max_iter=max_iter, tol=tol, seed=seed)
+    r, z = ppca["resp"], ppca["z"]
+    step()
+
+    # 3. Global coordination.
+    u = coefficient_matrix(r, z)
+    w_idx, w = lle_weights(x, neighbors)
+    lmap, eigvals = coordinate(u, w_idx, w, global_dim)
+    g = u @ lmap
+    gm, gc = _global_gaussians(g, r)
+    step()
+
+    # 4. AR(p) by Schwarz's criterion.
+    ar = fit_ar(g, pmax, max_radius=max_radius)
+    step()
+
+    # Pixel-space stacked basis: per component its mean offset, then its loadings.
+    rows = []
+    for s in range(components):
+        rows.append(ppca["mu"][s][None, :])
+        rows.append(ppca["U"][s].T)
+    stacked = np.concatenate(rows, axis=0).astype(np.float32) @ basis
+    inside = float(np.sum(x ** 2))
+    err_soft = (total - inside + float(np.sum((x - reconstruct(ppca, r, z)) ** 2))) / total
+    hard = np.zeros_like(r)
+    hard[np.arange(tau), r.argmax(axis=1)] = 1
+    err_hard = (total - inside + float(np.sum((x - reconstruct(ppca, hard, z)) ** 2))) / total
+    info = {
+        "pca_dim": q, "neighbors": int(neighbors), "pmax": int(pmax), "seed": int(seed),
+        "max_radius": float(max_radius), "em_iterations": int(ppca["iterations"]),
+        "log_likelihood": float(ppca["loglik"]), "total_energy": total,
+        "energy_pca_space": inside / total, "recon_error": err_soft, "recon_error_hard": err_hard,
+        "recon_error_pca_dim": float(1 - np.sum(sv[:dim] ** 2) / total),
+        "coordination_cost": float(np.sum(eigvals)),
+        "spectral_radius_raw": float(ar["radius_raw"]), "spectral_radius": float(ar["radius"]),
+        "ar_shrink": float(ar["shrink"]), "tau": int(tau),
+    }
+    model = MixtureModel(
+        mean=mean, stacked_basis=np.ascontiguousarray(stacked), weights=ppca["pi"], sigma2=ppca["sigma2"],
+        singular_values=sv.astype(np.float64), responsibilities=r, local_coords=z, coord_map=lmap,
+        global_coords=g, gauss_mean=gm, gauss_cov=gc, ar_coefs=ar["A"], ar_intercept=ar["w"],
+        ar_noise_cov=ar["C"], sbc=ar["sbc"], info=info)
+    step()
+    return model
+
+
+# -- mixture of probabilistic PCA -----------------------------------------------------------
+
+def fit_mppca(x: np.ndarray, components: int, dim: int, *, max_iter: int = 200, tol: float = 1e-6,
+              seed: int = 0) -> dict:
+    """EM for a mixture of PPCA on rows of ``x`` (N, q).
+
+    Returns a dict: ``pi`` (S,), ``mu`` (S, q), ``U`` (S, q, d) orthonormal loadings,
+    ``lam`` (S, d) principal variances, ``sigma2`` (S,), ``resp`` (N, S), ``z`` (N, S, d),
+    ``loglik`` (mean per point), ``iterations``. Raises ValueError when a component loses
+    its data (too many components for the clip).
+    """
+    n, q = x.shape
+    floor = 1e-6 * float(np.mean(np.var(x, axis=0))) + 1e-12
+    resp = _kmeans_resp(x, components, seed)
+    prev = -np.inf
+    it = 0
+    for it in range(1, max_iter + 1):
+        params = _m_step(x, resp, dim, floor)
+        logp = _log_gauss(x, params)
+        top = logp.max(axis=1, keepdims=True)
+        norm = top[:, 0] + np.log(np.exp(logp - top).sum(axis=1))
+        resp = np.exp(logp - norm[:, None])
+        loglik = float(norm.mean())
+        if abs(loglik - prev) <= tol * abs(loglik):
+            break
+        prev = loglik
+    params = _m_step(x, resp, dim, floor)
+    z = np.einsum("nsq,sqd->nsd", x[:, None, :] - params["mu"][None], params["U"])
+    return {**params, "resp": resp, "z": z, "loglik": loglik, "iterations": it}
+
+
+def _m_step(x: np.ndarray, resp: np.ndarray, dim: int, floor: float) -> dict:
+    n, q = x.shape
+    nk = resp.sum(axis=0)
+    s_count = resp.shape[1]
+    if nk.min() < dim + 1:
+        k = int(nk.argmin())
+        raise ValueError(f"component {k} holds only {nk[k]:.1f} frames' worth of data (needs more than "
+                         f"dim={dim}); the clip does not support {s_count} components: use fewer components "
+                         f"or a smaller dim")
+    mu = (resp.T @ x) / nk[:, None]
+    us = np.empty((s_count, q, dim))
+    lam = np.empty((s_count, dim))
+    sigma2 = np.empty(s_count)
+    for s in range(s_count):
+        e = x - mu[s]
+        cov = (e * resp[:, s:s + 1]).T @ e / nk[s]
+        ev, vec = np.linalg.eigh(cov)
+        ev, vec = ev[::-1], vec[:, ::-1]
+        sigma2[s] = max(float(ev[dim:].mean()) if q > dim else floor, floor)
+        lam[s] = np.maximum(ev[:dim], sigma2[s] * (1 + 1e-9))
+        us[s] = vec[:, :dim]
+    return {"pi": nk / n, "mu": mu, "U": us, "lam": lam, "sigma2": sigma2}
+
+
+def _log_gauss(x: np.ndarray, p: dict) -> np.ndarray:
+    """``log pi_s + log N(x; mu_s, U diag(lam) U^T + sigma2 (I - U U^T))`` for every row and component."""
+    n, q = x.shape
+    out = np.empty((n, p["mu"].shape[0]))
+    for s in range(p["mu"].shape[0]):
+        e = x - p["mu"][s]
+        c = e @ p["U"][s]
+        sq = np.einsum("ij,ij->i", e, e)
+        cs = np.einsum("ij,ij->i", c, c)
+        maha = (c ** 2 / p["lam"][s]).sum(axis=1) + (sq - cs) / p["sigma2"][s]
+        logdet = np.log(p["lam"][s]).sum() + (q - p["lam"].shape[1]) * np.log(p["sigma2"][s])
+        out[:, s] = np.log(p["pi"][s]) - 0.5 * (q * np.log(2 * np.pi) + logdet + maha)
+    return out
+
+
+def _kmeans_resp(x: np.ndarray, k: int, seed: int, iters: int = 30) -> np.ndarray:
+    """Hard responsibilities from k-means with k-means++ seeding."""
+    rng = np.random.default_rng(seed)
+    n = x.shape[0]
+    centres = [x[rng.integers(n)]]
+    for _ in range(1, k):
+        d2 = np.min(((x[:, None, :] - np.array(centres)[None]) ** 2).sum(-1), axis=1)
+        tot = d2.sum()
+        centres.append(x[rng.choice(n, p=d2 / tot)] if tot > 0 else x[rng.integers(n)])
+    c = np.array(centres)
+    labels = np.zeros(n, int)
+    for _ in range(iters):
+        labels = ((x[:, None, :] - c[None]) ** 2).sum(-1).argmin(axis=1)
+        for j in range(k):
+            if np.any(labels == j):
+                c[j] = x[labels == j].mean(axis=0)
+    resp = np.zeros((n, k))
+    resp[np.arange(n), labels] = 1.0
+    # A little softness keeps every component alive for the first M-step.
+    return 0.98 * resp + 0.02 / k
+
+
+def reconstruct(ppca: dict, resp: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Reduced-space reconstruction ``sum_s r_s (mu_s + U_s z_s)``."""
+    per = ppca["mu"][None] + np.einsum("sqd,nsd->nsq", ppca["U"], z)
+    return np.einsum("ns,nsq->nq", resp, per)
+
+
+# -- global coordination -----------------------------------------------------------------
+
+def coefficient_matrix(resp: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``U`` with ``u_nj = r_ns z^i_ns``, ``j = s (d + 1) + i``, ``z^0 = 1``: (N, S (d + 1))."""
+    n, s, d = z.shape
+    ext = np.concatenate([np.ones((n, s, 1)), z], axis=2)
+    return (resp[:, :, None] * ext).reshape(n, s * (d + 1))
+
+
+def lle_weights(x: np.ndarray, k: int, reg: float = LLE_REG) -> tuple[np.ndarray, np.ndarray]:
+    """LLE reconstruction weights: each row of ``x`` from its ``k`` nearest other rows, weights summing to 1.
+
+    Returns neighbour indices (N, k) and weights (N, k).
+    """
+    sq = np.einsum("ij,ij->i", x, x)
+    d2 = sq[:, None] + sq[None, :] - 2 * x @ x.T
+    np.fill_diagonal(d2, np.inf)
+    idx = np.argsort(d2, axis=1)[:, :k]
+    diff = x[idx] - x[:, None, :]                          # (N, k, q)
+    gram = diff @ diff.transpose(0, 2, 1)                  # (N, k, k)
+    tr = np.trace(gram, axis1=1, axis2=2)
+    gram += (reg * np.maximum(tr, 1e-12))[:, None, None] * np.eye(k)
+    w = np.linalg.solve(gram, np.ones((x.shape[0], k, 1)))[..., 0]
+    w /= w.sum(axis=1, keepdims=True)
+    return idx, w
+
+
+def coordinate(u: np.ndarray, idx: np.ndarray, w: np.ndarray, out_dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """The coordination map ``L`` (J, out_dim): the smallest generalized eigenvectors of
+    ``A v = lambda B v`` subject to ``1^T U L = 0``; ``G = U L`` is centred with unit covariance.
+
+    Returns ``L`` and its eigenvalues (the LLE cost of each global axis).
+    """
+    n, j = u.shape
+    resid = u - np.einsum("nk,nkj->nj", w, u[idx])       # (I - W) U
+    a = resid.T @ resid
+    b = u.T @ u / n
+    # Centring: 1^T U v = 0, i.e. v orthogonal to c = U^T 1. Work in c's orthogonal complement.
+    c = u.sum(axis=0)
+    qmat, _ = np.linalg.qr(np.concatenate([c[:, None], np.eye(j)], axis=1))
+    null = qmat[:, 1:j]
+    an = null.T @ a @ null
+    bn = null.T @ b @ null
+    bn = (bn + bn.T) / 2
+    bn += 1e-10 * np.trace(bn) / bn.shape[0] * np.eye(bn.shape[0])
+    chol = np.linalg.cholesky(bn)
+    ci = np.linalg.inv(chol)
+    m = ci @ ((an + an.T) / 2) @ ci.T
+    ev, vec = np.linalg.eigh((m + m.T) / 2)
+    v = ci.T @ vec[:, :out_dim]
+    lmap = null @ v
+    # Fix signs so results do not depend on the eigensolver.
+    g = u @ lmap
+    sign = np.sign(g[np.argmax(np.abs(g), axis=0), np.arange(out_dim)])
+    sign[sign == 0] = 1
+    return lmap * sign, ev[:out_dim]
+
+
+def _global_gaussians(g: np.ndarray, resp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Responsibility-weighted Gaussian of the global coordinates per component (decodes responsibilities)."""
+    nk = resp.sum(axis=0)
+    dg = g.shape[1]
+    means = (resp.T @ g) / nk[:, None]
+    covs = np.empty((resp.shape[1], dg, dg))
+    for s in range(resp.shape[1]):
+        e = g - means[s]
+        cov = (e * resp[:, s:s + 1]).T @ e / nk[s]
+        covs[s] = (cov + cov.T) / 2 + 1e-4 * np.eye(dg)
+    return means, covs
+
+
+# -- AR(p) by Schwarz's criterion -----------------------------------------------------------
+
+def fit_ar(g: np.ndarray, pmax: int, *, max_radius: float = DEFAULT_MAX_RADIUS) -> dict:
+    """Fit AR(p) with intercept for ``p = 1..pmax`` and keep the one minimising Schwarz's criterion.
+
+    All orders are compared on the same sample (times ``pmax .. N-1``), as in Neumaier &
+    Schneider's ARfit: ``SBC(p) = log det(Sigma_p) / m + (m p + 1) log(ne) / ne`` with
+    ``Sigma_p`` the residual covariance and ``ne = N - pmax``. The chosen order is then
+    refitted on every available sample.
+
+    Returns a dict with ``A`` (p, m, m), ``w`` (m,), ``C`` (m, m), ``sbc`` (pmax,), ``p``,
+    ``radius_raw``, ``radius`` and ``shrink`` (the pole scale applied for stability, 1 when none).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> g = np.zeros((2000, 1))
+    >>> for t in range(2, 2000):
+    ...     g[t] = 1.2 * g[t - 1] - 0.5 * g[t - 2] + rng.standard_normal(1)
+    >>> fit_ar(g, 6)["p"]
+    2
+    """
+    n, m = g.shape
+    ne = n - pmax
+    if ne - (m * pmax + 1) <= 0:
+        raise ValueError(f"pmax={pmax} is too large for {n} samples of dimension {m}")
+    sbc = np.empty(pmax)
+    for p in range(1, pmax + 1):
+        _, _, resid = _ar_lstsq(g, p, start=pmax)
+        cov = resid.T @ resid / ne
+        sign, logdet = np.linalg.slogdet(cov)
+        if sign <= 0:
+            raise ValueError("the global coordinates are degenerate (singular AR residual covariance); "
+                             "the clip has too little variation for this global_dim")
+        sbc[p - 1] = logdet / m + (m * p + 1) * np.log(ne) / ne
+    p = int(np.argmin(sbc)) + 1
+    a, w, resid = _ar_lstsq(g, p, start=p)
+    dof = max(resid.shape[0] - (m * p + 1), 1)
+    c = resid.T @ resid / dof
+    c = (c + c.T) / 2
+    radius_raw = companion_radius(a)
+    shrink = 1.0
+    if radius_raw > max_radius:
+        shrink = max_radius / radius_raw
+        a = a * (shrink ** np.arange(1, p + 1))[:, None, None]
+    return {"A": a, "w": w, "C": c, "sbc": sbc, "p": p, "radius_raw": radius_raw,
+            "radius": companion_radius(a), "shrink": shrink}
+
+
+def _ar_lstsq(g: np.ndarray, p: int, start: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    n, m = g.shape
+    rows = np.arange(start, n)
+    design = np.concatenate([np.ones((rows.size, 1))] + [g[rows - i] for i in range(1, p + 1)], axis=1)
+    coef = np.linalg.lstsq(design, g[rows], rcond=None)[0]
+    resid = g[rows] - design @ coef
+    w = coef[0]
+    a = coef[1:].reshape(p, m, m).transpose(0, 2, 1)
+    return np.ascontiguousarray(a), w, resid
+
+
+def _pos_int(name: str, v, lo: int = 1) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise ValueError(f"{name} must be an integer >= {lo}, not {v!r}")
+    return int(v)

@@ -1,0 +1,249 @@
+"""Mode ``mixture``: real-time synthesis from a subspace-mixture dynamic texture.
+
+Per frame the host runs the AR(p) recursion on the ``D``-dimensional global coordinate,
+drawing ``draws`` noise vectors and keeping the candidate nearest the training coordinates
+(the learned manifold), then decodes it to responsibilities ``r_s`` and local coordinates
+``z_s`` (microseconds: ``S`` small Gaussians and ``d x D`` maps). The image is the
+projection of ``u = (r_s, r_s z_s)`` onto the stacked basis (component means and loadings)
+with the LDS mode's ``project`` kernel (:mod:`.projection`): one launch per frame,
+memory-bound on the stacked basis.
+"""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from ..tiledb import MixtureModel, TileDB
+from .base import Player, check_float, check_int
+from .projection import Projector
+
+PRECISIONS = ("float32", "float16")
+DEFAULT_DRAWS = 8
+MAX_DRAWS = 1024
+MAX_INTENSITY = 100.0
+
+
+class GlobalDecoder:
+    """Decodes global coordinates to projection coefficients ``u`` (responsibilities and local coordinates).
+
+    ``r_s(g) ~ pi_s N(g; m_s, Sigma_s)`` (the per-component Gaussians of the training global
+    coordinates) and ``z_s = L_s^+ (g - l_s^0)``, the least-squares inverse of the component's
+    coordination map ``g_s = L_s z_s + l_s^0``.
+    """
+
+    def __init__(self, model: MixtureModel) -> None:
+        s, d, dg = model.components, model.dim, model.global_dim
+        self.s, self.d, self.dg = s, d, dg
+        lmap = model.coord_map.reshape(s, d + 1, dg)
+        self.offset = lmap[:, 0, :].copy()                               # (S, D)
+        self.inverse = np.stack([np.linalg.pinv(lmap[k, 1:, :].T) for k in range(s)])   # (S, d, D)
+        chol = np.linalg.cholesky(model.gauss_cov)                       # (S, D, D)
+        self.whiten = np.linalg.inv(chol)
+        self.centre = model.gauss_mean.copy()
+        self.lognorm = np.log(np.maximum(model.weights, 1e-300)) - np.log(
+            np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
+
+    def responsibilities(self, g: np.ndarray) -> np.ndarray:
+        """``(N, D)`` -> ``(N, S)``."""
+        e = np.einsum("sij,nsj->nsi", self.whiten, g[:, None, :] - self.centre[None])
+        logp = self.lognorm[None] - 0.5 * np.einsum("nsi,nsi->ns", e, e)
+        logp -= logp.max(axis=1, keepdims=True)
+        p = np.exp(logp)
+        return p / p.sum(axis=1, keepdims=True)
+
+    def coefficients(self, g: np.ndarray) -> np.ndarray:
+        """``(N, D)`` or ``(D,)`` global coordinates -> ``(N, S (d + 1))`` (or ``(S (d + 1),)``) coefficients."""
+        g = np.asarray(g, dtype=float)
+        single = g.ndim == 1
+        g2 = g[None] if single else g
+        r = self.responsibilities(g2)
+        z = np.einsum("sij,nsj->nsi", self.inverse, g2[:, None, :] - self.offset[None])
+        u = np.concatenate([np.ones(z.shape[:2] + (1,)), z], axis=2) * r[:, :, None]
+        u = u.reshape(g2.shape[0], -1)
+        return u[0] if single else u
+
+
+def nearest_distance(train: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Euclidean distance of each row of ``g`` (N, D) to its nearest row of ``train`` (T, D)."""
+    d2 = (g * g).sum(1)[:, None] - 2 * g @ train.T + (train * train).sum(1)[None]
+    return np.sqrt(np.maximum(d2.min(axis=1), 0))
+
+
+class MixturePlayer(Player):
+    """Endless frames from a texture's ``mixture`` model.
+
+    Parameters
+    ----------
+    db : path or TileDB
+        The tile database.
+    texture : str, optional
+        Texture name (optional when the database holds one texture).
+    backend : {"opencl", "numpy"}
+        ``"numpy"`` is the reference implementation and the fallback without OpenCL.
+    device : str, optional
+        OpenCL device (see :func:`dynatex.player.opencl.get_context`).
+    seed : int
+        Seed of the driving noise; the same seed gives the same frames.
+    precision : {"float32", "float16"}
+        Storage of the stacked basis on the device.
+    draws : int
+        Initial value of the ``draws`` control.
+
+    Controls (attributes, changeable between any two frames)
+    ---------------------------------------------------------
+    draws : int in [1, 1024]
+        Noise draws per step; the candidate nearest the training manifold is kept
+        (1 = the plain AR process).
+    intensity : float in [0, 100]
+        Scale of the AR noise covariance (0 follows the deterministic AR prediction).
+
+    Examples
+    --------
+    >>> with MixturePlayer("water.h5", seed=3) as p:     # doctest: +SKIP
+    ...     p.draws = 16
+    ...     frame = p.next_frame()
+    """
+
+    mode = "mixture"
+
+    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
+                 backend: str = "opencl", device: str | None = None, seed: int = 0,
+                 precision: str = "float32", draws: int = DEFAULT_DRAWS) -> None:
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")
+        super().__init__(db, texture, backend=backend, device=device)
+        try:
+            self._setup(self.texture.read("mixture"), seed, precision, draws)
+        except BaseException:
+            self.close()
+            raise
+
+    def _setup(self, model: MixtureModel, seed: int, precision: str, draws: int) -> None:
+        src = self.texture.source
+        self.model_info = dict(model.info)
+        self.precision = precision
+        self.components, self.dim, self.global_dim, self.order = (model.components, model.dim,
+                                                                  model.global_dim, model.order)
+        self._shape = (src.height, src.width, 3)
+        self.decoder = GlobalDecoder(model)
+        self.train_coords = np.ascontiguousarray(model.global_coords)
+        self._train_sq = (self.train_coords ** 2).sum(axis=1)
+        self._A = np.ascontiguousarray(model.ar_coefs)
+        self._w = model.ar_intercept.copy()
+        self._noise = np.linalg.cholesky(model.ar_noise_cov)
+        p = self.order
+        self._hist0 = self.train_coords[p - 1::-1].copy()           # hist[i] = g_{t-i}
+        self._draws = DEFAULT_DRAWS
+        self.draws = draws
+        self._intensity = 1.0
+        basis = model.stacked_basis
+        if precision == "float16":
+            basis = basis.astype(np.float16)
+        self._proj = Projector(basis, model.mean, shape=self._shape, channels=src.channels,
+                               ctx=self.ctx, queue=self.queue)
+        self.basis_bytes = self._proj.basis_bytes
+        self.reseed(seed)
+        scratch = np.empty(self._shape, np.uint8)
+        self._project(self._hist[0], scratch)
+
+    # -- controls ----------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self._shape
+
+    @property
+    def draws(self) -> int:
+        return self._draws
+
+    @draws.setter
+    def draws(self, value: int) -> None:
+        self._draws = check_int("draws", value, 1, MAX_DRAWS)
+
+    @property
+    def intensity(self) -> float:
+        return self._intensity
+
+    @intensity.setter
+    def intensity(self, value: float) -> None:
+        self._intensity = check_float("intensity", value, 0.0, MAX_INTENSITY)
+
+    def reseed(self, seed: int) -> None:
+        """Restart the driving noise from ``seed`` (the coordinates are kept)."""
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
+        self.seed = int(seed)
+        self._rng = np.random.Generator(np.random.PCG64(self.seed))
+        if not hasattr(self, "_hist"):
+            self._hist = self._hist0.copy()
+
+    # -- synthesis -----------------------------------------------------------------
+    @property
+    def global_coord(self) -> np.ndarray:
+        """The global coordinate of the next frame (a copy)."""
+        return self._hist[0].copy()
+
+    def _step(self) -> None:
+        pred = self._w + np.einsum("pij,pj->i", self._A, self._hist)
+        eps = self._rng.standard_normal((self._draws, self.global_dim))
+        cand = pred + np.sqrt(self._intensity) * (eps @ self._noise.T)
+        if self._draws > 1:
+            d2 = (self._train_sq[None] - 2 * cand @ self.train_coords.T).min(axis=1) + (cand * cand).sum(1)
+            best = cand[int(np.argmin(d2))]
+        else:
+            best = cand[0]
+        self._hist[1:] = self._hist[:-1]
+        self._hist[0] = best
+
+    def advance(self, steps: int = 1, *, record: bool = False) -> np.ndarray | None:
+        """Run the AR recursion ``steps`` times without projecting frames.
+
+        With ``record=True`` returns the visited global coordinates, ``(steps, D)``.
+        """
+        steps = check_int("steps", steps, 0)
+        rec = np.empty((steps, self.global_dim)) if record else None
+        for i in range(steps):
+            self._step()
+            if rec is not None:
+                rec[i] = self._hist[0]
+        self.frame_index += steps
+        return rec
+
+    def _render(self, out: np.ndarray) -> None:
+        self._project(self._hist[0], out)
+        self._step()
+
+    def render_coord(self, g: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Decode and project an arbitrary global coordinate; the player does not advance."""
+        g = np.asarray(g, dtype=float)
+        if g.shape != (self.global_dim,) or not np.isfinite(g).all():
+            raise ValueError(f"g must be a finite vector of shape ({self.global_dim},)")
+        if out is None:
+            out = np.empty(self._shape, np.uint8)
+        self._project(g, out)
+        return out
+
+    def _project(self, g: np.ndarray, out: np.ndarray) -> None:
+        self._proj.coef[:] = self.decoder.coefficients(g)
+        self._proj.run(out)
+
+    # -- state ---------------------------------------------------------------------
+    def _get_state(self) -> dict[str, Any]:
+        return {"history": self._hist.copy(), "rng": self._rng.bit_generator.state, "seed": self.seed,
+                "draws": self._draws, "intensity": self._intensity}
+
+    def _set_state(self, state: dict[str, Any]) -> None:
+        try:
+            hist = np.asarray(state["history"], dtype=float)
+            if hist.shape != self._hist.shape or not np.isfinite(hist).all():
+                raise ValueError(f"state history must be finite with shape {self._hist.shape}")
+            rng = np.random.Generator(np.random.PCG64())
+            rng.bit_generator.state = state["rng"]
+            self.draws = state["draws"]
+            self.intensity = state["intensity"]
+        except KeyError as exc:
+            raise ValueError(f"state lacks {exc.args[0]!r}") from None
+        self._hist = hist.copy()
+        self._rng = rng
+        self.seed = int(state.get("seed", self.seed))

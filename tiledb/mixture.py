@@ -1,0 +1,193 @@
+"""The subspace-mixture dynamic texture of a texture (the ``mixture`` group).
+
+Appearance: a mixture of ``S`` probabilistic PCA components of dimension ``d`` (learned in a
+reduced PCA space), coordinated into one ``D``-dimensional global coordinate system by a
+linear map ``L``. Dynamics: an AR(p) process on the global coordinates. A frame is
+``mean + sum_j u_j stacked_basis[j]`` with ``u = (r_s, r_s z_s)`` per component, so the
+player decodes a global coordinate to ``u`` and projects it like an LDS state.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import h5py
+import numpy as np
+
+from ._check import Checker
+from .source import SourceInfo
+
+#: Largest spectral radius the stored AR process's companion matrix may have.
+MAX_SPECTRAL_RADIUS = 1.0 - 1e-9
+#: Bounds on the model sizes a reader accepts (guards hostile files).
+MAX_COMPONENTS = 64
+MAX_DIM = 512
+MAX_ORDER = 64
+
+
+@dataclass
+class MixtureModel:
+    """A subspace-mixture dynamic texture.
+
+    Attributes
+    ----------
+    mean : (P,) float32
+        Mean frame, 0..255.
+    stacked_basis : (S * (d + 1), P) float32
+        Component ``s`` owns rows ``s*(d+1) .. s*(d+1)+d``: its mean offset from ``mean``,
+        then its ``d`` orthonormal loadings, all in pixel space.
+    weights : (S,) float64
+        Mixing proportions ``pi_s`` (sum 1).
+    sigma2 : (S,) float64
+        Isotropic noise variance of each PPCA component (reduced-space units).
+    singular_values : (r,) float64
+        Singular values of the mean-subtracted clip (the reduced PCA space keeps ``q`` of them).
+    responsibilities : (T, S) float64
+        Posterior component probabilities of the training frames.
+    local_coords : (T, S, d) float64
+        Training frames' coordinates in each component's subspace.
+    coord_map : (S * (d + 1), D) float64
+        The coordination map ``L``: ``g = u @ L``.
+    global_coords : (T, D) float64
+        Training global coordinates (centred, unit covariance).
+    gauss_mean, gauss_cov : (S, D), (S, D, D) float64
+        Per-component Gaussian of the global coordinates, used to decode responsibilities.
+    ar_coefs : (p, D, D) float64
+        ``g_t = ar_intercept + sum_i ar_coefs[i] @ g_{t-1-i} + v_t``.
+    ar_intercept : (D,) float64
+    ar_noise_cov : (D, D) float64
+        Covariance of ``v_t``.
+    sbc : (pmax,) float64
+        Schwarz's criterion of the orders 1..pmax (the order chosen minimises it).
+    info : dict
+        Scalars describing the fit, stored as attributes.
+    """
+
+    mean: np.ndarray
+    stacked_basis: np.ndarray
+    weights: np.ndarray
+    sigma2: np.ndarray
+    singular_values: np.ndarray
+    responsibilities: np.ndarray
+    local_coords: np.ndarray
+    coord_map: np.ndarray
+    global_coords: np.ndarray
+    gauss_mean: np.ndarray
+    gauss_cov: np.ndarray
+    ar_coefs: np.ndarray
+    ar_intercept: np.ndarray
+    ar_noise_cov: np.ndarray
+    sbc: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    @property
+    def components(self) -> int:
+        return int(self.weights.shape[0])
+
+    @property
+    def dim(self) -> int:
+        return int(self.local_coords.shape[2])
+
+    @property
+    def global_dim(self) -> int:
+        return int(self.coord_map.shape[1])
+
+    @property
+    def order(self) -> int:
+        return int(self.ar_coefs.shape[0])
+
+
+_F64 = ("weights", "sigma2", "singular_values", "responsibilities", "local_coords", "coord_map",
+        "global_coords", "gauss_mean", "gauss_cov", "ar_coefs", "ar_intercept", "ar_noise_cov", "sbc")
+_SIZES = ("components", "dim", "global_dim", "order")
+
+
+def companion_radius(ar_coefs: np.ndarray) -> float:
+    """Spectral radius of the AR(p) process's companion matrix (< 1 means stable)."""
+    p, dd, _ = ar_coefs.shape
+    comp = np.zeros((p * dd, p * dd))
+    comp[:dd] = np.concatenate(list(ar_coefs), axis=1)
+    comp[dd:, :-dd] = np.eye((p - 1) * dd)
+    return float(np.max(np.abs(np.linalg.eigvals(comp))))
+
+
+def write(group: h5py.Group, model: MixtureModel) -> None:
+    group.create_dataset("mean", data=np.asarray(model.mean, np.float32))
+    group.create_dataset("stacked_basis", data=np.asarray(model.stacked_basis, np.float32),
+                         chunks=(1, model.stacked_basis.shape[1]))
+    for name in _F64:
+        group.create_dataset(name, data=np.asarray(getattr(model, name), np.float64))
+    for name in _SIZES:
+        group.attrs[name] = getattr(model, name)
+    for key, value in model.info.items():
+        if key not in _SIZES:
+            group.attrs[key] = value
+
+
+def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
+    p = source.pixels
+    path = group.name
+    s = check.attr(group, "components", int)
+    d = check.attr(group, "dim", int)
+    dg = check.attr(group, "global_dim", int)
+    order = check.attr(group, "order", int)
+    for name, v, hi in (("components", s, MAX_COMPONENTS), ("dim", d, MAX_DIM),
+                        ("global_dim", dg, MAX_DIM), ("order", order, MAX_ORDER)):
+        if not 1 <= v <= hi:
+            check.fail(f"{path}@{name}", f"{v} out of range 1..{hi}")
+    j = s * (d + 1)
+    if dg > j - 1:
+        check.fail(f"{path}@global_dim", f"{dg} exceeds components * (dim + 1) - 1 = {j - 1}")
+    ds = check.dataset
+    f = "f"
+    model = MixtureModel(
+        mean=ds(group, "mean", kind=f, shape=(p,)),
+        stacked_basis=ds(group, "stacked_basis", kind=f, shape=(j, p)),
+        weights=ds(group, "weights", kind=f, shape=(s,)),
+        sigma2=ds(group, "sigma2", kind=f, shape=(s,)),
+        singular_values=ds(group, "singular_values", kind=f, shape=(None,)),
+        responsibilities=ds(group, "responsibilities", kind=f, shape=(None, s)),
+        local_coords=ds(group, "local_coords", kind=f, shape=(None, s, d)),
+        coord_map=ds(group, "coord_map", kind=f, shape=(j, dg)),
+        global_coords=ds(group, "global_coords", kind=f, shape=(None, dg)),
+        gauss_mean=ds(group, "gauss_mean", kind=f, shape=(s, dg)),
+        gauss_cov=ds(group, "gauss_cov", kind=f, shape=(s, dg, dg)),
+        ar_coefs=ds(group, "ar_coefs", kind=f, shape=(order, dg, dg)),
+        ar_intercept=ds(group, "ar_intercept", kind=f, shape=(dg,)),
+        ar_noise_cov=ds(group, "ar_noise_cov", kind=f, shape=(dg, dg)),
+        sbc=ds(group, "sbc", kind=f, shape=(None,)),
+        info={key: (v.item() if isinstance(v, np.generic) else v) for key, v in group.attrs.items()
+              if key not in _SIZES},
+    )
+    t = model.global_coords.shape[0]
+    if t < 2 or model.responsibilities.shape[0] != t or model.local_coords.shape[0] != t:
+        check.fail(path + "/global_coords", "training arrays disagree on the number of frames (or fewer than 2)")
+    if model.sbc.shape[0] < order:
+        check.fail(path + "/sbc", f"holds {model.sbc.shape[0]} values, fewer than the order {order}")
+    if model.weights.min() < 0 or abs(model.weights.sum() - 1) > 1e-6:
+        check.fail(path + "/weights", "mixing proportions must be >= 0 and sum to 1")
+    if model.sigma2.min() <= 0:
+        check.fail(path + "/sigma2", "noise variances must be > 0")
+    r = model.responsibilities
+    if r.min() < -1e-9 or r.max() > 1 + 1e-9 or np.abs(r.sum(axis=1) - 1).max() > 1e-6:
+        check.fail(path + "/responsibilities", "rows must be probabilities summing to 1")
+    for k in range(s):
+        if not _positive_definite(model.gauss_cov[k]):
+            check.fail(path + "/gauss_cov", f"covariance of component {k} is not symmetric positive definite")
+    if not _positive_definite(model.ar_noise_cov):
+        check.fail(path + "/ar_noise_cov", "is not symmetric positive definite")
+    rho = companion_radius(model.ar_coefs)
+    if not rho < MAX_SPECTRAL_RADIUS:
+        check.fail(path + "/ar_coefs", f"the AR process is not stable (spectral radius {rho:.6g} >= 1)")
+    if model.mean.min() < -1 or model.mean.max() > 256:
+        check.fail(path + "/mean", "values outside the 0..255 pixel range")
+    return model
+
+
+def _positive_definite(m: np.ndarray) -> bool:
+    if not np.allclose(m, m.T, rtol=1e-9, atol=1e-12 * max(1.0, float(np.abs(m).max()))):
+        return False
+    try:
+        np.linalg.cholesky(m)
+    except np.linalg.LinAlgError:
+        return False
+    return True
