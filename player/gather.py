@@ -1,0 +1,491 @@
+"""Shared gather machinery: output pixel = stored frame stack sampled at a per-pixel source
+position and a per-pixel time, blended linearly in time, colour-toned.
+
+Modes ``tiles`` and ``quilt`` (and any mode that copies stored pixels) build on
+:class:`Gather`. It owns the device buffers of one frame stack and of the maps that say
+where and when every output pixel reads, builds ``kernels/gather.cl`` once at
+construction, and renders a frame with one kernel launch plus one copy into the caller's
+buffer. Every device path has a numpy reference (the ``numpy`` backend runs exactly those
+functions), and tests compare the two.
+
+The pieces
+----------
+frame stack
+    ``(N, h, w, 3)`` uint8: ``N`` stored frames (tiles side by side, a quilt's source
+    frames, ...). A source pixel is the linear index ``y * w + x`` inside one frame.
+source
+    Either a per-pixel map (:meth:`Gather.set_source_map`, ``(H, W)`` packed int32) or a
+    grid of cells (:meth:`Gather.set_source_grid`: ``(gh, gw)`` packed int32 naming each
+    cell's top-left source pixel; the pixel at ``(dy, dx)`` inside a cell reads
+    ``origin + dy * w + dx``; cheaper: no per-pixel map is read). A packed entry is
+    ``(tone << 24) | (y * w + x)`` (:func:`pack_source`), so a frame may hold at most
+    2**24 pixels and there are at most 256 tones.
+time
+    ``time(y, x) = t + map(y, x)`` where ``t`` is the argument of :meth:`Gather.render`
+    and ``map`` is the time map (:meth:`Gather.set_time_map`), given per pixel
+    (``step=1``) or on a coarser lattice sampled bilinearly (``step=s``: shape
+    ``(ceil(H/s), ceil(W/s))``, sample ``(i, j)`` sits at pixel centre ``((i+0.5)s-0.5, ...)``).
+    Frame indices wrap by ``wrap`` (``"loop"``: modulo ``N``; ``"clamp"``: held at the ends;
+    ``"pingpong"``: forth and back with period ``2(N-1)``). With ``interpolate`` the pixel
+    is ``(1-f) F[wrap(i)] + f F[wrap(i+1)]``, ``i = floor(time)``, ``f = time - i``.
+    :meth:`Gather.smooth_time_map` Gaussian-smooths the map in place (separable, edges
+    clamped, ``sigma`` in output pixels).
+tone
+    ``out = round(v * gain[tone] + offset[tone])`` saturated to 0..255 per channel
+    (:meth:`Gather.set_tones`, tables ``(n, 3)``; tone 0 defaults to identity).
+
+Numerical contract: the device and the numpy reference evaluate the same float32
+formulas; they agree exactly on integer times with unit gains and within one grey level
+elsewhere (contracted multiply-adds round differently).
+
+Examples
+--------
+>>> import numpy as np
+>>> from dynatex.player.gather import Gather, pack_source
+>>> stack = np.random.default_rng(0).integers(0, 256, (8, 4, 6, 3), dtype=np.uint8)
+>>> g = Gather(stack, (4, 6), backend="numpy")
+>>> g.set_source_map(pack_source(np.arange(24).reshape(4, 6)))   # identity map
+>>> g.set_time_map(np.zeros((4, 6), np.float32))
+>>> bool((g.render(3.0) == stack[3]).all())
+True
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+import numpy as np
+
+from .base import check_float, check_int, check_out
+
+WRAPS = ("loop", "clamp", "pingpong")
+MAX_FRAME_PIXELS = 1 << 24
+MAX_TONES = 256
+_WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
+
+
+# -- numpy references ------------------------------------------------------------------------
+def pack_source(index: np.ndarray, tone: np.ndarray | int = 0) -> np.ndarray:
+    """Pack source pixel indices (``y * w + x`` inside a stored frame) and tone indices into int32.
+
+    Examples
+    --------
+    >>> int(pack_source(np.array(5), 2))
+    33554437
+    """
+    index = np.asarray(index, np.int64)
+    tone = np.asarray(tone, np.int64)
+    if index.size and (index.min() < 0 or index.max() >= MAX_FRAME_PIXELS):
+        raise ValueError(f"source index must be in [0, {MAX_FRAME_PIXELS})")
+    if tone.size and (tone.min() < 0 or tone.max() >= MAX_TONES):
+        raise ValueError(f"tone must be in [0, {MAX_TONES})")
+    return ((tone << 24) | index).astype(np.uint32).view(np.int32)
+
+
+def unpack_source(packed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(index, tone)`` of packed source entries."""
+    u = np.asarray(packed).astype(np.int32).view(np.uint32)
+    return (u & 0xFFFFFF).astype(np.int64), (u >> 24).astype(np.int64)
+
+
+def wrap_index(i: np.ndarray, n: int, wrap: str) -> np.ndarray:
+    """Frame index ``i`` (integers, any range) folded into ``[0, n)`` by ``wrap``."""
+    i = np.asarray(i, np.int64)
+    if wrap == "loop":
+        return np.mod(i, n)
+    if wrap == "clamp":
+        return np.clip(i, 0, n - 1)
+    if wrap == "pingpong":
+        if n == 1:
+            return np.zeros_like(i)
+        period = 2 * (n - 1)
+        m = np.mod(i, period)
+        return np.where(m < n, m, period - m)
+    raise ValueError(f"wrap must be one of {WRAPS}, not {wrap!r}")
+
+
+def gaussian_weights(sigma: float) -> np.ndarray:
+    """Normalised float32 taps of a Gaussian truncated at ``ceil(3 sigma)`` (one tap when sigma is 0)."""
+    sigma = check_float("sigma", sigma, 0.0, 1e4)
+    radius = int(math.ceil(3.0 * sigma))
+    if radius == 0:
+        return np.ones(1, np.float32)
+    x = np.arange(-radius, radius + 1, dtype=np.float64)
+    w = np.exp(-0.5 * (x / sigma) ** 2)
+    return (w / w.sum()).astype(np.float32)
+
+
+def gaussian_smooth(field: np.ndarray, sigma: float) -> np.ndarray:
+    """Separable Gaussian smoothing of a 2-D float map with clamped edges (reference of kernels ``smooth_x``, ``smooth_y``).
+
+    Examples
+    --------
+    >>> m = np.zeros((5, 9), np.float32); m[:, 4:] = 10
+    >>> s = gaussian_smooth(m, 1.0)
+    >>> bool(0 < s[0, 4] < 10 and abs(float(s[0, 0])) < 1e-6)
+    True
+    """
+    field = np.asarray(field, np.float32)
+    if field.ndim != 2:
+        raise ValueError(f"field must be 2-D, not shape {field.shape}")
+    w = gaussian_weights(sigma)
+    r = (len(w) - 1) // 2
+    if r == 0:
+        return field.copy()
+    out = field
+    for axis in (1, 0):
+        n = out.shape[axis]
+        acc = np.zeros_like(out)
+        for k in range(-r, r + 1):
+            idx = np.clip(np.arange(n) + k, 0, n - 1)
+            acc += w[k + r] * np.take(out, idx, axis=axis)
+        out = acc
+    return out
+
+
+def sample_time_map(tmap: np.ndarray, shape: tuple[int, int], step: int) -> np.ndarray:
+    """The per-pixel time offsets ``(H, W)`` float32 a time map at lattice ``step`` describes."""
+    tmap = np.asarray(tmap, np.float32)
+    h, w = shape
+    if step == 1:
+        return tmap
+    th, tw = tmap.shape
+    inv = np.float32(1.0 / step)
+    fy = (np.arange(h, dtype=np.float32) + np.float32(0.5)) * inv - np.float32(0.5)
+    fx = (np.arange(w, dtype=np.float32) + np.float32(0.5)) * inv - np.float32(0.5)
+    y0f, x0f = np.floor(fy), np.floor(fx)
+    wy, wx = (fy - y0f)[:, None], (fx - x0f)[None, :]
+    y0 = np.clip(y0f.astype(np.int64), 0, th - 1)
+    y1 = np.clip(y0f.astype(np.int64) + 1, 0, th - 1)
+    x0 = np.clip(x0f.astype(np.int64), 0, tw - 1)
+    x1 = np.clip(x0f.astype(np.int64) + 1, 0, tw - 1)
+    a, b = tmap[y0][:, x0], tmap[y0][:, x1]
+    c, d = tmap[y1][:, x0], tmap[y1][:, x1]
+    top = a + wx * (b - a)
+    bot = c + wx * (d - c)
+    return (top + wy * (bot - top)).astype(np.float32)
+
+
+def source_indices(source: np.ndarray, shape: tuple[int, int], frame_w: int,
+                   cell: tuple[int, int] | None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel ``(pixel index, tone)`` of a per-pixel map (``cell=None``) or a cell grid."""
+    idx, tone = unpack_source(source)
+    if cell is None:
+        return idx, tone
+    h, w = shape
+    ch, cw = cell
+    yy, xx = np.arange(h), np.arange(w)
+    cy, cx = yy // ch, xx // cw
+    pix = idx[cy][:, cx] + ((yy - cy * ch) * frame_w)[:, None] + (xx - cx * cw)[None, :]
+    return pix, tone[cy][:, cx]
+
+
+def gather_reference(stack: np.ndarray, pix: np.ndarray, tone: np.ndarray, times: np.ndarray,
+                     tones: np.ndarray, *, wrap: str = "loop", interpolate: bool = True,
+                     out: np.ndarray | None = None) -> np.ndarray:
+    """Reference of kernel ``gather``: ``stack`` (N, h, w, 3) uint8, per-pixel ``pix``/``tone``
+    (H, W) ints, absolute ``times`` (H, W) float32, ``tones`` (n, 6) float32 (gain rgb, offset rgb)."""
+    n = stack.shape[0]
+    flat = stack.reshape(n, -1, 3)
+    tf = np.floor(times)
+    i0 = wrap_index(tf.astype(np.int64), n, wrap)
+    v = flat[i0, pix].astype(np.float32)
+    if interpolate:
+        f = (times - tf).astype(np.float32)[..., None]
+        v1 = flat[wrap_index(tf.astype(np.int64) + 1, n, wrap), pix].astype(np.float32)
+        v = v + f * (v1 - v)
+    tn = tones[tone]
+    v = v * tn[..., :3] + tn[..., 3:]
+    res = np.clip(np.rint(v), 0, 255).astype(np.uint8)
+    if out is None:
+        return res
+    out[...] = res
+    return out
+
+
+# -- the device-backed gather ------------------------------------------------------------------
+class Gather:
+    """Render frames gathered from a frame stack (see the module docstring for the model).
+
+    Parameters
+    ----------
+    frames : (N, h, w, 3) uint8
+        The stored frame stack (copied to the device once).
+    out_size : (H, W)
+        Output frame size.
+    backend : {"opencl", "numpy"}
+    ctx, queue : pyopencl context and queue to share with the owner (the mode's player);
+        both ``None`` uses :func:`dynatex.player.opencl.get_context` (``device``) and a new queue.
+    wrap : {"loop", "clamp", "pingpong"}
+        How frame indices fold into ``[0, N)``. Fixed at construction (a kernel define).
+    interpolate : bool
+        Blend linearly between neighbouring frames (fixed at construction).
+    time_step : int
+        Lattice step of the time map in output pixels (fixed at construction).
+    grid : bool
+        Source given as a cell grid (:meth:`set_source_grid`) instead of a per-pixel map.
+
+    After construction call :meth:`set_source_map` or :meth:`set_source_grid`, optionally
+    :meth:`set_time_map` (default zeros), :meth:`smooth_time_map` and :meth:`set_tones`
+    (default identity); then :meth:`render` as often as wanted. Maps and tones may be
+    replaced between any two frames; nothing is rebuilt.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> stack = np.zeros((4, 2, 2, 3), np.uint8); stack[:, :, :, 0] = np.arange(4)[:, None, None] * 10
+    >>> g = Gather(stack, (2, 2), backend="numpy", grid=True)
+    >>> g.set_source_grid(pack_source(np.zeros((1, 1), int)), (2, 2))
+    >>> int(g.render(1.5)[0, 0, 0])      # halfway between 10 and 20
+    15
+    """
+
+    def __init__(self, frames: np.ndarray, out_size: Sequence[int], *, backend: str = "opencl",
+                 ctx: Any = None, queue: Any = None, device: str | None = None, wrap: str = "loop",
+                 interpolate: bool = True, time_step: int = 1, grid: bool = False) -> None:
+        frames = np.asarray(frames)
+        if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
+            raise ValueError(f"frames must be uint8 (N, h, w, 3) with N >= 1, not {frames.dtype} {frames.shape}")
+        if frames.shape[1] * frames.shape[2] > MAX_FRAME_PIXELS:
+            raise ValueError(f"frames hold {frames.shape[1] * frames.shape[2]} pixels each, more than {MAX_FRAME_PIXELS}")
+        if wrap not in WRAPS:
+            raise ValueError(f"wrap must be one of {WRAPS}, not {wrap!r}")
+        if backend not in ("opencl", "numpy"):
+            raise ValueError(f"backend must be 'opencl' or 'numpy', not {backend!r}")
+        h_out, w_out = _size("out_size", out_size)
+        self.time_step = check_int("time_step", time_step, 1, 4096)
+        self.backend, self.wrap, self.interpolate, self.grid = backend, wrap, bool(interpolate), bool(grid)
+        self.n_frames, self.frame_h, self.frame_w = (int(v) for v in frames.shape[:3])
+        self.out_shape = (h_out, w_out, 3)
+        self.tmap_shape = (-(-h_out // self.time_step), -(-w_out // self.time_step))
+        self._stack = np.array(frames, order="C")
+        self._source: np.ndarray | None = None
+        self._cell: tuple[int, int] | None = None
+        self._tmap = np.zeros(self.tmap_shape, np.float32)
+        self._tones = np.zeros((1, 6), np.float32)
+        self._tones[0, :3] = 1.0
+        self.ctx, self.queue = ctx, queue
+        if backend == "opencl":
+            self._setup_opencl(device)
+
+    # -- device setup ------------------------------------------------------------------------
+    def _setup_opencl(self, device: str | None) -> None:
+        import pyopencl as cl
+        from .opencl import build_program, get_context
+        if self.ctx is None:
+            self.ctx = get_context(device)
+        if self.queue is None:
+            self.queue = cl.CommandQueue(self.ctx)
+        mf = cl.mem_flags
+        h, w = self.out_shape[:2]
+        self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self._stack)
+        self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
+        self._d_tmp = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
+        self._d_tones = cl.Buffer(self.ctx, mf.READ_ONLY, MAX_TONES * 6 * 4)
+        self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
+        self._d_source = None
+        self._d_source_bytes = 0
+        defines = {"FRAME_W": self.frame_w, "FRAME_PIXELS": self.frame_w * self.frame_h,
+                   "NFRAMES": self.n_frames, "GRID": self.grid, "WRAP": _WRAP_CODE[self.wrap],
+                   "INTERP": self.interpolate, "TSTEP": self.time_step}
+        prog = build_program(self.ctx, "gather.cl", defines)
+        self._k_gather = prog.kernel("gather")
+        self._k_smooth_x = prog.kernel("smooth_x")
+        self._k_smooth_y = prog.kernel("smooth_y")
+        self._gsize = (_round_up(w, 16), _round_up(h, 4))
+        self._tsize = (_round_up(self.tmap_shape[1], 16), _round_up(self.tmap_shape[0], 4))
+        self._upload_tmap()
+        self._upload_tones()
+
+    def _upload_tmap(self) -> None:
+        if self.backend == "opencl":
+            import pyopencl as cl
+            cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=True)
+
+    def _upload_tones(self) -> None:
+        if self.backend == "opencl":
+            import pyopencl as cl
+            cl.enqueue_copy(self.queue, self._d_tones, self._tones, is_blocking=True)
+
+    def _set_args(self) -> None:
+        if self.backend != "opencl" or self._d_source is None:
+            return
+        h, w = self.out_shape[:2]
+        ch, cw = self._cell or (1, 1)
+        grid_w = self._source.shape[1]
+        self._k_gather.set_args(self._d_stack, self._d_source, self._d_tmap, self._d_tones, self._d_out,
+                                np.int32(w), np.int32(h), np.int32(ch), np.int32(cw), np.int32(grid_w),
+                                np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0))
+
+    # -- inputs --------------------------------------------------------------------------------
+    def set_source_map(self, packed: np.ndarray) -> None:
+        """Per-pixel source: ``(H, W)`` int32 packed entries (:func:`pack_source`). Needs ``grid=False``."""
+        if self.grid:
+            raise ValueError("this Gather was built with grid=True; use set_source_grid")
+        packed = self._check_packed("packed", packed, self.out_shape[:2])
+        idx, _ = unpack_source(packed)
+        if idx.size and idx.max() >= self.frame_w * self.frame_h:
+            raise ValueError(f"packed holds source pixels outside the {self.frame_h}x{self.frame_w} frame")
+        self._store_source(packed, None)
+
+    def set_source_grid(self, origins: np.ndarray, cell: Sequence[int]) -> None:
+        """Cell-grid source: ``origins`` ``(ceil(H/ch), ceil(W/cw))`` packed top-left pixels, ``cell=(ch, cw)``.
+
+        Every cell must fit inside the stored frame: its top-left ``(y, x)`` needs
+        ``y + ch <= h`` and ``x + cw <= w``. Needs ``grid=True``.
+        """
+        if not self.grid:
+            raise ValueError("this Gather was built with grid=False; use set_source_map")
+        ch, cw = _size("cell", cell)
+        if ch > self.frame_h or cw > self.frame_w:
+            raise ValueError(f"cell {ch}x{cw} is larger than the stored {self.frame_h}x{self.frame_w} frame")
+        h, w = self.out_shape[:2]
+        origins = self._check_packed("origins", origins, (-(-h // ch), -(-w // cw)))
+        idx, _ = unpack_source(origins)
+        y, x = idx // self.frame_w, idx % self.frame_w
+        if idx.size and ((y + ch > self.frame_h).any() or (x + cw > self.frame_w).any()):
+            raise ValueError("origins name cells that reach outside the stored frame")
+        self._store_source(origins, (ch, cw))
+
+    def _check_packed(self, name: str, packed: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        packed = np.asarray(packed)
+        if packed.dtype != np.int32:
+            raise TypeError(f"{name} must be int32 packed entries (see pack_source), not {packed.dtype}")
+        if packed.shape != tuple(shape):
+            raise ValueError(f"{name} must have shape {tuple(shape)}, not {packed.shape}")
+        _, tone = unpack_source(packed)
+        if tone.size and tone.max() >= len(self._tones):
+            raise ValueError(f"{name} names tone {int(tone.max())} but only {len(self._tones)} tones are set")
+        return np.array(packed, order="C")
+
+    def _store_source(self, packed: np.ndarray, cell: tuple[int, int] | None) -> None:
+        self._source, self._cell = packed, cell
+        if self.backend != "opencl":
+            return
+        import pyopencl as cl
+        if self._d_source is None or self._d_source_bytes < packed.nbytes:
+            self._d_source = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY, max(packed.nbytes, 4))
+            self._d_source_bytes = packed.nbytes
+        cl.enqueue_copy(self.queue, self._d_source, packed, is_blocking=True)
+        self._set_args()
+
+    def set_time_map(self, tmap: np.ndarray) -> None:
+        """Per-pixel time offsets in frames, ``tmap_shape`` float32 (finite)."""
+        tmap = np.asarray(tmap, np.float32)
+        if tmap.shape != self.tmap_shape:
+            raise ValueError(f"tmap must have shape {self.tmap_shape}, not {tmap.shape}")
+        if not np.isfinite(tmap).all():
+            raise ValueError("tmap must be finite")
+        self._tmap = np.array(tmap, np.float32, order="C")   # own copy: device reads land here
+        self._upload_tmap()
+
+    @property
+    def time_map(self) -> np.ndarray:
+        """The current time map (read back from the device after smoothing)."""
+        if self.backend == "opencl":
+            import pyopencl as cl
+            cl.enqueue_copy(self.queue, self._tmap, self._d_tmap, is_blocking=True)
+        return self._tmap.copy()
+
+    def smooth_time_map(self, sigma: float) -> None:
+        """Gaussian-smooth the time map in place, ``sigma`` in output pixels (0: no change)."""
+        sigma = check_float("sigma", sigma, 0.0, 1e4) / self.time_step
+        w = gaussian_weights(sigma)
+        if len(w) == 1:
+            return
+        if self.backend == "numpy":
+            self._tmap = gaussian_smooth(self._tmap, sigma)
+            return
+        import pyopencl as cl
+        r = (len(w) - 1) // 2
+        d_w = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=w)
+        th, tw = self.tmap_shape
+        dims = (np.int32(tw), np.int32(th), np.int32(r))
+        self._k_smooth_x.set_args(self._d_tmap, self._d_tmp, d_w, *dims)
+        cl.enqueue_nd_range_kernel(self.queue, self._k_smooth_x, self._tsize, None)
+        self._k_smooth_y.set_args(self._d_tmp, self._d_tmap, d_w, *dims)
+        cl.enqueue_nd_range_kernel(self.queue, self._k_smooth_y, self._tsize, None)
+        self.queue.finish()
+
+    def set_tones(self, gain: np.ndarray, offset: np.ndarray | None = None) -> None:
+        """Tone table: ``gain`` and ``offset`` ``(n, 3)`` (or ``(3,)`` for one tone), finite, gain in [0, 64]."""
+        gain = np.atleast_2d(np.asarray(gain, np.float32))
+        offset = np.zeros_like(gain) if offset is None else np.atleast_2d(np.asarray(offset, np.float32))
+        if gain.ndim != 2 or gain.shape[1] != 3 or not 1 <= gain.shape[0] <= MAX_TONES:
+            raise ValueError(f"gain must have shape (n, 3) with 1 <= n <= {MAX_TONES}, not {gain.shape}")
+        if offset.shape != gain.shape:
+            raise ValueError(f"offset must have shape {gain.shape}, not {offset.shape}")
+        if not (np.isfinite(gain).all() and np.isfinite(offset).all()) or gain.min() < 0 or gain.max() > 64:
+            raise ValueError("gain must be finite within [0, 64] and offset finite")
+        if self._source is not None:
+            _, tone = unpack_source(self._source)
+            if tone.size and tone.max() >= len(gain):
+                raise ValueError(f"the source names tone {int(tone.max())} but only {len(gain)} tones are given")
+        self._tones = np.ascontiguousarray(np.concatenate([gain, offset], axis=1))
+        self._upload_tones()
+
+    @property
+    def tones(self) -> np.ndarray:
+        """The tone table ``(n, 6)``: gain rgb, offset rgb."""
+        return self._tones.copy()
+
+    # -- rendering -----------------------------------------------------------------------------
+    def render(self, t: float, out: np.ndarray | None = None) -> np.ndarray:
+        """The frame at global time ``t`` (frames), ``(H, W, 3)`` uint8, written into ``out`` when given."""
+        if self._source is None:
+            raise RuntimeError("set a source (set_source_map or set_source_grid) before render")
+        if out is None:
+            out = np.empty(self.out_shape, np.uint8)
+        else:
+            check_out(out, self.out_shape)
+        t = self._fold(float(t))
+        if self.backend == "numpy":
+            self.render_reference(t, out)
+            return out
+        import pyopencl as cl
+        self._k_gather.set_arg(12, np.float32(t))
+        cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, None)
+        cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
+        return out
+
+    def render_reference(self, t: float, out: np.ndarray | None = None) -> np.ndarray:
+        """The numpy reference of :meth:`render` (usable with either backend, for checks)."""
+        h, w = self.out_shape[:2]
+        pix, tone = source_indices(self._source, (h, w), self.frame_w, self._cell)
+        tmap = self.time_map if self.backend == "opencl" else self._tmap
+        times = np.float32(self._fold(float(t))) + sample_time_map(tmap, (h, w), self.time_step)
+        return gather_reference(self._stack, pix, tone, times.astype(np.float32), self._tones,
+                                wrap=self.wrap, interpolate=self.interpolate, out=out)
+
+    def _fold(self, t: float) -> float:
+        """Fold the global time into one period so float32 keeps sub-frame precision forever."""
+        if not math.isfinite(t):
+            raise ValueError(f"t must be finite, not {t!r}")
+        if self.wrap == "loop":
+            return math.fmod(t, self.n_frames) if abs(t) >= self.n_frames else t
+        if self.wrap == "pingpong" and self.n_frames > 1:
+            p = 2 * (self.n_frames - 1)
+            return math.fmod(t, p) if abs(t) >= p else t
+        return t
+
+    @property
+    def bytes_per_frame(self) -> int:
+        """Bytes one render must move at least: output, frames read, source and time maps."""
+        h, w = self.out_shape[:2]
+        reads = (2 if self.interpolate else 1) * h * w * 3
+        src = self._source.nbytes if self._source is not None else 0
+        return int(h * w * 3 + reads + src + self._tmap.nbytes + h * w * 3)   # + copy to host
+
+
+def _size(name: str, value: Sequence[int]) -> tuple[int, int]:
+    try:
+        a, b = (int(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be two positive integers, not {value!r}") from None
+    if a < 1 or b < 1:
+        raise ValueError(f"{name} must be two positive integers, not {value!r}")
+    return a, b
+
+
+def _round_up(v: int, m: int) -> int:
+    return -(-v // m) * m

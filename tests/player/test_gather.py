@@ -1,0 +1,158 @@
+"""The shared gather machinery: OpenCL kernels against their numpy references."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynatex.player.gather import (Gather, gaussian_smooth, gaussian_weights, pack_source, sample_time_map,
+                                   unpack_source, wrap_index)
+
+
+def _stack(n=7, h=10, w=12, seed=0):
+    return np.random.default_rng(seed).integers(0, 256, (n, h, w, 3), dtype=np.uint8)
+
+
+def _close(a: np.ndarray, b: np.ndarray) -> None:
+    diff = np.abs(a.astype(int) - b.astype(int))
+    assert diff.max() <= 1, diff.max()
+    assert (diff > 0).mean() < 0.01
+
+
+def test_wrap_modes():
+    i = np.arange(-5, 12)
+    assert wrap_index(i, 4, "loop").tolist() == [(v % 4) for v in i]
+    assert wrap_index(i, 4, "clamp").min() == 0 and wrap_index(i, 4, "clamp").max() == 3
+    pp = wrap_index(np.arange(0, 12), 4, "pingpong").tolist()
+    assert pp == [0, 1, 2, 3, 2, 1, 0, 1, 2, 3, 2, 1]
+    with pytest.raises(ValueError, match="wrap"):
+        wrap_index(i, 4, "bounce")
+
+
+def test_pack_roundtrip_and_limits():
+    idx = np.array([[0, 5], [2**24 - 1, 17]])
+    tone = np.array([[0, 255], [3, 1]])
+    got_i, got_t = unpack_source(pack_source(idx, tone))
+    assert (got_i == idx).all() and (got_t == tone).all()
+    with pytest.raises(ValueError, match="source index"):
+        pack_source(np.array([2**24]))
+    with pytest.raises(ValueError, match="tone"):
+        pack_source(np.array([1]), 256)
+
+
+def test_gaussian_smooth_reference_properties():
+    assert gaussian_weights(0).tolist() == [1.0]
+    w = gaussian_weights(2.0)
+    assert len(w) == 13 and abs(float(w.sum()) - 1) < 1e-6
+    m = np.zeros((9, 20), np.float32)
+    m[:, 10:] = 6.0
+    s = gaussian_smooth(m, 2.0)
+    assert np.allclose(s[:, 0], 0, atol=1e-6) and np.allclose(s[:, -1], 6, atol=1e-5)
+    assert (np.diff(s[4]) >= -1e-6).all() and 2.0 < s[4, 10] < 4.0     # monotone ramp
+    assert np.allclose(gaussian_smooth(np.full((5, 5), 3.0), 1.5), 3.0, atol=1e-5)  # clamped edges keep constants
+
+
+def test_identity_map_integer_time_is_exact_copy():
+    stack = _stack()
+    g = Gather(stack, (10, 12), backend="numpy")
+    g.set_source_map(pack_source(np.arange(120).reshape(10, 12)))
+    for t in (0, 3, 8, -2):
+        assert (g.render(float(t)) == stack[t % 7]).all()
+
+
+@pytest.mark.parametrize("wrap", ["loop", "clamp", "pingpong"])
+@pytest.mark.parametrize("interpolate", [True, False])
+def test_map_gather_opencl_matches_numpy(cl_context, wrap, interpolate):
+    stack = _stack()
+    rng = np.random.default_rng(1)
+    H, W = 23, 31
+    packed = pack_source(rng.integers(0, 120, (H, W)), rng.integers(0, 2, (H, W)))
+    tmap = rng.uniform(-3, 3, (H, W)).astype(np.float32)
+    gains = np.array([[1, 1, 1], [1.1, 0.9, 1.2]], np.float32)
+    offs = np.array([[0, 0, 0], [5, -3, 0]], np.float32)
+    res = {}
+    for backend in ("opencl", "numpy"):
+        g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
+                   wrap=wrap, interpolate=interpolate)
+        g.set_tones(gains, offs)
+        g.set_source_map(packed)
+        g.set_time_map(tmap)
+        res[backend] = [g.render(t).copy() for t in (0.0, 2.25, 13.5, -4.75)]
+    for a, b in zip(res["opencl"], res["numpy"]):
+        _close(a, b)
+
+
+def test_grid_gather_with_coarse_time_opencl_matches_numpy(cl_context):
+    stack = _stack(n=9, h=8, w=24)                      # three 8x8 "tiles" side by side
+    H, W = 37, 45
+    gh, gw = -(-H // 8), -(-W // 8)
+    rng = np.random.default_rng(2)
+    origins = pack_source(8 * rng.integers(0, 3, (gh, gw)), rng.integers(0, 3, (gh, gw)))
+    step = 4
+    th, tw = -(-H // step), -(-W // step)
+    tmap = np.repeat(np.repeat(rng.integers(0, 5, (gh, gw)).astype(np.float32), 2, 0), 2, 1)[:th, :tw]
+    out = {}
+    for backend in ("opencl", "numpy"):
+        g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
+                   grid=True, time_step=step)
+        g.set_tones(np.array([[1, 1, 1], [0.5, 0.5, 0.5], [1.5, 1, 1]], np.float32))
+        g.set_source_grid(origins, (8, 8))
+        g.set_time_map(tmap)
+        g.smooth_time_map(6.0)
+        out[backend] = (g.render(5.3), g.time_map)
+    assert np.allclose(out["opencl"][1], out["numpy"][1], atol=1e-4)
+    _close(out["opencl"][0], out["numpy"][0])
+
+
+def test_grid_pixels_come_from_the_named_cell():
+    stack = _stack(n=3, h=4, w=8)
+    g = Gather(stack, (4, 8), backend="numpy", grid=True, interpolate=False)
+    g.set_source_grid(pack_source(np.array([[4, 0]])), (4, 4))
+    f = g.render(1.0)
+    assert (f[:, :4] == stack[1, :, 4:]).all() and (f[:, 4:] == stack[1, :, :4]).all()
+
+
+def test_time_interpolation_halfway():
+    stack = np.zeros((4, 1, 1, 3), np.uint8)
+    stack[:, 0, 0, :] = np.array([0, 100, 200, 50])[:, None]
+    g = Gather(stack, (1, 1), backend="numpy")
+    g.set_source_map(pack_source(np.zeros((1, 1), int)))
+    assert int(g.render(0.5)[0, 0, 0]) == 50
+    assert int(g.render(3.5)[0, 0, 0]) == 25          # loop: between frame 3 (50) and frame 0 (0)
+    g.set_tones(np.array([2.0, 2.0, 2.0]), np.array([1.0, 0.0, -200.0]))
+    px = g.render(1.0)[0, 0]
+    assert px.tolist() == [201, 200, 0]
+
+
+def test_coarse_time_map_sampling_is_bilinear_and_exact_at_centres():
+    tmap = np.array([[0, 4], [8, 12]], np.float32)
+    full = sample_time_map(tmap, (8, 8), 4)
+    assert full[0, 0] == 0 and full[-1, -1] == 12
+    assert abs(float(full[1, 1]) - 0.0) < 1e-6 and abs(float(full[4, 4]) - 7.5) < 1e-5
+
+
+def test_bad_inputs_are_clear_errors():
+    stack = _stack()
+    with pytest.raises(ValueError, match="frames must be uint8"):
+        Gather(stack.astype(np.float32), (4, 4), backend="numpy")
+    with pytest.raises(ValueError, match="wrap"):
+        Gather(stack, (4, 4), backend="numpy", wrap="mirror")
+    g = Gather(stack, (4, 4), backend="numpy")
+    with pytest.raises(RuntimeError, match="set a source"):
+        g.render(0)
+    with pytest.raises(ValueError, match="packed must have shape"):
+        g.set_source_map(pack_source(np.zeros((3, 4), int)))
+    with pytest.raises(ValueError, match="outside"):
+        g.set_source_map(pack_source(np.full((4, 4), 500)))
+    with pytest.raises(ValueError, match="tone 1"):
+        g.set_source_map(pack_source(np.zeros((4, 4), int), 1))
+    with pytest.raises(ValueError, match="tmap must have shape"):
+        g.set_time_map(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="finite"):
+        g.set_time_map(np.full((4, 4), np.nan))
+    with pytest.raises(ValueError, match="gain"):
+        g.set_tones(np.array([[-1, 1, 1]]))
+    with pytest.raises(ValueError, match="sigma"):
+        g.smooth_time_map(-1)
+    gg = Gather(stack, (4, 4), backend="numpy", grid=True)
+    with pytest.raises(ValueError, match="reach outside"):
+        gg.set_source_grid(pack_source(np.full((1, 1), 10)), (4, 4))
