@@ -30,6 +30,8 @@ class Player:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, not {backend!r}")
         self.backend = backend
+        self.queue = None
+        self.ctx = None
         self._own_db = not isinstance(db, TileDB)
         self.db = TileDB(db) if self._own_db else db
         try:
@@ -37,8 +39,6 @@ class Player:
         except BaseException:
             self.close()
             raise
-        self.queue = None
-        self.ctx = None
         if backend == "opencl":
             from . import opencl
             import pyopencl as cl
