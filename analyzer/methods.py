@@ -25,6 +25,7 @@ class Method:
 
 METHODS: dict[str, Method] = {
     "lds": Method("lds", "lds:learn_lds", False, "linear dynamic texture (Doretto & Soatto)"),
+    "turnpoints": Method("turnpoints", "turnpoints:learn_turnpoints", True, "video texture with turn points and transitions (Van Haevre; Schoedl)"),
     "mixture": Method("mixture", "mixture:learn_mixture", False, "subspace mixture + global coordination + AR(p) (Liu, Lin & Ahuja)"),
 }
 

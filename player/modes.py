@@ -6,6 +6,7 @@ import importlib
 #: mode name -> "module:Class" inside dynatex.player
 MODES: dict[str, str] = {
     "lds": "lds:LDSPlayer",
+    "turnpoints": "turnpoints:TurnPointPlayer",
     "mixture": "mixture:MixturePlayer",
 }
 

@@ -15,11 +15,12 @@ from .quilt import QuiltModel
 from .mixture import MixtureModel
 from .schema import FORMAT_NAME, FORMAT_VERSION
 from .source import SourceInfo
+from .turnpoints import TurnPointModel
 from .writer import DatabaseWriter
 
 __all__ = [
     "DatabaseWriter", "FORMAT_NAME", "FORMAT_VERSION", "FrameStore", "LDSModel", "MethodNotFoundError", "MixtureModel",
     "QuiltModel",
     "SourceInfo", "Texture", "TextureNotFoundError", "TileDB", "TileDBError", "TileDBFormatError",
-    "TileDBNotFoundError", "TileDBVersionError", "open_db",
+    "TileDBNotFoundError", "TileDBVersionError", "TurnPointModel", "open_db",
 ]

@@ -7,10 +7,11 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from . import lds, mixture, quilt, schema
+from . import lds, mixture, quilt, schema, turnpoints
 
 CODECS: dict[str, ModuleType] = {
     schema.METHOD_LDS: lds,
+    schema.METHOD_TURNPOINTS: turnpoints,
     schema.METHOD_QUILT: quilt,
     schema.METHOD_MIXTURE: mixture,
 }

@@ -35,6 +35,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--energy", type=float, default=0.9, help="variance kept by --n auto (default 0.9)")
     g.add_argument("--svd", choices=("auto", "gram", "randomized"), default="auto")
     g.add_argument("--max-radius", type=float, default=0.995, help="largest pole magnitude (default 0.995)")
+    g = p.add_argument_group("turnpoints")
+    g.add_argument("--tp-n", type=int, default=4, help="mirrored frame pairs of the symmetry test (default 4)")
+    g.add_argument("--tp-s", type=int, default=1, help="binomial smoothness, 0 <= s < n/2 (default 1)")
+    g.add_argument("--tp-r", type=int, default=4, help="turn points are more than R frames apart (default 4)")
+    g.add_argument("--tp-min-symmetry", type=float, default=0.5, help="weakest turn point, in [0, 1) (default 0.5)")
+    g.add_argument("--tp-max-cost", type=float, default=2.0,
+                   help="drop transitions costlier than this many median frame steps (default 2)")
+    g.add_argument("--tp-plot", default=None, metavar="PNG",
+                   help="write a plot of the symmetry curve, turn points and probabilities")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
     return p
 
@@ -54,6 +63,9 @@ def method_params(name: str, args: argparse.Namespace) -> dict:
     if name == "lds":
         n = args.n if args.n == "auto" else _int("--n", args.n)
         return {"n": n, "k": args.k, "energy": args.energy, "svd": args.svd, "max_radius": args.max_radius}
+    if name == "turnpoints":
+        return {"n": args.tp_n, "s": args.tp_s, "r": args.tp_r, "min_symmetry": args.tp_min_symmetry,
+                "max_cost": args.tp_max_cost}
     return {}
 
 
@@ -88,6 +100,9 @@ def run(args: argparse.Namespace) -> int:
             t = time.perf_counter()
             model = m.function()(clip, progress=tqdm_progress(m.name, show), **method_params(m.name, args))
             writer.put_method(texture, m.name, model)
+            if m.name == "turnpoints" and args.tp_plot:
+                from ..analyzer.turnpoints import plot_turnpoints
+                plot_turnpoints(model, args.tp_plot, title=texture)
             if show:
                 print(f"{m.name}: {_summary(m.name, model)} ({time.perf_counter() - t:.1f} s)", file=sys.stderr)
     if show:
@@ -103,4 +118,7 @@ def _summary(name: str, model) -> str:
         return (f"n={model.n} k={model.k}, energy {info.get('energy_captured', 0):.3f}, "
                 f"spectral radius {info.get('spectral_radius_raw', 0):.4f} -> {info.get('spectral_radius', 0):.4f} "
                 f"({info.get('poles_clipped', 0)} poles clipped)")
+    if name == "turnpoints":
+        return (f"{info.get('n_turn_points', 0)} turn points {model.turn_points.tolist()[:12]}, "
+                f"{info.get('n_transitions', 0)} transitions, exit frame {model.exit_frame}")
     return ""

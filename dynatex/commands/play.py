@@ -33,6 +33,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--intensity", type=float, default=1.0, help=">= 0, scale of the driving noise")
     g.add_argument("--scales", default=None, metavar="C,M,F", help="coarse,medium,fine weights in [0, 10]")
     g.add_argument("--precision", choices=("float32", "float16"), default="float32")
+    g = p.add_argument_group("turnpoints controls (--speed in [0, 4])")
+    g.add_argument("--playback", choices=("hybrid", "turns", "jumps"), default="hybrid",
+                   help="turn points and transitions (default), turn points only, transitions only")
+    g.add_argument("--crossfade", type=int, default=4, help="frames of crossfade at a jump, 0..16 (default 4)")
+    g.add_argument("--increment", type=float, default=0.1, help="step of the adaptive reversal probabilities")
+    g.add_argument("--start", type=int, default=0, help="first source frame (default 0)")
     return p
 
 
@@ -41,12 +47,21 @@ def player_options(args: argparse.Namespace) -> dict:
     opts = {"backend": args.backend, "device": args.device, "seed": args.seed}
     if args.mode == "lds":
         opts["precision"] = args.precision
+    if args.mode == "turnpoints":
+        opts["playback"] = args.playback
+        opts["start"] = args.start
     if args.size is not None and args.mode == "lds":
         raise UsageError("--size is not supported by mode lds (it plays at the clip's resolution)")
+    if args.size is not None and args.mode == "turnpoints":
+        raise UsageError("--size is not supported by mode turnpoints (it plays the source frames themselves)")
     return opts
 
 
 def apply_controls(player, args: argparse.Namespace) -> None:
+    if args.mode == "turnpoints":
+        player.speed = args.speed
+        player.crossfade = args.crossfade
+        player.increment = args.increment
     if args.mode == "lds":
         player.speed = args.speed
         player.intensity = args.intensity

@@ -1,0 +1,462 @@
+"""Video textures with turn points (Van Haevre & Van Reeth) and classic transitions (Schoedl et al.).
+
+Analysis, all on a ``T x T`` matrix of frame distances computed on reduced frames:
+
+1. Symmetry per frame (the seed's eq. 2): ``Sym_i = sum_r C(2(n-s), n-r) D[i-r, i+r]``,
+   ``r = 1..n``. Read literally the weights peak at ``r = s`` (for ``s = 0`` they fall from
+   ``r = 1`` outward) and a larger ``s`` flattens them (``w_1 / w_n = C(2(n-s), n-1)``), the
+   opposite of what the seed's prose says; we implement the formula. Frames closer than
+   ``n`` to an end use the mirrored pairs that fit (at least ``min_pairs``), normalised by
+   the weights used, so turns near the clip's ends can be found (``min_pairs = n`` is the
+   seed exactly: only full windows).
+2. Normalisation (eq. 3) ``sym = 1 - Sym / Sym_max``, local maxima within ``r`` (eq. 4),
+   maxima below ``min_symmetry`` dropped, ``p_max = sym / 2`` (eq. 5) and 1 at the
+   outermost turn points.
+3. Transitions: the distance matrix filtered along its diagonals with binomial weights
+   (``2 m`` taps) so a jump also matches the neighbouring frames (dynamics preserved), the
+   future-cost iteration ``F_ij = C_ij^p + alpha min_k F_jk`` (continuing costs nothing but
+   leads on; the last frame is a dead end), probabilities ``exp(-F / sigma)``, and only
+   transitions that are local minima of ``F`` and probable enough kept. Forward-only play
+   always jumps at ``exit_frame`` so it never runs off the end.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+
+from ..tiledb.turnpoints import TurnPointModel
+from .video import Clip
+
+Progress = Callable[[int, "int | None"], None]
+
+DEFAULTS = dict(n=4, s=1, r=4, min_pairs=2, min_symmetry=0.5, feature_size=64, taps=2, p=2.0,
+                alpha=0.999, sigma=0.1, min_gap=3, min_prob=0.02, max_per_frame=3, max_cost=2.0)
+
+
+def frame_features(frames: np.ndarray, size: int = 64) -> np.ndarray:
+    """Frames reduced for distance computations: area-downscaled so the longer side is at most
+    ``size``, as float32 rows ``(T, h * w * C)``, scaled so distances approximate full-resolution L2.
+
+    Examples
+    --------
+    >>> f = frame_features(np.zeros((3, 128, 64, 3), np.uint8), size=32)
+    >>> f.shape
+    (3, 1536)
+    """
+    frames = _check_frames(frames)
+    size = _int("feature_size", size, 4)
+    t, h, w, c = frames.shape
+    factor = max(h, w) / size
+    if factor <= 1:
+        return frames.reshape(t, -1).astype(np.float32)
+    import cv2
+    nh, nw = max(1, round(h / factor)), max(1, round(w / factor))
+    out = np.empty((t, nh * nw * c), np.float32)
+    for i in range(t):
+        small = cv2.resize(frames[i], (nw, nh), interpolation=cv2.INTER_AREA).astype(np.float32)
+        out[i] = small.reshape(-1)
+    # Each reduced pixel stands for (h*w)/(nh*nw) pixels: scale to keep distances comparable.
+    out *= math.sqrt((h * w) / (nh * nw))
+    return out
+
+
+def distance_matrix(features: np.ndarray) -> np.ndarray:
+    """Euclidean distances between all rows, ``(T, T)`` float64, exactly symmetric with a zero diagonal."""
+    x = np.asarray(features, np.float64)
+    g = x @ x.T
+    sq = np.diag(g).copy()
+    d2 = sq[:, None] + sq[None, :] - 2 * g
+    np.maximum(d2, 0, out=d2)
+    d = np.sqrt(d2)
+    d = 0.5 * (d + d.T)
+    np.fill_diagonal(d, 0.0)
+    return d
+
+
+def symmetry_weights(n: int, s: int) -> np.ndarray:
+    """Binomial weights ``C(2(n-s), n-r)`` for ``r = 1..n`` (the seed's eq. 2).
+
+    Examples
+    --------
+    >>> symmetry_weights(4, 1).tolist()
+    [20.0, 15.0, 6.0, 1.0]
+    """
+    return np.array([math.comb(2 * (n - s), n - r) for r in range(1, n + 1)], np.float64)
+
+
+def symmetry_scores(d: np.ndarray, *, n: int, s: int, min_pairs: int) -> tuple[np.ndarray, np.ndarray]:
+    """Raw weighted mirrored distances (eq. 2) and the normalised symmetry (eq. 3).
+
+    Returns ``(sym_raw, symmetry)``, both ``(T,)``; frames with fewer than ``min_pairs``
+    mirrored pairs on both sides get ``sym_raw = 0`` and ``symmetry = 0``.
+    """
+    t = d.shape[0]
+    w = symmetry_weights(n, s)
+    raw = np.zeros(t)
+    wsum = np.zeros(t)
+    idx = np.arange(t)
+    for r in range(1, n + 1):
+        ok = (idx - r >= 0) & (idx + r < t)
+        i = idx[ok]
+        raw[i] += w[r - 1] * d[i - r, i + r]
+        wsum[i] += w[r - 1]
+    pairs = np.minimum(idx, t - 1 - idx).clip(max=n)
+    valid = pairs >= min_pairs
+    raw = np.where(valid, raw / np.where(wsum > 0, wsum, 1) * w.sum(), 0.0)
+    sym = np.zeros(t)
+    top = raw[valid].max() if valid.any() else 0.0
+    if top > 0:
+        sym[valid] = 1.0 - raw[valid] / top
+    elif valid.any():
+        sym[valid] = 1.0  # a constant clip: every frame mirrors perfectly
+    return raw, sym
+
+
+def local_maxima(values: np.ndarray, r: int) -> np.ndarray:
+    """Eq. 4: ``values`` kept where it is the maximum of ``values[i-r .. i+r]`` (first of ties), else 0."""
+    t = values.shape[0]
+    out = np.zeros(t)
+    for i in range(t):
+        v = values[i]
+        if v <= 0:
+            continue
+        lo, hi = max(0, i - r), min(t, i + r + 1)
+        if v >= values[lo:hi].max() and not np.any(values[lo:i] == v):
+            out[i] = v
+    return out
+
+
+def filtered_distances(d: np.ndarray, taps: int) -> np.ndarray:
+    """``D'[i, j] = sum_k w_k D[i+k, j+k]`` for ``k = -taps .. taps-1`` with binomial weights
+    (normalised to sum 1); ``inf`` where the window leaves the clip."""
+    t = d.shape[0]
+    w = np.array([math.comb(2 * taps - 1, k) for k in range(2 * taps)], np.float64)
+    w /= w.sum()
+    out = np.full((t, t), np.inf)
+    lo, hi = taps, t - taps + 1  # i + k must stay in [0, t) for k in [-taps, taps-1]
+    if hi <= lo:
+        return out
+    acc = np.zeros((hi - lo, hi - lo))
+    for k, wk in zip(range(-taps, taps), w):
+        acc += wk * d[lo + k:hi + k, lo + k:hi + k]
+    out[lo:hi, lo:hi] = acc
+    return out
+
+
+def future_costs(cost_p: np.ndarray, alpha: float, dead: float, max_iter: int = 10000) -> tuple[np.ndarray, np.ndarray]:
+    """Q-learning iteration for forward play: ``F[i, j] = cost_p[i, j] + alpha * m[j]`` with
+    ``m[j] = min(alpha * m[j + 1], min_k F[j, k])`` (continuing is free but leads on) and the
+    last frame, which cannot continue, worth ``dead`` plus its best jump.
+
+    Returns ``(F, m)``.
+    """
+    t = cost_p.shape[0]
+    m = np.zeros(t)
+    m[-1] = dead
+    for _ in range(max_iter):
+        f = cost_p + alpha * m[None, :]
+        best_jump = f.min(axis=1)
+        cont = np.empty(t)
+        cont[:-1] = alpha * m[1:]
+        cont[-1] = dead
+        new = np.minimum(np.minimum(cont, best_jump), dead)
+        if np.allclose(new, m, rtol=1e-12, atol=1e-12 * dead):
+            m = new
+            break
+        m = new
+    return cost_p + alpha * m[None, :], m
+
+
+def learn_turnpoints(clip: Clip | np.ndarray, *, n: int = 4, s: int = 1, r: int = 4, min_pairs: int = 2,
+                     min_symmetry: float = 0.5, feature_size: int = 64, taps: int = 2, p: float = 2.0,
+                     alpha: float = 0.999, sigma: float = 0.1, min_gap: int = 3, min_prob: float = 0.02,
+                     max_per_frame: int = 3, max_cost: float = 2.0,
+                     progress: Progress | None = None) -> TurnPointModel:
+    """Find turn points and transitions of a clip (the ``turnpoints`` method).
+
+    Parameters
+    ----------
+    clip : Clip or ndarray
+        Frames ``(T, H, W, C)`` uint8; ``T >= 2 n + 1``.
+    n : int
+        Mirrored frame pairs in the symmetry test (eq. 2), ``n >= 1``.
+    s : int
+        Smoothness of the binomial weights, ``0 <= s < n / 2``.
+    r : int
+        Range of the local-maximum reduction (eq. 4): turn points are more than ``r`` apart.
+    min_pairs : int
+        Fewest mirrored pairs a frame near the clip's ends needs to be scored, ``1..n``.
+    min_symmetry : float
+        Local maxima below this normalised symmetry (in [0, 1)) are not turn points.
+    feature_size : int
+        Frames are area-downscaled to this longer side before distances (see ``info``
+        ``distance_correlation`` for the agreement with full-resolution L2).
+    taps : int
+        Half-length of the diagonal filter of the transition costs (``2 taps`` frames).
+    p : float
+        Exponent on the filtered cost (Schoedl's ``p``), ``> 0``.
+    alpha : float
+        Future-cost discount, in (0, 1).
+    sigma : float
+        Probability scale as a fraction of the mean finite cost: ``prob ~ exp(-F / sigma)``.
+    min_gap : int
+        Transitions to within ``min_gap`` frames of the natural successor are dropped.
+    min_prob : float
+        Transitions less probable than this per visit are dropped.
+    max_per_frame : int
+        Most transitions kept per source frame (the best ones).
+    max_cost : float
+        Transitions whose filtered cost exceeds ``max_cost`` times the median distance
+        between consecutive frames are dropped (visibly wrong jumps), ``> 0``.
+    progress : callable(done, total), optional
+        Called after each of the 4 stages.
+
+    Returns
+    -------
+    TurnPointModel
+
+    Examples
+    --------
+    >>> t = np.arange(60)
+    >>> x = (20 + 10 * np.cos(2 * np.pi * t / 20)).round().astype(int)   # extremes at 0, 10, 20, ...
+    >>> frames = np.zeros((60, 8, 48, 3), np.uint8)
+    >>> for i, xi in enumerate(x):
+    ...     frames[i, :, xi - 2:xi + 2] = 255
+    >>> model = learn_turnpoints(frames, n=3, s=1, r=4)
+    >>> model.turn_points.tolist()
+    [10, 20, 30, 40, 50]
+    """
+    frames = clip.frames if isinstance(clip, Clip) else _check_frames(clip)
+    t = frames.shape[0]
+    n = _int("n", n, 1)
+    s = _int("s", s, 0)
+    if not s < n / 2:
+        raise ValueError(f"s must satisfy 0 <= s < n/2 (the seed's eq. 2), got s={s} with n={n}")
+    r = _int("r", r, 1)
+    min_pairs = _int("min_pairs", min_pairs, 1)
+    if min_pairs > n:
+        raise ValueError(f"min_pairs must be in 1..n={n}, not {min_pairs}")
+    if t < 2 * n + 1:
+        raise ValueError(f"clip has {t} frames, too short for n={n}: the symmetry test needs at least "
+                         f"2n+1 = {2 * n + 1} frames; use a smaller n")
+    min_symmetry = _float("min_symmetry", min_symmetry, 0.0, 1.0, hi_open=True)
+    feature_size = _int("feature_size", feature_size, 4)
+    taps = _int("taps", taps, 1)
+    p = _float("p", p, 0.0, 10.0, lo_open=True)
+    alpha = _float("alpha", alpha, 0.0, 1.0, lo_open=True, hi_open=True)
+    sigma = _float("sigma", sigma, 0.0, 100.0, lo_open=True)
+    min_gap = _int("min_gap", min_gap, 1)
+    min_prob = _float("min_prob", min_prob, 0.0, 1.0, hi_open=True)
+    max_per_frame = _int("max_per_frame", max_per_frame, 1)
+    max_cost = _float("max_cost", max_cost, 0.0, 1e6, lo_open=True)
+    step = _stepper(progress, 4)
+
+    feats = frame_features(frames, feature_size)
+    d = distance_matrix(feats)
+    corr, rel = _distance_agreement(frames, d)
+    step()
+
+    sym_raw, sym = symmetry_scores(d, n=n, s=s, min_pairs=min_pairs)
+    reduced = local_maxima(sym, r)
+    reduced[reduced < min_symmetry] = 0.0
+    turns = np.flatnonzero(reduced > 0).astype(np.int32)
+    if turns.size < 2:
+        raise ValueError(f"found {turns.size} turn point(s) with symmetry >= min_symmetry={min_symmetry}; playback "
+                         f"needs at least 2: lower min_symmetry, r or n, or use a longer clip")
+    p_max = reduced / 2.0
+    p_max[turns[0]] = p_max[turns[-1]] = 1.0
+    step()
+
+    src, dst, cost, fcost, prob, exit_frame = _transitions(d, taps=taps, p=p, alpha=alpha, sigma=sigma,
+                                                           min_gap=min_gap, min_prob=min_prob,
+                                                           max_per_frame=max_per_frame,
+                                                           max_cost=max_cost * float(np.median(np.diag(d, 1))))
+    step()
+    consec = np.diag(d, 1)
+    info = {"n": n, "s": s, "r": r, "min_pairs": min_pairs, "min_symmetry": min_symmetry,
+            "feature_size": feature_size, "feature_values": int(feats.shape[1]), "taps": taps, "p": p,
+            "alpha": alpha, "sigma": sigma, "min_gap": min_gap, "min_prob": min_prob,
+            "max_per_frame": max_per_frame, "max_cost": max_cost, "distance_correlation": corr, "distance_rel_error": rel,
+            "median_step": float(np.median(consec)), "n_turn_points": int(turns.size),
+            "n_transitions": int(src.size)}
+    model = TurnPointModel(sym_raw=sym_raw, symmetry=sym, reduced=reduced, turn_points=turns, p_max=p_max,
+                           src=src, dst=dst, cost=cost, future_cost=fcost, prob=prob,
+                           exit_frame=exit_frame, info=info)
+    step()
+    return model
+
+
+def _transitions(d: np.ndarray, *, taps: int, p: float, alpha: float, sigma: float, min_gap: int,
+                 min_prob: float, max_per_frame: int, max_cost: float):
+    t = d.shape[0]
+    dp = filtered_distances(d, taps)
+    # Jump i -> j replaces the successor i+1 by j: its cost compares i+1 with j.
+    cost = np.full((t, t), np.inf)
+    cost[:-1] = dp[1:]
+    ii, jj = np.indices((t, t))
+    near = np.abs(jj - (ii + 1)) < min_gap
+    cost[near] = np.inf
+    cost[cost > max_cost] = np.inf
+    finite = np.isfinite(cost)
+    empty = (np.zeros(0, np.int32),) * 2 + (np.zeros(0),) * 3
+    if not finite.any():
+        return (*empty, t - 1)
+    cost_p = np.where(finite, cost, 0.0) ** p
+    scale = float(cost_p[finite].mean()) or 1.0
+    cost_p /= scale
+    dead = 1e3
+    cost_p[~finite] = np.inf
+    f, m = future_costs(cost_p, alpha, dead)
+    # Per-visit probabilities: the continuation (cost alpha m[i+1]) competes with the jumps.
+    cont = np.full(t, np.inf)
+    cont[:-1] = alpha * m[1:]
+    keep = finite & _is_local_min(f)
+    # Locally best, then the best few per frame.
+    f_keep = np.where(keep, f, np.inf)
+    order = np.argsort(f_keep, axis=1)[:, :max_per_frame]
+    sel = np.zeros_like(keep)
+    np.put_along_axis(sel, order, True, axis=1)
+    keep &= sel
+    base = np.minimum(cont, f_keep.min(axis=1))[:, None]
+    with np.errstate(invalid="ignore"):
+        ew = np.where(keep, np.exp(-(f - base) / sigma), 0.0)
+        ec = np.where(np.isfinite(cont), np.exp(-(cont - base[:, 0]) / sigma), 0.0)
+    denom = ew.sum(axis=1) + ec
+    prob = np.where(keep, ew / np.where(denom > 0, denom, 1)[:, None], 0.0)
+    keep &= prob >= min_prob
+    # Forward play must never run off the end: find the exit frame, the last frame with a
+    # kept backward jump, drop everything beyond it and always jump there.
+    while True:
+        back = keep & (jj < ii)
+        rows = np.flatnonzero(back.any(axis=1))
+        if rows.size == 0:
+            # No backward jump survived the thresholds: keep the single best one.
+            fb = np.where(finite & (jj < ii), f, np.inf)
+            i, j = np.unravel_index(int(np.argmin(fb)), fb.shape)
+            if not np.isfinite(fb[i, j]):
+                return (*empty, t - 1)
+            keep[i, j] = True
+            prob[i, j] = max(prob[i, j], min_prob)
+            continue
+        exit_frame = int(rows.max())
+        beyond = (ii > exit_frame) | (jj > exit_frame)
+        if not (keep & beyond).any():
+            break
+        keep &= ~beyond
+    row = keep[exit_frame] & (np.arange(t) < exit_frame)
+    keep[exit_frame] = row
+    prob[exit_frame] = np.where(row, np.exp(-(f[exit_frame] - f[exit_frame][row].min()) / sigma), 0.0)
+    prob[exit_frame] /= prob[exit_frame].sum()
+    src, dst = np.nonzero(keep)
+    return (src.astype(np.int32), dst.astype(np.int32), cost[src, dst].astype(np.float64),
+            f[src, dst].astype(np.float64), np.clip(prob[src, dst], 0.0, 1.0), exit_frame)
+
+
+def _is_local_min(f: np.ndarray) -> np.ndarray:
+    """Entries no larger than their 8 neighbours (``inf`` padding)."""
+    pad = np.pad(f, 1, constant_values=np.inf)
+    t0, t1 = f.shape
+    out = np.ones(f.shape, bool)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di or dj:
+                out &= f <= pad[1 + di:1 + di + t0, 1 + dj:1 + dj + t1]
+    return out
+
+
+def _distance_agreement(frames: np.ndarray, d: np.ndarray, samples: int = 64) -> tuple[float, float]:
+    """Correlation and relative RMS error (after the best scale fit) of the reduced distances
+    against full-resolution L2, on consecutive pairs and ``samples`` random pairs."""
+    t = frames.shape[0]
+    rng = np.random.default_rng(0)
+    pairs = [(i, i + 1) for i in range(0, t - 1, max(1, (t - 1) // samples))]
+    pairs += [tuple(sorted(rng.choice(t, 2, replace=False))) for _ in range(samples)]
+    full = np.array([math.sqrt(float(np.sum((frames[i].astype(np.float32) - frames[j]) ** 2, dtype=np.float64)))
+                     for i, j in pairs])
+    red = np.array([d[i, j] for i, j in pairs])
+    if full.std() == 0 or red.std() == 0:
+        return 1.0, 0.0
+    corr = float(np.corrcoef(full, red)[0, 1])
+    k = float(np.dot(full, red) / np.dot(red, red))  # best scale: reduced frames lose fine detail
+    rel = float(np.sqrt(np.mean((k * red - full) ** 2)) / np.sqrt(np.mean(full ** 2)))
+    return corr, rel
+
+
+# -- checks ---------------------------------------------------------------------------
+def _check_frames(frames) -> np.ndarray:
+    frames = np.asarray(frames)
+    if frames.ndim != 4 or frames.dtype != np.uint8:
+        raise ValueError(f"clip must be (T, H, W, C) uint8 frames, not {frames.dtype} {frames.shape}")
+    return frames
+
+
+def _int(name: str, value, lo: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, not {value!r}")
+    if value < lo:
+        raise ValueError(f"{name} must be at least {lo}, not {value}")
+    return int(value)
+
+
+def _float(name: str, value, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a number, not {value!r}")
+    v = float(value)
+    bad = (not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi))
+    if bad:
+        raise ValueError(f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}, not {value!r}")
+    return v
+
+
+def _stepper(progress: Progress | None, total: int) -> Callable[[], None]:
+    done = [0]
+
+    def step() -> None:
+        done[0] += 1
+        if progress is not None:
+            progress(done[0], total)
+    return step
+
+
+def plot_turnpoints(model: TurnPointModel, path: str, *, title: str | None = None) -> str:
+    """Write a PNG like the seed's Figure 2: symmetry (grey), maximum reversal probabilities
+    (red), initial probabilities (green), turn points, and below it the kept transitions.
+
+    Examples
+    --------
+    >>> frames = np.zeros((30, 8, 8, 3), np.uint8)
+    >>> frames[:, :, :, 0] = (100 + 80 * np.cos(np.arange(30) / 3)).astype(np.uint8)[:, None, None]
+    >>> plot_turnpoints(learn_turnpoints(frames, n=3), "/tmp/tp_doctest.png")   # doctest: +ELLIPSIS
+    '/tmp/tp_doctest.png'
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    t = model.n_frames
+    x = np.arange(t)
+    p_init = model.p_max / 2.0
+    p_init[[model.first_turn, model.last_turn]] = 1.0
+    fig = Figure(figsize=(9, 5.5), dpi=100)
+    ax, bx = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 2]})
+    ax.fill_between(x, model.symmetry, color="0.75", step="mid", label="symmetry (eq. 3)")
+    ax.vlines(x, 0, model.p_max, color="tab:red", lw=3, label="max reversal probability (eq. 5)")
+    ax.vlines(x + 0.25, 0, p_init, color="tab:green", lw=2, label="initial probability (eq. 6)")
+    ax.plot(model.turn_points, model.symmetry[model.turn_points], "kv", ms=6, label="turn points")
+    ax.set_ylim(0, 1.05)
+    ax.set_ylabel("value")
+    ax.legend(loc="upper right", fontsize=7, ncol=2)
+    ax.set_title(title or "turn points")
+    if model.src.size:
+        sc = bx.scatter(model.src, model.dst, c=model.prob, cmap="viridis", vmin=0, vmax=1, s=18)
+        fig.colorbar(sc, ax=(ax, bx), label="jump probability", fraction=0.04)
+    bx.axvline(model.exit_frame, color="tab:orange", ls="--", lw=1, label="exit frame")
+    bx.plot([0, t - 1], [1, t], color="0.6", lw=0.8, label="natural successor")
+    bx.set_xlabel("source frame")
+    bx.set_ylabel("transition target")
+    bx.set_xlim(-0.5, t - 0.5)
+    bx.legend(loc="upper left", fontsize=7)
+    fig.savefig(path)
+    return path

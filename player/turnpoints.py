@@ -1,0 +1,408 @@
+"""Mode ``turnpoints``: endless playback of the source frames themselves, reversing at
+turn points (Van Haevre & Van Reeth) and jumping along video-texture transitions.
+
+The walk over source frames is host work (a few microseconds a step): at a turn point
+playback reverses with an adaptive probability (the seed's eq. 7: it starts at half the
+maximum, drops by ``increment`` after a turn and rises by ``increment`` after a pass, so
+the whole clip gets used); elsewhere it may take a transition. The outermost turn points
+always reverse when playback heads outward, and forward-only playback always jumps at the
+exit frame, so the walk never reaches a dead end.
+
+Frames are kept in memory on the device: ``T * ceil(H*W*3 / 16) * 16`` bytes (grey clips
+are expanded to RGB), e.g. 7.4 MB for the 43-frame 240x240 pendulum clip, 321 MB for 116
+frames at 1280x720. A frame that is one stored frame is a single device-to-host copy
+straight into the caller's buffer; a crossfade (after a jump) or a fractional speed
+blends up to four frames with one ``blend`` kernel launch in exact integer arithmetic,
+so the numpy reference gives identical bytes.
+"""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from ..tiledb import TileDB
+from ..tiledb.turnpoints import TurnPointModel
+from .base import Player, check_float, check_int
+
+PLAYBACKS = ("hybrid", "turns", "jumps")
+SPEED_RANGE = (0.0, 4.0)
+MAX_CROSSFADE = 16
+EVENT_NONE, EVENT_TURN, EVENT_JUMP = 0, 1, 2
+VEC = 16
+
+
+class TurnPointPlayer(Player):
+    """Endless frames from a texture's ``turnpoints`` tables and stored frames.
+
+    Parameters
+    ----------
+    db : path or TileDB
+        The tile database (the texture needs ``turnpoints`` data and stored frames).
+    texture : str, optional
+        Texture name (optional when the database holds one texture).
+    backend : {"opencl", "numpy"}
+        ``"numpy"`` is the reference implementation and the fallback without OpenCL.
+    device : str, optional
+        OpenCL device (see :func:`dynatex.player.opencl.get_context`).
+    seed : int
+        Seed of the random walk; the same seed gives the same frames.
+    playback : {"hybrid", "turns", "jumps"}
+        Turn points and transitions, turn points only (the seed), or transitions only
+        (classic video textures, forward only).
+    start : int
+        Source frame of the first output frame (played forward), default 0.
+
+    Controls (attributes, changeable between any two frames)
+    ---------------------------------------------------------
+    speed : float in [0, 4]
+        Source frames advanced per output frame; fractional speeds blend neighbouring frames.
+    crossfade : int in [0, 16]
+        Frames over which a jump is crossfaded with the path it left (0: cut).
+    increment : float in [0, 1]
+        The eq. 7 step of the reversal probabilities.
+
+    Observables: ``source_index`` (the walk's source frame of the last output frame),
+    ``last_event`` (0 none, 1 turn, 2 jump, 3 both), ``last_sources`` ((frame, weight/256)
+    pairs), ``probabilities`` (current reversal probabilities), :meth:`advance` (the walk
+    without rendering).
+
+    Examples
+    --------
+    >>> with TurnPointPlayer("pendulum.h5", seed=1) as p:   # doctest: +SKIP
+    ...     frame = p.next_frame()
+    ...     p.source_index, p.last_event
+    """
+
+    mode = "turnpoints"
+
+    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
+                 backend: str = "opencl", device: str | None = None, seed: int = 0,
+                 playback: str = "hybrid", start: int = 0) -> None:
+        if playback not in PLAYBACKS:
+            raise ValueError(f"playback must be one of {PLAYBACKS}, not {playback!r}")
+        super().__init__(db, texture, backend=backend, device=device)
+        try:
+            self._setup(self.texture.read("turnpoints"), playback, seed, start)
+        except BaseException:
+            self.close()
+            raise
+
+    # -- setup -----------------------------------------------------------------------
+    def _setup(self, model: TurnPointModel, playback: str, seed: int, start: int) -> None:
+        src = self.texture.source
+        self.model = model
+        self.playback = playback
+        t = model.n_frames
+        self.n_frames = t
+        self._shape = (src.height, src.width, 3)
+        self._a, self._z = model.first_turn, model.last_turn
+        self._p_max = model.p_max.copy()
+        self._is_turn = np.zeros(t, bool)
+        self._is_turn[model.turn_points] = True
+        if playback == "jumps" and model.src.size == 0:
+            raise ValueError("playback='jumps' needs transitions, and this texture has none; use 'hybrid' or 'turns'")
+        self._fwd, self._bwd = self._tables(model)
+        start = check_int("start", start, 0, t - 1)
+        if playback == "jumps" and start > model.exit_frame:
+            raise ValueError(f"start must be at most the exit frame {model.exit_frame} for playback='jumps', not {start}")
+        if playback != "jumps" and start > self._z:
+            raise ValueError(f"start must be at most the last turn point {self._z}, not {start}")
+        self._speed, self._crossfade, self._increment = 1.0, 4, 0.1
+        self.reseed(seed)
+        self._reset_walk(start)
+
+        store = self.texture.frames()
+        frames = store.read()
+        if frames.shape[-1] == 1:
+            frames = np.repeat(frames, 3, axis=-1)
+        self.frame_bytes = int(np.prod(self._shape))
+        self._vecs = -(-self.frame_bytes // VEC)
+        self.memory_bytes = t * self._vecs * VEC
+        if self.backend == "numpy":
+            self._frames = np.ascontiguousarray(frames)
+        else:
+            self._setup_opencl(frames)
+        self._warm()
+
+    def _tables(self, model: TurnPointModel):
+        """Per source frame: (destinations, cumulative probabilities) forward and backward."""
+        t = model.n_frames
+        empty = (np.zeros(0, np.int64), np.zeros(0))
+        fwd = [empty] * t
+        bwd = [empty] * t
+        if self.playback == "turns":
+            return fwd, bwd
+        s, d, p = model.src.astype(np.int64), model.dst.astype(np.int64), model.prob
+        if self.playback == "hybrid":
+            ok = d <= self._z                       # heading forward beyond the last turn: dead end
+            fs, fd, fp = s[ok], d[ok], p[ok]
+            bs, bd = d + 1, s + 1                   # the mirror of i -> j played backward
+            ok = (bd >= self._a) & (bs < t)
+            bs, bd, bp = bs[ok], bd[ok], p[ok]
+        else:
+            fs, fd, fp = s, d, p
+            bs = bd = bp = np.zeros(0)
+        for table, ss, dd, pp in ((fwd, fs, fd, fp), (bwd, bs, bd, bp)):
+            for i in np.unique(ss).astype(np.int64):
+                sel = ss == i
+                probs = pp[sel]
+                total = probs.sum()
+                if total > 1:
+                    probs = probs / total
+                cum = np.cumsum(probs)
+                if self.playback == "jumps" and i == model.exit_frame:
+                    cum[-1] = np.inf                # always jump at the exit frame
+                table[int(i)] = (dd[sel].astype(np.int64), cum)
+        return fwd, bwd
+
+    def _setup_opencl(self, frames: np.ndarray) -> None:
+        import pyopencl as cl
+        from .opencl import build_program
+        t = frames.shape[0]
+        padded = np.zeros((t, self._vecs * VEC), np.uint8)
+        padded[:, :self.frame_bytes] = frames.reshape(t, -1)
+        mf = cl.mem_flags
+        self._d_frames = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
+        del padded
+        self._params = np.zeros(8, np.int32)
+        self._d_params = cl.Buffer(self.ctx, mf.READ_ONLY, self._params.nbytes)
+        self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, self._vecs * VEC)
+        prog = build_program(self.ctx, "blend.cl", {"FRAME_VECS": self._vecs})
+        self._kernel = prog.kernel("blend")
+        self._kernel.set_args(self._d_frames, self._d_params, self._d_out)
+        self._gsize = (self._vecs,)
+
+    def _warm(self) -> None:
+        scratch = np.empty(self._shape, np.uint8)
+        self._compose(((0, 128), (min(1, self.n_frames - 1), 128)), scratch)
+        self._compose(((0, 256),), scratch)
+
+    # -- controls ----------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self._shape
+
+    @property
+    def speed(self) -> float:
+        return self._speed
+
+    @speed.setter
+    def speed(self, value: float) -> None:
+        self._speed = check_float("speed", value, *SPEED_RANGE)
+
+    @property
+    def crossfade(self) -> int:
+        return self._crossfade
+
+    @crossfade.setter
+    def crossfade(self, value: int) -> None:
+        self._crossfade = check_int("crossfade", value, 0, MAX_CROSSFADE)
+
+    @property
+    def increment(self) -> float:
+        return self._increment
+
+    @increment.setter
+    def increment(self, value: float) -> None:
+        self._increment = check_float("increment", value, 0.0, 1.0)
+
+    @property
+    def probabilities(self) -> np.ndarray:
+        """Current reversal probability of every source frame (0 where there is no turn point)."""
+        return self._p.copy()
+
+    def reseed(self, seed: int) -> None:
+        """Restart the random walk's generator from ``seed`` (position and probabilities are kept)."""
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
+        self.seed = int(seed)
+        self._rng = np.random.Generator(np.random.PCG64(self.seed))
+
+    # -- the walk ------------------------------------------------------------------------
+    def _reset_walk(self, start: int) -> None:
+        self._pos, self._dir = int(start), 1
+        self._p = self._p_max / 2.0                     # eq. 6
+        self._p[[self._a, self._z]] = 1.0
+        self._old: list[int] | None = None               # crossfade: [old frame, old direction, k]
+        self.dead_ends = 0
+        self._phase = 0.0
+        first = (self._pos, ((self._pos, 1.0),), EVENT_NONE)
+        self._disp = [first, self._walk_step()]
+        self._pending = EVENT_NONE
+        self.source_index = self._pos
+        self.last_event = EVENT_NONE
+        self.last_sources: tuple[tuple[int, int], ...] = ((self._pos, 256),)
+
+    def _walk_step(self) -> tuple[int, tuple[tuple[int, float], ...], int]:
+        """Advance the walk one source frame: (frame, blend pairs, event)."""
+        i, d = self._pos, self._dir
+        event = EVENT_NONE
+        nxt = None
+        if self.playback != "jumps" and self._is_turn[i]:
+            if (i == self._a and d < 0) or (i == self._z and d > 0):
+                turn = True                              # outermost turn heading outward: always
+            elif (i == self._a and d > 0) or (i == self._z and d < 0):
+                turn = False                             # turning here would head outward
+            else:
+                turn = bool(self._rng.random() < self._p[i])
+                inc = self._increment                    # eq. 7
+                self._p[i] = max(self._p[i] - inc, 0.0) if turn else min(self._p[i] + inc, self._p_max[i])
+            if turn:
+                d = -d
+                nxt = i + d
+                event = EVENT_TURN
+        if nxt is None and self.playback != "turns":
+            dsts, cum = (self._fwd if d > 0 else self._bwd)[i]
+            if dsts.size:
+                k = int(np.searchsorted(cum, self._rng.random(), side="right"))
+                if k < dsts.size:
+                    nxt = int(dsts[k])
+                    event = EVENT_JUMP
+                    self._old = [i + d, d, 1]
+        if nxt is None:
+            nxt = i + d
+        if not 0 <= nxt < self.n_frames:                 # never happens with valid tables
+            self.dead_ends += 1
+            d = -d
+            nxt = i + d
+        self._pos, self._dir = nxt, d
+        pairs: tuple[tuple[int, float], ...] = ((nxt, 1.0),)
+        old = self._old
+        if old is not None:
+            o, od, k = old
+            n_fade = self._crossfade
+            if k <= n_fade and 0 <= o < self.n_frames:
+                w = k / (n_fade + 1)
+                pairs = ((nxt, w), (o, 1.0 - w))
+                old[0], old[2] = o + od, k + 1
+            else:
+                self._old = None
+        return nxt, pairs, event
+
+    def _advance_display(self) -> None:
+        """Move the output clock by ``speed`` source frames."""
+        self._phase += self._speed
+        while self._phase >= 1.0:
+            self._phase -= 1.0
+            self._disp.pop(0)
+            self._disp.append(self._walk_step())
+            self._pending |= self._disp[0][2]
+
+    def _current(self) -> tuple[tuple[int, int], ...]:
+        """Integer blend weights (summing to 256) of the output frame at the current phase."""
+        f = self._phase
+        acc: dict[int, float] = {}
+        for (_, pairs, _), wd in ((self._disp[0], 1.0 - f), (self._disp[1], f)):
+            if wd > 0:
+                for frame, w in pairs:
+                    acc[frame] = acc.get(frame, 0.0) + wd * w
+        return _fixed_point(acc)
+
+    def advance(self, count: int, *, record: bool = True):
+        """Run ``count`` output frames' worth of the walk without rendering.
+
+        Returns ``(source_index, event)`` arrays of length ``count`` when ``record``.
+        """
+        count = check_int("count", count, 0)
+        idx = np.empty(count, np.int32) if record else None
+        ev = np.empty(count, np.int8) if record else None
+        for n in range(count):
+            self._emit()
+            if record:
+                idx[n] = self.source_index
+                ev[n] = self.last_event
+            self._advance_display()
+        self.frame_index += count
+        return (idx, ev) if record else None
+
+    def _emit(self) -> tuple[tuple[int, int], ...]:
+        # The output frame shows walk step disp[0] (blended towards disp[1] by the phase); its
+        # event is every turn or jump the walk made since the previous output frame.
+        sources = self._current()
+        self.last_sources = sources
+        self.source_index = self._disp[0][0]
+        self.last_event = self._pending
+        self._pending = EVENT_NONE
+        return sources
+
+    def _render(self, out: np.ndarray) -> None:
+        self._compose(self._emit(), out)
+        self._advance_display()
+
+    def _compose(self, sources: tuple[tuple[int, int], ...], out: np.ndarray) -> None:
+        if self.backend == "numpy":
+            if len(sources) == 1:
+                out[...] = self._frames[sources[0][0]]
+                return
+            acc = np.full(self._shape, 128, np.uint16)
+            for frame, w in sources:
+                acc += self._frames[frame].astype(np.uint16) * np.uint16(w)
+            np.right_shift(acc, 8, out=acc)
+            out[...] = acc
+            return
+        import pyopencl as cl
+        flat = out.reshape(-1)
+        if len(sources) == 1:
+            cl.enqueue_copy(self.queue, flat, self._d_frames, src_offset=sources[0][0] * self._vecs * VEC,
+                            is_blocking=True)
+            return
+        p = self._params
+        p[:] = 0
+        for k, (frame, w) in enumerate(sources):
+            p[k], p[4 + k] = frame, w
+        cl.enqueue_copy(self.queue, self._d_params, p, is_blocking=False)
+        cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, None)
+        cl.enqueue_copy(self.queue, flat, self._d_out, is_blocking=True)
+
+    # -- state ---------------------------------------------------------------------------
+    def _get_state(self) -> dict[str, Any]:
+        return {"playback": self.playback, "pos": self._pos, "dir": self._dir, "p": self._p.copy(),
+                "old": None if self._old is None else list(self._old), "phase": self._phase,
+                "disp": [(f, tuple(pairs), e) for f, pairs, e in self._disp], "pending": self._pending,
+                "rng": self._rng.bit_generator.state, "seed": self.seed, "speed": self._speed,
+                "crossfade": self._crossfade, "increment": self._increment}
+
+    def _set_state(self, state: dict[str, Any]) -> None:
+        try:
+            if state["playback"] != self.playback:
+                raise ValueError(f"state is for playback {state['playback']!r}, not {self.playback!r}")
+            t = self.n_frames
+            pos = check_int("state pos", state["pos"], 0, t - 1)
+            direction = int(state["dir"])
+            if direction not in (-1, 1):
+                raise ValueError("state dir must be -1 or 1")
+            p = np.asarray(state["p"], dtype=float)
+            if p.shape != (t,) or not np.isfinite(p).all() or p.min() < 0 or p.max() > 1:
+                raise ValueError(f"state p must be ({t},) probabilities")
+            disp = [(int(f), tuple((int(a), float(w)) for a, w in pairs), int(e)) for f, pairs, e in state["disp"]]
+            if len(disp) != 2 or any(not 0 <= a < t for _, pairs, _ in disp for a, _ in pairs):
+                raise ValueError("state disp is invalid")
+            rng = np.random.Generator(np.random.PCG64())
+            rng.bit_generator.state = state["rng"]
+            self.speed = state["speed"]
+            self.crossfade = state["crossfade"]
+            self.increment = state["increment"]
+            phase = check_float("state phase", state["phase"], 0.0, 1.0)
+        except KeyError as exc:
+            raise ValueError(f"state lacks {exc.args[0]!r}") from None
+        self._pos, self._dir, self._p, self._disp, self._phase = pos, direction, p.copy(), disp, phase
+        self._old = None if state["old"] is None else [int(v) for v in state["old"]]
+        self._pending = int(state["pending"])
+        self._rng = rng
+        self.seed = int(state.get("seed", self.seed))
+
+
+def _fixed_point(weights: dict[int, float]) -> tuple[tuple[int, int], ...]:
+    """Float weights (summing to 1) as integers summing to 256, largest remainders rounded up,
+    at most four terms, heaviest first."""
+    items = sorted(((w, f) for f, w in weights.items() if w > 0), reverse=True)[:4]
+    total = sum(w for w, _ in items)
+    scaled = [(256.0 * w / total, f) for w, f in items]
+    ints = [int(s) for s, _ in scaled]
+    rest = 256 - sum(ints)
+    order = sorted(range(len(scaled)), key=lambda k: scaled[k][0] - ints[k], reverse=True)
+    for k in order[:rest]:
+        ints[k] += 1
+    return tuple((f, w) for (_, f), w in zip(scaled, ints) if w > 0)
