@@ -52,6 +52,11 @@ class Player:
         """``(height, width, 3)`` of the frames this player produces."""
         raise NotImplementedError
 
+    @property
+    def bytes_per_frame(self) -> int | None:
+        """Bytes of memory one frame must move at least (for roofline figures), if known."""
+        return None
+
     def next_frame(self, out: np.ndarray | None = None) -> np.ndarray:
         """Produce the next frame as ``(H, W, 3)`` uint8, into ``out`` when given."""
         if out is None:

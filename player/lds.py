@@ -139,6 +139,11 @@ class LDSPlayer(Player):
         return self._shape
 
     @property
+    def bytes_per_frame(self) -> int:
+        """The basis and mean read, plus the uint8 frame written."""
+        return int(self.basis_bytes + 4 * self._values + int(np.prod(self._shape)))
+
+    @property
     def speed(self) -> float:
         return self._speed
 

@@ -1,0 +1,159 @@
+"""Measuring players: frames per second, latency percentiles, the numpy reference side by
+side, and the fraction of the memory-bandwidth roofline (measured in the same run)."""
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from typing import Callable
+
+import numpy as np
+
+from .player import open_player
+from .tiledb import DatabaseWriter, LDSModel, SourceInfo
+
+
+def copy_bandwidth(*, mbytes: int = 256, repeats: int = 5) -> dict[str, float]:
+    """Sustained copy bandwidth in GB/s (bytes read + written; numpy and OpenCL, the larger
+    is the roofline ``gbs``).
+
+    The roofline time of a frame is ``bytes_per_frame / gbs``. A read-only stream can beat
+    copy bandwidth (no write traffic), so a read-bound kernel may exceed 1.0 of it.
+    """
+    n = mbytes * 2**20 // 4
+    src = np.ones(n, np.float32)
+    dst = np.empty_like(src)
+    np.copyto(dst, src)
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        np.copyto(dst, src)
+        times.append(time.perf_counter() - t)
+    result = {"numpy_gbs": 2 * src.nbytes / np.median(times) / 1e9}
+    try:
+        result["opencl_gbs"] = _opencl_copy_bandwidth(src, repeats)
+    except Exception as exc:  # no OpenCL: the numpy figure stands alone
+        result["opencl_error"] = str(exc).splitlines()[0]
+    result["gbs"] = max(result["numpy_gbs"], result.get("opencl_gbs", 0.0))
+    return result
+
+
+def _opencl_copy_bandwidth(src: np.ndarray, repeats: int) -> float:
+    import pyopencl as cl
+    from .player.opencl import get_context
+    ctx = get_context()
+    queue = cl.CommandQueue(ctx)
+    mf = cl.mem_flags
+    a = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=src)
+    b = cl.Buffer(ctx, mf.WRITE_ONLY, src.nbytes)
+    prog = cl.Program(ctx, """
+        __kernel void copy16(__global const float16 *a, __global float16 *b) {
+            size_t i = get_global_id(0); b[i] = a[i]; }""").build()
+    copy = cl.Kernel(prog, "copy16")
+    copy.set_args(a, b)
+    size = (src.size // 16,)
+    cl.enqueue_nd_range_kernel(queue, copy, size, None).wait()
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        cl.enqueue_nd_range_kernel(queue, copy, size, None).wait()
+        times.append(time.perf_counter() - t)
+    return 2 * src.nbytes / float(np.median(times)) / 1e9
+
+
+def time_calls(fn: Callable[[], object], *, frames: int, warmup: int = 3, max_seconds: float = 20.0) -> np.ndarray:
+    """Wall-clock seconds of ``frames`` calls of ``fn`` (fewer if ``max_seconds`` runs out)."""
+    for _ in range(warmup):
+        fn()
+    out = []
+    start = time.perf_counter()
+    for _ in range(frames):
+        t = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - t)
+        if out and time.perf_counter() - start > max_seconds and len(out) >= 10:
+            break
+    return np.array(out)
+
+
+def summarize(times: np.ndarray) -> dict[str, float]:
+    med = float(np.median(times))
+    return {"frames": int(times.size), "median_ms": med * 1e3, "p99_ms": float(np.percentile(times, 99)) * 1e3,
+            "fps": 1.0 / med}
+
+
+def bench_player(db: str | os.PathLike, texture: str | None = None, *, mode: str = "lds", frames: int = 200,
+                 bandwidth_gbs: float | None = None, numpy_frames: int | None = None,
+                 options: dict | None = None) -> dict:
+    """Time ``next_frame(out=...)`` end to end on OpenCL and on the numpy reference."""
+    options = dict(options or {})
+    result: dict = {"mode": mode}
+    for backend in ("opencl", "numpy"):
+        with open_player(db, texture, mode=mode, backend=backend, **options) as p:
+            out = np.empty(p.shape, np.uint8)
+            n = frames if backend == "opencl" else (numpy_frames or max(10, frames // 4))
+            result[backend] = summarize(time_calls(lambda: p.next_frame(out=out), frames=n))
+            result["size"] = f"{p.shape[1]}x{p.shape[0]}"
+            result["bytes_per_frame"] = p.bytes_per_frame
+    result["speedup_vs_numpy"] = result["numpy"]["median_ms"] / result["opencl"]["median_ms"]
+    if bandwidth_gbs and result.get("bytes_per_frame"):
+        roof_ms = result["bytes_per_frame"] / (bandwidth_gbs * 1e9) * 1e3
+        result["roofline_ms"] = roof_ms
+        result["roofline_fraction"] = roof_ms / result["opencl"]["median_ms"]
+        result["numpy_roofline_fraction"] = roof_ms / result["numpy"]["median_ms"]
+    return result
+
+
+def synthetic_lds_db(path: str | os.PathLike, width: int, height: int, *, n: int = 50, seed: int = 0) -> str:
+    """Write a database with texture ``synthetic``: an ``n``-state LDS at ``width x height`` colour.
+
+    The player's cost depends only on the sizes, so a random orthonormal-ish basis and a
+    stable rotation-block transition matrix stand in for an analysed clip.
+    """
+    rng = np.random.default_rng(seed)
+    p = width * height * 3
+    basis = rng.standard_normal((n, p), dtype=np.float32)
+    basis /= np.linalg.norm(basis, axis=1, keepdims=True)
+    a = np.zeros((n, n))
+    for i in range(0, n - 1, 2):
+        t = rng.uniform(0.05, 1.0)
+        a[i:i + 2, i:i + 2] = 0.97 * np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    if n % 2:
+        a[-1, -1] = 0.9
+    b = np.eye(n) * 30
+    from .analyzer.lds import stationary_covariance
+    model = LDSModel(mean=np.full(p, 128, np.float32), basis=basis, singular_values=np.ones(n), A=a, B=b,
+                     x0=np.zeros(n), states=np.zeros((n, 2)), stationary_cov=stationary_covariance(a, b @ b.T),
+                     info={"synthetic": True})
+    info = SourceInfo(filename="<synthetic>", sha256="", fps=25.0, width=width, height=height, channels=3,
+                      n_frames=2)
+    with DatabaseWriter(path, overwrite=True) as w:
+        w.put_texture("synthetic", info)
+        w.put_method("synthetic", "lds", model)
+    return os.fspath(path)
+
+
+def bench_lds_sizes(sizes: list[tuple[int, int]], *, n: int = 50, frames: int = 200,
+                    precisions: tuple[str, ...] = ("float32", "float16"), log: Callable[[str], None] | None = None) -> dict:
+    """The LDS benchmark of the README: synthetic textures at each size, both precisions."""
+    bw = copy_bandwidth()
+    report = {"bandwidth": bw, "results": []}
+    with tempfile.TemporaryDirectory(prefix="dynatex-bench-") as tmp:
+        for w, h in sizes:
+            path = synthetic_lds_db(os.path.join(tmp, f"lds_{w}x{h}.h5"), w, h, n=n)
+            for prec in precisions:
+                r = bench_player(path, mode="lds", frames=frames, bandwidth_gbs=bw["gbs"],
+                                 options={"precision": prec})
+                r.update(precision=prec, n=n)
+                report["results"].append(r)
+                if log:
+                    log(format_result(r))
+    return report
+
+
+def format_result(r: dict) -> str:
+    roof = f", {r['roofline_fraction']:.2f} of roofline" if "roofline_fraction" in r else ""
+    extra = f" {r['precision']}" if "precision" in r else ""
+    return (f"{r['mode']} {r['size']}{extra}: OpenCL {r['opencl']['fps']:.0f} fps (median {r['opencl']['median_ms']:.2f} ms, "
+            f"p99 {r['opencl']['p99_ms']:.2f} ms{roof}); numpy {r['numpy']['fps']:.0f} fps "
+            f"-> {r['speedup_vs_numpy']:.2f}x")
