@@ -147,6 +147,8 @@ def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONEN
     lmap, eigvals = coordinate(u, w_idx, w, global_dim)
     g = u @ lmap
     gm, gc = _global_gaussians(g, r)
+    dec_off, dec_gain = _decoders(g, r, z, gm, gc)
+    loc_cov, loc_rad = _local_extent(r, z, dec_off)
     step()
 
     # 4. AR(p) by Schwarz's criterion.
@@ -177,7 +179,8 @@ def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONEN
     model = MixtureModel(
         mean=mean, stacked_basis=np.ascontiguousarray(stacked), weights=ppca["pi"], sigma2=ppca["sigma2"],
         singular_values=sv.astype(np.float64), responsibilities=r, local_coords=z, coord_map=lmap,
-        global_coords=g, gauss_mean=gm, gauss_cov=gc, ar_coefs=ar["A"], ar_intercept=ar["w"],
+        global_coords=g, gauss_mean=gm, gauss_cov=gc,
+        decode_offset=dec_off, decode_gain=dec_gain, local_cov=loc_cov, local_radius=loc_rad, ar_coefs=ar["A"], ar_intercept=ar["w"],
         ar_noise_cov=ar["C"], sbc=ar["sbc"], info=info)
     step()
     return model
@@ -332,6 +335,9 @@ def coordinate(u: np.ndarray, idx: np.ndarray, w: np.ndarray, out_dim: int) -> t
     ev, vec = np.linalg.eigh((m + m.T) / 2)
     v = ci.T @ vec[:, :out_dim]
     lmap = null @ v
+    # Undo the ridge's tiny effect so that L^T B L = I holds exactly.
+    ev_b, vec_b = np.linalg.eigh(lmap.T @ b @ lmap)
+    lmap = lmap @ (vec_b / np.sqrt(ev_b)) @ vec_b.T
     # Fix signs so results do not depend on the eigensolver.
     g = u @ lmap
     sign = np.sign(g[np.argmax(np.abs(g), axis=0), np.arange(out_dim)])
@@ -350,6 +356,40 @@ def _global_gaussians(g: np.ndarray, resp: np.ndarray) -> tuple[np.ndarray, np.n
         cov = (e * resp[:, s:s + 1]).T @ e / nk[s]
         covs[s] = (cov + cov.T) / 2 + 1e-4 * np.eye(dg)
     return means, covs
+
+
+def _decoders(g: np.ndarray, resp: np.ndarray, z: np.ndarray, gm: np.ndarray,
+              gc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per component, the linear regression of ``z_s`` on ``g`` weighted by ``r_s``:
+    ``E[z_s | g] = mean_z + Sigma_zg Sigma_gg^{-1} (g - mean_g)`` (bounded gain, unlike inverting ``L_s``)."""
+    nk = resp.sum(axis=0)
+    s_count, d = z.shape[1], z.shape[2]
+    offs = np.empty((s_count, d))
+    gains = np.empty((s_count, d, g.shape[1]))
+    for s in range(s_count):
+        offs[s] = resp[:, s] @ z[:, s] / nk[s]
+        czg = ((z[:, s] - offs[s]) * resp[:, s:s + 1]).T @ (g - gm[s]) / nk[s]
+        gains[s] = np.linalg.solve(gc[s], czg.T).T
+    return offs, gains
+
+
+def _local_extent(resp: np.ndarray, z: np.ndarray, means: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per component: weighted covariance of the training ``z_s`` and the largest Mahalanobis
+    radius among the frames it owns (responsibility >= 0.5, or its most responsible frames)."""
+    s_count, d = z.shape[1], z.shape[2]
+    covs = np.empty((s_count, d, d))
+    radii = np.empty(s_count)
+    for s in range(s_count):
+        e = z[:, s] - means[s]
+        cov = (e * resp[:, s:s + 1]).T @ e / resp[:, s].sum()
+        cov = (cov + cov.T) / 2
+        cov += 1e-9 * max(np.trace(cov) / d, 1e-12) * np.eye(d)
+        covs[s] = cov
+        white = np.linalg.solve(np.linalg.cholesky(cov), e.T).T
+        rad = np.sqrt((white ** 2).sum(axis=1))
+        own = resp[:, s] >= min(0.5, resp[:, s].max())
+        radii[s] = max(float(rad[own].max()), 1e-6)
+    return covs, radii
 
 
 # -- AR(p) by Schwarz's criterion -----------------------------------------------------------

@@ -20,7 +20,7 @@ from .base import Player, check_float, check_int
 from .projection import Projector
 
 PRECISIONS = ("float32", "float16")
-DEFAULT_DRAWS = 8
+DEFAULT_DRAWS = 16
 MAX_DRAWS = 1024
 MAX_INTENSITY = 100.0
 
@@ -29,16 +29,19 @@ class GlobalDecoder:
     """Decodes global coordinates to projection coefficients ``u`` (responsibilities and local coordinates).
 
     ``r_s(g) ~ pi_s N(g; m_s, Sigma_s)`` (the per-component Gaussians of the training global
-    coordinates) and ``z_s = L_s^+ (g - l_s^0)``, the least-squares inverse of the component's
-    coordination map ``g_s = L_s z_s + l_s^0``.
+    coordinates) and ``z_s = c_s + K_s (g - m_s)``, the conditional mean of the local
+    coordinates given ``g`` under the component's joint Gaussian (stored by the analyzer),
+    pulled back into the ellipsoid of the component's training coordinates (a local linear
+    model is only valid near its data; far-off ``g`` would otherwise decode to huge images).
     """
 
     def __init__(self, model: MixtureModel) -> None:
         s, d, dg = model.components, model.dim, model.global_dim
         self.s, self.d, self.dg = s, d, dg
-        lmap = model.coord_map.reshape(s, d + 1, dg)
-        self.offset = lmap[:, 0, :].copy()                               # (S, D)
-        self.inverse = np.stack([np.linalg.pinv(lmap[k, 1:, :].T) for k in range(s)])   # (S, d, D)
+        self.offset = model.decode_offset.copy()                          # (S, d)
+        self.gain = model.decode_gain.copy()                              # (S, d, D)
+        self.local_whiten = np.linalg.inv(np.linalg.cholesky(model.local_cov))   # (S, d, d)
+        self.radius = model.local_radius.copy()
         chol = np.linalg.cholesky(model.gauss_cov)                       # (S, D, D)
         self.whiten = np.linalg.inv(chol)
         self.centre = model.gauss_mean.copy()
@@ -59,7 +62,10 @@ class GlobalDecoder:
         single = g.ndim == 1
         g2 = g[None] if single else g
         r = self.responsibilities(g2)
-        z = np.einsum("sij,nsj->nsi", self.inverse, g2[:, None, :] - self.offset[None])
+        dz = np.einsum("sij,nsj->nsi", self.gain, g2[:, None, :] - self.centre[None])
+        rad = np.sqrt((np.einsum("sij,nsj->nsi", self.local_whiten, dz) ** 2).sum(axis=2))     # (N, S)
+        dz *= np.minimum(1.0, self.radius[None] / np.maximum(rad, 1e-300))[:, :, None]
+        z = self.offset[None] + dz
         u = np.concatenate([np.ones(z.shape[:2] + (1,)), z], axis=2) * r[:, :, None]
         u = u.reshape(g2.shape[0], -1)
         return u[0] if single else u

@@ -51,6 +51,15 @@ class MixtureModel:
         Training global coordinates (centred, unit covariance).
     gauss_mean, gauss_cov : (S, D), (S, D, D) float64
         Per-component Gaussian of the global coordinates, used to decode responsibilities.
+    decode_offset, decode_gain : (S, d), (S, d, D) float64
+        Decoding of local coordinates, ``z_s = decode_offset[s] + decode_gain[s] @ (g - gauss_mean[s])``:
+        the conditional mean of ``z_s`` given ``g`` under component ``s``'s joint Gaussian of the
+        training pairs (equal to the inverse of ``g_s = L_s z_s + l_s^0`` when that map is exact).
+        ``decode_offset`` is also the responsibility-weighted mean of the training ``z_s``.
+    local_cov, local_radius : (S, d, d), (S,) float64
+        Responsibility-weighted covariance of the training ``z_s`` and the largest Mahalanobis
+        radius of the frames the component owns: decoded ``z_s`` are pulled back inside that
+        ellipsoid, where the local linear model is valid.
     ar_coefs : (p, D, D) float64
         ``g_t = ar_intercept + sum_i ar_coefs[i] @ g_{t-1-i} + v_t``.
     ar_intercept : (D,) float64
@@ -73,6 +82,10 @@ class MixtureModel:
     global_coords: np.ndarray
     gauss_mean: np.ndarray
     gauss_cov: np.ndarray
+    decode_offset: np.ndarray
+    decode_gain: np.ndarray
+    local_cov: np.ndarray
+    local_radius: np.ndarray
     ar_coefs: np.ndarray
     ar_intercept: np.ndarray
     ar_noise_cov: np.ndarray
@@ -97,7 +110,7 @@ class MixtureModel:
 
 
 _F64 = ("weights", "sigma2", "singular_values", "responsibilities", "local_coords", "coord_map",
-        "global_coords", "gauss_mean", "gauss_cov", "ar_coefs", "ar_intercept", "ar_noise_cov", "sbc")
+        "global_coords", "gauss_mean", "gauss_cov", "decode_offset", "decode_gain", "local_cov", "local_radius", "ar_coefs", "ar_intercept", "ar_noise_cov", "sbc")
 _SIZES = ("components", "dim", "global_dim", "order")
 
 
@@ -151,6 +164,10 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         global_coords=ds(group, "global_coords", kind=f, shape=(None, dg)),
         gauss_mean=ds(group, "gauss_mean", kind=f, shape=(s, dg)),
         gauss_cov=ds(group, "gauss_cov", kind=f, shape=(s, dg, dg)),
+        decode_offset=ds(group, "decode_offset", kind=f, shape=(s, d)),
+        decode_gain=ds(group, "decode_gain", kind=f, shape=(s, d, dg)),
+        local_cov=ds(group, "local_cov", kind=f, shape=(s, d, d)),
+        local_radius=ds(group, "local_radius", kind=f, shape=(s,)),
         ar_coefs=ds(group, "ar_coefs", kind=f, shape=(order, dg, dg)),
         ar_intercept=ds(group, "ar_intercept", kind=f, shape=(dg,)),
         ar_noise_cov=ds(group, "ar_noise_cov", kind=f, shape=(dg, dg)),
@@ -173,6 +190,11 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
     for k in range(s):
         if not _positive_definite(model.gauss_cov[k]):
             check.fail(path + "/gauss_cov", f"covariance of component {k} is not symmetric positive definite")
+    for k in range(s):
+        if not _positive_definite(model.local_cov[k]):
+            check.fail(path + "/local_cov", f"covariance of component {k} is not symmetric positive definite")
+    if model.local_radius.min() <= 0:
+        check.fail(path + "/local_radius", "radii must be > 0")
     if not _positive_definite(model.ar_noise_cov):
         check.fail(path + "/ar_noise_cov", "is not symmetric positive definite")
     rho = companion_radius(model.ar_coefs)

@@ -1,0 +1,147 @@
+"""Subspace-mixture learning: MPPCA, global coordination constraints, Schwarz's criterion, bad input."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynatex.analyzer import load_clip
+from dynatex.analyzer.mixture import (coefficient_matrix, coordinate, fit_ar, fit_mppca, learn_mixture,
+                                      lle_weights)
+from dynatex.tiledb.mixture import companion_radius
+
+from ..conftest import wave_clip
+
+
+@pytest.fixture(scope="module")
+def model():
+    return learn_mixture(wave_clip(90, periods=(17.0, 11.0, 7.0)), components=3, dim=4, pca_dim=20,
+                         neighbors=8, pmax=4)
+
+
+def test_model_shapes_and_invariants(model):
+    t, s, d, dg = 90, 3, 4, 4
+    assert model.stacked_basis.shape == (s * (d + 1), 24 * 32 * 3)
+    assert model.responsibilities.shape == (t, s) and model.local_coords.shape == (t, s, d)
+    assert np.allclose(model.responsibilities.sum(axis=1), 1)
+    assert np.isclose(model.weights.sum(), 1) and (model.sigma2 > 0).all()
+    for arr in (model.stacked_basis, model.coord_map, model.global_coords, model.ar_coefs):
+        assert np.isfinite(arr).all()
+    # Loadings are orthonormal within each component (they live in an orthonormal PCA space).
+    rows = model.stacked_basis.reshape(s, d + 1, -1)[:, 1:].astype(np.float64)
+    for k in range(s):
+        assert np.allclose(rows[k] @ rows[k].T, np.eye(d), atol=1e-4)
+    # Coordination constraints: centred, unit covariance.
+    g = model.global_coords
+    assert np.abs(g.mean(axis=0)).max() < 1e-8
+    assert np.allclose(g.T @ g / t, np.eye(dg), atol=1e-6)
+    assert companion_radius(model.ar_coefs) < 1
+    assert 1 <= model.order <= 4 and model.sbc.shape == (4,)
+    assert model.order == int(np.argmin(model.sbc)) + 1
+
+
+def test_coordination_solves_the_constrained_generalized_eigenproblem():
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(80, 6))
+    p = fit_mppca(x, 2, 2, seed=0)
+    u = coefficient_matrix(p["resp"], p["z"])
+    idx, w = lle_weights(x, 6)
+    assert np.allclose(w.sum(axis=1), 1) and not (idx == np.arange(80)[:, None]).any()
+    lmap, ev = coordinate(u, idx, w, 3)
+    g = u @ lmap
+    assert np.abs(g.sum(axis=0)).max() < 1e-8
+    assert np.allclose(g.T @ g / 80, np.eye(3), atol=1e-8)
+    assert (np.diff(ev) >= -1e-12).all()
+    # The cost trace(L^T A L) equals the sum of the eigenvalues and beats random feasible maps.
+    resid = u - np.einsum("nk,nkj->nj", w, u[idx])
+    cost = np.trace(lmap.T @ resid.T @ resid @ lmap)
+    assert np.isclose(cost, ev.sum(), rtol=1e-6)
+    for _ in range(5):
+        m = rng.normal(size=lmap.shape)
+        gm = u @ m
+        gm -= gm.mean(axis=0)
+        q = np.linalg.cholesky(gm.T @ gm / 80)
+        m2 = np.linalg.lstsq(u, gm @ np.linalg.inv(q).T, rcond=None)[0]
+        assert np.trace(m2.T @ resid.T @ resid @ m2) >= cost - 1e-9
+
+
+def test_mppca_beats_a_single_subspace_on_a_union_of_subspaces():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(100, 2)) @ rng.normal(size=(2, 8)) + 5
+    b = rng.normal(size=(100, 2)) @ rng.normal(size=(2, 8)) - 5
+    x = np.concatenate([a, b]) + 0.01 * rng.normal(size=(200, 8))
+    p = fit_mppca(x, 2, 2, seed=0)
+    assert sorted(np.round(p["pi"], 2)) == [0.5, 0.5]
+    hard = p["resp"].argmax(axis=1)
+    assert len(set(hard[:100])) == 1 and len(set(hard[100:])) == 1 and hard[0] != hard[150]
+    assert p["sigma2"].max() < 1e-3
+
+
+def test_schwarz_criterion_recovers_ar2():
+    rng = np.random.default_rng(3)
+    a1 = np.array([[0.9, 0.2], [-0.1, 0.6]])
+    a2 = np.array([[-0.5, 0.0], [0.1, -0.3]])
+    g = np.zeros((3000, 2))
+    for t in range(2, 3000):
+        g[t] = a1 @ g[t - 1] + a2 @ g[t - 2] + rng.standard_normal(2)
+    ar = fit_ar(g, 6)
+    assert ar["p"] == 2
+    assert np.abs(ar["A"][0] - a1).max() < 0.08 and np.abs(ar["A"][1] - a2).max() < 0.08
+    assert np.allclose(ar["C"], np.eye(2), atol=0.1)
+    assert ar["shrink"] == 1.0
+
+
+def test_unstable_ar_is_pulled_inside_the_unit_circle():
+    g = np.cumsum(np.random.default_rng(0).standard_normal((400, 2)), axis=0)  # random walk, pole ~1
+    ar = fit_ar(g, 3, max_radius=0.9)
+    assert ar["radius"] <= 0.9 + 1e-9 and ar["radius_raw"] > 0.9
+
+
+def test_progress_is_reported():
+    calls = []
+    learn_mixture(wave_clip(40), components=2, dim=2, pca_dim=8, neighbors=5, pmax=2,
+                  progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(i, 5) for i in range(1, 6)]
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"components": 8, "dim": 6}, "needs more than components \\* \\(dim \\+ 1\\) = 56 frames, the clip has 40"),
+    ({"components": 0}, "components must be an integer >= 1"),
+    ({"dim": 2.5}, "dim must be an integer"),
+    ({"dim": 8, "pca_dim": 8}, "dim=8 must be smaller than pca_dim=8"),
+    ({"neighbors": 40}, "neighbors=40 must be smaller"),
+    ({"pmax": 12}, "pmax=12 is too large"),
+    ({"max_radius": 1.0}, "max_radius must be in"),
+    ({"components": 2, "dim": 2, "global_dim": 6}, "global_dim=6 exceeds"),
+])
+def test_bad_parameters_give_clear_errors(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        learn_mixture(wave_clip(40), **kwargs)
+
+
+def test_constant_and_degenerate_clips_are_refused():
+    const = np.full((40, 8, 8, 3), 77, np.uint8)
+    with pytest.raises(ValueError, match="clip is constant"):
+        learn_mixture(const, components=2, dim=2)
+    two = np.where(np.arange(40)[:, None, None, None] % 2 == 0, 10, 200).astype(np.uint8) * np.ones((1, 8, 8, 3), np.uint8)
+    with pytest.raises(ValueError, match="rank"):
+        learn_mixture(two, components=2, dim=2)
+    with pytest.raises(ValueError, match="uint8"):
+        learn_mixture(np.zeros((40, 8, 8, 3)), components=2, dim=2)
+
+
+def test_a_component_without_data_is_an_error_not_a_nan_model():
+    # Frames from two tight clusters cannot feed six components of dimension 3.
+    rng = np.random.default_rng(0)
+    base = rng.integers(0, 255, (2, 8, 8, 3))
+    frames = (base[np.arange(40) % 2] + rng.integers(0, 3, (40, 8, 8, 3))).clip(0, 255).astype(np.uint8)
+    with pytest.raises(ValueError, match="use fewer components"):
+        learn_mixture(frames, components=6, dim=3, pca_dim=30, seed=0)
+
+
+@pytest.mark.clips
+@pytest.mark.parametrize("name", ["water_sea_waves_dyntex.avi", "flag_wind_dyntex_571c110.avi"])
+def test_mixture_reconstructs_better_than_single_pca_of_same_dimension(clips_dir, name):
+    clip = load_clip(clips_dir / name, stop=120, size=(88, 72))
+    m = learn_mixture(clip, components=3, dim=8)
+    assert m.info["recon_error"] < m.info["recon_error_pca_dim"]
+    assert m.info["recon_error_hard"] < m.info["recon_error_pca_dim"]
