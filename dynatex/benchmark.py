@@ -134,9 +134,10 @@ def synthetic_lds_db(path: str | os.PathLike, width: int, height: int, *, n: int
 
 
 def bench_lds_sizes(sizes: list[tuple[int, int]], *, n: int = 50, frames: int = 200,
-                    precisions: tuple[str, ...] = ("float32", "float16"), log: Callable[[str], None] | None = None) -> dict:
+                    precisions: tuple[str, ...] = ("float32", "float16"), log: Callable[[str], None] | None = None,
+                    bandwidth: dict | None = None) -> dict:
     """The LDS benchmark of the README: synthetic textures at each size, both precisions."""
-    bw = copy_bandwidth()
+    bw = bandwidth or copy_bandwidth()
     report = {"bandwidth": bw, "results": []}
     with tempfile.TemporaryDirectory(prefix="dynatex-bench-") as tmp:
         for w, h in sizes:
