@@ -14,8 +14,9 @@ frame stack
     ``(N, h, w, 3)`` uint8: ``N`` stored frames (tiles side by side, a quilt's source
     frames, ...). A source pixel is the linear index ``y * w + x`` inside one frame.
 source
-    Either a per-pixel map (:meth:`Gather.set_source_map`, ``(H, W)`` packed int32) or a
-    grid of cells (:meth:`Gather.set_source_grid`: ``(gh, gw)`` packed int32 naming each
+    Either a per-pixel map (:meth:`Gather.set_source_map`, ``(H, W)`` packed int32) or,
+    when the Gather is built with ``cell=(ch, cw)``, a grid of cells
+    (:meth:`Gather.set_source_grid`: ``(ceil(H/ch), ceil(W/cw))`` packed int32 naming each
     cell's top-left source pixel; the pixel at ``(dy, dx)`` inside a cell reads
     ``origin + dy * w + dx``; cheaper: no per-pixel map is read). A packed entry is
     ``(tone << 24) | (y * w + x)`` (:func:`pack_source`), so a frame may hold at most
@@ -61,6 +62,7 @@ from .base import check_float, check_int, check_out
 WRAPS = ("loop", "clamp", "pingpong")
 MAX_FRAME_PIXELS = 1 << 24
 MAX_TONES = 256
+RUN = 32              # output pixels per work-item of kernel gather
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
 
 
@@ -222,8 +224,9 @@ class Gather:
         Blend linearly between neighbouring frames (fixed at construction).
     time_step : int
         Lattice step of the time map in output pixels (fixed at construction).
-    grid : bool
-        Source given as a cell grid (:meth:`set_source_grid`) instead of a per-pixel map.
+    cell : (ch, cw), optional
+        Source given as a grid of ``ch x cw`` cells (:meth:`set_source_grid`) instead of a
+        per-pixel map (:meth:`set_source_map`). Fixed at construction (a kernel define).
 
     After construction call :meth:`set_source_map` or :meth:`set_source_grid`, optionally
     :meth:`set_time_map` (default zeros), :meth:`smooth_time_map` and :meth:`set_tones`
@@ -234,15 +237,15 @@ class Gather:
     --------
     >>> import numpy as np
     >>> stack = np.zeros((4, 2, 2, 3), np.uint8); stack[:, :, :, 0] = np.arange(4)[:, None, None] * 10
-    >>> g = Gather(stack, (2, 2), backend="numpy", grid=True)
-    >>> g.set_source_grid(pack_source(np.zeros((1, 1), int)), (2, 2))
+    >>> g = Gather(stack, (2, 2), backend="numpy", cell=(2, 2))
+    >>> g.set_source_grid(pack_source(np.zeros((1, 1), int)))
     >>> int(g.render(1.5)[0, 0, 0])      # halfway between 10 and 20
     15
     """
 
     def __init__(self, frames: np.ndarray, out_size: Sequence[int], *, backend: str = "opencl",
                  ctx: Any = None, queue: Any = None, device: str | None = None, wrap: str = "loop",
-                 interpolate: bool = True, time_step: int = 1, grid: bool = False) -> None:
+                 interpolate: bool = True, time_step: int = 1, cell: Sequence[int] | None = None) -> None:
         frames = np.asarray(frames)
         if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
             raise ValueError(f"frames must be uint8 (N, h, w, 3) with N >= 1, not {frames.dtype} {frames.shape}")
@@ -254,8 +257,13 @@ class Gather:
             raise ValueError(f"backend must be 'opencl' or 'numpy', not {backend!r}")
         h_out, w_out = _size("out_size", out_size)
         self.time_step = check_int("time_step", time_step, 1, 4096)
-        self.backend, self.wrap, self.interpolate, self.grid = backend, wrap, bool(interpolate), bool(grid)
+        self.backend, self.wrap, self.interpolate = backend, wrap, bool(interpolate)
         self.n_frames, self.frame_h, self.frame_w = (int(v) for v in frames.shape[:3])
+        self.cell = None if cell is None else _size("cell", cell)
+        self.grid = self.cell is not None
+        if self.grid and (self.cell[0] > self.frame_h or self.cell[1] > self.frame_w):
+            raise ValueError(f"cell {self.cell[0]}x{self.cell[1]} is larger than the stored "
+                             f"{self.frame_h}x{self.frame_w} frame")
         self.out_shape = (h_out, w_out, 3)
         self.tmap_shape = (-(-h_out // self.time_step), -(-w_out // self.time_step))
         self._stack = np.array(frames, order="C")
@@ -287,12 +295,13 @@ class Gather:
         self._d_source_bytes = 0
         defines = {"FRAME_W": self.frame_w, "FRAME_PIXELS": self.frame_w * self.frame_h,
                    "NFRAMES": self.n_frames, "GRID": self.grid, "WRAP": _WRAP_CODE[self.wrap],
-                   "INTERP": self.interpolate, "TSTEP": self.time_step}
+                   "CELL_H": (self.cell or (1, 1))[0], "CELL_W": (self.cell or (1, 1))[1],
+                   "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN}
         prog = build_program(self.ctx, "gather.cl", defines)
         self._k_gather = prog.kernel("gather")
         self._k_smooth_x = prog.kernel("smooth_x")
         self._k_smooth_y = prog.kernel("smooth_y")
-        self._gsize = (_round_up(w, 16), _round_up(h, 4))
+        self._gsize = (-(-w // RUN), h)
         self._tsize = (_round_up(self.tmap_shape[1], 16), _round_up(self.tmap_shape[0], 4))
         self._upload_tmap()
         self._upload_tones()
@@ -311,34 +320,31 @@ class Gather:
         if self.backend != "opencl" or self._d_source is None:
             return
         h, w = self.out_shape[:2]
-        ch, cw = self._cell or (1, 1)
         grid_w = self._source.shape[1]
         self._k_gather.set_args(self._d_stack, self._d_source, self._d_tmap, self._d_tones, self._d_out,
-                                np.int32(w), np.int32(h), np.int32(ch), np.int32(cw), np.int32(grid_w),
+                                np.int32(w), np.int32(h), np.int32(grid_w),
                                 np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0))
 
     # -- inputs --------------------------------------------------------------------------------
     def set_source_map(self, packed: np.ndarray) -> None:
         """Per-pixel source: ``(H, W)`` int32 packed entries (:func:`pack_source`). Needs ``grid=False``."""
         if self.grid:
-            raise ValueError("this Gather was built with grid=True; use set_source_grid")
+            raise ValueError("this Gather was built with a cell grid; use set_source_grid")
         packed = self._check_packed("packed", packed, self.out_shape[:2])
         idx, _ = unpack_source(packed)
         if idx.size and idx.max() >= self.frame_w * self.frame_h:
             raise ValueError(f"packed holds source pixels outside the {self.frame_h}x{self.frame_w} frame")
         self._store_source(packed, None)
 
-    def set_source_grid(self, origins: np.ndarray, cell: Sequence[int]) -> None:
-        """Cell-grid source: ``origins`` ``(ceil(H/ch), ceil(W/cw))`` packed top-left pixels, ``cell=(ch, cw)``.
+    def set_source_grid(self, origins: np.ndarray) -> None:
+        """Cell-grid source: ``origins`` ``(ceil(H/ch), ceil(W/cw))`` packed top-left pixels of each cell.
 
         Every cell must fit inside the stored frame: its top-left ``(y, x)`` needs
-        ``y + ch <= h`` and ``x + cw <= w``. Needs ``grid=True``.
+        ``y + ch <= h`` and ``x + cw <= w``. Needs ``cell`` at construction.
         """
         if not self.grid:
-            raise ValueError("this Gather was built with grid=False; use set_source_map")
-        ch, cw = _size("cell", cell)
-        if ch > self.frame_h or cw > self.frame_w:
-            raise ValueError(f"cell {ch}x{cw} is larger than the stored {self.frame_h}x{self.frame_w} frame")
+            raise ValueError("this Gather was built without a cell; use set_source_map")
+        ch, cw = self.cell
         h, w = self.out_shape[:2]
         origins = self._check_packed("origins", origins, (-(-h // ch), -(-w // cw)))
         idx, _ = unpack_source(origins)
@@ -443,7 +449,7 @@ class Gather:
             self.render_reference(t, out)
             return out
         import pyopencl as cl
-        self._k_gather.set_arg(12, np.float32(t))
+        self._k_gather.set_arg(10, np.float32(t))
         cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, None)
         cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
         return out

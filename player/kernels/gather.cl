@@ -12,8 +12,9 @@
 // value per pixel): time(y, x) = t0 + map((y + 0.5) / TSTEP - 0.5, (x + 0.5) / TSTEP - 0.5).
 //
 // Defines: FRAME_W, FRAME_PIXELS (stored frame width, width * height), NFRAMES, GRID,
+// CELL_H, CELL_W (cell size of the grid; compile-time so the divisions become multiplies),
 // WRAP (0 loop, 1 clamp, 2 ping-pong), INTERP (1: linear in time, 0: nearest earlier
-// frame), TSTEP.
+// frame), TSTEP, RUN (pixels per work-item).
 
 #define WRAP_LOOP 0
 #define WRAP_CLAMP 1
@@ -38,61 +39,85 @@ inline int wrap_index(int i)
 #endif
 }
 
-inline float sample_time(__global const float *restrict tmap, int tw, int th, int y, int x)
+// floor() is a slow library call in PoCL; this is exact for |v| < 2^31.
+inline int fast_floor(float v)
 {
-#if TSTEP == 1
-    return tmap[(size_t)y * tw + x];
-#else
-    const float fy = ((float)y + 0.5f) * (1.0f / TSTEP) - 0.5f;
-    const float fx = ((float)x + 0.5f) * (1.0f / TSTEP) - 0.5f;
-    const float y0f = floor(fy), x0f = floor(fx);
-    const float wy = fy - y0f, wx = fx - x0f;
-    const int y0 = clamp((int)y0f, 0, th - 1), y1 = clamp((int)y0f + 1, 0, th - 1);
-    const int x0 = clamp((int)x0f, 0, tw - 1), x1 = clamp((int)x0f + 1, 0, tw - 1);
-    const float a = tmap[(size_t)y0 * tw + x0], b = tmap[(size_t)y0 * tw + x1];
-    const float c = tmap[(size_t)y1 * tw + x0], d = tmap[(size_t)y1 * tw + x1];
-    const float top = a + wx * (b - a);
-    const float bot = c + wx * (d - c);
-    return top + wy * (bot - top);
-#endif
+    const int i = (int)v;
+    return i - (int)((float)i > v);
 }
 
+
+// One work-item renders RUN consecutive pixels of one row (global size (ceil(W/RUN), H)):
+// on CPU devices a loop per work-item beats one work-item per pixel by a wide margin.
 __kernel void gather(__global const uchar *restrict stack,
                      __global const int *restrict source,
                      __global const float *restrict tmap,
                      __global const float *restrict tones,   // (ntones, 6): gain rgb, offset rgb
                      __global uchar *restrict out,
                      const int width, const int height,
-                     const int cell_h, const int cell_w, const int grid_w,
+                     const int grid_w,
                      const int tmap_w, const int tmap_h,
                      const float t0)
 {
-    const int x = get_global_id(0);
     const int y = get_global_id(1);
-    if (x >= width || y >= height)
+    const int xstart = get_global_id(0) * RUN;
+    if (y >= height)
         return;
-#if GRID
-    const int cy = y / cell_h, cx = x / cell_w;
-    const int packed = source[cy * grid_w + cx];
-    const int pix = (packed & 0xFFFFFF) + (y - cy * cell_h) * FRAME_W + (x - cx * cell_w);
+    const int xend = min(xstart + RUN, width);
+#if TSTEP > 1
+    // Vertical part of the bilinear time lookup is shared by the whole run.
+    const float fy = ((float)y + 0.5f) * (1.0f / TSTEP) - 0.5f;
+    const int yi = fast_floor(fy);
+    const float wy = fy - (float)yi;
+    __global const float *trow0 = tmap + (size_t)clamp(yi, 0, tmap_h - 1) * tmap_w;
+    __global const float *trow1 = tmap + (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w;
 #else
-    const int packed = source[(size_t)y * width + x];
-    const int pix = packed & 0xFFFFFF;
+    __global const float *trow = tmap + (size_t)y * tmap_w;
 #endif
-    const int tone = (packed >> 24) & 0xFF;
-    const float t = t0 + sample_time(tmap, tmap_w, tmap_h, y, x);
-    const float tf = floor(t);
-    const int i0 = wrap_index((int)tf);
-    float3 v = convert_float3(vload3(0, stack + ((size_t)i0 * FRAME_PIXELS + pix) * 3));
+#if GRID
+    const int cy = y / CELL_H;
+    __global const int *srow = source + cy * grid_w;
+    const int dy = (y - cy * CELL_H) * FRAME_W;
+#else
+    __global const int *srow = source + (size_t)y * width;
+#endif
+    __global uchar *o = out + ((size_t)y * width + xstart) * 3;
+    for (int x = xstart; x < xend; ++x, o += 3) {
+#if GRID
+        const int cx = x / CELL_W;
+        const int packed = srow[cx];
+        const int pix = (packed & 0xFFFFFF) + dy + (x - cx * CELL_W);
+#else
+        const int packed = srow[x];
+        const int pix = packed & 0xFFFFFF;
+#endif
+#if TSTEP > 1
+        const float fx = ((float)x + 0.5f) * (1.0f / TSTEP) - 0.5f;
+        const int xi = fast_floor(fx);
+        const float wx = fx - (float)xi;
+        const int x0 = clamp(xi, 0, tmap_w - 1), x1 = clamp(xi + 1, 0, tmap_w - 1);
+        const float top = trow0[x0] + wx * (trow0[x1] - trow0[x0]);
+        const float bot = trow1[x0] + wx * (trow1[x1] - trow1[x0]);
+        const float t = t0 + (top + wy * (bot - top));
+#else
+        const float t = t0 + trow[x];
+#endif
+        const int ti = fast_floor(t);
+        // Scalar channels on purpose: PoCL's float3/vload3 code is an order of magnitude slower.
+        __global const uchar *p0 = stack + ((size_t)wrap_index(ti) * FRAME_PIXELS + pix) * 3;
+        float r = p0[0], g = p0[1], b = p0[2];
 #if INTERP
-    const float f = t - tf;
-    const int i1 = wrap_index((int)tf + 1);
-    const float3 v1 = convert_float3(vload3(0, stack + ((size_t)i1 * FRAME_PIXELS + pix) * 3));
-    v = v + f * (v1 - v);
+        const float f = t - (float)ti;
+        __global const uchar *p1 = stack + ((size_t)wrap_index(ti + 1) * FRAME_PIXELS + pix) * 3;
+        r = r + f * ((float)p1[0] - r);
+        g = g + f * ((float)p1[1] - g);
+        b = b + f * ((float)p1[2] - b);
 #endif
-    __global const float *tn = tones + tone * 6;
-    v = v * (float3)(tn[0], tn[1], tn[2]) + (float3)(tn[3], tn[4], tn[5]);
-    vstore3(convert_uchar3_sat_rte(v), 0, out + ((size_t)y * width + x) * 3);
+        __global const float *tn = tones + ((packed >> 24) & 0xFF) * 6;
+        o[0] = convert_uchar_sat_rte(r * tn[0] + tn[3]);
+        o[1] = convert_uchar_sat_rte(g * tn[1] + tn[4]);
+        o[2] = convert_uchar_sat_rte(b * tn[2] + tn[5]);
+    }
 }
 
 // Separable Gaussian smoothing of a float map, edges clamped; weights holds 2 * radius + 1

@@ -93,9 +93,9 @@ def test_grid_gather_with_coarse_time_opencl_matches_numpy(cl_context):
     out = {}
     for backend in ("opencl", "numpy"):
         g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
-                   grid=True, time_step=step)
+                   cell=(8, 8), time_step=step)
         g.set_tones(np.array([[1, 1, 1], [0.5, 0.5, 0.5], [1.5, 1, 1]], np.float32))
-        g.set_source_grid(origins, (8, 8))
+        g.set_source_grid(origins)
         g.set_time_map(tmap)
         g.smooth_time_map(6.0)
         out[backend] = (g.render(5.3), g.time_map)
@@ -105,8 +105,8 @@ def test_grid_gather_with_coarse_time_opencl_matches_numpy(cl_context):
 
 def test_grid_pixels_come_from_the_named_cell():
     stack = _stack(n=3, h=4, w=8)
-    g = Gather(stack, (4, 8), backend="numpy", grid=True, interpolate=False)
-    g.set_source_grid(pack_source(np.array([[4, 0]])), (4, 4))
+    g = Gather(stack, (4, 8), backend="numpy", cell=(4, 4), interpolate=False)
+    g.set_source_grid(pack_source(np.array([[4, 0]])))
     f = g.render(1.0)
     assert (f[:, :4] == stack[1, :, 4:]).all() and (f[:, 4:] == stack[1, :, :4]).all()
 
@@ -153,6 +153,8 @@ def test_bad_inputs_are_clear_errors():
         g.set_tones(np.array([[-1, 1, 1]]))
     with pytest.raises(ValueError, match="sigma"):
         g.smooth_time_map(-1)
-    gg = Gather(stack, (4, 4), backend="numpy", grid=True)
+    gg = Gather(stack, (4, 4), backend="numpy", cell=(4, 4))
     with pytest.raises(ValueError, match="reach outside"):
-        gg.set_source_grid(pack_source(np.full((1, 1), 10)), (4, 4))
+        gg.set_source_grid(pack_source(np.full((1, 1), 10)))
+    with pytest.raises(ValueError, match="cell 11x4 is larger"):
+        Gather(stack, (4, 4), backend="numpy", cell=(11, 4))
