@@ -31,8 +31,8 @@ from .video import Clip
 
 Progress = Callable[[int, "int | None"], None]
 
-DEFAULTS = dict(n=4, s=1, r=4, min_pairs=2, min_symmetry=0.5, feature_size=64, taps=2, p=2.0,
-                alpha=0.999, sigma=0.1, min_gap=3, min_prob=0.02, max_per_frame=3, max_cost=2.0)
+DEFAULTS = dict(n=4, s=1, r=4, min_pairs=2, min_symmetry=0.3, feature_size=64, taps=2, p=2.0,
+                alpha=0.999, sigma=0.1, min_gap=6, min_prob=0.02, max_per_frame=3, max_cost=2.0)
 
 
 def frame_features(frames: np.ndarray, size: int = 64) -> np.ndarray:
@@ -170,8 +170,8 @@ def future_costs(cost_p: np.ndarray, alpha: float, dead: float, max_iter: int = 
 
 
 def learn_turnpoints(clip: Clip | np.ndarray, *, n: int = 4, s: int = 1, r: int = 4, min_pairs: int = 2,
-                     min_symmetry: float = 0.5, feature_size: int = 64, taps: int = 2, p: float = 2.0,
-                     alpha: float = 0.999, sigma: float = 0.1, min_gap: int = 3, min_prob: float = 0.02,
+                     min_symmetry: float = 0.3, feature_size: int = 64, taps: int = 2, p: float = 2.0,
+                     alpha: float = 0.999, sigma: float = 0.1, min_gap: int = 6, min_prob: float = 0.02,
                      max_per_frame: int = 3, max_cost: float = 2.0,
                      progress: Progress | None = None) -> TurnPointModel:
     """Find turn points and transitions of a clip (the ``turnpoints`` method).
@@ -202,7 +202,8 @@ def learn_turnpoints(clip: Clip | np.ndarray, *, n: int = 4, s: int = 1, r: int 
     sigma : float
         Probability scale as a fraction of the mean finite cost: ``prob ~ exp(-F / sigma)``.
     min_gap : int
-        Transitions to within ``min_gap`` frames of the natural successor are dropped.
+        Transitions to within ``min_gap`` frames of the natural successor are dropped (short
+        jumps near a slow turn look like stutters and add little variety).
     min_prob : float
         Transitions less probable than this per visit are dropped.
     max_per_frame : int
@@ -320,9 +321,9 @@ def _transitions(d: np.ndarray, *, taps: int, p: float, alpha: float, sigma: flo
     np.put_along_axis(sel, order, True, axis=1)
     keep &= sel
     base = np.minimum(cont, f_keep.min(axis=1))[:, None]
-    with np.errstate(invalid="ignore"):
-        ew = np.where(keep, np.exp(-(f - base) / sigma), 0.0)
-        ec = np.where(np.isfinite(cont), np.exp(-(cont - base[:, 0]) / sigma), 0.0)
+    base = np.where(np.isfinite(base), base, 0.0)
+    ew = np.exp(-np.where(keep, f - base, np.inf) / sigma)
+    ec = np.exp(-np.where(np.isfinite(cont), cont - base[:, 0], np.inf) / sigma)
     denom = ew.sum(axis=1) + ec
     prob = np.where(keep, ew / np.where(denom > 0, denom, 1)[:, None], 0.0)
     keep &= prob >= min_prob
@@ -382,6 +383,47 @@ def _distance_agreement(frames: np.ndarray, d: np.ndarray, samples: int = 64) ->
     k = float(np.dot(full, red) / np.dot(red, red))  # best scale: reduced frames lose fine detail
     rel = float(np.sqrt(np.mean((k * red - full) ** 2)) / np.sqrt(np.mean(full ** 2)))
     return corr, rel
+
+
+def pendulum_clip(frames: int = 120, size: int = 64, *, period: float = 26.4, phase: float = 3.3,
+                  amplitude: float = 0.6, noise: float = 2.0, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A rendered swinging pendulum with known extremes, for tests and demos.
+
+    The angle is ``amplitude * cos(2 pi (t - phase) / period)``, so the swing turns at
+    ``t = phase + k period / 2``. Returns ``(frames, extremes)``: ``(T, size, size, 3)``
+    uint8 frames (anti-aliased rod and bob over a textured background, light noise) and
+    the extreme times (float) inside ``[0, T - 1]``.
+
+    Examples
+    --------
+    >>> frames, extremes = pendulum_clip(40, 32)
+    >>> frames.shape, np.round(extremes, 1).tolist()
+    ((40, 32, 32, 3), [3.3, 16.5, 29.7])
+    """
+    t = np.arange(frames, dtype=np.float64)
+    theta = amplitude * np.cos(2 * np.pi * (t - phase) / period)
+    yy, xx = np.mgrid[0:size, 0:size].astype(np.float64) + 0.5
+    px, py = size / 2, size * 0.08
+    length = size * 0.72
+    rng = np.random.default_rng(seed)
+    bg = 90 + 25 * np.sin(xx / size * 7) * np.cos(yy / size * 5)
+    out = np.empty((frames, size, size, 3), np.uint8)
+    for i, th in enumerate(theta):
+        bx, by = px + length * np.sin(th), py + length * np.cos(th)
+        # distance to the rod segment and to the bob, turned into anti-aliased coverage
+        vx, vy = bx - px, by - py
+        u = np.clip(((xx - px) * vx + (yy - py) * vy) / (vx * vx + vy * vy), 0, 1)
+        d_rod = np.hypot(xx - (px + u * vx), yy - (py + u * vy))
+        d_bob = np.hypot(xx - bx, yy - by)
+        rod = np.clip(1.5 - d_rod / (size / 64), 0, 1)
+        bob = np.clip(size * 0.09 - d_bob + 0.5, 0, 1)
+        img = bg * (1 - np.maximum(rod, bob))
+        rgb = np.stack([img + 200 * bob + 40 * rod, img + 170 * bob + 40 * rod, img + 60 * bob + 40 * rod], -1)
+        rgb += rng.normal(0, noise, rgb.shape)
+        out[i] = np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
+    k = np.arange(-1, int(frames / (period / 2)) + 2)
+    ext = phase + k * period / 2
+    return out, ext[(ext >= 0) & (ext <= frames - 1)]
 
 
 # -- checks ---------------------------------------------------------------------------

@@ -39,11 +39,19 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--tp-n", type=int, default=4, help="mirrored frame pairs of the symmetry test (default 4)")
     g.add_argument("--tp-s", type=int, default=1, help="binomial smoothness, 0 <= s < n/2 (default 1)")
     g.add_argument("--tp-r", type=int, default=4, help="turn points are more than R frames apart (default 4)")
-    g.add_argument("--tp-min-symmetry", type=float, default=0.5, help="weakest turn point, in [0, 1) (default 0.5)")
+    g.add_argument("--tp-min-symmetry", type=float, default=0.3, help="weakest turn point, in [0, 1) (default 0.3)")
     g.add_argument("--tp-max-cost", type=float, default=2.0,
                    help="drop transitions costlier than this many median frame steps (default 2)")
     g.add_argument("--tp-plot", default=None, metavar="PNG",
                    help="write a plot of the symmetry curve, turn points and probabilities")
+    g = p.add_argument_group("mixture")
+    g.add_argument("--mix-components", type=positive_int, default=3, help="PPCA components S (default 3)")
+    g.add_argument("--mix-dim", type=positive_int, default=10, help="dimension d of each component (default 10)")
+    g.add_argument("--mix-global-dim", type=positive_int, default=None, help="global coordinates D (default d)")
+    g.add_argument("--mix-pca-dim", type=positive_int, default=50, help="reduced PCA space (default 50)")
+    g.add_argument("--mix-neighbors", type=positive_int, default=12, help="LLE neighbours K (default 12)")
+    g.add_argument("--mix-pmax", type=positive_int, default=None,
+                   help="largest AR order tried (default 5, or less when the clip is short)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
     return p
 
@@ -63,6 +71,9 @@ def method_params(name: str, args: argparse.Namespace) -> dict:
     if name == "lds":
         n = args.n if args.n == "auto" else _int("--n", args.n)
         return {"n": n, "k": args.k, "energy": args.energy, "svd": args.svd, "max_radius": args.max_radius}
+    if name == "mixture":
+        return {"components": args.mix_components, "dim": args.mix_dim, "global_dim": args.mix_global_dim,
+                "pca_dim": args.mix_pca_dim, "neighbors": args.mix_neighbors, "pmax": args.mix_pmax}
     if name == "turnpoints":
         return {"n": args.tp_n, "s": args.tp_s, "r": args.tp_r, "min_symmetry": args.tp_min_symmetry,
                 "max_cost": args.tp_max_cost}
@@ -118,6 +129,10 @@ def _summary(name: str, model) -> str:
         return (f"n={model.n} k={model.k}, energy {info.get('energy_captured', 0):.3f}, "
                 f"spectral radius {info.get('spectral_radius_raw', 0):.4f} -> {info.get('spectral_radius', 0):.4f} "
                 f"({info.get('poles_clipped', 0)} poles clipped)")
+    if name == "mixture":
+        return (f"S={model.components} d={model.dim} D={model.global_dim}, AR({model.order}) by Schwarz, "
+                f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
+                f"{info.get('recon_error_pca_dim', 0):.3f})")
     if name == "turnpoints":
         return (f"{info.get('n_turn_points', 0)} turn points {model.turn_points.tolist()[:12]}, "
                 f"{info.get('n_transitions', 0)} transitions, exit frame {model.exit_frame}")
