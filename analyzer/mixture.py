@@ -38,7 +38,7 @@ LLE_REG = 1e-3
 
 def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONENTS, dim: int = DEFAULT_DIM,
                   global_dim: int | None = None, pca_dim: int = DEFAULT_PCA_DIM,
-                  neighbors: int = DEFAULT_NEIGHBORS, pmax: int = DEFAULT_PMAX,
+                  neighbors: int = DEFAULT_NEIGHBORS, pmax: int | None = None,
                   max_radius: float = DEFAULT_MAX_RADIUS, max_iter: int = 200, tol: float = 1e-6,
                   seed: int = 0, progress: Progress | None = None) -> MixtureModel:
     """Learn a subspace-mixture dynamic texture from a clip.
@@ -57,8 +57,9 @@ def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONEN
         Dimension ``q`` of the reduced PCA space the mixture is fitted in (capped by the clip's rank).
     neighbors : int
         ``K`` nearest neighbours of the LLE reconstruction weights (``1 <= K < T``).
-    pmax : int
-        Largest AR order tried; Schwarz's criterion picks ``p`` in ``1..pmax``.
+    pmax : int, optional
+        Largest AR order tried; Schwarz's criterion picks ``p`` in ``1..pmax``. Default
+        ``DEFAULT_PMAX`` (5), lowered to what the clip's length allows.
     max_radius : float
         Largest pole magnitude of the AR process, in (0, 1).
     max_iter, tol : int, float
@@ -91,7 +92,6 @@ def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONEN
     dim = _pos_int("dim", dim)
     pca_dim = _pos_int("pca_dim", pca_dim)
     neighbors = _pos_int("neighbors", neighbors)
-    pmax = _pos_int("pmax", pmax)
     max_iter = _pos_int("max_iter", max_iter)
     seed = _pos_int("seed", seed, lo=0)
     global_dim = dim if global_dim is None else _pos_int("global_dim", global_dim)
@@ -110,6 +110,10 @@ def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONEN
         raise ValueError(f"global_dim={global_dim} exceeds components * (dim + 1) - 1 = {components * (dim + 1) - 1}")
     if neighbors >= tau:
         raise ValueError(f"neighbors={neighbors} must be smaller than the number of frames ({tau})")
+    if pmax is None:
+        # Largest p with T - p > (p + 1) D + 1, capped at the default.
+        pmax = max(1, min(DEFAULT_PMAX, (tau - global_dim - 2) // (global_dim + 1)))
+    pmax = _pos_int("pmax", pmax)
     if not tau - pmax > global_dim * pmax + 1 + global_dim:
         raise ValueError(f"pmax={pmax} is too large for {tau} frames of {global_dim}-dimensional global "
                          f"coordinates (needs T - pmax > (pmax + 1) * global_dim + 1); use a smaller pmax")

@@ -33,6 +33,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--intensity", type=float, default=1.0, help=">= 0, scale of the driving noise")
     g.add_argument("--scales", default=None, metavar="C,M,F", help="coarse,medium,fine weights in [0, 10]")
     g.add_argument("--precision", choices=("float32", "float16"), default="float32")
+    g = p.add_argument_group("mixture controls (also --intensity, --precision)")
+    g.add_argument("--draws", type=positive_int, default=16,
+                   help="noise draws per step, the one nearest the learned manifold is kept (default 16)")
     g = p.add_argument_group("turnpoints controls (--speed in [0, 4])")
     g.add_argument("--playback", choices=("hybrid", "turns", "jumps"), default="hybrid",
                    help="turn points and transitions (default), turn points only, transitions only")
@@ -47,6 +50,11 @@ def player_options(args: argparse.Namespace) -> dict:
     opts = {"backend": args.backend, "device": args.device, "seed": args.seed}
     if args.mode == "lds":
         opts["precision"] = args.precision
+    if args.mode == "mixture":
+        opts["precision"] = args.precision
+        opts["draws"] = args.draws
+        if args.size is not None:
+            raise UsageError("--size is not supported by mode mixture (it plays at the clip's resolution)")
     if args.mode == "turnpoints":
         opts["playback"] = args.playback
         opts["start"] = args.start
@@ -58,6 +66,8 @@ def player_options(args: argparse.Namespace) -> dict:
 
 
 def apply_controls(player, args: argparse.Namespace) -> None:
+    if args.mode == "mixture":
+        player.intensity = args.intensity
     if args.mode == "turnpoints":
         player.speed = args.speed
         player.crossfade = args.crossfade
