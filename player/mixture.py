@@ -160,6 +160,11 @@ class MixturePlayer(Player):
         return self._shape
 
     @property
+    def bytes_per_frame(self) -> int:
+        """The stacked basis and mean read, plus the uint8 frame written."""
+        return int(self.basis_bytes + 4 * self._proj.values + int(np.prod(self._shape)))
+
+    @property
     def draws(self) -> int:
         return self._draws
 
