@@ -185,6 +185,11 @@ class TurnPointPlayer(Player):
         return self._shape
 
     @property
+    def bytes_per_frame(self) -> int:
+        """Bytes a frame moves at speed 1 between jumps: one stored frame read, the output written."""
+        return 2 * self.frame_bytes
+
+    @property
     def speed(self) -> float:
         return self._speed
 

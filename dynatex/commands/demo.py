@@ -33,6 +33,8 @@ class DemoStep:
 #: Analysis methods the demo runs on the sample (with their learn options).
 DEMO_METHODS: dict[str, dict] = {
     "lds": {"n": 40},
+    # the ripples travel and barely mirror (symmetry <= 0.05): keep every local maximum as a turn point
+    "turnpoints": {"min_symmetry": 0.0},
 }
 
 #: What the demo plays, in order.
@@ -43,6 +45,8 @@ DEMO_STEPS: list[DemoStep] = [
     DemoStep("lds: slow, calm", "lds", {"speed": 0.5, "intensity": 0.5}),
     DemoStep("lds: fine scales up", "lds", {"scales": (0.5, 1.0, 2.5)}),
     DemoStep("lds: float16 basis", "lds", options={"precision": "float16"}),
+    DemoStep("turnpoints: turns + jumps", "turnpoints"),
+    DemoStep("turnpoints: jumps, speed 1.5", "turnpoints", {"speed": 1.5}, {"playback": "jumps"}),
 ]
 
 
