@@ -27,6 +27,7 @@ METHODS: dict[str, Method] = {
     "lds": Method("lds", "lds:learn_lds", False, "linear dynamic texture (Doretto & Soatto)"),
     "turnpoints": Method("turnpoints", "turnpoints:learn_turnpoints", True, "video texture with turn points and transitions (Van Haevre; Schoedl)"),
     "mixture": Method("mixture", "mixture:learn_mixture", False, "subspace mixture + global coordination + AR(p) (Liu, Lin & Ahuja)"),
+    "tiles": Method("tiles", "tiles:learn_tiles", False, "triple toroid-shaped tiles, mixing and tone (Richtr & Haindl)"),
     "quilt": Method("quilt", "quilt:learn_quilt", True, "time-varying texture: SVD-accelerated quilting of spatio-temporal cuboids"),
 }
 

@@ -15,6 +15,7 @@ from .quilt import QuiltModel
 from .mixture import MixtureModel
 from .schema import FORMAT_NAME, FORMAT_VERSION
 from .source import SourceInfo
+from .tiles import TilesModel
 from .turnpoints import TurnPointModel
 from .writer import DatabaseWriter
 
@@ -22,5 +23,5 @@ __all__ = [
     "DatabaseWriter", "FORMAT_NAME", "FORMAT_VERSION", "FrameStore", "LDSModel", "MethodNotFoundError", "MixtureModel",
     "QuiltModel",
     "SourceInfo", "Texture", "TextureNotFoundError", "TileDB", "TileDBError", "TileDBFormatError",
-    "TileDBNotFoundError", "TileDBVersionError", "TurnPointModel", "open_db",
+    "TileDBNotFoundError", "TileDBVersionError", "TilesModel", "TurnPointModel", "open_db",
 ]

@@ -7,11 +7,12 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from . import lds, mixture, quilt, schema, turnpoints
+from . import lds, mixture, quilt, schema, tiles, turnpoints
 
 CODECS: dict[str, ModuleType] = {
     schema.METHOD_LDS: lds,
     schema.METHOD_TURNPOINTS: turnpoints,
     schema.METHOD_QUILT: quilt,
     schema.METHOD_MIXTURE: mixture,
+    schema.METHOD_TILES: tiles,
 }

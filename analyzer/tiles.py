@@ -1,0 +1,620 @@
+"""Triple toroid-shaped tiles (Richtr & Haindl, "Dynamic texture editing"): analysis.
+
+Pipeline (each step is a public function, so it can be tested and reused):
+
+1. :func:`tile_period` - tile size from the dominant spatial periodicity (mean power
+   spectrum of a few frames; a multiple of the period inside ``[min_tile, max_tile]``,
+   a default size when the texture has no clear period). Overridable.
+2. :func:`find_loop` - the temporal loop: the start ``s`` and length ``L`` whose frame
+   sets ``s .. s+o-1`` and ``s+L .. s+L+o-1`` are most alike (Schoedl's frame-distance
+   matrix on thumbnails, longer loops mildly preferred).
+3. :func:`transition_map` - per-pixel temporal transition: pixel ``p`` plays
+   ``V[s+L+u]`` for ``u < tau(p)`` and ``V[s+u]`` afterwards, so its only jump sits at
+   ``tau(p) in [0, o)`` where the two frame sets differ least there (the argmin of a
+   spatially smoothed cost volume: a minimum-cost cut surface in time, not a crossfade).
+   The loop ``G`` wraps seamlessly: ``G[L-1] = V[s+L-1]`` is followed by ``G[0] = V[s+L]``.
+4. :func:`flow_magnitude` - mean optical-flow magnitude (OpenCV Farneback) over the loop.
+5. :func:`toroidal_tile` - spatial toroidal cuts by dynamic programming on the overlap
+   error summed over the loop frames: a block of ``(th + b) x (tw + b)`` is cut so that
+   its right overlap continues its left edge (a closed vertical path, circular in y), then
+   likewise vertically (a closed horizontal path, circular in x). The path may move by
+   ``1 + round(flow_gain * flow)`` pixels per row (at most 3), so the band of freedom
+   widens where the texture moves, and the overlap width ``b`` grows with the mean flow.
+6. :func:`ring_join` - **construction of several mutually compatible tiles**: every tile
+   of a class is the class's primary toroidal tile ``P`` outside a closed minimum cut and
+   the loop at another place of the clip inside it (four DP cuts inside a ring of width
+   ``r`` along the edges). All tiles of a class therefore carry exactly ``P``'s pixels along
+   their edges; since ``P`` tiles seamlessly with itself, any two tiles of the class sit
+   next to each other, in any arrangement, exactly as ``P`` sits next to ``P``.
+7. Mixing: every extra texture gets a loop of the same length and its own tiles cut to the
+   same size; a border tile ``(a, c)`` is class ``c``'s primary ring joined by the same cut
+   to class ``a``'s primary interior. The player puts class ``c``'s ring where a cell of
+   class ``a`` borders class ``c`` (see :mod:`dynatex.player.tiles`).
+8. Colour statistics per tile (mean RGB and HSV) for tone fitting.
+"""
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..tiledb.tiles import TilesModel
+from .video import Clip
+
+Progress = Callable[[int, int | None], None]
+
+DEFAULT_MIN_TILE = 32
+DEFAULT_MAX_TILE = 256
+MAX_STEP = 3
+_SAMPLE_FRAMES = 48       # loop frames summed in the cut errors (evenly spread)
+_PRE_FRAMES = 12          # loop frames used to rank candidate positions
+
+
+# -- 1. tile size ------------------------------------------------------------------------------
+def _grey(frames: np.ndarray) -> np.ndarray:
+    f = frames.astype(np.float32)
+    return f @ np.array([0.299, 0.587, 0.114], np.float32) if f.shape[-1] == 3 else f[..., 0]
+
+
+def tile_period(frames: np.ndarray, *, min_tile: int = DEFAULT_MIN_TILE, max_tile: int = DEFAULT_MAX_TILE,
+                n_frames: int = 8) -> tuple[tuple[int, int], tuple[float, float], float]:
+    """Tile size from the dominant spatial periodicity.
+
+    Returns ``((th, tw), (period_y, period_x), strength)``: ``strength`` is the peak of the
+    mean power spectrum over its median (beyond ~30 the texture is periodic and the tile
+    is the smallest multiple of the period that is at least ``min_tile``; otherwise the
+    tile is a quarter of the shorter frame side). Both are clamped to
+    ``[min_tile, min(max_tile, frame side)]``.
+
+    Examples
+    --------
+    >>> x = np.arange(128)
+    >>> img = (128 + 100 * np.sin(2 * np.pi * x / 16))[None, :].repeat(96, 0)
+    >>> f = np.repeat(img[None, :, :, None], 3, axis=3).astype(np.uint8)[None].repeat(2, 0)
+    >>> size, period, strength = tile_period(f, min_tile=40)
+    >>> size[1], round(period[1])
+    (48, 16)
+    """
+    t, h, w = frames.shape[:3]
+    idx = np.linspace(0, t - 1, min(n_frames, t)).round().astype(int)
+    g = _grey(frames[idx])
+    g -= g.mean(axis=(1, 2), keepdims=True)
+    win = np.hanning(h)[:, None] * np.hanning(w)[None, :]
+    power = (np.abs(np.fft.fft2(g * win)) ** 2).mean(axis=0)
+    fy = np.abs(np.fft.fftfreq(h))[:, None]
+    fx = np.abs(np.fft.fftfreq(w))[None, :]
+    # ignore periods longer than the largest tile (and DC)
+    fmin = 1.0 / max(2, min(max_tile, max(h, w)))
+    valid = np.maximum(fy, fx) >= fmin
+    power = np.where(valid, power, 0.0)
+    med = float(np.median(power[valid])) if valid.any() else 0.0
+    k = int(np.argmax(power))
+    ky, kx = divmod(k, w)
+    strength = float(power.flat[k] / med) if med > 0 else 0.0
+    py = 1.0 / fy[ky, 0] if fy[ky, 0] > 0 else float("inf")
+    px = 1.0 / fx[0, kx] if fx[0, kx] > 0 else float("inf")
+    default = max(min_tile, min(max_tile, (min(h, w) // 4) // 8 * 8))
+
+    def size(period: float, side: int) -> int:
+        hi = max(min_tile, min(max_tile, side))
+        if strength >= 30 and np.isfinite(period) and period >= 2:
+            m = int(np.ceil(min_tile / period))
+            s = int(round(m * period))
+            if s <= hi:
+                return s
+        return min(default, hi)
+
+    return (size(py, h), size(px, w)), (float(py), float(px)), strength
+
+
+# -- 2./3. temporal loop ---------------------------------------------------------------------
+def _thumbs(frames: np.ndarray, side: int = 48) -> np.ndarray:
+    t, h, w = frames.shape[:3]
+    sy, sx = max(1, h // side), max(1, w // side)
+    g = np.empty((t, h // sy, w // sx), np.float32)
+    for i in range(0, t, 64):
+        gg = _grey(frames[i:i + 64, : (h // sy) * sy, : (w // sx) * sx])
+        g[i:i + 64] = gg.reshape(gg.shape[0], h // sy, sy, w // sx, sx).mean(axis=(2, 4))
+    return g.reshape(t, -1)
+
+
+def find_loop(frames: np.ndarray, *, min_loop: int, max_loop: int | None = None, transition: int = 8,
+              length: int | None = None, prefer_long: float = 0.3) -> tuple[int, int, float]:
+    """``(start, length, cost)`` of the best loop.
+
+    ``cost`` is the mean RMS thumbnail difference between the frame sets
+    ``start + j`` and ``start + length + j`` (``j < transition``) over the median
+    consecutive-frame difference. With ``length`` given only the start is searched.
+    """
+    t = frames.shape[0]
+    o = transition
+    if length is not None:
+        if t < length + o:
+            raise ValueError(f"clip has {t} frames, fewer than the loop length {length} plus the "
+                             f"transition {o}")
+        lengths = [length]
+    else:
+        if t < min_loop + o:
+            raise ValueError(f"clip has {t} frames, fewer than the shortest loop: min_loop={min_loop} "
+                             f"plus transition={o} frames")
+        hi = t - o if max_loop is None else min(max_loop, t - o)
+        lengths = list(range(min_loop, hi + 1))
+    th = _thumbs(frames)
+    sq = (th * th).sum(axis=1)
+    d = np.sqrt(np.maximum(sq[:, None] + sq[None, :] - 2 * th @ th.T, 0) / th.shape[1])
+    med = float(np.median(np.diag(d, 1))) or 1e-3
+    lmax = max(lengths)
+    best = (np.inf, 0, lengths[0], np.inf)
+    for ln in lengths:
+        n_start = t - ln - o + 1
+        diag = np.diag(d, ln)                       # d[i, i + ln]
+        c = np.lib.stride_tricks.sliding_window_view(diag[: n_start + o - 1], o).mean(axis=1)[:n_start] / med
+        s = int(np.argmin(c))
+        score = float(c[s]) + prefer_long * (lmax - ln) / lmax
+        if score < best[0]:
+            best = (score, s, ln, float(c[s]))
+    return best[1], best[2], best[3]
+
+
+def transition_map(frames: np.ndarray, start: int, length: int, transition: int, *, sigma: float = 3.0) -> np.ndarray:
+    """Per-pixel transition frame ``tau (H, W)`` in ``[0, transition)`` (see the module docstring)."""
+    import cv2
+    o = transition
+    h, w = frames.shape[1:3]
+    cost = np.empty((o, h, w), np.float32)
+    for j in range(o):
+        d = frames[start + length + j].astype(np.float32) - frames[start + j].astype(np.float32)
+        cost[j] = cv2.GaussianBlur((d * d).sum(axis=2), (0, 0), sigma)
+    return np.argmin(cost, axis=0).astype(np.int32)
+
+
+def looped_block(frames: np.ndarray, start: int, length: int, tau: np.ndarray, y: int, x: int, h: int, w: int,
+                 u: Sequence[int] | None = None) -> np.ndarray:
+    """Frames ``u`` (default all ``0..L-1``) of the seamless loop, block ``[y:y+h, x:x+w]``, uint8."""
+    u = np.arange(length) if u is None else np.asarray(u)
+    tb = tau[y:y + h, x:x + w]
+    out = np.empty((len(u), h, w, frames.shape[3]), np.uint8)
+    tmax = int(tb.max()) if tb.size else 0
+    for i, uu in enumerate(u):
+        early = frames[start + uu, y:y + h, x:x + w]
+        if uu >= tmax:                      # every pixel has passed its transition
+            out[i] = early
+        else:
+            out[i] = np.where((uu < tb)[..., None], frames[start + length + uu, y:y + h, x:x + w], early)
+    return out
+
+
+# -- 4. optical flow -----------------------------------------------------------------------------
+def flow_magnitude(frames: np.ndarray, start: int, length: int, *, pairs: int = 6, max_side: int = 320) -> np.ndarray:
+    """Mean Farneback optical-flow magnitude ``(H, W)`` in full-resolution pixels per frame."""
+    import cv2
+    t, h, w = frames.shape[:3]
+    scale = min(1.0, max_side / max(h, w))
+    size = (max(8, int(round(w * scale))), max(8, int(round(h * scale))))
+    acc = np.zeros((size[1], size[0]), np.float32)
+    idx = np.linspace(start, start + length - 2, min(pairs, length - 1)).round().astype(int)
+    for i in idx:
+        a = cv2.resize(_grey(frames[i]), size, interpolation=cv2.INTER_AREA)
+        b = cv2.resize(_grey(frames[i + 1]), size, interpolation=cv2.INTER_AREA)
+        f = cv2.calcOpticalFlowFarneback(a, b, None, 0.5, 3, 15, 3, 5, 1.2, 0)
+        acc += np.sqrt((f * f).sum(axis=2))
+    acc /= max(1, len(idx))
+    return cv2.resize(acc, (w, h), interpolation=cv2.INTER_LINEAR) / scale
+
+
+def _steps(flow_rows: np.ndarray, flow_gain: float) -> np.ndarray:
+    return np.clip(1 + np.round(flow_gain * flow_rows), 1, MAX_STEP).astype(np.int64)
+
+
+# -- 5. dynamic-programming cuts ---------------------------------------------------------------
+def _dp(err: np.ndarray, steps: np.ndarray, start: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """Minimum path through ``err (n, m)`` moving at most ``steps[i]`` columns per row.
+
+    ``start``: allowed start columns (None: any). Returns the column per row and the mean error.
+    """
+    n, m = err.shape
+    big = np.float64(1e30)
+    acc = np.where(np.zeros(m, bool) if start is None else ~start, big, 0.0) + err[0]
+    back = np.zeros((n, m), np.int64)
+    cols = np.arange(m)
+    for i in range(1, n):
+        s = int(steps[i])
+        best = np.full(m, big)
+        arg = cols.copy()
+        for d in range(-s, s + 1):
+            src = cols + d
+            ok = (src >= 0) & (src < m)
+            cand = np.where(ok, acc[np.clip(src, 0, m - 1)], big)
+            better = cand < best
+            best = np.where(better, cand, best)
+            arg = np.where(better, np.clip(src, 0, m - 1), arg)
+        acc = best + err[i]
+        back[i] = arg
+    path = np.empty(n, np.int64)
+    path[-1] = int(np.argmin(acc))
+    for i in range(n - 1, 0, -1):
+        path[i - 1] = back[i, path[i]]
+    return path, float(err[np.arange(n), path].mean())
+
+
+def circular_cut(err: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, float]:
+    """Closed minimum path through ``err (n, m)``: the last row's column is within the first
+    row's step of the first row's column (the path is periodic in the row index)."""
+    n, m = err.shape
+    best = (np.inf, None)
+    for c0 in range(m):
+        start = np.zeros(m, bool)
+        start[c0] = True
+        e = err.copy()
+        s0 = int(steps[0])
+        far = np.abs(np.arange(m) - c0) > s0
+        e[-1, far] = 1e30
+        path, cost = _dp(e, steps, start)
+        if cost < best[0]:
+            best = (cost, path)
+    return best[1], best[0]
+
+
+def _sample(length: int, n: int) -> np.ndarray:
+    return np.unique(np.linspace(0, length - 1, min(n, length)).round().astype(int))
+
+
+def toroidal_tile(block: np.ndarray, th: int, tw: int, *, flow: np.ndarray | None = None,
+                  flow_gain: float = 0.5) -> tuple[np.ndarray, float, float]:
+    """Cut a ``(L, th + b, tw + b, 3)`` looped block into a ``(L, th, tw, 3)`` tile that tiles the plane.
+
+    Returns ``(tile, cost_h, cost_v)``: mean squared RGB error per frame along the cuts.
+    ``flow`` ``(th + b, tw + b)`` widens the per-row freedom of the paths.
+    """
+    length, hb, wb = block.shape[:3]
+    by, bx = hb - th, wb - tw
+    if by < 2 or bx < 2:
+        raise ValueError(f"block must exceed the tile by at least 2 pixels, got {hb}x{wb} for {th}x{tw}")
+    u = _sample(length, _SAMPLE_FRAMES)
+    sub = block[u].astype(np.float32)
+    flow = np.zeros((hb, wb), np.float32) if flow is None else flow
+    # horizontal wrap: column x of the tile is block column x + tw left of the cut (continuing
+    # the right edge), block column x from the cut on. Rows y and y + th share one cut.
+    d = sub[:, :, tw:tw + bx] - sub[:, :, :bx]
+    eh = (d * d).sum(axis=(0, 3)) / len(u)                     # (hb, bx)
+    e_rows = eh[:th].copy()
+    e_rows[:by] += eh[th:th + by]
+    e_rows[:, 0] = 1e30                                          # cut >= 1: column 0 continues column tw - 1
+    steps = _steps(flow[:th, :bx].mean(axis=1), flow_gain)
+    cut_h, cost_h = circular_cut(e_rows, steps)
+    cut_rows = np.concatenate([cut_h, cut_h[:by]])
+    xx = np.arange(tw)[None, :]
+    left = xx < cut_rows[:, None]                                # (hb, tw)
+    mid = np.where(left[None, :, :, None], _shift_cols(block, tw), block[:, :, :tw])
+    # vertical wrap on the x-periodic intermediate (hb, tw): a closed path in x.
+    subm = mid[u].astype(np.float32)
+    d = subm[:, th:th + by] - subm[:, :by]
+    ev = (d * d).sum(axis=(0, 3)).T / len(u)                     # (tw, by)
+    ev[:, 0] = 1e30
+    steps = _steps(flow[:by, :tw].mean(axis=0), flow_gain)
+    cut_v, cost_v = circular_cut(ev, steps)
+    yy = np.arange(th)[:, None]
+    top = yy < cut_v[None, :]                                    # (th, tw)
+    tile = np.where(top[None, :, :, None], _shift_rows(mid, th), mid[:, :th])
+    return np.ascontiguousarray(tile), cost_h, cost_v
+
+
+def _shift_cols(block: np.ndarray, tw: int) -> np.ndarray:
+    """``block[:, :, x + tw]`` for ``x < tw`` where it exists (only the first ``b`` columns are used)."""
+    out = np.zeros_like(block[:, :, :tw])
+    n = block.shape[2] - tw
+    out[:, :, :n] = block[:, :, tw:]
+    return out
+
+
+def _shift_rows(block: np.ndarray, th: int) -> np.ndarray:
+    out = np.zeros_like(block[:, :th])
+    n = block.shape[1] - th
+    out[:, :n] = block[:, th:]
+    return out
+
+
+# -- 6. ring join -------------------------------------------------------------------------------
+def ring_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, *, flow: np.ndarray | None = None,
+              flow_gain: float = 0.5) -> tuple[np.ndarray, np.ndarray, float]:
+    """``ring_tile`` outside a closed minimum cut, ``inner`` inside it.
+
+    The cut runs inside a ring of width ``ring`` along the four edges: four DP paths (left,
+    right, top, bottom), each keeping at least the outermost pixel from ``ring_tile``.
+    Returns ``(tile, mask, cost)``; ``mask`` is 1 where the pixel comes from ``ring_tile``,
+    ``cost`` the mean squared RGB error per frame along the four paths.
+    """
+    length, th, tw = ring_tile.shape[:3]
+    if not 2 <= ring <= min(th, tw) // 2 - 1:
+        raise ValueError(f"ring must be in 2..{min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {ring}")
+    u = _sample(length, _SAMPLE_FRAMES)
+    d = ring_tile[u].astype(np.float32) - inner[u].astype(np.float32)
+    err = (d * d).sum(axis=(0, 3)) / len(u)                      # (th, tw)
+    flow = np.zeros((th, tw), np.float32) if flow is None else flow
+    mask = np.zeros((th, tw), bool)
+    costs = []
+    yy, xx = np.arange(th)[:, None], np.arange(tw)[None, :]
+    # left / right: path over rows, column c in 1..ring = first pixel from inner
+    for side in ("left", "right", "top", "bottom"):
+        if side in ("left", "right"):
+            e = err[:, :ring + 1] if side == "left" else err[:, ::-1][:, :ring + 1]
+            steps = _steps(flow[:, :ring].mean(axis=1), flow_gain)
+        else:
+            e = err[:ring + 1].T if side == "top" else err[::-1][:ring + 1].T
+            steps = _steps(flow[:ring].mean(axis=0), flow_gain)
+        e = e.copy()
+        e[:, 0] = 1e30
+        path, cost = _dp(e, steps, None)
+        costs.append(cost)
+        if side == "left":
+            mask |= xx < path[:, None]
+        elif side == "right":
+            mask |= xx >= tw - path[:, None]
+        elif side == "top":
+            mask |= yy < path[None, :]
+        else:
+            mask |= yy >= th - path[None, :]
+    tile = np.where(mask[None, :, :, None], ring_tile, inner)
+    return np.ascontiguousarray(tile), mask.astype(np.uint8), float(np.mean(costs))
+
+
+# -- 8. colour statistics --------------------------------------------------------------------------
+def colour_stats(tile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean RGB (0..255) and mean HSV (hue in degrees by circular mean, S and V in 0..1) of a tile."""
+    import cv2
+    u = _sample(tile.shape[0], 16)
+    rgb = tile[u].reshape(-1, 1, 3)
+    mean_rgb = rgb.reshape(-1, 3).mean(axis=0, dtype=np.float64)
+    hsv = cv2.cvtColor(rgb.astype(np.float32) / 255.0, cv2.COLOR_RGB2HSV).reshape(-1, 3).astype(np.float64)
+    ang = np.deg2rad(hsv[:, 0])
+    hue = float(np.rad2deg(np.arctan2(np.sin(ang).mean(), np.cos(ang).mean())) % 360.0)
+    return mean_rgb, np.array([hue, hsv[:, 1].mean(), hsv[:, 2].mean()])
+
+
+# -- the whole analysis -------------------------------------------------------------------------------
+class _Texture:
+    """One class's loop, flow and primary tile."""
+
+    def __init__(self, frames, start, length, cost, tau, flow):
+        self.frames, self.start, self.length, self.cost, self.tau, self.flow = frames, start, length, cost, tau, flow
+        self.primary = None
+        self.primary_pos = (0, 0)
+        self.toroid_cost = (0.0, 0.0)
+
+    def block(self, y, x, h, w, u=None):
+        return looped_block(self.frames, self.start, self.length, self.tau, y, x, h, w, u)
+
+
+def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = None, n_tiles: int = 4,
+                min_tile: int = DEFAULT_MIN_TILE, max_tile: int = DEFAULT_MAX_TILE, min_loop: int = 16,
+                max_loop: int | None = None, transition: int = 8, overlap: int | None = None,
+                ring: int | None = None, flow_gain: float = 0.5, mix: Sequence[Clip | np.ndarray] = (),
+                names: Sequence[str] | None = None, progress: Progress | None = None) -> TilesModel:
+    """Cut triple toroid-shaped tiles from a clip (and, for mixing, from more clips).
+
+    Parameters
+    ----------
+    clip : Clip or ndarray
+        Frames ``(T, H, W, C)`` uint8 (grey clips are expanded to RGB).
+    tile : int or (th, tw), optional
+        Tile size; default from :func:`tile_period` within ``[min_tile, max_tile]``.
+    n_tiles : int
+        Tiles per texture (>= 1; the first is the primary toroidal tile).
+    min_loop, max_loop : int
+        Bounds of the loop length in frames (``max_loop`` defaults to the clip length).
+    transition : int
+        Frames ``o`` over which the per-pixel temporal transitions spread (>= 1).
+    overlap : int, optional
+        Width ``b`` of the toroidal overlap bands (default ``tile // 4`` plus twice the mean flow).
+    ring : int, optional
+        Width of the shared boundary ring (default ``max(2, tile // 5)``).
+    flow_gain : float
+        Extra path freedom per pixel/frame of optical flow (0 disables the widening).
+    mix : sequence of clips
+        Further textures cut to the same tile size and loop length; border tiles join
+        every ordered pair of textures.
+    names : sequence of str, optional
+        Class names (default ``"main"``, ``"mix1"``, ...).
+    progress : callable(done, total), optional
+
+    Returns
+    -------
+    TilesModel
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> t, y, x = np.meshgrid(np.arange(40), np.arange(48), np.arange(64), indexing="ij")
+    >>> g = 128 + 60 * np.sin(2 * np.pi * (t / 10 + x / 16)) + rng.normal(0, 3, t.shape)
+    >>> frames = np.repeat(np.clip(g, 0, 255).astype(np.uint8)[..., None], 3, axis=3)
+    >>> m = learn_tiles(frames, tile=16, n_tiles=2, min_loop=8)
+    >>> m.tiles.shape[0], m.tile_size, m.loop_length >= 8
+    (2, (16, 16), True)
+    """
+    main = _frames("clip", clip)
+    extra = [_frames(f"mix[{i}]", c) for i, c in enumerate(mix)]
+    names = list(names) if names is not None else ["main"] + [f"mix{i + 1}" for i in range(len(extra))]
+    if len(names) != 1 + len(extra):
+        raise ValueError(f"names must name {1 + len(extra)} textures, not {len(names)}")
+    n_tiles = _int("n_tiles", n_tiles, 1, 64)
+    min_loop = _int("min_loop", min_loop, 2)
+    transition = _int("transition", transition, 1)
+    if max_loop is not None:
+        max_loop = _int("max_loop", max_loop, min_loop)
+    if transition >= min_loop:
+        raise ValueError(f"transition ({transition}) must be smaller than min_loop ({min_loop})")
+    if not (isinstance(flow_gain, (int, float)) and 0 <= flow_gain <= 10):
+        raise ValueError(f"flow_gain must be a number in [0, 10], not {flow_gain!r}")
+    min_tile = _int("min_tile", min_tile, 8)
+    max_tile = _int("max_tile", max_tile, min_tile)
+    total = 6 + n_tiles + len(extra) * (3 + n_tiles) + (len(extra) + 1) * len(extra)
+    done = 0
+
+    def step(k: int = 1) -> None:
+        nonlocal done
+        done += k
+        if progress is not None:
+            progress(min(done, total), total)
+
+    t, h, w = main.shape[:3]
+    if tile is None:
+        (th, tw), period, strength = tile_period(main, min_tile=min_tile, max_tile=max_tile)
+        for f in extra:
+            th, tw = min(th, f.shape[1] // 2), min(tw, f.shape[2] // 2)
+    else:
+        th, tw = (tile, tile) if isinstance(tile, (int, np.integer)) else tuple(int(v) for v in tile)
+        if th < 8 or tw < 8:
+            raise ValueError(f"tile must be at least 8x8, not {th}x{tw}")
+        period, strength = (0.0, 0.0), 0.0          # not measured: the caller chose the size
+    step()
+    for label, f in [("clip", main)] + [(f"mix[{i}]", e) for i, e in enumerate(extra)]:
+        if th + 2 > f.shape[1] or tw + 2 > f.shape[2]:
+            raise ValueError(f"tile {th}x{tw} (plus a 2-pixel overlap) is larger than the {label} frame "
+                             f"{f.shape[1]}x{f.shape[2]}")
+
+    start, length, loop_cost = find_loop(main, min_loop=min_loop, max_loop=max_loop, transition=transition)
+    step()
+    textures = [_Texture(main, start, length, loop_cost, transition_map(main, start, length, transition),
+                         flow_magnitude(main, start, length))]
+    step()
+    for f in extra:
+        s, _, c = find_loop(f, min_loop=min_loop, transition=transition, length=length)
+        textures.append(_Texture(f, s, length, c, transition_map(f, s, length, transition),
+                                 flow_magnitude(f, s, length)))
+        step()
+    mean_flow = float(np.mean([tx.flow.mean() for tx in textures]))
+    if overlap is None:
+        b = max(2, min(th, tw) // 4) + int(round(2 * mean_flow))
+    else:
+        b = _int("overlap", overlap, 2)
+    by = max(2, min(b, h - th, *(f.shape[1] - th for f in extra)))
+    bx = max(2, min(b, w - tw, *(f.shape[2] - tw for f in extra)))
+    r = max(2, min(th, tw) // 5) if ring is None else _int("ring", ring, 2)
+    if r > min(th, tw) // 2 - 1:
+        raise ValueError(f"ring must be at most {min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {r}")
+
+    # primary toroidal tile of every class
+    for tx in textures:
+        tx.primary, tx.primary_pos, tx.toroid_cost = _primary(tx, th, tw, by, bx, flow_gain)
+        step()
+
+    tiles, tcls, rcls, masks, costs = [], [], [], [], []
+    for ci, tx in enumerate(textures):
+        tiles.append(tx.primary)
+        tcls.append(ci), rcls.append(ci), masks.append(np.ones((th, tw), np.uint8)), costs.append(0.0)
+        for tile_k, mask, cost in _interiors(tx, th, tw, r, n_tiles - 1, flow_gain, step):
+            tiles.append(tile_k), tcls.append(ci), rcls.append(ci), masks.append(mask), costs.append(cost)
+    step()
+    # border tiles: ring of class c around the interior of class a
+    for a, ta in enumerate(textures):
+        for c, tc in enumerate(textures):
+            if a == c:
+                continue
+            tile_k, mask, cost = ring_join(tc.primary, ta.primary, r, flow_gain=flow_gain)
+            tiles.append(tile_k), tcls.append(a), rcls.append(c), masks.append(mask), costs.append(cost)
+            step()
+    stats = [colour_stats(tl) for tl in tiles]
+    step()
+    model = TilesModel(
+        tiles=np.stack(tiles), tile_class=np.array(tcls, np.int32), ring_class=np.array(rcls, np.int32),
+        masks=np.stack(masks), seam_cost=np.array(costs), mean_rgb=np.array([s[0] for s in stats]),
+        mean_hsv=np.array([s[1] for s in stats]), class_names=names,
+        class_loop_start=np.array([tx.start for tx in textures], np.int64),
+        class_loop_cost=np.array([tx.cost for tx in textures]),
+        class_toroid_cost=np.array([tx.toroid_cost for tx in textures]),
+        info={"tile_h": th, "tile_w": tw, "loop_length": length, "transition": transition, "overlap_y": by,
+              "overlap_x": bx, "ring": r, "period_y": period[0], "period_x": period[1],
+              "periodicity": strength, "mean_flow": mean_flow, "flow_gain": float(flow_gain),
+              "source_frames": t, "n_classes": len(textures),
+              "median_frame_step": _median_step(main)})
+    step(total)
+    return model
+
+
+def _primary(tx: _Texture, th: int, tw: int, by: int, bx: int, flow_gain: float):
+    """Best toroidal tile of one texture: rank positions by a cheap bound, cut the best three."""
+    f = tx.frames
+    h, w = f.shape[1:3]
+    hb, wb = th + by, tw + bx
+    stride_y, stride_x = max(4, th // 4), max(4, tw // 4)
+    ys = np.unique(np.r_[np.arange(0, h - hb + 1, stride_y), h - hb])
+    xs = np.unique(np.r_[np.arange(0, w - wb + 1, stride_x), w - wb])
+    u = _sample(tx.length, _PRE_FRAMES)
+    ranked = []
+    for y in ys:
+        for x in xs:
+            blk = tx.block(y, x, hb, wb, u).astype(np.float32)
+            dh = blk[:, :th, tw:tw + bx] - blk[:, :th, :bx]
+            dv = blk[:, th:th + by, :tw] - blk[:, :by, :tw]
+            bound = (dh * dh).sum(axis=(0, 3)).min(axis=1).mean() + (dv * dv).sum(axis=(0, 3)).min(axis=0).mean()
+            ranked.append((float(bound), int(y), int(x)))
+    ranked.sort()
+    best = None
+    for _, y, x in ranked[:3]:
+        tile, ch, cv = toroidal_tile(tx.block(y, x, hb, wb), th, tw, flow=tx.flow[y:y + hb, x:x + wb],
+                                     flow_gain=flow_gain)
+        if best is None or ch + cv < best[2][0] + best[2][1]:
+            best = (tile, (y, x), (ch, cv))
+    return best
+
+
+def _interiors(tx: _Texture, th: int, tw: int, r: int, count: int, flow_gain: float, step):
+    """``count`` more tiles: the primary's ring joined to loops at other, non-overlapping places."""
+    if count <= 0:
+        return []
+    f = tx.frames
+    h, w = f.shape[1:3]
+    py, px = tx.primary_pos
+    u = _sample(tx.length, _PRE_FRAMES)
+    prim = tx.primary[u].astype(np.float32)
+    ringmask = np.ones((th, tw), bool)
+    ringmask[r:th - r, r:tw - r] = False
+    stride_y, stride_x = max(4, th // 4), max(4, tw // 4)
+    ranked = []
+    for y in np.unique(np.r_[np.arange(0, h - th + 1, stride_y), h - th]):
+        for x in np.unique(np.r_[np.arange(0, w - tw + 1, stride_x), w - tw]):
+            d = tx.block(y, x, th, tw, u).astype(np.float32) - prim
+            e = (d * d).sum(axis=(0, 3))
+            ranked.append((float(e[ringmask].mean()), int(y), int(x)))
+    ranked.sort()
+    chosen: list[tuple[int, int]] = [(py, px)]
+    out = []
+    for relax in (0.5, 0.0, -1.0):     # prefer places apart from the chosen ones, then allow overlap
+        for _, y, x in ranked:
+            if len(out) >= count:
+                break
+            if any(abs(y - cy) < th * relax and abs(x - cx) < tw * relax for cy, cx in chosen) or (y, x) in chosen:
+                continue
+            inner = tx.block(y, x, th, tw)
+            tile, mask, cost = ring_join(tx.primary, inner, r, flow=tx.flow[y:y + th, x:x + tw], flow_gain=flow_gain)
+            out.append((tile, mask, cost))
+            chosen.append((y, x))
+            step()
+    while len(out) < count:             # a tiny clip: repeat the primary
+        out.append((tx.primary.copy(), np.ones((th, tw), np.uint8), 0.0))
+        step()
+    return out
+
+
+def _median_step(frames: np.ndarray) -> float:
+    n = min(frames.shape[0] - 1, 64)
+    idx = np.linspace(0, frames.shape[0] - 2, n).round().astype(int)
+    d = frames[idx + 1].astype(np.float32) - frames[idx].astype(np.float32)
+    return float(np.median(np.sqrt((d * d).mean(axis=(1, 2, 3)))))
+
+
+def _frames(name: str, clip: Clip | np.ndarray) -> np.ndarray:
+    frames = clip.frames if isinstance(clip, Clip) else np.asarray(clip)
+    if frames.ndim != 4 or frames.dtype != np.uint8 or frames.shape[3] not in (1, 3):
+        raise ValueError(f"{name} must be (T, H, W, C) uint8 frames with C 1 or 3, not {frames.dtype} {frames.shape}")
+    if frames.shape[3] == 1:
+        frames = np.repeat(frames, 3, axis=3)
+    return frames
+
+
+def _int(name: str, value, lo: int, hi: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer, not {value!r}")
+    if value < lo or (hi is not None and value > hi):
+        raise ValueError(f"{name} must be in [{lo}, {'inf' if hi is None else hi}], not {value}")
+    return int(value)

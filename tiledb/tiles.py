@@ -1,0 +1,156 @@
+"""The triple toroid-shaped tile set of a texture (the ``tiles`` group).
+
+Every tile is an ``L x th x tw`` RGB block that repeats seamlessly in x, y and t. Tiles
+of one class share one boundary ring (the class's primary tile outside a minimum cut),
+so any arrangement of them is seamless. A border tile carries the ring of another
+class around the interior of its own class; the player uses it where two classes meet.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import h5py
+import numpy as np
+
+from ._check import Checker
+from .source import SourceInfo
+
+MAX_TILES = 4096
+MAX_CLASSES = 64
+
+
+@dataclass
+class TilesModel:
+    """A set of triple toroid-shaped tiles.
+
+    Attributes
+    ----------
+    tiles : (K, L, th, tw, 3) uint8
+        Tile frames; frame ``L - 1`` is followed by frame 0 seamlessly.
+    tile_class : (K,) int32
+        Class (texture) of each tile's interior, ``0 .. C-1``.
+    ring_class : (K,) int32
+        Class of each tile's boundary ring; equal to ``tile_class`` for ordinary tiles,
+        different for border tiles.
+    masks : (K, th, tw) uint8
+        1 where the tile's pixel comes from the ring (the class primary), 0 from its interior.
+    seam_cost : (K,) float64
+        Mean squared RGB error per pixel along the tile's ring-interior cut (0 for primaries).
+    mean_rgb, mean_hsv : (K, 3) float64
+        Colour statistics per tile: RGB on 0..255; HSV with hue in degrees, S and V in 0..1.
+    class_names : list of str
+        Name of each class (the main texture first, then the mixed-in textures).
+    class_loop_start : (C,) int64
+        First source frame of each class's loop.
+    class_loop_cost : (C,) float64
+        Frame-set loop cost of each class (RMS difference over the median frame step).
+    class_toroid_cost : (C, 2) float64
+        Mean cut error of the primary tile's horizontal and vertical toroidal cuts.
+    info : dict
+        Scalars (tile size, loop length, period, band widths, ...) stored as attributes.
+    """
+
+    tiles: np.ndarray
+    tile_class: np.ndarray
+    ring_class: np.ndarray
+    masks: np.ndarray
+    seam_cost: np.ndarray
+    mean_rgb: np.ndarray
+    mean_hsv: np.ndarray
+    class_names: list[str]
+    class_loop_start: np.ndarray
+    class_loop_cost: np.ndarray
+    class_toroid_cost: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    @property
+    def n_tiles(self) -> int:
+        return int(self.tiles.shape[0])
+
+    @property
+    def loop_length(self) -> int:
+        return int(self.tiles.shape[1])
+
+    @property
+    def tile_size(self) -> tuple[int, int]:
+        return int(self.tiles.shape[2]), int(self.tiles.shape[3])
+
+    @property
+    def n_classes(self) -> int:
+        return len(self.class_names)
+
+    def tiles_of(self, cls: int, ring: int | None = None) -> np.ndarray:
+        """Indices of the tiles with interior class ``cls`` and ring class ``ring`` (default ``cls``)."""
+        ring = cls if ring is None else ring
+        return np.flatnonzero((self.tile_class == cls) & (self.ring_class == ring))
+
+
+def write(group: h5py.Group, model: TilesModel) -> None:
+    k, length, th, tw, _ = model.tiles.shape
+    group.create_dataset("tiles", data=np.asarray(model.tiles, np.uint8), chunks=(1, 1, th, tw, 3),
+                         compression="lzf")
+    group.create_dataset("tile_class", data=np.asarray(model.tile_class, np.int32))
+    group.create_dataset("ring_class", data=np.asarray(model.ring_class, np.int32))
+    group.create_dataset("masks", data=np.asarray(model.masks, np.uint8), compression="lzf")
+    for name in ("seam_cost", "mean_rgb", "mean_hsv", "class_loop_cost", "class_toroid_cost"):
+        group.create_dataset(name, data=np.asarray(getattr(model, name), np.float64))
+    group.create_dataset("class_loop_start", data=np.asarray(model.class_loop_start, np.int64))
+    group.create_dataset("class_names", data=np.array([n.encode("utf-8") for n in model.class_names], dtype="S64"))
+    for key, value in model.info.items():
+        group.attrs[key] = value
+    group.attrs["n_tiles"] = k
+    group.attrs["loop_length"] = length
+    group.attrs["tile_h"] = th
+    group.attrs["tile_w"] = tw
+
+
+def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
+    k = check.attr(group, "n_tiles", int)
+    length = check.attr(group, "loop_length", int)
+    th = check.attr(group, "tile_h", int)
+    tw = check.attr(group, "tile_w", int)
+    if not 1 <= k <= MAX_TILES:
+        check.fail(group.name + "@n_tiles", f"{k} tiles, outside 1..{MAX_TILES}")
+    if not 2 <= length <= 1_000_000:
+        check.fail(group.name + "@loop_length", f"loop length {length} outside 2..1000000")
+    if not (4 <= th <= 8192 and 4 <= tw <= 8192):
+        check.fail(group.name + "@tile_h", f"tile size {th}x{tw} outside 4..8192")
+    ds = check.dataset
+    names_raw = ds(group, "class_names", kind="S", shape=(None,))
+    c = len(names_raw)
+    if not 1 <= c <= MAX_CLASSES:
+        check.fail(group.name + "/class_names", f"{c} classes, outside 1..{MAX_CLASSES}")
+    try:
+        names = [bytes(n).decode("utf-8") for n in names_raw]
+    except UnicodeDecodeError:
+        check.fail(group.name + "/class_names", "names are not UTF-8")
+    model = TilesModel(
+        tiles=ds(group, "tiles", kind="u", shape=(k, length, th, tw, 3), read=False),
+        tile_class=ds(group, "tile_class", kind="iu", shape=(k,)).astype(np.int32),
+        ring_class=ds(group, "ring_class", kind="iu", shape=(k,)).astype(np.int32),
+        masks=ds(group, "masks", kind="u", shape=(k, th, tw)),
+        seam_cost=ds(group, "seam_cost", kind="f", shape=(k,)),
+        mean_rgb=ds(group, "mean_rgb", kind="f", shape=(k, 3)),
+        mean_hsv=ds(group, "mean_hsv", kind="f", shape=(k, 3)),
+        class_names=names,
+        class_loop_start=ds(group, "class_loop_start", kind="iu", shape=(c,)),
+        class_loop_cost=ds(group, "class_loop_cost", kind="f", shape=(c,)),
+        class_toroid_cost=ds(group, "class_toroid_cost", kind="f", shape=(c, 2)),
+        info={key: (v.item() if isinstance(v, np.generic) else v) for key, v in group.attrs.items()},
+    )
+    if model.tiles.dtype != np.uint8:
+        check.fail(group.name + "/tiles", f"dtype {model.tiles.dtype} is not uint8")
+    try:
+        model.tiles = model.tiles[()]
+    except Exception as exc:
+        check.fail(group.name + "/tiles", f"data cannot be read, the file may be truncated or corrupt ({exc})")
+    check.index_range(group.name + "/tile_class", model.tile_class, c)
+    check.index_range(group.name + "/ring_class", model.ring_class, c)
+    for cls in range(c):
+        if model.tiles_of(cls).size == 0:
+            check.fail(group.name + "/tile_class", f"class {cls} ({names[cls]!r}) has no tile of its own")
+    if model.masks.size and model.masks.max() > 1:
+        check.fail(group.name + "/masks", "values other than 0 and 1")
+    if (model.mean_rgb < 0).any() or (model.mean_rgb > 255).any():
+        check.fail(group.name + "/mean_rgb", "values outside 0..255")
+    return model
