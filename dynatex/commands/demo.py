@@ -35,6 +35,7 @@ DEMO_METHODS: dict[str, dict] = {
     "lds": {"n": 40},
     # the ripples travel and barely mirror (symmetry <= 0.05): keep every local maximum as a turn point
     "turnpoints": {"min_symmetry": 0.0},
+    "mixture": {"components": 3, "dim": 8},
 }
 
 #: What the demo plays, in order.
@@ -45,6 +46,8 @@ DEMO_STEPS: list[DemoStep] = [
     DemoStep("lds: slow, calm", "lds", {"speed": 0.5, "intensity": 0.5}),
     DemoStep("lds: fine scales up", "lds", {"scales": (0.5, 1.0, 2.5)}),
     DemoStep("lds: float16 basis", "lds", options={"precision": "float16"}),
+    DemoStep("mixture: 16 draws", "mixture"),
+    DemoStep("mixture: plain AR, calm", "mixture", {"draws": 1, "intensity": 0.5}),
     DemoStep("turnpoints: turns + jumps", "turnpoints"),
     DemoStep("turnpoints: jumps, speed 1.5", "turnpoints", {"speed": 1.5}, {"playback": "jumps"}),
 ]
