@@ -6,8 +6,10 @@ import importlib
 #: mode name -> "module:Class" inside dynatex.player
 MODES: dict[str, str] = {
     "lds": "lds:LDSPlayer",
+    "tiles": "tiles:TilesPlayer",
     "turnpoints": "turnpoints:TurnPointPlayer",
     "mixture": "mixture:MixturePlayer",
+    "evolve": "quilt:EvolvePlayer",
 }
 
 

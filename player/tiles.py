@@ -1,0 +1,419 @@
+"""Mode ``tiles``: any size, endless output from triple toroid-shaped tiles.
+
+The output is a lattice of tile cells. Each cell shows one tile of its class (seeded
+random choice; the class comes from the caller's label map, default the main texture).
+Each pixel plays its tile's loop at ``t + offset(x, t)``: per-cell offsets form a smooth
+random field (neighbouring cells differ little, as the seed asks: "maximal change to
+base time by neighbour patch"), spread over the pixels by a Gaussian of ``sigma`` output
+pixels so time shifts gradually across cell borders, and drifting from one field to the
+next over ``epoch`` frames so the output never repeats with the loop's period. Frames are
+built by the shared :class:`~dynatex.player.gather.Gather` (time interpolation between
+neighbouring loop frames, per-tile colour tone).
+
+Mixing: where a cell of class ``a`` borders class ``c``, the strip of its ring along
+that edge (and the corners) takes class ``min(a, c)``; if that is not ``a`` the pixels
+come from the border tile (ring ``c``, interior ``a``), so both sides of the cell edge
+show the same toroidal ring and the textures meet along the border tile's minimum cut.
+Without mixing the source is a cell grid (no per-pixel map is read); with mixing a
+per-pixel source map is built once per arrangement.
+"""
+from __future__ import annotations
+
+import os
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..tiledb import TileDB, TilesModel
+from .base import Player, check_float, check_int
+from .gather import Gather, gaussian_smooth, pack_source
+
+TIME_STEP = 8              # output pixels per time-map sample
+MAX_SIZE = 16384
+SPEED_RANGE = (-4.0, 4.0)
+
+
+class TilesPlayer(Player):
+    """Endless frames of any size from a texture's ``tiles`` group.
+
+    Parameters
+    ----------
+    db : path or TileDB
+    texture : str, optional
+    backend : {"opencl", "numpy"}
+    device : str, optional
+    seed : int
+        Seed of the arrangement and of the time offsets; the same seed gives the same frames.
+    size : (width, height), optional
+        Output size (default the source clip's); any size up to 16384 x 16384.
+    labels : (gh, gw) int array, optional
+        Class of every tile cell (``gh = ceil(H / th)``, ``gw = ceil(W / tw)``), or an
+        ``(H, W)`` map sampled at the cell centres. Classes are indices into
+        ``class_names`` (:attr:`classes`). Default: everything the main texture (class 0).
+    tone : None, str, int or (r, g, b)
+        Colour-tone target: None (off), a class name or index (fit every tile's mean RGB to
+        that texture's), ``"consensus"`` (the mean over all classes), or an RGB colour.
+
+    Controls (attributes, changeable between frames)
+    -------------------------------------------------
+    sigma : float >= 0
+        Gaussian smoothing of the time offsets, in output pixels (default half a tile).
+    max_shift : float in [0, loop length]
+        Amplitude of the per-cell time offsets, in frames (default a third of the loop).
+    epoch : int >= 0
+        Frames over which the offsets drift to a new random field (0: fixed offsets;
+        default twice the loop length).
+    speed : float in [-4, 4]
+        Loop frames per output frame.
+    tone : see above.
+
+    Examples
+    --------
+    >>> with TilesPlayer("grass.h5", size=(3840, 2160), seed=2) as p:   # doctest: +SKIP
+    ...     p.sigma = 48.0
+    ...     frame = p.next_frame()                                       # (2160, 3840, 3)
+    """
+
+    mode = "tiles"
+
+    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
+                 backend: str = "opencl", device: str | None = None, seed: int = 0,
+                 size: Sequence[int] | None = None, labels: np.ndarray | None = None,
+                 tone: Any = None) -> None:
+        super().__init__(db, texture, backend=backend, device=device)
+        try:
+            self._setup(self.texture.read("tiles"), seed, size, labels, tone)
+        except BaseException:
+            self.close()
+            raise
+
+    def _setup(self, model: TilesModel, seed: int, size, labels, tone) -> None:
+        self.model = model
+        self.model_info = dict(model.info)
+        k, length, th, tw, _ = model.tiles.shape
+        self.loop_length, self.tile_size, self.n_tiles = length, (th, tw), k
+        if size is None:
+            src = self.texture.source
+            size = (src.width, src.height)
+        try:
+            w, h = (int(v) for v in size)
+        except (TypeError, ValueError):
+            raise ValueError(f"size must be (width, height), not {size!r}") from None
+        if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
+            raise ValueError(f"size must be within 1..{MAX_SIZE} on each side, not {w}x{h}")
+        self._shape = (h, w, 3)
+        self.grid_shape = (-(-h // th), -(-w // tw))
+        self.ring = int(model.info.get("ring", max(2, min(th, tw) // 5)))
+        self.labels = self._check_labels(labels)
+        mixing = len(np.unique(self.labels)) > 1
+        stack = np.ascontiguousarray(model.tiles.transpose(1, 2, 0, 3, 4).reshape(length, th, k * tw, 3))
+        self._gather = Gather(stack, (h, w), backend=self.backend, ctx=self.ctx, queue=self.queue,
+                              time_step=TIME_STEP, cell=None if mixing else (th, tw))
+        self.mixing = mixing
+        self._sigma = 0.5 * min(th, tw)
+        self._max_shift = length / 3.0
+        self._epoch = 2 * length
+        self._speed = 1.0
+        self._t = 0.0
+        self._phase = 0
+        self._tone_spec = None
+        self.tone = tone
+        self.reseed(seed)
+        self._warm()
+
+    # -- arrangement ---------------------------------------------------------------------------
+    @property
+    def classes(self) -> list[str]:
+        """Names of the tile classes (textures), index = label value."""
+        return list(self.model.class_names)
+
+    def _check_labels(self, labels) -> np.ndarray:
+        gh, gw = self.grid_shape
+        if labels is None:
+            return np.zeros((gh, gw), np.int32)
+        lab = np.asarray(labels)
+        if lab.dtype.kind not in "iub" or lab.ndim != 2:
+            raise ValueError(f"labels must be a 2-D integer map, not {lab.dtype} {lab.shape}")
+        h, w = self._shape[:2]
+        th, tw = self.tile_size
+        if lab.shape == (h, w) and (h, w) != (gh, gw):
+            cy = np.minimum(np.arange(gh) * th + th // 2, h - 1)
+            cx = np.minimum(np.arange(gw) * tw + tw // 2, w - 1)
+            lab = lab[cy][:, cx]
+        if lab.shape != (gh, gw):
+            raise ValueError(f"labels must have shape {(gh, gw)} (tile cells) or {(h, w)} (pixels), not {lab.shape}")
+        n = self.model.n_classes
+        if lab.size and (lab.min() < 0 or lab.max() >= n):
+            bad = int(lab.max()) if lab.max() >= n else int(lab.min())
+            raise ValueError(f"labels name texture class {bad}, but the tile set has {n} class(es): "
+                             + ", ".join(f"{i}={c}" for i, c in enumerate(self.model.class_names)))
+        return lab.astype(np.int32)
+
+    def _arrange(self) -> None:
+        """Choose a tile of its class for every cell (seeded) and build the gather's source."""
+        m = self.model
+        choice = np.empty(self.grid_shape, np.int64)
+        for c in np.unique(self.labels):
+            own = m.tiles_of(int(c))
+            cells = self.labels == c
+            choice[cells] = own[self._rng.integers(0, len(own), int(cells.sum()))]
+        self._build_source(choice)
+
+    def _build_source(self, choice: np.ndarray) -> None:
+        m = self.model
+        th, tw = self.tile_size
+        kw = self.n_tiles * tw
+        self.arrangement = choice
+        if not self.mixing:
+            self._gather.set_source_grid(pack_source(choice * tw, choice))
+            return
+        h, w = self._shape[:2]
+        yy, xx = np.arange(h), np.arange(w)
+        ci, cj = yy // th, xx // tw
+        ly, lx = yy - ci * th, xx - cj * tw
+        lab = self.labels
+        pad = np.pad(lab, 1, mode="edge")                          # outside the output: own class
+        a = lab[ci][:, cj]
+        r = self.ring
+        left, top = lx < tw - 1 - lx, ly < th - 1 - ly
+        dh = np.minimum(lx, tw - 1 - lx)
+        dv = np.minimum(ly, th - 1 - ly)
+        # neighbour cell across the nearer vertical / horizontal edge (padded indices)
+        nj = np.where(left, cj, cj + 2)
+        ni = np.where(top, ci, ci + 2)
+        pi, pj = ci + 1, cj + 1
+        edge_h = np.minimum(a, pad[pi[:, None], nj[None, :]])       # across the left/right edge
+        edge_v = np.minimum(a, pad[ni[:, None], pj[None, :]])       # across the top/bottom edge
+        corner = np.minimum(np.minimum(edge_h, edge_v), pad[ni[:, None], nj[None, :]])
+        in_h = (dh < r)[None, :]
+        in_v = (dv < r)[:, None]
+        zone = np.where(in_h & in_v, corner, np.where(in_h, edge_h, np.where(in_v, edge_v, a)))
+        tile = choice[ci][:, cj]
+        border = zone != a
+        if border.any():
+            lut = np.full((m.n_classes, m.n_classes), -1, np.int64)
+            for kk in range(self.n_tiles):
+                if m.tile_class[kk] != m.ring_class[kk] and lut[m.tile_class[kk], m.ring_class[kk]] < 0:
+                    lut[m.tile_class[kk], m.ring_class[kk]] = kk
+            bt = lut[a[border], zone[border]]
+            if (bt < 0).any():
+                raise ValueError("the tile set has no border tile for some pair of neighbouring classes; "
+                                 "re-run the analysis with every texture mixed in")
+            tile[border] = bt
+        index = ly[:, None] * kw + tile * tw + lx[None, :]
+        self._gather.set_source_map(pack_source(index, tile))
+
+    def set_labels(self, labels: np.ndarray | None) -> None:
+        """Replace the label map (same rules as the constructor); the arrangement is redrawn."""
+        lab = self._check_labels(labels)
+        if (len(np.unique(lab)) > 1) != self.mixing:
+            raise ValueError("set_labels cannot switch between a single texture and a mix; open a new player")
+        self.labels = lab
+        self._arrange()
+
+    # -- time offsets ------------------------------------------------------------------------------
+    def _cell_field(self) -> np.ndarray:
+        """Per-cell offsets in [0, 1]: smooth random field (neighbours differ little)."""
+        gh, gw = self.grid_shape
+        raw = gaussian_smooth(self._rng.random((gh, gw)).astype(np.float32), 1.5)
+        lo, hi = float(raw.min()), float(raw.max())
+        return (raw - lo) / (hi - lo) if hi > lo else np.full_like(raw, 0.5)
+
+    def _pixel_field(self, cells: np.ndarray) -> np.ndarray:
+        """Cell offsets spread on the time-map lattice and Gaussian-smoothed by ``sigma`` (device)."""
+        th, tw = self.tile_size
+        mh, mw = self._gather.tmap_shape
+        cy = np.minimum(((np.arange(mh) + 0.5) * TIME_STEP) // th, cells.shape[0] - 1).astype(int)
+        cx = np.minimum(((np.arange(mw) + 0.5) * TIME_STEP) // tw, cells.shape[1] - 1).astype(int)
+        field = (cells[cy][:, cx] * self._max_shift).astype(np.float32)
+        self._gather.set_time_map(field)
+        self._gather.smooth_time_map(self._sigma)
+        return self._gather.time_map
+
+    def _refresh_fields(self) -> None:
+        self._field_a = self._pixel_field(self._cells_a)
+        self._field_b = self._pixel_field(self._cells_b)
+
+    def _time_map(self) -> np.ndarray:
+        if self._epoch == 0:
+            return self._field_a
+        f = np.float32(self._phase / self._epoch)
+        return self._field_a + f * (self._field_b - self._field_a)
+
+    def _advance_time(self) -> None:
+        self._t = (self._t + self._speed) % self.loop_length
+        if self._epoch:
+            self._phase += 1
+            if self._phase >= self._epoch:
+                self._phase = 0
+                self._cells_a, self._field_a = self._cells_b, self._field_b
+                self._cells_b = self._cell_field()
+                self._field_b = self._pixel_field(self._cells_b)
+
+    # -- controls ------------------------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self._shape
+
+    @property
+    def sigma(self) -> float:
+        return self._sigma
+
+    @sigma.setter
+    def sigma(self, value: float) -> None:
+        self._sigma = check_float("sigma", value, 0.0, 4096.0)
+        self._refresh_fields()
+
+    @property
+    def max_shift(self) -> float:
+        return self._max_shift
+
+    @max_shift.setter
+    def max_shift(self, value: float) -> None:
+        self._max_shift = check_float("max_shift", value, 0.0, float(self.loop_length))
+        self._refresh_fields()
+
+    @property
+    def epoch(self) -> int:
+        return self._epoch
+
+    @epoch.setter
+    def epoch(self, value: int) -> None:
+        self._epoch = check_int("epoch", value, 0, 10**7)
+        self._phase = min(self._phase, max(0, self._epoch - 1))
+
+    @property
+    def speed(self) -> float:
+        return self._speed
+
+    @speed.setter
+    def speed(self, value: float) -> None:
+        self._speed = check_float("speed", value, *SPEED_RANGE)
+
+    @property
+    def tone(self) -> Any:
+        return self._tone_spec
+
+    @tone.setter
+    def tone(self, value: Any) -> None:
+        self._gather.set_tones(*self._tone_tables(value))
+        self._tone_spec = value
+
+    def tone_target(self, value: Any) -> np.ndarray | None:
+        """The RGB target ``value`` names (see ``tone``), or None when tone fitting is off."""
+        m = self.model
+        if value is None:
+            return None
+        class_means = np.array([m.mean_rgb[m.tiles_of(c)].mean(axis=0) for c in range(m.n_classes)])
+        if isinstance(value, str):
+            if value == "consensus":
+                return class_means.mean(axis=0)
+            if value not in m.class_names:
+                raise ValueError(f"tone names texture {value!r}, which the tile set lacks "
+                                 f"(it has {', '.join(m.class_names)}, or 'consensus', or an RGB colour)")
+            return class_means[m.class_names.index(value)]
+        if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+            if not 0 <= value < m.n_classes:
+                raise ValueError(f"tone names texture class {value}, but the tile set has {m.n_classes}")
+            return class_means[int(value)]
+        rgb = np.asarray(value, dtype=float)
+        if rgb.shape != (3,) or not np.isfinite(rgb).all() or rgb.min() < 0 or rgb.max() > 255:
+            raise ValueError(f"tone must be None, a texture name or index, 'consensus' or an RGB colour in "
+                             f"0..255, not {value!r}")
+        return rgb
+
+    def _tone_tables(self, value: Any) -> tuple[np.ndarray, np.ndarray]:
+        target = self.tone_target(value)
+        gain = np.ones((self.n_tiles, 3), np.float32)
+        if target is not None:
+            means = np.maximum(self.model.mean_rgb, 1.0)
+            gain = np.clip(target[None, :] / means, 0.0, 64.0).astype(np.float32)
+        return gain, np.zeros_like(gain)
+
+    def reseed(self, seed: int) -> None:
+        """Redraw the arrangement and the time offsets from ``seed``."""
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
+        self.seed = int(seed)
+        self._rng = np.random.Generator(np.random.PCG64(self.seed))
+        self._arrange()
+        self._cells_a = self._cell_field()
+        self._cells_b = self._cell_field()
+        self._phase = 0
+        self._refresh_fields()
+
+    # -- synthesis ---------------------------------------------------------------------------------------
+    def _warm(self) -> None:
+        scratch = np.empty(self._shape, np.uint8)
+        self._gather.set_time_map(self._time_map())
+        self._gather.render(self._t, scratch)
+
+    def _render(self, out: np.ndarray) -> None:
+        self._gather.set_time_map(self._time_map())
+        self._gather.render(self._t, out)
+        self._advance_time()
+
+    def inpaint(self, frame: np.ndarray, mask: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The caller's ``frame`` with its ``mask``-ed pixels replaced by the next synthesized frame.
+
+        ``frame`` is ``(H, W, 3)`` uint8 of the player's size, ``mask`` ``(H, W)`` bool or
+        0/1 integers (nonzero = fill). Advances the player by one frame.
+        """
+        frame = np.asarray(frame)
+        if frame.dtype != np.uint8 or frame.shape != self._shape:
+            raise ValueError(f"frame must be uint8 with shape {self._shape}, not {frame.dtype} {frame.shape}")
+        mask = np.asarray(mask)
+        if mask.shape != self._shape[:2]:
+            raise ValueError(f"mask must have shape {self._shape[:2]} (the frame's height and width), "
+                             f"not {mask.shape}")
+        if mask.dtype.kind not in "biu":
+            raise ValueError(f"mask must be boolean or integer, not {mask.dtype}")
+        synth = self.next_frame()
+        if out is None:
+            out = frame.copy()
+        elif out is not frame:
+            np.copyto(out, frame)
+        np.copyto(out, synth, where=(mask != 0)[..., None])
+        return out
+
+    @property
+    def bytes_per_frame(self) -> int:
+        """Bytes one frame moves at least (the gather's reads and writes and the copy out)."""
+        return self._gather.bytes_per_frame
+
+    # -- state --------------------------------------------------------------------------------------------
+    def _get_state(self) -> dict[str, Any]:
+        return {"t": self._t, "phase": self._phase, "rng": self._rng.bit_generator.state, "seed": self.seed,
+                "cells_a": self._cells_a.copy(), "cells_b": self._cells_b.copy(),
+                "arrangement": self.arrangement.copy(), "labels": self.labels.copy(), "sigma": self._sigma,
+                "max_shift": self._max_shift, "epoch": self._epoch, "speed": self._speed,
+                "tone": self._tone_spec}
+
+    def _set_state(self, state: dict[str, Any]) -> None:
+        try:
+            rng = np.random.Generator(np.random.PCG64())
+            rng.bit_generator.state = state["rng"]
+            labels = self._check_labels(state["labels"])
+            cells = [np.asarray(state[k], np.float32) for k in ("cells_a", "cells_b")]
+            arrangement = np.asarray(state["arrangement"], np.int64)
+            t = check_float("t", state["t"], 0.0, float(self.loop_length))
+            phase = check_int("phase", state["phase"], 0)
+            self.speed = state["speed"]
+            self.epoch = state["epoch"]
+            self._sigma = check_float("sigma", state["sigma"], 0.0, 4096.0)
+            self._max_shift = check_float("max_shift", state["max_shift"], 0.0, float(self.loop_length))
+        except KeyError as exc:
+            raise ValueError(f"state lacks {exc.args[0]!r}") from None
+        if any(c.shape != self.grid_shape or not np.isfinite(c).all() for c in cells):
+            raise ValueError(f"state offsets must be finite with shape {self.grid_shape}")
+        if arrangement.shape != self.grid_shape or arrangement.min() < 0 or arrangement.max() >= self.n_tiles:
+            raise ValueError("state arrangement does not fit this tile set")
+        self._rng, self.labels, self._t, self._phase = rng, labels, t, phase
+        self._cells_a, self._cells_b = cells
+        self.arrangement = arrangement
+        if not (self.model.tile_class[arrangement] == labels).all():
+            raise ValueError("state arrangement does not match its labels")
+        self.seed = int(state.get("seed", self.seed))
+        self.tone = state.get("tone")
+        self._build_source(arrangement)
+        self._refresh_fields()
