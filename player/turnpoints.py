@@ -8,11 +8,11 @@ the whole clip gets used); elsewhere it may take a transition. The outermost tur
 always reverse when playback heads outward, and forward-only playback always jumps at the
 exit frame, so the walk never reaches a dead end.
 
-Frames are kept in memory on the device: ``T * ceil(H*W*3 / 16) * 16`` bytes (grey clips
+Frames are kept in memory on the device: ``T * ceil(H*W*3 / 64) * 64`` bytes (grey clips
 are expanded to RGB), e.g. 7.4 MB for the 43-frame 240x240 pendulum clip, 321 MB for 116
 frames at 1280x720. A frame that is one stored frame is a single device-to-host copy
 straight into the caller's buffer; a crossfade (after a jump) or a fractional speed
-blends up to four frames with one ``blend`` kernel launch in exact integer arithmetic,
+blends two (or up to four) frames with one kernel launch in exact integer arithmetic,
 so the numpy reference gives identical bytes.
 """
 from __future__ import annotations
@@ -31,6 +31,7 @@ SPEED_RANGE = (0.0, 4.0)
 MAX_CROSSFADE = 16
 EVENT_NONE, EVENT_TURN, EVENT_JUMP = 0, 1, 2
 VEC = 16
+ITEMS = 4          # uchar16 per work-item of the blend kernels
 
 
 class TurnPointPlayer(Player):
@@ -118,7 +119,7 @@ class TurnPointPlayer(Player):
         if frames.shape[-1] == 1:
             frames = np.repeat(frames, 3, axis=-1)
         self.frame_bytes = int(np.prod(self._shape))
-        self._vecs = -(-self.frame_bytes // VEC)
+        self._vecs = -(-self.frame_bytes // (VEC * ITEMS)) * ITEMS
         self.memory_bytes = t * self._vecs * VEC
         if self.backend == "numpy":
             self._frames = np.ascontiguousarray(frames)
@@ -169,14 +170,19 @@ class TurnPointPlayer(Player):
         self._params = np.zeros(8, np.int32)
         self._d_params = cl.Buffer(self.ctx, mf.READ_ONLY, self._params.nbytes)
         self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, self._vecs * VEC)
-        prog = build_program(self.ctx, "blend.cl", {"FRAME_VECS": self._vecs})
-        self._kernel = prog.kernel("blend")
-        self._kernel.set_args(self._d_frames, self._d_params, self._d_out)
-        self._gsize = (self._vecs,)
+        prog = build_program(self.ctx, "blend.cl", {"FRAME_VECS": self._vecs, "ITEMS": ITEMS})
+        self._kernels = {}
+        for terms in (2, 4):
+            kernel = prog.kernel(f"blend{terms}")
+            kernel.set_args(self._d_frames, self._d_params, self._d_out)
+            self._kernels[terms] = kernel
+        self._gsize = (self._vecs // ITEMS,)
 
     def _warm(self) -> None:
         scratch = np.empty(self._shape, np.uint8)
-        self._compose(((0, 128), (min(1, self.n_frames - 1), 128)), scratch)
+        last = self.n_frames - 1
+        self._compose(((0, 128), (last, 128)), scratch)
+        self._compose(((0, 64), (last, 64), (0, 64), (last, 64)), scratch)
         self._compose(((0, 256),), scratch)
 
     # -- controls ----------------------------------------------------------------------
@@ -358,7 +364,8 @@ class TurnPointPlayer(Player):
         for k, (frame, w) in enumerate(sources):
             p[k], p[4 + k] = frame, w
         cl.enqueue_copy(self.queue, self._d_params, p, is_blocking=False)
-        cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, None)
+        kernel = self._kernels[2 if len(sources) == 2 else 4]
+        cl.enqueue_nd_range_kernel(self.queue, kernel, self._gsize, None)
         cl.enqueue_copy(self.queue, flat, self._d_out, is_blocking=True)
 
     # -- state ---------------------------------------------------------------------------

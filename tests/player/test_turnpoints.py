@@ -33,7 +33,7 @@ def test_opencl_matches_numpy_exactly(pend_db, cl_context, playback):
     path = pend_db[0]
     with TurnPointPlayer(path, backend="numpy", playback=playback, seed=5) as ref, \
             TurnPointPlayer(path, backend="opencl", playback=playback, seed=5) as cl:
-        blended = 0
+        blended, terms = 0, set()
         for k in range(160):
             if k % 40 == 0:
                 ref.speed = cl.speed = [1.0, 0.37, 2.5, 1.6][k // 40]
@@ -42,7 +42,10 @@ def test_opencl_matches_numpy_exactly(pend_db, cl_context, playback):
             assert np.array_equal(a, b), k
             assert ref.last_sources == cl.last_sources
             blended += len(ref.last_sources) > 1
-        assert blended > 20  # the blend kernel path was exercised, not only copies
+            terms.add(len(ref.last_sources))
+        assert blended > 20  # the blend kernels were exercised, not only copies
+        if playback != "turns":
+            assert max(terms) > 2  # a crossfade at a fractional speed: the four-term kernel
 
 
 def test_blend_arithmetic(pend_db):
@@ -180,7 +183,7 @@ def test_missing_tables_or_frames(tmp_path, pend_db):
 
 def test_memory_cost_is_reported(pend_db, cl_context):
     with TurnPointPlayer(pend_db[0]) as p:
-        assert p.memory_bytes == 90 * ((40 * 40 * 3 + 15) // 16) * 16
+        assert p.memory_bytes == 90 * ((40 * 40 * 3 + 63) // 64) * 64
 
 
 def _long_run(path, clip, playback="hybrid", frames=10000, seed=1):
