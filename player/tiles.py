@@ -31,6 +31,36 @@ from .gather import Gather, gaussian_smooth, pack_source
 TIME_STEP = 8              # output pixels per time-map sample
 MAX_SIZE = 16384
 SPEED_RANGE = (-4.0, 4.0)
+LABEL_PRESETS = ("halves", "stripes", "checker", "blobs")
+
+
+def label_preset(name: str, shape: tuple[int, int], n_classes: int, *, seed: int = 0) -> np.ndarray:
+    """A pixel label map ``(H, W)`` of class indices ``0 .. n_classes-1`` for quick mixing.
+
+    ``halves``: vertical bands, one per class; ``stripes``: eight horizontal bands cycling
+    the classes; ``checker``: a 4 x 4 board; ``blobs``: smooth random regions.
+
+    Examples
+    --------
+    >>> label_preset("halves", (2, 4), 2).tolist()
+    [[0, 0, 1, 1], [0, 0, 1, 1]]
+    """
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    if name == "halves":
+        return np.minimum(xx * n_classes // w, n_classes - 1).astype(np.int32)
+    if name == "stripes":
+        return ((yy * 8 // h) % n_classes).astype(np.int32)
+    if name == "checker":
+        return (((yy * 4 // h) + (xx * 4 // w)) % n_classes).astype(np.int32)
+    if name == "blobs":
+        rng = np.random.default_rng(seed)
+        gh, gw = max(2, h // 64), max(2, w // 64)
+        noise = gaussian_smooth(rng.random((gh, gw)).astype(np.float32), 1.0)
+        cut = np.quantile(noise, np.linspace(0, 1, n_classes + 1)[1:-1])
+        cells = np.searchsorted(cut, noise).astype(np.int32)
+        return cells[np.minimum(yy * gh // h, gh - 1), np.minimum(xx * gw // w, gw - 1)]
+    raise ValueError(f"labels preset must be one of {LABEL_PRESETS}, not {name!r}")
 
 
 class TilesPlayer(Player):
@@ -46,9 +76,9 @@ class TilesPlayer(Player):
         Seed of the arrangement and of the time offsets; the same seed gives the same frames.
     size : (width, height), optional
         Output size (default the source clip's); any size up to 16384 x 16384.
-    labels : (gh, gw) int array, optional
-        Class of every tile cell (``gh = ceil(H / th)``, ``gw = ceil(W / tw)``), or an
-        ``(H, W)`` map sampled at the cell centres. Classes are indices into
+    labels : (gh, gw) int array or str, optional
+        Class of every tile cell (``gh = ceil(H / th)``, ``gw = ceil(W / tw)``), an
+        ``(H, W)`` map sampled at the cell centres, or a :func:`label_preset` name. Classes are indices into
         ``class_names`` (:attr:`classes`). Default: everything the main texture (class 0).
     tone : None, str, int or (r, g, b)
         Colour-tone target: None (off), a class name or index (fit every tile's mean RGB to
@@ -131,6 +161,8 @@ class TilesPlayer(Player):
         gh, gw = self.grid_shape
         if labels is None:
             return np.zeros((gh, gw), np.int32)
+        if isinstance(labels, str):
+            labels = label_preset(labels, self._shape[:2], self.model.n_classes, seed=getattr(self, "seed", 0))
         lab = np.asarray(labels)
         if lab.dtype.kind not in "iub" or lab.ndim != 2:
             raise ValueError(f"labels must be a 2-D integer map, not {lab.dtype} {lab.shape}")

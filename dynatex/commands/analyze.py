@@ -52,6 +52,21 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--mix-neighbors", type=positive_int, default=12, help="LLE neighbours K (default 12)")
     g.add_argument("--mix-pmax", type=positive_int, default=None,
                    help="largest AR order tried (default 5, or less when the clip is short)")
+    g = p.add_argument_group("tiles")
+    g.add_argument("--tile", type=_tile_arg, default=None, metavar="N or WxH",
+                   help="tile size in pixels (default: from the dominant spatial period)")
+    g.add_argument("--tiles-n", type=positive_int, default=4, help="tiles per texture (default 4)")
+    g.add_argument("--tiles-min-loop", type=positive_int, default=16, help="shortest loop in frames (default 16)")
+    g.add_argument("--tiles-max-loop", type=positive_int, default=None, help="longest loop (default: the clip)")
+    g.add_argument("--tiles-transition", type=positive_int, default=8,
+                   help="frames over which the per-pixel temporal transitions spread (default 8)")
+    g.add_argument("--tiles-ring", type=positive_int, default=None, help="width of the shared tile ring (default tile/5)")
+    g.add_argument("--tiles-flow-gain", type=float, default=0.5,
+                   help="extra cut freedom per pixel/frame of optical flow (default 0.5, 0 = off)")
+    g.add_argument("--tiles-mix", action="append", default=[], metavar="CLIP",
+                   help="another texture to mix with (repeatable): cut to the same tiles, with border tiles")
+    g.add_argument("--tiles-names", default=None, metavar="A,B,...",
+                   help="class names of the main and the --tiles-mix textures (default main,mix1,...)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
     return p
 
@@ -77,7 +92,30 @@ def method_params(name: str, args: argparse.Namespace) -> dict:
     if name == "turnpoints":
         return {"n": args.tp_n, "s": args.tp_s, "r": args.tp_r, "min_symmetry": args.tp_min_symmetry,
                 "max_cost": args.tp_max_cost}
+    if name == "tiles":
+        mix = []
+        for path in args.tiles_mix:
+            src = path
+            if path.endswith(".npy") and os.path.isfile(path):
+                import numpy as np
+                src = np.load(path, allow_pickle=False)
+            mix.append(load_clip(src, stop=args.stop, step=args.step, size=args.resize, color=not args.grey,
+                                 isolate=isinstance(src, str) and os.path.isfile(src)).frames)
+        names = None if args.tiles_names is None else [n.strip() for n in args.tiles_names.split(",")]
+        return {"tile": args.tile, "n_tiles": args.tiles_n, "min_loop": args.tiles_min_loop,
+                "max_loop": args.tiles_max_loop, "transition": args.tiles_transition, "ring": args.tiles_ring,
+                "flow_gain": args.tiles_flow_gain, "mix": mix, "names": names}
     return {}
+
+
+def _tile_arg(text: str):
+    try:
+        parts = [int(v) for v in text.lower().split("x")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected N or WxH, not {text!r}") from None
+    if len(parts) not in (1, 2) or min(parts) < 1:
+        raise argparse.ArgumentTypeError(f"expected N or WxH, not {text!r}")
+    return parts[0] if len(parts) == 1 else (parts[1], parts[0])    # WxH -> (h, w)
 
 
 def _int(flag: str, text: str) -> int:
@@ -133,6 +171,11 @@ def _summary(name: str, model) -> str:
         return (f"S={model.components} d={model.dim} D={model.global_dim}, AR({model.order}) by Schwarz, "
                 f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
                 f"{info.get('recon_error_pca_dim', 0):.3f})")
+    if name == "tiles":
+        return (f"{model.n_tiles} tiles of {model.tile_size[1]}x{model.tile_size[0]}, loop {model.loop_length} "
+                f"frames from {model.class_loop_start.tolist()}, classes {', '.join(model.class_names)}, "
+                f"toroidal cut cost {model.class_toroid_cost.mean():.4g}, ring seam cost "
+                f"{model.seam_cost[model.seam_cost > 0].mean() if (model.seam_cost > 0).any() else 0:.4g}")
     if name == "turnpoints":
         return (f"{info.get('n_turn_points', 0)} turn points {model.turn_points.tolist()[:12]}, "
                 f"{info.get('n_transitions', 0)} transitions, exit frame {model.exit_frame}")

@@ -36,6 +36,17 @@ def _method_info(method: str, model) -> dict:
     info = {k: _plain(v) for k, v in (getattr(model, "info", None) or {}).items()}
     if method == "lds":
         info.update(n=model.n, k=model.k, basis_mb=round(model.basis.nbytes / 2**20, 2))
+    if method == "tiles":
+        pure = model.ring_class == model.tile_class
+        info.update(n_tiles=model.n_tiles, tile_size=f"{model.tile_size[1]}x{model.tile_size[0]}",
+                    loop_length=model.loop_length, classes=list(model.class_names),
+                    tiles_per_class=[int(len(model.tiles_of(c))) for c in range(model.n_classes)],
+                    border_tiles=int((~pure).sum()), loop_start=model.class_loop_start.tolist(),
+                    loop_cost=[round(float(v), 4) for v in model.class_loop_cost],
+                    toroid_cut_cost=[[round(float(v), 2) for v in row] for row in model.class_toroid_cost],
+                    ring_seam_cost=[round(float(v), 2) for v in model.seam_cost],
+                    mean_rgb=[[round(float(v), 1) for v in row] for row in model.mean_rgb],
+                    tiles_mb=round(model.tiles.nbytes / 2**20, 2))
     return info
 
 

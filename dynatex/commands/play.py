@@ -42,6 +42,21 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--crossfade", type=int, default=4, help="frames of crossfade at a jump, 0..16 (default 4)")
     g.add_argument("--increment", type=float, default=0.1, help="step of the adaptive reversal probabilities")
     g.add_argument("--start", type=int, default=0, help="first source frame (default 0)")
+    g = p.add_argument_group("tiles controls (also --size, --speed in [-4, 4])")
+    g.add_argument("--sigma", type=float, default=None,
+                   help="Gaussian smoothing of the per-tile time offsets, output pixels (default half a tile)")
+    g.add_argument("--max-shift", type=float, default=None, help="amplitude of the time offsets, frames "
+                   "(default a third of the loop)")
+    g.add_argument("--epoch", type=int, default=None,
+                   help="frames over which the offsets drift to a new field, 0 = fixed (default 2 loops)")
+    g.add_argument("--tone", default=None, metavar="TEXTURE|consensus|R,G,B",
+                   help="fit tile colours to a texture class's tone, the consensus of all, or a colour")
+    g.add_argument("--labels", default=None, metavar="PRESET|FILE.npy",
+                   help="which texture class goes where: halves, stripes, checker, blobs, or an .npy map "
+                        "(tile cells or pixels) of class indices")
+    g.add_argument("--inpaint", default=None, metavar="VIDEO",
+                   help="fill the --mask region of this video's frames with synthesized texture")
+    g.add_argument("--mask", default=None, metavar="MASK.png|.npy", help="inpainting mask, nonzero = fill")
     return p
 
 
@@ -58,6 +73,10 @@ def player_options(args: argparse.Namespace) -> dict:
     if args.mode == "turnpoints":
         opts["playback"] = args.playback
         opts["start"] = args.start
+    if args.mode == "tiles":
+        opts.update(_tiles_options(args))
+    elif args.inpaint or args.labels or args.tone:
+        raise UsageError("--inpaint, --labels and --tone belong to mode tiles")
     if args.size is not None and args.mode == "lds":
         raise UsageError("--size is not supported by mode lds (it plays at the clip's resolution)")
     if args.size is not None and args.mode == "turnpoints":
@@ -72,6 +91,11 @@ def apply_controls(player, args: argparse.Namespace) -> None:
         player.speed = args.speed
         player.crossfade = args.crossfade
         player.increment = args.increment
+    if args.mode == "tiles":
+        player.speed = args.speed
+        for name in ("sigma", "max_shift", "epoch"):
+            if getattr(args, name) is not None:
+                setattr(player, name, getattr(args, name))
     if args.mode == "lds":
         player.speed = args.speed
         player.intensity = args.intensity
@@ -82,8 +106,75 @@ def apply_controls(player, args: argparse.Namespace) -> None:
                 raise UsageError(f"--scales must be three numbers C,M,F, not {args.scales!r}") from None
 
 
+def _tiles_options(args: argparse.Namespace) -> dict:
+    opts: dict = {}
+    if args.inpaint:
+        if not args.mask:
+            raise UsageError("--inpaint needs --mask")
+        import cv2
+        cap = cv2.VideoCapture(args.inpaint)
+        ok, first = cap.read()
+        cap.release()
+        if not ok:
+            raise UsageError(f"--inpaint: cannot read a frame of {args.inpaint}")
+        opts["size"] = (first.shape[1], first.shape[0])
+    elif args.mask:
+        raise UsageError("--mask needs --inpaint")
+    elif args.size is not None:
+        opts["size"] = args.size
+    if args.labels:
+        if args.labels.endswith(".npy"):
+            if not os.path.isfile(args.labels):
+                raise UsageError(f"--labels: no such file {args.labels}")
+            opts["labels"] = np.load(args.labels, allow_pickle=False)
+        else:
+            opts["labels"] = args.labels
+    if args.tone:
+        tone = args.tone
+        if "," in tone:
+            try:
+                tone = tuple(float(v) for v in tone.split(","))
+            except ValueError:
+                raise UsageError(f"--tone colour must be R,G,B numbers, not {args.tone!r}") from None
+        opts["tone"] = tone
+    return opts
+
+
+def _run_inpaint(args: argparse.Namespace, player, writer: "FrameWriter", fps: float | None) -> int:
+    """Frames of the --inpaint video with the --mask region synthesized (mode tiles)."""
+    import cv2
+    if args.mask.endswith(".npy"):
+        mask = np.load(args.mask, allow_pickle=False)
+    else:
+        mask = cv2.imread(args.mask, cv2.IMREAD_GRAYSCALE)
+        if mask is None:
+            raise UsageError(f"--mask: cannot read {args.mask}")
+    cap = cv2.VideoCapture(args.inpaint)
+    fps = fps or cap.get(cv2.CAP_PROP_FPS) or 25.0
+    out = np.empty(player.shape, np.uint8)
+    n = 0
+    try:
+        while n < args.frames:
+            ok, bgr = cap.read()
+            if not ok:
+                break
+            player.inpaint(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), mask, out=out)
+            writer.write(out, fps)
+            n += 1
+    finally:
+        cap.release()
+        writer.close()
+    print(f"inpainted {n} frames ({player.shape[1]}x{player.shape[0]}) of {args.inpaint} to {args.output}",
+          file=sys.stderr)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     writer = FrameWriter(args.output)
+    if getattr(args, "inpaint", None) and args.mode == "tiles":
+        with open_player(args.database, args.texture, mode=args.mode, **player_options(args)) as player:
+            apply_controls(player, args)
+            return _run_inpaint(args, player, writer, args.fps)
     with open_player(args.database, args.texture, mode=args.mode, **player_options(args)) as player:
         apply_controls(player, args)
         fps = args.fps or player.texture.source.fps
