@@ -155,14 +155,15 @@ def future_costs(cost_p: np.ndarray, alpha: float, dead: float, max_iter: int = 
     t = cost_p.shape[0]
     m = np.zeros(t)
     m[-1] = dead
+    # Continuing chains are solved exactly in each sweep: m[j] = min_{k >= j} alpha^(k-j) b[k]
+    # (b = best jump, capped by the dead end at the last frame), a reversed running minimum
+    # of alpha^k b[k]; only chains of jumps need further sweeps.
+    powers = alpha ** np.arange(t, dtype=np.float64)
     for _ in range(max_iter):
-        f = cost_p + alpha * m[None, :]
-        best_jump = f.min(axis=1)
-        cont = np.empty(t)
-        cont[:-1] = alpha * m[1:]
-        cont[-1] = dead
-        new = np.minimum(np.minimum(cont, best_jump), dead)
-        if np.allclose(new, m, rtol=1e-12, atol=1e-12 * dead):
+        b = np.minimum((cost_p + alpha * m[None, :]).min(axis=1), dead)
+        new = np.minimum.accumulate((powers * b)[::-1])[::-1] / powers
+        np.minimum(new, dead, out=new)
+        if np.allclose(new, m, rtol=1e-10, atol=1e-10 * dead):
             m = new
             break
         m = new
