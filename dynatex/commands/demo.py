@@ -1,8 +1,9 @@
 """``dynatex demo``: the whole path on a built-in sample, in well under two minutes.
 
-Makes a sample clip, analyzes it, plays every demo step below (edits included), writes a
+Makes sample clips, analyzes them, plays every demo step below (edits included), writes a
 video and a contact sheet, and prints a short benchmark. To show a new mode, add its
-analysis method to ``DEMO_METHODS`` and its steps to ``DEMO_STEPS``.
+analysis method to a texture of ``DEMO_TEXTURES`` (or a new sample) and its steps to
+``DEMO_STEPS``.
 """
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -28,14 +30,23 @@ class DemoStep:
     controls: dict = field(default_factory=dict)   # player attributes set before playing
     options: dict = field(default_factory=dict)    # player constructor options
     frames: int = 48
+    texture: str = "ripples"
 
 
-#: Analysis methods the demo runs on the sample (with their learn options).
-DEMO_METHODS: dict[str, dict] = {
-    "lds": {"n": 40},
-    # the ripples travel and barely mirror (symmetry <= 0.05): keep every local maximum as a turn point
-    "turnpoints": {"min_symmetry": 0.0},
-    "mixture": {"components": 3, "dim": 8},
+def _pendulum() -> np.ndarray:
+    from ..analyzer.turnpoints import pendulum_clip
+    return pendulum_clip(120, 96)[0]
+
+
+#: The demo's textures: a sample-clip maker and the analysis methods (with options) run on it.
+DEMO_TEXTURES: dict[str, tuple[Callable[[], np.ndarray], dict[str, dict]]] = {
+    "ripples": (ripples, {
+        "lds": {"n": 40},
+        "mixture": {"components": 3, "dim": 8},
+    }),
+    "pendulum": (_pendulum, {
+        "turnpoints": {},
+    }),
 }
 
 #: What the demo plays, in order.
@@ -48,8 +59,9 @@ DEMO_STEPS: list[DemoStep] = [
     DemoStep("lds: float16 basis", "lds", options={"precision": "float16"}),
     DemoStep("mixture: 16 draws", "mixture"),
     DemoStep("mixture: plain AR, calm", "mixture", {"draws": 1, "intensity": 0.5}),
-    DemoStep("turnpoints: turns + jumps", "turnpoints"),
-    DemoStep("turnpoints: jumps, speed 1.5", "turnpoints", {"speed": 1.5}, {"playback": "jumps"}),
+    DemoStep("turnpoints: turns + jumps", "turnpoints", texture="pendulum"),
+    DemoStep("turnpoints: jumps, speed 1.5", "turnpoints", {"speed": 1.5}, {"playback": "jumps"},
+             texture="pendulum"),
 ]
 
 
@@ -67,33 +79,34 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     os.makedirs(args.output, exist_ok=True)
     db = os.path.join(args.output, "sample.h5")
-    frames = ripples(seed=args.seed)
-    clip = load_clip(frames)
-    clip.filename = "ripples (built-in sample)"
-    print(f"sample clip: {frames.shape[0]} frames {frames.shape[2]}x{frames.shape[1]}")
-
     with DatabaseWriter(db, overwrite=True) as w:
-        w.put_texture("ripples", clip.source_info())
-        methods = [METHODS[m] for m in DEMO_METHODS]
-        if any(m.needs_frames for m in methods):
-            w.put_frames("ripples", clip.frames)
-        for m in methods:
-            t = time.perf_counter()
-            w.put_method("ripples", m.name, m.function()(clip, **DEMO_METHODS[m.name]))
-            print(f"analyzed {m.name} in {time.perf_counter() - t:.2f} s")
+        for name, (make, methods) in DEMO_TEXTURES.items():
+            clip = load_clip(make())
+            clip.filename = f"{name} (built-in sample)"
+            t, h, wd, _ = clip.frames.shape
+            print(f"sample {name!r}: {t} frames {wd}x{h}")
+            w.put_texture(name, clip.source_info())
+            if any(METHODS[m].needs_frames for m in methods):
+                w.put_frames(name, clip.frames)
+            for m, options in methods.items():
+                t0m = time.perf_counter()
+                w.put_method(name, m, METHODS[m].function()(clip, **options))
+                print(f"  analyzed {m} in {time.perf_counter() - t0m:.2f} s")
     print(f"wrote {db}")
+    video_hw = (96, 128)
+    fps = 25.0
 
     from .play import FrameWriter
     video = FrameWriter(os.path.join(args.output, "demo.mp4"))
     rows = []
     for step in DEMO_STEPS:
-        with open_player(db, "ripples", mode=step.mode, backend=args.backend, seed=args.seed,
+        with open_player(db, step.texture, mode=step.mode, backend=args.backend, seed=args.seed,
                          **step.options) as p:
             for key, value in step.controls.items():
                 setattr(p, key, value)
             shown = [p.next_frame() for _ in range(step.frames)]
         for f in shown:
-            video.write(_fit(f, frames.shape[1:3]), clip.fps)
+            video.write(_fit(f, video_hw), fps)
         rows.append((step.title, shown[:: max(1, step.frames // 6)][:6]))
         print(f"played {step.title!r}: {step.frames} frames")
     video.close()
@@ -107,11 +120,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _fit(frame: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
-    """Frames of every step go into one video of the sample's size."""
+    """Frames of every step go into one video: scale to fit ``hw``, letterboxed."""
     if frame.shape[:2] == tuple(hw):
         return frame
     import cv2
-    return cv2.resize(frame, (hw[1], hw[0]), interpolation=cv2.INTER_AREA)
+    scale = min(hw[0] / frame.shape[0], hw[1] / frame.shape[1])
+    size = (max(1, round(frame.shape[1] * scale)), max(1, round(frame.shape[0] * scale)))
+    small = cv2.resize(frame, size, interpolation=cv2.INTER_AREA)
+    out = np.zeros((*hw, 3), np.uint8)
+    y, x = (hw[0] - size[1]) // 2, (hw[1] - size[0]) // 2
+    out[y:y + size[1], x:x + size[0]] = small
+    return out
 
 
 def _contact_sheet(rows: list[tuple[str, list[np.ndarray]]], path: str, thumb_h: int = 96) -> None:
@@ -140,7 +159,7 @@ def _short_benchmark(db: str, backend: str) -> None:
         if key in seen:
             continue
         seen.add(key)
-        r = bench_player(db, "ripples", mode=step.mode, frames=100, bandwidth_gbs=bw["gbs"], options=step.options)
+        r = bench_player(db, step.texture, mode=step.mode, frames=100, bandwidth_gbs=bw["gbs"], options=step.options)
         print("  " + format_result(r) + (f" [{step.options}]" if step.options else ""))
     from ..benchmark import bench_lds_sizes
     bench_lds_sizes([(352, 288)], frames=60, precisions=("float32",), log=lambda line: print("  " + line),
