@@ -67,6 +67,21 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="another texture to mix with (repeatable): cut to the same tiles, with border tiles")
     g.add_argument("--tiles-names", default=None, metavar="A,B,...",
                    help="class names of the main and the --tiles-mix textures (default main,mix1,...)")
+    g = p.add_argument_group("quilt (time-varying textures)")
+    g.add_argument("--quilt-size", type=size_arg, default=None, metavar="WxH",
+                   help="output canvas (default: twice the clip's width and height)")
+    g.add_argument("--quilt-block", type=_tile_arg, default=32, metavar="N or WxH",
+                   help="block size; elongated blocks (e.g. 16x64) suit stretching features (default 32)")
+    g.add_argument("--quilt-overlap", type=positive_int, default=None, help="block overlap (default 5/16 of the block)")
+    g.add_argument("--quilt-rank", type=positive_int, default=15, help="SVD rank of the comparisons (default 15)")
+    g.add_argument("--quilt-tolerance", type=float, default=0.1,
+                   help="pick among candidates within (1 + T) of the best error (default 0.1)")
+    g.add_argument("--quilt-feather", type=int, default=None, help="cross-fade half-width across cuts (default overlap/2, 0 = hard cuts)")
+    g.add_argument("--quilt-lowpass", type=float, default=None, metavar="SIGMA",
+                   help="low-pass gain normalisation with this Gaussian sigma in pixels (default off)")
+    g.add_argument("--quilt-restore-gradient", action="store_true",
+                   help="with --quilt-lowpass: keep the source's low-frequency gradient instead of flattening it")
+    g.add_argument("--quilt-seed", type=int, default=0, help="seed of the random block choices (default 0)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
     return p
 
@@ -105,6 +120,11 @@ def method_params(name: str, args: argparse.Namespace) -> dict:
         return {"tile": args.tile, "n_tiles": args.tiles_n, "min_loop": args.tiles_min_loop,
                 "max_loop": args.tiles_max_loop, "transition": args.tiles_transition, "ring": args.tiles_ring,
                 "flow_gain": args.tiles_flow_gain, "mix": mix, "names": names}
+    if name == "quilt":
+        return {"size": args.quilt_size, "block": args.quilt_block, "overlap": args.quilt_overlap,
+                "rank": args.quilt_rank, "tolerance": args.quilt_tolerance, "feather": args.quilt_feather,
+                "lowpass": args.quilt_lowpass, "restore_gradient": args.quilt_restore_gradient,
+                "seed": args.quilt_seed}
     return {}
 
 
@@ -176,6 +196,11 @@ def _summary(name: str, model) -> str:
                 f"frames from {model.class_loop_start.tolist()}, classes {', '.join(model.class_names)}, "
                 f"toroidal cut cost {model.class_toroid_cost.mean():.4g}, ring seam cost "
                 f"{model.seam_cost[model.seam_cost > 0].mean() if (model.seam_cost > 0).any() else 0:.4g}")
+    if name == "quilt":
+        w, h = model.size
+        return (f"{w}x{h} canvas from {model.n_blocks} blocks of {model.block[1]}x{model.block[0]}, "
+                f"rank-{info.get('rank')} SVD error {100 * info.get('rank_error', 0):.2f}% "
+                f"(comparing {info.get('compare_width')} instead of {info.get('full_width')} values per pixel)")
     if name == "turnpoints":
         return (f"{info.get('n_turn_points', 0)} turn points {model.turn_points.tolist()[:12]}, "
                 f"{info.get('n_transitions', 0)} transitions, exit frame {model.exit_frame}")

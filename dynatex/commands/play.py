@@ -57,6 +57,20 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--inpaint", default=None, metavar="VIDEO",
                    help="fill the --mask region of this video's frames with synthesized texture")
     g.add_argument("--mask", default=None, metavar="MASK.png|.npy", help="inpainting mask, nonzero = fill")
+    g = p.add_argument_group("evolve controls (time-varying textures; also --speed in [-16, 16], --size must "
+                             "match the analysed quilt)")
+    g.add_argument("--jitter", type=float, default=0.0, metavar="E",
+                   help="per-block time jitter: monotone, at most E frames from the true time (default 0)")
+    g.add_argument("--end", choices=("hold", "loop", "pingpong"), default="hold",
+                   help="after the last source frame: hold it, loop to the first, or play back and forth")
+    g.add_argument("--rate-map", default=None, metavar="SPEC",
+                   help="per-pixel rate of evolution M: an image (grey, scaled to --rate-range) or .npy of rates "
+                        "the size of the output, halves:LEFT,RIGHT, or light:X,Y,HEIGHT[,MAX[,MIN]] "
+                        "(fall-off from a point light)")
+    g.add_argument("--rate-range", default="0,2", metavar="LOW,HIGH",
+                   help="rates of black and white in a --rate-map image (default 0,2)")
+    g.add_argument("--rate-sigma", type=float, default=0.0, help="Gaussian smoothing of the rate map, pixels")
+    g.add_argument("--no-interpolate", action="store_true", help="nearest earlier frame instead of blending")
     return p
 
 
@@ -73,6 +87,11 @@ def player_options(args: argparse.Namespace) -> dict:
     if args.mode == "turnpoints":
         opts["playback"] = args.playback
         opts["start"] = args.start
+    if args.mode == "evolve":
+        opts.update(size=args.size, jitter=args.jitter, end=args.end, rate_sigma=args.rate_sigma,
+                    interpolate=not args.no_interpolate)
+    elif args.rate_map is not None:
+        raise UsageError("--rate-map belongs to mode evolve")
     if args.mode == "tiles":
         opts.update(_tiles_options(args))
     elif args.inpaint or args.labels or args.tone:
@@ -96,6 +115,10 @@ def apply_controls(player, args: argparse.Namespace) -> None:
         for name in ("sigma", "max_shift", "epoch"):
             if getattr(args, name) is not None:
                 setattr(player, name, getattr(args, name))
+    if args.mode == "evolve":
+        player.speed = args.speed
+        if args.rate_map is not None:
+            player.rate_map = rate_map_arg(args.rate_map, args.rate_range, player.shape[:2])
     if args.mode == "lds":
         player.speed = args.speed
         player.intensity = args.intensity
@@ -104,6 +127,38 @@ def apply_controls(player, args: argparse.Namespace) -> None:
                 player.scales = [float(v) for v in args.scales.split(",")]
             except ValueError:
                 raise UsageError(f"--scales must be three numbers C,M,F, not {args.scales!r}") from None
+
+
+def rate_map_arg(spec: str, rate_range: str, shape: tuple[int, int]) -> np.ndarray:
+    """The rate map ``--rate-map SPEC`` describes, for an output of ``shape`` (H, W)."""
+    from ..player import ratemap
+    kind, _, rest = spec.partition(":")
+    if kind in ("halves", "light") and rest:
+        try:
+            vals = [float(v) for v in rest.split(",")]
+        except ValueError:
+            raise UsageError(f"--rate-map {kind}: expected numbers after '{kind}:', not {rest!r}") from None
+        if kind == "halves":
+            if len(vals) != 2:
+                raise UsageError(f"--rate-map halves:LEFT,RIGHT needs two rates, not {rest!r}")
+            return ratemap.halves(shape, *vals)
+        if not 3 <= len(vals) <= 5:
+            raise UsageError(f"--rate-map light:X,Y,HEIGHT[,MAX[,MIN]] needs 3 to 5 numbers, not {rest!r}")
+        extra = dict(zip(("max_rate", "min_rate"), vals[3:]))
+        return ratemap.point_light(shape, vals[:2], vals[2], **extra)
+    if not os.path.isfile(spec):
+        raise UsageError(f"--rate-map: no such file {spec!r} (or use halves:L,R or light:X,Y,H)")
+    if spec.endswith(".npy"):
+        return np.load(spec, allow_pickle=False)
+    import cv2
+    img = cv2.imread(spec, cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise UsageError(f"--rate-map: cannot read image {spec!r}")
+    try:
+        low, high = (float(v) for v in rate_range.split(","))
+    except ValueError:
+        raise UsageError(f"--rate-range must be LOW,HIGH, not {rate_range!r}") from None
+    return ratemap.from_image(img, low=low, high=high)
 
 
 def _tiles_options(args: argparse.Namespace) -> dict:
