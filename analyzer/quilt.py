@@ -140,8 +140,8 @@ def block_errors(features: np.ndarray, template: np.ndarray, mask: np.ndarray) -
     --------
     >>> f = np.arange(16, dtype=np.float32).reshape(4, 4, 1)
     >>> e = block_errors(f, f[1:3, 1:3], np.ones((2, 2), bool))
-    >>> tuple(np.argwhere(e == e.min())[0])
-    (1, 1)
+    >>> np.argwhere(e == e.min())[0].tolist()
+    [1, 1]
     """
     import cv2
     k = features.shape[2]
@@ -214,7 +214,7 @@ def frame_weights(frames: np.ndarray) -> np.ndarray:
     Examples
     --------
     >>> f = np.zeros((2, 4, 4, 1), np.float32); f[0, :, ::2] = 10; f[1, :, ::2] = 20
-    >>> frame_weights(f).round(3).tolist()
+    >>> [round(float(v), 3) for v in frame_weights(f)]
     [1.333, 0.667]
     """
     f = np.asarray(frames, dtype=np.float32)
@@ -496,6 +496,32 @@ def measure_comparison_speedup(frames: np.ndarray, *, rank: int = DEFAULT_RANK, 
     return {"rank": int(coef.shape[1]), "full_width": int(x.shape[1]), "svd_s": svd_s,
             "svd_s_per_trial_break_even": svd_s / max(mf - ms, 1e-12), "rank_error": float(err[coef.shape[1] - 1]),
             "small_s": ms, "full_s": mf, "speedup": mf / ms, "best_agreement": agree / trials}
+
+
+def spreading_clip(t: int = 48, h: int = 48, w: int = 64, *, seed: int = 0) -> np.ndarray:
+    """A synthetic time-varying texture: rust-like spots spread over grainy steel as time goes on.
+
+    A smooth random field is compared with a level that rises over the clip; pixels below
+    it turn dark orange, so spots appear, grow and merge. ``(t, h, w, 3)`` uint8.
+
+    Examples
+    --------
+    >>> f = spreading_clip(10, 16, 16)
+    >>> f.shape, bool(f[-1].mean() < f[0].mean())
+    ((10, 16, 16, 3), True)
+    """
+    t, h, w = _int("t", t, 2), _int("h", h, 1), _int("w", w, 1)
+    rng = np.random.default_rng(_int("seed", seed, 0))
+    field = rng.random((h, w))
+    for _ in range(2):
+        field = (field + np.roll(field, 1, 0) + np.roll(field, 1, 1) + np.roll(field, -1, 0)
+                 + np.roll(field, -1, 1)) / 5
+    field = (field - field.min()) / max(float(np.ptp(field)), 1e-12)
+    level = np.linspace(0, 1, t)[:, None, None]
+    rust = np.clip((level - field) * 6, 0, 1)
+    grain = rng.normal(0, 6, (h, w))
+    base = np.stack([200 - 120 * rust, 200 - 150 * rust, 210 - 180 * rust], axis=-1) + grain[None, ..., None]
+    return np.clip(base, 0, 255).astype(np.uint8)
 
 
 # -- argument checks -------------------------------------------------------------------------

@@ -38,6 +38,16 @@ def _pendulum() -> np.ndarray:
     return pendulum_clip(120, 96)[0]
 
 
+def _spreading() -> np.ndarray:
+    from ..analyzer.quilt import spreading_clip
+    return spreading_clip(48, 48, 64)
+
+
+def _left_fast() -> np.ndarray:
+    from ..player.ratemap import halves
+    return halves((96, 128), 2.0, 1.0)
+
+
 #: The demo's textures: a sample-clip maker and the analysis methods (with options) run on it.
 DEMO_TEXTURES: dict[str, tuple[Callable[[], np.ndarray], dict[str, dict]]] = {
     "ripples": (ripples, {
@@ -46,6 +56,9 @@ DEMO_TEXTURES: dict[str, tuple[Callable[[], np.ndarray], dict[str, dict]]] = {
     }),
     "pendulum": (_pendulum, {
         "turnpoints": {},
+    }),
+    "spreading": (_spreading, {
+        "quilt": {"size": (128, 96), "block": 16, "rank": 15},
     }),
 }
 
@@ -62,6 +75,9 @@ DEMO_STEPS: list[DemoStep] = [
     DemoStep("turnpoints: turns + jumps", "turnpoints", texture="pendulum"),
     DemoStep("turnpoints: jumps, speed 1.5", "turnpoints", {"speed": 1.5}, {"playback": "jumps"},
              texture="pendulum"),
+    DemoStep("evolve: quilted 2x, jitter 3", "evolve", {"jitter": 3.0}, texture="spreading"),
+    DemoStep("evolve: left half 2x faster, smoothed", "evolve", {"rate_map": _left_fast(), "rate_sigma": 8.0},
+             texture="spreading"),
 ]
 
 

@@ -11,22 +11,8 @@ import pytest
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import seam_visibility
 from dynatex.analyzer.quilt import (block_errors, learn_quilt, measure_comparison_speedup, min_cut_path,
-                                    pixel_time_matrix, rank_errors, time_svd)
+                                    pixel_time_matrix, rank_errors, spreading_clip, time_svd)
 from tests.conftest import wave_clip
-
-
-def spreading_clip(t: int = 20, h: int = 32, w: int = 32, seed: int = 0) -> np.ndarray:
-    """A synthetic time-varying texture: dark spots appear where a rough field falls below a rising level."""
-    rng = np.random.default_rng(seed)
-    field = rng.random((h, w))
-    for _ in range(2):
-        field = (field + np.roll(field, 1, 0) + np.roll(field, 1, 1) + np.roll(field, -1, 0) + np.roll(field, -1, 1)) / 5
-    field = (field - field.min()) / (field.max() - field.min())
-    level = np.linspace(0, 1, t)[:, None, None]
-    rust = np.clip((level - field) * 6, 0, 1)
-    grain = rng.normal(0, 6, (h, w))
-    base = np.stack([200 - 120 * rust, 200 - 150 * rust, 210 - 180 * rust], axis=-1) + grain[None, ..., None]
-    return np.clip(base, 0, 255).astype(np.uint8)
 
 
 def render(frames, q, t):
@@ -101,7 +87,7 @@ def test_min_cut_path_is_optimal():
 # -- quilting --------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def spread():
-    return spreading_clip()
+    return spreading_clip(20, 32, 32)
 
 
 def test_quilt_copies_blocks_verbatim_and_covers_canvas(spread):

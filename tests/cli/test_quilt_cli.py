@@ -8,7 +8,7 @@ import pytest
 from dynatex.cli import main
 from dynatex.tiledb import TileDB
 
-from ..analyzer.test_quilt import spreading_clip
+from dynatex.analyzer.quilt import spreading_clip
 
 
 @pytest.fixture

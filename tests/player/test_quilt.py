@@ -12,7 +12,7 @@ from dynatex.analyzer.quilt import learn_quilt
 from dynatex.player import open_player, ratemap
 from dynatex.player.quilt import ENDS, EvolvePlayer, fold_time, jitter_warp
 from dynatex.tiledb import DatabaseWriter, MethodNotFoundError, QuiltModel
-from tests.analyzer.test_quilt import spreading_clip
+from dynatex.analyzer.quilt import spreading_clip
 
 
 def write_db(path, frames, model, name="s"):
