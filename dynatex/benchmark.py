@@ -84,17 +84,27 @@ def summarize(times: np.ndarray) -> dict[str, float]:
 
 def bench_player(db: str | os.PathLike, texture: str | None = None, *, mode: str = "lds", frames: int = 200,
                  bandwidth_gbs: float | None = None, numpy_frames: int | None = None,
-                 options: dict | None = None) -> dict:
-    """Time ``next_frame(out=...)`` end to end on OpenCL and on the numpy reference."""
+                 options: dict | None = None, rounds: int = 5) -> dict:
+    """Time ``next_frame(out=...)`` end to end on OpenCL and on the numpy reference.
+
+    The two backends run in alternating rounds, so that both see the same machine load.
+    """
     options = dict(options or {})
     result: dict = {"mode": mode}
-    for backend in ("opencl", "numpy"):
-        with open_player(db, texture, mode=mode, backend=backend, **options) as p:
-            out = np.empty(p.shape, np.uint8)
-            n = frames if backend == "opencl" else (numpy_frames or max(10, frames // 4))
-            result[backend] = summarize(time_calls(lambda: p.next_frame(out=out), frames=n))
-            result["size"] = f"{p.shape[1]}x{p.shape[0]}"
-            result["bytes_per_frame"] = p.bytes_per_frame
+    n_frames = {"opencl": frames, "numpy": numpy_frames or max(10, frames // 4)}
+    times: dict[str, list[np.ndarray]] = {"opencl": [], "numpy": []}
+    with open_player(db, texture, mode=mode, backend="opencl", **options) as pc, \
+            open_player(db, texture, mode=mode, backend="numpy", **options) as pn:
+        out = np.empty(pc.shape, np.uint8)
+        for r in range(rounds):
+            for backend, p in (("opencl", pc), ("numpy", pn)):
+                per_round = max(2, n_frames[backend] // rounds)
+                times[backend].append(time_calls(lambda: p.next_frame(out=out), frames=per_round,
+                                                 warmup=3 if r == 0 else 1, max_seconds=20.0 / rounds))
+        result["size"] = f"{pc.shape[1]}x{pc.shape[0]}"
+        result["bytes_per_frame"] = pc.bytes_per_frame
+    for backend in times:
+        result[backend] = summarize(np.concatenate(times[backend]))
     result["speedup_vs_numpy"] = result["numpy"]["median_ms"] / result["opencl"]["median_ms"]
     if bandwidth_gbs and result.get("bytes_per_frame"):
         roof_ms = result["bytes_per_frame"] / (bandwidth_gbs * 1e9) * 1e3
