@@ -226,6 +226,7 @@ class EvolvePlayer(Player):
         self._rate: np.ndarray | None = None
         self._rate_sigma = 0.0
         self._warp = jitter_warp(self.n_blocks, self.n_frames, 0.0, seed=self.seed)
+        self._block_ids = np.arange(self.n_blocks)
         if self.backend == "opencl":
             self._setup_opencl(frames)
 
@@ -251,6 +252,8 @@ class EvolvePlayer(Player):
         self._d_gain = cl.Buffer(self.ctx, ro, hostbuf=self._gain if self._gain is not None else dummy)
         self._d_rate = cl.Buffer(self.ctx, mf.READ_ONLY, h * w * 4)
         self._d_warp = cl.Buffer(self.ctx, mf.READ_ONLY, self._warp.nbytes)
+        self._btime = np.zeros(self.n_blocks, np.float32)
+        self._d_btime = cl.Buffer(self.ctx, mf.READ_ONLY, self._btime.nbytes)
         self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
         self.device_bytes = int(frames.nbytes + source.nbytes + self._labels.size * np.dtype(ltype).itemsize
                                 * (2 if self._blend else 1) + (source.nbytes if self._blend else 0)
@@ -262,7 +265,7 @@ class EvolvePlayer(Player):
         for rate in (False, True):
             k = build_program(self.ctx, "quilt.cl", {**defines, "RATE": rate}).kernel("evolve")
             k.set_args(self._d_stack, self._d_source, self._d_labels, self._d_source2, self._d_labels2,
-                       self._d_rate, self._d_warp, self._d_gain, self._d_out, np.int32(w), np.int32(h),
+                       self._d_rate, self._d_warp, self._d_btime, self._d_gain, self._d_out, np.int32(w), np.int32(h),
                        np.int32(0), np.float32(0))
             self._kernels[rate] = k
         self._gsize = (-(-w // RUN), h)
@@ -431,8 +434,12 @@ class EvolvePlayer(Player):
             return
         import pyopencl as cl
         k = self._kernels[self._rate is not None]
-        k.set_arg(11, np.int32(_END_CODE[self._end]))
-        k.set_arg(12, np.float32(t))
+        if self._rate is None:
+            tau = fold_time(np.full(self.n_blocks, np.float32(t), np.float32), self.n_frames, self._end)
+            self._btime[...] = warp_time(self._warp, self._block_ids, tau)
+            cl.enqueue_copy(self.queue, self._d_btime, self._btime, is_blocking=False)
+        k.set_arg(12, np.int32(_END_CODE[self._end]))
+        k.set_arg(13, np.float32(t))
         cl.enqueue_nd_range_kernel(self.queue, k, self._gsize, None)
         cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
 

@@ -10,7 +10,8 @@
 // are scalar (PoCL's float3 is slow).
 //
 // Defines: FRAME_PIXELS, NFRAMES, KNOTS (knots per block warp, NFRAMES + 1), INTERP,
-// RATE (1: per-pixel rate map), BLEND (1: cross-fade band), GAIN (1: per-pixel RGB gain),
+// RATE (1: per-pixel rate map and per-pixel warps; 0: uniform rate, per-block source
+// times btime precomputed on the host each frame), BLEND (1: cross-fade band), GAIN (1: per-pixel RGB gain),
 // LABEL16 (1: labels stored as ushort), RUN. The end mode (0 hold, 1 loop, 2 ping-pong) is
 // a kernel argument: a control that changes between frames without a rebuild.
 
@@ -88,6 +89,7 @@ __kernel void evolve(__global const uchar *restrict stack,
                      __global const label_t *restrict labels2,
                      __global const float *restrict rate,
                      __global const float *restrict warp,
+                     __global const float *restrict btime,
                      __global const float *restrict gain,
                      __global uchar *restrict out,
                      const int width, const int height,
@@ -99,26 +101,25 @@ __kernel void evolve(__global const uchar *restrict stack,
         return;
     const int xend = min(xstart + RUN, width);
     const size_t row = (size_t)y * width;
-#if !RATE
-    const float tau_row = fold_time(t, end);
-#endif
     for (int x = xstart; x < xend; ++x) {
         const size_t i = row + x;
 #if RATE
         const float tau = fold_time(t * rate[i], end);
+#define SOURCE_TIME(lab) warp_time(warp, (lab), tau)
 #else
-        const float tau = tau_row;
+        // Uniform rate: every pixel of a block shares one source time, computed on the host.
+#define SOURCE_TIME(lab) btime[lab]
 #endif
         const uint packed = source[i];
         float r, g, b;
-        sample(stack, packed & 0xFFFFFF, warp_time(warp, labels[i], tau), end, &r, &g, &b);
+        sample(stack, packed & 0xFFFFFF, SOURCE_TIME(labels[i]), end, &r, &g, &b);
 #if BLEND
         // Branch-free: outside the band the weight is 0 and the second source a cached
         // dummy; on CPU devices this is ~1.6x faster than skipping it with a branch.
         const uint wq = packed >> 24;
         {
             float r2, g2, b2;
-            sample(stack, source2[i] & 0xFFFFFF, warp_time(warp, labels2[i], tau), end, &r2, &g2, &b2);
+            sample(stack, source2[i] & 0xFFFFFF, SOURCE_TIME(labels2[i]), end, &r2, &g2, &b2);
             const float a = (float)wq * (1.0f / 256.0f);
             r = r + a * (r2 - r);
             g = g + a * (g2 - g);
