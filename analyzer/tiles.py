@@ -27,9 +27,11 @@ Pipeline (each step is a public function, so it can be tested and reused):
    their edges; since ``P`` tiles seamlessly with itself, any two tiles of the class sit
    next to each other, in any arrangement, exactly as ``P`` sits next to ``P``.
 7. Mixing: every extra texture gets a loop of the same length and its own tiles cut to the
-   same size; a border tile ``(a, c)`` is class ``c``'s primary ring joined by the same cut
-   to class ``a``'s primary interior. The player puts class ``c``'s ring where a cell of
-   class ``a`` borders class ``c`` (see :mod:`dynatex.player.tiles`).
+   same size; a border tile ``(a, c, side)`` (:func:`side_join`) is class ``a``'s primary
+   with a strip of class ``c``'s primary along one side, ending at a closed minimum cut and
+   feathered beyond it (two different textures have no invisible cut). The player lends a
+   cell of class ``a`` the strip of its neighbour's class ``c < a`` along their shared edge,
+   so both sides of the edge show ``c``'s toroidal primary (see :mod:`dynatex.player.tiles`).
 8. Colour statistics per tile (mean RGB and HSV) for tone fitting.
 """
 from __future__ import annotations
@@ -316,13 +318,16 @@ def _shift_rows(block: np.ndarray, th: int) -> np.ndarray:
 
 # -- 6. ring join -------------------------------------------------------------------------------
 def ring_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, *, flow: np.ndarray | None = None,
-              flow_gain: float = 0.5) -> tuple[np.ndarray, np.ndarray, float]:
+              flow_gain: float = 0.5, feather: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
     """``ring_tile`` outside a closed minimum cut, ``inner`` inside it.
 
     The cut runs inside a ring of width ``ring`` along the four edges: four DP paths (left,
     right, top, bottom), each keeping at least the outermost pixel from ``ring_tile``.
-    Returns ``(tile, mask, cost)``; ``mask`` is 1 where the pixel comes from ``ring_tile``,
-    ``cost`` the mean squared RGB error per frame along the four paths.
+    With ``feather > 0`` (border tiles between two different textures, which no cut can
+    join invisibly) ``ring_tile`` fades out linearly over ``feather`` pixels inside the cut.
+    Returns ``(tile, weight, cost)``; ``weight`` (uint8, 0..255) is the share of
+    ``ring_tile`` in each pixel (255 outside the cut), ``cost`` the mean squared RGB error
+    per frame along the four paths.
     """
     length, th, tw = ring_tile.shape[:3]
     if not 2 <= ring <= min(th, tw) // 2 - 1:
@@ -354,8 +359,76 @@ def ring_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, *, flow: np.n
             mask |= yy < path[None, :]
         else:
             mask |= yy >= th - path[None, :]
-    tile = np.where(mask[None, :, :, None], ring_tile, inner)
-    return np.ascontiguousarray(tile), mask.astype(np.uint8), float(np.mean(costs))
+    if feather > 0:
+        import cv2
+        dist = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, 3)
+        alpha = np.clip(1.0 - dist / float(feather + 1), 0.0, 1.0)
+        weight = np.rint(255 * alpha).astype(np.uint8)
+        a = (weight.astype(np.float32) / 255)[None, :, :, None]
+        tile = np.rint(a * ring_tile + (1 - a) * inner.astype(np.float32)).astype(np.uint8)
+    else:
+        weight = np.where(mask, 255, 0).astype(np.uint8)
+        tile = np.where(mask[None, :, :, None], ring_tile, inner)
+    return np.ascontiguousarray(tile), weight, float(np.mean(costs))
+
+
+SIDES = ("left", "right", "top", "bottom")
+
+
+def _orient(a: np.ndarray, side: str, *, tile_axes: tuple[int, int]) -> np.ndarray:
+    """View ``a`` so that ``side`` becomes the left edge (an involution for left/right, and
+    its own inverse applied with :func:`_unorient`)."""
+    y, x = tile_axes
+    if side == "left":
+        return a
+    if side == "right":
+        return np.flip(a, axis=x)
+    if side == "top":
+        return np.swapaxes(a, y, x)
+    return np.flip(np.swapaxes(a, y, x), axis=x)
+
+
+def _unorient(a: np.ndarray, side: str, *, tile_axes: tuple[int, int]) -> np.ndarray:
+    y, x = tile_axes
+    if side in ("left", "right", "top"):
+        return _orient(a, side, tile_axes=tile_axes)
+    return np.swapaxes(np.flip(a, axis=x), y, x)
+
+
+def side_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, side: str, *, feather: int = 0,
+              flow: np.ndarray | None = None, flow_gain: float = 0.5) -> tuple[np.ndarray, np.ndarray, float]:
+    """A border tile: ``inner`` with a strip of ``ring_tile`` along one ``side``.
+
+    The strip ends at a closed minimum-error DP path (circular along the edge, so strips of
+    cells stacked along that edge join) at depth ``1 .. ring``; beyond it ``ring_tile``
+    fades out linearly over ``feather`` pixels, measured across the edge only (so the fade
+    is periodic along the edge too). Returns ``(tile, weight, cost)``: ``weight`` (uint8)
+    is the share of ``ring_tile`` per pixel, 255 in the strip.
+    """
+    if side not in SIDES:
+        raise ValueError(f"side must be one of {SIDES}, not {side!r}")
+    ax = (1, 2)
+    rt = _orient(ring_tile, side, tile_axes=ax)
+    it = _orient(inner, side, tile_axes=ax)
+    length, n, m = rt.shape[:3]
+    if not 2 <= ring <= m // 2 - 1:
+        raise ValueError(f"ring must be in 2..{m // 2 - 1} for this tile, not {ring}")
+    u = _sample(length, _SAMPLE_FRAMES)
+    d = rt[u].astype(np.float32) - it[u].astype(np.float32)
+    err = (d * d).sum(axis=(0, 3)) / len(u)                     # (n, m)
+    fl = np.zeros((n, m), np.float32) if flow is None else _orient(flow, side, tile_axes=(0, 1))
+    e = err[:, :ring + 1].copy()
+    e[:, 0] = 1e30
+    path, cost = circular_cut(e, _steps(fl[:, :ring].mean(axis=1), flow_gain))
+    xx = np.arange(m)[None, :]
+    beyond = (xx - path[:, None] + 1).astype(np.float32)        # 1 at the first pixel past the strip
+    alpha = np.where(xx < path[:, None], 1.0, np.clip(1.0 - beyond / float(feather + 1), 0.0, 1.0))
+    weight = np.rint(255 * alpha).astype(np.uint8)
+    a = (weight.astype(np.float32) / 255)[None, :, :, None]
+    tile = np.rint(a * rt + (1 - a) * it.astype(np.float32)).astype(np.uint8)
+    tile = np.ascontiguousarray(_unorient(tile, side, tile_axes=ax))
+    weight = np.ascontiguousarray(_unorient(weight, side, tile_axes=(0, 1)))
+    return tile, weight, cost
 
 
 # -- 8. colour statistics --------------------------------------------------------------------------
@@ -389,7 +462,8 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
                 min_tile: int = DEFAULT_MIN_TILE, max_tile: int = DEFAULT_MAX_TILE, min_loop: int = 16,
                 max_loop: int | None = None, transition: int = 8, overlap: int | None = None,
                 ring: int | None = None, flow_gain: float = 0.5, mix: Sequence[Clip | np.ndarray] = (),
-                names: Sequence[str] | None = None, progress: Progress | None = None) -> TilesModel:
+                names: Sequence[str] | None = None, feather: int | None = None,
+                progress: Progress | None = None) -> TilesModel:
     """Cut triple toroid-shaped tiles from a clip (and, for mixing, from more clips).
 
     Parameters
@@ -415,6 +489,9 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         every ordered pair of textures.
     names : sequence of str, optional
         Class names (default ``"main"``, ``"mix1"``, ...).
+    feather : int, optional
+        Border tiles fade the other texture's strip into the interior over this many pixels
+        past the cut (default ``ring``; 0: a hard cut).
     progress : callable(done, total), optional
 
     Returns
@@ -492,6 +569,8 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     r = max(2, min(th, tw) // 5) if ring is None else _int("ring", ring, 2)
     if r > min(th, tw) // 2 - 1:
         raise ValueError(f"ring must be at most {min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {r}")
+    fe = r if feather is None else _int("feather", feather, 0)
+    fe = min(fe, min(th, tw) // 2 - 1 - r)
 
     # primary toroidal tile of every class
     for tx in textures:
@@ -501,29 +580,32 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     tiles, tcls, rcls, masks, costs = [], [], [], [], []
     for ci, tx in enumerate(textures):
         tiles.append(tx.primary)
-        tcls.append(ci), rcls.append(ci), masks.append(np.ones((th, tw), np.uint8)), costs.append(0.0)
+        tcls.append(ci), rcls.append(ci), masks.append(np.full((th, tw), 255, np.uint8)), costs.append(0.0)
         for tile_k, mask, cost in _interiors(tx, th, tw, r, n_tiles - 1, flow_gain, step):
             tiles.append(tile_k), tcls.append(ci), rcls.append(ci), masks.append(mask), costs.append(cost)
     step()
-    # border tiles: ring of class c around the interior of class a
+    # border tiles: a strip of class c's primary along one side of class a's primary
+    sides = [-1] * len(tiles)
     for a, ta in enumerate(textures):
         for c, tc in enumerate(textures):
             if a == c:
                 continue
-            tile_k, mask, cost = ring_join(tc.primary, ta.primary, r, flow_gain=flow_gain)
-            tiles.append(tile_k), tcls.append(a), rcls.append(c), masks.append(mask), costs.append(cost)
+            for si, side in enumerate(SIDES):
+                tile_k, mask, cost = side_join(tc.primary, ta.primary, r, side, feather=fe, flow_gain=flow_gain)
+                tiles.append(tile_k), tcls.append(a), rcls.append(c), masks.append(mask), costs.append(cost)
+                sides.append(si)
             step()
     stats = [colour_stats(tl) for tl in tiles]
     step()
     model = TilesModel(
         tiles=np.stack(tiles), tile_class=np.array(tcls, np.int32), ring_class=np.array(rcls, np.int32),
-        masks=np.stack(masks), seam_cost=np.array(costs), mean_rgb=np.array([s[0] for s in stats]),
+        masks=np.stack(masks), border_side=np.array(sides, np.int8), seam_cost=np.array(costs), mean_rgb=np.array([s[0] for s in stats]),
         mean_hsv=np.array([s[1] for s in stats]), class_names=names,
         class_loop_start=np.array([tx.start for tx in textures], np.int64),
         class_loop_cost=np.array([tx.cost for tx in textures]),
         class_toroid_cost=np.array([tx.toroid_cost for tx in textures]),
         info={"tile_h": th, "tile_w": tw, "loop_length": length, "transition": transition, "overlap_y": by,
-              "overlap_x": bx, "ring": r, "period_y": period[0], "period_x": period[1],
+              "overlap_x": bx, "ring": r, "feather": fe, "period_y": period[0], "period_x": period[1],
               "periodicity": strength, "mean_flow": mean_flow, "flow_gain": float(flow_gain),
               "source_frames": t, "n_classes": len(textures),
               "median_frame_step": _median_step(main)})
@@ -591,7 +673,7 @@ def _interiors(tx: _Texture, th: int, tw: int, r: int, count: int, flow_gain: fl
             chosen.append((y, x))
             step()
     while len(out) < count:             # a tiny clip: repeat the primary
-        out.append((tx.primary.copy(), np.ones((th, tw), np.uint8), 0.0))
+        out.append((tx.primary.copy(), np.full((th, tw), 255, np.uint8), 0.0))
         step()
     return out
 

@@ -10,10 +10,14 @@ next over ``epoch`` frames so the output never repeats with the loop's period. F
 built by the shared :class:`~dynatex.player.gather.Gather` (time interpolation between
 neighbouring loop frames, per-tile colour tone).
 
-Mixing: where a cell of class ``a`` borders class ``c``, the strip of its ring along
-that edge (and the corners) takes class ``min(a, c)``; if that is not ``a`` the pixels
-come from the border tile (ring ``c``, interior ``a``), so both sides of the cell edge
-show the same toroidal ring and the textures meet along the border tile's minimum cut.
+Mixing: the edge between a cell of class ``a`` and one of class ``c`` belongs to class
+``min(a, c)``. A cell whose edge belongs to another class ``c`` takes, along that edge,
+the border tile ``(a, c, side)``: its own primary with a strip of ``c``'s primary
+(ending at a minimum cut, then feathered), so both sides of the edge show ``c``'s
+toroidal primary. Where strips of two sides overlap (corners) the pixel takes the tile
+whose strip weighs more there, so the blend stays continuous. Cells that borrow a strip
+show their class primary, which the border tiles carry beyond the strip. Colour tone is per class
+(feathered pixels get a blended tone), so a ring keeps one tone wherever it appears.
 Without mixing the source is a cell grid (no per-pixel map is read); with mixing a
 per-pixel source map is built once per arrangement.
 """
@@ -134,12 +138,17 @@ class TilesPlayer(Player):
         self._shape = (h, w, 3)
         self.grid_shape = (-(-h // th), -(-w // tw))
         self.ring = int(model.info.get("ring", max(2, min(th, tw) // 5)))
+        #: width of the strips along cell edges that may take a neighbouring class
         self.labels = self._check_labels(labels)
         mixing = len(np.unique(self.labels)) > 1
         stack = np.ascontiguousarray(model.tiles.transpose(1, 2, 0, 3, 4).reshape(length, th, k * tw, 3))
         self._gather = Gather(stack, (h, w), backend=self.backend, ctx=self.ctx, queue=self.queue,
                               time_step=TIME_STEP, cell=None if mixing else (th, tw))
         self.mixing = mixing
+        c = model.n_classes
+        #: quantization levels of a feathered pixel's tone share (tone table <= 256 entries)
+        self._tone_levels = max(2, min(32, (255 - c) // max(1, c * c)))
+        self._gather.set_tones(*self._tone_tables(None))
         self._sigma = 0.5 * min(th, tw)
         self._max_shift = length / 3.0
         self._epoch = 2 * length
@@ -194,10 +203,11 @@ class TilesPlayer(Player):
     def _build_source(self, choice: np.ndarray) -> None:
         m = self.model
         th, tw = self.tile_size
-        kw = self.n_tiles * tw
+        choice = np.array(choice, np.int64)
         self.arrangement = choice
         if not self.mixing:
-            self._gather.set_source_grid(pack_source(choice * tw, choice))
+            self._class_map = None
+            self._gather.set_source_grid(pack_source(choice * tw, m.tile_class[choice]))
             return
         h, w = self._shape[:2]
         yy, xx = np.arange(h), np.arange(w)
@@ -205,35 +215,58 @@ class TilesPlayer(Player):
         ly, lx = yy - ci * th, xx - cj * tw
         lab = self.labels
         pad = np.pad(lab, 1, mode="edge")                          # outside the output: own class
-        a = lab[ci][:, cj]
-        r = self.ring
-        left, top = lx < tw - 1 - lx, ly < th - 1 - ly
-        dh = np.minimum(lx, tw - 1 - lx)
-        dv = np.minimum(ly, th - 1 - ly)
-        # neighbour cell across the nearer vertical / horizontal edge (padded indices)
-        nj = np.where(left, cj, cj + 2)
-        ni = np.where(top, ci, ci + 2)
-        pi, pj = ci + 1, cj + 1
-        edge_h = np.minimum(a, pad[pi[:, None], nj[None, :]])       # across the left/right edge
-        edge_v = np.minimum(a, pad[ni[:, None], pj[None, :]])       # across the top/bottom edge
-        corner = np.minimum(np.minimum(edge_h, edge_v), pad[ni[:, None], nj[None, :]])
-        in_h = (dh < r)[None, :]
-        in_v = (dv < r)[:, None]
-        zone = np.where(in_h & in_v, corner, np.where(in_h, edge_h, np.where(in_v, edge_v, a)))
-        tile = choice[ci][:, cj]
-        border = zone != a
-        if border.any():
-            lut = np.full((m.n_classes, m.n_classes), -1, np.int64)
-            for kk in range(self.n_tiles):
-                if m.tile_class[kk] != m.ring_class[kk] and lut[m.tile_class[kk], m.ring_class[kk]] < 0:
-                    lut[m.tile_class[kk], m.ring_class[kk]] = kk
-            bt = lut[a[border], zone[border]]
-            if (bt < 0).any():
+        neighbours = (pad[1:-1, :-2], pad[1:-1, 2:], pad[:-2, 1:-1], pad[2:, 1:-1])   # left right top bottom
+        lut = np.full((m.n_classes, m.n_classes, 4), -1, np.int64)
+        for kk in np.flatnonzero(m.border_side >= 0):
+            lut[m.tile_class[kk], m.ring_class[kk], m.border_side[kk]] = kk
+        # a cell lends its edge to the smaller class: both sides then show that class's primary
+        side_tile = []
+        for si, nb in enumerate(neighbours):
+            edge = np.minimum(lab, nb)
+            bt = np.where(edge != lab, lut[lab, edge, si], -1)
+            if ((edge != lab) & (bt < 0)).any():
                 raise ValueError("the tile set has no border tile for some pair of neighbouring classes; "
-                                 "re-run the analysis with every texture mixed in")
-            tile[border] = bt
+                                 "re-run the analysis with every texture of the label map mixed in")
+            side_tile.append(bt)
+        touched = np.any([bt >= 0 for bt in side_tile], axis=0)
+        for c in np.unique(lab[touched]):
+            choice[touched & (lab == c)] = m.tiles_of(int(c))[0]  # the primary: border tiles share it
+        self.arrangement = choice
+        tile = choice[ci][:, cj]
+        best_w = np.zeros((h, w), np.uint8)
+        for bt in side_tile:
+            btp = bt[ci][:, cj]
+            wgt = np.where(btp >= 0, m.masks[np.maximum(btp, 0), ly[:, None], lx[None, :]], 0).astype(np.uint8)
+            take = wgt > best_w
+            tile = np.where(take, btp, tile)
+            best_w = np.maximum(best_w, wgt)
+        kw = self.n_tiles * tw
         index = ly[:, None] * kw + tile * tw + lx[None, :]
-        self._gather.set_source_map(pack_source(index, tile))
+        weight = np.where(m.border_side[tile] >= 0, best_w, 255)
+        self._class_map = np.where(weight >= 128, m.ring_class[tile], m.tile_class[tile]).astype(np.int32)
+        self._weight, self._interior_class = weight, m.tile_class[tile].astype(np.int32)
+        # tone per source class; feathered border-tile pixels get a blended tone (quantized share)
+        tone = self._class_map.copy()
+        feathered = (weight > 0) & (weight < 255) & (m.ring_class[tile] != m.tile_class[tile])
+        if feathered.any():
+            pair = m.tile_class[tile[feathered]] * m.n_classes + m.ring_class[tile[feathered]]
+            q = np.rint(weight[feathered] / 255.0 * (self._tone_levels - 1)).astype(np.int64)
+            tone[feathered] = m.n_classes + pair * self._tone_levels + q
+        self._gather.set_source_map(pack_source(index, tone))
+
+    def source_class_map(self, *, strict: bool = False) -> np.ndarray:
+        """``(H, W)`` class (texture) each output pixel mostly comes from: the true texture borders.
+
+        With ``strict`` a border-tile pixel counts as the lending class only where it is
+        that class alone (the minimum cut, before the feathering).
+        """
+        if self._class_map is not None:
+            if strict:
+                return np.where(self._weight == 255, self._class_map, self._interior_class)
+            return self._class_map.copy()
+        h, w = self._shape[:2]
+        th, tw = self.tile_size
+        return self.labels[np.arange(h) // th][:, np.arange(w) // tw]
 
     def set_labels(self, labels: np.ndarray | None) -> None:
         """Replace the label map (same rules as the constructor); the arrangement is redrawn."""
@@ -336,7 +369,7 @@ class TilesPlayer(Player):
         m = self.model
         if value is None:
             return None
-        class_means = np.array([m.mean_rgb[m.tiles_of(c)].mean(axis=0) for c in range(m.n_classes)])
+        class_means = self.class_mean_rgb()
         if isinstance(value, str):
             if value == "consensus":
                 return class_means.mean(axis=0)
@@ -354,13 +387,26 @@ class TilesPlayer(Player):
                              f"0..255, not {value!r}")
         return rgb
 
+    def class_mean_rgb(self) -> np.ndarray:
+        """``(C, 3)`` mean RGB of each class (over its own tiles)."""
+        m = self.model
+        return np.array([m.mean_rgb[m.tiles_of(c)].mean(axis=0) for c in range(m.n_classes)])
+
     def _tone_tables(self, value: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Per-class gains (tone index = class): the seed's per-pixel multiplication fitting
+        a class's mean RGB to the target. Per class, not per tile, so the shared ring of a
+        class gets one gain wherever it appears and stays seamless."""
         target = self.tone_target(value)
-        gain = np.ones((self.n_tiles, 3), np.float32)
+        c = self.model.n_classes
+        gain = np.ones((c, 3), np.float32)
         if target is not None:
-            means = np.maximum(self.model.mean_rgb, 1.0)
+            means = np.maximum(self.class_mean_rgb(), 1.0)
             gain = np.clip(target[None, :] / means, 0.0, 64.0).astype(np.float32)
-        return gain, np.zeros_like(gain)
+        # blended entries for feathered border pixels: index c + (a * C + ring) * levels + q
+        share = np.linspace(0.0, 1.0, self._tone_levels, dtype=np.float32)
+        blend = [(1 - share[:, None]) * gain[a] + share[:, None] * gain[r] for a in range(c) for r in range(c)]
+        table = np.concatenate([gain] + blend).astype(np.float32)
+        return table, np.zeros_like(table)
 
     def reseed(self, seed: int) -> None:
         """Redraw the arrangement and the time offsets from ``seed``."""

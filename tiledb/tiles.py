@@ -2,8 +2,8 @@
 
 Every tile is an ``L x th x tw`` RGB block that repeats seamlessly in x, y and t. Tiles
 of one class share one boundary ring (the class's primary tile outside a minimum cut),
-so any arrangement of them is seamless. A border tile carries the ring of another
-class around the interior of its own class; the player uses it where two classes meet.
+so any arrangement of them is seamless. A border tile is a class's primary with a strip
+of another class's primary along one side; the player uses it where two classes meet.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from ._check import Checker
 from .source import SourceInfo
 
 MAX_TILES = 4096
-MAX_CLASSES = 64
+MAX_CLASSES = 10           # the player tone table (256 entries) holds blended tones for every pair
 
 
 @dataclass
@@ -33,7 +33,11 @@ class TilesModel:
         Class of each tile's boundary ring; equal to ``tile_class`` for ordinary tiles,
         different for border tiles.
     masks : (K, th, tw) uint8
-        1 where the tile's pixel comes from the ring (the class primary), 0 from its interior.
+        Share of the ring source (the ring class's primary) in each pixel, 0..255: 255
+        outside the cut, 0 inside; border tiles fade between the two (feathering).
+    border_side : (K,) int8
+        For border tiles the side carrying the ring class's strip (0 left, 1 right, 2 top,
+        3 bottom); -1 for ordinary tiles.
     seam_cost : (K,) float64
         Mean squared RGB error per pixel along the tile's ring-interior cut (0 for primaries).
     mean_rgb, mean_hsv : (K, 3) float64
@@ -54,6 +58,7 @@ class TilesModel:
     tile_class: np.ndarray
     ring_class: np.ndarray
     masks: np.ndarray
+    border_side: np.ndarray
     seam_cost: np.ndarray
     mean_rgb: np.ndarray
     mean_hsv: np.ndarray
@@ -92,6 +97,7 @@ def write(group: h5py.Group, model: TilesModel) -> None:
     group.create_dataset("tile_class", data=np.asarray(model.tile_class, np.int32))
     group.create_dataset("ring_class", data=np.asarray(model.ring_class, np.int32))
     group.create_dataset("masks", data=np.asarray(model.masks, np.uint8), compression="lzf")
+    group.create_dataset("border_side", data=np.asarray(model.border_side, np.int8))
     for name in ("seam_cost", "mean_rgb", "mean_hsv", "class_loop_cost", "class_toroid_cost"):
         group.create_dataset(name, data=np.asarray(getattr(model, name), np.float64))
     group.create_dataset("class_loop_start", data=np.asarray(model.class_loop_start, np.int64))
@@ -129,6 +135,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
         tile_class=ds(group, "tile_class", kind="iu", shape=(k,)).astype(np.int32),
         ring_class=ds(group, "ring_class", kind="iu", shape=(k,)).astype(np.int32),
         masks=ds(group, "masks", kind="u", shape=(k, th, tw)),
+        border_side=ds(group, "border_side", kind="i", shape=(k,)).astype(np.int8),
         seam_cost=ds(group, "seam_cost", kind="f", shape=(k,)),
         mean_rgb=ds(group, "mean_rgb", kind="f", shape=(k, 3)),
         mean_hsv=ds(group, "mean_hsv", kind="f", shape=(k, 3)),
@@ -149,8 +156,10 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
     for cls in range(c):
         if model.tiles_of(cls).size == 0:
             check.fail(group.name + "/tile_class", f"class {cls} ({names[cls]!r}) has no tile of its own")
-    if model.masks.size and model.masks.max() > 1:
-        check.fail(group.name + "/masks", "values other than 0 and 1")
+    border = model.ring_class != model.tile_class
+    if ((model.border_side < -1) | (model.border_side > 3)).any() or (model.border_side[border] < 0).any() \
+            or (model.border_side[~border] != -1).any():
+        check.fail(group.name + "/border_side", "must be 0..3 for border tiles and -1 for the others")
     if (model.mean_rgb < 0).any() or (model.mean_rgb > 255).any():
         check.fail(group.name + "/mean_rgb", "values outside 0..255")
     return model
