@@ -147,9 +147,9 @@ def block_errors(features: np.ndarray, template: np.ndarray, mask: np.ndarray) -
     k = features.shape[2]
     m = np.ascontiguousarray(np.repeat(mask[:, :, None].astype(np.float32), k, axis=2))
     out = None
-    # OpenCV handles at most 512 channels; wider features are compared in slices.
-    for lo in range(0, k, 256):
-        hi = min(k, lo + 256)
+    # OpenCV takes at most 128 channels here; wider features are compared in slices.
+    for lo in range(0, k, 128):
+        hi = min(k, lo + 128)
         e = cv2.matchTemplate(np.ascontiguousarray(features[:, :, lo:hi]),
                               np.ascontiguousarray(template[:, :, lo:hi]), cv2.TM_SQDIFF,
                               mask=np.ascontiguousarray(m[:, :, lo:hi]))

@@ -263,11 +263,12 @@ class EvolvePlayer(Player):
                    "LABEL16": label16, "RUN": RUN}
         self._kernels = {}
         for rate in (False, True):
-            k = build_program(self.ctx, "quilt.cl", {**defines, "RATE": rate}).kernel("evolve")
-            k.set_args(self._d_stack, self._d_source, self._d_labels, self._d_source2, self._d_labels2,
-                       self._d_rate, self._d_warp, self._d_btime, self._d_gain, self._d_out, np.int32(w), np.int32(h),
-                       np.int32(0), np.float32(0))
-            self._kernels[rate] = k
+            for end in ENDS:
+                k = build_program(self.ctx, "quilt.cl", {**defines, "RATE": rate, "END": _END_CODE[end]}).kernel("evolve")
+                k.set_args(self._d_stack, self._d_source, self._d_labels, self._d_source2, self._d_labels2,
+                           self._d_rate, self._d_warp, self._d_btime, self._d_gain, self._d_out,
+                           np.int32(w), np.int32(h), np.float32(0))
+                self._kernels[rate, end] = k
         self._gsize = (-(-w // RUN), h)
         self._upload_warp()
 
@@ -283,10 +284,12 @@ class EvolvePlayer(Player):
             saved = self._rate
             if saved is None:   # fill the rate buffer once so the RATE variant can run
                 cl.enqueue_copy(self.queue, self._d_rate, np.ones(self._shape[:2], np.float32), is_blocking=True)
+            end = self._end
             for rate in (False, True):
-                self._rate = np.ones(1, np.float32) if rate else None
-                self._draw(0.0, scratch)
-            self._rate = saved
+                for self._end in ENDS:
+                    self._rate = np.ones(1, np.float32) if rate else None
+                    self._draw(0.0, scratch)
+            self._rate, self._end = saved, end
             if saved is not None:
                 cl.enqueue_copy(self.queue, self._d_rate, saved, is_blocking=True)
         else:
@@ -433,13 +436,12 @@ class EvolvePlayer(Player):
             self.render_reference(t, out)
             return
         import pyopencl as cl
-        k = self._kernels[self._rate is not None]
+        k = self._kernels[self._rate is not None, self._end]
         if self._rate is None:
             tau = fold_time(np.full(self.n_blocks, np.float32(t), np.float32), self.n_frames, self._end)
             self._btime[...] = warp_time(self._warp, self._block_ids, tau)
             cl.enqueue_copy(self.queue, self._d_btime, self._btime, is_blocking=False)
-        k.set_arg(12, np.int32(_END_CODE[self._end]))
-        k.set_arg(13, np.float32(t))
+        k.set_arg(12, np.float32(t))
         cl.enqueue_nd_range_kernel(self.queue, k, self._gsize, None)
         cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
 

@@ -74,6 +74,16 @@ def test_block_errors_match_brute_force():
     np.testing.assert_allclose(e, ref, rtol=1e-4, atol=1e-4)
 
 
+def test_block_errors_wide_features_in_slices():
+    rng = np.random.default_rng(6)
+    feats = rng.random((10, 9, 300)).astype(np.float32)
+    mask = np.ones((4, 3), bool)
+    e = block_errors(feats, feats[2:6, 3:6], mask)
+    assert e.shape == (7, 7) and np.unravel_index(np.argmin(e), e.shape) == (2, 3) and e.min() < 1e-3
+    ref = ((feats[5:9, 1:4] - feats[2:6, 3:6]) ** 2).sum()
+    assert abs(e[5, 1] - ref) < 1e-3 * ref
+
+
 def test_min_cut_path_is_optimal():
     rng = np.random.default_rng(4)
     err = rng.random((5, 4))
