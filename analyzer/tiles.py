@@ -121,7 +121,7 @@ def _thumbs(frames: np.ndarray, side: int = 48) -> np.ndarray:
 
 
 def find_loop(frames: np.ndarray, *, min_loop: int, max_loop: int | None = None, transition: int = 8,
-              length: int | None = None, prefer_long: float = 0.3) -> tuple[int, int, float]:
+              length: int | None = None, prefer_long: float = 0.5) -> tuple[int, int, float]:
     """``(start, length, cost)`` of the best loop.
 
     ``cost`` is the mean RMS thumbnail difference between the frame sets
@@ -459,7 +459,7 @@ class _Texture:
 
 
 def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = None, n_tiles: int = 4,
-                min_tile: int = DEFAULT_MIN_TILE, max_tile: int = DEFAULT_MAX_TILE, min_loop: int = 16,
+                min_tile: int = DEFAULT_MIN_TILE, max_tile: int = DEFAULT_MAX_TILE, min_loop: int = 32,
                 max_loop: int | None = None, transition: int = 8, overlap: int | None = None,
                 ring: int | None = None, flow_gain: float = 0.5, mix: Sequence[Clip | np.ndarray] = (),
                 names: Sequence[str] | None = None, feather: int | None = None,
@@ -622,6 +622,7 @@ def _primary(tx: _Texture, th: int, tw: int, by: int, bx: int, flow_gain: float)
     ys = np.unique(np.r_[np.arange(0, h - hb + 1, stride_y), h - hb])
     xs = np.unique(np.r_[np.arange(0, w - wb + 1, stride_x), w - wb])
     u = _sample(tx.length, _PRE_FRAMES)
+    act = _activity(tx)
     ranked = []
     for y in ys:
         for x in xs:
@@ -629,10 +630,10 @@ def _primary(tx: _Texture, th: int, tw: int, by: int, bx: int, flow_gain: float)
             dh = blk[:, :th, tw:tw + bx] - blk[:, :th, :bx]
             dv = blk[:, th:th + by, :tw] - blk[:, :by, :tw]
             bound = (dh * dh).sum(axis=(0, 3)).min(axis=1).mean() + (dv * dv).sum(axis=(0, 3)).min(axis=0).mean()
-            ranked.append((float(bound), int(y), int(x)))
-    ranked.sort()
+            ranked.append((float(bound), int(y), int(x), float(act[y:y + hb, x:x + wb].mean())))
+    ranked = _lively(ranked)
     best = None
-    for _, y, x in ranked[:3]:
+    for _, y, x, _ in ranked[:3]:
         tile, ch, cv = toroidal_tile(tx.block(y, x, hb, wb), th, tw, flow=tx.flow[y:y + hb, x:x + wb],
                                      flow_gain=flow_gain)
         if best is None or ch + cv < best[2][0] + best[2][1]:
@@ -652,17 +653,18 @@ def _interiors(tx: _Texture, th: int, tw: int, r: int, count: int, flow_gain: fl
     ringmask = np.ones((th, tw), bool)
     ringmask[r:th - r, r:tw - r] = False
     stride_y, stride_x = max(4, th // 4), max(4, tw // 4)
+    act = _activity(tx)
     ranked = []
     for y in np.unique(np.r_[np.arange(0, h - th + 1, stride_y), h - th]):
         for x in np.unique(np.r_[np.arange(0, w - tw + 1, stride_x), w - tw]):
             d = tx.block(y, x, th, tw, u).astype(np.float32) - prim
             e = (d * d).sum(axis=(0, 3))
-            ranked.append((float(e[ringmask].mean()), int(y), int(x)))
-    ranked.sort()
+            ranked.append((float(e[ringmask].mean()), int(y), int(x), float(act[y:y + th, x:x + tw].mean())))
+    ranked = _lively(ranked)
     chosen: list[tuple[int, int]] = [(py, px)]
     out = []
     for relax in (0.5, 0.0, -1.0):     # prefer places apart from the chosen ones, then allow overlap
-        for _, y, x in ranked:
+        for _, y, x, _ in ranked:
             if len(out) >= count:
                 break
             if any(abs(y - cy) < th * relax and abs(x - cx) < tw * relax for cy, cx in chosen) or (y, x) in chosen:
@@ -676,6 +678,27 @@ def _interiors(tx: _Texture, th: int, tw: int, r: int, count: int, flow_gain: fl
         out.append((tx.primary.copy(), np.full((th, tw), 255, np.uint8), 0.0))
         step()
     return out
+
+
+def _activity(tx: _Texture) -> np.ndarray:
+    """Mean squared consecutive-frame difference per pixel over the loop (a few pairs)."""
+    f = tx.frames
+    idx = _sample(tx.length - 1, 8) + tx.start
+    acc = np.zeros(f.shape[1:3], np.float32)
+    for i in idx:
+        d = f[i + 1].astype(np.float32) - f[i].astype(np.float32)
+        acc += (d * d).sum(axis=2)
+    return acc / len(idx)
+
+
+def _lively(ranked: list) -> list:
+    """Candidates sorted by cost, the calm ones (activity below half the median) last.
+
+    Without this the lowest overlap error wins in the stillest part of the clip, and the
+    tiles would show a texture calmer than the source.
+    """
+    med = float(np.median([r[3] for r in ranked]))
+    return sorted(ranked, key=lambda r: (r[3] < 0.5 * med, r[0]))
 
 
 def _median_step(frames: np.ndarray) -> float:

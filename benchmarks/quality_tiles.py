@@ -11,7 +11,7 @@ For each clip: analyze with ``--methods tiles``, play ``--frames`` frames at ``-
 - repetition: ``repetition_lag`` of the output (None = no repeat within half the output);
 - mixing (two textures, label map "halves" with border tiles): seam visibility across the
   texture border over seam visibility across tile borders inside one texture;
-- tone: output mean RGB against a target colour.
+- tone: output mean RGB (over the whole run) against a target colour.
 
 Usage::
 
@@ -112,8 +112,10 @@ def measure(name: str, frames: np.ndarray, *, size: tuple[int, int], n_out: int,
             res["mix_ratio" + key] = res["mix_seam_texture_border" + key] / res["mix_seam_inside" + key]
     target = np.array([150.0, 120.0, 90.0])
     with TilesPlayer(path, backend=backend, size=size, seed=1, tone=tuple(target)) as p:
-        toned = np.stack([p.next_frame() for _ in range(20)])
-    mean = toned.reshape(-1, 3).mean(axis=0)
+        acc = np.zeros(3)
+        for _ in range(n_out):
+            acc += p.next_frame().reshape(-1, 3).mean(axis=0)
+    mean = acc / n_out
     res["tone_target"] = target.tolist()
     res["tone_mean"] = [round(float(v), 2) for v in mean]
     res["tone_max_rel_error"] = float(np.max(np.abs(mean - target) / target))

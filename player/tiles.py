@@ -67,6 +67,24 @@ def label_preset(name: str, shape: tuple[int, int], n_classes: int, *, seed: int
     raise ValueError(f"labels preset must be one of {LABEL_PRESETS}, not {name!r}")
 
 
+def _fit_gain(hist: np.ndarray, target: float) -> float:
+    """Gain ``g`` whose saturated output ``min(255, g v)`` has mean ``target`` over ``hist``.
+
+    The seed fits mean colours by per-pixel multiplication; solving through the histogram
+    keeps the fit exact when bright pixels saturate. Bisection on a monotone function.
+    """
+    v = np.arange(256, dtype=np.float64)
+    n = hist.sum()
+    if n == 0 or (hist[1:].sum() == 0):
+        return 1.0
+    lo, hi = 0.0, 64.0
+    for _ in range(40):
+        g = 0.5 * (lo + hi)
+        mean = float((hist * np.minimum(255.0, np.rint(g * v))).sum() / n)
+        lo, hi = (g, hi) if mean < target else (lo, g)
+    return 0.5 * (lo + hi)
+
+
 class TilesPlayer(Player):
     """Endless frames of any size from a texture's ``tiles`` group.
 
@@ -85,8 +103,11 @@ class TilesPlayer(Player):
         ``(H, W)`` map sampled at the cell centres, or a :func:`label_preset` name. Classes are indices into
         ``class_names`` (:attr:`classes`). Default: everything the main texture (class 0).
     tone : None, str, int or (r, g, b)
-        Colour-tone target: None (off), a class name or index (fit every tile's mean RGB to
-        that texture's), ``"consensus"`` (the mean over all classes), or an RGB colour.
+        Colour-tone target: None (off), a class name or index (that texture's mean RGB),
+        ``"consensus"`` (the mean over all classes), or an RGB colour. Each class gets one
+        gain per channel (per-pixel multiplication, as in the seed), solved so that the
+        class's pixels *as arranged* (tile histograms weighted by their output area, with
+        saturation at 255) have the target mean.
 
     Controls (attributes, changeable between frames)
     -------------------------------------------------
@@ -207,7 +228,12 @@ class TilesPlayer(Player):
         self.arrangement = choice
         if not self.mixing:
             self._class_map = None
+            h, w = self._shape[:2]
+            area = np.outer(np.minimum(th, h - th * np.arange(choice.shape[0])),
+                            np.minimum(tw, w - tw * np.arange(choice.shape[1])))
+            self._tile_pixels = np.bincount(choice.ravel(), weights=area.ravel(), minlength=self.n_tiles)
             self._gather.set_source_grid(pack_source(choice * tw, m.tile_class[choice]))
+            self._retone()
             return
         h, w = self._shape[:2]
         yy, xx = np.arange(h), np.arange(w)
@@ -252,7 +278,14 @@ class TilesPlayer(Player):
             pair = m.tile_class[tile[feathered]] * m.n_classes + m.ring_class[tile[feathered]]
             q = np.rint(weight[feathered] / 255.0 * (self._tone_levels - 1)).astype(np.int64)
             tone[feathered] = m.n_classes + pair * self._tone_levels + q
+        self._tile_pixels = np.bincount(tile.ravel(), minlength=self.n_tiles).astype(float)
         self._gather.set_source_map(pack_source(index, tone))
+        self._retone()
+
+    def _retone(self) -> None:
+        """Refit the tone to the current arrangement (the target stays)."""
+        if getattr(self, "_tone_spec", None) is not None:
+            self._gather.set_tones(*self._tone_tables(self._tone_spec))
 
     def source_class_map(self, *, strict: bool = False) -> np.ndarray:
         """``(H, W)`` class (texture) each output pixel mostly comes from: the true texture borders.
@@ -387,6 +420,30 @@ class TilesPlayer(Player):
                              f"0..255, not {value!r}")
         return rgb
 
+    def _class_histograms(self) -> np.ndarray:
+        """``(C, 3, 256)`` value histograms of each class as the current arrangement shows it:
+        every tile's histogram (a few loop frames, cached) weighted by its output pixels."""
+        m = self.model
+        if getattr(self, "_tile_hist", None) is None:
+            hist = np.zeros((self.n_tiles, 3, 256), np.float64)
+            idx = np.unique(np.linspace(0, self.loop_length - 1, 16).round().astype(int))
+            for k in range(self.n_tiles):
+                px = m.tiles[k, idx].reshape(-1, 3)
+                for ch in range(3):
+                    hist[k, ch] = np.bincount(px[:, ch], minlength=256) / len(px)
+            self._tile_hist = hist
+        counts = getattr(self, "_tile_pixels", None)
+        if counts is None:
+            counts = np.ones(self.n_tiles)
+        out = np.zeros((m.n_classes, 3, 256), np.float64)
+        for c in range(m.n_classes):
+            own = m.tile_class == c
+            w = np.where(own, counts, 0.0)
+            if w.sum() == 0:
+                w = own.astype(float)
+            out[c] = np.tensordot(w, self._tile_hist, axes=1)
+        return out
+
     def class_mean_rgb(self) -> np.ndarray:
         """``(C, 3)`` mean RGB of each class (over its own tiles)."""
         m = self.model
@@ -400,8 +457,10 @@ class TilesPlayer(Player):
         c = self.model.n_classes
         gain = np.ones((c, 3), np.float32)
         if target is not None:
-            means = np.maximum(self.class_mean_rgb(), 1.0)
-            gain = np.clip(target[None, :] / means, 0.0, 64.0).astype(np.float32)
+            hist = self._class_histograms()
+            for ci in range(c):
+                for ch in range(3):
+                    gain[ci, ch] = _fit_gain(hist[ci, ch], float(target[ch]))
         # blended entries for feathered border pixels: index c + (a * C + ring) * levels + q
         share = np.linspace(0.0, 1.0, self._tone_levels, dtype=np.float32)
         blend = [(1 - share[:, None]) * gain[a] + share[:, None] * gain[r] for a in range(c) for r in range(c)]

@@ -56,7 +56,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--tile", type=_tile_arg, default=None, metavar="N or WxH",
                    help="tile size in pixels (default: from the dominant spatial period)")
     g.add_argument("--tiles-n", type=positive_int, default=4, help="tiles per texture (default 4)")
-    g.add_argument("--tiles-min-loop", type=positive_int, default=16, help="shortest loop in frames (default 16)")
+    g.add_argument("--tiles-min-loop", type=positive_int, default=32, help="shortest loop in frames (default 32)")
     g.add_argument("--tiles-max-loop", type=positive_int, default=None, help="longest loop (default: the clip)")
     g.add_argument("--tiles-transition", type=positive_int, default=8,
                    help="frames over which the per-pixel temporal transitions spread (default 8)")
