@@ -66,13 +66,13 @@ def tile_period(frames: np.ndarray, *, min_tile: int = DEFAULT_MIN_TILE, max_til
     mean power spectrum over its median (beyond ~30 the texture is periodic and the tile
     is the smallest multiple of the period that is at least ``min_tile``; otherwise the
     tile is a quarter of the shorter frame side). Both are clamped to
-    ``[min_tile, min(max_tile, frame side)]``.
+    ``[min_tile, min(max_tile, 2/3 of the frame side)]``.
 
     Examples
     --------
     >>> x = np.arange(128)
     >>> img = (128 + 100 * np.sin(2 * np.pi * x / 16))[None, :].repeat(96, 0)
-    >>> f = np.repeat(img[None, :, :, None], 3, axis=3).astype(np.uint8)[None].repeat(2, 0)
+    >>> f = np.repeat(img[:, :, None], 3, axis=2).astype(np.uint8)[None].repeat(2, 0)
     >>> size, period, strength = tile_period(f, min_tile=40)
     >>> size[1], round(period[1])
     (48, 16)
@@ -98,7 +98,7 @@ def tile_period(frames: np.ndarray, *, min_tile: int = DEFAULT_MIN_TILE, max_til
     default = max(min_tile, min(max_tile, (min(h, w) // 4) // 8 * 8))
 
     def size(period: float, side: int) -> int:
-        hi = max(min_tile, min(max_tile, side))
+        hi = max(min_tile, min(max_tile, (2 * side) // 3))          # room for the overlap bands
         if strength >= 30 and np.isfinite(period) and period >= 2:
             m = int(np.ceil(min_tile / period))
             s = int(round(m * period))

@@ -1,0 +1,185 @@
+"""Tile analysis: period, loop, per-pixel transition, toroidal cuts, compatible tiles, mixing.
+
+Quality figures use analyzer/metrics.py (seam_visibility, temporal_discontinuity).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynatex.analyzer import load_clip, metrics
+from dynatex.analyzer.tiles import (circular_cut, find_loop, learn_tiles, looped_block, ring_join, side_join,
+                                    tile_period, toroidal_tile, transition_map)
+
+from ..conftest import wave_clip
+
+
+def _stochastic(t=70, h=56, w=72, seed=0):
+    """Moving smooth noise: a clip where uncut blocks show seams."""
+    import cv2
+    rng = np.random.default_rng(seed)
+    big = cv2.GaussianBlur(rng.normal(0, 1, (h + t * 2, w + t)).astype(np.float32), (0, 0), 2.5)
+    frames = np.stack([big[2 * i:2 * i + h, i:i + w] for i in range(t)])
+    g = np.clip(128 + 60 * frames / frames.std(), 0, 255).astype(np.uint8)
+    return np.stack([g, 255 - g, np.clip(g * 0.5 + 60, 0, 255).astype(np.uint8)], axis=3)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return learn_tiles(_stochastic(), tile=24, n_tiles=4, min_loop=24)
+
+
+def test_tile_period_finds_a_stripe_period():
+    x = np.arange(160)
+    img = (128 + 90 * np.sin(2 * np.pi * x / 20))[None, :].repeat(120, 0)
+    f = np.repeat(img[:, :, None], 3, axis=2).astype(np.uint8)[None].repeat(3, 0)
+    (th, tw), (py, px), strength = tile_period(f, min_tile=32, max_tile=100)
+    assert round(px) == 20 and tw == 40 and strength > 30
+
+
+def test_tile_period_without_a_period_uses_the_default_size():
+    f = np.random.default_rng(0).integers(0, 256, (3, 96, 128, 3), dtype=np.uint8)
+    (th, tw), _, strength = tile_period(f, min_tile=16, max_tile=64)
+    assert strength < 30 and th == tw == 24
+
+
+def test_find_loop_recovers_a_periodic_clip():
+    base = wave_clip(t=40, h=16, w=20, periods=(40.0, 20.0), seed=1)
+    clip = np.concatenate([base, base, base[:20]])
+    start, length, cost = find_loop(clip, min_loop=30, transition=4)
+    assert length % 40 == 0 and cost < 0.3
+
+
+def test_transition_map_and_seamless_loop_wrap():
+    clip = _stochastic(t=60)
+    start, length, _ = find_loop(clip, min_loop=24, transition=6)
+    tau = transition_map(clip, start, length, 6)
+    assert tau.shape == clip.shape[1:3] and tau.min() >= 0 and tau.max() < 6
+    loop = looped_block(clip, start, length, tau, 0, 0, *clip.shape[1:3])
+    # where tau > 0 the wrap continues the source: frame 0 is the source frame after frame L-1
+    on = tau > 0
+    assert (loop[0][on] == clip[start + length][on]).all() and (loop[-1] == clip[start + length - 1]).all()
+    twice = np.concatenate([loop, loop])
+    assert metrics.temporal_discontinuity(twice, [length], source=clip)[0] <= 1.3
+
+
+def test_circular_cut_closes():
+    rng = np.random.default_rng(0)
+    err = rng.random((30, 8))
+    path, cost = circular_cut(err, np.ones(30, int))
+    assert abs(int(path[0]) - int(path[-1])) <= 1 and (np.abs(np.diff(path)) <= 1).all()
+    assert cost <= err.min(axis=1).mean() + err.max()
+
+
+def test_toroidal_tile_wraps_seamlessly(model):
+    tile = model.tiles[0]
+    # tile the plane 3x3 with the primary and measure the seam across the wrap
+    plane = np.tile(tile, (1, 3, 3, 1))
+    th, tw = model.tile_size
+    seam = metrics.seam_visibility(plane, metrics.grid_labels(plane.shape[1:3], (th, tw))).mean()
+    assert seam <= 1.15, seam
+
+
+def test_tiles_are_mutually_compatible_and_share_the_ring(model):
+    assert model.n_tiles == 4 and (model.tile_class == 0).all()
+    th, tw = model.tile_size
+    edge = np.zeros((th, tw), bool)
+    edge[0], edge[-1], edge[:, 0], edge[:, -1] = True, True, True, True
+    for k in range(1, 4):
+        assert (model.masks[k][edge] == 255).all()                       # the outermost ring is the primary's
+        assert (model.tiles[k][:, edge] == model.tiles[0][:, edge]).all()
+        assert (model.masks[k] == 0).any()                               # and the interior is not
+    # a random arrangement of the four is as seamless as the primary with itself
+    rng = np.random.default_rng(0)
+    pick = rng.integers(0, 4, (4, 5))
+    plane = np.concatenate([np.concatenate([model.tiles[k] for k in row], axis=2) for row in pick], axis=1)
+    labels = metrics.grid_labels(plane.shape[1:3], (th, tw))
+    assert metrics.seam_visibility(plane, labels).mean() <= 1.15
+
+
+def test_uncut_blocks_are_clearly_worse():
+    clip = _stochastic()
+    m = learn_tiles(clip, tile=24, n_tiles=2, min_loop=24)
+    th, tw = m.tile_size
+    rng = np.random.default_rng(1)
+    blocks = []
+    for _ in range(12):
+        y, x, s = rng.integers(0, clip.shape[1] - th), rng.integers(0, clip.shape[2] - tw), rng.integers(0, 30)
+        blocks.append(clip[s:s + 30, y:y + th, x:x + tw])
+    plane = np.concatenate([np.concatenate(blocks[r * 4:(r + 1) * 4], axis=2) for r in range(3)], axis=1)
+    labels = metrics.grid_labels(plane.shape[1:3], (th, tw))
+    uncut = metrics.seam_visibility(plane, labels).mean()
+    tiled = np.tile(m.tiles[0][:30], (1, 3, 4, 1))
+    cut = metrics.seam_visibility(tiled, labels).mean()
+    assert uncut > 2 * cut and uncut > 1.5
+
+
+def test_ring_join_and_side_join_masks():
+    rng = np.random.default_rng(0)
+    a = rng.integers(0, 256, (4, 20, 24, 3), dtype=np.uint8)
+    b = rng.integers(0, 256, (4, 20, 24, 3), dtype=np.uint8)
+    tile, weight, cost = ring_join(a, b, 4)
+    assert set(np.unique(weight)) <= {0, 255} and cost > 0
+    assert (tile[:, weight == 255] == a[:, weight == 255]).all() and (tile[:, weight == 0] == b[:, weight == 0]).all()
+    for side in ("left", "right", "top", "bottom"):
+        tile, weight, _ = side_join(a, b, 4, side, feather=3)
+        line = {"left": weight[:, 0], "right": weight[:, -1], "top": weight[0], "bottom": weight[-1]}[side]
+        opposite = {"left": weight[:, -1], "right": weight[:, 0], "top": weight[-1], "bottom": weight[0]}[side]
+        assert (line == 255).all() and (opposite == 0).all()
+    with pytest.raises(ValueError, match="side"):
+        side_join(a, b, 4, "middle")
+
+
+def test_mixing_builds_border_tiles_and_colour_stats():
+    main = _stochastic(seed=0)
+    other = np.ascontiguousarray(_stochastic(seed=5)[..., ::-1])
+    m = learn_tiles(main, tile=24, n_tiles=2, min_loop=24, mix=[other], names=["a", "b"])
+    assert m.class_names == ["a", "b"]
+    assert len(m.tiles_of(0)) == 2 and len(m.tiles_of(1)) == 2
+    border = m.ring_class != m.tile_class
+    assert border.sum() == 8 and sorted(m.border_side[border].tolist()) == [0, 0, 1, 1, 2, 2, 3, 3]
+    assert m.loop_length == m.tiles.shape[1]
+    assert np.allclose(m.mean_rgb[0], m.tiles[0].reshape(-1, 3).mean(axis=0), atol=3)
+    assert (m.mean_hsv[:, 0] >= 0).all() and (m.mean_hsv[:, 0] < 360).all() and (m.mean_hsv[:, 1:] <= 1).all()
+
+
+def test_progress_reaches_its_total():
+    calls = []
+    learn_tiles(_stochastic(t=50), tile=16, n_tiles=2, min_loop=20, progress=lambda d, t: calls.append((d, t)))
+    assert calls and calls[-1][0] == calls[-1][1] and all(d <= t for d, t in calls)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"tile": 80}, "larger than the clip frame"),
+    ({"min_loop": 90}, "fewer than the shortest loop"),
+    ({"n_tiles": 0}, "n_tiles"),
+    ({"transition": 30, "min_loop": 20}, "transition"),
+    ({"flow_gain": -1}, "flow_gain"),
+    ({"ring": 20, "tile": 24}, "ring"),
+    ({"names": ["only", "two"]}, "names"),
+])
+def test_bad_input_is_a_clear_error(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        learn_tiles(_stochastic(t=50), **kwargs)
+
+
+def test_mix_clip_shorter_than_the_loop_is_a_clear_error():
+    with pytest.raises(ValueError, match="fewer than the loop length"):
+        learn_tiles(_stochastic(t=60), tile=16, min_loop=40, mix=[_stochastic(t=30, seed=2)])
+
+
+def test_grey_clip_is_expanded():
+    m = learn_tiles(_stochastic(t=50)[..., :1], tile=16, n_tiles=1, min_loop=20)
+    assert m.tiles.shape[-1] == 3 and (m.tiles[..., 0] == m.tiles[..., 1]).all()
+
+
+@pytest.mark.clips
+def test_real_clip_tiles_are_seamless(clips_dir):
+    clip = load_clip(str(clips_dir / "grass_straw_wind_dyntex.avi"), stop=120, size=(176, 144))
+    m = learn_tiles(clip, n_tiles=2, min_loop=40)
+    th, tw = m.tile_size
+    plane = np.tile(m.tiles[0][:40], (1, 2, 2, 1))
+    seam = metrics.seam_visibility(plane, metrics.grid_labels(plane.shape[1:3], (th, tw))).mean()
+    twice = np.concatenate([m.tiles[0], m.tiles[0]])
+    wrap = metrics.temporal_discontinuity(twice, [m.loop_length], source=clip.frames)[0]
+    assert seam <= 1.15 and wrap <= 1.3, (seam, wrap)

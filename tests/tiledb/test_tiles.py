@@ -1,0 +1,82 @@
+"""The ``tiles`` group: round trip, and damaged or hostile values refused with a clear error."""
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from dynatex.analyzer import load_clip
+from dynatex.analyzer.tiles import learn_tiles
+from dynatex.tiledb import DatabaseWriter, TileDB, TileDBFormatError, TilesModel
+
+from ..conftest import wave_clip
+
+
+@pytest.fixture(scope="module")
+def model():
+    return learn_tiles(wave_clip(50, 40, 48), tile=16, n_tiles=2, min_loop=16,
+                       mix=[wave_clip(50, 40, 48, seed=3)], names=["calm", "wild"])
+
+
+@pytest.fixture(scope="module")
+def db_path(tmp_path_factory, model):
+    clip = load_clip(wave_clip(50, 40, 48))
+    path = tmp_path_factory.mktemp("tiles") / "tiles.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("waves", clip.source_info())
+        w.put_method("waves", "tiles", model)
+    return path
+
+
+def test_round_trip(db_path, model):
+    with TileDB(db_path) as db:
+        tex = db.texture("waves")
+        assert "tiles" in tex.methods
+        back = tex.read("tiles")
+    assert isinstance(back, TilesModel)
+    for name in ("tiles", "tile_class", "ring_class", "masks", "border_side", "seam_cost", "mean_rgb", "mean_hsv",
+                 "class_loop_start", "class_loop_cost", "class_toroid_cost"):
+        assert np.array_equal(getattr(back, name), getattr(model, name)), name
+    assert back.class_names == ["calm", "wild"] and back.tiles.dtype == np.uint8
+    assert back.loop_length == model.loop_length and back.tile_size == (16, 16)
+    assert back.info["ring"] == model.info["ring"]
+
+
+def _damaged(src, tmp_path, edit):
+    path = tmp_path / "bad.h5"
+    path.write_bytes(src.read_bytes())
+    with h5py.File(path, "r+") as f:
+        edit(f["textures/waves/tiles"])
+    return path
+
+
+def _replace(name, fn):
+    def edit(g):
+        data = fn(g[name][()])
+        del g[name]
+        g.create_dataset(name, data=data)
+    return edit
+
+
+def _attr(name, value):
+    def edit(g):
+        g.attrs[name] = value
+    return edit
+
+
+@pytest.mark.parametrize("edit, match", [
+    (_replace("tile_class", lambda a: a + 5), r"/tile_class: holds indices outside \[0, 2\)"),
+    (_replace("ring_class", lambda a: np.full_like(a, 1)), r"class 0 \('calm'\) has no tile of its own"),
+    (_replace("tiles", lambda a: a[:, :, :8]), r"/tiles: has shape"),
+    (_replace("tiles", lambda a: a.astype(np.float32)), r"/tiles: dtype float32 is not unsigned integer"),
+    (_replace("mean_rgb", lambda a: a * np.nan), r"/mean_rgb: contains NaN"),
+    (_replace("border_side", lambda a: np.full_like(a, -1)), r"/border_side: must be 0..3 for border tiles"),
+    (_attr("loop_length", 1), r"@loop_length: loop length 1 outside"),
+    (_attr("n_tiles", 10**6), r"@n_tiles"),
+    (lambda g: g.__delitem__("masks"), r"/masks: missing dataset"),
+])
+def test_damaged_group_is_refused(db_path, tmp_path, edit, match):
+    path = _damaged(db_path, tmp_path, edit)
+    with TileDB(path) as db:
+        with pytest.raises(TileDBFormatError, match=match):
+            db.texture("waves").read("tiles")
