@@ -67,6 +67,23 @@ class Player:
         self.frame_index += 1
         return out
 
+    def start_frame(self, out: np.ndarray) -> PendingFrame:
+        """Start producing the next frame into ``out`` and return at once (double buffering).
+
+        The frame is complete after ``handle.wait()``; until then ``out`` must not be read
+        or reused. Alternate two buffers to overlap frame production with the caller's work.
+        Modes without an asynchronous path render before returning.
+        """
+        check_out(out, self.shape)
+        event = self._start(out)
+        self.frame_index += 1
+        return PendingFrame(out, event)
+
+    def _start(self, out: np.ndarray):
+        """Begin rendering into ``out``; return an event to wait on, or None when done."""
+        self._render(out)
+        return None
+
     def frames(self, count: int) -> Iterator[np.ndarray]:
         """Yield ``count`` new frames (each a fresh array)."""
         count = check_int("count", count, 0)
@@ -112,6 +129,28 @@ class Player:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class PendingFrame:
+    """A frame in flight from :meth:`Player.start_frame`."""
+
+    def __init__(self, out: np.ndarray, event: Any = None) -> None:
+        self.out = out
+        self._event = event
+
+    @property
+    def done(self) -> bool:
+        if self._event is None:
+            return True
+        import pyopencl as cl
+        return self._event.command_execution_status == cl.command_execution_status.COMPLETE
+
+    def wait(self) -> np.ndarray:
+        """Block until the frame is complete and return it."""
+        if self._event is not None:
+            self._event.wait()
+            self._event = None
+        return self.out
 
 
 def check_out(out: Any, shape: tuple[int, ...]) -> None:

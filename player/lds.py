@@ -236,6 +236,12 @@ class LDSPlayer(Player):
         self._project(self._x, out)
         self._step()
 
+    def _start(self, out: np.ndarray):
+        np.multiply(self._w, self._x, out=self._coef[: self.n], casting="same_kind")
+        event = self._proj.run(out, wait=False)
+        self._step()
+        return event
+
     def render_state(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Project an arbitrary state to a frame (the current weights apply); the player does not advance."""
         x = np.asarray(x, dtype=float)

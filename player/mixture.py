@@ -225,6 +225,12 @@ class MixturePlayer(Player):
         self._project(self._hist[0], out)
         self._step()
 
+    def _start(self, out: np.ndarray):
+        self._proj.coef[:] = self.decoder.coefficients(self._hist[0])
+        event = self._proj.run(out, wait=False)
+        self._step()
+        return event
+
     def render_coord(self, g: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Decode and project an arbitrary global coordinate; the player does not advance."""
         g = np.asarray(g, dtype=float)

@@ -80,8 +80,13 @@ class Projector:
     def is_opencl(self) -> bool:
         return self.queue is not None
 
-    def run(self, out: np.ndarray) -> None:
-        """Project :attr:`coef` into ``out`` ((H, W, 3) uint8, C-contiguous)."""
+    def run(self, out: np.ndarray, *, wait: bool = True):
+        """Project :attr:`coef` into ``out`` ((H, W, 3) uint8, C-contiguous).
+
+        With ``wait=False`` (OpenCL only) the copy into ``out`` is left in flight and its
+        event returned: ``out`` is complete once the event has completed. :attr:`coef` may
+        be changed as soon as this returns.
+        """
         if self.queue is None:
             frame = self.coef[: self.n] @ self._basis
             frame += self._mean
@@ -91,8 +96,9 @@ class Projector:
                 out.reshape(-1)[...] = frame
             else:
                 out[...] = frame.reshape(self.shape[0], self.shape[1], 1)
-            return
+            return None
         import pyopencl as cl
-        cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=False)
+        cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=not wait)
         cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, None)
-        cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
+        event = cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=wait)
+        return None if wait else event

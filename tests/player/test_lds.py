@@ -228,3 +228,15 @@ def test_bad_arguments(lds_db):
             p.reseed(-1)
         with pytest.raises(ValueError, match="state must come from"):
             p.set_state({"mode": "tiles"})
+
+
+def test_double_buffering_gives_the_same_frames(lds_db):
+    with open_player(lds_db, seed=8) as sync, open_player(lds_db, seed=8) as pipe:
+        bufs = [np.empty(pipe.shape, np.uint8) for _ in range(2)]
+        pending = pipe.start_frame(bufs[0])
+        for i in range(1, 12):
+            nxt = pipe.start_frame(bufs[i % 2]) if i < 11 else None
+            frame = pending.wait()
+            np.testing.assert_array_equal(frame, sync.next_frame())
+            pending = nxt
+        assert pipe.frame_index == sync.frame_index == 11
