@@ -48,6 +48,15 @@ def _left_fast() -> np.ndarray:
     return halves((96, 128), 2.0, 1.0)
 
 
+def _grassy() -> np.ndarray:
+    from ..sample import ripples
+    return ripples()
+
+
+def _grassy_other() -> np.ndarray:
+    return np.ascontiguousarray(_grassy()[..., ::-1])
+
+
 #: The demo's textures: a sample-clip maker and the analysis methods (with options) run on it.
 DEMO_TEXTURES: dict[str, tuple[Callable[[], np.ndarray], dict[str, dict]]] = {
     "ripples": (ripples, {
@@ -56,6 +65,9 @@ DEMO_TEXTURES: dict[str, tuple[Callable[[], np.ndarray], dict[str, dict]]] = {
     }),
     "pendulum": (_pendulum, {
         "turnpoints": {},
+    }),
+    "grassy": (_grassy, {
+        "tiles": {"tile": 32, "n_tiles": 3, "min_loop": 24, "mix": [_grassy_other()], "names": ["grassy", "sea"]},
     }),
     "spreading": (_spreading, {
         "quilt": {"size": (128, 96), "block": 16, "rank": 15},
@@ -75,6 +87,10 @@ DEMO_STEPS: list[DemoStep] = [
     DemoStep("turnpoints: turns + jumps", "turnpoints", texture="pendulum"),
     DemoStep("turnpoints: jumps, speed 1.5", "turnpoints", {"speed": 1.5}, {"playback": "jumps"},
              texture="pendulum"),
+    DemoStep("tiles: random arrangement, smoothed offsets", "tiles", {"sigma": 16.0},
+             {"size": (128, 96)}, texture="grassy"),
+    DemoStep("tiles: two textures mixed, consensus tone", "tiles", {},
+             {"size": (128, 96), "labels": "halves", "tone": "consensus"}, texture="grassy"),
     DemoStep("evolve: quilted 2x, jitter 3", "evolve", {"jitter": 3.0}, texture="spreading"),
     DemoStep("evolve: left half 2x faster, smoothed", "evolve", {"rate_map": _left_fast(), "rate_sigma": 8.0},
              texture="spreading"),

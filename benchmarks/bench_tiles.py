@@ -1,0 +1,122 @@
+"""Mode tiles: playback rate against the roofline and the numpy reference, and analysis time.
+
+    python benchmarks/bench_tiles.py [--frames 300] [--json] [--no-analysis] [--sizes 1280x720,3840x2160]
+
+- Player: ``next_frame(out=...)`` end to end into a host buffer, with smoothed drifting time
+  offsets (sigma 64 px) and colour tone (consensus), at 1280x720 and 3840x2160, OpenCL and
+  the numpy reference, against the copy-bandwidth roofline measured in the same run
+  (``bytes_per_frame / copy GB/s``: the frame read twice for time interpolation, written
+  once, copied out once, plus the tiny cell grid and time lattice).
+  Floors (issue 5): >= 800 frames/s at 1280x720; >= 0.5 of the roofline at 3840x2160.
+- Analysis (with progress bars off): the 250-frame 352x288 grass clip from
+  ``../shared/data/clips`` (floor: 2 minutes) and a generated 260-frame 1280x720 clip
+  (floor: 10 minutes).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from dynatex.analyzer import load_clip
+from dynatex.analyzer.tiles import learn_tiles
+from dynatex.benchmark import copy_bandwidth, summarize, time_calls
+from dynatex.player.tiles import TilesPlayer
+from dynatex.tiledb import DatabaseWriter
+
+CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
+
+
+def generated_clip(t: int, h: int, w: int, seed: int = 0) -> np.ndarray:
+    """Travelling waves plus noise at any size (cheap to make at 1280x720)."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    out = np.empty((t, h, w, 3), np.uint8)
+    for i in range(t):
+        g = (np.sin(2 * np.pi * i / 23 + 0.05 * xx + 0.02 * yy) + np.sin(2 * np.pi * i / 37 - 0.03 * xx + 0.04 * yy))
+        g = 128 + 50 * g + rng.normal(0, 5, (h, w)).astype(np.float32)
+        g = np.clip(g, 0, 255).astype(np.uint8)
+        out[i, ..., 0], out[i, ..., 1], out[i, ..., 2] = g, (g * 0.7 + 40).astype(np.uint8), 255 - g
+    return out
+
+
+def write_db(path: str, frames: np.ndarray, model) -> None:
+    clip = load_clip(frames)
+    with DatabaseWriter(path, overwrite=True) as w:
+        w.put_texture("t", clip.source_info())
+        w.put_method("t", "tiles", model)
+
+
+def bench_player(path: str, size: tuple[int, int], n: int, bandwidth: float) -> dict:
+    row: dict = {"size": f"{size[0]}x{size[1]}"}
+    for backend in ("opencl", "numpy"):
+        with TilesPlayer(path, backend=backend, size=size, seed=1, tone="consensus") as p:
+            p.sigma = 64.0
+            buf = np.empty(p.shape, np.uint8)
+            count = n if backend == "opencl" else max(5, n // 30)
+            row[backend] = summarize(time_calls(lambda: p.next_frame(out=buf), frames=count))
+            row["bytes_per_frame"] = p.bytes_per_frame
+    roof_ms = row["bytes_per_frame"] / (bandwidth * 1e9) * 1e3
+    row["roofline_ms"] = roof_ms
+    row["roofline_fraction"] = roof_ms / row["opencl"]["median_ms"]
+    row["speedup_vs_numpy"] = row["numpy"]["median_ms"] / row["opencl"]["median_ms"]
+    return row
+
+
+def bench_analysis() -> list[dict]:
+    out = []
+    grass = CLIPS / "grass_straw_wind_dyntex.avi"
+    if grass.exists():
+        frames = load_clip(str(grass)).frames
+        t0 = time.perf_counter()
+        m = learn_tiles(frames)
+        out.append({"clip": "grass 352x288", "frames": int(frames.shape[0]), "seconds": time.perf_counter() - t0,
+                    "floor_s": 120, "tile": list(m.tile_size), "loop": m.loop_length})
+    frames = generated_clip(260, 720, 1280)
+    t0 = time.perf_counter()
+    m = learn_tiles(frames)
+    out.append({"clip": "generated 1280x720", "frames": 260, "seconds": time.perf_counter() - t0, "floor_s": 600,
+                "tile": list(m.tile_size), "loop": m.loop_length})
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=300)
+    ap.add_argument("--sizes", default="1280x720,3840x2160")
+    ap.add_argument("--json", action="store_true", help="print the results as JSON")
+    ap.add_argument("--no-analysis", action="store_true")
+    args = ap.parse_args(argv)
+    bw = copy_bandwidth()
+    result: dict = {"copy_bandwidth": bw, "player": [], "analysis": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "tiles.h5")
+        grass = CLIPS / "grass_straw_wind_dyntex.avi"
+        frames = load_clip(str(grass)).frames if grass.exists() else generated_clip(250, 288, 352)
+        write_db(path, frames, learn_tiles(frames))
+        for text in args.sizes.split(","):
+            size = tuple(int(v) for v in text.lower().split("x"))
+            row = bench_player(path, size, args.frames, bw["gbs"])
+            result["player"].append(row)
+            print(f"{row['size']}: OpenCL {row['opencl']['fps']:.0f} frames/s (median {row['opencl']['median_ms']:.2f} ms, "
+                  f"p99 {row['opencl']['p99_ms']:.2f} ms), numpy {row['numpy']['fps']:.1f} frames/s, "
+                  f"x{row['speedup_vs_numpy']:.1f} vs numpy, {row['roofline_fraction']:.2f} of the roofline "
+                  f"({row['roofline_ms']:.2f} ms at {bw['gbs']:.1f} GB/s)", file=sys.stderr)
+    if not args.no_analysis:
+        result["analysis"] = bench_analysis()
+        for a in result["analysis"]:
+            print(f"analysis {a['clip']} ({a['frames']} frames): {a['seconds']:.1f} s (floor {a['floor_s']} s)",
+                  file=sys.stderr)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
