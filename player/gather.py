@@ -301,7 +301,8 @@ class Gather:
         self._k_gather = prog.kernel("gather")
         self._k_smooth_x = prog.kernel("smooth_x")
         self._k_smooth_y = prog.kernel("smooth_y")
-        self._gsize = (-(-w // RUN), h)
+        # kernel gather: TSTEP 8 renders 64-pixel spans from x = -4 (vector path), else RUN pixels
+        self._gsize = (-(-(w + 4) // 64), h) if self.time_step == 8 else (-(-w // RUN), h)
         self._tsize = (_round_up(self.tmap_shape[1], 16), _round_up(self.tmap_shape[0], 4))
         self._upload_tmap()
         self._upload_tones()

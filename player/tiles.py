@@ -114,7 +114,8 @@ class TilesPlayer(Player):
     sigma : float >= 0
         Gaussian smoothing of the time offsets, in output pixels (default half a tile).
     max_shift : float in [0, loop length]
-        Amplitude of the per-cell time offsets, in frames (default a third of the loop).
+        Amplitude of the per-cell time offsets, in frames (default a third of the loop, at
+        most 16: neighbouring cells then differ by a few frames, as the seed advises).
     epoch : int >= 0
         Frames over which the offsets drift to a new random field (0: fixed offsets;
         default twice the loop length).
@@ -171,7 +172,7 @@ class TilesPlayer(Player):
         self._tone_levels = max(2, min(32, (255 - c) // max(1, c * c)))
         self._gather.set_tones(*self._tone_tables(None))
         self._sigma = 0.5 * min(th, tw)
-        self._max_shift = length / 3.0
+        self._max_shift = min(length / 3.0, 16.0)
         self._epoch = 2 * length
         self._speed = 1.0
         self._t = 0.0

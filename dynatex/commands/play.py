@@ -46,7 +46,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--sigma", type=float, default=None,
                    help="Gaussian smoothing of the per-tile time offsets, output pixels (default half a tile)")
     g.add_argument("--max-shift", type=float, default=None, help="amplitude of the time offsets, frames "
-                   "(default a third of the loop)")
+                   "(default a third of the loop, at most 16)")
     g.add_argument("--epoch", type=int, default=None,
                    help="frames over which the offsets drift to a new field, 0 = fixed (default 2 loops)")
     g.add_argument("--tone", default=None, metavar="TEXTURE|consensus|R,G,B",
