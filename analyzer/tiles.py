@@ -504,8 +504,8 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     >>> t, y, x = np.meshgrid(np.arange(40), np.arange(48), np.arange(64), indexing="ij")
     >>> g = 128 + 60 * np.sin(2 * np.pi * (t / 10 + x / 16)) + rng.normal(0, 3, t.shape)
     >>> frames = np.repeat(np.clip(g, 0, 255).astype(np.uint8)[..., None], 3, axis=3)
-    >>> m = learn_tiles(frames, tile=16, n_tiles=2, min_loop=8)
-    >>> m.tiles.shape[0], m.tile_size, m.loop_length >= 8
+    >>> m = learn_tiles(frames, tile=16, n_tiles=2, min_loop=12, transition=4)
+    >>> m.tiles.shape[0], m.tile_size, m.loop_length >= 12
     (2, (16, 16), True)
     """
     main = _frames("clip", clip)
@@ -539,7 +539,10 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         for f in extra:
             th, tw = min(th, f.shape[1] // 2), min(tw, f.shape[2] // 2)
     else:
-        th, tw = (tile, tile) if isinstance(tile, (int, np.integer)) else tuple(int(v) for v in tile)
+        try:
+            th, tw = (int(tile), int(tile)) if isinstance(tile, (int, np.integer)) else (int(v) for v in tile)
+        except (TypeError, ValueError):
+            raise ValueError(f"tile must be an integer or (th, tw), not {tile!r}") from None
         if th < 8 or tw < 8:
             raise ValueError(f"tile must be at least 8x8, not {th}x{tw}")
         period, strength = (0.0, 0.0), 0.0          # not measured: the caller chose the size

@@ -151,6 +151,7 @@ def test_progress_reaches_its_total():
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"tile": 80}, "larger than the clip frame"),
+    ({"tile": "big"}, "tile must be an integer"),
     ({"min_loop": 90}, "fewer than the shortest loop"),
     ({"n_tiles": 0}, "n_tiles"),
     ({"transition": 30, "min_loop": 20}, "transition"),
