@@ -8,7 +8,8 @@ For each clip: analyze with ``--methods tiles``, play ``--frames`` frames at ``-
 - temporal wrap discontinuity of the loop: ``temporal_discontinuity`` of the primary tile
   played twice, at the wrap frame and at every frame of the per-pixel transition (the
   worst is reported), against the source's median frame step;
-- repetition: ``repetition_lag`` of the output (None = no repeat within half the output);
+- repetition: ``repetition_lag`` of the output normalised by its own median frame step
+  (None = no repeat up to ``frames - 10``), and the profile at the loop length;
 - mixing (two textures, label map "halves" with border tiles): seam visibility across the
   texture border over seam visibility across tile borders inside one texture;
 - tone: output mean RGB (over the whole run) against a target colour.
@@ -95,8 +96,14 @@ def measure(name: str, frames: np.ndarray, *, size: tuple[int, int], n_out: int,
     disc = metrics.temporal_discontinuity(twice, events, source=frames)
     res["wrap_discontinuity"] = float(disc[0])
     res["transition_discontinuity_max"] = float(disc.max())
-    res["repetition_lag"] = metrics.repetition_lag(out, source=frames)
-    res["repetition_min_profile"] = float(metrics.repetition_profile(out, source=frames).min())
+    # Normalised by the output's own median step: normalising by the source's would compare
+    # thumbnails of a 1280x720 output with those of a 352x288 clip (the larger frame averages
+    # more pixels into each thumbnail pixel and so looks calmer).
+    max_lag = n_out - 10
+    prof = metrics.repetition_profile(out, max_lag=max_lag)
+    res["repetition_lag"] = metrics.repetition_lag(out, max_lag=max_lag)
+    res["repetition_min_profile"] = float(prof.min())
+    res["repetition_at_loop"] = float(prof[model.loop_length - 1]) if model.loop_length <= max_lag else None
     if mix is not None:
         for tone in (None, "consensus"):
             with TilesPlayer(path, backend=backend, size=size, seed=1, labels="halves", tone=tone) as p:
@@ -140,12 +147,13 @@ def main(argv: list[str] | None = None) -> int:
             results.append(r)
             print(json.dumps(r), file=sys.stderr)
     print("| clip | tile | loop | seam (tiles) | seam (uncut blocks) | wrap disc. | worst transition | "
-          "repetition lag | mix border/inside | tone error | analysis s |")
+          "repetition lag (min profile) | mix border/inside | tone error | analysis s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
         mixr = f"{r['mix_ratio']:.2f} ({r['mix_ratio_tone']:.2f} toned)" if "mix_ratio" in r else "-"
         print(f"| {r['clip']} | {r['tile']} | {r['loop']} | {r['seam_tiles']:.3f} | {r['seam_uncut_blocks']:.2f} | "
-              f"{r['wrap_discontinuity']:.2f} | {r['transition_discontinuity_max']:.2f} | {r['repetition_lag']} | "
+              f"{r['wrap_discontinuity']:.2f} | {r['transition_discontinuity_max']:.2f} | {r['repetition_lag']} "
+              f"({r['repetition_min_profile']:.2f}) | "
               f"{mixr} | {100 * r['tone_max_rel_error']:.2f}% | {r['analysis_s']} |")
     if args.json:
         with open(args.json, "w") as f:
