@@ -160,7 +160,6 @@ class TilesPlayer(Player):
         self._shape = (h, w, 3)
         self.grid_shape = (-(-h // th), -(-w // tw))
         self.ring = int(model.info.get("ring", max(2, min(th, tw) // 5)))
-        #: width of the strips along cell edges that may take a neighbouring class
         self.labels = self._check_labels(labels)
         mixing = len(np.unique(self.labels)) > 1
         stack = np.ascontiguousarray(model.tiles.transpose(1, 2, 0, 3, 4).reshape(length, th, k * tw, 3))
