@@ -36,7 +36,7 @@ from .ratemap import check_rate_map
 ENDS = ("hold", "loop", "pingpong")
 SPEED_RANGE = (-16.0, 16.0)
 MAX_SIGMA = 1024.0
-RUN = 32
+SPILL = 16           # bytes a kernel chunk may read past a run
 _END_CODE = {"hold": 0, "loop": 1, "pingpong": 2}
 
 
@@ -118,6 +118,72 @@ def _sample(flat: np.ndarray, pix: np.ndarray, s: np.ndarray, end: str, interpol
         v1 = flat[_frame_index(si + 1, n, end), pix].astype(np.float32)
         v = v + f * (v1 - v)
     return v
+
+
+def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None,
+               pix2: np.ndarray | None = None, labels2: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Cut the quilt's rows into runs, the unit of work of kernel ``evolve``.
+
+    A *stream* is one block's source at a constant offset along a row (source pixel =
+    output column + offset). A run is a maximal segment of one row that reads one stream
+    (plain: no cross-fade) or one unordered pair of streams (a cross-fade band, which keeps
+    its pair on both sides of the cut, where the primary and second sources swap).
+
+    Returns ``starts`` (first output pixel, row-major index, int64), ``lengths``, and the
+    kernel tables: ``runs`` ``(n, 4)`` int32 (first pixel, stream A's source pixel there,
+    block of A, length | blend << 31 | spill << 30: the run's last 16-byte chunk may run
+    past its end and stays within the row), ``runs_b`` ``(n, 2)`` int32 (stream B's source pixel
+    and block), ``row_start`` ``(H + 1,)`` int32, and ``code`` ``(H * W * 3,)`` uint16 per
+    output byte: weight of the second source in 1/256 (bits 0-8), bit 9 set when the
+    primary source is stream B (0 outside bands).
+
+    Examples
+    --------
+    >>> pix = np.array([[5, 6, 7, 0, 1]]); lab = np.array([[0, 0, 0, 1, 1]])
+    >>> r = build_runs(pix, lab)
+    >>> r["runs"].tolist(), r["row_start"].tolist()
+    ([[0, 5, 0, 3], [3, 0, 1, 2]], [0, 2])
+    >>> build_runs(np.arange(48)[None], np.zeros((1, 48)))["runs"][:, 3] == 48 | 1 << 30
+    array([ True])
+    """
+    h, w = pix.shape
+    x = np.arange(w, dtype=np.int64)[None, :]
+    pix = np.asarray(pix, np.int64)
+    labels = np.asarray(labels, np.int64)
+    span = int(max(pix.max(initial=0), 0 if pix2 is None else pix2.max(initial=0))) + w + 1
+    key_p = labels * span + (pix - x + w)
+    if wq is None or not (wq > 0).any():
+        blend = np.zeros((h, w), bool)
+        key_a, key_b = key_p, np.full((h, w), -1, np.int64)
+        swap = blend
+    else:
+        blend = wq > 0
+        key_s = np.asarray(labels2, np.int64) * span + (np.asarray(pix2, np.int64) - x + w)
+        key_a = np.where(blend, np.minimum(key_p, key_s), key_p)
+        key_b = np.where(blend, np.maximum(key_p, key_s), -1)
+        swap = blend & (key_p > key_s)
+    brk = np.ones((h, w), bool)
+    brk[:, 1:] = (key_a[:, 1:] != key_a[:, :-1]) | (key_b[:, 1:] != key_b[:, :-1])
+    starts = np.flatnonzero(brk.ravel())
+    lengths = np.diff(np.append(starts, h * w))
+    col = starts % w
+    ka, kb = key_a.ravel()[starts], key_b.ravel()[starts]
+    is_blend = kb >= 0
+    kb = np.where(is_blend, kb, ka)
+    runs = np.empty((len(starts), 4), np.int64)
+    runs[:, 0] = starts
+    runs[:, 1] = ka % span - w + col
+    runs[:, 2] = ka // span
+    may_spill = col * 3 + -(-lengths * 3 // SPILL) * SPILL <= w * 3    # the last chunk stays in the row
+    runs[:, 3] = lengths | (is_blend.astype(np.int64) << 31) | (may_spill.astype(np.int64) << 30)
+    runs_b = np.stack([kb % span - w + col, kb // span], axis=1)
+    code = np.zeros((h, w), np.uint16)
+    if blend.any():
+        code[blend] = (np.asarray(wq)[blend].astype(np.uint16) | (swap[blend].astype(np.uint16) << 9))
+    return {"starts": starts, "lengths": lengths,
+            "runs": runs.astype(np.uint32).view(np.int32), "runs_b": runs_b.astype(np.int32),
+            "row_start": np.searchsorted(starts, np.arange(h + 1) * w).astype(np.int32),
+            "code": np.repeat(code.ravel(), 3)}
 
 
 class EvolvePlayer(Player):
@@ -236,43 +302,53 @@ class EvolvePlayer(Player):
         h, w = self._shape[:2]
         mf = cl.mem_flags
         ro = mf.READ_ONLY | mf.COPY_HOST_PTR
-        label16 = self.n_blocks <= 0xFFFF
-        ltype = np.uint16 if label16 else np.uint32
-        wq = self._wq if self._blend else 0
-        source = pack_source(self._pix, wq).view(np.uint32)
-        self._d_stack = cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(frames))
-        self._d_source = cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(source))
-        self._d_labels = cl.Buffer(self.ctx, ro, hostbuf=self._labels.astype(ltype))
-        dummy = np.zeros(4, np.uint32)
         if self._blend:
-            self._d_source2 = cl.Buffer(self.ctx, ro, hostbuf=pack_source(self._pix2).view(np.uint32))
-            self._d_labels2 = cl.Buffer(self.ctx, ro, hostbuf=self._labels2.astype(ltype))
+            runs = build_runs(self._pix, self._labels, self._wq, self._pix2, self._labels2)
         else:
-            self._d_source2 = self._d_labels2 = cl.Buffer(self.ctx, ro, hostbuf=dummy)
-        self._d_gain = cl.Buffer(self.ctx, ro, hostbuf=self._gain if self._gain is not None else dummy)
+            runs = build_runs(self._pix, self._labels)
+        self._run_starts, self._n_blend_bytes = runs["starts"], int(np.count_nonzero(runs["code"]))
+        self.n_runs = len(runs["starts"])
+        pad = np.zeros(SPILL, np.uint8)   # a spilling chunk may read past the ends (values unused)
+        self._d_stack = cl.Buffer(self.ctx, ro, hostbuf=np.concatenate([frames.reshape(-1), pad]))
+        self._d_runs = cl.Buffer(self.ctx, ro, hostbuf=runs["runs"])
+        self._d_runs_b = cl.Buffer(self.ctx, ro, hostbuf=runs["runs_b"])
+        self._d_row_start = cl.Buffer(self.ctx, ro, hostbuf=runs["row_start"])
+        self._d_code = cl.Buffer(self.ctx, ro, hostbuf=np.concatenate([runs["code"], np.zeros(SPILL, np.uint16)]))
+        gain = np.zeros(4, np.float32) if self._gain is None else self._gain.reshape(-1)
+        self._d_gain = cl.Buffer(self.ctx, ro, hostbuf=np.concatenate([gain, np.zeros(SPILL, np.float32)]))
         self._d_rate = cl.Buffer(self.ctx, mf.READ_ONLY, h * w * 4)
+        self._d_run_rate = cl.Buffer(self.ctx, mf.READ_ONLY, self.n_runs * 4)
         self._d_warp = cl.Buffer(self.ctx, mf.READ_ONLY, self._warp.nbytes)
-        self._btime = np.zeros(self.n_blocks, np.float32)
-        self._d_btime = cl.Buffer(self.ctx, mf.READ_ONLY, self._btime.nbytes)
+        self._bframe = np.zeros((self.n_blocks, 4), np.int32)
+        self._d_bframe = cl.Buffer(self.ctx, mf.READ_ONLY, self._bframe.nbytes)
         self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
-        self.device_bytes = int(frames.nbytes + source.nbytes + self._labels.size * np.dtype(ltype).itemsize
-                                * (2 if self._blend else 1) + (source.nbytes if self._blend else 0)
-                                + (self._gain.nbytes if self._gain is not None else 0) + h * w * 7)
-        defines = {"FRAME_PIXELS": self._flat.shape[1], "NFRAMES": self.n_frames, "KNOTS": self.n_frames + 1,
-                   "INTERP": self.interpolate, "BLEND": self._blend, "GAIN": self._gain is not None,
-                   "LABEL16": label16, "RUN": RUN}
+        self.device_bytes = int(frames.nbytes + runs["runs"].nbytes + runs["runs_b"].nbytes + runs["code"].nbytes
+                                + (self._gain.nbytes if self._gain is not None else 0) + h * w * 7 + self.n_runs * 4)
+        defines = {"FRAME_BYTES": self._flat.shape[1] * 3, "NFRAMES": self.n_frames, "KNOTS": self.n_frames + 1,
+                   "INTERP": self.interpolate, "GAIN": self._gain is not None}
         self._kernels = {}
         for rate in (False, True):
             for end in ENDS:
                 k = build_program(self.ctx, "quilt.cl", {**defines, "RATE": rate, "END": _END_CODE[end]}).kernel("evolve")
-                k.set_args(self._d_stack, self._d_source, self._d_labels, self._d_source2, self._d_labels2,
-                           self._d_rate, self._d_warp, self._d_btime, self._d_gain, self._d_out,
-                           np.int32(w), np.int32(h), np.float32(0))
+                k.set_args(self._d_stack, self._d_runs, self._d_runs_b, self._d_row_start, self._d_code,
+                           self._d_rate, self._d_run_rate, self._d_warp, self._d_bframe, self._d_gain, self._d_out,
+                           np.int32(h), np.float32(0))
                 self._kernels[rate, end] = k
-        self._gsize = (-(-w // RUN), h)
+        self._gsize = (h,)
         self._upload_warp()
 
+    def _upload_rate(self, rate: np.ndarray) -> None:
+        """The per-pixel rate map and, per run, its rate where it is constant along the run (else -1)."""
+        import pyopencl as cl
+        flat = rate.reshape(-1)
+        lo = np.minimum.reduceat(flat, self._run_starts)
+        hi = np.maximum.reduceat(flat, self._run_starts)
+        run_rate = np.ascontiguousarray(np.where(lo == hi, lo, np.float32(-1)), np.float32)
+        cl.enqueue_copy(self.queue, self._d_rate, np.ascontiguousarray(rate, np.float32), is_blocking=True)
+        cl.enqueue_copy(self.queue, self._d_run_rate, run_rate, is_blocking=True)
+
     def _upload_warp(self) -> None:
+        self._warp_t = np.ascontiguousarray(self._warp.T)     # (knots, blocks): one row per local time
         if self.backend == "opencl":
             import pyopencl as cl
             cl.enqueue_copy(self.queue, self._d_warp, self._warp, is_blocking=True)
@@ -280,10 +356,9 @@ class EvolvePlayer(Player):
     def _warm(self) -> None:
         scratch = np.empty(self._shape, np.uint8)
         if self.backend == "opencl":
-            import pyopencl as cl
             saved = self._rate
-            if saved is None:   # fill the rate buffer once so the RATE variant can run
-                cl.enqueue_copy(self.queue, self._d_rate, np.ones(self._shape[:2], np.float32), is_blocking=True)
+            if saved is None:   # fill the rate buffers once so the RATE variant can run
+                self._upload_rate(np.ones(self._shape[:2], np.float32))
             end = self._end
             for rate in (False, True):
                 for self._end in ENDS:
@@ -291,7 +366,7 @@ class EvolvePlayer(Player):
                     self._draw(0.0, scratch)
             self._rate, self._end = saved, end
             if saved is not None:
-                cl.enqueue_copy(self.queue, self._d_rate, saved, is_blocking=True)
+                self._upload_rate(saved)
         else:
             self._draw(0.0, scratch)
 
@@ -387,8 +462,7 @@ class EvolvePlayer(Player):
             rate = np.ascontiguousarray(gaussian_smooth(rate, self._rate_sigma), np.float32)
         self._rate = rate
         if self.backend == "opencl":
-            import pyopencl as cl
-            cl.enqueue_copy(self.queue, self._d_rate, rate, is_blocking=True)
+            self._upload_rate(rate)
 
     # -- frames -----------------------------------------------------------------------------------
     def source_times(self, t: float | None = None) -> np.ndarray:
@@ -436,14 +510,42 @@ class EvolvePlayer(Player):
             self.render_reference(t, out)
             return
         import pyopencl as cl
+        self._launch(t)
+        cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
+
+    def _launch(self, t: float) -> None:
+        """Enqueue the kernel for clock ``t`` (the frame lands in the device buffer; benchmarks time it alone)."""
+        import pyopencl as cl
         k = self._kernels[self._rate is not None, self._end]
         if self._rate is None:
-            tau = fold_time(np.full(self.n_blocks, np.float32(t), np.float32), self.n_frames, self._end)
-            self._btime[...] = warp_time(self._warp, self._block_ids, tau)
-            cl.enqueue_copy(self.queue, self._d_btime, self._btime, is_blocking=False)
+            self._block_frames(t)
+            cl.enqueue_copy(self.queue, self._d_bframe, self._bframe, is_blocking=False)
         k.set_arg(12, np.float32(t))
         cl.enqueue_nd_range_kernel(self.queue, k, self._gsize, None)
-        cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
+
+    def _block_frames(self, t: float) -> None:
+        """Uniform rate: every block's source time at clock ``t`` as the kernel reads it, the
+        byte offsets of its two frames and the fraction (the float32 formulas of
+        :func:`warp_time` and :func:`_sample`; one local time for all blocks)."""
+        tau = fold_time(np.full(1, np.float32(t), np.float32), self.n_frames, self._end)
+        k = int(np.clip(np.floor(tau[0]), 0, self.n_frames - 1))
+        fr = np.float32(tau[0] - np.float32(k))
+        w0 = self._warp_t[k]
+        s = w0 + fr * (self._warp_t[k + 1] - w0)
+        si = np.floor(s)
+        i0 = si.astype(np.int32)
+        n, fb = self.n_frames, self._flat.shape[1] * 3
+        i1 = i0 + 1
+        if self._end == "loop":
+            i0 = np.where(i0 >= n, i0 - n, i0)
+            i1 = np.where(i1 >= n, i1 - n, i1)
+        else:
+            i0 = np.minimum(i0, n - 1)
+            i1 = np.minimum(i1, n - 1)
+        b = self._bframe
+        b[:, 0] = i0 * fb
+        b[:, 1] = (i1 if self.interpolate else i0) * fb
+        b[:, 2] = (s - si).astype(np.float32).view(np.int32)
 
     @property
     def bytes_per_frame(self) -> int:
