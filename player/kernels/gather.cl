@@ -58,6 +58,19 @@ inline int fast_floor(float v)
 // Same formulas as the scalar kernel and the numpy reference.
 #define VRUN 64
 
+// PoCL's vload16/vstore16 of uchar move byte by byte; an under-aligned vector type gives one
+// unaligned 16-byte (8-byte) access. (Found by the quilt mode; same trick.)
+typedef uchar16 __attribute__((aligned(1))) uchar16_u;
+typedef uchar8 __attribute__((aligned(1))) uchar8_u;
+#define LOAD16(p) (*(__global const uchar16_u *)(p))
+#define LOAD8(p) (*(__global const uchar8_u *)(p))
+typedef int8 __attribute__((aligned(4))) int8_u;
+
+// Round to nearest even and saturate, as convert_uchar*_sat_rte but faster on PoCL: after the
+// clamp, adding 1.5 * 2^23 leaves the rounded integer in the low mantissa bits.
+inline uchar16 to_uchar16(float16 v) { return convert_uchar16(as_uint16(clamp(v, 0.0f, 255.0f) + 12582912.0f)); }
+inline uchar8 to_uchar8(float8 v) { return convert_uchar8(as_uint8(clamp(v, 0.0f, 255.0f) + 12582912.0f)); }
+
 inline void pixel(__global const uchar *restrict stack, __global const float *restrict tones, int pix, int tone,
                   float t, __global uchar *restrict o)
 {
@@ -127,7 +140,7 @@ __kernel void gather(__global const uchar *restrict stack,
                 contiguous = true;
             }
 #else
-            const int8 pk = vload8(0, srow + xs);
+            const int8 pk = *(__global const int8_u *)(srow + xs);
             const int8 step = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
             pix0 = pk.s0 & 0xFFFFFF;
             tone = (pk.s0 >> 24) & 0xFF;
@@ -139,12 +152,12 @@ __kernel void gather(__global const uchar *restrict stack,
             // lanes at frame lo blend (F[lo], F[lo+1]); lanes at lo+1 blend (F[lo+1], F[lo+2])
             __global const uchar *p0 = stack + ((size_t)wrap_index(lo) * FRAME_PIXELS + pix0) * 3;
             __global const uchar *p1 = stack + ((size_t)wrap_index(lo + 1) * FRAME_PIXELS + pix0) * 3;
-            float16 va = convert_float16(vload16(0, p0));
-            float8 vb = convert_float8(vload8(0, p0 + 16));
+            float16 va = convert_float16(LOAD16(p0));
+            float8 vb = convert_float8(LOAD8(p0 + 16));
             const uint16 la = (uint16)(0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5);
             const uint8 lb = (uint8)(5, 5, 6, 6, 6, 7, 7, 7);
-            float16 wa = convert_float16(vload16(0, p1));
-            float8 wb = convert_float8(vload8(0, p1 + 16));
+            float16 wa = convert_float16(LOAD16(p1));
+            float8 wb = convert_float8(LOAD8(p1 + 16));
             if (hi > lo) {
                 __global const uchar *p2 = stack + ((size_t)wrap_index(lo + 2) * FRAME_PIXELS + pix0) * 3;
                 const float8 sel = convert_float8(ti - lo);             // 0 or 1 per lane
@@ -152,8 +165,8 @@ __kernel void gather(__global const uchar *restrict stack,
                 const float8 sb = shuffle(sel, lb);
                 va = va + sa * (wa - va);                                // F[ti]
                 vb = vb + sb * (wb - vb);
-                wa = wa + sa * (convert_float16(vload16(0, p2)) - wa);   // F[ti + 1]
-                wb = wb + sb * (convert_float8(vload8(0, p2 + 16)) - wb);
+                wa = wa + sa * (convert_float16(LOAD16(p2)) - wa);   // F[ti + 1]
+                wb = wb + sb * (convert_float8(LOAD8(p2 + 16)) - wb);
             }
 #if INTERP
             const float8 f = t - convert_float8(ti);
@@ -168,8 +181,8 @@ __kernel void gather(__global const uchar *restrict stack,
             va = va * shuffle(g, ca) + shuffle(off, ca);
             vb = vb * shuffle(g, cb) + shuffle(off, cb);
             __global uchar *o = orow + xs * 3;
-            vstore16(convert_uchar16_sat_rte(va), 0, o);
-            vstore8(convert_uchar8_sat_rte(vb), 0, o + 16);
+            *(__global uchar16_u *)o = to_uchar16(va);
+            *(__global uchar8_u *)(o + 16) = to_uchar8(vb);
         } else {
             float tl[8];
             vstore8(t, 0, tl);
