@@ -481,7 +481,8 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     overlap : int, optional
         Width ``b`` of the toroidal overlap bands (default ``tile // 4`` plus twice the mean flow).
     ring : int, optional
-        Width of the shared boundary ring (default ``max(2, tile // 5)``).
+        Width of the band in which the ring cuts run (default ``max(2, tile // 10)``; the
+        ring is repeated by every tile of a class, so narrower means less periodic content).
     flow_gain : float
         Extra path freedom per pixel/frame of optical flow (0 disables the widening).
     mix : sequence of clips
@@ -491,7 +492,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         Class names (default ``"main"``, ``"mix1"``, ...).
     feather : int, optional
         Border tiles fade the other texture's strip into the interior over this many pixels
-        past the cut (default ``ring``; 0: a hard cut).
+        past the cut (default ``max(ring, tile // 5)``; 0: a hard cut).
     progress : callable(done, total), optional
 
     Returns
@@ -569,10 +570,11 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         b = _int("overlap", overlap, 2)
     by = max(2, min(b, h - th, *(f.shape[1] - th for f in extra)))
     bx = max(2, min(b, w - tw, *(f.shape[2] - tw for f in extra)))
-    r = max(2, min(th, tw) // 5) if ring is None else _int("ring", ring, 2)
+    # a narrow ring: every tile of a class repeats it, so it is the only periodic content
+    r = max(2, min(th, tw) // 10) if ring is None else _int("ring", ring, 2)
     if r > min(th, tw) // 2 - 1:
         raise ValueError(f"ring must be at most {min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {r}")
-    fe = r if feather is None else _int("feather", feather, 0)
+    fe = max(r, min(th, tw) // 5) if feather is None else _int("feather", feather, 0)
     fe = min(fe, min(th, tw) // 2 - 1 - r)
 
     # primary toroidal tile of every class

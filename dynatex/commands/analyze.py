@@ -60,7 +60,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--tiles-max-loop", type=positive_int, default=None, help="longest loop (default: the clip)")
     g.add_argument("--tiles-transition", type=positive_int, default=8,
                    help="frames over which the per-pixel temporal transitions spread (default 8)")
-    g.add_argument("--tiles-ring", type=positive_int, default=None, help="width of the shared tile ring (default tile/5)")
+    g.add_argument("--tiles-ring", type=positive_int, default=None, help="width of the band of the shared ring cuts (default tile/10)")
     g.add_argument("--tiles-flow-gain", type=float, default=0.5,
                    help="extra cut freedom per pixel/frame of optical flow (default 0.5, 0 = off)")
     g.add_argument("--tiles-mix", action="append", default=[], metavar="CLIP",
