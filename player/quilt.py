@@ -16,7 +16,10 @@ that map, at a per-pixel source time built in three steps:
 
 Pixels in a quilt's cross-fade band blend their second source (with its own block's time).
 One OpenCL kernel (``kernels/quilt.cl``) does it all per frame; the numpy reference below
-evaluates the same float32 formulas. The shared gather machinery (:mod:`.gather`) supplies
+evaluates the same float32 formulas. At open the player cuts the quilt's rows into *runs*
+(:func:`build_runs`): segments that copy a contiguous run of one source row, or blend two
+(a cross-fade band), so that the kernel moves whole runs with 16-byte vectors instead of
+gathering pixel by pixel; the host computes each block's source frames once per frame. The shared gather machinery (:mod:`.gather`) supplies
 the packing of source entries and the Gaussian smoothing; its kernel adds a per-pixel
 *offset* to one global time, which cannot express a per-pixel rate times the time or a
 per-block time warp without re-uploading a full time map every frame, hence the own kernel.
@@ -37,6 +40,7 @@ ENDS = ("hold", "loop", "pingpong")
 SPEED_RANGE = (-16.0, 16.0)
 MAX_SIGMA = 1024.0
 SPILL = 16           # bytes a kernel chunk may read past a run
+MAX_CLASSES = 8      # distinct rates of runs with a constant rate that get per-frame host tables
 _END_CODE = {"hold": 0, "loop": 1, "pingpong": 2}
 
 
@@ -317,35 +321,47 @@ class EvolvePlayer(Player):
         gain = np.zeros(4, np.float32) if self._gain is None else self._gain.reshape(-1)
         self._d_gain = cl.Buffer(self.ctx, ro, hostbuf=np.concatenate([gain, np.zeros(SPILL, np.float32)]))
         self._d_rate = cl.Buffer(self.ctx, mf.READ_ONLY, h * w * 4)
-        self._d_run_rate = cl.Buffer(self.ctx, mf.READ_ONLY, self.n_runs * 4)
+        self._d_run_class = cl.Buffer(self.ctx, mf.READ_ONLY, self.n_runs * 4)
         self._d_warp = cl.Buffer(self.ctx, mf.READ_ONLY, self._warp.nbytes)
-        self._bframe = np.zeros((self.n_blocks, 4), np.int32)
+        self._class_rates = np.ones(1, np.float32)       # rate classes (uniform: one class, rate 1)
+        self._bframe = np.zeros((MAX_CLASSES, self.n_blocks, 4), np.int32)
         self._d_bframe = cl.Buffer(self.ctx, mf.READ_ONLY, self._bframe.nbytes)
         self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
         self.device_bytes = int(frames.nbytes + runs["runs"].nbytes + runs["runs_b"].nbytes + runs["code"].nbytes
                                 + (self._gain.nbytes if self._gain is not None else 0) + h * w * 7 + self.n_runs * 4)
         defines = {"FRAME_BYTES": self._flat.shape[1] * 3, "NFRAMES": self.n_frames, "KNOTS": self.n_frames + 1,
-                   "INTERP": self.interpolate, "GAIN": self._gain is not None}
+                   "INTERP": self.interpolate, "GAIN": self._gain is not None, "NBLOCKS": self.n_blocks}
         self._kernels = {}
         for rate in (False, True):
             for end in ENDS:
                 k = build_program(self.ctx, "quilt.cl", {**defines, "RATE": rate, "END": _END_CODE[end]}).kernel("evolve")
                 k.set_args(self._d_stack, self._d_runs, self._d_runs_b, self._d_row_start, self._d_code,
-                           self._d_rate, self._d_run_rate, self._d_warp, self._d_bframe, self._d_gain, self._d_out,
+                           self._d_rate, self._d_run_class, self._d_warp, self._d_bframe, self._d_gain, self._d_out,
                            np.int32(h), np.float32(0))
                 self._kernels[rate, end] = k
         self._gsize = (h,)
         self._upload_warp()
 
     def _upload_rate(self, rate: np.ndarray) -> None:
-        """The per-pixel rate map and, per run, its rate where it is constant along the run (else -1)."""
+        """The per-pixel rate map and the runs' rate classes: a run along which the rate is
+        constant gets the class of its rate (the ``MAX_CLASSES`` rates that cover the most
+        runs), so that the host computes its streams' frames once per frame and block;
+        the other runs (-1) take the per-pixel path."""
         import pyopencl as cl
         flat = rate.reshape(-1)
         lo = np.minimum.reduceat(flat, self._run_starts)
         hi = np.maximum.reduceat(flat, self._run_starts)
-        run_rate = np.ascontiguousarray(np.where(lo == hi, lo, np.float32(-1)), np.float32)
-        cl.enqueue_copy(self.queue, self._d_rate, np.ascontiguousarray(rate, np.float32), is_blocking=True)
-        cl.enqueue_copy(self.queue, self._d_run_rate, run_rate, is_blocking=True)
+        const = lo == hi
+        values, inverse, counts = np.unique(lo[const], return_inverse=True, return_counts=True)
+        keep = np.argsort(-counts, kind="stable")[:MAX_CLASSES]
+        index = np.full(len(values), -1, np.int32)
+        index[keep] = np.arange(len(keep), dtype=np.int32)
+        run_class = np.full(len(lo), -1, np.int32)
+        run_class[const] = index[inverse]
+        self._n_varying_px = int(np.diff(np.append(self._run_starts, flat.size))[run_class < 0].sum())
+        self._class_rates = np.ascontiguousarray(values[keep], np.float32)
+        cl.enqueue_copy(self.queue, self._d_rate, np.ascontiguousarray(flat), is_blocking=True)
+        cl.enqueue_copy(self.queue, self._d_run_class, run_class, is_blocking=True)
 
     def _upload_warp(self) -> None:
         self._warp_t = np.ascontiguousarray(self._warp.T)     # (knots, blocks): one row per local time
@@ -517,19 +533,22 @@ class EvolvePlayer(Player):
         """Enqueue the kernel for clock ``t`` (the frame lands in the device buffer; benchmarks time it alone)."""
         import pyopencl as cl
         k = self._kernels[self._rate is not None, self._end]
-        if self._rate is None:
-            self._block_frames(t)
-            cl.enqueue_copy(self.queue, self._d_bframe, self._bframe, is_blocking=False)
+        if len(self._class_rates) or self._rate is None:
+            cl.enqueue_copy(self.queue, self._d_bframe, self._block_frames(t), is_blocking=False)
         k.set_arg(12, np.float32(t))
         cl.enqueue_nd_range_kernel(self.queue, k, self._gsize, None)
 
     def _block_frames(self, t: float) -> None:
-        """Uniform rate: every block's source time at clock ``t`` as the kernel reads it, the
-        byte offsets of its two frames and the fraction (the float32 formulas of
-        :func:`warp_time` and :func:`_sample`; one local time for all blocks)."""
-        tau = fold_time(np.full(1, np.float32(t), np.float32), self.n_frames, self._end)
-        k = int(np.clip(np.floor(tau[0]), 0, self.n_frames - 1))
-        fr = np.float32(tau[0] - np.float32(k))
+        """Per rate class and block, the source time at clock ``t`` as the kernel reads it:
+        the byte offsets of its two frames and the fraction (the float32 formulas of
+        :func:`fold_time`, :func:`warp_time` and :func:`_sample`; one local time per class)."""
+        t32 = np.float32(t)
+        if self._rate is None:
+            tau = fold_time(np.full(1, t32, np.float32), self.n_frames, self._end)
+        else:
+            tau = fold_time(t32 * self._class_rates, self.n_frames, self._end)
+        k = np.clip(np.floor(tau).astype(np.int64), 0, self.n_frames - 1)
+        fr = (tau - k.astype(np.float32)).astype(np.float32)[:, None]
         w0 = self._warp_t[k]
         s = w0 + fr * (self._warp_t[k + 1] - w0)
         si = np.floor(s)
@@ -542,19 +561,28 @@ class EvolvePlayer(Player):
         else:
             i0 = np.minimum(i0, n - 1)
             i1 = np.minimum(i1, n - 1)
-        b = self._bframe
-        b[:, 0] = i0 * fb
-        b[:, 1] = (i1 if self.interpolate else i0) * fb
-        b[:, 2] = (s - si).astype(np.float32).view(np.int32)
+        b = self._bframe[:len(tau)]
+        b[..., 0] = i0 * fb
+        b[..., 1] = (i1 if self.interpolate else i0) * fb
+        b[..., 2] = (s - si).astype(np.float32).view(np.int32)
+        return b
 
     @property
     def bytes_per_frame(self) -> int:
-        """Bytes a frame moves at least: maps read, source pixels read (two frames when
-        interpolating), output written and copied to the caller."""
+        """Bytes a frame moves at least: what the kernel reads (run tables, blend codes, gain,
+        per-pixel rates where the rate varies along a run, source pixels: two frames per
+        source when interpolating), the output written and copied to the caller. For the
+        numpy backend, per-pixel maps as packed device tables (source, label, rate) instead."""
         h, w = self._shape[:2]
-        per_px = 4 + (2 if self.n_blocks <= 0xFFFF else 4) + (4 if self._rate is not None else 0)
-        per_px += (12 if self._gain is not None else 0) + (6 if self.interpolate else 3) + 3 + 3
-        return int(h * w * per_px)
+        px = h * w
+        per_src = 2 if self.interpolate else 1
+        gain = 12 * px if self._gain is not None else 0
+        if self.backend == "numpy":
+            maps = px * (4 + (2 if self.n_blocks <= 0xFFFF else 4) + (4 if self._rate is not None else 0))
+            return int(maps + gain + per_src * 3 * px + 6 * px)
+        rate = 0 if self._rate is None else 4 * self.n_runs + 4 * self._n_varying_px
+        src = per_src * (3 * px + self._n_blend_bytes)
+        return int(24 * self.n_runs + 2 * self._n_blend_bytes + rate + gain + src + 6 * px)
 
     # -- state --------------------------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:

@@ -7,30 +7,35 @@
 //
 // Runs instead of a per-pixel gather. The player cuts every output row, once at open,
 // into runs: segments whose pixels read at most two *streams*, a stream being one block's
-// source pixels at a constant offset (source pixel = x + offset, so the run's source is a
+// source pixels at a constant offset (source pixel = x + offset, so a stream is a
 // contiguous run of a source frame row). A plain run reads one stream (A); a blend run (a
-// cross-fade band, on both sides of the cut) reads two (A and B) and, per output byte, a
+// cross-fade band, on both sides of its cut) reads two (A and B) and, per output byte, a
 // code: the weight of the second source in 1/256 (bits 0-8) and whether the pixel's
-// primary source is B (bit 9). Within a run the stream times are constant unless the rate
-// map varies along it, so a work-item copies or blends whole runs as byte streams (colour
-// channels are just bytes: every operation is per byte) with 16-byte vector loads and
-// stores; the last chunk of a run is aligned to its end (it recomputes a few bytes with
-// the same values) so nothing outside the run is touched. Runs shorter than 16 bytes go
-// byte by byte, and runs along which the rate map varies pixel by pixel.
+// primary source is B (bit 9). One work-item does the runs of one row, left to right.
 //
-// Arithmetic per byte is that of the numpy reference, in float32: v = v0 + f (v1 - v0)
-// per source, v = first + a (second - first) for a blend, v *= gain, rounded to nearest
-// even and saturated.
+// Where the rate is constant along a run (always, with a uniform rate), so are its stream
+// times; the host computes, once per frame, per rate class and block, the byte offsets of
+// the two source frames and the fraction (bframe), and the run is copied or blended as a
+// byte stream (colour channels are just bytes: every operation is per byte) with 16-byte
+// vector loads and stores. The last chunk of a run spills up to 15 bytes into the next
+// runs of its row, which rewrite them (the host flags the runs whose spill stays within
+// the row), or else is aligned to the run's end (rewriting a few bytes with the same
+// values); a run shorter than a chunk that may not spill goes byte by byte. Runs along
+// which the rate varies go pixel by pixel, with the time computed per pixel.
+//
+// Arithmetic is that of the numpy reference, in float32: v = v0 + f (v1 - v0) per source,
+// v = first + a (second - first) for a blend, v *= gain, rounded to nearest even and
+// saturated.
 //
 // Defines: FRAME_BYTES (bytes of one stored frame), NFRAMES, KNOTS (knots per block warp,
-// NFRAMES + 1), INTERP, RATE (1: rate map, per-run rates (negative: varies along the run)
-// and per-pixel rates; 0: uniform rate, per-block frames and fractions bframe computed
-// on the host each frame), GAIN (per-byte gain), END (0 hold, 1 loop, 2 ping-pong; the player
-// builds all variants at open, so the end control switches kernels without a rebuild).
+// NFRAMES + 1), NBLOCKS, INTERP, GAIN (per-byte gain), RATE (1: rate map: run_class per
+// run, -1 where the rate varies along the run, with rate per pixel; 0: uniform rate, one
+// class), END (0 hold, 1 loop, 2 ping-pong). The player builds all variants at open, so
+// the end and rate controls switch kernels without a rebuild.
 //
 // Run tables: runs[r] = (first output pixel, pixel of stream A at it, block of A, length |
-// blend << 31 | spill << 30), runs_b[r] = (pixel of stream B at the first output pixel, block of B);
-// row_start[y] .. row_start[y + 1] are the runs of output row y (one work-item per row).
+// blend << 31 | spill << 30), runs_b[r] = (pixel of stream B at the first output pixel,
+// block of B); row_start[y] .. row_start[y + 1] are the runs of output row y.
 
 #define BLEND_FLAG 0x80000000u
 #define SPILL_FLAG 0x40000000u
@@ -150,12 +155,17 @@ inline uchar16 to_uchar16(float16 v)
     return convert_uchar16(as_uint16(clamp(v, 0.0f, 255.0f) + 12582912.0f));
 }
 
+inline uchar to_uchar(float v)
+{
+    return (uchar)as_uint(clamp(v, 0.0f, 255.0f) + 12582912.0f);
+}
+
 // Output bytes [ob, ob + n) of a run whose streams have constant times. With may_spill
 // (its last chunk ends within the row: the runs of a row are done in order, left to right,
 // by one work-item) the last chunk spills over into the next runs, which rewrite those bytes;
 // otherwise it is aligned to the end of the run and overlaps the previous chunk (same
-// values), or the run goes byte by byte when shorter than a chunk. The buffers the spill
-// may read past (stack, code, gain) are padded by a chunk.
+// values), or the run goes byte by byte when shorter than a chunk. The buffers a spill
+// reads past (stack, code, gain) are padded by a chunk.
 __attribute__((always_inline)) inline void run_const(__global const ushort *restrict code, __global const float *restrict gain,
                       __global uchar *restrict out, size_t ob, int n, bool blend, bool may_spill,
                       stream_t a, stream_t b)
@@ -189,10 +199,50 @@ __attribute__((always_inline)) inline void run_const(__global const ushort *rest
 #if GAIN
             v *= gain[ob + o];
 #endif
-            out[ob + o] = convert_uchar_sat_rte(v);
+            out[ob + o] = to_uchar(v);
         }
     }
 }
+
+#if RATE
+// A run along which the rate varies, pixel by pixel. (Vectorising this over groups of 16
+// pixels, with vector loads where a group reads two frames and gathers elsewhere, ran
+// 1.3-1.5x slower on PoCL 3.1 than this scalar loop.)
+__attribute__((always_inline)) inline void run_varying(
+        __global const uchar *restrict stack, __global const ushort *restrict code,
+        __global const float *restrict rate, __global const float *restrict warp,
+        __global const float *restrict gain, __global uchar *restrict out, float t,
+        uint px, int npx, bool blend, uint pa, uint la, uint pb, uint lb)
+{
+    if (blend) {
+        for (int i = 0; i < npx; ++i) {
+            const size_t ob = (size_t)(px + i) * 3;
+            const float tau = fold_time(t * rate[px + i]);
+            const stream_t a = stream_at(stack, (pa + i) * 3, warp_time(warp, la, tau));
+            const stream_t b = stream_at(stack, (pb + i) * 3, warp_time(warp, lb, tau));
+            float v0 = blend1(load1(a, 0), load1(b, 0), code[ob]);
+            float v1 = blend1(load1(a, 1), load1(b, 1), code[ob + 1]);
+            float v2 = blend1(load1(a, 2), load1(b, 2), code[ob + 2]);
+#if GAIN
+            v0 *= gain[ob]; v1 *= gain[ob + 1]; v2 *= gain[ob + 2];
+#endif
+            out[ob] = to_uchar(v0); out[ob + 1] = to_uchar(v1); out[ob + 2] = to_uchar(v2);
+        }
+    } else {
+        for (int i = 0; i < npx; ++i) {
+            const size_t ob = (size_t)(px + i) * 3;
+            const float tau = fold_time(t * rate[px + i]);
+            const stream_t a = stream_at(stack, (pa + i) * 3, warp_time(warp, la, tau));
+            float v0 = load1(a, 0), v1 = load1(a, 1), v2 = load1(a, 2);
+#if GAIN
+            v0 *= gain[ob]; v1 *= gain[ob + 1]; v2 *= gain[ob + 2];
+#endif
+            out[ob] = to_uchar(v0); out[ob + 1] = to_uchar(v1); out[ob + 2] = to_uchar(v2);
+        }
+    }
+}
+
+#endif
 
 __kernel void evolve(__global const uchar *restrict stack,
                      __global const int4 *restrict runs,
@@ -200,7 +250,7 @@ __kernel void evolve(__global const uchar *restrict stack,
                      __global const int *restrict row_start,
                      __global const ushort *restrict code,
                      __global const float *restrict rate,
-                     __global const float *restrict run_rate,
+                     __global const int *restrict run_class,
                      __global const float *restrict warp,
                      __global const int4 *restrict bframe,
                      __global const float *restrict gain,
@@ -225,41 +275,22 @@ __kernel void evolve(__global const uchar *restrict stack,
             lb = (uint)rb.y;
         }
         const bool spill = ((uint)run.w & SPILL_FLAG) != 0;
+        // Streams whose rate is constant along the run: per rate class and block, the byte
+        // offsets of the two frames and the fraction, computed on the host each frame.
 #if RATE
-        const float rr = run_rate[r];
-        if (rr >= 0.0f) {
-            const float tau = fold_time(t * rr);
-            run_const(code, gain, out, (size_t)px * 3, npx * 3, blend, spill,
-                      stream_at(stack, pa * 3, warp_time(warp, la, tau)),
-                      stream_at(stack, pb * 3, warp_time(warp, lb, tau)));
-        } else {
-            // The rate varies along the run: times per pixel.
-            for (int i = 0; i < npx; ++i) {
-                const size_t ob = (size_t)(px + i) * 3;
-                const float tau = fold_time(t * rate[px + i]);
-                const stream_t a = stream_at(stack, (pa + i) * 3, warp_time(warp, la, tau));
-                stream_t b = a;
-                if (blend)
-                    b = stream_at(stack, (pb + i) * 3, warp_time(warp, lb, tau));
-                for (int c = 0; c < 3; ++c) {
-                    float v = load1(a, c);
-                    if (blend)
-                        v = blend1(v, load1(b, c), code[ob + c]);
-#if GAIN
-                    v *= gain[ob + c];
-#endif
-                    out[ob + c] = convert_uchar_sat_rte(v);
-                }
-            }
+        const int cls = run_class[r];
+        if (cls < 0) {
+            run_varying(stack, code, rate, warp, gain, out, t, px, npx, blend, pa, la, pb, lb);
+            continue;
         }
+        __global const int4 *restrict bf = bframe + (size_t)cls * NBLOCKS;
 #else
-        // Uniform rate: per block, the byte offsets of its two frames and the fraction,
-        // computed on the host each frame.
-        const int4 fa = bframe[la], fb = bframe[lb];
+        __global const int4 *restrict bf = bframe;
+#endif
+        const int4 fa = bf[la], fb = bf[lb];
         stream_t a, b;
         a.p0 = stack + (uint)fa.x + pa * 3; a.p1 = stack + (uint)fa.y + pa * 3; a.f = as_float(fa.z);
         b.p0 = stack + (uint)fb.x + pb * 3; b.p1 = stack + (uint)fb.y + pb * 3; b.f = as_float(fb.z);
         run_const(code, gain, out, (size_t)px * 3, npx * 3, blend, spill, a, b);
-#endif
     }
 }

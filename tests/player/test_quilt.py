@@ -10,7 +10,7 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import seam_visibility
 from dynatex.analyzer.quilt import learn_quilt
 from dynatex.player import open_player, ratemap
-from dynatex.player.quilt import ENDS, EvolvePlayer, fold_time, jitter_warp
+from dynatex.player.quilt import ENDS, MAX_CLASSES, SPILL, EvolvePlayer, build_runs, fold_time, jitter_warp
 from dynatex.tiledb import DatabaseWriter, MethodNotFoundError, QuiltModel
 from dynatex.analyzer.quilt import spreading_clip
 
@@ -66,6 +66,68 @@ def test_opencl_matches_numpy(spread_db, cl_context, end):
             assert diff.max() <= 1, k          # float32 on both sides; contracted multiply-adds may round apart
             exact += bool(diff.max() == 0)
         assert exact >= 30
+
+
+@pytest.mark.parametrize("interpolate", [True, False])
+def test_opencl_matches_numpy_rate_classes(spread_db, cl_context, interpolate):
+    """Rate maps with runs of constant rate (host tables per rate class), more distinct
+    constant rates than classes (the rest go pixel by pixel) and smoothed bands."""
+    path = spread_db[0]
+    h, w = 56, 72
+    stairs = np.repeat(np.linspace(0.5, 3.0, MAX_CLASSES + 4, dtype=np.float32), -(-w // (MAX_CLASSES + 4)))[:w]
+    maps = [(ratemap.halves((h, w), 2.0, 1.0), 0.0), (ratemap.halves((h, w), 2.0, 1.0), 3.0),
+            (np.tile(stairs, (h, 1)), 0.0)]
+    opts = dict(jitter=2.5, seed=2, interpolate=interpolate, end="pingpong")
+    with EvolvePlayer(path, backend="numpy", **opts) as ref, EvolvePlayer(path, backend="opencl", **opts) as cl:
+        exact = total = 0
+        for rate, sigma in maps:
+            ref.rate_map = cl.rate_map = rate
+            ref.rate_sigma = cl.rate_sigma = sigma
+            for t in (0.0, 3.3, 11.7, 25.2, 40.9):
+                a, b = ref.render_at(t), cl.render_at(t)
+                diff = np.abs(a.astype(int) - b)
+                assert diff.max() <= 1, (sigma, t)
+                exact += bool(diff.max() == 0)
+                total += 1
+        assert exact >= total - 3
+
+
+def test_runs_describe_the_quilt(spread_db):
+    """The run tables of the kernel say exactly what the per-pixel quilt says, and a run's
+    last 16-byte chunk may spill only where it stays within its row."""
+    _, _, q = spread_db
+    h, w = q.labels.shape
+    sw = 32
+    pix = q.source_map[..., 0].astype(np.int64) * sw + q.source_map[..., 1]
+    pix2 = q.blend_map[..., 0].astype(np.int64) * sw + q.blend_map[..., 1]
+    wq = np.rint(q.blend_weight.astype(np.float64) * 256).astype(np.int64)
+    r = build_runs(pix, q.labels, wq, pix2, q.blend_labels)
+    runs = r["runs"].view(np.uint32).astype(np.int64)
+    start, length = runs[:, 0], runs[:, 3] & 0x3FFFFFFF
+    blend, spill = runs[:, 3] >> 31 == 1, (runs[:, 3] >> 30) & 1 == 1
+    np.testing.assert_array_equal(start, np.cumsum(np.append(0, length[:-1])))       # cover every pixel, in order
+    assert ((start % w) + length <= w).all()                                          # within a row
+    np.testing.assert_array_equal(r["row_start"], np.searchsorted(start, np.arange(h + 1) * w))
+    col3 = (start % w) * 3
+    assert (col3[spill] + -(-length[spill] * 3 // SPILL) * SPILL <= 3 * w).all()
+    assert spill.mean() > 0.9
+    code = r["code"].reshape(h, w, 3)
+    assert (code[..., 0] == code[..., 1]).all() and (code[..., 0] == code[..., 2]).all()
+    code = code[..., 0].astype(np.int64)
+    # per pixel: the primary and second source from the streams and the code
+    k = np.repeat(np.arange(len(start)), length)
+    x = np.arange(h * w) - start[k]
+    a_pix, a_lab = runs[k, 1] + x, runs[k, 2]
+    b_pix, b_lab = r["runs_b"][k, 0] + x, r["runs_b"][k, 1]
+    swap = (code >> 9).ravel() == 1
+    band = (wq > 0).ravel()
+    np.testing.assert_array_equal(np.where(swap, b_pix, a_pix), pix.ravel())
+    np.testing.assert_array_equal(np.where(swap, b_lab, a_lab), q.labels.ravel())
+    np.testing.assert_array_equal((code & 0x1FF).ravel(), wq.ravel())
+    np.testing.assert_array_equal(np.where(swap, a_pix, b_pix)[band], pix2.ravel()[band])
+    np.testing.assert_array_equal(np.where(swap, a_lab, b_lab)[band], q.blend_labels.ravel()[band])
+    assert not swap[~band].any() and (blend[k] | ~band).all()
+    assert len(start) < h * w / 4                                                     # runs, not pixels
 
 
 def test_integer_times_copy_source_pixels(spread_db):
