@@ -364,11 +364,12 @@ class EvolvePlayer(Player):
         self._d_run_class = cl.Buffer(self.ctx, mf.READ_ONLY, self.n_runs * 4)
         self._d_warp = cl.Buffer(self.ctx, mf.READ_ONLY, self._warp.nbytes)
         self._class_rates = np.ones(1, np.float32)       # rate classes (uniform: one class, rate 1)
-        self._bframe = np.zeros((MAX_CLASSES, self.n_blocks, 4), np.int32)
+        self._bframe = np.zeros((1, self.n_blocks, 4), np.int32)    # grows with the rate classes
         self._d_bframe = cl.Buffer(self.ctx, mf.READ_ONLY, self._bframe.nbytes)
         self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
-        self.device_bytes = int(frames.nbytes + runs["runs"].nbytes + runs["runs_b"].nbytes + runs["code"].nbytes
-                                + (self._gain.nbytes if self._gain is not None else 0) + h * w * 7 + self.n_runs * 4)
+        self.device_bytes = int(frames.nbytes + sum(runs[k].nbytes for k in ("runs", "runs_b", "row_start", "code"))
+                                + (self._gain.nbytes if self._gain is not None else 0) + h * w * 7 + self.n_runs * 4
+                                + self._warp.nbytes + self._bframe.nbytes)
         defines = {"FRAME_BYTES": self._flat.shape[1] * 3, "NFRAMES": self.n_frames, "KNOTS": self.n_frames + 1,
                    "INTERP": self.interpolate, "GAIN": self._gain is not None, "NBLOCKS": self.n_blocks}
         self._kernels = {}
@@ -400,6 +401,11 @@ class EvolvePlayer(Player):
         run_class[const] = index[inverse]
         self._n_varying_px = int(np.diff(np.append(self._run_starts, flat.size))[run_class < 0].sum())
         self._class_rates = np.ascontiguousarray(values[keep], np.float32)
+        if len(keep) > len(self._bframe):
+            self._bframe = np.zeros((len(keep), self.n_blocks, 4), np.int32)
+            self._d_bframe = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY, self._bframe.nbytes)
+            for k in self._kernels.values():
+                k.set_arg(8, self._d_bframe)
         cl.enqueue_copy(self.queue, self._d_rate, np.ascontiguousarray(flat), is_blocking=True)
         cl.enqueue_copy(self.queue, self._d_run_class, run_class, is_blocking=True)
 
