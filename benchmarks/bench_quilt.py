@@ -39,6 +39,7 @@ from dynatex.tiledb import DatabaseWriter
 CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 NAMES = ("rusting_steel", "melting_honey")
 RANKS = (1, 2, 3, 5, 10, 15, 20, 30, 50)
+ROUNDS = 10
 
 
 def sources() -> dict[str, np.ndarray]:
@@ -67,17 +68,23 @@ def bench_player(folder: str, frames: np.ndarray, n: int, bandwidth: float) -> d
             with EvolvePlayer(path, backend=backend, seed=1, **controls) as p:
                 p.speed = 0.37
                 buf = np.empty(p.shape, np.uint8)
-                count = n if backend == "opencl" else max(5, n // 20)
-                row[backend] = summarize(time_calls(lambda: p.next_frame(out=buf), frames=count))
-                if backend == "opencl":
-                    row["bytes_per_frame"] = p.bytes_per_frame
-                    row["runs"] = p.n_runs
-                    clock = iter(np.arange(10 ** 6) * 0.37)
+                if backend == "numpy":
+                    row[backend] = summarize(time_calls(lambda: p.next_frame(out=buf), frames=max(5, n // 20)))
+                    continue
+                row["bytes_per_frame"] = p.bytes_per_frame
+                row["runs"] = p.n_runs
 
-                    def kernel_only():    # the same clocks; host tables + launch + wait, no copy to the caller
-                        p._launch(float(next(clock)))
-                        p.queue.finish()
-                    row["kernel"] = summarize(time_calls(kernel_only, frames=count))
+                def kernel_only():    # host tables + launch + wait, no copy to the caller; the clock stands still
+                    p._launch(p.time)
+                    p.queue.finish()
+                # alternate rounds of both, so that both see the same load on a shared machine
+                e2e, kern = [], []
+                for r in range(ROUNDS):
+                    e2e.append(time_calls(lambda: p.next_frame(out=buf), frames=max(2, n // ROUNDS),
+                                          warmup=3 if r == 0 else 1, max_seconds=20.0 / ROUNDS))
+                    kern.append(time_calls(kernel_only, frames=max(2, n // ROUNDS), warmup=1, max_seconds=20.0 / ROUNDS))
+                row[backend] = summarize(np.concatenate(e2e))
+                row["kernel"] = summarize(np.concatenate(kern))
         roof_ms = row["bytes_per_frame"] / (bandwidth * 1e9) * 1e3
         row["roofline_ms"] = roof_ms
         row["roofline_fraction"] = roof_ms / row["opencl"]["median_ms"]
@@ -151,7 +158,8 @@ def main() -> int:
         print()
         return 0
     p = report["player"]
-    print(f"copy bandwidth {bw['gbs']:.1f} GB/s; clip {next(iter(src))}")
+    print(f"copy bandwidth {bw['gbs']:.1f} GB/s; clip {next(iter(src))}; load average {os.getloadavg()[0]:.2f} "
+          f"on {os.cpu_count()} CPUs")
     for key in ("uniform_jitter4", "ratemap_smoothed"):
         r = p[key]
         print(f"  player {p['size']} {key}: OpenCL {r['opencl']['fps']:.0f} fps end to end (median "
