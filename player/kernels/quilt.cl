@@ -205,9 +205,10 @@ __attribute__((always_inline)) inline void run_const(__global const ushort *rest
 }
 
 #if RATE
-// A run along which the rate varies, pixel by pixel. (Vectorising this over groups of 16
-// pixels, with vector loads where a group reads two frames and gathers elsewhere, ran
-// 1.3-1.5x slower on PoCL 3.1 than this scalar loop.)
+// A run along which the rate varies, pixel by pixel. Two vectorised versions ran slower on
+// PoCL 3.1 than this scalar loop: groups of 16 pixels with vector loads where a group reads
+// two frames and gathers elsewhere (1.3-1.5x), and 16-byte chunks with times computed 8
+// pixels at a time and per-byte selects among up to four frames (1.2x).
 __attribute__((always_inline)) inline void run_varying(
         __global const uchar *restrict stack, __global const ushort *restrict code,
         __global const float *restrict rate, __global const float *restrict warp,
