@@ -33,7 +33,7 @@ import numpy as np
 
 from ..tiledb import QuiltModel, TileDB
 from .base import Player, check_float
-from .gather import gaussian_smooth, pack_source
+from .gather import gaussian_smooth
 from .ratemap import check_rate_map
 
 ENDS = ("hold", "loop", "pingpong")
