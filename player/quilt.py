@@ -336,7 +336,6 @@ class EvolvePlayer(Player):
         self._rate: np.ndarray | None = None
         self._rate_sigma = 0.0
         self._warp = jitter_warp(self.n_blocks, self.n_frames, 0.0, seed=self.seed)
-        self._block_ids = np.arange(self.n_blocks)
         if self.backend == "opencl":
             self._setup_opencl(frames)
 
