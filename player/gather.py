@@ -39,6 +39,14 @@ Numerical contract: the device and the numpy reference evaluate the same float32
 formulas; they agree exactly on integer times with unit gains and within one grey level
 elsewhere (contracted multiply-adds round differently).
 
+Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders 128-pixel spans
+of 16 rows in runs of 16 pixels (two lattice intervals): a run with linear source (one
+cell, or two cells split at a boundary, merged bytewise) moves 48 bytes per frame with
+wide loads and blends and tones them as three float16, tone factors pre-expanded per byte
+on the host; other runs, and other time steps, go pixel by pixel. Where the device shares
+host memory (PoCL on the CPU; probed once at open, :attr:`Gather.direct`) the kernel writes
+straight into the caller's array: one launch, no copy.
+
 Examples
 --------
 >>> import numpy as np
@@ -63,6 +71,9 @@ WRAPS = ("loop", "clamp", "pingpong")
 MAX_FRAME_PIXELS = 1 << 24
 MAX_TONES = 256
 RUN = 32              # output pixels per work-item of kernel gather
+STACK_PAD = 64        # bytes of padding around the device copy of the frame stack
+VRUN, ROWS = 128, 16  # time step 8: a work-item renders 128 pixels of each of ROWS rows
+TONE_STRIDE = 96      # floats per device tone row: gains then offsets, each repeated for 16 rgb pixels
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
 
 
@@ -273,6 +284,8 @@ class Gather:
         self._tones = np.zeros((1, 6), np.float32)
         self._tones[0, :3] = 1.0
         self.ctx, self.queue = ctx, queue
+        self.direct = False       # frames written straight into the caller's array (set at open)
+        self._last_t = 0.0
         if backend == "opencl":
             self._setup_opencl(device)
 
@@ -286,23 +299,33 @@ class Gather:
             self.queue = cl.CommandQueue(self.ctx)
         mf = cl.mem_flags
         h, w = self.out_shape[:2]
-        self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self._stack)
+        # STACK_PAD bytes on both sides: vector loads of a run may read a few bytes past the
+        # frame stack's ends (lanes that a bytewise merge then drops)
+        padded = np.zeros(self._stack.nbytes + 2 * STACK_PAD, np.uint8)
+        padded[STACK_PAD:STACK_PAD + self._stack.nbytes] = self._stack.reshape(-1)
+        self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
         self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
         self._d_tmp = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
-        self._d_tones = cl.Buffer(self.ctx, mf.READ_ONLY, MAX_TONES * 6 * 4)
+        self._d_tones = cl.Buffer(self.ctx, mf.READ_ONLY, MAX_TONES * TONE_STRIDE * 4)
         self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
         self._d_source = None
         self._d_source_bytes = 0
         defines = {"FRAME_W": self.frame_w, "FRAME_PIXELS": self.frame_w * self.frame_h,
                    "NFRAMES": self.n_frames, "GRID": self.grid, "WRAP": _WRAP_CODE[self.wrap],
                    "CELL_H": (self.cell or (1, 1))[0], "CELL_W": (self.cell or (1, 1))[1],
-                   "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN}
+                   "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN,
+                   "STACK_PAD": STACK_PAD, "ROWS": ROWS, "TONE_STRIDE": TONE_STRIDE}
         prog = build_program(self.ctx, "gather.cl", defines)
         self._k_gather = prog.kernel("gather")
         self._k_smooth_x = prog.kernel("smooth_x")
         self._k_smooth_y = prog.kernel("smooth_y")
-        # kernel gather: TSTEP 8 renders 64-pixel spans from x = -4 (vector path), else RUN pixels
-        self._gsize = (-(-(w + 4) // 64), h) if self.time_step == 8 else (-(-w // RUN), h)
+        self.direct = _writes_through(self.ctx, self.queue, prog.kernel("probe_write"))
+        # kernel gather: TSTEP 8 renders VRUN-pixel spans from x = -4 on ROWS rows (vector path),
+        # else RUN pixels of one row
+        self._gsize = ((-(-(w + 4) // VRUN), -(-h // ROWS)) if self.time_step == 8 else (-(-w // RUN), h))
+        # one work-item per work-group there: left to itself PoCL may put the whole small
+        # range into one work-group, which runs on one core
+        self._lsize = (1, 1) if self.time_step == 8 else None
         self._tsize = (_round_up(self.tmap_shape[1], 16), _round_up(self.tmap_shape[0], 4))
         self._upload_tmap()
         self._upload_tones()
@@ -315,7 +338,7 @@ class Gather:
     def _upload_tones(self) -> None:
         if self.backend == "opencl":
             import pyopencl as cl
-            cl.enqueue_copy(self.queue, self._d_tones, self._tones, is_blocking=True)
+            cl.enqueue_copy(self.queue, self._d_tones, _expand_tones(self._tones), is_blocking=True)
 
     def _set_args(self) -> None:
         if self.backend != "opencl" or self._d_source is None:
@@ -446,14 +469,34 @@ class Gather:
         else:
             check_out(out, self.out_shape)
         t = self._fold(float(t))
+        self._last_t = t
         if self.backend == "numpy":
             self.render_reference(t, out)
             return out
         import pyopencl as cl
         self._k_gather.set_arg(10, np.float32(t))
-        cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, None)
+        if self.direct:
+            # the kernel writes straight into the caller's array (the device shares host
+            # memory, checked at open): no device buffer, no copy
+            dst = cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=out.reshape(-1))
+            self._k_gather.set_arg(4, dst)
+            cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
+            self.queue.finish()
+            self._k_gather.set_arg(4, self._d_out)
+            return out
+        cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
         cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
         return out
+
+    def render_on_device(self, t: float) -> None:
+        """Run the gather kernel alone into the device's own frame buffer and wait (no copy, no
+        caller's array): the kernel-only time of the benchmarks."""
+        if self.backend != "opencl" or self._source is None:
+            raise RuntimeError("render_on_device needs the opencl backend and a source")
+        import pyopencl as cl
+        self._k_gather.set_arg(10, np.float32(self._fold(float(t))))
+        cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
+        self.queue.finish()
 
     def render_reference(self, t: float, out: np.ndarray | None = None) -> np.ndarray:
         """The numpy reference of :meth:`render` (usable with either backend, for checks)."""
@@ -475,13 +518,68 @@ class Gather:
             return math.fmod(t, p) if abs(t) >= p else t
         return t
 
+    def frame_traffic(self, t: float | None = None) -> dict[str, int]:
+        """Bytes the frame at ``t`` (default: the last rendered) must move at least.
+
+        ``output``: the frame written once (``H * W * 3``; straight into the caller's array
+        where the device shares host memory, see :attr:`direct`; a copy out of a device
+        buffer elsewhere is not counted, it is avoidable). ``stored``: the stored pixels the
+        frame reads, each distinct (frame, pixel) once (``3`` bytes each), which is at most
+        two per output pixel when interpolating and, for a small stored set (a few tiles
+        over the frames that the time offsets reach), far fewer: such a set is re-read
+        from cache rather than from memory, so the memory traffic is then close to the
+        output alone. Source and time maps are not counted (a cell grid and a lattice of
+        step 8 are tiny).
+        """
+        h, w = self.out_shape[:2]
+        out = {"output": h * w * 3, "stored": 0}
+        if self._source is None:
+            return out
+        t = self._last_t if t is None else float(t)
+        pix, _ = source_indices(self._source, (h, w), self.frame_w, self._cell)
+        tmap = self.time_map if self.backend == "opencl" else self._tmap
+        i0 = np.floor(np.float32(self._fold(t)) + sample_time_map(tmap, (h, w), self.time_step)).astype(np.int64)
+        fp = self.frame_h * self.frame_w
+        seen = np.zeros(self.n_frames * fp, bool)
+        seen[wrap_index(i0, self.n_frames, self.wrap) * fp + pix] = True
+        if self.interpolate:
+            seen[wrap_index(i0 + 1, self.n_frames, self.wrap) * fp + pix] = True
+        out["stored"] = 3 * int(np.count_nonzero(seen))
+        return out
+
     @property
     def bytes_per_frame(self) -> int:
-        """Bytes one render must move at least: output, frames read, source and time maps."""
-        h, w = self.out_shape[:2]
-        reads = (2 if self.interpolate else 1) * h * w * 3
-        src = self._source.nbytes if self._source is not None else 0
-        return int(h * w * 3 + reads + src + self._tmap.nbytes + h * w * 3)   # + copy to host
+        """Bytes one render must move at least: the output written plus the distinct stored
+        pixels read (:meth:`frame_traffic`, which says what is counted and what may be cached)."""
+        return sum(self.frame_traffic().values())
+
+
+def _expand_tones(tones: np.ndarray) -> np.ndarray:
+    """Device tone table: per tone, the rgb gains repeated for 16 pixels (48 floats), then the
+    offsets likewise, so a run of 16 pixels loads its per-byte factors with vector loads."""
+    out = np.zeros((len(tones), TONE_STRIDE), np.float32)
+    out[:, :48] = np.tile(tones[:, :3], 16)
+    out[:, 48:] = np.tile(tones[:, 3:], 16)
+    return out
+
+
+def _writes_through(ctx: Any, queue: Any, kernel: Any) -> bool:
+    """Whether kernel writes into a ``USE_HOST_PTR`` buffer land in the host array itself
+    (true for CPU devices such as PoCL's): probed once, on an odd-aligned array."""
+    import pyopencl as cl
+    from .opencl import device_shares_host_memory
+    if not device_shares_host_memory(ctx):
+        return False
+    try:
+        base = np.zeros(4096 + 3, np.uint8)
+        host = base[3:]
+        buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=host)
+        kernel.set_args(buf)
+        cl.enqueue_nd_range_kernel(queue, kernel, (host.size,), None)
+        queue.finish()
+    except cl.Error:
+        return False
+    return bool((host == ((np.arange(host.size) * 7 + 3) & 255).astype(np.uint8)).all())
 
 
 def _size(name: str, value: Sequence[int]) -> tuple[int, int]:

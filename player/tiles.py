@@ -162,7 +162,9 @@ class TilesPlayer(Player):
         self.ring = int(model.info.get("ring", max(2, min(th, tw) // 5)))
         self.labels = self._check_labels(labels)
         mixing = len(np.unique(self.labels)) > 1
-        stack = np.ascontiguousarray(model.tiles.transpose(1, 2, 0, 3, 4).reshape(length, th, k * tw, 3))
+        # tiles stacked vertically in each stored frame: one tile's frame is contiguous, so a
+        # cell's rows are read as one forward stream (hardware prefetch follows it)
+        stack = np.ascontiguousarray(model.tiles.transpose(1, 0, 2, 3, 4).reshape(length, k * th, tw, 3))
         self._gather = Gather(stack, (h, w), backend=self.backend, ctx=self.ctx, queue=self.queue,
                               time_step=TIME_STEP, cell=None if mixing else (th, tw))
         self.mixing = mixing
@@ -232,7 +234,7 @@ class TilesPlayer(Player):
             area = np.outer(np.minimum(th, h - th * np.arange(choice.shape[0])),
                             np.minimum(tw, w - tw * np.arange(choice.shape[1])))
             self._tile_pixels = np.bincount(choice.ravel(), weights=area.ravel(), minlength=self.n_tiles)
-            self._gather.set_source_grid(pack_source(choice * tw, m.tile_class[choice]))
+            self._gather.set_source_grid(pack_source(choice * (th * tw), m.tile_class[choice]))
             self._retone()
             return
         h, w = self._shape[:2]
@@ -266,8 +268,7 @@ class TilesPlayer(Player):
             take = wgt > best_w
             tile = np.where(take, btp, tile)
             best_w = np.maximum(best_w, wgt)
-        kw = self.n_tiles * tw
-        index = ly[:, None] * kw + tile * tw + lx[None, :]
+        index = (tile * th + ly[:, None]) * tw + lx[None, :]
         weight = np.where(m.border_side[tile] >= 0, best_w, 255)
         self._class_map = np.where(weight >= 128, m.ring_class[tile], m.tile_class[tile]).astype(np.int32)
         self._weight, self._interior_class = weight, m.tile_class[tile].astype(np.int32)
@@ -513,9 +514,17 @@ class TilesPlayer(Player):
         np.copyto(out, synth, where=(mask != 0)[..., None])
         return out
 
+    def frame_traffic(self) -> dict[str, int]:
+        """Bytes the last frame had to move at least: ``output`` (the frame written once) and
+        ``stored`` (the distinct tile pixels it read; a few tiles over the frames the time
+        offsets reach: usually cache-resident). See :meth:`Gather.frame_traffic`."""
+        return self._gather.frame_traffic()
+
     @property
     def bytes_per_frame(self) -> int:
-        """Bytes one frame moves at least (the gather's reads and writes and the copy out)."""
+        """Bytes one frame must move at least: the output written plus the distinct tile data
+        read (:meth:`frame_traffic`); the roofline figure of the benchmark divides this by
+        the measured copy bandwidth."""
         return self._gather.bytes_per_frame
 
     # -- state --------------------------------------------------------------------------------------------

@@ -158,3 +158,69 @@ def test_bad_inputs_are_clear_errors():
         gg.set_source_grid(pack_source(np.full((1, 1), 10)))
     with pytest.raises(ValueError, match="cell 11x4 is larger"):
         Gather(stack, (4, 4), backend="numpy", cell=(11, 4))
+
+
+@pytest.mark.parametrize("cell", [(8, 8), (5, 7), (6, 24), (9, 40)])
+@pytest.mark.parametrize("wrap", ["loop", "pingpong"])
+def test_vector_path_time_step_8_grid_matches_numpy(cl_context, cell, wrap):
+    """Time step 8 takes the 16-pixel vector runs: cell boundaries inside a run (two sources,
+    two tones), cells narrower than a run (three sources: per-pixel fallback), partial runs at
+    both row ends, runs whose frames cross one boundary and steep ones that span more."""
+    ch, cw = cell
+    stack = _stack(n=11, h=2 * ch, w=3 * cw)
+    H, W = 29, 157
+    gh, gw = -(-H // ch), -(-W // cw)
+    rng = np.random.default_rng(3)
+    origins = pack_source(rng.integers(0, 2, (gh, gw)) * ch * 3 * cw + cw * rng.integers(0, 3, (gh, gw)),
+                          rng.integers(0, 3, (gh, gw)))
+    th, tw = -(-H // 8), -(-W // 8)
+    tmap = (rng.uniform(-2, 2, (th, tw)) + np.linspace(0, 9, tw)[None, :]).astype(np.float32)
+    tmap[:, 7] += 25.0                                   # steep: runs spanning several frames
+    gains = np.array([[1, 1, 1], [0.8, 1.3, 0.5], [1.5, 0.7, 1.1]], np.float32)
+    offs = np.array([[0, 0, 0], [4, -6, 10], [-3, 2, 0]], np.float32)
+    res = {}
+    for backend in ("opencl", "numpy"):
+        g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
+                   cell=cell, time_step=8, wrap=wrap)
+        g.set_tones(gains, offs)
+        g.set_source_grid(origins)
+        g.set_time_map(tmap)
+        res[backend] = [g.render(t).copy() for t in (0.0, 3.4, 7.999, -5.25)]
+    for a, b in zip(res["opencl"], res["numpy"]):
+        _close(a, b)
+
+
+def test_vector_path_time_step_8_pixel_map_matches_numpy(cl_context):
+    """Per-pixel map with time step 8: linear runs take the vector path, the rest go per pixel."""
+    stack = _stack(n=6, h=12, w=40)
+    H, W = 21, 203
+    rng = np.random.default_rng(4)
+    idx = (np.arange(H)[:, None] % 12) * 40 + (np.arange(W)[None, :] % 40)
+    idx[rng.random((H, W)) < 0.02] = rng.integers(0, 480, int((rng.random((H, W)) < 0.02).sum()))[:1]
+    packed = pack_source(idx, (np.arange(W)[None, :] // 50 % 2) * np.ones((H, 1), int))
+    tmap = rng.uniform(0, 12, (-(-H // 8), -(-W // 8))).astype(np.float32)
+    res = {}
+    for backend in ("opencl", "numpy"):
+        g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None, time_step=8)
+        g.set_tones(np.array([[1, 1, 1], [1.2, 0.9, 0.6]], np.float32), np.array([[0, 0, 0], [3, 0, -2]], np.float32))
+        g.set_source_map(packed)
+        g.set_time_map(tmap)
+        res[backend] = [g.render(t).copy() for t in (0.5, 4.75)]
+    for a, b in zip(res["opencl"], res["numpy"]):
+        _close(a, b)
+
+
+def test_render_writes_into_the_callers_array(cl_context):
+    """On a device that shares host memory the frame lands in ``out`` without a copy; either way
+    ``out`` holds the frame, also when it is a view into a larger array."""
+    stack = _stack(n=5, h=8, w=24)
+    g = Gather(stack, (19, 45), backend="opencl", ctx=cl_context, cell=(8, 8), time_step=8)
+    g.set_source_grid(pack_source(np.full((3, 6), 8)))
+    from dynatex.player.opencl import device_shares_host_memory
+    assert g.direct == device_shares_host_memory(cl_context)
+    fresh = g.render(2.5).copy()
+    big = np.zeros((2, 19, 45, 3), np.uint8)
+    got = g.render(2.5, out=big[1])
+    assert got is big[1] or np.shares_memory(got, big)
+    assert (big[1] == fresh).all() and (big[0] == 0).all()
+    _close(fresh, g.render_reference(2.5))
