@@ -43,7 +43,8 @@ Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders 128-p
 of 16 rows in runs of 16 pixels (two lattice intervals): a run with linear source (one
 cell, or two cells split at a boundary, merged bytewise) moves 48 bytes per frame with
 wide loads and blends and tones them as three float16, tone factors pre-expanded per byte
-on the host; other runs, and other time steps, go pixel by pixel. Where the device shares
+on the host (with a cell grid also the runs that reach past a row's ends: only their bytes
+inside the row are stored); other runs, and other time steps, go pixel by pixel. Where the device shares
 host memory (PoCL on the CPU; probed once at open, :attr:`Gather.direct`) the kernel writes
 straight into the caller's array: one launch, no copy.
 

@@ -55,8 +55,10 @@ inline int fast_floor(float v)
 // whose source is linear (one tile cell, or two cells split at a boundary: bytes merged
 // before the blend) and whose frame indices span at most two neighbours moves 48 bytes per
 // frame with under-aligned 16-byte loads (three frames when the run crosses a frame
-// boundary) and blends and tones in three float16; any other run falls back to the
-// per-pixel path. Tone factors come pre-expanded per byte from the host (TONE_STRIDE).
+// boundary) and blends and tones in three float16, tone factors pre-expanded per byte on the
+// host (TONE_STRIDE); the runs that reach past a row's ends store only their bytes inside
+// it. Any other run falls back to the per-pixel path. (Runs of 32 pixels were tried: their
+// frame span exceeds two neighbours too often under smoothed offsets, and they were slower.)
 #define VRUN 128
 
 // PoCL's vload16/vstore16 of uchar move byte by byte; an under-aligned vector type gives one
@@ -86,6 +88,14 @@ inline void pixel(__global const uchar *restrict stack, __global const float *re
     o[0] = convert_uchar_sat_rte(r * tn[0] + tn[48]);
     o[1] = convert_uchar_sat_rte(g * tn[1] + tn[49]);
     o[2] = convert_uchar_sat_rte(b * tn[2] + tn[50]);
+}
+
+// the bytes [lo, hi) of v to o (a run's chunk at a row's end)
+#define SP1(j, c) if (lo <= j && j < hi) o[j] = v.c;
+inline void store_part(uchar16 v, __global uchar *o, int lo, int hi)
+{
+    SP1(0, s0) SP1(1, s1) SP1(2, s2) SP1(3, s3) SP1(4, s4) SP1(5, s5) SP1(6, s6) SP1(7, s7)
+    SP1(8, s8) SP1(9, s9) SP1(10, sa) SP1(11, sb) SP1(12, sc) SP1(13, sd) SP1(14, se) SP1(15, sf)
 }
 
 // 48 bytes of frame pointer p (A) merged with those of q (B) where mask m* is set
@@ -148,35 +158,40 @@ __kernel void gather(__global const uchar *restrict stack,
             // then subtract one where that rounded up (a true comparison is -1)
             const int16 tt = convert_int16(t);
             const int16 ti = tt + (convert_float16(tt) > t);
-            const bool full = xs >= 0 && xs + 16 <= width;
+            // valid bytes of the run: [blo, bhi) (the first and last runs of a row reach past it)
+            const int blo = max(-xs, 0) * 3, bhi = min(width - xs, 16) * 3;
             int pix0 = 0, tone = 0;
             bool linear = false;
-            // lanes >= split read the next cell (pixb + lane); 16: none do
+            // lanes >= split read the next cell (pixb + lane); 16: none do. Lanes outside the
+            // row read whatever lies there (inside the padded stack) and are not stored.
             int split = 16, pixb = 0, toneb = 0;
-            if (full) {
 #if GRID
-                const int cx = xs / CELL_W;
+            {
+                const int cx = max(xs, 0) / CELL_W;
                 const int packed = srow[cx];
                 pix0 = (packed & 0xFFFFFF) + dy + (xs - cx * CELL_W);
                 tone = (packed >> 24) & 0xFF;
-                split = (cx + 1) * CELL_W - xs;
                 linear = true;
-                if (split < 16) {
+                const int edge = (cx + 1) * CELL_W;          // the next cell's first pixel
+                if (edge - xs < 16 && edge < width) {
+                    split = edge - xs;
                     const int pb = srow[cx + 1];
                     pixb = (pb & 0xFFFFFF) + dy - split;
                     toneb = (pb >> 24) & 0xFF;
 #if CELL_W < 16
-                    linear = split + CELL_W >= 16;       // a third cell: per pixel
+                    linear = split + CELL_W >= 16 || edge + CELL_W >= width;   // else a third cell: per pixel
 #endif
                 }
+            }
 #else
+            if (xs >= 0 && xs + 16 <= width) {
                 const int16 pk = *(__global const int16_u *)(srow + xs);
                 const int16 step = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
                 pix0 = pk.s0 & 0xFFFFFF;
                 tone = (pk.s0 >> 24) & 0xFF;
                 linear = all((pk - pk.s0) == step);
-#endif
             }
+#endif
             // t is linear on lanes 0-7 and on 8-15: its extremes sit at lanes 0, 7, 8, 15
             const int lo = min(min(ti.s0, ti.s7), min(ti.s8, ti.sf));
             const int hi = max(max(ti.s0, ti.s7), max(ti.s8, ti.sf));
@@ -224,9 +239,16 @@ __kernel void gather(__global const uchar *restrict stack,
                     o2 = select(o2, vload16(5, tb), n2);
                 }
                 __global uchar *o = orow + xs * 3;
-                *(__global uchar16_u *)o = to_uchar16(va0 * g0 + o0);
-                *(__global uchar16_u *)(o + 16) = to_uchar16(va1 * g1 + o1);
-                *(__global uchar16_u *)(o + 32) = to_uchar16(va2 * g2 + o2);
+                const uchar16 r0 = to_uchar16(va0 * g0 + o0), r1 = to_uchar16(va1 * g1 + o1), r2 = to_uchar16(va2 * g2 + o2);
+                if (blo == 0 && bhi == 48) {
+                    *(__global uchar16_u *)o = r0;
+                    *(__global uchar16_u *)(o + 16) = r1;
+                    *(__global uchar16_u *)(o + 32) = r2;
+                } else {
+                    store_part(r0, o, blo, bhi);
+                    store_part(r1, o + 16, blo - 16, bhi - 16);
+                    store_part(r2, o + 32, blo - 32, bhi - 32);
+                }
             } else {
                 float tl[16];
                 vstore16(t, 0, tl);
