@@ -157,15 +157,17 @@ def gaussian_smooth(field: np.ndarray, sigma: float) -> np.ndarray:
     return out
 
 
-def sample_time_map(tmap: np.ndarray, shape: tuple[int, int], step: int) -> np.ndarray:
-    """The per-pixel time offsets ``(H, W)`` float32 a time map at lattice ``step`` describes."""
+def sample_time_map(tmap: np.ndarray, shape: tuple[int, int], step: int, rows: range | None = None) -> np.ndarray:
+    """The per-pixel time offsets ``(H, W)`` float32 a time map at lattice ``step`` describes
+    (only the output rows ``rows`` when given)."""
     tmap = np.asarray(tmap, np.float32)
     h, w = shape
+    rows = range(h) if rows is None else rows
     if step == 1:
-        return tmap
+        return tmap[rows.start:rows.stop]
     th, tw = tmap.shape
     inv = np.float32(1.0 / step)
-    fy = (np.arange(h, dtype=np.float32) + np.float32(0.5)) * inv - np.float32(0.5)
+    fy = (np.arange(rows.start, rows.stop, dtype=np.float32) + np.float32(0.5)) * inv - np.float32(0.5)
     fx = (np.arange(w, dtype=np.float32) + np.float32(0.5)) * inv - np.float32(0.5)
     y0f, x0f = np.floor(fy), np.floor(fx)
     wy, wx = (fy - y0f)[:, None], (fx - x0f)[None, :]
@@ -181,14 +183,16 @@ def sample_time_map(tmap: np.ndarray, shape: tuple[int, int], step: int) -> np.n
 
 
 def source_indices(source: np.ndarray, shape: tuple[int, int], frame_w: int,
-                   cell: tuple[int, int] | None) -> tuple[np.ndarray, np.ndarray]:
-    """Per-pixel ``(pixel index, tone)`` of a per-pixel map (``cell=None``) or a cell grid."""
-    idx, tone = unpack_source(source)
-    if cell is None:
-        return idx, tone
+                   cell: tuple[int, int] | None, rows: range | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel ``(pixel index, tone)`` of a per-pixel map (``cell=None``) or a cell grid
+    (only the output rows ``rows`` when given)."""
     h, w = shape
+    rows = range(h) if rows is None else rows
+    if cell is None:
+        return unpack_source(source[rows.start:rows.stop])
+    idx, tone = unpack_source(source)
     ch, cw = cell
-    yy, xx = np.arange(h), np.arange(w)
+    yy, xx = np.arange(rows.start, rows.stop), np.arange(w)
     cy, cx = yy // ch, xx // cw
     pix = idx[cy][:, cx] + ((yy - cy * ch) * frame_w)[:, None] + (xx - cx * cw)[None, :]
     return pix, tone[cy][:, cx]
@@ -536,15 +540,17 @@ class Gather:
         out = {"output": h * w * 3, "stored": 0}
         if self._source is None:
             return out
-        t = self._last_t if t is None else float(t)
-        pix, _ = source_indices(self._source, (h, w), self.frame_w, self._cell)
+        t = np.float32(self._fold(self._last_t if t is None else float(t)))
         tmap = self.time_map if self.backend == "opencl" else self._tmap
-        i0 = np.floor(np.float32(self._fold(t)) + sample_time_map(tmap, (h, w), self.time_step)).astype(np.int64)
         fp = self.frame_h * self.frame_w
         seen = np.zeros(self.n_frames * fp, bool)
-        seen[wrap_index(i0, self.n_frames, self.wrap) * fp + pix] = True
-        if self.interpolate:
-            seen[wrap_index(i0 + 1, self.n_frames, self.wrap) * fp + pix] = True
+        for r0 in range(0, h, 256):                     # in blocks of rows: bounded memory
+            rows = range(r0, min(r0 + 256, h))
+            pix, _ = source_indices(self._source, (h, w), self.frame_w, self._cell, rows)
+            i0 = np.floor(t + sample_time_map(tmap, (h, w), self.time_step, rows)).astype(np.int64)
+            seen[wrap_index(i0, self.n_frames, self.wrap) * fp + pix] = True
+            if self.interpolate:
+                seen[wrap_index(i0 + 1, self.n_frames, self.wrap) * fp + pix] = True
         out["stored"] = 3 * int(np.count_nonzero(seen))
         return out
 

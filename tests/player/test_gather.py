@@ -224,3 +224,20 @@ def test_render_writes_into_the_callers_array(cl_context):
     assert got is big[1] or np.shares_memory(got, big)
     assert (big[1] == fresh).all() and (big[0] == 0).all()
     _close(fresh, g.render_reference(2.5))
+
+
+def test_frame_traffic_counts_output_and_distinct_stored_pixels():
+    """bytes_per_frame = the output written once + each distinct (frame, pixel) read once."""
+    stack = _stack(n=6, h=8, w=16)                       # two 8x8 cells side by side
+    g = Gather(stack, (16, 40), backend="numpy", cell=(8, 8), time_step=8)
+    g.set_source_grid(pack_source(np.zeros((2, 5), int)))   # one cell repeated everywhere
+    g.render(2.0)
+    assert g.frame_traffic() == {"output": 16 * 40 * 3, "stored": 2 * 64 * 3}   # frames 2 and 3
+    tmap = np.zeros(g.tmap_shape, np.float32)
+    tmap[:, 3:] = 2.0                                    # part of the frame two frames later
+    g.set_time_map(tmap)
+    assert g.frame_traffic(2.0)["stored"] == 4 * 64 * 3   # frames 2..5, each once
+    assert g.bytes_per_frame == sum(g.frame_traffic().values())
+    m = Gather(stack, (8, 16), backend="numpy", interpolate=False)
+    m.set_source_map(pack_source(np.arange(128).reshape(8, 16)))
+    assert m.frame_traffic(0.0)["stored"] == 128 * 3     # every output pixel its own source
