@@ -297,7 +297,7 @@ class Gather:
     # -- device setup ------------------------------------------------------------------------
     def _setup_opencl(self, device: str | None) -> None:
         import pyopencl as cl
-        from .opencl import build_program, get_context
+        from .opencl import build_program, get_context, writes_through
         if self.ctx is None:
             self.ctx = get_context(device)
         if self.queue is None:
@@ -324,7 +324,7 @@ class Gather:
         self._k_gather = prog.kernel("gather")
         self._k_smooth_x = prog.kernel("smooth_x")
         self._k_smooth_y = prog.kernel("smooth_y")
-        self.direct = _writes_through(self.ctx, self.queue, prog.kernel("probe_write"))
+        self.direct = writes_through(self.ctx)
         # kernel gather: TSTEP 8 renders VRUN-pixel spans from x = -4 on ROWS rows (vector path),
         # else RUN pixels of one row
         self._gsize = ((-(-(w + 4) // VRUN), -(-h // ROWS)) if self.time_step == 8 else (-(-w // RUN), h))
@@ -568,25 +568,6 @@ def _expand_tones(tones: np.ndarray) -> np.ndarray:
     out[:, :48] = np.tile(tones[:, :3], 16)
     out[:, 48:] = np.tile(tones[:, 3:], 16)
     return out
-
-
-def _writes_through(ctx: Any, queue: Any, kernel: Any) -> bool:
-    """Whether kernel writes into a ``USE_HOST_PTR`` buffer land in the host array itself
-    (true for CPU devices such as PoCL's): probed once, on an odd-aligned array."""
-    import pyopencl as cl
-    from .opencl import device_shares_host_memory
-    if not device_shares_host_memory(ctx):
-        return False
-    try:
-        base = np.zeros(4096 + 3, np.uint8)
-        host = base[3:]
-        buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=host)
-        kernel.set_args(buf)
-        cl.enqueue_nd_range_kernel(queue, kernel, (host.size,), None)
-        queue.finish()
-    except cl.Error:
-        return False
-    return bool((host == ((np.arange(host.size) * 7 + 3) & 255).astype(np.uint8)).all())
 
 
 def _size(name: str, value: Sequence[int]) -> tuple[int, int]:

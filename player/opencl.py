@@ -149,6 +149,40 @@ def _require_pyopencl() -> None:
         raise OpenCLUnavailableError(f"pyopencl cannot be imported ({_IMPORT_ERROR}); {_FIX}")
 
 
+_PROBE_WRITE = ("__kernel void probe_write(__global uchar *o) "
+                "{ size_t i = get_global_id(0); o[i] = (uchar)(i * 7 + 3); }")
+_writes_through: dict[int, bool] = {}
+
+
+def writes_through(ctx: "cl.Context") -> bool:
+    """Whether kernel writes into a ``USE_HOST_PTR`` buffer land in the host array itself,
+    with no map or copy (true of CPU devices such as PoCL's). Probed once per context on an
+    odd-aligned array, so players can write frames straight into the caller's buffer."""
+    key = ctx.int_ptr
+    if key not in _writes_through:
+        _writes_through[key] = _probe_writes_through(ctx)
+    return _writes_through[key]
+
+
+def _probe_writes_through(ctx: "cl.Context") -> bool:
+    if not device_shares_host_memory(ctx):
+        return False
+    try:
+        queue = cl.CommandQueue(ctx)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            kernel = cl.Kernel(cl.Program(ctx, _PROBE_WRITE).build(), "probe_write")
+        base = np.zeros(4096 + 3, np.uint8)
+        host = base[3:]
+        buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=host)
+        kernel.set_args(buf)
+        cl.enqueue_nd_range_kernel(queue, kernel, (host.size,), None)
+        queue.finish()
+    except cl.Error:
+        return False
+    return bool((host == ((np.arange(host.size) * 7 + 3) & 255).astype(np.uint8)).all())
+
+
 def device_shares_host_memory(ctx: "cl.Context") -> bool:
     dev = ctx.devices[0]
     try:

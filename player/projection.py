@@ -11,6 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 BLOCK = 16
+#: Work-group size. Left to choose, PoCL may make few large groups that leave a core idle;
+#: 32 measured best or equal at 352x288 and 1280x720 (up to 1.5x faster than the default).
+LOCAL = 32
 
 
 def blocked_basis(basis: np.ndarray, block: int = BLOCK) -> np.ndarray:
@@ -58,7 +61,7 @@ class Projector:
             self._mean = mean
             return
         import pyopencl as cl
-        from .opencl import build_program
+        from .opencl import build_program, writes_through
         blocked = blocked_basis(basis)
         blocks = blocked.shape[0]
         padded = blocks * BLOCK
@@ -74,7 +77,11 @@ class Projector:
         self._kernel = prog.kernel("project")
         self._kernel.set_args(self._d_basis, self._d_mean, self._d_coef, self._d_out,
                               np.int32(self.n), np.int32(self.values))
-        self._gsize = (blocks,)
+        #: frames are written straight into the caller's array (no copy) where the device
+        #: shares host memory; probed once per context
+        self.direct = writes_through(ctx)
+        self._gsize = (-(-blocks // LOCAL) * LOCAL,)
+        self._lsize = (LOCAL,)
 
     @property
     def is_opencl(self) -> bool:
@@ -99,6 +106,16 @@ class Projector:
             return None
         import pyopencl as cl
         cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=not wait)
-        cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, None)
+        if self.direct:
+            dst = cl.Buffer(self.queue.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR,
+                            hostbuf=out.reshape(-1))
+            self._kernel.set_arg(3, dst)
+            event = cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, self._lsize)
+            self._kernel.set_arg(3, self._d_out)
+            if wait:
+                event.wait()
+                return None
+            return event
+        cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, self._lsize)
         event = cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=wait)
         return None if wait else event

@@ -381,11 +381,3 @@ __kernel void smooth_y(__global const float *restrict src,
         acc += weights[k + radius] * src[(size_t)clamp(y + k, 0, h - 1) * w + x];
     dst[(size_t)y * w + x] = acc;
 }
-
-// Probe run once at open: do a kernel's writes into a CL_MEM_USE_HOST_PTR buffer land straight
-// in host memory (so frames can be written into the caller's array without a copy)?
-__kernel void probe_write(__global uchar *out)
-{
-    const int i = get_global_id(0);
-    out[i] = (uchar)(i * 7 + 3);
-}

@@ -26,6 +26,8 @@ __kernel void project(__global const basis_t *restrict basis,
                       const int values)
 {
     const size_t b = get_global_id(0);
+    if (b * BLOCK >= (size_t)values)
+        return;  // the global size is rounded up to whole work-groups
     __global const basis_t *row = basis + b * (size_t)n * BLOCK;
     float16 acc = vload16(b, mean);
     int i = 0;
