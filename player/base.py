@@ -49,8 +49,19 @@ class Player:
     # -- frame contract --------------------------------------------------------
     @property
     def shape(self) -> tuple[int, int, int]:
-        """``(height, width, 3)`` of the frames this player produces."""
-        raise NotImplementedError
+        """``(height, width, 3)`` of the frames this player produces (subclasses set ``_shape``)."""
+        return self._shape
+
+    def reseed(self, seed: int) -> None:
+        """Restart the player's random generator from ``seed``; :meth:`_on_reseed` says what else."""
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
+        self.seed = int(seed)
+        self._rng = np.random.Generator(np.random.PCG64(self.seed))
+        self._on_reseed()
+
+    def _on_reseed(self) -> None:
+        """Hook run after :meth:`reseed` (for example to redraw a random arrangement)."""
 
     @property
     def bytes_per_frame(self) -> int | None:

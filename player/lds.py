@@ -126,6 +126,7 @@ class LDSPlayer(Player):
                                ctx=self.ctx, queue=self.queue)
         self._coef = self._proj.coef
         self.basis_bytes = self._proj.basis_bytes
+        self._x = self._x0.copy()
         self.reseed(seed)
         self._warm()
 
@@ -134,10 +135,6 @@ class LDSPlayer(Player):
         self._project(self._x, scratch)
 
     # -- controls ----------------------------------------------------------------
-    @property
-    def shape(self) -> tuple[int, int, int]:
-        return self._shape
-
     @property
     def bytes_per_frame(self) -> int:
         """The basis and mean read, plus the uint8 frame written."""
@@ -197,15 +194,6 @@ class LDSPlayer(Player):
     def groups(self) -> np.ndarray:
         """Scale group of each component (0 coarse, 1 medium, 2 fine)."""
         return self._groups.copy()
-
-    def reseed(self, seed: int) -> None:
-        """Restart the driving noise from ``seed`` (the state is kept)."""
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
-        self.seed = int(seed)
-        self._rng = np.random.Generator(np.random.PCG64(self.seed))
-        if not hasattr(self, "_x"):
-            self._x = self._x0.copy()
 
     # -- synthesis -----------------------------------------------------------------
     @property

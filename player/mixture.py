@@ -150,15 +150,12 @@ class MixturePlayer(Player):
         self._proj = Projector(basis, model.mean, shape=self._shape, channels=src.channels,
                                ctx=self.ctx, queue=self.queue)
         self.basis_bytes = self._proj.basis_bytes
+        self._hist = self._hist0.copy()
         self.reseed(seed)
         scratch = np.empty(self._shape, np.uint8)
         self._project(self._hist[0], scratch)
 
     # -- controls ----------------------------------------------------------------
-    @property
-    def shape(self) -> tuple[int, int, int]:
-        return self._shape
-
     @property
     def bytes_per_frame(self) -> int:
         """The stacked basis and mean read, plus the uint8 frame written."""
@@ -179,15 +176,6 @@ class MixturePlayer(Player):
     @intensity.setter
     def intensity(self, value: float) -> None:
         self._intensity = check_float("intensity", value, 0.0, MAX_INTENSITY)
-
-    def reseed(self, seed: int) -> None:
-        """Restart the driving noise from ``seed`` (the coordinates are kept)."""
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
-        self.seed = int(seed)
-        self._rng = np.random.Generator(np.random.PCG64(self.seed))
-        if not hasattr(self, "_hist"):
-            self._hist = self._hist0.copy()
 
     # -- synthesis -----------------------------------------------------------------
     @property

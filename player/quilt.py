@@ -433,10 +433,6 @@ class EvolvePlayer(Player):
 
     # -- controls ---------------------------------------------------------------------------------
     @property
-    def shape(self) -> tuple[int, int, int]:
-        return self._shape
-
-    @property
     def speed(self) -> float:
         return self._speed
 
@@ -475,6 +471,10 @@ class EvolvePlayer(Player):
         if v != self._jitter:
             self._jitter = v
             self._make_warp()
+
+    def _on_reseed(self) -> None:
+        """A new seed draws new jitter warps."""
+        self._make_warp()
 
     def _make_warp(self) -> None:
         self._warp = jitter_warp(self.n_blocks, self.n_frames, self._jitter, end=self._end, seed=self.seed)

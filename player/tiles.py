@@ -351,10 +351,6 @@ class TilesPlayer(Player):
 
     # -- controls ------------------------------------------------------------------------------------
     @property
-    def shape(self) -> tuple[int, int, int]:
-        return self._shape
-
-    @property
     def sigma(self) -> float:
         return self._sigma
 
@@ -468,12 +464,8 @@ class TilesPlayer(Player):
         table = np.concatenate([gain] + blend).astype(np.float32)
         return table, np.zeros_like(table)
 
-    def reseed(self, seed: int) -> None:
-        """Redraw the arrangement and the time offsets from ``seed``."""
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
-        self.seed = int(seed)
-        self._rng = np.random.Generator(np.random.PCG64(self.seed))
+    def _on_reseed(self) -> None:
+        """Redraw the arrangement and the time offsets."""
         self._arrange()
         self._cells_a = self._cell_field()
         self._cells_b = self._cell_field()

@@ -187,10 +187,6 @@ class TurnPointPlayer(Player):
 
     # -- controls ----------------------------------------------------------------------
     @property
-    def shape(self) -> tuple[int, int, int]:
-        return self._shape
-
-    @property
     def bytes_per_frame(self) -> int:
         """Bytes a frame moves at speed 1 between jumps: one stored frame read, the output written."""
         return 2 * self.frame_bytes
@@ -223,13 +219,6 @@ class TurnPointPlayer(Player):
     def probabilities(self) -> np.ndarray:
         """Current reversal probability of every source frame (0 where there is no turn point)."""
         return self._p.copy()
-
-    def reseed(self, seed: int) -> None:
-        """Restart the random walk's generator from ``seed`` (position and probabilities are kept)."""
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
-        self.seed = int(seed)
-        self._rng = np.random.Generator(np.random.PCG64(self.seed))
 
     # -- the walk ------------------------------------------------------------------------
     def _reset_walk(self, start: int) -> None:

@@ -341,3 +341,17 @@ def test_rate_map_on_rusting_steel(clips_dir, tmp_path):
         p.rate_sigma = 16.0
         smooth = seam_visibility(np.stack([p.render_at(t) for t in (20.0, 35.0, 50.0)]), left.astype(np.int32))
     assert smooth.mean() <= 1.2 and smooth.mean() < sharp.mean(), (smooth, sharp)
+
+
+
+def test_reseed_draws_new_jitter(spread_db):
+    path, _, _ = spread_db
+    with open_player(path, mode="evolve", seed=3, backend="numpy") as p:
+        p.jitter = 3.0
+        first = p.warp.copy()
+        p.reseed(4)
+        assert not np.array_equal(p.warp, first)
+        p.reseed(3)
+        np.testing.assert_array_equal(p.warp, first)
+        with pytest.raises(ValueError, match="seed must be a non-negative integer"):
+            p.reseed(-2)
