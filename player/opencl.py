@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import threading
 import warnings
 from importlib import resources
@@ -96,7 +97,8 @@ def _pick_device(device: str | None) -> "cl.Device":
             err = _probe_build(d)
             if err is None:
                 return d
-            failures.append(f"{p.name} {p.version.split()[-1] if p.version else ''} / {d.name}: {err}")
+            version = re.search(r"PoCL [\w.+-]+", p.version or "")
+            failures.append(f"{version.group(0) if version else p.name} / {d.name}: {err}")
         raise OpenCLUnavailableError(
             "no OpenCL device here can compile kernels (" + "; ".join(failures) + "). "
             "PoCL's LLVM may not know this CPU: run ./install.sh (it adds the system PoCL, "
