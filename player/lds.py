@@ -14,7 +14,7 @@ import numpy as np
 
 from ..tiledb import LDSModel, TileDB
 from .base import Player, check_float
-from .projection import BLOCK, Projector
+from .projection import Projector
 
 PRECISIONS = ("float32", "float16")
 MAX_INTENSITY = 100.0

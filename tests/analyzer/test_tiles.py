@@ -9,7 +9,7 @@ import pytest
 
 from dynatex.analyzer import load_clip, metrics
 from dynatex.analyzer.tiles import (circular_cut, find_loop, learn_tiles, looped_block, ring_join, side_join,
-                                    tile_period, toroidal_tile, transition_map)
+                                    tile_period, transition_map)
 
 from ..conftest import wave_clip
 
