@@ -265,6 +265,11 @@ def _main(argv: list[str] | None = None) -> int:
         return 1
     d = ctx.devices[0]
     print(f"default device: {d.platform.name} {d.platform.version}: {d.name}")
+    if args.check:   # a device named by PYOPENCL_CTX is taken unprobed: probe it here
+        err = _probe_build(d)
+        if err is not None:
+            print(f"the default device cannot compile kernels: {err}")
+            return 1
     return 0
 
 
