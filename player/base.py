@@ -54,9 +54,7 @@ class Player:
 
     def reseed(self, seed: int) -> None:
         """Restart the player's random generator from ``seed``; :meth:`_on_reseed` says what else."""
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
-        self.seed = int(seed)
+        self.seed = check_seed("seed", seed)
         self._rng = np.random.Generator(np.random.PCG64(self.seed))
         self._on_reseed()
 
@@ -183,6 +181,13 @@ def check_float(name: str, value: Any, lo: float | None = None, hi: float | None
         rng = f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
         raise ValueError(f"{name} must be a finite number in {rng}, not {value!r}")
     return v
+
+
+def check_seed(name: str, value: Any) -> int:
+    """``value`` as a seed (a non-negative integer), else a ValueError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ValueError(f"{name} must be a non-negative integer, not {value!r}")
+    return int(value)
 
 
 def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None) -> int:

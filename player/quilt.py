@@ -32,7 +32,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..tiledb import QuiltModel, TileDB
-from .base import Player, check_float
+from .base import Player, check_float, check_seed
 from .gather import gaussian_smooth
 from .ratemap import check_rate_map
 
@@ -306,9 +306,7 @@ class EvolvePlayer(Player):
             if (sw, sh) != (w, h):
                 raise ValueError(f"size {sw}x{sh} does not fit the stored quilt, which is {w}x{h}; "
                                  "re-run the analysis with that size (dynatex analyze --quilt-size)")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
-        self.seed = int(seed)
+        self.seed = check_seed("seed", seed)
         self.model_info = dict(model.info)
         self.interpolate = interpolate
         self._shape = (h, w, 3)
@@ -636,9 +634,7 @@ class EvolvePlayer(Player):
 
     def _set_state(self, state: dict[str, Any]) -> None:
         try:
-            seed = state["seed"]
-            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-                raise ValueError(f"state seed must be a non-negative integer, not {seed!r}")
+            seed = check_seed("state seed", state["seed"])
             clock = check_float("state clock", state["clock"], -1e7, 1e7)
             self.speed = state["speed"]
             self.rate_sigma = state["rate_sigma"]
@@ -647,7 +643,7 @@ class EvolvePlayer(Player):
             if end not in ENDS:
                 raise ValueError(f"state end must be one of {ENDS}, not {end!r}")
             jitter = check_float("state jitter", state["jitter"], 0.0, float(self.n_frames))
-            self.seed, self._end, self._jitter = int(seed), end, jitter
+            self.seed, self._end, self._jitter = seed, end, jitter
             self._make_warp()
         except KeyError as exc:
             raise ValueError(f"state lacks {exc.args[0]!r}") from None
