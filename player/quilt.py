@@ -581,7 +581,7 @@ class EvolvePlayer(Player):
         k.set_arg(12, np.float32(t))
         cl.enqueue_nd_range_kernel(self.queue, k, self._gsize, None)
 
-    def _block_frames(self, t: float) -> None:
+    def _block_frames(self, t: float) -> np.ndarray:
         """Per rate class and block, the source time at clock ``t`` as the kernel reads it:
         the byte offsets of its two frames and the fraction (the float32 formulas of
         :func:`fold_time`, :func:`warp_time` and :func:`_sample`; one local time per class)."""
