@@ -48,16 +48,13 @@ def _left_fast() -> np.ndarray:
     return halves((96, 128), 2.0, 1.0)
 
 
-def _grassy() -> np.ndarray:
-    from ..sample import ripples
-    return ripples()
-
-
-def _grassy_other() -> np.ndarray:
-    return np.ascontiguousarray(_grassy()[..., ::-1])
+def _grassy_other() -> list[np.ndarray]:
+    return [np.ascontiguousarray(ripples()[..., ::-1])]
 
 
 #: The demo's textures: a sample-clip maker and the analysis methods (with options) run on it.
+#: An option given as a callable is made when the demo runs, not when this module is imported
+#: (every ``dynatex`` command imports it to build its parser).
 DEMO_TEXTURES: dict[str, tuple[Callable[[], np.ndarray], dict[str, dict]]] = {
     "ripples": (ripples, {
         "lds": {"n": 40},
@@ -66,8 +63,8 @@ DEMO_TEXTURES: dict[str, tuple[Callable[[], np.ndarray], dict[str, dict]]] = {
     "pendulum": (_pendulum, {
         "turnpoints": {},
     }),
-    "grassy": (_grassy, {
-        "tiles": {"tile": 32, "n_tiles": 3, "min_loop": 24, "mix": [_grassy_other()], "names": ["grassy", "sea"]},
+    "grassy": (ripples, {
+        "tiles": {"tile": 32, "n_tiles": 3, "min_loop": 24, "mix": _grassy_other, "names": ["grassy", "sea"]},
     }),
     "spreading": (_spreading, {
         "quilt": {"size": (128, 96), "block": 16, "rank": 15},
@@ -121,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
             if any(METHODS[m].needs_frames for m in methods):
                 w.put_frames(name, clip.frames)
             for m, options in methods.items():
+                options = {k: v() if callable(v) else v for k, v in options.items()}
                 t0m = time.perf_counter()
                 w.put_method(name, m, METHODS[m].function()(clip, **options))
                 print(f"  analyzed {m} in {time.perf_counter() - t0m:.2f} s")
