@@ -7,9 +7,6 @@ import h5py
 
 from ._check import Checker
 
-COLOR_ORDERS = ("RGB", "GRAY")
-
-
 @dataclass(frozen=True)
 class SourceInfo:
     """Where a texture came from and the pixel layout every method of it uses.
