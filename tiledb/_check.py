@@ -114,6 +114,14 @@ class Checker:
             self.fail(path, f"has an invalid value ({exc})")
         raise TypeError(f"unsupported attribute kind {kind!r}")
 
+    def info(self, group: h5py.Group, skip: Sequence[str] = ()) -> dict[str, Any]:
+        """Every attribute of ``group`` (but ``skip``) as plain Python values: a model's ``info``."""
+        try:
+            return {key: (v.item() if isinstance(v, np.generic) else v)
+                    for key, v in group.attrs.items() if key not in skip}
+        except Exception as exc:
+            self.fail(group.name, f"attributes cannot be read ({exc})")
+
     def index_range(self, path: str, arr: np.ndarray, stop: int) -> None:
         """Every integer in ``arr`` must lie in ``[0, stop)``."""
         if arr.size and (arr.min() < 0 or arr.max() >= stop):

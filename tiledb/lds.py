@@ -95,7 +95,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
         x0=ds(group, "x0", kind="f", shape=(n,)),
         states=ds(group, "states", kind="f", shape=(n, None)),
         stationary_cov=ds(group, "stationary_cov", kind="f", shape=(n, n)),
-        info={key: (v.item() if isinstance(v, np.generic) else v) for key, v in group.attrs.items()},
+        info=check.info(group),
     )
     if model.singular_values.shape[0] < n:
         check.fail(group.name + "/singular_values", f"holds {model.singular_values.shape[0]} values, fewer than n={n}")

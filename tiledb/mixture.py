@@ -172,8 +172,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         ar_intercept=ds(group, "ar_intercept", kind=f, shape=(dg,)),
         ar_noise_cov=ds(group, "ar_noise_cov", kind=f, shape=(dg, dg)),
         sbc=ds(group, "sbc", kind=f, shape=(None,)),
-        info={key: (v.item() if isinstance(v, np.generic) else v) for key, v in group.attrs.items()
-              if key not in _SIZES},
+        info=check.info(group, skip=_SIZES),
     )
     t = model.global_coords.shape[0]
     if t < 2 or model.responsibilities.shape[0] != t or model.local_coords.shape[0] != t:

@@ -163,7 +163,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> QuiltModel:
             check.fail(path + "/blend_weight", "values must lie in [0, 0.5]")
         blend = [bmap.astype(np.int32, copy=False), blab.astype(np.int32, copy=False),
                  bwt.astype(np.float32, copy=False)]
-    info = {key: (v.item() if isinstance(v, np.generic) else v) for key, v in group.attrs.items()}
+    info = check.info(group)
     return QuiltModel(source_map=smap.astype(np.int32, copy=False), labels=labels.astype(np.int32, copy=False),
                       block_sources=bsrc.astype(np.int32, copy=False),
                       block_positions=bpos.astype(np.int32, copy=False),

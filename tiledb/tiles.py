@@ -143,7 +143,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
         class_loop_start=ds(group, "class_loop_start", kind="iu", shape=(c,)),
         class_loop_cost=ds(group, "class_loop_cost", kind="f", shape=(c,)),
         class_toroid_cost=ds(group, "class_toroid_cost", kind="f", shape=(c, 2)),
-        info={key: (v.item() if isinstance(v, np.generic) else v) for key, v in group.attrs.items()},
+        info=check.info(group),
     )
     if model.tiles.dtype != np.uint8:
         check.fail(group.name + "/tiles", f"dtype {model.tiles.dtype} is not uint8")

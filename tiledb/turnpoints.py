@@ -132,6 +132,6 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TurnPointMode
         check.fail(f"{base}@exit_frame", "the exit frame has no backward transition (forward playback would dead-end)")
     if m and np.any((src.astype(np.int64) > exit_frame) | (dst.astype(np.int64) > exit_frame)):
         check.fail(f"{base}/src", "a transition lies beyond the exit frame")
-    info = {key: (v.item() if isinstance(v, np.generic) else v) for key, v in group.attrs.items()}
+    info = check.info(group)
     return TurnPointModel(turn_points=turns.astype(np.int32), src=src.astype(np.int32), dst=dst.astype(np.int32),
                           exit_frame=exit_frame, info=info, **arrays, **per_tr)
