@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import Callable
 
@@ -29,6 +30,16 @@ def positive_int(text: str) -> int:
     return v
 
 
+def load_clip_arg(path: str, **options):
+    """:func:`~dynatex.analyzer.video.load_clip` of a command-line clip: a ``.npy`` file is read
+    as an array (no pickles), a video file is decoded in a child process (``isolate``)."""
+    from ..analyzer.video import load_clip
+    if path.endswith(".npy") and os.path.isfile(path):
+        import numpy as np
+        return load_clip(np.load(path, allow_pickle=False), **options)
+    return load_clip(path, isolate=os.path.isfile(path), **options)
+
+
 def tqdm_progress(desc: str, enabled: bool = True) -> Callable[[int, int | None], None] | None:
     """A ``progress(done, total)`` callback drawing a tqdm bar on stderr (None when disabled)."""
     if not enabled:
@@ -51,4 +62,4 @@ def tqdm_progress(desc: str, enabled: bool = True) -> Callable[[int, int | None]
     return update
 
 
-__all__ = ["UsageError", "positive_int", "size_arg", "tqdm_progress"]
+__all__ = ["UsageError", "load_clip_arg", "positive_int", "size_arg", "tqdm_progress"]

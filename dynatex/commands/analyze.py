@@ -7,9 +7,8 @@ import sys
 import time
 
 from ..analyzer.methods import METHODS, get_method
-from ..analyzer.video import load_clip
 from ..tiledb import DatabaseWriter
-from ._common import UsageError, positive_int, size_arg, tqdm_progress
+from ._common import UsageError, load_clip_arg, positive_int, size_arg, tqdm_progress
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -110,12 +109,8 @@ def method_params(name: str, args: argparse.Namespace) -> dict:
     if name == "tiles":
         mix = []
         for path in args.tiles_mix:
-            src = path
-            if path.endswith(".npy") and os.path.isfile(path):
-                import numpy as np
-                src = np.load(path, allow_pickle=False)
-            mix.append(load_clip(src, stop=args.stop, step=args.step, size=args.resize, color=not args.grey,
-                                 isolate=isinstance(src, str) and os.path.isfile(src)).frames)
+            mix.append(load_clip_arg(path, stop=args.stop, step=args.step, size=args.resize,
+                                     color=not args.grey).frames)
         names = None if args.tiles_names is None else [n.strip() for n in args.tiles_names.split(",")]
         return {"tile": args.tile, "n_tiles": args.tiles_n, "min_loop": args.tiles_min_loop,
                 "max_loop": args.tiles_max_loop, "transition": args.tiles_transition, "ring": args.tiles_ring,
@@ -152,16 +147,11 @@ def run(args: argparse.Namespace) -> int:
     methods = [get_method(m) for m in names]
     texture = args.name or os.path.splitext(os.path.basename(os.path.normpath(args.clip)))[0]
     show = not args.quiet
-    source = args.clip
-    if source.endswith(".npy") and os.path.isfile(source):
-        import numpy as np
-        source = np.load(source, allow_pickle=False)
     t0 = time.perf_counter()
     # Open (and so validate) an existing database before the long work.
     with DatabaseWriter(args.output, overwrite=args.overwrite) as writer:
-        clip = load_clip(source, start=args.start, stop=args.stop, step=args.step, crop=args.crop,
-                         size=args.resize, color=not args.grey, isolate=isinstance(source, str) and os.path.isfile(source),
-                         progress=tqdm_progress("decode", show))
+        clip = load_clip_arg(args.clip, start=args.start, stop=args.stop, step=args.step, crop=args.crop,
+                             size=args.resize, color=not args.grey, progress=tqdm_progress("decode", show))
         writer.put_texture(texture, clip.source_info())
         if any(m.needs_frames for m in methods):
             writer.put_frames(texture, clip.frames)

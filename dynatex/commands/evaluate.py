@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from ._common import UsageError, positive_int, size_arg
+from ._common import UsageError, load_clip_arg, positive_int, size_arg
 
 DB_SUFFIXES = (".h5", ".hdf5")
 
@@ -120,13 +120,7 @@ def parse_boundaries(spec: str, shape: tuple[int, int]) -> tuple[np.ndarray | No
 
 # -- inputs ------------------------------------------------------------------------------------
 def _load(path: str, **opts: Any) -> np.ndarray:
-    from ..analyzer.video import load_clip
-    if path.endswith(".npy") and os.path.isfile(path):
-        arr = np.load(path, allow_pickle=False)
-        src: Any = arr
-    else:
-        src = path
-    return load_clip(src, isolate=isinstance(src, str) and os.path.isfile(src), **opts).frames
+    return load_clip_arg(path, **opts).frames
 
 
 def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any]]:
