@@ -13,13 +13,11 @@ from typing import Callable
 import numpy as np
 
 from ..tiledb import LDSModel
-from .video import Clip
+from .video import Clip, Progress
 
 SVD_METHODS = ("auto", "gram", "randomized")
 DEFAULT_N = 50
 DEFAULT_MAX_RADIUS = 0.995
-
-Progress = Callable[[int, int | None], None]
 
 
 def learn_lds(clip: Clip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | None = None,

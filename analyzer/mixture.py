@@ -16,16 +16,12 @@
 """
 from __future__ import annotations
 
-from typing import Callable
-
 import numpy as np
 
 from ..tiledb import MixtureModel
 from ..tiledb.mixture import companion_radius
 from .lds import _stepper, _svd_gram, _svd_randomized
-from .video import Clip
-
-Progress = Callable[[int, int | None], None]
+from .video import Clip, Progress
 
 DEFAULT_COMPONENTS = 3
 DEFAULT_DIM = 10

@@ -23,19 +23,17 @@ source map (plus gain) that the player gathers from the stored frames.
 from __future__ import annotations
 
 import time
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from ..tiledb import QuiltModel
-from .video import Clip
+from .video import Clip, Progress
 
 DEFAULT_RANK = 15
 DEFAULT_BLOCK = 32
 DEFAULT_TOLERANCE = 0.1
 MAX_SIDE = 16384
-
-Progress = Callable[[int, int | None], None]
 
 
 # -- the pixel-by-time matrix and its SVD ---------------------------------------------------

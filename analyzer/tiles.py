@@ -36,14 +36,12 @@ Pipeline (each step is a public function, so it can be tested and reused):
 """
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from ..tiledb.tiles import TilesModel
-from .video import Clip
-
-Progress = Callable[[int, int | None], None]
+from .video import Clip, Progress
 
 DEFAULT_MIN_TILE = 32
 DEFAULT_MAX_TILE = 256

@@ -22,14 +22,12 @@ Analysis, all on a ``T x T`` matrix of frame distances computed on reduced frame
 from __future__ import annotations
 
 import math
-from typing import Callable
 
 import numpy as np
 
 from ..tiledb.turnpoints import TurnPointModel
-from .video import Clip
-
-Progress = Callable[[int, "int | None"], None]
+from .lds import _stepper
+from .video import Clip, Progress
 
 DEFAULTS = dict(n=4, s=1, r=4, min_pairs=2, min_symmetry=0.3, feature_size=64, taps=2, p=2.0,
                 alpha=0.999, sigma=0.1, min_gap=6, min_prob=0.02, max_per_frame=3, max_cost=2.0)
@@ -451,16 +449,6 @@ def _float(name: str, value, lo: float, hi: float, *, lo_open: bool = False, hi_
     if bad:
         raise ValueError(f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}, not {value!r}")
     return v
-
-
-def _stepper(progress: Progress | None, total: int) -> Callable[[], None]:
-    done = [0]
-
-    def step() -> None:
-        done[0] += 1
-        if progress is not None:
-            progress(done[0], total)
-    return step
 
 
 def plot_turnpoints(model: TurnPointModel, path: str, *, title: str | None = None) -> str:
