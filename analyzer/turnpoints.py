@@ -29,9 +29,6 @@ from ..tiledb.turnpoints import TurnPointModel
 from .lds import _stepper
 from .video import Clip, Progress
 
-DEFAULTS = dict(n=4, s=1, r=4, min_pairs=2, min_symmetry=0.3, feature_size=64, taps=2, p=2.0,
-                alpha=0.999, sigma=0.1, min_gap=6, min_prob=0.02, max_per_frame=3, max_cost=2.0)
-
 
 def frame_features(frames: np.ndarray, size: int = 64) -> np.ndarray:
     """Frames reduced for distance computations: area-downscaled so the longer side is at most

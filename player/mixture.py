@@ -141,7 +141,6 @@ class MixturePlayer(Player):
         self._noise = np.linalg.cholesky(model.ar_noise_cov)
         p = self.order
         self._hist0 = self.train_coords[p - 1::-1].copy()           # hist[i] = g_{t-i}
-        self._draws = DEFAULT_DRAWS
         self.draws = draws
         self._intensity = 1.0
         basis = model.stacked_basis

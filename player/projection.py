@@ -83,10 +83,6 @@ class Projector:
         self._gsize = (-(-blocks // LOCAL) * LOCAL,)
         self._lsize = (LOCAL,)
 
-    @property
-    def is_opencl(self) -> bool:
-        return self.queue is not None
-
     def run(self, out: np.ndarray, *, wait: bool = True):
         """Project :attr:`coef` into ``out`` ((H, W, 3) uint8, C-contiguous).
 
