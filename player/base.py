@@ -183,6 +183,13 @@ def check_float(name: str, value: Any, lo: float | None = None, hi: float | None
     return v
 
 
+def rng_from_state(state: Any) -> np.random.Generator:
+    """The PCG64 generator whose ``bit_generator.state`` a player's :meth:`Player.get_state` saved."""
+    rng = np.random.Generator(np.random.PCG64())
+    rng.bit_generator.state = state
+    return rng
+
+
 def check_seed(name: str, value: Any) -> int:
     """``value`` as a seed (a non-negative integer), else a ValueError naming ``name``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:

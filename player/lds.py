@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..tiledb import LDSModel, TileDB
-from .base import Player, check_float
+from .base import Player, check_float, rng_from_state
 from .projection import Projector
 
 PRECISIONS = ("float32", "float16")
@@ -255,8 +255,7 @@ class LDSPlayer(Player):
             x = np.asarray(state["x"], dtype=float)
             if x.shape != (self.n,) or not np.isfinite(x).all():
                 raise ValueError(f"state x must be finite with shape ({self.n},)")
-            rng = np.random.Generator(np.random.PCG64())
-            rng.bit_generator.state = state["rng"]
+            rng = rng_from_state(state["rng"])
             self.speed = state["speed"]
             self.intensity = state["intensity"]
             self.scales = state["scales"]

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..tiledb import MixtureModel, TileDB
-from .base import Player, check_float, check_int
+from .base import Player, check_float, check_int, rng_from_state
 from .projection import Projector
 
 PRECISIONS = ("float32", "float16")
@@ -242,8 +242,7 @@ class MixturePlayer(Player):
             hist = np.asarray(state["history"], dtype=float)
             if hist.shape != self._hist.shape or not np.isfinite(hist).all():
                 raise ValueError(f"state history must be finite with shape {self._hist.shape}")
-            rng = np.random.Generator(np.random.PCG64())
-            rng.bit_generator.state = state["rng"]
+            rng = rng_from_state(state["rng"])
             self.draws = state["draws"]
             self.intensity = state["intensity"]
         except KeyError as exc:

@@ -29,7 +29,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..tiledb import TileDB, TilesModel
-from .base import Player, check_float, check_int
+from .base import Player, check_float, check_int, rng_from_state
 from .gather import Gather, gaussian_smooth, pack_source
 
 TIME_STEP = 8              # output pixels per time-map sample
@@ -529,8 +529,7 @@ class TilesPlayer(Player):
 
     def _set_state(self, state: dict[str, Any]) -> None:
         try:
-            rng = np.random.Generator(np.random.PCG64())
-            rng.bit_generator.state = state["rng"]
+            rng = rng_from_state(state["rng"])
             labels = self._check_labels(state["labels"])
             cells = [np.asarray(state[k], np.float32) for k in ("cells_a", "cells_b")]
             arrangement = np.asarray(state["arrangement"], np.int64)

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..tiledb import TileDB
 from ..tiledb.turnpoints import TurnPointModel
-from .base import Player, check_float, check_int
+from .base import Player, check_float, check_int, rng_from_state
 
 PLAYBACKS = ("hybrid", "turns", "jumps")
 SPEED_RANGE = (0.0, 4.0)
@@ -380,8 +380,7 @@ class TurnPointPlayer(Player):
             disp = [(int(f), tuple((int(a), float(w)) for a, w in pairs), int(e)) for f, pairs, e in state["disp"]]
             if len(disp) != 2 or any(not 0 <= a < t for _, pairs, _ in disp for a, _ in pairs):
                 raise ValueError("state disp is invalid")
-            rng = np.random.Generator(np.random.PCG64())
-            rng.bit_generator.state = state["rng"]
+            rng = rng_from_state(state["rng"])
             self.speed = state["speed"]
             self.crossfade = state["crossfade"]
             self.increment = state["increment"]
