@@ -66,7 +66,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .base import check_float, check_int, check_out
+from .base import BACKENDS, check_float, check_int, check_out
 
 WRAPS = ("loop", "clamp", "pingpong")
 MAX_FRAME_PIXELS = 1 << 24
@@ -269,8 +269,8 @@ class Gather:
             raise ValueError(f"frames hold {frames.shape[1] * frames.shape[2]} pixels each, more than {MAX_FRAME_PIXELS}")
         if wrap not in WRAPS:
             raise ValueError(f"wrap must be one of {WRAPS}, not {wrap!r}")
-        if backend not in ("opencl", "numpy"):
-            raise ValueError(f"backend must be 'opencl' or 'numpy', not {backend!r}")
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, not {backend!r}")
         h_out, w_out = _size("out_size", out_size)
         self.time_step = check_int("time_step", time_step, 1, 4096)
         self.backend, self.wrap, self.interpolate = backend, wrap, bool(interpolate)
