@@ -385,11 +385,12 @@ class TurnPointPlayer(Player):
             self.crossfade = state["crossfade"]
             self.increment = state["increment"]
             phase = check_float("state phase", state["phase"], 0.0, 1.0)
+            old = None if state["old"] is None else [int(v) for v in state["old"]]
+            pending = int(state["pending"])
         except KeyError as exc:
             raise ValueError(f"state lacks {exc.args[0]!r}") from None
         self._pos, self._dir, self._p, self._disp, self._phase = pos, direction, p.copy(), disp, phase
-        self._old = None if state["old"] is None else [int(v) for v in state["old"]]
-        self._pending = int(state["pending"])
+        self._old, self._pending = old, pending
         self._rng = rng
         self.seed = int(state.get("seed", self.seed))
 
