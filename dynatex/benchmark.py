@@ -71,7 +71,7 @@ def time_calls(fn: Callable[[], object], *, frames: int, warmup: int = 3, max_se
         t = time.perf_counter()
         fn()
         out.append(time.perf_counter() - t)
-        if out and time.perf_counter() - start > max_seconds and len(out) >= 10:
+        if time.perf_counter() - start > max_seconds and len(out) >= 10:
             break
     return np.array(out)
 

@@ -29,7 +29,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..tiledb import TileDB, TilesModel
-from .base import Player, check_float, check_int, rng_from_state
+from .base import Player, check_float, check_int, check_seed, rng_from_state
 from .gather import Gather, gaussian_smooth, pack_source
 
 TIME_STEP = 8              # output pixels per time-map sample
@@ -160,6 +160,7 @@ class TilesPlayer(Player):
         self._shape = (h, w, 3)
         self.grid_shape = (-(-h // th), -(-w // tw))
         self.ring = int(model.info.get("ring", max(2, min(th, tw) // 5)))
+        self.seed = check_seed("seed", seed)  # label presets such as "blobs" draw from it
         self.labels = self._check_labels(labels)
         mixing = len(np.unique(self.labels)) > 1
         # tiles stacked vertically in each stored frame: one tile's frame is contiguous, so a
@@ -194,7 +195,7 @@ class TilesPlayer(Player):
         if labels is None:
             return np.zeros((gh, gw), np.int32)
         if isinstance(labels, str):
-            labels = label_preset(labels, self._shape[:2], self.model.n_classes, seed=getattr(self, "seed", 0))
+            labels = label_preset(labels, self._shape[:2], self.model.n_classes, seed=self.seed)
         lab = np.asarray(labels)
         if lab.dtype.kind not in "iub" or lab.ndim != 2:
             raise ValueError(f"labels must be a 2-D integer map, not {lab.dtype} {lab.shape}")

@@ -4,7 +4,12 @@
 """
 from __future__ import annotations
 
-__version__ = "0.1.0"
+from importlib.metadata import PackageNotFoundError, version as _version
+
+try:
+    __version__ = _version("dynatex")
+except PackageNotFoundError:  # running from a source tree that was never installed
+    __version__ = "unknown"
 
 from .database import Texture, TileDB, open_db
 from .errors import (MethodNotFoundError, TextureNotFoundError, TileDBError, TileDBFormatError,

@@ -181,6 +181,9 @@ def _contact_sheet(rows: list[tuple[str, list[np.ndarray]]], path: str, thumb_h:
 
 def _short_benchmark(db: str, backend: str) -> None:
     from ..benchmark import bench_player, copy_bandwidth, format_result
+    if backend != "opencl":
+        print("benchmark skipped: it compares the OpenCL player with the numpy reference (--backend opencl)")
+        return
     bw = copy_bandwidth(mbytes=64, repeats=3)
     print(f"benchmark (copy bandwidth {bw['gbs']:.1f} GB/s):")
     seen = set()

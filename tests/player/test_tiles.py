@@ -184,3 +184,15 @@ def test_controls_are_validated(tiles_db):
                 setattr(p, name, bad)
         p.speed = -1.0
         assert p.next_frame().shape == (32, 32, 3)
+
+
+
+
+def test_blobs_preset_follows_the_seed(tiles_db):
+    maps = {}
+    for seed in (1, 2):
+        with TilesPlayer(tiles_db, size=(160, 128), seed=seed, labels="blobs", backend="numpy") as p:
+            maps[seed] = p.labels.copy()
+            p.reseed(seed)
+            np.testing.assert_array_equal(p.labels, maps[seed])
+    assert not np.array_equal(maps[1], maps[2])
