@@ -7,17 +7,14 @@ on the basis.
 """
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import numpy as np
 
-from ..tiledb import LDSModel, TileDB
-from .base import Player, check_float, rng_from_state
-from .projection import Projector
+from ..tiledb import LDSModel
+from .base import check_float, rng_from_state
+from .projected import ProjectionPlayer
 
-PRECISIONS = ("float32", "float16")
-MAX_INTENSITY = 100.0
 MAX_WEIGHT = 10.0
 SPEED_RANGE = (-3.0, 3.0)
 
@@ -48,7 +45,7 @@ def edited_poles(poles: np.ndarray, speed: float) -> np.ndarray:
     return new
 
 
-class LDSPlayer(Player):
+class LDSPlayer(ProjectionPlayer):
     """Endless frames from a texture's ``lds`` model, with live edits.
 
     Parameters
@@ -87,26 +84,11 @@ class LDSPlayer(Player):
 
     mode = "lds"
 
-    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "opencl", device: str | None = None, seed: int = 0,
-                 precision: str = "float32") -> None:
-        if precision not in PRECISIONS:
-            raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")
-        super().__init__(db, texture, backend=backend, device=device)
-        try:
-            self._setup(self.texture.read("lds"), seed, precision)
-        except BaseException:
-            self.close()
-            raise
-
-    def _setup(self, model: LDSModel, seed: int, precision: str) -> None:
+    def _setup(self, model: LDSModel) -> None:
         src = self.texture.source
-        self.model_info = dict(model.info)
-        self.precision = precision
         self.n, self.k = model.n, model.k
+        self._dim = self.n
         self._shape = (src.height, src.width, 3)
-        self._channels = src.channels
-        self._values = src.pixels
         self._A = model.A.copy()
         self._B = model.B.copy()
         self._x0 = model.x0.copy()
@@ -114,32 +96,14 @@ class LDSPlayer(Player):
         self._poles, self._vecs = np.linalg.eig(self._A)
         self._vecs_inv = np.linalg.inv(self._vecs)
         self._groups = scale_groups(self.n)
-        self._speed, self._intensity = 1.0, 1.0
+        self._speed = 1.0
         self._scales = np.ones(3)
         self._weights = np.ones(self.n)
         self._A_edit = self._A
         self._w = np.ones(self.n)
-        basis = model.basis
-        if precision == "float16":
-            basis = basis.astype(np.float16)
-        self._proj = Projector(basis, model.mean, shape=self._shape, channels=self._channels,
-                               ctx=self.ctx, queue=self.queue)
-        self._coef = self._proj.coef
-        self.basis_bytes = self._proj.basis_bytes
         self._x = self._x0.copy()
-        self.reseed(seed)
-        self._warm()
-
-    def _warm(self) -> None:
-        scratch = np.empty(self._shape, np.uint8)
-        self._project(self._x, scratch)
 
     # -- controls ----------------------------------------------------------------
-    @property
-    def bytes_per_frame(self) -> int:
-        """The basis and mean read, plus the uint8 frame written."""
-        return int(self.basis_bytes + 4 * self._values + int(np.prod(self._shape)))
-
     @property
     def speed(self) -> float:
         return self._speed
@@ -152,14 +116,6 @@ class LDSPlayer(Player):
         else:
             poles = edited_poles(self._poles, self._speed)
             self._A_edit = np.ascontiguousarray(((self._vecs * poles) @ self._vecs_inv).real)
-
-    @property
-    def intensity(self) -> float:
-        return self._intensity
-
-    @intensity.setter
-    def intensity(self, value: float) -> None:
-        self._intensity = check_float("intensity", value, 0.0, MAX_INTENSITY)
 
     @property
     def scales(self) -> tuple[float, float, float]:
@@ -205,44 +161,15 @@ class LDSPlayer(Player):
         v = self._rng.standard_normal(self.k)
         self._x = self._A_edit @ self._x + np.sqrt(self._intensity) * (self._B @ v)
 
-    def advance(self, steps: int = 1, *, record: bool = False) -> np.ndarray | None:
-        """Run the state recursion ``steps`` times without projecting frames.
+    def _vector(self) -> np.ndarray:
+        return self._x
 
-        With ``record=True`` returns the visited states, ``(steps, n)``.
-        """
-        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
-            raise ValueError(f"steps must be a non-negative integer, not {steps!r}")
-        rec = np.empty((steps, self.n)) if record else None
-        for i in range(steps):
-            self._step()
-            if rec is not None:
-                rec[i] = self._x
-        self.frame_index += int(steps)
-        return rec
-
-    def _render(self, out: np.ndarray) -> None:
-        self._project(self._x, out)
-        self._step()
-
-    def _start(self, out: np.ndarray):
-        np.multiply(self._w, self._x, out=self._coef[: self.n], casting="same_kind")
-        event = self._proj.run(out, wait=False)
-        self._step()
-        return event
+    def _coefficients(self, x: np.ndarray, coef: np.ndarray) -> None:
+        np.multiply(self._w, x, out=coef[: self.n], casting="same_kind")
 
     def render_state(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Project an arbitrary state to a frame (the current weights apply); the player does not advance."""
-        x = np.asarray(x, dtype=float)
-        if x.shape != (self.n,) or not np.isfinite(x).all():
-            raise ValueError(f"x must be a finite vector of shape ({self.n},)")
-        if out is None:
-            out = np.empty(self._shape, np.uint8)
-        self._project(x, out)
-        return out
-
-    def _project(self, x: np.ndarray, out: np.ndarray) -> None:
-        np.multiply(self._w, x, out=self._coef[: self.n], casting="same_kind")
-        self._proj.run(out)
+        return self._render_vector("x", x, out)
 
     # -- state ---------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:

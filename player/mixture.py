@@ -16,13 +16,11 @@ from typing import Any
 import numpy as np
 
 from ..tiledb import MixtureModel, TileDB
-from .base import Player, check_float, check_int, rng_from_state
-from .projection import Projector
+from .base import check_int, rng_from_state
+from .projected import ProjectionPlayer
 
-PRECISIONS = ("float32", "float16")
 DEFAULT_DRAWS = 16
 MAX_DRAWS = 1024
-MAX_INTENSITY = 100.0
 
 
 class GlobalDecoder:
@@ -77,7 +75,7 @@ def nearest_distance(train: np.ndarray, g: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(d2.min(axis=1), 0))
 
 
-class MixturePlayer(Player):
+class MixturePlayer(ProjectionPlayer):
     """Endless frames from a texture's ``mixture`` model.
 
     Parameters
@@ -113,25 +111,19 @@ class MixturePlayer(Player):
     """
 
     mode = "mixture"
+    basis_name = "stacked_basis"
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
                  backend: str = "opencl", device: str | None = None, seed: int = 0,
                  precision: str = "float32", draws: int = DEFAULT_DRAWS) -> None:
-        if precision not in PRECISIONS:
-            raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")
-        super().__init__(db, texture, backend=backend, device=device)
-        try:
-            self._setup(self.texture.read("mixture"), seed, precision, draws)
-        except BaseException:
-            self.close()
-            raise
+        self.draws = draws
+        super().__init__(db, texture, backend=backend, device=device, seed=seed, precision=precision)
 
-    def _setup(self, model: MixtureModel, seed: int, precision: str, draws: int) -> None:
+    def _setup(self, model: MixtureModel) -> None:
         src = self.texture.source
-        self.model_info = dict(model.info)
-        self.precision = precision
         self.components, self.dim, self.global_dim, self.order = (model.components, model.dim,
                                                                   model.global_dim, model.order)
+        self._dim = self.global_dim
         self._shape = (src.height, src.width, 3)
         self.decoder = GlobalDecoder(model)
         self.train_coords = np.ascontiguousarray(model.global_coords)
@@ -141,25 +133,9 @@ class MixturePlayer(Player):
         self._noise = np.linalg.cholesky(model.ar_noise_cov)
         p = self.order
         self._hist0 = self.train_coords[p - 1::-1].copy()           # hist[i] = g_{t-i}
-        self.draws = draws
-        self._intensity = 1.0
-        basis = model.stacked_basis
-        if precision == "float16":
-            basis = basis.astype(np.float16)
-        self._proj = Projector(basis, model.mean, shape=self._shape, channels=src.channels,
-                               ctx=self.ctx, queue=self.queue)
-        self.basis_bytes = self._proj.basis_bytes
         self._hist = self._hist0.copy()
-        self.reseed(seed)
-        scratch = np.empty(self._shape, np.uint8)
-        self._project(self._hist[0], scratch)
 
     # -- controls ----------------------------------------------------------------
-    @property
-    def bytes_per_frame(self) -> int:
-        """The stacked basis and mean read, plus the uint8 frame written."""
-        return int(self.basis_bytes + 4 * self._proj.values + int(np.prod(self._shape)))
-
     @property
     def draws(self) -> int:
         return self._draws
@@ -167,14 +143,6 @@ class MixturePlayer(Player):
     @draws.setter
     def draws(self, value: int) -> None:
         self._draws = check_int("draws", value, 1, MAX_DRAWS)
-
-    @property
-    def intensity(self) -> float:
-        return self._intensity
-
-    @intensity.setter
-    def intensity(self, value: float) -> None:
-        self._intensity = check_float("intensity", value, 0.0, MAX_INTENSITY)
 
     # -- synthesis -----------------------------------------------------------------
     @property
@@ -194,43 +162,15 @@ class MixturePlayer(Player):
         self._hist[1:] = self._hist[:-1]
         self._hist[0] = best
 
-    def advance(self, steps: int = 1, *, record: bool = False) -> np.ndarray | None:
-        """Run the AR recursion ``steps`` times without projecting frames.
+    def _vector(self) -> np.ndarray:
+        return self._hist[0]
 
-        With ``record=True`` returns the visited global coordinates, ``(steps, D)``.
-        """
-        steps = check_int("steps", steps, 0)
-        rec = np.empty((steps, self.global_dim)) if record else None
-        for i in range(steps):
-            self._step()
-            if rec is not None:
-                rec[i] = self._hist[0]
-        self.frame_index += steps
-        return rec
-
-    def _render(self, out: np.ndarray) -> None:
-        self._project(self._hist[0], out)
-        self._step()
-
-    def _start(self, out: np.ndarray):
-        self._proj.coef[:] = self.decoder.coefficients(self._hist[0])
-        event = self._proj.run(out, wait=False)
-        self._step()
-        return event
+    def _coefficients(self, g: np.ndarray, coef: np.ndarray) -> None:
+        coef[:] = self.decoder.coefficients(g)
 
     def render_coord(self, g: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Decode and project an arbitrary global coordinate; the player does not advance."""
-        g = np.asarray(g, dtype=float)
-        if g.shape != (self.global_dim,) or not np.isfinite(g).all():
-            raise ValueError(f"g must be a finite vector of shape ({self.global_dim},)")
-        if out is None:
-            out = np.empty(self._shape, np.uint8)
-        self._project(g, out)
-        return out
-
-    def _project(self, g: np.ndarray, out: np.ndarray) -> None:
-        self._proj.coef[:] = self.decoder.coefficients(g)
-        self._proj.run(out)
+        return self._render_vector("g", g, out)
 
     # -- state ---------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:

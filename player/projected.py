@@ -1,0 +1,125 @@
+"""What the projection modes (``lds``, ``mixture``) share: a player whose frame is the
+projection of a small vector, advanced on the host once per frame, through a stored basis.
+
+A mode subclasses :class:`ProjectionPlayer` and supplies its model (``_setup``), the
+vector it advances (``_vector``, ``_dim``, ``_step``) and how that vector becomes
+projection coefficients (``_coefficients``). The base builds the :class:`.Projector`,
+warms it, and provides ``precision``, the ``intensity`` control, ``bytes_per_frame``,
+``advance`` and the frame paths.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..tiledb import TileDB
+from .base import Player, check_float, check_int
+from .projection import Projector
+
+PRECISIONS = ("float32", "float16")
+MAX_INTENSITY = 100.0
+
+
+class ProjectionPlayer(Player):
+    """Base of the modes whose frames are ``Projector`` projections of a host-side vector.
+
+    Subclasses set ``mode`` and ``basis_name`` (the model's basis attribute) and implement
+    ``_setup(model)`` (everything but the projector; it must set ``_shape`` and ``_dim``),
+    ``_vector()`` (the vector of the next frame), ``_dim`` (its length), ``_step()``
+    (advance it once) and ``_coefficients(v, coef)`` (write the coefficients for ``v``).
+    """
+
+    basis_name = "basis"
+
+    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
+                 backend: str = "opencl", device: str | None = None, seed: int = 0,
+                 precision: str = "float32") -> None:
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")
+        super().__init__(db, texture, backend=backend, device=device)
+        try:
+            model = self.texture.read(self.mode)
+            self.model_info = dict(model.info)
+            self.precision = precision
+            self._intensity = 1.0
+            self._setup(model)
+            basis = getattr(model, self.basis_name)
+            if precision == "float16":
+                basis = basis.astype(np.float16)
+            self._proj = Projector(basis, model.mean, shape=self._shape, channels=self.texture.source.channels,
+                                   ctx=self.ctx, queue=self.queue)
+            self.basis_bytes = self._proj.basis_bytes
+            self.reseed(seed)
+            self._project(self._vector(), np.empty(self._shape, np.uint8))     # warm the kernel
+        except BaseException:
+            self.close()
+            raise
+
+    # -- what a mode supplies ----------------------------------------------------------
+    _dim: int
+
+    def _setup(self, model) -> None:
+        raise NotImplementedError
+
+    def _vector(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def _step(self) -> None:
+        raise NotImplementedError
+
+    def _coefficients(self, v: np.ndarray, coef: np.ndarray) -> None:
+        raise NotImplementedError
+
+    # -- controls ----------------------------------------------------------------
+    @property
+    def bytes_per_frame(self) -> int:
+        """The basis and mean read, plus the uint8 frame written."""
+        return int(self.basis_bytes + 4 * self._proj.values + int(np.prod(self._shape)))
+
+    @property
+    def intensity(self) -> float:
+        return self._intensity
+
+    @intensity.setter
+    def intensity(self, value: float) -> None:
+        self._intensity = check_float("intensity", value, 0.0, MAX_INTENSITY)
+
+    # -- synthesis -----------------------------------------------------------------
+    def advance(self, steps: int = 1, *, record: bool = False) -> np.ndarray | None:
+        """Run the recursion ``steps`` times without projecting frames.
+
+        With ``record=True`` returns the visited vectors, ``(steps, dim)``.
+        """
+        steps = check_int("steps", steps, 0)
+        rec = np.empty((steps, self._dim)) if record else None
+        for i in range(steps):
+            self._step()
+            if rec is not None:
+                rec[i] = self._vector()
+        self.frame_index += steps
+        return rec
+
+    def _render(self, out: np.ndarray) -> None:
+        self._project(self._vector(), out)
+        self._step()
+
+    def _start(self, out: np.ndarray):
+        self._coefficients(self._vector(), self._proj.coef)
+        event = self._proj.run(out, wait=False)
+        self._step()
+        return event
+
+    def _render_vector(self, name: str, v: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+        """Project an arbitrary vector (checked, named ``name`` in errors); the player does not advance."""
+        v = np.asarray(v, dtype=float)
+        if v.shape != (self._dim,) or not np.isfinite(v).all():
+            raise ValueError(f"{name} must be a finite vector of shape ({self._dim},)")
+        if out is None:
+            out = np.empty(self._shape, np.uint8)
+        self._project(v, out)
+        return out
+
+    def _project(self, v: np.ndarray, out: np.ndarray) -> None:
+        self._coefficients(v, self._proj.coef)
+        self._proj.run(out)
