@@ -29,7 +29,10 @@ Pipeline (each step is a public function, so it can be tested and reused):
 7. Mixing: every extra texture gets a loop of the same length and its own tiles cut to the
    same size; a border tile ``(a, c, side)`` (:func:`side_join`) is class ``a``'s primary
    with a strip of class ``c``'s primary along one side, ending at a closed minimum cut and
-   feathered beyond it (two different textures have no invisible cut). The player lends a
+   feathered beyond it (two different textures have no invisible cut). The cut's cost is
+   what the output holds across it (the strip beside the first faded pixel, plus the
+   edges a step of the path exposes), so it follows quiet paths of the strip texture; it
+   may run up to twice the ring deep, since the strip continues ``c``'s cells at any depth. The player lends a
    cell of class ``a`` the strip of its neighbour's class ``c < a`` along their shared edge,
    so both sides of the edge show ``c``'s toroidal primary (see :mod:`dynatex.player.tiles`).
 8. Colour statistics per tile (mean RGB and HSV) for tone fitting.
@@ -207,10 +210,13 @@ def _steps(flow_rows: np.ndarray, flow_gain: float) -> np.ndarray:
 
 
 # -- 5. dynamic-programming cuts ---------------------------------------------------------------
-def _dp(err: np.ndarray, steps: np.ndarray, start: np.ndarray | None) -> tuple[np.ndarray, float]:
+def _dp(err: np.ndarray, steps: np.ndarray, start: np.ndarray | None,
+        move: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Minimum path through ``err (n, m)`` moving at most ``steps[i]`` columns per row.
 
-    ``start``: allowed start columns (None: any). Returns the column per row and the mean error.
+    ``start``: allowed start columns (None: any). ``move (n,)``: cost per column moved on
+    entering row ``i`` (the edges a step exposes across the path). Returns the column per
+    row and the mean error (``err`` along the path only).
     """
     n, m = err.shape
     big = np.float64(1e30)
@@ -225,6 +231,8 @@ def _dp(err: np.ndarray, steps: np.ndarray, start: np.ndarray | None) -> tuple[n
             src = cols + d
             ok = (src >= 0) & (src < m)
             cand = np.where(ok, acc[np.clip(src, 0, m - 1)], big)
+            if move is not None and d:
+                cand = cand + abs(d) * move[i]
             better = cand < best
             best = np.where(better, cand, best)
             arg = np.where(better, np.clip(src, 0, m - 1), arg)
@@ -237,9 +245,10 @@ def _dp(err: np.ndarray, steps: np.ndarray, start: np.ndarray | None) -> tuple[n
     return path, float(err[np.arange(n), path].mean())
 
 
-def circular_cut(err: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, float]:
+def circular_cut(err: np.ndarray, steps: np.ndarray, move: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Closed minimum path through ``err (n, m)``: the last row's column is within the first
-    row's step of the first row's column (the path is periodic in the row index)."""
+    row's step of the first row's column (the path is periodic in the row index).
+    ``move``: see :func:`_dp`."""
     n, m = err.shape
     best = (np.inf, None)
     for c0 in range(m):
@@ -249,7 +258,9 @@ def circular_cut(err: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, float]
         s0 = int(steps[0])
         far = np.abs(np.arange(m) - c0) > s0
         e[-1, far] = 1e30
-        path, cost = _dp(e, steps, start)
+        path, cost = _dp(e, steps, start, move)
+        if move is not None:
+            cost += float((np.abs(np.diff(path)) * move[1:]).sum()) / n
         if cost < best[0]:
             best = (cost, path)
     return best[1], best[0]
@@ -412,12 +423,23 @@ def side_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, side: str, *,
     if not 2 <= ring <= m // 2 - 1:
         raise ValueError(f"ring must be in 2..{m // 2 - 1} for this tile, not {ring}")
     u = _sample(length, _SAMPLE_FRAMES)
-    d = rt[u].astype(np.float32) - it[u].astype(np.float32)
-    err = (d * d).sum(axis=(0, 3)) / len(u)                     # (n, m)
-    fl = np.zeros((n, m), np.float32) if flow is None else _orient(flow, side, tile_axes=(0, 1))
-    e = err[:, :ring + 1].copy()
+    # The cost of a cut is what the output holds across it: the strip's last pixel beside
+    # the first faded pixel ``a1 * strip + (1 - a1) * inner``. With a soft fade that is
+    # mostly the strip texture's own gradient, so the cut seeks low-gradient paths of it
+    # (and, through the ``1 - a1`` share, places where the two textures agree).
+    a1 = 1.0 - 1.0 / float(feather + 1) if feather > 0 else 0.0
+    k = ring + 1
+    rs = rt[u, :, :k + 1].astype(np.float32)
+    blend = a1 * rs + (1.0 - a1) * it[u, :, :k + 1].astype(np.float32)
+    d = rs[:, :, :k - 1] - blend[:, :, 1:k]                      # strip x-1 | blend x, x = 1..ring
+    e = np.empty((n, k), np.float32)
     e[:, 0] = 1e30
-    path, cost = circular_cut(e, _steps(fl[:, :ring].mean(axis=1), flow_gain))
+    e[:, 1:] = (d * d).sum(axis=(0, 3)) / len(u)
+    # a step of the path between rows i-1 and i puts strip beside blend across those rows
+    dv = rs[:, :, 1:k] - np.roll(blend[:, :, 1:k], 1, axis=1)
+    move = ((dv * dv).sum(axis=(0, 3)) / len(u)).mean(axis=1)    # (n,)
+    fl = np.zeros((n, m), np.float32) if flow is None else _orient(flow, side, tile_axes=(0, 1))
+    path, cost = circular_cut(e, _steps(fl[:, :ring].mean(axis=1), flow_gain), move)
     xx = np.arange(m)[None, :]
     beyond = (xx - path[:, None] + 1).astype(np.float32)        # 1 at the first pixel past the strip
     alpha = np.where(xx < path[:, None], 1.0, np.clip(1.0 - beyond / float(feather + 1), 0.0, 1.0))
@@ -574,6 +596,9 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         raise ValueError(f"ring must be at most {min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {r}")
     fe = max(r, min(th, tw) // 5) if feather is None else _int("feather", feather, 0)
     fe = min(fe, min(th, tw) // 2 - 1 - r)
+    # border cuts may run deeper than the ring (the strip is the other class's toroidal
+    # primary, which continues its own cells at any depth): more room for a quiet path
+    depth = max(r, min(2 * r, min(th, tw) // 2 - 1 - fe))
 
     # primary toroidal tile of every class
     for tx in textures:
@@ -594,7 +619,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
             if a == c:
                 continue
             for si, side in enumerate(SIDES):
-                tile_k, mask, cost = side_join(tc.primary, ta.primary, r, side, feather=fe, flow_gain=flow_gain)
+                tile_k, mask, cost = side_join(tc.primary, ta.primary, depth, side, feather=fe, flow_gain=flow_gain)
                 tiles.append(tile_k), tcls.append(a), rcls.append(c), masks.append(mask), costs.append(cost)
                 sides.append(si)
             step()
@@ -608,7 +633,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         class_loop_cost=np.array([tx.cost for tx in textures]),
         class_toroid_cost=np.array([tx.toroid_cost for tx in textures]),
         info={"tile_h": th, "tile_w": tw, "loop_length": length, "transition": transition, "overlap_y": by,
-              "overlap_x": bx, "ring": r, "feather": fe, "period_y": period[0], "period_x": period[1],
+              "overlap_x": bx, "ring": r, "feather": fe, "border_depth": depth, "period_y": period[0], "period_x": period[1],
               "periodicity": strength, "mean_flow": mean_flow, "flow_gain": float(flow_gain),
               "source_frames": t, "n_classes": len(textures),
               "median_frame_step": _median_step(main)})

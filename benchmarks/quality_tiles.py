@@ -11,7 +11,9 @@ For each clip: analyze with ``--methods tiles``, play ``--frames`` frames at ``-
 - repetition: ``repetition_lag`` of the output normalised by its own median frame step
   (None = no repeat up to ``frames - 10``), and the profile at the loop length;
 - mixing (two textures, label map "halves" with border tiles): seam visibility across the
-  texture border over seam visibility across tile borders inside one texture;
+  texture border over seam visibility across tile borders inside one texture, measured at
+  the minimum cut itself (``source_class_map(strict=True)``) and where the dominant texture
+  changes inside the fade (``source_class_map()``);
 - tone: output mean RGB (over the whole run) against a target colour.
 
 Usage::
@@ -117,6 +119,7 @@ def measure(name: str, frames: np.ndarray, *, size: tuple[int, int], n_out: int,
             res["mix_seam_at_cut" + key] = float(metrics.seam_visibility(mixed, cut).mean())
             res["mix_seam_inside" + key] = float(metrics.seam_visibility(mixed[:, :, :xb], inside).mean())
             res["mix_ratio" + key] = res["mix_seam_texture_border" + key] / res["mix_seam_inside" + key]
+            res["mix_ratio_at_cut" + key] = res["mix_seam_at_cut" + key] / res["mix_seam_inside" + key]
     target = np.array([150.0, 120.0, 90.0])
     with TilesPlayer(path, backend=backend, size=size, seed=1, tone=tuple(target)) as p:
         acc = np.zeros(3)
@@ -147,10 +150,11 @@ def main(argv: list[str] | None = None) -> int:
             results.append(r)
             print(json.dumps(r), file=sys.stderr)
     print("| clip | tile | loop | seam (tiles) | seam (uncut blocks) | wrap disc. | worst transition | "
-          "repetition lag (min profile) | mix border/inside | tone error | analysis s |")
+          "repetition lag (min profile) | mix border/inside (at cut, in fade) | tone error | analysis s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
-        mixr = f"{r['mix_ratio']:.2f} ({r['mix_ratio_tone']:.2f} toned)" if "mix_ratio" in r else "-"
+        mixr = (f"cut {r['mix_ratio_at_cut']:.2f} ({r['mix_ratio_at_cut_tone']:.2f} toned), fade "
+                f"{r['mix_ratio']:.2f} ({r['mix_ratio_tone']:.2f} toned)") if "mix_ratio" in r else "-"
         print(f"| {r['clip']} | {r['tile']} | {r['loop']} | {r['seam_tiles']:.3f} | {r['seam_uncut_blocks']:.2f} | "
               f"{r['wrap_discontinuity']:.2f} | {r['transition_discontinuity_max']:.2f} | {r['repetition_lag']} "
               f"({r['repetition_min_profile']:.2f}) | "
