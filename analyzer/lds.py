@@ -13,6 +13,7 @@ from typing import Callable
 import numpy as np
 
 from ..tiledb import LDSModel
+from ._checks import check_int, clip_frames
 from .video import Clip, Progress
 
 SVD_METHODS = ("auto", "gram", "randomized")
@@ -63,9 +64,7 @@ def learn_lds(clip: Clip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | Non
     >>> model.basis.shape, bool(model.info["spectral_radius"] < 1)
     ((4, 384), True)
     """
-    frames = clip.frames if isinstance(clip, Clip) else np.asarray(clip)
-    if frames.ndim != 4 or frames.dtype != np.uint8:
-        raise ValueError(f"clip must be (T, H, W, C) uint8 frames, not {frames.dtype} {frames.shape}")
+    frames = clip_frames(clip)
     tau = frames.shape[0]
     if tau < 3:
         raise ValueError(f"clip has {tau} frames; learning an LDS needs at least 3")
@@ -79,8 +78,7 @@ def learn_lds(clip: Clip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | Non
     if auto and n != "auto":
         raise ValueError(f"n must be a positive integer or 'auto', not {n!r}")
     if not auto:
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"n must be a positive integer or 'auto', not {n!r}")
+        n = check_int("n", n, 1, rule="a positive integer or 'auto'")
         if n > tau - 1:
             raise ValueError(f"n={n} is larger than the clip allows: it has {tau} frames, so n <= {tau - 1}")
     step = _stepper(progress, 5)
@@ -113,8 +111,7 @@ def learn_lds(clip: Clip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | Non
     basis = np.ascontiguousarray(basis[:n])
     x = states[:n].astype(np.float64)
     k = n if k is None else k
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= n:
-        raise ValueError(f"k must be an integer in 1..n={n}, not {k!r}")
+    k = check_int("k", k, 1, n, rule=f"an integer in 1..n={n}")
     step()
 
     x0, x1 = x[:, :-1], x[:, 1:]

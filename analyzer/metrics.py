@@ -21,6 +21,8 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from ._checks import check_int
+
 __all__ = [
     "StabilityReport", "check_frames", "count_nonfinite", "evaluate", "frame_coverage", "frame_step_ratio",
     "grid_labels", "index_coverage", "patch_coherence", "patch_completeness", "patch_distances",
@@ -77,15 +79,6 @@ def check_frames(frames: Any, *, name: str = "frames", min_frames: int = 1,
     return frames
 
 
-def _check_int(name: str, value: Any, lo: int, hi: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, not {value!r}")
-    v = int(value)
-    if v < lo or (hi is not None and v > hi):
-        raise ValueError(f"{name} must be in [{lo}, {'inf' if hi is None else hi}], not {v}")
-    return v
-
-
 def _check_pos_float(name: str, value: Any) -> float:
     try:
         v = float(value)
@@ -103,7 +96,7 @@ def _pair(name: str, value: Any, lo: int) -> tuple[int, int]:
         a, b = value
     except (TypeError, ValueError):
         raise TypeError(f"{name} must be an integer or a pair of integers, not {value!r}") from None
-    return _check_int(f"{name}[0]", a, lo), _check_int(f"{name}[1]", b, lo)
+    return check_int(f"{name}[0]", a, lo), check_int(f"{name}[1]", b, lo)
 
 
 def _same_size(a: np.ndarray, b: np.ndarray, what: str) -> None:
@@ -158,7 +151,7 @@ def _grey(frames: np.ndarray, factor: int = 1, size: tuple[int, int] | None = No
 def _auto_downscale(source: np.ndarray, downscale: int | None) -> int:
     if downscale is None:
         return max(1, min(source.shape[1], source.shape[2]) // 128)
-    return _check_int("downscale", downscale, 1)
+    return check_int("downscale", downscale, 1)
 
 
 def _thumb_size(shape: tuple[int, ...]) -> tuple[int, int]:
@@ -261,7 +254,7 @@ def stability(output: np.ndarray | Iterable[np.ndarray], source: np.ndarray, *, 
     >>> np.round(rep.ratios, 6).tolist(), rep.nonfinite_frames, rep.is_stable()
     ([1.0], 0, True)
     """
-    window = _check_int("window", window, 1)
+    window = check_int("window", window, 1)
     source = check_frames(source, name="source", min_frames=2)
     mean = np.zeros(source.shape[1:], np.float64)
     for _, chunk in _chunks(source):
@@ -533,7 +526,7 @@ def st_power_spectrum(frames: np.ndarray, *, cuboid: Sequence[int] = (16, 32), d
     """
     frames = check_frames(frames, name="frames")
     ct, cs = _pair("cuboid", cuboid, 2)
-    downscale = _check_int("downscale", downscale, 1)
+    downscale = check_int("downscale", downscale, 1)
     grey = _grey(frames, downscale)
     return _spectrum(grey, ct, cs)
 
@@ -688,9 +681,9 @@ def patch_distances(output: np.ndarray, source: np.ndarray, *, patch: Sequence[i
     source = check_frames(source, name="source")
     pt, ps = _pair("patch", patch, 1)
     st, ss = _pair("stride", stride, 1)
-    n_samples = _check_int("n_samples", n_samples, 1)
-    n_components = _check_int("n_components", n_components, 1)
-    seed = _check_int("seed", seed, 0)
+    n_samples = check_int("n_samples", n_samples, 1)
+    n_components = check_int("n_components", n_components, 1)
+    seed = check_int("seed", seed, 0)
     f = _auto_downscale(source, downscale)
     vo, go = _patches(_grey(output, f), pt, ps, st, ss)
     vs, gs = _patches(_grey(source, f), pt, ps, st, ss)
@@ -753,7 +746,7 @@ def index_coverage(indices: Any, n_source: int) -> float:
     >>> index_coverage([0, 1, 1, 3], 8)
     0.375
     """
-    n_source = _check_int("n_source", n_source, 1)
+    n_source = check_int("n_source", n_source, 1)
     idx = np.asarray(indices)
     if idx.size == 0:
         raise ValueError("indices is empty")
@@ -820,7 +813,7 @@ def repetition_profile(output: np.ndarray, *, source: np.ndarray | None = None,
     """
     output = check_frames(output, name="output", min_frames=2)
     t = output.shape[0]
-    max_lag = max(1, t // 2) if max_lag is None else _check_int("max_lag", max_lag, 1, t - 1)
+    max_lag = max(1, t // 2) if max_lag is None else check_int("max_lag", max_lag, 1, t - 1)
     to = _grey(output, size=_thumb_size(output.shape)).reshape(t, -1).astype(np.float64)
     to -= to.mean(axis=0)         # smaller norms: less cancellation in the Gram-matrix distances
     if source is None:

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..tiledb import MixtureModel
 from ..tiledb.mixture import companion_radius
+from ._checks import check_int, clip_frames
 from .lds import _stepper, _svd_gram, _svd_randomized
 from .video import Clip, Progress
 
@@ -80,17 +81,15 @@ def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONEN
     >>> m.stacked_basis.shape, m.global_coords.shape, 1 <= m.order <= 3
     ((6, 384), (60, 2), True)
     """
-    frames = clip.frames if isinstance(clip, Clip) else np.asarray(clip)
-    if frames.ndim != 4 or frames.dtype != np.uint8:
-        raise ValueError(f"clip must be (T, H, W, C) uint8 frames, not {frames.dtype} {frames.shape}")
+    frames = clip_frames(clip)
     tau = frames.shape[0]
-    components = _pos_int("components", components)
-    dim = _pos_int("dim", dim)
-    pca_dim = _pos_int("pca_dim", pca_dim)
-    neighbors = _pos_int("neighbors", neighbors)
-    max_iter = _pos_int("max_iter", max_iter)
-    seed = _pos_int("seed", seed, lo=0)
-    global_dim = dim if global_dim is None else _pos_int("global_dim", global_dim)
+    components = check_int("components", components, 1)
+    dim = check_int("dim", dim, 1)
+    pca_dim = check_int("pca_dim", pca_dim, 1)
+    neighbors = check_int("neighbors", neighbors, 1)
+    max_iter = check_int("max_iter", max_iter, 1)
+    seed = check_int("seed", seed, 0)
+    global_dim = dim if global_dim is None else check_int("global_dim", global_dim, 1)
     if not 0 < max_radius < 1:
         raise ValueError(f"max_radius must be in (0, 1), not {max_radius!r}")
     if not 0 < tol < 1:
@@ -109,7 +108,7 @@ def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONEN
     if pmax is None:
         # Largest p with T - p > (p + 1) D + 1, capped at the default.
         pmax = max(1, min(DEFAULT_PMAX, (tau - global_dim - 2) // (global_dim + 1)))
-    pmax = _pos_int("pmax", pmax)
+    pmax = check_int("pmax", pmax, 1)
     if not tau - pmax > global_dim * pmax + 1 + global_dim:
         raise ValueError(f"pmax={pmax} is too large for {tau} frames of {global_dim}-dimensional global "
                          f"coordinates (needs T - pmax > (pmax + 1) * global_dim + 1); use a smaller pmax")
@@ -451,8 +450,3 @@ def _ar_lstsq(g: np.ndarray, p: int, start: int) -> tuple[np.ndarray, np.ndarray
     a = coef[1:].reshape(p, m, m).transpose(0, 2, 1)
     return np.ascontiguousarray(a), w, resid
 
-
-def _pos_int(name: str, v, lo: int = 1) -> int:
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-        raise ValueError(f"{name} must be an integer >= {lo}, not {v!r}")
-    return int(v)

@@ -26,6 +26,7 @@ import math
 import numpy as np
 
 from ..tiledb.turnpoints import TurnPointModel
+from ._checks import check_int, clip_frames
 from .lds import _stepper
 from .video import Clip, Progress
 
@@ -40,7 +41,7 @@ def frame_features(frames: np.ndarray, size: int = 64) -> np.ndarray:
     >>> f.shape
     (3, 1536)
     """
-    frames = _check_frames(frames)
+    frames = clip_frames(frames)
     size = _int("feature_size", size, 4)
     t, h, w, c = frames.shape
     factor = max(h, w) / size
@@ -225,7 +226,7 @@ def learn_turnpoints(clip: Clip | np.ndarray, *, n: int = 4, s: int = 1, r: int 
     >>> model.turn_points.tolist()
     [10, 20, 30, 40, 50]
     """
-    frames = clip.frames if isinstance(clip, Clip) else _check_frames(clip)
+    frames = clip_frames(clip)
     t = frames.shape[0]
     n = _int("n", n, 1)
     s = _int("s", s, 0)
@@ -423,19 +424,8 @@ def pendulum_clip(frames: int = 120, size: int = 64, *, period: float = 26.4, ph
 
 
 # -- checks ---------------------------------------------------------------------------
-def _check_frames(frames) -> np.ndarray:
-    frames = np.asarray(frames)
-    if frames.ndim != 4 or frames.dtype != np.uint8:
-        raise ValueError(f"clip must be (T, H, W, C) uint8 frames, not {frames.dtype} {frames.shape}")
-    return frames
-
-
 def _int(name: str, value, lo: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, not {value!r}")
-    if value < lo:
-        raise ValueError(f"{name} must be at least {lo}, not {value}")
-    return int(value)
+    return check_int(name, value, lo, rule=f"at least {lo}")
 
 
 def _float(name: str, value, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False) -> float:

@@ -13,6 +13,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..tiledb import SourceInfo
+from ._checks import check_int
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
 
@@ -85,12 +86,10 @@ def load_clip(source: str | os.PathLike | np.ndarray, *, start: int = 0, stop: i
     >>> clip.frames.shape
     (10, 16, 24, 3)
     """
-    start = _nonneg_int("start", start)
-    step = _nonneg_int("step", step)
-    if step < 1:
-        raise ValueError(f"step must be at least 1, not {step}")
+    start = check_int("start", start, 0)
+    step = check_int("step", step, 1, rule="at least 1")
     if stop is not None:
-        stop = _nonneg_int("stop", stop)
+        stop = check_int("stop", stop, 0)
         if stop <= start:
             raise ValueError(f"stop ({stop}) must be greater than start ({start})")
     crop_t = _tuple4("crop", crop) if crop is not None else None
@@ -266,12 +265,6 @@ def _crop_resize_color(frames: np.ndarray, crop, size, color: bool, name: str) -
             grey[i, ..., 0] = cv2.cvtColor(np.ascontiguousarray(frames[i]), cv2.COLOR_RGB2GRAY)
         frames = grey
     return np.ascontiguousarray(frames)
-
-
-def _nonneg_int(name: str, v) -> int:
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-        raise ValueError(f"{name} must be a non-negative integer, not {v!r}")
-    return int(v)
 
 
 def _tuple4(name: str, v) -> tuple[int, int, int, int]:
