@@ -20,7 +20,9 @@ class Player:
     next frame. :meth:`get_state` / :meth:`set_state` save and restore everything that
     decides future frames (position, controls, random generator).
 
-    Subclasses set ``mode``, implement ``_render(out)`` and ``_get_state``/``_set_state``.
+    Subclasses set ``mode``, implement ``_render(out)`` and ``_get_state``/``_set_state``
+    (``_set_state`` reads and checks every entry before it changes anything; a missing
+    entry's KeyError becomes the ValueError "state lacks '...'" here).
     """
 
     mode: ClassVar[str] = ""
@@ -117,8 +119,12 @@ class Player:
             raise ValueError(f"state must come from a {self.mode!r} player")
         if state.get("texture") != self.texture.name:
             raise ValueError(f"state is for texture {state.get('texture')!r}, not {self.texture.name!r}")
-        self._set_state(state)
-        self.frame_index = int(state["frame_index"])
+        try:
+            frame_index = int(state["frame_index"])
+            self._set_state(state)
+        except KeyError as exc:
+            raise ValueError(f"state lacks {exc.args[0]!r}") from None
+        self.frame_index = frame_index
 
     def _get_state(self) -> dict[str, Any]:
         raise NotImplementedError

@@ -178,17 +178,14 @@ class LDSPlayer(ProjectionPlayer):
                 "weights": self._weights.copy()}
 
     def _set_state(self, state: dict[str, Any]) -> None:
-        try:
-            x = np.asarray(state["x"], dtype=float)
-            if x.shape != (self.n,) or not np.isfinite(x).all():
-                raise ValueError(f"state x must be finite with shape ({self.n},)")
-            rng = rng_from_state(state["rng"])
-            self.speed = state["speed"]
-            self.intensity = state["intensity"]
-            self.scales = state["scales"]
-            self.weights = state["weights"]
-        except KeyError as exc:
-            raise ValueError(f"state lacks {exc.args[0]!r}") from None
+        x = np.asarray(state["x"], dtype=float)
+        if x.shape != (self.n,) or not np.isfinite(x).all():
+            raise ValueError(f"state x must be finite with shape ({self.n},)")
+        rng = rng_from_state(state["rng"])
+        self.speed = state["speed"]
+        self.intensity = state["intensity"]
+        self.scales = state["scales"]
+        self.weights = state["weights"]
         self._x = x.copy()
         self._rng = rng
         self.seed = int(state.get("seed", self.seed))

@@ -178,15 +178,12 @@ class MixturePlayer(ProjectionPlayer):
                 "draws": self._draws, "intensity": self._intensity}
 
     def _set_state(self, state: dict[str, Any]) -> None:
-        try:
-            hist = np.asarray(state["history"], dtype=float)
-            if hist.shape != self._hist.shape or not np.isfinite(hist).all():
-                raise ValueError(f"state history must be finite with shape {self._hist.shape}")
-            rng = rng_from_state(state["rng"])
-            self.draws = state["draws"]
-            self.intensity = state["intensity"]
-        except KeyError as exc:
-            raise ValueError(f"state lacks {exc.args[0]!r}") from None
+        hist = np.asarray(state["history"], dtype=float)
+        if hist.shape != self._hist.shape or not np.isfinite(hist).all():
+            raise ValueError(f"state history must be finite with shape {self._hist.shape}")
+        rng = rng_from_state(state["rng"])
+        self.draws = state["draws"]
+        self.intensity = state["intensity"]
         self._hist = hist.copy()
         self._rng = rng
         self.seed = int(state.get("seed", self.seed))

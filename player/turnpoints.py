@@ -366,29 +366,26 @@ class TurnPointPlayer(Player):
                 "crossfade": self._crossfade, "increment": self._increment}
 
     def _set_state(self, state: dict[str, Any]) -> None:
-        try:
-            if state["playback"] != self.playback:
-                raise ValueError(f"state is for playback {state['playback']!r}, not {self.playback!r}")
-            t = self.n_frames
-            pos = check_int("state pos", state["pos"], 0, t - 1)
-            direction = int(state["dir"])
-            if direction not in (-1, 1):
-                raise ValueError("state dir must be -1 or 1")
-            p = np.asarray(state["p"], dtype=float)
-            if p.shape != (t,) or not np.isfinite(p).all() or p.min() < 0 or p.max() > 1:
-                raise ValueError(f"state p must be ({t},) probabilities")
-            disp = [(int(f), tuple((int(a), float(w)) for a, w in pairs), int(e)) for f, pairs, e in state["disp"]]
-            if len(disp) != 2 or any(not 0 <= a < t for _, pairs, _ in disp for a, _ in pairs):
-                raise ValueError("state disp is invalid")
-            rng = rng_from_state(state["rng"])
-            self.speed = state["speed"]
-            self.crossfade = state["crossfade"]
-            self.increment = state["increment"]
-            phase = check_float("state phase", state["phase"], 0.0, 1.0)
-            old = None if state["old"] is None else [int(v) for v in state["old"]]
-            pending = int(state["pending"])
-        except KeyError as exc:
-            raise ValueError(f"state lacks {exc.args[0]!r}") from None
+        if state["playback"] != self.playback:
+            raise ValueError(f"state is for playback {state['playback']!r}, not {self.playback!r}")
+        t = self.n_frames
+        pos = check_int("state pos", state["pos"], 0, t - 1)
+        direction = int(state["dir"])
+        if direction not in (-1, 1):
+            raise ValueError("state dir must be -1 or 1")
+        p = np.asarray(state["p"], dtype=float)
+        if p.shape != (t,) or not np.isfinite(p).all() or p.min() < 0 or p.max() > 1:
+            raise ValueError(f"state p must be ({t},) probabilities")
+        disp = [(int(f), tuple((int(a), float(w)) for a, w in pairs), int(e)) for f, pairs, e in state["disp"]]
+        if len(disp) != 2 or any(not 0 <= a < t for _, pairs, _ in disp for a, _ in pairs):
+            raise ValueError("state disp is invalid")
+        rng = rng_from_state(state["rng"])
+        self.speed = state["speed"]
+        self.crossfade = state["crossfade"]
+        self.increment = state["increment"]
+        phase = check_float("state phase", state["phase"], 0.0, 1.0)
+        old = None if state["old"] is None else [int(v) for v in state["old"]]
+        pending = int(state["pending"])
         self._pos, self._dir, self._p, self._disp, self._phase = pos, direction, p.copy(), disp, phase
         self._old, self._pending = old, pending
         self._rng = rng
