@@ -6,7 +6,8 @@ that map, at a per-pixel source time built in three steps:
 
 1. **rate map** ``M(y, x)``: local time ``tau = t * M`` (the seed's eq. 8), so brighter
    regions of ``M`` evolve faster; ``M`` may be Gaussian-smoothed so that regions of
-   different rate meet without a seam;
+   different rate meet without a seam, and is then quantized to steps of 1/512
+   (:func:`quantize_rate`);
 2. **end mode** (a control): after the last source frame ``tau`` holds there, loops to the
    first frame, or plays back and forth (``hold``, ``loop``, ``pingpong``);
 3. **time jitter** per block (the seed's eq. 6-7): source time ``f_b(tau)``, a monotone
@@ -19,7 +20,9 @@ One OpenCL kernel (``kernels/quilt.cl``) does it all per frame; the numpy refere
 evaluates the same float32 formulas. At open the player cuts the quilt's rows into *runs*
 (:func:`build_runs`): segments that copy a contiguous run of one source row, or blend two
 (a cross-fade band), so that the kernel moves whole runs with 16-byte vectors instead of
-gathering pixel by pixel; the host computes each block's source frames once per frame. The shared gather machinery (:mod:`.gather`) supplies
+gathering pixel by pixel; with a rate map the runs are cut further where the quantized rate
+changes, and the host computes once per frame the source frames of every (rate, block) pair
+that a run reads. The shared gather machinery (:mod:`.gather`) supplies
 the packing of source entries and the Gaussian smoothing; its kernel adds a per-pixel
 *offset* to one global time, which cannot express a per-pixel rate times the time or a
 per-block time warp without re-uploading a full time map every frame, hence the own kernel.
@@ -40,8 +43,7 @@ ENDS = ("hold", "loop", "pingpong")
 SPEED_RANGE = (-16.0, 16.0)
 MAX_SIGMA = 1024.0
 SPILL = 16           # bytes a kernel chunk may read past a run
-MAX_CLASSES = 8      # distinct rates of runs with a constant rate that get per-frame host tables
-_END_CODE = {"hold": 0, "loop": 1, "pingpong": 2}
+RATE_STEP = 1.0 / 512  # rate maps are quantized to this step (see quantize_rate)
 
 
 # -- time functions (numpy; the kernel mirrors them) -------------------------------------------
@@ -107,6 +109,28 @@ def warp_time(warp: np.ndarray, labels: np.ndarray, tau: np.ndarray) -> np.ndarr
     fr = (tau - k.astype(np.float32)).astype(np.float32)
     w0 = warp[labels, k]
     return (w0 + fr * (warp[labels, k + 1] - w0)).astype(np.float32)
+
+
+def quantize_rate(rate: np.ndarray) -> np.ndarray:
+    """The rate map the frames use: rounded to the nearest multiple of ``RATE_STEP`` (1/512), float32.
+
+    Both backends play the quantized map, so that the OpenCL player can cut its runs where
+    the rate changes and give every piece one host-computed time per frame instead of a
+    per-pixel time. The rate moves by at most 1/1024, so a pixel's local time ``t * M`` by
+    at most ``t / 1024`` frames (0.1 frame at t = 100); where a smoothed map changes by
+    less than a step from one pixel to the next, it becomes steps of ``t / 512`` frames.
+    On a 1024x1024 canvas, a 2 / 1 map smoothed with sigma 16 adds ~80k runs and ~8k
+    (rate, block) time slots to the uniform rate's 75k runs and 2.2k slots (1/64 cut the
+    band's centre in steps of two levels, which showed as a seam there; 1/1024 made the
+    slot tables the bottleneck). An unsmoothed map that changes at every pixel plays, but
+    at a run (and a slot) per pixel.
+
+    Examples
+    --------
+    >>> quantize_rate(np.array([1.0, 1.0009, 1.004, 2.0])).tolist()
+    [1.0, 1.0, 1.00390625, 2.0]
+    """
+    return np.ascontiguousarray(np.rint(np.asarray(rate, np.float64) / RATE_STEP) * RATE_STEP, np.float32)
 
 
 def _frame_index(i: np.ndarray, n: int, end: str) -> np.ndarray:
@@ -264,7 +288,8 @@ class EvolvePlayer(Player):
     end : {"hold", "loop", "pingpong"}
         What happens after the last source frame.
     rate_map : (H, W) array in [0, 64], or None (uniform 1)
-        Per-pixel rate ``M``; see :mod:`dynatex.player.ratemap` for generators.
+        Per-pixel rate ``M``; see :mod:`dynatex.player.ratemap` for generators. Played
+        quantized to steps of 1/512 after smoothing (:func:`quantize_rate`).
     rate_sigma : float >= 0
         Gaussian smoothing of the rate map in output pixels (0: none).
 
@@ -334,12 +359,13 @@ class EvolvePlayer(Player):
         self._rate: np.ndarray | None = None
         self._rate_sigma = 0.0
         self._warp = jitter_warp(self.n_blocks, self.n_frames, 0.0, seed=self.seed)
+        self._index_warp()
         if self.backend == "opencl":
             self._setup_opencl(frames)
 
     def _setup_opencl(self, frames: np.ndarray) -> None:
         import pyopencl as cl
-        from .opencl import build_program
+        from .opencl import build_program, writes_through
         h, w = self._shape[:2]
         mf = cl.mem_flags
         ro = mf.READ_ONLY | mf.COPY_HOST_PTR
@@ -347,87 +373,88 @@ class EvolvePlayer(Player):
             runs = build_runs(self._pix, self._labels, self._wq, self._pix2, self._labels2)
         else:
             runs = build_runs(self._pix, self._labels)
-        self._run_starts, self._n_blend_bytes = runs["starts"], int(3 * runs["lengths"][runs["runs"][:, 3] < 0].sum())
-        self.n_runs = len(runs["starts"])
+        self._n_blend_bytes = int(3 * runs["lengths"][runs["runs"][:, 3] < 0].sum())
+        self._base_runs = runs
         pad = np.zeros(SPILL, np.uint8)   # a spilling chunk may read past the ends (values unused)
         self._d_stack = cl.Buffer(self.ctx, ro, hostbuf=np.concatenate([frames.reshape(-1), pad]))
-        self._d_runs = cl.Buffer(self.ctx, ro, hostbuf=runs["runs"])
-        self._d_runs_b = cl.Buffer(self.ctx, ro, hostbuf=runs["runs_b"])
-        self._d_row_start = cl.Buffer(self.ctx, ro, hostbuf=runs["row_start"])
         self._d_code = cl.Buffer(self.ctx, ro, hostbuf=np.concatenate([runs["code"], np.zeros(SPILL, np.uint16)]))
         gain = np.zeros(4, np.float32) if self._gain is None else self._gain.reshape(-1)
         self._d_gain = cl.Buffer(self.ctx, ro, hostbuf=np.concatenate([gain, np.zeros(SPILL, np.float32)]))
-        self._d_rate = cl.Buffer(self.ctx, mf.READ_ONLY, h * w * 4)
-        self._d_run_class = cl.Buffer(self.ctx, mf.READ_ONLY, self.n_runs * 4)
-        self._d_warp = cl.Buffer(self.ctx, mf.READ_ONLY, self._warp.nbytes)
-        self._class_rates = np.ones(1, np.float32)       # rate classes (uniform: one class, rate 1)
-        self._bframe = np.zeros((1, self.n_blocks, 4), np.int32)    # grows with the rate classes
-        self._d_bframe = cl.Buffer(self.ctx, mf.READ_ONLY, self._bframe.nbytes)
         self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
-        self.device_bytes = int(frames.nbytes + sum(runs[k].nbytes for k in ("runs", "runs_b", "row_start", "code"))
-                                + (self._gain.nbytes if self._gain is not None else 0) + h * w * 7 + self.n_runs * 4
-                                + self._warp.nbytes + self._bframe.nbytes)
-        defines = {"FRAME_BYTES": self._flat.shape[1] * 3, "NFRAMES": self.n_frames, "KNOTS": self.n_frames + 1,
-                   "INTERP": self.interpolate, "GAIN": self._gain is not None, "NBLOCKS": self.n_blocks}
-        self._kernels = {}
-        for rate in (False, True):
-            for end in ENDS:
-                k = build_program(self.ctx, "quilt.cl", {**defines, "RATE": rate, "END": _END_CODE[end]}).kernel("evolve")
-                k.set_args(self._d_stack, self._d_runs, self._d_runs_b, self._d_row_start, self._d_code,
-                           self._d_rate, self._d_run_class, self._d_warp, self._d_bframe, self._d_gain, self._d_out,
-                           np.int32(h), np.float32(0))
-                self._kernels[rate, end] = k
+        #: frames are written straight into the caller's array (no copy) where the device
+        #: shares host memory; probed once per context
+        self.direct = writes_through(self.ctx)
+        defines = {"INTERP": self.interpolate, "GAIN": self._gain is not None}
+        self._kernel = build_program(self.ctx, "quilt.cl", defines).kernel("evolve")
+        self._kernel.set_args(self._d_stack, None, None, None, self._d_code, None, None, self._d_gain,
+                              self._d_out, np.int32(h))
         self._gsize = (h,)
-        self._upload_warp()
+        self._set_runs(None)
 
-    def _upload_rate(self, rate: np.ndarray) -> None:
-        """The per-pixel rate map and the runs' rate classes: a run along which the rate is
-        constant gets the class of its rate (the ``MAX_CLASSES`` rates that cover the most
-        runs), so that the host computes its streams' frames once per frame and block;
-        the other runs (-1) take the per-pixel path."""
+    def _set_runs(self, rate: np.ndarray | None) -> None:
+        """The kernel's run tables for a rate map (None: uniform rate): the open-time runs,
+        cut where the (quantized) rate changes along a row, and their time slots: the
+        distinct (rate, block) pairs the runs' streams read, whose frames the host computes
+        each frame (:meth:`_block_frames`). With a uniform rate the slots are the blocks."""
         import pyopencl as cl
-        flat = rate.reshape(-1)
-        lo = np.minimum.reduceat(flat, self._run_starts)
-        hi = np.maximum.reduceat(flat, self._run_starts)
-        const = lo == hi
-        values, inverse, counts = np.unique(lo[const], return_inverse=True, return_counts=True)
-        keep = np.argsort(-counts, kind="stable")[:MAX_CLASSES]
-        index = np.full(len(values), -1, np.int32)
-        index[keep] = np.arange(len(keep), dtype=np.int32)
-        run_class = np.full(len(lo), -1, np.int32)
-        run_class[const] = index[inverse]
-        self._n_varying_px = int(np.diff(np.append(self._run_starts, flat.size))[run_class < 0].sum())
-        self._class_rates = np.ascontiguousarray(values[keep], np.float32)
-        if len(keep) > len(self._bframe):
-            self._bframe = np.zeros((len(keep), self.n_blocks, 4), np.int32)
-            self._d_bframe = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY, self._bframe.nbytes)
-            for k in self._kernels.values():
-                k.set_arg(8, self._d_bframe)
-        cl.enqueue_copy(self.queue, self._d_rate, np.ascontiguousarray(flat), is_blocking=True)
-        cl.enqueue_copy(self.queue, self._d_run_class, run_class, is_blocking=True)
+        base = self._base_runs
+        runs, runs_b = base["runs"], base["runs_b"]
+        if rate is None:
+            starts = base["starts"]
+            pair = np.stack([runs[:, 2], runs_b[:, 1]], axis=1).astype(np.int32)
+            self._pair_block = np.arange(self.n_blocks, dtype=np.int64)
+            self._pair_rate = None
+            row_start = base["row_start"]
+        else:
+            h, w = self._shape[:2]
+            flat = rate.reshape(-1)
+            brk = np.zeros(flat.size, bool)
+            brk[base["starts"]] = True
+            brk[1:] |= flat[1:] != flat[:-1]
+            starts = np.flatnonzero(brk)
+            parent = np.searchsorted(base["starts"], starts, side="right") - 1
+            off = starts - base["starts"][parent]
+            lengths = np.diff(np.append(starts, flat.size))
+            col = starts % w
+            flags = runs[parent, 3].view(np.uint32).astype(np.int64) & (1 << 31)
+            may_spill = col * 3 + -(-lengths * 3 // SPILL) * SPILL <= w * 3
+            r = np.empty((len(starts), 4), np.int64)
+            r[:, 0] = starts
+            r[:, 1] = runs[parent, 1] + off
+            r[:, 2] = runs[parent, 2]
+            r[:, 3] = lengths | flags | (may_spill.astype(np.int64) << 30)
+            runs = r.astype(np.uint32).view(np.int32)
+            runs_b = np.stack([runs_b[parent, 0] + off, runs_b[parent, 1]], axis=1).astype(np.int32)
+            row_start = np.searchsorted(starts, np.arange(h + 1) * w).astype(np.int32)
+            level = np.rint(flat[starts].astype(np.float64) / RATE_STEP).astype(np.int64)
+            keys = np.concatenate([level * self.n_blocks + runs[:, 2], level * self.n_blocks + runs_b[:, 1]])
+            uniq, inverse = np.unique(keys, return_inverse=True)
+            pair = inverse.reshape(2, -1).T.astype(np.int32)
+            self._pair_block = uniq % self.n_blocks
+            self._pair_rate = ((uniq // self.n_blocks) * RATE_STEP).astype(np.float32)
+        self.n_runs = len(starts)
+        self._bframe = np.zeros((len(self._pair_block), 4), np.int32)
+        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        self._d_runs = cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(runs))
+        self._d_runs_b = cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(runs_b))
+        self._d_row_start = cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(row_start))
+        self._d_pair = cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(pair))
+        self._d_bframe = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY, self._bframe.nbytes)
+        k = self._kernel
+        k.set_arg(1, self._d_runs)
+        k.set_arg(2, self._d_runs_b)
+        k.set_arg(3, self._d_row_start)
+        k.set_arg(5, self._d_pair)
+        k.set_arg(6, self._d_bframe)
+        self.device_bytes = int(self._flat.nbytes + base["code"].nbytes + self._shape[0] * self._shape[1] * 3
+                                + (self._gain.nbytes if self._gain is not None else 0)
+                                + runs.nbytes + runs_b.nbytes + row_start.nbytes + pair.nbytes + self._bframe.nbytes)
 
-    def _upload_warp(self) -> None:
+    def _index_warp(self) -> None:
         self._warp_t = np.ascontiguousarray(self._warp.T)     # (knots, blocks): one row per local time
-        if self.backend == "opencl":
-            import pyopencl as cl
-            cl.enqueue_copy(self.queue, self._d_warp, self._warp, is_blocking=True)
 
     def _warm(self) -> None:
-        scratch = np.empty(self._shape, np.uint8)
-        if self.backend == "opencl":
-            saved = self._rate
-            if saved is None:   # fill the rate buffers once so the RATE variant can run
-                self._upload_rate(np.ones(self._shape[:2], np.float32))
-            end = self._end
-            for rate in (False, True):
-                for self._end in ENDS:
-                    self._rate = np.ones(1, np.float32) if rate else None
-                    self._draw(0.0, scratch)
-            self._rate, self._end = saved, end
-            if saved is not None:
-                self._upload_rate(saved)
-        else:
-            self._draw(0.0, scratch)
+        self._draw(0.0, np.empty(self._shape, np.uint8))
 
     # -- controls ---------------------------------------------------------------------------------
     @property
@@ -476,7 +503,7 @@ class EvolvePlayer(Player):
 
     def _make_warp(self) -> None:
         self._warp = jitter_warp(self.n_blocks, self.n_frames, self._jitter, end=self._end, seed=self.seed)
-        self._upload_warp()
+        self._index_warp()
 
     @property
     def warp(self) -> np.ndarray:
@@ -509,19 +536,21 @@ class EvolvePlayer(Player):
 
     @property
     def effective_rate(self) -> np.ndarray:
-        """The rate map the frames use (smoothed), ``(H, W)`` float32; ones when none is set."""
+        """The rate map the frames use (smoothed, quantized to 1/512), ``(H, W)`` float32; ones when none is set."""
         return np.ones(self._shape[:2], np.float32) if self._rate is None else self._rate.copy()
 
     def _update_rate(self) -> None:
         if self._rate_raw is None:
             self._rate = None
+            if self.backend == "opencl":
+                self._set_runs(None)
             return
         rate = self._rate_raw
         if self._rate_sigma > 0:
-            rate = np.ascontiguousarray(gaussian_smooth(rate, self._rate_sigma), np.float32)
-        self._rate = rate
+            rate = gaussian_smooth(rate, self._rate_sigma)
+        self._rate = quantize_rate(rate)
         if self.backend == "opencl":
-            self._upload_rate(rate)
+            self._set_runs(self._rate)
 
     # -- frames -----------------------------------------------------------------------------------
     def source_times(self, t: float | None = None) -> np.ndarray:
@@ -569,31 +598,37 @@ class EvolvePlayer(Player):
             self.render_reference(t, out)
             return
         import pyopencl as cl
+        if self.direct:     # the kernel writes the caller's array itself
+            dst = cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=out.reshape(-1))
+            self._kernel.set_arg(8, dst)
+            try:
+                self._launch(t).wait()
+            finally:
+                self._kernel.set_arg(8, self._d_out)
+            return
         self._launch(t)
         cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
 
-    def _launch(self, t: float) -> None:
-        """Enqueue the kernel for clock ``t`` (the frame lands in the device buffer; benchmarks time it alone)."""
+    def _launch(self, t: float):
+        """Enqueue the kernel for clock ``t`` and return its event (the frame lands in the
+        device buffer, or the caller's array while :meth:`_draw` has set it; benchmarks time it alone)."""
         import pyopencl as cl
-        k = self._kernels[self._rate is not None, self._end]
-        if len(self._class_rates) or self._rate is None:
-            cl.enqueue_copy(self.queue, self._d_bframe, self._block_frames(t), is_blocking=False)
-        k.set_arg(12, np.float32(t))
-        cl.enqueue_nd_range_kernel(self.queue, k, self._gsize, None)
+        cl.enqueue_copy(self.queue, self._d_bframe, self._block_frames(t), is_blocking=False)
+        return cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, None)
 
     def _block_frames(self, t: float) -> np.ndarray:
-        """Per rate class and block, the source time at clock ``t`` as the kernel reads it:
-        the byte offsets of its two frames and the fraction (the float32 formulas of
-        :func:`fold_time`, :func:`warp_time` and :func:`_sample`; one local time per class)."""
+        """Per time slot (a rate and a block, see :meth:`_set_runs`), the source time at
+        clock ``t`` as the kernel reads it: the byte offsets of its two frames and the
+        fraction (the float32 formulas of :func:`fold_time`, :func:`warp_time` and :func:`_sample`)."""
         t32 = np.float32(t)
-        if self._rate is None:
+        if self._pair_rate is None:
             tau = fold_time(np.full(1, t32, np.float32), self.n_frames, self._end)
         else:
-            tau = fold_time(t32 * self._class_rates, self.n_frames, self._end)
+            tau = fold_time(t32 * self._pair_rate, self.n_frames, self._end)
         k = np.clip(np.floor(tau).astype(np.int64), 0, self.n_frames - 1)
-        fr = (tau - k.astype(np.float32)).astype(np.float32)[:, None]
-        w0 = self._warp_t[k]
-        s = w0 + fr * (self._warp_t[k + 1] - w0)
+        fr = (tau - k.astype(np.float32)).astype(np.float32)
+        w0 = self._warp_t[k, self._pair_block]
+        s = w0 + fr * (self._warp_t[k + 1, self._pair_block] - w0)
         si = np.floor(s)
         i0 = si.astype(np.int32)
         n, fb = self.n_frames, self._flat.shape[1] * 3
@@ -604,17 +639,17 @@ class EvolvePlayer(Player):
         else:
             i0 = np.minimum(i0, n - 1)
             i1 = np.minimum(i1, n - 1)
-        b = self._bframe[:len(tau)]
-        b[..., 0] = i0 * fb
-        b[..., 1] = (i1 if self.interpolate else i0) * fb
-        b[..., 2] = (s - si).astype(np.float32).view(np.int32)
+        b = self._bframe
+        b[:, 0] = i0 * fb
+        b[:, 1] = (i1 if self.interpolate else i0) * fb
+        b[:, 2] = (s - si).astype(np.float32).view(np.int32)
         return b
 
     @property
     def bytes_per_frame(self) -> int:
-        """Bytes a frame moves at least: what the kernel reads (run tables, blend codes, gain,
-        per-pixel rates where the rate varies along a run, source pixels: two frames per
-        source when interpolating), the output written and copied to the caller. For the
+        """Bytes a frame moves at least: what the kernel reads (run tables, the time slots,
+        blend codes, gain, source pixels: two frames per source when interpolating), the
+        output written (and copied to the caller unless written into its array directly). For the
         numpy backend, per-pixel maps as packed device tables (source, label, rate) instead."""
         h, w = self._shape[:2]
         px = h * w
@@ -623,9 +658,9 @@ class EvolvePlayer(Player):
         if self.backend == "numpy":
             maps = px * (4 + (2 if self.n_blocks <= 0xFFFF else 4) + (4 if self._rate is not None else 0))
             return int(maps + gain + per_src * 3 * px + 6 * px)
-        rate = 0 if self._rate is None else 4 * self.n_runs + 4 * self._n_varying_px
         src = per_src * (3 * px + self._n_blend_bytes)
-        return int(24 * self.n_runs + 2 * self._n_blend_bytes + rate + gain + src + 6 * px)
+        out = 3 * px if self.direct else 6 * px
+        return int(32 * self.n_runs + 16 * len(self._pair_block) + 2 * self._n_blend_bytes + gain + src + out)
 
     # -- state --------------------------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:

@@ -13,93 +13,36 @@
 // code: the weight of the second source in 1/256 (bits 0-8) and whether the pixel's
 // primary source is B (bit 9). One work-item does the runs of one row, left to right.
 //
-// Where the rate is constant along a run (always, with a uniform rate), so are its stream
-// times; the host computes, once per frame, per rate class and block, the byte offsets of
-// the two source frames and the fraction (bframe), and the run is copied or blended as a
-// byte stream (colour channels are just bytes: every operation is per byte) with 16-byte
+// The rate is constant along every run: the player quantizes the rate map to steps of
+// 1/512 and, when a rate map is set, cuts the runs further where the quantized rate
+// changes. So are the stream times: the host computes, once per frame, for every *time
+// slot* (a pair of rate and block that some run reads) the byte offsets of the two source
+// frames and the fraction (bframe; run_pair[r] names the slots of streams A and B, with a
+// uniform rate the slot of a block is the block itself), and the run is copied or blended
+// as a byte stream (colour channels are just bytes: every operation is per byte) with 16-byte
 // vector loads and stores. The last chunk of a run spills up to 15 bytes into the next
 // runs of its row, which rewrite them (the host flags the runs whose spill stays within
 // the row), or else is aligned to the run's end (rewriting a few bytes with the same
-// values); a run shorter than a chunk that may not spill goes byte by byte. Runs along
-// which the rate varies go pixel by pixel, with the time computed per pixel.
+// values); a run shorter than a chunk that may not spill goes byte by byte. (Per-pixel
+// times where the rate varied along a run cost ~10x a run pixel; the quantized, cut runs
+// made a 1024x1024 smoothed rate map ~2x faster.)
 //
 // Arithmetic is that of the numpy reference, in float32: v = v0 + f (v1 - v0) per source,
 // v = first + a (second - first) for a blend, v *= gain, rounded to nearest even and
 // saturated.
 //
-// Defines: FRAME_BYTES (bytes of one stored frame), NFRAMES, KNOTS (knots per block warp,
-// NFRAMES + 1), NBLOCKS, INTERP, GAIN (per-byte gain), RATE (1: rate map: run_class per
-// run, -1 where the rate varies along the run, with rate per pixel; 0: uniform rate, one
-// class), END (0 hold, 1 loop, 2 ping-pong). The player builds all variants at open, so
-// the end and rate controls switch kernels without a rebuild.
+// Defines: INTERP, GAIN (per-byte gain). The end mode, the rate map and the jitter live in
+// the host's per-frame slot table, so no control needs another kernel.
 //
 // Run tables: runs[r] = (first output pixel, pixel of stream A at it, block of A, length |
 // blend << 31 | spill << 30), runs_b[r] = (pixel of stream B at the first output pixel,
-// block of B); row_start[y] .. row_start[y + 1] are the runs of output row y.
+// block of B), run_pair[r] = (time slot of A, of B); row_start[y] .. row_start[y + 1] are
+// the runs of output row y.
 
 #define BLEND_FLAG 0x80000000u
 #define SPILL_FLAG 0x40000000u
 
-inline int fast_floor(float v)
-{
-    const int i = (int)v;
-    return i - (int)((float)i > v);
-}
-
-// Local time folded into the source timeline: hold [0, N-1], loop [0, N), ping-pong [0, N-1].
-inline float fold_time(float tau)
-{
-#if END == 0
-    return clamp(tau, 0.0f, (float)(NFRAMES - 1));
-#elif END == 1
-    const float n = (float)NFRAMES;
-    return clamp(tau - n * (float)fast_floor(tau * (1.0f / (float)NFRAMES)), 0.0f, n);
-#elif NFRAMES == 1
-    return 0.0f;
-#else
-    const float p = (float)(2 * (NFRAMES - 1));
-    const float m = clamp(tau - p * (float)fast_floor(tau * (1.0f / (float)(2 * (NFRAMES - 1)))), 0.0f, p);
-    return m <= (float)(NFRAMES - 1) ? m : p - m;
-#endif
-}
-
-// Source times lie in [0, NFRAMES] (the warps are clamped), so i is in [0, NFRAMES + 1]:
-// loop wraps the frame after the last to the first; hold and ping-pong clamp.
-inline int frame_index(int i)
-{
-#if END == 1
-    return i >= NFRAMES ? i - NFRAMES : i;
-#else
-    return min(i, NFRAMES - 1);
-#endif
-}
-
-inline float warp_time(__global const float *restrict warp, uint block, float tau)
-{
-    int k = fast_floor(tau);
-    k = clamp(k, 0, KNOTS - 2);
-    const float fr = tau - (float)k;
-    __global const float *w = warp + (size_t)block * KNOTS + k;
-    return w[0] + fr * (w[1] - w[0]);
-}
-
-// The two frames a source time reads (byte offset pixb inside a frame) and the fraction.
 typedef struct { __global const uchar *p0, *p1; float f; } stream_t;
-
-inline stream_t stream_at(__global const uchar *restrict stack, uint pixb, float s)
-{
-    stream_t st;
-    const int si = fast_floor(s);
-    st.p0 = stack + (size_t)frame_index(si) * FRAME_BYTES + pixb;
-#if INTERP
-    st.p1 = stack + (size_t)frame_index(si + 1) * FRAME_BYTES + pixb;
-    st.f = s - (float)si;
-#else
-    st.p1 = st.p0;
-    st.f = 0.0f;
-#endif
-    return st;
-}
 
 inline float16 load16(stream_t st, int o)
 {
@@ -204,60 +147,16 @@ __attribute__((always_inline)) inline void run_const(__global const ushort *rest
     }
 }
 
-#if RATE
-// A run along which the rate varies, pixel by pixel. Two vectorised versions ran slower on
-// PoCL 3.1 than this scalar loop: groups of 16 pixels with vector loads where a group reads
-// two frames and gathers elsewhere (1.3-1.5x), and 16-byte chunks with times computed 8
-// pixels at a time and per-byte selects among up to four frames (1.2x).
-__attribute__((always_inline)) inline void run_varying(
-        __global const uchar *restrict stack, __global const ushort *restrict code,
-        __global const float *restrict rate, __global const float *restrict warp,
-        __global const float *restrict gain, __global uchar *restrict out, float t,
-        uint px, int npx, bool blend, uint pa, uint la, uint pb, uint lb)
-{
-    if (blend) {
-        for (int i = 0; i < npx; ++i) {
-            const size_t ob = (size_t)(px + i) * 3;
-            const float tau = fold_time(t * rate[px + i]);
-            const stream_t a = stream_at(stack, (pa + i) * 3, warp_time(warp, la, tau));
-            const stream_t b = stream_at(stack, (pb + i) * 3, warp_time(warp, lb, tau));
-            float v0 = blend1(load1(a, 0), load1(b, 0), code[ob]);
-            float v1 = blend1(load1(a, 1), load1(b, 1), code[ob + 1]);
-            float v2 = blend1(load1(a, 2), load1(b, 2), code[ob + 2]);
-#if GAIN
-            v0 *= gain[ob]; v1 *= gain[ob + 1]; v2 *= gain[ob + 2];
-#endif
-            out[ob] = to_uchar(v0); out[ob + 1] = to_uchar(v1); out[ob + 2] = to_uchar(v2);
-        }
-    } else {
-        for (int i = 0; i < npx; ++i) {
-            const size_t ob = (size_t)(px + i) * 3;
-            const float tau = fold_time(t * rate[px + i]);
-            const stream_t a = stream_at(stack, (pa + i) * 3, warp_time(warp, la, tau));
-            float v0 = load1(a, 0), v1 = load1(a, 1), v2 = load1(a, 2);
-#if GAIN
-            v0 *= gain[ob]; v1 *= gain[ob + 1]; v2 *= gain[ob + 2];
-#endif
-            out[ob] = to_uchar(v0); out[ob + 1] = to_uchar(v1); out[ob + 2] = to_uchar(v2);
-        }
-    }
-}
-
-#endif
-
 __kernel void evolve(__global const uchar *restrict stack,
                      __global const int4 *restrict runs,
                      __global const int2 *restrict runs_b,
                      __global const int *restrict row_start,
                      __global const ushort *restrict code,
-                     __global const float *restrict rate,
-                     __global const int *restrict run_class,
-                     __global const float *restrict warp,
+                     __global const int2 *restrict run_pair,
                      __global const int4 *restrict bframe,
                      __global const float *restrict gain,
                      __global uchar *restrict out,
-                     const int height,
-                     const float t)
+                     const int height)
 {
     const int y = get_global_id(0);
     if (y >= height)
@@ -266,29 +165,14 @@ __kernel void evolve(__global const uchar *restrict stack,
     for (int r = row_start[y]; r < r1; ++r) {
         const int4 run = runs[r];
         const uint px = (uint)run.x;
-        const uint pa = (uint)run.y, la = (uint)run.z;
+        const uint pa = (uint)run.y;
         const bool blend = ((uint)run.w & BLEND_FLAG) != 0;
         const int npx = (int)((uint)run.w & ~(BLEND_FLAG | SPILL_FLAG));
-        uint pb = pa, lb = la;
-        if (blend) {
-            const int2 rb = runs_b[r];
-            pb = (uint)rb.x;
-            lb = (uint)rb.y;
-        }
         const bool spill = ((uint)run.w & SPILL_FLAG) != 0;
-        // Streams whose rate is constant along the run: per rate class and block, the byte
-        // offsets of the two frames and the fraction, computed on the host each frame.
-#if RATE
-        const int cls = run_class[r];
-        if (cls < 0) {
-            run_varying(stack, code, rate, warp, gain, out, t, px, npx, blend, pa, la, pb, lb);
-            continue;
-        }
-        __global const int4 *restrict bf = bframe + (size_t)cls * NBLOCKS;
-#else
-        __global const int4 *restrict bf = bframe;
-#endif
-        const int4 fa = bf[la], fb = bf[lb];
+        const int2 slot = run_pair[r];
+        const uint pb = blend ? (uint)runs_b[r].x : pa;
+        // the stream times of the run's slots: byte offsets of the two frames and the fraction
+        const int4 fa = bframe[slot.x], fb = bframe[slot.y];
         stream_t a, b;
         a.p0 = stack + (uint)fa.x + pa * 3; a.p1 = stack + (uint)fa.y + pa * 3; a.f = as_float(fa.z);
         b.p0 = stack + (uint)fb.x + pb * 3; b.p1 = stack + (uint)fb.y + pb * 3; b.f = as_float(fb.z);

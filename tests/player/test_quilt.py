@@ -10,7 +10,7 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import seam_visibility
 from dynatex.analyzer.quilt import learn_quilt
 from dynatex.player import open_player, ratemap
-from dynatex.player.quilt import ENDS, MAX_CLASSES, SPILL, EvolvePlayer, build_runs, fold_time, jitter_warp
+from dynatex.player.quilt import ENDS, RATE_STEP, SPILL, EvolvePlayer, build_runs, fold_time, jitter_warp
 from dynatex.tiledb import DatabaseWriter, MethodNotFoundError, QuiltModel
 from dynatex.analyzer.quilt import spreading_clip
 
@@ -70,11 +70,11 @@ def test_opencl_matches_numpy(spread_db, cl_context, end):
 
 @pytest.mark.parametrize("interpolate", [True, False])
 def test_opencl_matches_numpy_rate_classes(spread_db, cl_context, interpolate):
-    """Rate maps with runs of constant rate (host tables per rate class), more distinct
-    constant rates than classes (the rest go pixel by pixel) and smoothed bands."""
+    """Rate maps cut into runs of constant (quantized) rate: halves, a smoothed band, many
+    steps that are not multiples of the quantization step."""
     path = spread_db[0]
     h, w = 56, 72
-    stairs = np.repeat(np.linspace(0.5, 3.0, MAX_CLASSES + 4, dtype=np.float32), -(-w // (MAX_CLASSES + 4)))[:w]
+    stairs = np.repeat(np.linspace(0.5, 3.0, 12, dtype=np.float32), -(-w // 12))[:w]
     maps = [(ratemap.halves((h, w), 2.0, 1.0), 0.0), (ratemap.halves((h, w), 2.0, 1.0), 3.0),
             (np.tile(stairs, (h, 1)), 0.0)]
     opts = dict(jitter=2.5, seed=2, interpolate=interpolate, end="pingpong")
@@ -355,3 +355,20 @@ def test_reseed_draws_new_jitter(spread_db):
         np.testing.assert_array_equal(p.warp, first)
         with pytest.raises(ValueError, match="seed must be a non-negative integer"):
             p.reseed(-2)
+
+
+def test_rate_map_quantized_and_copy_path(spread_db, cl_context):
+    """Both backends play the rate map quantized to RATE_STEP (so the OpenCL runs have one
+    rate each); frames copied from the device buffer equal those written into the caller's array."""
+    from dynatex.player.quilt import quantize_rate
+    path = spread_db[0]
+    rate = ratemap.point_light((56, 72), (10, 40), 20.0, max_rate=3.0, min_rate=0.5)
+    with EvolvePlayer(path, jitter=2.0, seed=3, rate_map=rate, rate_sigma=2.0) as p:
+        eff = p.effective_rate
+        np.testing.assert_array_equal(eff, quantize_rate(eff))
+        q = np.rint(eff.astype(np.float64) / RATE_STEP)
+        assert np.abs(q * RATE_STEP - eff).max() == 0
+        frames = [p.render_at(t) for t in (4.2, 13.9)]
+        p.direct = not p.direct
+        for t, f in zip((4.2, 13.9), frames):
+            np.testing.assert_array_equal(p.render_at(t), f)
