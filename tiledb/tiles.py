@@ -34,7 +34,8 @@ class TilesModel:
         different for border tiles.
     masks : (K, th, tw) uint8
         Share of the ring source (the ring class's primary) in each pixel, 0..255: 255
-        outside the cut, 0 inside; border tiles fade between the two (feathering).
+        outside the cut, 0 inside, in between over a few pixels past the cut (feathering:
+        ``info["ring_feather"]`` in ordinary tiles, ``info["feather"]`` in border tiles).
     border_side : (K,) int8
         For border tiles the side carrying the ring class's strip (0 left, 1 right, 2 top,
         3 bottom); -1 for ordinary tiles.
