@@ -141,6 +141,27 @@ def test_real_mix_border_within_1_5x_inside(clips_dir, tmp_path):
     assert at_cut <= 1.5 * inside and in_fade <= 1.5 * inside, (at_cut, in_fade, inside)
 
 
+@pytest.mark.clips
+@pytest.mark.parametrize("name", ["water_sea_waves_dyntex.avi", "grass_straw_wind_dyntex.avi"])
+def test_real_ring_cuts_do_not_show(clips_dir, tmp_path, name):
+    """Seams at the lattice *and* at every tile's ring cut (where its mask leaves 255): a hard
+    ring cut between two places of the sea showed ~3x the interior gradient here."""
+    clip = load_clip(str(clips_dir / name), stop=100, size=(176, 144))
+    model = learn_tiles(clip, n_tiles=3, min_loop=40)
+    path = tmp_path / "t.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("x", clip.source_info())
+        w.put_method("x", "tiles", model)
+    th, tw = model.tile_size
+    with TilesPlayer(path, size=(320, 192), seed=1, backend="numpy") as p:
+        out = np.stack([p.next_frame() for _ in range(12)])
+        arr = p.arrangement
+    yy, xx = np.mgrid[0:192, 0:320]
+    strip = model.masks[arr[yy // th, xx // tw], yy % th, xx % tw] == 255
+    cuts = metrics.grid_labels((192, 320), (th, tw)) * 2 + strip
+    assert metrics.seam_visibility(out, cuts).mean() <= 1.3
+
+
 def test_label_map_naming_a_missing_texture_is_a_clear_error(tiles_db):
     with pytest.raises(ValueError, match=r"labels name texture class 2, but the tile set has 2 class\(es\): 0=calm, 1=wild"):
         TilesPlayer(tiles_db, size=(32, 32), labels=np.full((2, 2), 2))
