@@ -7,6 +7,7 @@ import sys
 import time
 
 from ..analyzer.methods import METHODS, get_method
+from ..analyzer.quilt import DEFAULT_BLOCK as QUILT_BLOCK
 from ..tiledb import DatabaseWriter
 from ._common import UsageError, load_clip_arg, positive_int, size_arg, tqdm_progress
 
@@ -69,8 +70,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g = p.add_argument_group("quilt (time-varying textures)")
     g.add_argument("--quilt-size", type=size_arg, default=None, metavar="WxH",
                    help="output canvas (default: twice the clip's width and height)")
-    g.add_argument("--quilt-block", type=_tile_arg, default=32, metavar="N or WxH",
-                   help="block size; elongated blocks (e.g. 16x64) suit stretching features (default 32)")
+    g.add_argument("--quilt-block", type=_tile_arg, default=QUILT_BLOCK, metavar="N or WxH",
+                   help=f"block size; elongated blocks (e.g. 16x64) suit stretching features (default {QUILT_BLOCK})")
     g.add_argument("--quilt-overlap", type=positive_int, default=None, help="block overlap (default 5/16 of the block)")
     g.add_argument("--quilt-rank", type=positive_int, default=15, help="SVD rank of the comparisons (default 15)")
     g.add_argument("--quilt-tolerance", type=float, default=0.1,
