@@ -168,6 +168,24 @@ class PendingFrame:
         return self.out
 
 
+class FloatControl:
+    """A player control holding a finite float in ``[lo, hi]``, checked on assignment.
+
+    ``speed = FloatControl("speed", 0.0, 4.0)`` in a player class stores the value in
+    ``self._speed``; a bad value raises the error of :func:`check_float` and keeps the old one.
+    """
+
+    def __init__(self, name: str, lo: float | None, hi: float | None) -> None:
+        self.name, self.lo, self.hi = name, lo, hi
+        self.attr = "_" + name
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        return self if obj is None else getattr(obj, self.attr)
+
+    def __set__(self, obj: Any, value: Any) -> None:
+        setattr(obj, self.attr, check_float(self.name, value, self.lo, self.hi))
+
+
 def check_out(out: Any, shape: tuple[int, ...]) -> None:
     if not isinstance(out, np.ndarray):
         raise TypeError(f"out must be a numpy array, not {type(out).__name__}")

@@ -35,7 +35,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..tiledb import QuiltModel, TileDB
-from .base import Player, check_float, check_seed
+from .base import FloatControl, Player, check_float, check_seed
 from .gather import gaussian_smooth
 from .ratemap import check_rate_map
 
@@ -457,13 +457,7 @@ class EvolvePlayer(Player):
         self._draw(0.0, np.empty(self._shape, np.uint8))
 
     # -- controls ---------------------------------------------------------------------------------
-    @property
-    def speed(self) -> float:
-        return self._speed
-
-    @speed.setter
-    def speed(self, value: float) -> None:
-        self._speed = check_float("speed", value, *SPEED_RANGE)
+    speed = FloatControl("speed", *SPEED_RANGE)
 
     @property
     def time(self) -> float:

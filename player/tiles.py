@@ -29,7 +29,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..tiledb import TileDB, TilesModel
-from .base import Player, check_float, check_int, check_seed, rng_from_state
+from .base import FloatControl, Player, check_float, check_int, check_seed, rng_from_state
 from .gather import Gather, gaussian_smooth, pack_source
 
 TIME_STEP = 8              # output pixels per time-map sample
@@ -378,13 +378,7 @@ class TilesPlayer(Player):
         self._epoch = check_int("epoch", value, 0, 10**7)
         self._phase = min(self._phase, max(0, self._epoch - 1))
 
-    @property
-    def speed(self) -> float:
-        return self._speed
-
-    @speed.setter
-    def speed(self, value: float) -> None:
-        self._speed = check_float("speed", value, *SPEED_RANGE)
+    speed = FloatControl("speed", *SPEED_RANGE)
 
     @property
     def tone(self) -> Any:

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..tiledb import TileDB
 from ..tiledb.turnpoints import TurnPointModel
-from .base import Player, check_float, check_int, rng_from_state
+from .base import FloatControl, Player, check_float, check_int, rng_from_state
 
 PLAYBACKS = ("hybrid", "turns", "jumps")
 SPEED_RANGE = (0.0, 4.0)
@@ -191,13 +191,7 @@ class TurnPointPlayer(Player):
         """Bytes a frame moves at speed 1 between jumps: one stored frame read, the output written."""
         return 2 * self.frame_bytes
 
-    @property
-    def speed(self) -> float:
-        return self._speed
-
-    @speed.setter
-    def speed(self, value: float) -> None:
-        self._speed = check_float("speed", value, *SPEED_RANGE)
+    speed = FloatControl("speed", *SPEED_RANGE)
 
     @property
     def crossfade(self) -> int:
