@@ -35,18 +35,26 @@ tone
     ``out = round(v * gain[tone] + offset[tone])`` saturated to 0..255 per channel
     (:meth:`Gather.set_tones`, tables ``(n, 3)``; tone 0 defaults to identity).
 
-Numerical contract: the device and the numpy reference evaluate the same float32
-formulas; they agree exactly on integer times with unit gains and within one grey level
-elsewhere (contracted multiply-adds round differently).
+Numerical contract: blend and tone are computed in fixed point, the same integers on the
+device and in the numpy reference (:func:`gather_reference`): the time weight in 256ths
+(``w = int(256 f + 0.5)``), ``v = a (256 - w) + b w``, gain ``G = round(512 gain)``, offset
+``O = round(2 offset) + 513``, ``out = clip((((v G) >> 16) + O) >> 1 - 256, 0, 255)``:
+every intermediate fits 16 bits (so the device works on 32 or 64 lanes at once). The result
+is the exact rounding of the blend at the quantised weight, gain and offset: within one grey
+level of the real-valued formula for gains up to 1.5 (tested; the weight's error grows as
+``|b - a| gain / 512``). The device and the reference agree exactly on integer times and
+within one grey level elsewhere (float32 times may round differently where multiply-adds
+are contracted, moving ``w`` by one).
 
-Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders 128-pixel spans
-of 16 rows in runs of 16 pixels (two lattice intervals): a run with linear source (one
-cell, or two cells split at a boundary, merged bytewise) moves 48 bytes per frame with
-wide loads and blends and tones them as three float16, tone factors pre-expanded per byte
-on the host (with a cell grid also the runs that reach past a row's ends: only their bytes
-inside the row are stored); other runs, and other time steps, go pixel by pixel. Where the device shares
-host memory (PoCL on the CPU; probed once at open, :attr:`Gather.direct`) the kernel writes
-straight into the caller's array: one launch, no copy.
+Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders runs of 64
+pixels starting at multiples of 64 on ``ROWS`` rows: a run inside the row whose source is
+linear (one cell, or two cells split at a boundary and merged bytewise; a per-pixel map
+with consecutive pixels and one tone) and whose frames span at most three neighbours is
+blended and toned on 64-byte vectors in 16-bit lanes, tone factors pre-expanded per byte
+on the host; other runs, and other time steps, go pixel by pixel with the same integers.
+Where the device shares host memory (PoCL on the CPU; probed once at open,
+:attr:`Gather.direct`) the kernel writes straight into the caller's array: one launch, no
+copy.
 
 Examples
 --------
@@ -71,10 +79,12 @@ from .base import BACKENDS, check_float, check_int, check_out
 WRAPS = ("loop", "clamp", "pingpong")
 MAX_FRAME_PIXELS = 1 << 24
 MAX_TONES = 256
-RUN = 32              # output pixels per work-item of kernel gather
-STACK_PAD = 64        # bytes of padding around the device copy of the frame stack
-VRUN, ROWS = 128, 16  # time step 8: a work-item renders 128 pixels of each of ROWS rows
-TONE_STRIDE = 96      # floats per device tone row: gains then offsets, each repeated for 16 rgb pixels
+MAX_GAIN, MAX_OFFSET = 64.0, 255.0   # the fixed-point tone's range (every intermediate fits 16 bits)
+RUN = 32              # output pixels per work-item of the per-pixel kernel (time steps other than 8)
+STACK_PAD = 256       # bytes of padding around the device copy of the frame stack (a run's 192 bytes fit)
+RUNS = 2              # wide kernel: a work-item renders RUNS runs of 64 pixels on 8 rows
+TONE_STRIDE = 384     # uint16 per device tone row: 192 gains then 192 offsets, the rgb pattern of a 64-pixel run
+TONE_OB = 192
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
 
 
@@ -198,23 +208,36 @@ def source_indices(source: np.ndarray, shape: tuple[int, int], frame_w: int,
     return pix, tone[cy][:, cx]
 
 
+def fixed_tones(tones: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed-point tone ``(G, O)`` int32 ``(n, 3)`` of a float table ``(n, 6)`` (gain rgb,
+    offset rgb): ``G = round(512 gain)``, ``O = round(2 offset) + 513`` (module docstring)."""
+    tones = np.asarray(tones, np.float64)
+    gain = np.clip(np.rint(tones[:, :3] * 512), 0, 512 * MAX_GAIN)
+    offset = np.rint(np.clip(tones[:, 3:], -MAX_OFFSET, MAX_OFFSET) * 2) + 513
+    return gain.astype(np.int32), offset.astype(np.int32)
+
+
 def gather_reference(stack: np.ndarray, pix: np.ndarray, tone: np.ndarray, times: np.ndarray,
                      tones: np.ndarray, *, wrap: str = "loop", interpolate: bool = True,
                      out: np.ndarray | None = None) -> np.ndarray:
     """Reference of kernel ``gather``: ``stack`` (N, h, w, 3) uint8, per-pixel ``pix``/``tone``
-    (H, W) ints, absolute ``times`` (H, W) float32, ``tones`` (n, 6) float32 (gain rgb, offset rgb)."""
+    (H, W) ints, absolute ``times`` (H, W) float32, ``tones`` (n, 6) float32 (gain rgb, offset rgb).
+
+    The fixed-point formula of the module docstring, evaluated exactly.
+    """
     n = stack.shape[0]
     flat = stack.reshape(n, -1, 3)
+    times = np.asarray(times, np.float32)
     tf = np.floor(times)
-    i0 = wrap_index(tf.astype(np.int64), n, wrap)
-    v = flat[i0, pix].astype(np.float32)
+    ti = tf.astype(np.int64)
+    v = flat[wrap_index(ti, n, wrap), pix].astype(np.int32) * 256
     if interpolate:
-        f = (times - tf).astype(np.float32)[..., None]
-        v1 = flat[wrap_index(tf.astype(np.int64) + 1, n, wrap), pix].astype(np.float32)
-        v = v + f * (v1 - v)
-    tn = tones[tone]
-    v = v * tn[..., :3] + tn[..., 3:]
-    res = np.clip(np.rint(v), 0, 255).astype(np.uint8)
+        w = np.clip(((times - tf) * np.float32(256) + np.float32(0.5)).astype(np.int32), 0, 256)[..., None]
+        b = flat[wrap_index(ti + 1, n, wrap), pix].astype(np.int32)
+        v += (b - v // 256) * w
+    gain, offset = fixed_tones(tones)
+    r = ((v * gain[tone]) >> 16) + offset[tone]
+    res = np.clip((r >> 1) - 256, 0, 255).astype(np.uint8)
     if out is None:
         return res
     out[...] = res
@@ -243,6 +266,10 @@ class Gather:
     cell : (ch, cw), optional
         Source given as a grid of ``ch x cw`` cells (:meth:`set_source_grid`) instead of a
         per-pixel map (:meth:`set_source_map`). Fixed at construction (a kernel define).
+    wide : bool, optional
+        With ``time_step=8``, use the 64-lane kernel (True) or the per-pixel one (False).
+        Default: the 64-lane kernel on CPU devices, whose vector units it is written for.
+        Both compute the same integers (see the module docstring); :attr:`wide` says which runs.
 
     After construction call :meth:`set_source_map` or :meth:`set_source_grid`, optionally
     :meth:`set_time_map` (default zeros), :meth:`smooth_time_map` and :meth:`set_tones`
@@ -261,7 +288,8 @@ class Gather:
 
     def __init__(self, frames: np.ndarray, out_size: Sequence[int], *, backend: str = "opencl",
                  ctx: Any = None, queue: Any = None, device: str | None = None, wrap: str = "loop",
-                 interpolate: bool = True, time_step: int = 1, cell: Sequence[int] | None = None) -> None:
+                 interpolate: bool = True, time_step: int = 1, cell: Sequence[int] | None = None,
+                 wide: bool | None = None) -> None:
         frames = np.asarray(frames)
         if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
             raise ValueError(f"frames must be uint8 (N, h, w, 3) with N >= 1, not {frames.dtype} {frames.shape}")
@@ -273,6 +301,9 @@ class Gather:
             raise ValueError(f"backend must be one of {BACKENDS}, not {backend!r}")
         h_out, w_out = _size("out_size", out_size)
         self.time_step = check_int("time_step", time_step, 1, 4096)
+        if wide is not None and not isinstance(wide, (bool, np.bool_)):
+            raise TypeError(f"wide must be None, True or False, not {wide!r}")
+        self._wide_choice = wide
         self.backend, self.wrap, self.interpolate = backend, wrap, bool(interpolate)
         self.n_frames, self.frame_h, self.frame_w = (int(v) for v in frames.shape[:3])
         self.cell = None if cell is None else _size("cell", cell)
@@ -290,6 +321,7 @@ class Gather:
         self._tones[0, :3] = 1.0
         self.ctx, self.queue = ctx, queue
         self.direct = False       # frames written straight into the caller's array (set at open)
+        self.wide = False         # the 64-lane kernel (time step 8 on a CPU device; set at open)
         self._last_t = 0.0
         if backend == "opencl":
             self._setup_opencl(device)
@@ -304,14 +336,18 @@ class Gather:
             self.queue = cl.CommandQueue(self.ctx)
         mf = cl.mem_flags
         h, w = self.out_shape[:2]
+        # the 64-lane kernel (time step 8) is written for CPU vector units; elsewhere per pixel
+        cpu = bool(self.ctx.devices[0].type & cl.device_type.CPU)
+        self.wide = self.time_step == 8 and (cpu if self._wide_choice is None else bool(self._wide_choice))
         # STACK_PAD bytes on both sides: vector loads of a run may read a few bytes past the
         # frame stack's ends (lanes that a bytewise merge then drops)
         padded = np.zeros(self._stack.nbytes + 2 * STACK_PAD, np.uint8)
         padded[STACK_PAD:STACK_PAD + self._stack.nbytes] = self._stack.reshape(-1)
         self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
-        self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
+        # 16 floats of padding: the time step 8 kernel reads the map 16 floats at a time
+        self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
         self._d_tmp = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
-        self._d_tones = cl.Buffer(self.ctx, mf.READ_ONLY, MAX_TONES * TONE_STRIDE * 4)
+        self._d_tones = cl.Buffer(self.ctx, mf.READ_ONLY, MAX_TONES * TONE_STRIDE * 2)
         self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
         self._d_source = None
         self._d_source_bytes = 0
@@ -319,18 +355,19 @@ class Gather:
                    "NFRAMES": self.n_frames, "GRID": self.grid, "WRAP": _WRAP_CODE[self.wrap],
                    "CELL_H": (self.cell or (1, 1))[0], "CELL_W": (self.cell or (1, 1))[1],
                    "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN,
-                   "STACK_PAD": STACK_PAD, "ROWS": ROWS, "TONE_STRIDE": TONE_STRIDE}
+                   "STACK_PAD": STACK_PAD, "RUNS": RUNS, "WIDE": self.wide, "TONE_STRIDE": TONE_STRIDE,
+                   "TONE_OB": TONE_OB}
         prog = build_program(self.ctx, "gather.cl", defines)
         self._k_gather = prog.kernel("gather")
         self._k_smooth_x = prog.kernel("smooth_x")
         self._k_smooth_y = prog.kernel("smooth_y")
         self.direct = writes_through(self.ctx)
-        # kernel gather: TSTEP 8 renders VRUN-pixel spans from x = -4 on ROWS rows (vector path),
-        # else RUN pixels of one row
-        self._gsize = ((-(-(w + 4) // VRUN), -(-h // ROWS)) if self.time_step == 8 else (-(-w // RUN), h))
+        # kernel gather: the wide kernel renders RUNS runs of 64 pixels on the 8 rows of one pair
+        # of map rows (rows 8k - 4 .. 8k + 3), the other RUN pixels of one row
+        self._gsize = (-(-w // (64 * RUNS)), -(-(h + 4) // 8)) if self.wide else (-(-w // RUN), h)
         # one work-item per work-group there: left to itself PoCL may put the whole small
         # range into one work-group, which runs on one core
-        self._lsize = (1, 1) if self.time_step == 8 else None
+        self._lsize = (1, 1) if self.wide else None
         self._tsize = (_round_up(self.tmap_shape[1], 16), _round_up(self.tmap_shape[0], 4))
         self._upload_tmap()
         self._upload_tones()
@@ -443,15 +480,18 @@ class Gather:
         self.queue.finish()
 
     def set_tones(self, gain: np.ndarray, offset: np.ndarray | None = None) -> None:
-        """Tone table: ``gain`` and ``offset`` ``(n, 3)`` (or ``(3,)`` for one tone), finite, gain in [0, 64]."""
+        """Tone table: ``gain`` and ``offset`` ``(n, 3)`` (or ``(3,)`` for one tone), gain in [0, 64],
+        offset in [-255, 255] (the range of the fixed-point tone)."""
         gain = np.atleast_2d(np.asarray(gain, np.float32))
         offset = np.zeros_like(gain) if offset is None else np.atleast_2d(np.asarray(offset, np.float32))
         if gain.ndim != 2 or gain.shape[1] != 3 or not 1 <= gain.shape[0] <= MAX_TONES:
             raise ValueError(f"gain must have shape (n, 3) with 1 <= n <= {MAX_TONES}, not {gain.shape}")
         if offset.shape != gain.shape:
             raise ValueError(f"offset must have shape {gain.shape}, not {offset.shape}")
-        if not (np.isfinite(gain).all() and np.isfinite(offset).all()) or gain.min() < 0 or gain.max() > 64:
-            raise ValueError("gain must be finite within [0, 64] and offset finite")
+        if not np.isfinite(gain).all() or gain.min() < 0 or gain.max() > MAX_GAIN:
+            raise ValueError(f"gain must be finite within [0, {MAX_GAIN:g}]")
+        if not np.isfinite(offset).all() or np.abs(offset).max() > MAX_OFFSET:
+            raise ValueError(f"offset must be finite within [-{MAX_OFFSET:g}, {MAX_OFFSET:g}]")
         if self._source is not None:
             _, tone = unpack_source(self._source)
             if tone.size and tone.max() >= len(gain):
@@ -562,11 +602,12 @@ class Gather:
 
 
 def _expand_tones(tones: np.ndarray) -> np.ndarray:
-    """Device tone table: per tone, the rgb gains repeated for 16 pixels (48 floats), then the
-    offsets likewise, so a run of 16 pixels loads its per-byte factors with vector loads."""
-    out = np.zeros((len(tones), TONE_STRIDE), np.float32)
-    out[:, :48] = np.tile(tones[:, :3], 16)
-    out[:, 48:] = np.tile(tones[:, 3:], 16)
+    """Device tone table (uint16): per tone, the fixed-point rgb gains repeated for 64 pixels
+    (192 values), then the offsets likewise, so a run loads its per-byte factors with vector loads."""
+    gain, offset = fixed_tones(tones)
+    out = np.zeros((len(tones), TONE_STRIDE), np.uint16)
+    out[:, :TONE_OB] = np.tile(gain, 64)
+    out[:, TONE_OB:] = np.tile(offset, 64)
     return out
 
 

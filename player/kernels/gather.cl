@@ -1,20 +1,29 @@
-// Shared gather machinery (modes tiles, quilt, ...): every output pixel is read from a
-// stack of stored frames at a per-pixel source pixel and a per-pixel time, blended
-// linearly between the two neighbouring stored frames and passed through a per-source
-// colour-tone stage  v * gain[tone] + offset[tone].
+// Shared gather machinery (mode tiles, and any mode that copies stored pixels): every output
+// pixel is read from a stack of stored frames at a per-pixel source pixel and a per-pixel
+// time, blended linearly between the two neighbouring stored frames and colour-toned.
 //
 // A packed source entry is (tone << 24) | (y * FRAME_W + x): a pixel of one stored frame
 // plus the index of its tone. The source is either a per-pixel map (GRID == 0, one entry
 // per output pixel) or a grid of cells (GRID == 1, one entry per cell naming the cell's
 // top-left pixel; the pixel at (dy, dx) inside the cell reads origin + dy * FRAME_W + dx).
 //
-// The time map is sampled bilinearly at a step of TSTEP output pixels (TSTEP == 1: one
-// value per pixel): time(y, x) = t0 + map((y + 0.5) / TSTEP - 0.5, (x + 0.5) / TSTEP - 0.5).
+// Time: a map m sampled bilinearly at a step of TSTEP output pixels: with fy = (y + 0.5) /
+// TSTEP - 0.5 = yi + wy and fx = xi + wx likewise, top = m[yi][xi] + wx (m[yi][xi+1] -
+// m[yi][xi]), bot the same on row yi + 1, time(y, x) = t0 + (top + wy (bot - top)), indices
+// clamped to the map.
+//
+// Fixed point (the numpy reference in gather.py computes exactly this): i = floor(time),
+// w = (int)((time - i) * 256 + 0.5) in [0, 256], v = a (256 - w) + b w for the channel
+// values a = F[wrap(i)], b = F[wrap(i + 1)]; tone gain G = round(512 gain), offset
+// O = round(2 offset) + 513: out = clamp((((v G) >> 16) + O) >> 1 - 256, 0, 255), which is
+// round(value * gain + offset) up to the quantisation. Every intermediate fits 16 bits.
 //
 // Defines: FRAME_W, FRAME_PIXELS (stored frame width, width * height), NFRAMES, GRID,
 // CELL_H, CELL_W (cell size of the grid; compile-time so the divisions become multiplies),
 // WRAP (0 loop, 1 clamp, 2 ping-pong), INTERP (1: linear in time, 0: nearest earlier
-// frame), TSTEP, RUN (pixels per work-item).
+// frame), TSTEP, WIDE (1: the 64-lane kernel for TSTEP 8, for CPU devices), RUN (pixels per
+// work-item of the per-pixel kernel), RUNS (64-pixel runs per work-item of the wide kernel),
+// STACK_PAD, TONE_STRIDE, TONE_OB (ushorts per tone row, and where its offsets start).
 
 #define WRAP_LOOP 0
 #define WRAP_CLAMP 1
@@ -46,71 +55,121 @@ inline int fast_floor(float v)
     return i - (int)((float)i > v);
 }
 
+// one channel: blended value v (256ths), tone gain g and offset o as in the header
+inline uchar tone1(uint v, uint g, uint o)
+{
+    return (uchar)min(max((((v * g) >> 16) + o) >> 1, 256u) - 256u, 255u);
+}
 
-#if TSTEP == 8
-// Vectorised variant for a time lattice of step 8. A work-item renders the VRUN pixels
-// [VRUN k - 4, VRUN (k + 1) - 4) of each of ROWS rows, in runs of 16 pixels (48 bytes) that
-// cover two lattice intervals, so that the time of lanes 0-7 and of lanes 8-15 is linear in x
-// and is computed as one float16 (the same per-pixel formula as the numpy reference). A run
-// whose source is linear (one tile cell, or two cells split at a boundary: bytes merged
-// before the blend) and whose frame indices span at most two neighbours moves 48 bytes per
-// frame with under-aligned 16-byte loads (three frames when the run crosses a frame
-// boundary) and blends and tones in three float16, tone factors pre-expanded per byte on the
-// host (TONE_STRIDE); the runs that reach past a row's ends store only their bytes inside
-// it. Any other run falls back to the per-pixel path. (Runs of 32 pixels were tried: their
-// frame span exceeds two neighbours too often under smoothed offsets, and they were slower.)
-#define VRUN 128
-
-// PoCL's vload16/vstore16 of uchar move byte by byte; an under-aligned vector type gives one
-// unaligned 16-byte access. (Found by the quilt mode; same trick.)
-typedef uchar16 __attribute__((aligned(1))) uchar16_u;
-#define LOAD16(p) (*(__global const uchar16_u *)(p))
-typedef int16 __attribute__((aligned(4))) int16_u;
-
-// Round to nearest even and saturate, as convert_uchar16_sat_rte but faster on PoCL: after
-// the clamp, adding 1.5 * 2^23 leaves the rounded integer in the low mantissa bits.
-inline uchar16 to_uchar16(float16 v) { return convert_uchar16(as_uint16(clamp(v, 0.0f, 255.0f) + 12582912.0f)); }
-
-inline void pixel(__global const uchar *restrict stack, __global const float *restrict tones, int pix, int tone,
+// one output pixel at time t from source pixel pix with tone
+inline void pixel(__global const uchar *restrict stack, __global const ushort *restrict tones, int pix, int tone,
                   float t, __global uchar *restrict o)
 {
     const int ti = fast_floor(t);
     __global const uchar *p0 = stack + ((size_t)wrap_index(ti) * FRAME_PIXELS + pix) * 3;
-    float r = p0[0], g = p0[1], b = p0[2];
 #if INTERP
-    const float f = t - (float)ti;
+    const uint w = (uint)clamp((int)((t - (float)ti) * 256.0f + 0.5f), 0, 256);
     __global const uchar *p1 = stack + ((size_t)wrap_index(ti + 1) * FRAME_PIXELS + pix) * 3;
-    r = r + f * ((float)p1[0] - r);
-    g = g + f * ((float)p1[1] - g);
-    b = b + f * ((float)p1[2] - b);
+#else
+    const uint w = 0;
+    __global const uchar *p1 = p0;
 #endif
-    __global const float *tn = tones + tone * TONE_STRIDE;
-    o[0] = convert_uchar_sat_rte(r * tn[0] + tn[48]);
-    o[1] = convert_uchar_sat_rte(g * tn[1] + tn[49]);
-    o[2] = convert_uchar_sat_rte(b * tn[2] + tn[50]);
+    __global const ushort *tn = tones + tone * TONE_STRIDE;
+    // scalar channels on purpose: PoCL's 3-vectors are an order of magnitude slower
+    o[0] = tone1(p0[0] * (256u - w) + p1[0] * w, tn[0], tn[TONE_OB]);
+    o[1] = tone1(p0[1] * (256u - w) + p1[1] * w, tn[1], tn[TONE_OB + 1]);
+    o[2] = tone1(p0[2] * (256u - w) + p1[2] * w, tn[2], tn[TONE_OB + 2]);
 }
 
-// the bytes [lo, hi) of v to o (a run's chunk at a row's end)
-#define SP1(j, c) if (lo <= j && j < hi) o[j] = v.c;
-inline void store_part(uchar16 v, __global uchar *o, int lo, int hi)
-{
-    SP1(0, s0) SP1(1, s1) SP1(2, s2) SP1(3, s3) SP1(4, s4) SP1(5, s5) SP1(6, s6) SP1(7, s7)
-    SP1(8, s8) SP1(9, s9) SP1(10, sa) SP1(11, sb) SP1(12, sc) SP1(13, sd) SP1(14, se) SP1(15, sf)
-}
 
-// 48 bytes of frame pointer p (A) merged with those of q (B) where mask m* is set
-#define LOAD48(p, q, split, a0, a1, a2) do {                                            \
-        a0 = LOAD16(p); a1 = LOAD16((p) + 16); a2 = LOAD16((p) + 32);                   \
-        if (split < 16) {                                                               \
-            a0 = select(a0, LOAD16(q), m0); a1 = select(a1, LOAD16((q) + 16), m1);      \
-            a2 = select(a2, LOAD16((q) + 32), m2);                                      \
-        }                                                                               \
+#if TSTEP == 8 && WIDE
+// A work-item renders RUNS runs of 64 pixels (192 bytes) on the 8 rows that share one pair of
+// map rows (rows 8k - 4 .. 8k + 3). Runs start at multiples of 64, so the map intervals a run
+// covers, and each lane's place inside its interval, are the same for every run. Per run the
+// ten map columns of both map rows are read once, the 64 lanes' interpolations along x come
+// from shuffles, and the frames the 8 rows need are bounded by the samples' extremes (the
+// lanes interpolate between them): lo .. lo + span + 1. Per row a lane's time is one
+// multiply-add, and u = (int)(256 (time - lo) + 0.5) gives its frame (lo + u / 256) and its
+// weight (u % 256) at once: the same integers as floor and weight in the header's formula.
+// When the run lies inside the row, its source is linear (inside one cell, or two cells
+// split at a boundary; a per-pixel map must be linear with one tone) and the frames span at
+// most three neighbours, the run is blended and toned in 16-bit lanes on 64-byte vectors:
+// three chunks of 64 bytes, each byte's pixel found by a shuffle. Any other run goes pixel
+// by pixel with the same formula. (Clang's ext_vector_type gives the 64-wide types OpenCL C
+// lacks: on AVX-512 one operation covers 32 or 64 lanes, where a float16 covers 16.)
+typedef uchar  u8x64  __attribute__((ext_vector_type(64)));
+typedef char   i8x64  __attribute__((ext_vector_type(64)));
+typedef ushort u16x64 __attribute__((ext_vector_type(64)));
+typedef short  i16x64 __attribute__((ext_vector_type(64)));
+typedef uint   u32x64 __attribute__((ext_vector_type(64)));
+typedef int    i32x64 __attribute__((ext_vector_type(64)));
+typedef float  f32x64 __attribute__((ext_vector_type(64)));
+typedef u8x64 __attribute__((aligned(1))) u8x64_u;
+#define MAX_SPAN 3   // a fast run blends frames lo .. lo + MAX_SPAN + 1 at most
+typedef u16x64 __attribute__((aligned(2))) u16x64_u;
+typedef int16 __attribute__((aligned(4))) int16_u;
+typedef float16 __attribute__((aligned(4))) float16_u;
+#define LOAD64(p) (*(__global const u8x64_u *)(p))
+#define LOADT(p) (*(__global const u16x64_u *)(p))
+// comparisons give signed lanes (0 or -1); these reinterpret them as masks
+#define AS_U8(x) __builtin_astype((x), u8x64)
+#define AS_U16(x) __builtin_astype((x), u16x64)
+// lanes where m is all ones take b, the others a
+#define PICK(m, a, b) (((a) & ~(m)) | ((b) & (m)))
+
+#define IOTA64 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 60, 61, 62, 63
+#define KLO 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8, 8
+#define KHI 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8, 8, 8, 8, 8, 8, 9, 9, 9, 9
+#define WX64 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f
+#define PIX0 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9, 9, 10, 10, 10, 11, 11, 11, 12, 12, 12, 13, 13, 13, 14, 14, 14, 15, 15, 15, 16, 16, 16, 17, 17, 17, 18, 18, 18, 19, 19, 19, 20, 20, 20, 21
+#define PIX1 21, 21, 22, 22, 22, 23, 23, 23, 24, 24, 24, 25, 25, 25, 26, 26, 26, 27, 27, 27, 28, 28, 28, 29, 29, 29, 30, 30, 30, 31, 31, 31, 32, 32, 32, 33, 33, 33, 34, 34, 34, 35, 35, 35, 36, 36, 36, 37, 37, 37, 38, 38, 38, 39, 39, 39, 40, 40, 40, 41, 41, 41, 42, 42
+#define PIX2 42, 43, 43, 43, 44, 44, 44, 45, 45, 45, 46, 46, 46, 47, 47, 47, 48, 48, 48, 49, 49, 49, 50, 50, 50, 51, 51, 51, 52, 52, 52, 53, 53, 53, 54, 54, 54, 55, 55, 55, 56, 56, 56, 57, 57, 57, 58, 58, 58, 59, 59, 59, 60, 60, 60, 61, 61, 61, 62, 62, 62, 63, 63, 63
+
+// One 64-byte chunk C (0..2) of a fast run: pick each byte's frames, blend, tone, store at
+// base + 64 C (a pointer of type PTR).
+#define CHUNK(C, PTR, base)                                                                                    \
+    do {                                                                                                  \
+        const long o0 = pa + 64 * C, o1 = pb + 64 * C;                                                    \
+        u8x64 fa = LOAD64(stack + fo[0] + o0), fb = LOAD64(stack + fo[1] + o0);                           \
+        u8x64 mb = (u8x64)0;                                                                              \
+        if (split < 64) {                                                                                 \
+            mb = AS_U8(iota8 >= (char)clamp(3 * split - 64 * C, 0, 64));                                  \
+            fa = PICK(mb, fa, LOAD64(stack + fo[0] + o1));                                                \
+            fb = PICK(mb, fb, LOAD64(stack + fo[1] + o1));                                                \
+        }                                                                                                 \
+        if (span > 0) {                  /* lanes at frame lo + k take the pair (k, k + 1) */             \
+            const u8x64 sc = __builtin_shufflevector(s8, s8, PIX##C);                                     \
+            u8x64 prev = fb;                                                                              \
+            for (int k = 1; k <= span; ++k) {                                                             \
+                u8x64 fn = LOAD64(stack + fo[k + 1] + o0);                                                \
+                if (split < 64)                                                                           \
+                    fn = PICK(mb, fn, LOAD64(stack + fo[k + 1] + o1));                                    \
+                const u8x64 mk = AS_U8(sc >= (uchar)k);                                                   \
+                fa = PICK(mk, fa, prev);                                                                  \
+                fb = PICK(mk, fb, fn);                                                                    \
+                prev = fn;                                                                                \
+            }                                                                                             \
+        }                                                                                                 \
+        const u16x64 wc = __builtin_shufflevector(w16, w16, PIX##C);                                      \
+        const u16x64 v = __builtin_convertvector(fa, u16x64) * ((ushort)256 - wc)                         \
+                         + __builtin_convertvector(fb, u16x64) * wc;                                      \
+        u16x64 g = LOADT(tn + 64 * C), ob = LOADT(tn + TONE_OB + 64 * C);                                 \
+        if (toneb != tone) {                                                                              \
+            const u16x64 mt = AS_U16(iota16 >= (short)(3 * split - 64 * C));                              \
+            g = PICK(mt, g, LOADT(tnb + 64 * C));                                                         \
+            ob = PICK(mt, ob, LOADT(tnb + TONE_OB + 64 * C));                                             \
+        }                                                                                                 \
+        const u16x64 r = __builtin_convertvector(                                                         \
+            (__builtin_convertvector(v, u32x64) * __builtin_convertvector(g, u32x64)) >> 16, u16x64);     \
+        const u16x64 q = (r + ob) >> 1;                                                                   \
+        const u16x64 d = (q - (ushort)256) & AS_U16(q > (ushort)256);                                     \
+        *(PTR)((base) + 64 * C) = __builtin_convertvector(d | AS_U16(d > (ushort)255), u8x64);            \
     } while (0)
 
 __kernel void gather(__global const uchar *restrict stack,
                      __global const int *restrict source,
                      __global const float *restrict tmap,
-                     __global const float *restrict tones,
+                     __global const ushort *restrict tones,   // (ntones, TONE_STRIDE): see the host
                      __global uchar *restrict out,
                      const int width, const int height,
                      const int grid_w,
@@ -118,153 +177,131 @@ __kernel void gather(__global const uchar *restrict stack,
                      const float t0)
 {
     stack += STACK_PAD;
-    const int ybeg = (int)get_global_id(1) * ROWS;
-    const int yend = min(ybeg + ROWS, height);
-    // lane weights inside a lattice interval, twice (lanes 0-7: interval m, 8-15: m + 1)
-    const float16 lane = (float16)(0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f,
-                                   0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f);
-    // pixel (lane) of each byte of the three 16-byte chunks of a run
-    const uint16 c0 = (uint16)(0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5);
-    const uint16 c1 = (uint16)(5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9, 9, 10, 10);
-    const uint16 c2 = (uint16)(10, 11, 11, 11, 12, 12, 12, 13, 13, 13, 14, 14, 14, 15, 15, 15);
-    const char16 bi = (char16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    for (int y = ybeg; y < yend; ++y) {
-        const float fy = ((float)y + 0.5f) * 0.125f - 0.5f;
-        const int yi = fast_floor(fy);
-        const float wy = fy - (float)yi;
-        __global const float *trow0 = tmap + (size_t)clamp(yi, 0, tmap_h - 1) * tmap_w;
-        __global const float *trow1 = tmap + (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w;
+    const int yi = (int)get_global_id(1) - 1;                    // the map rows yi, yi + 1
+    const int ybeg = max(8 * yi + 4, 0), yend = min(8 * yi + 12, height);
+    const int xbeg = (int)get_global_id(0) * (RUNS * 64);
+    const int xend = min(xbeg + RUNS * 64, width);
+    __global const float *trow0 = tmap + (size_t)clamp(yi, 0, tmap_h - 1) * tmap_w;
+    __global const float *trow1 = tmap + (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w;
+    const i8x64 iota8 = (i8x64)(IOTA64);
+    const i16x64 iota16 = (i16x64)(IOTA64);
+    const f32x64 wx = (f32x64)(WX64);
+    for (int xs = xbeg; xs < xend; xs += 64) {
+        // the map columns j0 .. j0 + 9 (j0 = xs/8 - 1) of both map rows
+        const int j0 = (xs >> 3) - 1;
+        float16 a, b;
+        if (j0 >= 0 && j0 + 9 < tmap_w) {            // one load each (the map is padded by 16 floats)
+            a = *(__global const float16_u *)(trow0 + j0);
+            b = *(__global const float16_u *)(trow1 + j0);
+        } else {
+            float ta[16], tb[16];
+            for (int j = 0; j < 16; ++j) {
+                const int jj = clamp(j0 + min(j, 9), 0, tmap_w - 1);
+                ta[j] = trow0[jj];
+                tb[j] = trow1[jj];
+            }
+            a = vload16(0, ta);
+            b = vload16(0, tb);
+        }
+        // along x: top (map row yi) and bot (yi + 1) per lane
+        const f32x64 ta = __builtin_shufflevector(a, a, KLO), tb = __builtin_shufflevector(a, a, KHI);
+        const f32x64 ba = __builtin_shufflevector(b, b, KLO), bb = __builtin_shufflevector(b, b, KHI);
+        const f32x64 top = ta + wx * (tb - ta);
+        const f32x64 dtb = (ba + wx * (bb - ba)) - top;
+        // the extremes of both rows' lanes 0-9 (lanes 10-15 repeat lane 9) bound every time
+        const float16 a9 = shuffle(a, (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9));
+        const float16 b9 = shuffle(b, (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9));
+        const float16 m16 = b9 < a9 ? b9 : a9, x16 = b9 > a9 ? b9 : a9;
+        const float8 m8 = m16.hi < m16.lo ? m16.hi : m16.lo, x8 = x16.hi > x16.lo ? x16.hi : x16.lo;
+        const float4 m4 = m8.hi < m8.lo ? m8.hi : m8.lo, x4 = x8.hi > x8.lo ? x8.hi : x8.lo;
+        const float2 m2 = m4.hi < m4.lo ? m4.hi : m4.lo, x2 = x4.hi > x4.lo ? x4.hi : x4.lo;
+        const float cmin = m2.hi < m2.lo ? m2.hi : m2.lo, cmax = x2.hi > x2.lo ? x2.hi : x2.lo;
+        const int lo = fast_floor(t0 + cmin);
+        const int span = fast_floor(t0 + cmax) - lo;
+        // byte offsets of the frames lo .. lo + span + 1
+        long fo[MAX_SPAN + 2];
+        for (int k = 0; k < min(span, MAX_SPAN) + 2; ++k)
+            fo[k] = wrap_index(lo + k) * ((long)FRAME_PIXELS * 3);
+        const int nvalid = min(64, width - xs);           // pixels of the run inside the row
 #if GRID
-        const int cy = y / CELL_H;
-        __global const int *srow = source + cy * grid_w;
-        const int dy = (y - cy * CELL_H) * FRAME_W;
-#else
-        __global const int *srow = source + (size_t)y * width;
+        const int cx = xs / CELL_W;
+        const int edge = (cx + 1) * CELL_W;               // the next cell's first pixel
+        const int split = edge < xs + nvalid ? edge - xs : 64;
+        // else a third cell in the run, or frames too far apart: per pixel
+        const bool linear = span <= MAX_SPAN && (split == 64 || edge + CELL_W >= xs + nvalid);
 #endif
-        __global uchar *orow = out + (size_t)y * width * 3;
-        const int xbase = (int)get_global_id(0) * VRUN - 4;
-        for (int xs = xbase; xs < xbase + VRUN && xs < width; xs += 16) {
-            // pixels xs .. xs+7 lie in lattice interval m, xs+8 .. xs+15 in m + 1
-            const int m = (xs - 4) >> 3;
-            const int x0 = clamp(m, 0, tmap_w - 1), x1 = clamp(m + 1, 0, tmap_w - 1), x2 = clamp(m + 2, 0, tmap_w - 1);
-            const float a0 = trow0[x0], a1 = trow0[x1], a2 = trow0[x2];
-            const float b0 = trow1[x0], b1 = trow1[x1], b2 = trow1[x2];
-            const float16 ta = (float16)((float8)a0, (float8)a1), tb = (float16)((float8)a1, (float8)a2);
-            const float16 ba = (float16)((float8)b0, (float8)b1), bb = (float16)((float8)b1, (float8)b2);
-            const float16 top = ta + lane * (tb - ta);
-            const float16 bot = ba + lane * (bb - ba);
-            const float16 t = t0 + (top + wy * (bot - top));
-            // floor in vector form (convert_int16_rtn goes lane by lane in PoCL): truncate,
-            // then subtract one where that rounded up (a true comparison is -1)
-            const int16 tt = convert_int16(t);
-            const int16 ti = tt + (convert_float16(tt) > t);
-            // valid bytes of the run: [blo, bhi) (the first and last runs of a row reach past it)
-            const int blo = max(-xs, 0) * 3, bhi = min(width - xs, 16) * 3;
+        for (int y = ybeg; y < yend; ++y) {
+            const float wy = ((float)y + 0.5f) * 0.125f - 0.5f - (float)yi;
+            __global uchar *orow = out + (size_t)y * width * 3;
+            // source: lanes < split read pix0 + lane, lanes >= split read pixb + lane
+#if GRID
+            const int cy = y / CELL_H;
+            __global const int *srow = source + cy * grid_w;
+            const int dy = (y - cy * CELL_H) * FRAME_W;
+            const int packed = srow[cx];
+            const int pix0 = (packed & 0xFFFFFF) + dy + (xs - cx * CELL_W);
+            const int tone = (packed >> 24) & 0xFF;
+            int pixb = 0, toneb = tone;
+            if (split < 64) {
+                const int next = srow[cx + 1];
+                pixb = (next & 0xFFFFFF) + dy - split;
+                toneb = (next >> 24) & 0xFF;
+            }
+#else
+            __global const int *srow = source + (size_t)y * width;
+            const int split = 64, pixb = 0, toneb = 0;
             int pix0 = 0, tone = 0;
-            bool linear = false;
-            // lanes >= split read the next cell (pixb + lane); 16: none do. Lanes outside the
-            // row read whatever lies there (inside the padded stack) and are not stored.
-            int split = 16, pixb = 0, toneb = 0;
-#if GRID
-            {
-                const int cx = max(xs, 0) / CELL_W;
-                const int packed = srow[cx];
-                pix0 = (packed & 0xFFFFFF) + dy + (xs - cx * CELL_W);
-                tone = (packed >> 24) & 0xFF;
-                linear = true;
-                const int edge = (cx + 1) * CELL_W;          // the next cell's first pixel
-                if (edge - xs < 16 && edge < width) {
-                    split = edge - xs;
-                    const int pb = srow[cx + 1];
-                    pixb = (pb & 0xFFFFFF) + dy - split;
-                    toneb = (pb >> 24) & 0xFF;
-#if CELL_W < 16
-                    linear = split + CELL_W >= 16 || edge + CELL_W >= width;   // else a third cell: per pixel
-#endif
-                }
-            }
-#else
-            if (xs >= 0 && xs + 16 <= width) {
-                const int16 pk = *(__global const int16_u *)(srow + xs);
+            bool linear = span <= MAX_SPAN && nvalid == 64;
+            if (linear) {
                 const int16 step = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-                pix0 = pk.s0 & 0xFFFFFF;
-                tone = (pk.s0 >> 24) & 0xFF;
-                linear = all((pk - pk.s0) == step);
+                const int base = srow[xs];
+                for (int k = 0; k < 4; ++k)
+                    linear = linear && all(*(__global const int16_u *)(srow + xs + 16 * k) - base == step + 16 * k);
+                pix0 = base & 0xFFFFFF;
+                tone = (base >> 24) & 0xFF;
             }
 #endif
-            // t is linear on lanes 0-7 and on 8-15: its extremes sit at lanes 0, 7, 8, 15
-            const int lo = min(min(ti.s0, ti.s7), min(ti.s8, ti.sf));
-            const int hi = max(max(ti.s0, ti.s7), max(ti.s8, ti.sf));
-            if (linear && hi - lo <= 1) {
-                const char16 m0 = bi >= (char)(3 * min(split, 16));          // bytes from the next cell
-                const char16 m1 = bi >= (char)(3 * min(split, 16) - 16);
-                const char16 m2 = bi >= (char)(3 * min(split, 16) - 32);
-                // lanes at frame lo blend (F[lo], F[lo+1]); lanes at lo+1 blend (F[lo+1], F[lo+2])
-                const size_t f0 = (size_t)wrap_index(lo) * FRAME_PIXELS, f1 = (size_t)wrap_index(lo + 1) * FRAME_PIXELS;
-                uchar16 u0, u1, u2, w0, w1, w2;
-                LOAD48(stack + (f0 + pix0) * 3, stack + (f0 + pixb) * 3, split, u0, u1, u2);
-                LOAD48(stack + (f1 + pix0) * 3, stack + (f1 + pixb) * 3, split, w0, w1, w2);
-                float16 va0 = convert_float16(u0), va1 = convert_float16(u1), va2 = convert_float16(u2);
-                float16 vb0 = convert_float16(w0), vb1 = convert_float16(w1), vb2 = convert_float16(w2);
-                if (hi > lo) {
-                    const size_t f2 = (size_t)wrap_index(lo + 2) * FRAME_PIXELS;
-                    uchar16 e0, e1, e2;
-                    LOAD48(stack + (f2 + pix0) * 3, stack + (f2 + pixb) * 3, split, e0, e1, e2);
-                    const float16 sel = convert_float16(ti - lo);            // 0 or 1 per lane
-                    const float16 s0 = shuffle(sel, c0), s1 = shuffle(sel, c1), s2 = shuffle(sel, c2);
-                    va0 = va0 + s0 * (vb0 - va0);                             // F[ti]
-                    va1 = va1 + s1 * (vb1 - va1);
-                    va2 = va2 + s2 * (vb2 - va2);
-                    vb0 = vb0 + s0 * (convert_float16(e0) - vb0);             // F[ti + 1]
-                    vb1 = vb1 + s1 * (convert_float16(e1) - vb1);
-                    vb2 = vb2 + s2 * (convert_float16(e2) - vb2);
-                }
+            const f32x64 t = t0 + (top + wy * dtb);
+            if (linear) {
+                // u = frame (above lo) * 256 + weight; past the bound only by rounding: held
+                // just below it (the last frame pair at weight 255/256)
+                const f32x64 tl = t - (float)lo;
 #if INTERP
-                const float16 f = t - convert_float16(ti);
-                va0 = va0 + shuffle(f, c0) * (vb0 - va0);
-                va1 = va1 + shuffle(f, c1) * (vb1 - va1);
-                va2 = va2 + shuffle(f, c2) * (vb2 - va2);
+                i32x64 u = __builtin_convertvector(tl * 256.0f + 0.5f, i32x64);
+#else
+                i32x64 u = __builtin_convertvector(tl, i32x64) << 8;
 #endif
-                __global const float *tn = tones + tone * TONE_STRIDE;
-                float16 g0 = vload16(0, tn), g1 = vload16(1, tn), g2 = vload16(2, tn);
-                float16 o0 = vload16(3, tn), o1 = vload16(4, tn), o2 = vload16(5, tn);
-                if (split < 16 && toneb != tone) {
-                    __global const float *tb = tones + toneb * TONE_STRIDE;
-                    const int16 n0 = convert_int16(m0), n1 = convert_int16(m1), n2 = convert_int16(m2);
-                    g0 = select(g0, vload16(0, tb), n0);
-                    g1 = select(g1, vload16(1, tb), n1);
-                    g2 = select(g2, vload16(2, tb), n2);
-                    o0 = select(o0, vload16(3, tb), n0);
-                    o1 = select(o1, vload16(4, tb), n1);
-                    o2 = select(o2, vload16(5, tb), n2);
-                }
-                __global uchar *o = orow + xs * 3;
-                const uchar16 r0 = to_uchar16(va0 * g0 + o0), r1 = to_uchar16(va1 * g1 + o1), r2 = to_uchar16(va2 * g2 + o2);
-                if (blo == 0 && bhi == 48) {
-                    *(__global uchar16_u *)o = r0;
-                    *(__global uchar16_u *)(o + 16) = r1;
-                    *(__global uchar16_u *)(o + 32) = r2;
-                } else {
-                    store_part(r0, o, blo, bhi);
-                    store_part(r1, o + 16, blo - 16, bhi - 16);
-                    store_part(r2, o + 32, blo - 32, bhi - 32);
+                const int umax = 256 * span + 255;
+                u = PICK(u > umax, u, (i32x64)umax);
+                const u16x64 u16 = __builtin_convertvector(u, u16x64);
+                const u16x64 w16 = u16 & (ushort)255;
+                const u8x64 s8 = __builtin_convertvector(u16 >> 8, u8x64);
+                const long pa = (long)pix0 * 3, pb = (long)pixb * 3;   // pb may lie before the stack: inside STACK_PAD
+                __global const ushort *tn = tones + tone * TONE_STRIDE, *tnb = tones + toneb * TONE_STRIDE;
+                if (nvalid == 64) {
+                    CHUNK(0, __global u8x64_u *, orow + 3 * xs);
+                    CHUNK(1, __global u8x64_u *, orow + 3 * xs);
+                    CHUNK(2, __global u8x64_u *, orow + 3 * xs);
+                } else {                                   // the run reaches past the row: its bytes
+                    uchar part[192];
+                    CHUNK(0, u8x64_u *, part);
+                    CHUNK(1, u8x64_u *, part);
+                    CHUNK(2, u8x64_u *, part);
+                    for (int i = 0; i < 3 * nvalid; ++i)
+                        orow[3 * xs + i] = part[i];
                 }
             } else {
-                float tl[16];
-                vstore16(t, 0, tl);
-                for (int j = 0; j < 16; ++j) {
-                    const int x = xs + j;
-                    if (x < 0 || x >= width)
-                        continue;
+                for (int p = 0; p < nvalid; ++p) {
+                    const int x = xs + p;
 #if GRID
-                    const int cx = x / CELL_W;
-                    const int packed = srow[cx];
-                    const int pix = (packed & 0xFFFFFF) + dy + (x - cx * CELL_W);
+                    const int cxp = x / CELL_W;
+                    const int pk = srow[cxp];
+                    const int pix = (pk & 0xFFFFFF) + dy + (x - cxp * CELL_W);
 #else
-                    const int packed = srow[x];
-                    const int pix = packed & 0xFFFFFF;
+                    const int pk = srow[x];
+                    const int pix = pk & 0xFFFFFF;
 #endif
-                    pixel(stack, tones, pix, (packed >> 24) & 0xFF, tl[j], orow + x * 3);
+                    pixel(stack, tones, pix, (pk >> 24) & 0xFF, t[p], orow + 3 * x);
                 }
             }
         }
@@ -277,7 +314,7 @@ __kernel void gather(__global const uchar *restrict stack,
 __kernel void gather(__global const uchar *restrict stack,
                      __global const int *restrict source,
                      __global const float *restrict tmap,
-                     __global const float *restrict tones,   // (ntones, TONE_STRIDE): see the host
+                     __global const ushort *restrict tones,   // (ntones, TONE_STRIDE): see the host
                      __global uchar *restrict out,
                      const int width, const int height,
                      const int grid_w,
@@ -291,7 +328,6 @@ __kernel void gather(__global const uchar *restrict stack,
     stack += STACK_PAD;
     const int xend = min(xstart + RUN, width);
 #if TSTEP > 1
-    // Vertical part of the bilinear time lookup is shared by the whole run.
     const float fy = ((float)y + 0.5f) * (1.0f / TSTEP) - 0.5f;
     const int yi = fast_floor(fy);
     const float wy = fy - (float)yi;
@@ -307,8 +343,7 @@ __kernel void gather(__global const uchar *restrict stack,
 #else
     __global const int *srow = source + (size_t)y * width;
 #endif
-    __global uchar *o = out + ((size_t)y * width + xstart) * 3;
-    for (int x = xstart; x < xend; ++x, o += 3) {
+    for (int x = xstart; x < xend; ++x) {
 #if GRID
         const int cx = x / CELL_W;
         const int packed = srow[cx];
@@ -328,21 +363,7 @@ __kernel void gather(__global const uchar *restrict stack,
 #else
         const float t = t0 + trow[x];
 #endif
-        const int ti = fast_floor(t);
-        // Scalar channels on purpose: PoCL's float3/vload3 code is an order of magnitude slower.
-        __global const uchar *p0 = stack + ((size_t)wrap_index(ti) * FRAME_PIXELS + pix) * 3;
-        float r = p0[0], g = p0[1], b = p0[2];
-#if INTERP
-        const float f = t - (float)ti;
-        __global const uchar *p1 = stack + ((size_t)wrap_index(ti + 1) * FRAME_PIXELS + pix) * 3;
-        r = r + f * ((float)p1[0] - r);
-        g = g + f * ((float)p1[1] - g);
-        b = b + f * ((float)p1[2] - b);
-#endif
-        __global const float *tn = tones + ((packed >> 24) & 0xFF) * TONE_STRIDE;
-        o[0] = convert_uchar_sat_rte(r * tn[0] + tn[48]);
-        o[1] = convert_uchar_sat_rte(g * tn[1] + tn[49]);
-        o[2] = convert_uchar_sat_rte(b * tn[2] + tn[50]);
+        pixel(stack, tones, pix, (packed >> 24) & 0xFF, t, out + ((size_t)y * width + x) * 3);
     }
 }
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynatex.player.gather import (Gather, gaussian_smooth, gaussian_weights, pack_source, sample_time_map,
-                                   unpack_source, wrap_index)
+from dynatex.player.gather import (Gather, gather_reference, gaussian_smooth, gaussian_weights, pack_source,
+                                   sample_time_map, unpack_source, wrap_index)
 
 
 def _stack(n=7, h=10, w=12, seed=0):
@@ -123,6 +123,24 @@ def test_time_interpolation_halfway():
     assert px.tolist() == [201, 200, 0]
 
 
+def test_fixed_point_is_within_one_grey_level_of_the_real_formula():
+    """The integer blend and tone (module docstring) against round(((1-f) a + f b) gain + offset)."""
+    rng = np.random.default_rng(0)
+    stack = _stack(n=4, h=64, w=64)
+    flat = stack.reshape(4, -1, 3).astype(np.float64)
+    for _ in range(5):
+        pix = rng.integers(0, 64 * 64, (128, 128))
+        times = rng.uniform(-2, 6, (128, 128)).astype(np.float32)
+        tones = np.concatenate([rng.uniform(0, 1.5, (3, 3)), rng.uniform(-60, 60, (3, 3))], 1).astype(np.float32)
+        tone = rng.integers(0, 3, (128, 128))
+        got = gather_reference(stack, pix, tone, times, tones).astype(int)
+        i = np.floor(times).astype(int)
+        f = (times - i)[..., None]
+        a, b = flat[i % 4, pix], flat[(i + 1) % 4, pix]
+        exact = np.clip(np.rint((a + f * (b - a)) * tones[tone][..., :3] + tones[tone][..., 3:]), 0, 255)
+        assert np.abs(got - exact).max() <= 1
+
+
 def test_coarse_time_map_sampling_is_bilinear_and_exact_at_centres():
     tmap = np.array([[0, 4], [8, 12]], np.float32)
     full = sample_time_map(tmap, (8, 8), 4)
@@ -151,6 +169,10 @@ def test_bad_inputs_are_clear_errors():
         g.set_time_map(np.full((4, 4), np.nan))
     with pytest.raises(ValueError, match="gain"):
         g.set_tones(np.array([[-1, 1, 1]]))
+    with pytest.raises(ValueError, match="offset must be finite within"):
+        g.set_tones(np.array([[1, 1, 1]]), np.array([[0, 300, 0]]))
+    with pytest.raises(TypeError, match="wide"):
+        Gather(stack, (4, 4), backend="numpy", wide="yes")
     with pytest.raises(ValueError, match="sigma"):
         g.smooth_time_map(-1)
     gg = Gather(stack, (4, 4), backend="numpy", cell=(4, 4))
@@ -160,12 +182,12 @@ def test_bad_inputs_are_clear_errors():
         Gather(stack, (4, 4), backend="numpy", cell=(11, 4))
 
 
-@pytest.mark.parametrize("cell", [(8, 8), (5, 7), (6, 24), (9, 40)])
+@pytest.mark.parametrize("cell", [(8, 8), (5, 7), (9, 40), (7, 64), (9, 72), (12, 100)])
 @pytest.mark.parametrize("wrap", ["loop", "pingpong"])
 def test_vector_path_time_step_8_grid_matches_numpy(cl_context, cell, wrap):
-    """Time step 8 takes the 16-pixel vector runs: cell boundaries inside a run (two sources,
-    two tones), cells narrower than a run (three sources: per-pixel fallback), partial runs at
-    both row ends, runs whose frames cross one boundary and steep ones that span more."""
+    """Time step 8 takes the 64-pixel runs: cell boundaries inside a run (two sources, two
+    tones), cells narrower than a run (three sources: per-pixel fallback), a partial run at
+    the row's end, runs whose frames span up to four neighbours and steep ones that span more."""
     ch, cw = cell
     stack = _stack(n=11, h=2 * ch, w=3 * cw)
     H, W = 29, 157
@@ -186,6 +208,31 @@ def test_vector_path_time_step_8_grid_matches_numpy(cl_context, cell, wrap):
         g.set_source_grid(origins)
         g.set_time_map(tmap)
         res[backend] = [g.render(t).copy() for t in (0.0, 3.4, 7.999, -5.25)]
+    for a, b in zip(res["opencl"], res["numpy"]):
+        _close(a, b)
+
+
+@pytest.mark.parametrize("wide", [True, False])
+def test_time_step_8_kernels_agree_with_numpy_on_a_smooth_map(cl_context, wide):
+    """The 64-lane kernel (CPU devices) and the per-pixel one (elsewhere) on the tiles mode's
+    typical input: wide cells, a smooth map of several frames' range, tones per cell."""
+    stack = _stack(n=20, h=40, w=3 * 90)
+    H, W = 83, 64 * 5 + 17
+    rng = np.random.default_rng(7)
+    gh, gw = -(-H // 40), -(-W // 90)
+    origins = pack_source(rng.integers(0, 3, (gh, gw)) * 90, rng.integers(0, 2, (gh, gw)))
+    th, tw = -(-H // 8), -(-W // 8)
+    tmap = gaussian_smooth(rng.uniform(0, 12, (th, tw)).astype(np.float32), 2.0)
+    res = {}
+    for backend in ("opencl", "numpy"):
+        g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
+                   cell=(40, 90), time_step=8, wide=wide)
+        g.set_tones(np.array([[1.1, 0.9, 1.0], [0.7, 1.2, 2.5]]), np.array([[2, -3, 0], [0, 5, -40]]))
+        g.set_source_grid(origins)
+        g.set_time_map(tmap)
+        res[backend] = [g.render(t).copy() for t in (0.0, 2.37, 13.9)]
+        if backend == "opencl":
+            assert g.wide == wide
     for a, b in zip(res["opencl"], res["numpy"]):
         _close(a, b)
 
