@@ -162,8 +162,8 @@ typedef float16 __attribute__((aligned(4))) float16_u;
         const u16x64 r = __builtin_convertvector(                                                         \
             (__builtin_convertvector(v, u32x64) * __builtin_convertvector(g, u32x64)) >> 16, u16x64);     \
         const u16x64 q = (r + ob) >> 1;                                                                   \
-        const u16x64 d = (q - (ushort)256) & AS_U16(q > (ushort)256);                                     \
-        *(PTR)((base) + 64 * C) = __builtin_convertvector(d | AS_U16(d > (ushort)255), u8x64);            \
+        const u16x64 d = q > (ushort)256 ? q - (ushort)256 : (u16x64)0;   /* saturating subtract */       \
+        *(PTR)((base) + 64 * C) = __builtin_convertvector(d > (ushort)255 ? (u16x64)255 : d, u8x64);      \
     } while (0)
 
 __kernel void gather(__global const uchar *restrict stack,
