@@ -25,7 +25,8 @@ from ._checks import check_int
 
 __all__ = [
     "StabilityReport", "check_frames", "count_nonfinite", "evaluate", "frame_coverage", "frame_step_ratio",
-    "grid_labels", "index_coverage", "patch_coherence", "patch_completeness", "patch_distances",
+    "grid_labels", "index_coverage", "lattice_correlation", "patch_coherence", "patch_completeness",
+    "patch_distances",
     "repetition_lag", "repetition_profile", "seam_visibility", "spectrum_distance", "st_power_spectrum",
     "stability", "temporal_discontinuity",
 ]
@@ -785,6 +786,41 @@ def _nearest_rows(q: np.ndarray, db: np.ndarray) -> np.ndarray:
     for i in range(0, len(q), 1024):
         out[i:i + 1024] = np.argmin(dbn[None, :] - 2.0 * (q64[i:i + 1024] @ db64.T), axis=1)
     return out
+
+
+def lattice_correlation(frames: np.ndarray, period: int | Sequence[int]) -> tuple[float, float]:
+    """Spatial repetition at a lattice period: ``(along y, along x)`` correlation of each frame
+    with itself shifted by ``period`` ``(py, px)``, averaged over frames.
+
+    The luma of each frame, minus its mean, is correlated (Pearson) with the same frame
+    moved by ``py`` rows, and by ``px`` columns. A natural texture is near 0 at any lag
+    longer than its own structures; content that repeats at every tile of a lattice raises
+    it (a lattice of one tile: 1). Compare with the source at the same lags.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> tile = rng.integers(0, 256, (1, 8, 8)).astype(np.uint8)
+    >>> tiled = np.tile(tile, (1, 4, 4))
+    >>> [round(v, 3) for v in lattice_correlation(tiled, 8)]
+    [1.0, 1.0]
+    >>> noise = rng.integers(0, 256, (2, 32, 32)).astype(np.uint8)
+    >>> bool(max(lattice_correlation(noise, 8)) < 0.1)
+    True
+    """
+    frames = check_frames(frames)
+    py, px = _pair("period", period, 1)
+    t, h, w = frames.shape[:3]
+    if py >= h or px >= w:
+        raise ValueError(f"period {py}x{px} must be smaller than the {h}x{w} frame")
+    acc = np.zeros(2)
+    for start, chunk in _chunks(frames):
+        for g in _grey(chunk):
+            g = g - g.mean()
+            for k, (a, b) in enumerate(((g[:-py], g[py:]), (g[:, :-px], g[:, px:]))):
+                den = np.sqrt(float((a * a).mean()) * float((b * b).mean()))
+                acc[k] += float((a * b).mean()) / den if den > 0 else 0.0
+    return float(acc[0] / t), float(acc[1] / t)
 
 
 def repetition_profile(output: np.ndarray, *, source: np.ndarray | None = None,

@@ -259,3 +259,18 @@ def test_evaluate_other_size_and_nonfinite():
     bad[3, 0, 0, 0] = np.nan
     rep = m.evaluate(bad, src, window=12)
     assert rep["stability"]["nonfinite_frames"] == 1 and "patch_coherence" not in rep
+
+
+def test_lattice_correlation_sees_a_tile_lattice_and_not_noise():
+    rng = np.random.default_rng(1)
+    tile = rng.integers(0, 256, (3, 12, 10, 3)).astype(np.uint8)
+    tiled = np.tile(tile, (1, 5, 6, 1))
+    assert m.lattice_correlation(tiled, (12, 10)) == pytest.approx((1.0, 1.0))
+    # at another lag the same lattice is not a repeat
+    assert max(m.lattice_correlation(tiled, (7, 7))) < 0.2
+    # half of the cells repeat: about half the correlation
+    mixed = tiled.copy()
+    mixed[:, :, 30:] = rng.integers(0, 256, mixed[:, :, 30:].shape)
+    assert 0.3 < m.lattice_correlation(mixed, (12, 10))[0] < 0.7
+    with pytest.raises(ValueError, match="period 60x10 must be smaller"):
+        m.lattice_correlation(tiled, (60, 10))
