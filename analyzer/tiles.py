@@ -26,7 +26,20 @@ Pipeline (each step is a public function, so it can be tested and reused):
    ``r`` along the edges, costed by what the output holds across them, ``P`` fading into
    the other place over ``max(2, r // 2)`` pixels past the cut). All tiles of a class therefore carry exactly ``P``'s pixels along
    their edges; since ``P`` tiles seamlessly with itself, any two tiles of the class sit
-   next to each other, in any arrangement, exactly as ``P`` sits next to ``P``.
+   next to each other, in any arrangement, exactly as ``P`` sits next to ``P``. The price:
+   ``P``'s ring shows at every tile, a lattice that calm textures make visible
+   (:func:`dynatex.analyzer.metrics.lattice_correlation`).
+6b. ``construction="wang"`` (one texture): **stochastic Wang tiles** (Cohen et al. 2003)
+   instead of one shared ring. Each tile edge carries one of ``k`` colours; colour ``c`` of
+   the vertical (horizontal) edges is one strip of the looped clip, ``2 d`` pixels across,
+   taken at a typical place (spatial and temporal activity near the clip's median). A
+   tile's ring is the inner halves of its four strips, split in the corners by small
+   minimum cuts (:func:`wang_ring`, :func:`corner_cut`), joined to an interior from another
+   place by the ring cuts of step 6. Two tiles whose shared edge has one colour show the two
+   halves of one piece of clip there: seamless. :func:`wang_edges` lists the ``k**3`` tiles
+   (one per left, top and bottom colour), so the player can fill cells row by row with a
+   random fitting tile. Nothing repeats at every tile, but the cuts meet four different
+   strips, which is harder to hide on textures with structures larger than the strips.
 7. Mixing: every extra texture gets a loop of the same length and its own tiles cut to the
    same size; a border tile ``(a, c, side)`` (:func:`side_join`) is class ``a``'s primary
    with a strip of class ``c``'s primary along one side, ending at a closed minimum cut and
@@ -51,6 +64,7 @@ from .video import Clip, Progress
 DEFAULT_MIN_TILE = 32
 DEFAULT_MAX_TILE = 256
 MAX_STEP = 3
+CONSTRUCTIONS = ("ring", "wang")
 _SAMPLE_FRAMES = 48       # loop frames summed in the cut errors (evenly spread)
 _PRE_FRAMES = 12          # loop frames used to rank candidate positions
 
@@ -458,6 +472,103 @@ def side_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, side: str, *,
 
 
 # -- 8. colour statistics --------------------------------------------------------------------------
+# -- 6b. Wang edges ----------------------------------------------------------------------------
+def wang_edges(colours: int) -> np.ndarray:
+    """Edge colours ``(left, right, top, bottom)`` of a stochastic Wang tile set, ``(k**3, 4)`` int8.
+
+    For every pair ``(left, top)`` there are ``k`` tiles, one per ``bottom`` colour, with
+    ``right = (left + top + bottom) mod k``: a player that fills cells row by row, taking
+    ``left`` and ``top`` from the neighbours already placed, always finds ``k`` tiles that fit
+    and picks one at random (Cohen et al. 2003 use the same set of eight for two colours).
+
+    Examples
+    --------
+    >>> e = wang_edges(2)
+    >>> e.shape, sorted({(int(a), int(b)) for a, _, b, _ in e}) == [(0, 0), (0, 1), (1, 0), (1, 1)]
+    ((8, 4), True)
+    """
+    k = _int("colours", colours, 1, 8)
+    return np.array([(w, (w + n + s) % k, n, s) for w in range(k) for n in range(k) for s in range(k)], np.int8)
+
+
+def corner_cut(hs: np.ndarray, vs: np.ndarray, band: int) -> np.ndarray:
+    """Where a corner square takes the horizontal edge strip (True) rather than the vertical one.
+
+    ``hs`` and ``vs`` are ``(n, d, d, 3)`` samples of the two strips, oriented so the tile's
+    corner is at ``(0, 0)``, rows running away from the horizontal edge and columns away
+    from the vertical one. A monotone staircase path from ``(0, 0)`` to ``(d-1, d-1)`` within
+    ``band`` pixels of the diagonal minimises the summed squared difference of the strips
+    along it; the horizontal strip keeps the side of the path along its own edge (path
+    pixels included). Near the corner each strip then meets its own edge, up to ``band``
+    pixels from the corner point, where the four tiles' strips meet.
+    """
+    d = hs.shape[1]
+    cost = ((hs.astype(np.float32) - vs.astype(np.float32)) ** 2).sum(axis=(0, 3))
+    ii, jj = np.mgrid[0:d, 0:d]
+    cost = np.where(np.abs(ii - jj) <= band, cost, np.inf)
+    acc = np.full((d, d), np.inf)
+    acc[0, 0] = cost[0, 0]
+    for i in range(d):
+        for j in range(d):
+            if i == j == 0:
+                continue
+            best = min(acc[i - 1, j] if i else np.inf, acc[i, j - 1] if j else np.inf)
+            acc[i, j] = cost[i, j] + best
+    first = np.full(d, d, np.int64)          # per row, the path's first column
+    i, j = d - 1, d - 1
+    while True:
+        first[i] = min(first[i], j)
+        if i == j == 0:
+            break
+        if i and (not j or acc[i - 1, j] <= acc[i, j - 1]):
+            i -= 1
+        else:
+            j -= 1
+    return jj >= first[:, None]
+
+
+def wang_ring(hstrips: Sequence[np.ndarray], vstrips: Sequence[np.ndarray], edges: Sequence[int], depth: int,
+              *, band: int | None = None) -> np.ndarray:
+    """The boundary of a Wang tile: halves of its four edge strips, joined at the corners.
+
+    ``hstrips[c]`` is a horizontal edge strip ``(L, 2 depth, tw, 3)``: its upper half is the
+    bottom band of the tile above an edge of colour ``c``, its lower half the top band of the
+    tile below. ``vstrips[c]`` ``(L, th, 2 depth, 3)`` likewise across vertical edges. Each
+    strip is one piece of the (looped) clip, so two tiles that meet on an edge of one colour
+    continue each other there exactly. ``edges`` is ``(left, right, top, bottom)``. Returns
+    ``(L, th, tw, 3)``, defined within ``depth`` pixels of the edges (zero inside); corner
+    squares are split by :func:`corner_cut`.
+    """
+    w, e, n, s = (int(v) for v in edges)
+    length, th, _, _ = vstrips[0].shape
+    tw = hstrips[0].shape[2]
+    d = int(depth)
+    if not 1 <= d <= min(th, tw) // 2:
+        raise ValueError(f"depth must be in 1..{min(th, tw) // 2} for a {th}x{tw} tile, not {d}")
+    hc = np.zeros((length, th, tw, 3), np.uint8)
+    vc = np.zeros_like(hc)
+    hc[:, :d], hc[:, th - d:] = hstrips[n][:, d:], hstrips[s][:, :d]
+    vc[:, :, :d], vc[:, :, tw - d:] = vstrips[w][:, :, d:], vstrips[e][:, :, :d]
+    yy, xx = np.arange(th)[:, None], np.arange(tw)[None, :]
+    in_h = (yy < d) | (yy >= th - d)
+    in_v = (xx < d) | (xx >= tw - d)
+    take_h = in_h & ~in_v
+    u = _sample(length, _PRE_FRAMES)
+    band = max(1, d // 3) if band is None else band
+    for ys, xs in ((slice(0, d), slice(0, d)), (slice(0, d), slice(tw - d, tw)),
+                   (slice(th - d, th), slice(0, d)), (slice(th - d, th), slice(tw - d, tw))):
+        fy, fx = ys.start > 0, xs.start > 0          # flip so the tile's corner is at (0, 0)
+        h_sq, v_sq = hc[u][:, ys, xs], vc[u][:, ys, xs]
+        if fy:
+            h_sq, v_sq = h_sq[:, ::-1], v_sq[:, ::-1]
+        if fx:
+            h_sq, v_sq = h_sq[:, :, ::-1], v_sq[:, :, ::-1]
+        m = corner_cut(h_sq, v_sq, band)
+        m = m[::-1] if fy else m
+        take_h[ys, xs] = m[:, ::-1] if fx else m
+    return np.where(take_h[None, :, :, None], hc, vc)
+
+
 def colour_stats(tile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean RGB (0..255) and mean HSV (hue in degrees by circular mean, S and V in 0..1) of a tile."""
     import cv2
@@ -484,7 +595,8 @@ class _Texture:
         return looped_block(self.frames, self.start, self.length, self.tau, y, x, h, w, u)
 
 
-def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = None, n_tiles: int = 4,
+def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = None,
+                construction: str = "ring", n_tiles: int | None = None, edge_colours: int = 2,
                 min_tile: int = DEFAULT_MIN_TILE, max_tile: int = DEFAULT_MAX_TILE, min_loop: int = 32,
                 max_loop: int | None = None, transition: int = 8, overlap: int | None = None,
                 ring: int | None = None, flow_gain: float = 0.5, mix: Sequence[Clip | np.ndarray] = (),
@@ -498,8 +610,18 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         Frames ``(T, H, W, C)`` uint8 (grey clips are expanded to RGB).
     tile : int or (th, tw), optional
         Tile size; default from :func:`tile_period` within ``[min_tile, max_tile]``.
-    n_tiles : int
-        Tiles per texture (>= 1; the first is the primary toroidal tile).
+    construction : {"ring", "wang"}
+        How tiles are made to join (module docstring). ``"ring"``: all tiles of a class
+        share one boundary ring, so they join in any arrangement, and that ring repeats at
+        every tile (a lattice shows on calm textures). ``"wang"`` (one texture only): every
+        edge carries one of ``edge_colours`` strips and tiles join where their edge colours
+        match, so nothing repeats at every tile; its cuts are harder to hide on textures
+        with large structures (measured: benchmarks/quality_tiles.py).
+    n_tiles : int, optional
+        Tiles per texture with the ring construction (>= 1, default 4; the first is the
+        primary toroidal tile). The Wang set has ``edge_colours ** 3`` tiles.
+    edge_colours : int
+        Strips per edge direction of the Wang construction (2..4).
     min_loop, max_loop : int
         Bounds of the loop length in frames (``max_loop`` defaults to the clip length).
     transition : int
@@ -540,7 +662,17 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     names = list(names) if names is not None else ["main"] + [f"mix{i + 1}" for i in range(len(extra))]
     if len(names) != 1 + len(extra):
         raise ValueError(f"names must name {1 + len(extra)} textures, not {len(names)}")
-    n_tiles = _int("n_tiles", n_tiles, 1, 64)
+    if construction not in CONSTRUCTIONS:
+        raise ValueError(f"construction must be one of {CONSTRUCTIONS}, not {construction!r}")
+    if construction == "wang" and extra:
+        raise ValueError("construction 'wang' cannot mix textures: border tiles need every class's shared "
+                         "ring (construction='ring')")
+    if construction == "wang" and n_tiles is not None:
+        raise ValueError(f"n_tiles applies to construction 'ring' only; the Wang set has edge_colours ** 3 "
+                         f"= {edge_colours ** 3} tiles")
+    n_tiles = _int("n_tiles", 4 if n_tiles is None else n_tiles, 1, 64)
+    edge_colours = _int("edge_colours", edge_colours, 2, 4)
+    n_own = edge_colours ** 3 if construction == "wang" else n_tiles
     min_loop = _int("min_loop", min_loop, 2)
     transition = _int("transition", transition, 1)
     if max_loop is not None:
@@ -551,7 +683,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         raise ValueError(f"flow_gain must be a number in [0, 10], not {flow_gain!r}")
     min_tile = _int("min_tile", min_tile, 8)
     max_tile = _int("max_tile", max_tile, min_tile)
-    total = 6 + n_tiles + len(extra) * (3 + n_tiles) + (len(extra) + 1) * len(extra)
+    total = 6 + n_own + len(extra) * (3 + n_tiles) + (len(extra) + 1) * len(extra)
     done = 0
 
     def step(k: int = 1) -> None:
@@ -608,17 +740,24 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     # the cut: 1.6x the inside seams with depth 2 * ring, 1.15x with this)
     depth = max(r, min(th, tw) // 2 - 1 - fe)
 
-    # primary toroidal tile of every class
-    for tx in textures:
-        tx.primary, tx.primary_pos, tx.toroid_cost = _primary(tx, th, tw, by, bx, flow_gain)
-        step()
-
     tiles, tcls, rcls, masks, costs = [], [], [], [], []
-    for ci, tx in enumerate(textures):
-        tiles.append(tx.primary)
-        tcls.append(ci), rcls.append(ci), masks.append(np.full((th, tw), 255, np.uint8)), costs.append(0.0)
-        for tile_k, mask, cost in _interiors(tx, th, tw, r, n_tiles - 1, flow_gain, step):
-            tiles.append(tile_k), tcls.append(ci), rcls.append(ci), masks.append(mask), costs.append(cost)
+    edges = np.zeros((0, 4), np.int8)
+    if construction == "wang":
+        step()
+        wang, edges, strip_depth = _wang_tiles(textures[0], th, tw, r, edge_colours, flow_gain, step)
+        for tile_k, mask, cost in wang:
+            tiles.append(tile_k), tcls.append(0), rcls.append(0), masks.append(mask), costs.append(cost)
+    else:
+        # primary toroidal tile of every class, then tiles sharing its ring
+        for tx in textures:
+            tx.primary, tx.primary_pos, tx.toroid_cost = _primary(tx, th, tw, by, bx, flow_gain)
+            step()
+        for ci, tx in enumerate(textures):
+            tiles.append(tx.primary)
+            tcls.append(ci), rcls.append(ci), masks.append(np.full((th, tw), 255, np.uint8)), costs.append(0.0)
+            for tile_k, mask, cost in _interiors(tx, [tx.primary] * (n_tiles - 1), th, tw, r, flow_gain, step,
+                                                 taken=[tx.primary_pos]):
+                tiles.append(tile_k), tcls.append(ci), rcls.append(ci), masks.append(mask), costs.append(cost)
     step()
     # border tiles: a strip of class c's primary along one side of class a's primary
     sides = [-1] * len(tiles)
@@ -633,6 +772,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
             step()
     stats = [colour_stats(tl) for tl in tiles]
     step()
+    wang_info = {"edge_colours": edge_colours, "strip_depth": strip_depth} if construction == "wang" else {}
     model = TilesModel(
         tiles=np.stack(tiles), tile_class=np.array(tcls, np.int32), ring_class=np.array(rcls, np.int32),
         masks=np.stack(masks), border_side=np.array(sides, np.int8), seam_cost=np.array(costs), mean_rgb=np.array([s[0] for s in stats]),
@@ -640,9 +780,11 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         class_loop_start=np.array([tx.start for tx in textures], np.int64),
         class_loop_cost=np.array([tx.cost for tx in textures]),
         class_toroid_cost=np.array([tx.toroid_cost for tx in textures]),
-        info={"tile_h": th, "tile_w": tw, "loop_length": length, "transition": transition, "overlap_y": by,
+        edges=np.concatenate([edges, np.full((len(tiles) - len(edges), 4), -1, np.int8)]),
+        info={"construction": construction, **wang_info,
+              "tile_h": th, "tile_w": tw, "loop_length": length, "transition": transition, "overlap_y": by,
               "overlap_x": bx, "ring": r, "feather": fe, "border_depth": depth,
-              "ring_feather": min(max(2, r // 2), min(th, tw) // 2 - 1 - r), "period_y": period[0], "period_x": period[1],
+              "ring_feather": _ring_feather(r, th, tw), "period_y": period[0], "period_x": period[1],
               "periodicity": strength, "mean_flow": mean_flow, "flow_gain": float(flow_gain),
               "source_frames": t, "n_classes": len(textures),
               "median_frame_step": _median_step(main)})
@@ -678,49 +820,116 @@ def _primary(tx: _Texture, th: int, tw: int, by: int, bx: int, flow_gain: float)
     return best
 
 
-def _interiors(tx: _Texture, th: int, tw: int, r: int, count: int, flow_gain: float, step):
-    """``count`` more tiles: the primary's ring joined to loops at other, non-overlapping places.
+def _interiors(tx: _Texture, rings: Sequence[np.ndarray], th: int, tw: int, r: int, flow_gain: float, step,
+               taken: Sequence[tuple[int, int]] = ()):
+    """One tile per ring tile in ``rings``: the ring joined to the loop at another place.
 
-    The ring cuts are feathered over ``max(2, r // 2)`` pixels inside the cut: a hard cut
-    between two places of a smooth texture (sea waves) showed ~10x the interior gradient.
+    Places are ranked by how well their edges match the ring (lively places first), and
+    kept apart from each other and from ``taken`` where the clip allows. The ring cuts are
+    feathered over ``max(2, r // 2)`` pixels inside the cut: a hard cut between two places
+    of a smooth texture (sea waves) showed ~10x the interior gradient.
     """
-    if count <= 0:
+    if not rings:
         return []
-    rf = min(max(2, r // 2), min(th, tw) // 2 - 1 - r)
+    rf = _ring_feather(r, th, tw)
     f = tx.frames
     h, w = f.shape[1:3]
-    py, px = tx.primary_pos
     u = _sample(tx.length, _PRE_FRAMES)
-    prim = tx.primary[u].astype(np.float32)
     ringmask = np.ones((th, tw), bool)
     ringmask[r:th - r, r:tw - r] = False
     stride_y, stride_x = max(4, th // 4), max(4, tw // 4)
+    places = [(int(y), int(x)) for y in np.unique(np.r_[np.arange(0, h - th + 1, stride_y), h - th])
+              for x in np.unique(np.r_[np.arange(0, w - tw + 1, stride_x), w - tw])]
     act = _activity(tx)
-    ranked = []
-    for y in np.unique(np.r_[np.arange(0, h - th + 1, stride_y), h - th]):
-        for x in np.unique(np.r_[np.arange(0, w - tw + 1, stride_x), w - tw]):
-            d = tx.block(y, x, th, tw, u).astype(np.float32) - prim
-            e = (d * d).sum(axis=(0, 3))
-            ranked.append((float(e[ringmask].mean()), int(y), int(x), float(act[y:y + th, x:x + tw].mean())))
-    ranked = _lively(ranked)
-    chosen: list[tuple[int, int]] = [(py, px)]
+    chosen: list[tuple[int, int]] = list(taken)
     out = []
-    for relax in (0.5, 0.0, -1.0):     # prefer places apart from the chosen ones, then allow overlap
-        for _, y, x, _ in ranked:
-            if len(out) >= count:
+    ranked, ranked_for = [], None
+    for ring_tile in rings:
+        if ring_tile is not ranked_for:
+            ring_u = ring_tile[u].astype(np.float32)
+            ranked = []
+            for y, x in places:
+                d = tx.block(y, x, th, tw, u).astype(np.float32) - ring_u
+                e = (d * d).sum(axis=(0, 3))
+                ranked.append((float(e[ringmask].mean()), y, x, float(act[y:y + th, x:x + tw].mean())))
+            ranked, ranked_for = _lively(ranked), ring_tile
+        pick = None
+        for relax in (0.5, 0.0, -1.0):     # places apart from the chosen ones, then allow overlap
+            pick = next(((y, x) for _, y, x, _ in ranked if (y, x) not in chosen and not any(
+                abs(y - cy) < th * relax and abs(x - cx) < tw * relax for cy, cx in chosen)), None)
+            if pick is not None:
                 break
-            if any(abs(y - cy) < th * relax and abs(x - cx) < tw * relax for cy, cx in chosen) or (y, x) in chosen:
-                continue
-            inner = tx.block(y, x, th, tw)
-            tile, mask, cost = ring_join(tx.primary, inner, r, flow=tx.flow[y:y + th, x:x + tw], flow_gain=flow_gain,
-                                         feather=rf)
-            out.append((tile, mask, cost))
-            chosen.append((y, x))
-            step()
-    while len(out) < count:             # a tiny clip: repeat the primary
-        out.append((tx.primary.copy(), np.full((th, tw), 255, np.uint8), 0.0))
+        if pick is None:                   # a tiny clip: every place is taken
+            pick = ranked[len(out) % len(ranked)][1:3]
+        y, x = pick
+        tile, mask, cost = ring_join(ring_tile, tx.block(y, x, th, tw), r, flow=tx.flow[y:y + th, x:x + tw],
+                                     flow_gain=flow_gain, feather=rf)
+        out.append((tile, mask, cost))
+        chosen.append((y, x))
         step()
     return out
+
+
+def _ring_feather(r: int, th: int, tw: int) -> int:
+    return min(max(2, r // 2), min(th, tw) // 2 - 1 - r)
+
+
+def _wang_tiles(tx: _Texture, th: int, tw: int, r: int, colours: int, flow_gain: float, step, seed: int = 0):
+    """The stochastic Wang set of one texture (:func:`wang_edges`).
+
+    Edge strips: ``colours`` horizontal and ``colours`` vertical pieces of the looped clip at
+    lively places apart from each other, each ``2 depth`` pixels across its edge (``depth``
+    = the ring plus its feathering, as far as a ring cut and its fade reach). A tile's ring
+    is the inner halves of its four strips (:func:`wang_ring`), joined to an interior from
+    yet another place by the ring cuts (:func:`ring_join`).
+    """
+    d = r + _ring_feather(r, th, tw) + 1
+    f = tx.frames
+    h, w = f.shape[1:3]
+    act = _activity(tx)
+    grad = np.zeros((h, w), np.float32)
+    for i in _sample(tx.length, 8) + tx.start:
+        g = _grey(f[i:i + 1])[0]
+        grad[:, 1:] += np.diff(g, axis=1) ** 2
+        grad[1:] += np.diff(g, axis=0) ** 2
+    rng = np.random.default_rng(seed)
+
+    def places(bh: int, bw: int) -> list[tuple[int, int]]:
+        """Typical places first: spatial and temporal activity near the clip's median (a strip
+        livelier or calmer than the rest would mark every edge it sits on), shuffled."""
+        ys = np.unique(np.r_[np.arange(0, h - bh + 1, max(2, bh // 4)), h - bh])
+        xs = np.unique(np.r_[np.arange(0, w - bw + 1, max(2, bw // 4)), w - bw])
+        cand = [(int(y), int(x), float(act[y:y + bh, x:x + bw].mean()) + 1e-6,
+                 float(grad[y:y + bh, x:x + bw].mean()) + 1e-6) for y in ys for x in xs]
+        ma, mg = np.median([c[2] for c in cand]), np.median([c[3] for c in cand])
+        score = np.array([abs(np.log(c[2] / ma)) + abs(np.log(c[3] / mg)) for c in cand])
+        best = np.argsort(score, kind="stable")[:max(2 * colours, len(cand) // 4)]
+        return [cand[i][:2] for i in rng.permutation(best)]
+
+    taken: list[tuple[int, int, int, int]] = []
+
+    def pick(bh: int, bw: int) -> tuple[int, int]:
+        cands = places(bh, bw)
+        for relax in (1.0, 0.5, 0.0):
+            for y, x in cands:
+                if all(abs(y - ty) >= relax * (bh + th_) / 2 or abs(x - tx_) >= relax * (bw + tw_) / 2
+                       for ty, tx_, th_, tw_ in taken):
+                    taken.append((y, x, bh, bw))
+                    return y, x
+        y, x = cands[0]
+        taken.append((y, x, bh, bw))
+        return y, x
+
+    hstrips, vstrips = [], []
+    for _ in range(colours):
+        y, x = pick(2 * d, tw)
+        hstrips.append(tx.block(y, x, 2 * d, tw))
+        y, x = pick(th, 2 * d)
+        vstrips.append(tx.block(y, x, th, 2 * d))
+    edges = wang_edges(colours)
+    rings = [wang_ring(hstrips, vstrips, e, d) for e in edges]
+    tiles = _interiors(tx, rings, th, tw, r, flow_gain, step, taken=[(y, x) for y, x, _, _ in taken])
+    return tiles, edges, d
 
 
 def _activity(tx: _Texture) -> np.ndarray:

@@ -10,7 +10,8 @@ For each clip: analyze with ``--methods tiles``, play ``--frames`` frames at ``-
   played twice, at the wrap frame and at every frame of the per-pixel transition (the
   worst is reported), against the source's median frame step;
 - repetition: ``repetition_lag`` of the output normalised by its own median frame step
-  (None = no repeat up to ``frames - 10``), and the profile at the loop length;
+  (None = no repeat up to ``frames - 10``), and the profile at the loop length; in space,
+  ``lattice_correlation`` of the output at the tile size beside the source's at the same lags;
 - mixing (two textures, label map "halves" with border tiles): seam visibility across the
   texture border over seam visibility across tile borders inside one texture, measured at
   the minimum cut itself (``source_class_map(strict=True)``) and where the dominant texture
@@ -72,10 +73,12 @@ def uncut_blocks(frames: np.ndarray, shape: tuple[int, int], tile: tuple[int, in
 
 
 def measure(name: str, frames: np.ndarray, *, size: tuple[int, int], n_out: int, backend: str, workdir: str,
-            mix: np.ndarray | None = None) -> dict:
+            mix: np.ndarray | None = None, construction: str | None = None) -> dict:
     res: dict = {"clip": name, "source": list(frames.shape)}
     t0 = time.perf_counter()
-    model = learn_tiles(frames, mix=[mix] if mix is not None else ())
+    model = learn_tiles(frames, mix=[mix] if mix is not None else (),
+                        construction=construction if mix is None else None)
+    res["construction"] = model.info["construction"]
     res["analysis_s"] = round(time.perf_counter() - t0, 2)
     th, tw = model.tile_size
     res.update(tile=f"{tw}x{th}", loop=model.loop_length, n_tiles=model.n_tiles)
@@ -112,6 +115,8 @@ def measure(name: str, frames: np.ndarray, *, size: tuple[int, int], n_out: int,
     res["repetition_lag"] = metrics.repetition_lag(out, max_lag=max_lag)
     res["repetition_min_profile"] = float(prof.min())
     res["repetition_at_loop"] = float(prof[model.loop_length - 1]) if model.loop_length <= max_lag else None
+    res["lattice_correlation"] = [round(v, 3) for v in metrics.lattice_correlation(out[::10], (th, tw))]
+    res["lattice_correlation_source"] = [round(v, 3) for v in metrics.lattice_correlation(frames[::10], (th, tw))]
     if mix is not None:
         for tone in (None, "consensus"):
             with TilesPlayer(path, backend=backend, size=size, seed=1, labels="halves", tone=tone) as p:
@@ -144,26 +149,36 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--backend", default="opencl", choices=("opencl", "numpy"))
     ap.add_argument("--json", default=None)
+    ap.add_argument("--construction", default=None, choices=("wang", "ring"),
+                    help="tile construction of the single-texture runs (default: the analyzer's, wang)")
+    ap.add_argument("--clips", default="grass,water,generated,grass+water",
+                    help="comma-separated subset of grass, water, generated, grass+water (mixing)")
     args = ap.parse_args(argv)
     size = tuple(int(v) for v in args.size.lower().split("x"))
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         grass = load_clip(str(CLIPS / "grass_straw_wind_dyntex.avi")).frames
         water = load_clip(str(CLIPS / "water_sea_waves_dyntex.avi")).frames
-        for name, frames, mix in (("grass", grass, water), ("water", water, None),
-                                  ("generated", generated_clip(), None)):
-            r = measure(name, frames, size=size, n_out=args.frames, backend=args.backend, workdir=tmp, mix=mix)
+        runs = {"grass": (grass, None), "water": (water, None), "generated": (generated_clip(), None),
+                "grass+water": (grass, water)}
+        for name in args.clips.split(","):
+            frames, mix = runs[name]
+            r = measure(name.replace("+", "_"), frames, size=size, n_out=args.frames, backend=args.backend,
+                        workdir=tmp, mix=mix, construction=args.construction)
             results.append(r)
             print(json.dumps(r), file=sys.stderr)
-    print("| clip | tile | loop | seam (tiles; with ring cuts) | seam (uncut blocks) | wrap disc. | worst transition | "
-          "repetition lag (min profile) | mix border/inside (at cut, in fade) | tone error | analysis s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| clip | construction | tile | loop | seam (tiles; with ring cuts) | seam (uncut blocks) | wrap disc. | "
+          "worst transition | repetition lag (min profile) | lattice corr. y/x (source) | "
+          "mix border/inside (at cut, in fade) | tone error | analysis s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
         mixr = (f"cut {r['mix_ratio_at_cut']:.2f} ({r['mix_ratio_at_cut_tone']:.2f} toned), fade "
                 f"{r['mix_ratio']:.2f} ({r['mix_ratio_tone']:.2f} toned)") if "mix_ratio" in r else "-"
-        print(f"| {r['clip']} | {r['tile']} | {r['loop']} | {r['seam_tiles']:.3f}; {r['seam_tiles_and_ring_cuts']:.3f} | {r['seam_uncut_blocks']:.2f} | "
+        lat, lsrc = r["lattice_correlation"], r["lattice_correlation_source"]
+        print(f"| {r['clip']} | {r['construction']} | {r['tile']} | {r['loop']} | {r['seam_tiles']:.3f}; "
+              f"{r['seam_tiles_and_ring_cuts']:.3f} | {r['seam_uncut_blocks']:.2f} | "
               f"{r['wrap_discontinuity']:.2f} | {r['transition_discontinuity_max']:.2f} | {r['repetition_lag']} "
-              f"({r['repetition_min_profile']:.2f}) | "
+              f"({r['repetition_min_profile']:.2f}) | {lat[0]:.2f}/{lat[1]:.2f} ({lsrc[0]:.2f}/{lsrc[1]:.2f}) | "
               f"{mixr} | {100 * r['tone_max_rel_error']:.2f}% | {r['analysis_s']} |")
     if args.json:
         with open(args.json, "w") as f:

@@ -217,12 +217,42 @@ class TilesPlayer(Player):
     def _arrange(self) -> None:
         """Choose a tile of its class for every cell (seeded) and build the gather's source."""
         m = self.model
+        if m.wang:
+            self._build_source(self._wang_arrangement())
+            return
         choice = np.empty(self.grid_shape, np.int64)
         for c in np.unique(self.labels):
             own = m.tiles_of(int(c))
             cells = self.labels == c
             choice[cells] = own[self._rng.integers(0, len(own), int(cells.sum()))]
         self._build_source(choice)
+
+    def _wang_arrangement(self) -> np.ndarray:
+        """A Wang set's cells row by row: random top colours for the first row and a random
+        left colour per row; each cell draws its bottom colour, which (with its left and top)
+        names its tile, whose right colour is then the next cell's left (right = (left + top +
+        bottom) mod k, as :func:`dynatex.analyzer.tiles.wang_edges` builds the set)."""
+        e = self.model.edges.astype(np.int64)
+        k = int(e.max()) + 1
+        lut = np.empty((k, k, k), np.int64)
+        lut[e[:, 0], e[:, 2], e[:, 3]] = np.arange(len(e))
+        gh, gw = self.grid_shape
+        choice = np.empty((gh, gw), np.int64)
+        top = self._rng.integers(0, k, gw)
+        for i in range(gh):
+            bottom = self._rng.integers(0, k, gw)
+            right = (self._rng.integers(0, k) + np.cumsum(top + bottom)) % k
+            left = np.r_[(right[0] - top[0] - bottom[0]) % k, right[:-1]]
+            choice[i] = lut[left, top, bottom]
+            top = bottom
+        return choice
+
+    def _wang_mismatch(self, arrangement: np.ndarray) -> int:
+        """Shared edges whose colours differ in ``arrangement`` (0 for a ring tile set)."""
+        if not self.model.wang:
+            return 0
+        e = self.model.edges[arrangement]
+        return int((e[:, :-1, 1] != e[:, 1:, 0]).sum() + (e[:-1, :, 3] != e[1:, :, 2]).sum())
 
     def _build_source(self, choice: np.ndarray) -> None:
         m = self.model
@@ -530,22 +560,29 @@ class TilesPlayer(Player):
             arrangement = np.asarray(state["arrangement"], np.int64)
             t = check_float("t", state["t"], 0.0, float(self.loop_length))
             phase = check_int("phase", state["phase"], 0)
-            self.speed = state["speed"]
-            self.epoch = state["epoch"]
-            self._sigma = check_float("sigma", state["sigma"], 0.0, 4096.0)
-            self._max_shift = check_float("max_shift", state["max_shift"], 0.0, float(self.loop_length))
+            speed = check_float("speed", state["speed"], *SPEED_RANGE)
+            epoch = check_int("epoch", state["epoch"], 0, 10**7)
+            sigma = check_float("sigma", state["sigma"], 0.0, 4096.0)
+            max_shift = check_float("max_shift", state["max_shift"], 0.0, float(self.loop_length))
+            tone = state.get("tone")
+            self.tone_target(tone)                          # validates it
         except KeyError as exc:
             raise ValueError(f"state lacks {exc.args[0]!r}") from None
         if any(c.shape != self.grid_shape or not np.isfinite(c).all() for c in cells):
             raise ValueError(f"state offsets must be finite with shape {self.grid_shape}")
         if arrangement.shape != self.grid_shape or arrangement.min() < 0 or arrangement.max() >= self.n_tiles:
             raise ValueError("state arrangement does not fit this tile set")
+        if not (self.model.tile_class[arrangement] == labels).all():
+            raise ValueError("state arrangement does not match its labels")
+        if self._wang_mismatch(arrangement):
+            raise ValueError(f"state arrangement puts {self._wang_mismatch(arrangement)} Wang edges of "
+                             "different colours together")
+        # everything checked: now change the player
         self._rng, self.labels, self._t, self._phase = rng, labels, t, phase
         self._cells_a, self._cells_b = cells
         self.arrangement = arrangement
-        if not (self.model.tile_class[arrangement] == labels).all():
-            raise ValueError("state arrangement does not match its labels")
+        self.speed, self.epoch, self._sigma, self._max_shift = speed, epoch, sigma, max_shift
         self.seed = int(state.get("seed", self.seed))
-        self.tone = state.get("tone")
+        self.tone = tone
         self._build_source(arrangement)
         self._refresh_fields()

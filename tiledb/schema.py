@@ -9,7 +9,7 @@ import re
 
 FORMAT_NAME = "dynatex-tiledb"
 #: (major, minor). A reader refuses another major and accepts any minor.
-FORMAT_VERSION = (1, 0)
+FORMAT_VERSION = (1, 1)
 
 # Root attributes.
 ATTR_FORMAT = "format"

@@ -1,9 +1,11 @@
 """The triple toroid-shaped tile set of a texture (the ``tiles`` group).
 
-Every tile is an ``L x th x tw`` RGB block that repeats seamlessly in x, y and t. Tiles
-of one class share one boundary ring (the class's primary tile outside a minimum cut),
-so any arrangement of them is seamless. A border tile is a class's primary with a strip
-of another class's primary along one side; the player uses it where two classes meet.
+Every tile is an ``L x th x tw`` RGB block that loops seamlessly in t. Two constructions
+join tiles in x and y. Ring: tiles of one class share one boundary ring (the class's
+primary toroidal tile outside a minimum cut), so any arrangement of them is seamless; a
+border tile is a class's primary with a strip of another class's primary along one side,
+used where two classes meet. Wang (one class): every tile edge carries one of a few edge
+colours, and tiles join where the colours of their shared edge match (``edges``).
 """
 from __future__ import annotations
 
@@ -50,9 +52,13 @@ class TilesModel:
     class_loop_cost : (C,) float64
         Frame-set loop cost of each class (RMS difference over the median frame step).
     class_toroid_cost : (C, 2) float64
-        Mean cut error of the primary tile's horizontal and vertical toroidal cuts.
+        Mean cut error of the primary tile's horizontal and vertical toroidal cuts (zeros
+        with the Wang construction, which has no primary).
     info : dict
         Scalars (tile size, loop length, period, band widths, ...) stored as attributes.
+    edges : (K, 4) int8, optional
+        Wang edge colours ``(left, right, top, bottom)`` of each tile, ``-1`` for tiles
+        outside the Wang set (all of them with the ring construction; the default).
     """
 
     tiles: np.ndarray
@@ -68,6 +74,16 @@ class TilesModel:
     class_loop_cost: np.ndarray
     class_toroid_cost: np.ndarray
     info: dict = field(default_factory=dict)
+    edges: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.edges is None:
+            self.edges = np.full((len(self.tile_class), 4), -1, np.int8)
+
+    @property
+    def wang(self) -> bool:
+        """Whether the tiles are a Wang set (join where edge colours match, ``edges``)."""
+        return bool((np.asarray(self.edges) >= 0).any())
 
     @property
     def n_tiles(self) -> int:
@@ -99,6 +115,7 @@ def write(group: h5py.Group, model: TilesModel) -> None:
     group.create_dataset("ring_class", data=np.asarray(model.ring_class, np.int32))
     group.create_dataset("masks", data=np.asarray(model.masks, np.uint8), compression="lzf")
     group.create_dataset("border_side", data=np.asarray(model.border_side, np.int8))
+    group.create_dataset("edges", data=np.asarray(model.edges, np.int8))
     for name in ("seam_cost", "mean_rgb", "mean_hsv", "class_loop_cost", "class_toroid_cost"):
         group.create_dataset(name, data=np.asarray(getattr(model, name), np.float64))
     group.create_dataset("class_loop_start", data=np.asarray(model.class_loop_start, np.int64))
@@ -145,6 +162,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
         class_loop_cost=ds(group, "class_loop_cost", kind="f", shape=(c,)),
         class_toroid_cost=ds(group, "class_toroid_cost", kind="f", shape=(c, 2)),
         info=check.info(group),
+        edges=ds(group, "edges", kind="i", shape=(k, 4)).astype(np.int8) if "edges" in group else None,
     )
     if model.tiles.dtype != np.uint8:
         check.fail(group.name + "/tiles", f"dtype {model.tiles.dtype} is not uint8")
@@ -163,4 +181,27 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
         check.fail(group.name + "/border_side", "must be 0..3 for border tiles and -1 for the others")
     if (model.mean_rgb < 0).any() or (model.mean_rgb > 255).any():
         check.fail(group.name + "/mean_rgb", "values outside 0..255")
+    _check_edges(group.name + "/edges", model, check)
     return model
+
+
+def _check_edges(where: str, model: TilesModel, check: Checker) -> None:
+    """Wang edges: whole rows of -1 or colours ``0 .. k-1``; one class; one tile per
+    ``(left, top, bottom)`` with ``right = (left + top + bottom) mod k`` (the player fills
+    cells row by row from the first three)."""
+    e = np.asarray(model.edges)
+    if not model.wang:
+        if (e != -1).any():
+            check.fail(where, "values must be -1 or edge colours >= 0")
+        return
+    wang = (e >= 0).all(axis=1)
+    if ((e >= 0).any(axis=1) & ~wang).any():
+        check.fail(where, "a tile has colours on some edges and -1 on others")
+    k = int(e[wang].max()) + 1
+    if k > 8 or model.n_classes != 1 or not wang.all():
+        check.fail(where, "a Wang set must be every tile of a single class, with at most 8 colours")
+    want = {(a, (a + b + c) % k, b, c) for a in range(k) for b in range(k) for c in range(k)}
+    have = {tuple(int(v) for v in row) for row in e}
+    if len(e) != len(want) or have != want:
+        check.fail(where, f"a Wang set of {k} colours must hold one tile per (left, top, bottom) with right = "
+                          "(left + top + bottom) mod colours")

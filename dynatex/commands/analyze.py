@@ -55,7 +55,14 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g = p.add_argument_group("tiles")
     g.add_argument("--tile", type=_tile_arg, default=None, metavar="N or WxH",
                    help="tile size in pixels (default: from the dominant spatial period)")
-    g.add_argument("--tiles-n", type=positive_int, default=4, help="tiles per texture (default 4)")
+    g.add_argument("--tiles-construction", choices=("ring", "wang"), default="ring",
+                   help="ring: tiles share one boundary ring and join in any arrangement (default); wang: "
+                        "edge-coloured tiles that join where colours match, with no content repeated at every "
+                        "tile (one texture only)")
+    g.add_argument("--tiles-n", type=positive_int, default=None,
+                   help="tiles per texture with the ring construction (default 4)")
+    g.add_argument("--tiles-edge-colours", type=positive_int, default=2,
+                   help="Wang edge colours per direction, 2..4 (default 2: 8 tiles)")
     g.add_argument("--tiles-min-loop", type=positive_int, default=32, help="shortest loop in frames (default 32)")
     g.add_argument("--tiles-max-loop", type=positive_int, default=None, help="longest loop (default: the clip)")
     g.add_argument("--tiles-transition", type=positive_int, default=8,
@@ -113,7 +120,8 @@ def method_params(name: str, args: argparse.Namespace) -> dict:
             mix.append(load_clip_arg(path, stop=args.stop, step=args.step, size=args.resize,
                                      color=not args.grey).frames)
         names = None if args.tiles_names is None else [n.strip() for n in args.tiles_names.split(",")]
-        return {"tile": args.tile, "n_tiles": args.tiles_n, "min_loop": args.tiles_min_loop,
+        return {"tile": args.tile, "construction": args.tiles_construction, "n_tiles": args.tiles_n,
+                "edge_colours": args.tiles_edge_colours, "min_loop": args.tiles_min_loop,
                 "max_loop": args.tiles_max_loop, "transition": args.tiles_transition, "ring": args.tiles_ring,
                 "flow_gain": args.tiles_flow_gain, "mix": mix, "names": names}
     if name == "quilt":
@@ -183,9 +191,11 @@ def _summary(name: str, model) -> str:
                 f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
                 f"{info.get('recon_error_pca_dim', 0):.3f})")
     if name == "tiles":
+        kind = (f"Wang set of {info.get('edge_colours')} edge colours" if model.wang
+                else f"ring construction, toroidal cut cost {model.class_toroid_cost.mean():.4g}")
         return (f"{model.n_tiles} tiles of {model.tile_size[1]}x{model.tile_size[0]}, loop {model.loop_length} "
                 f"frames from {model.class_loop_start.tolist()}, classes {', '.join(model.class_names)}, "
-                f"toroidal cut cost {model.class_toroid_cost.mean():.4g}, ring seam cost "
+                f"{kind}, ring seam cost "
                 f"{model.seam_cost[model.seam_cost > 0].mean() if (model.seam_cost > 0).any() else 0:.4g}")
     if name == "quilt":
         w, h = model.size

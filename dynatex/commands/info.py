@@ -47,6 +47,9 @@ def _method_info(method: str, model) -> dict:
                     ring_seam_cost=[round(float(v), 2) for v in model.seam_cost],
                     mean_rgb=[[round(float(v), 1) for v in row] for row in model.mean_rgb],
                     tiles_mb=round(model.tiles.nbytes / 2**20, 2))
+        info.setdefault("construction", "wang" if model.wang else "ring")
+        if model.wang:
+            info["wang_edges_left_right_top_bottom"] = model.edges.tolist()
     return info
 
 

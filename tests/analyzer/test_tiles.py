@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from dynatex.analyzer import load_clip, metrics
-from dynatex.analyzer.tiles import (circular_cut, find_loop, learn_tiles, looped_block, ring_join, side_join,
-                                    tile_period, transition_map)
+from dynatex.analyzer.tiles import (circular_cut, corner_cut, find_loop, learn_tiles, looped_block, ring_join,
+                                    side_join, tile_period, transition_map, wang_edges)
 
 from ..conftest import wave_clip
 
@@ -184,3 +184,64 @@ def test_real_clip_tiles_are_seamless(clips_dir):
     twice = np.concatenate([m.tiles[0], m.tiles[0]])
     wrap = metrics.temporal_discontinuity(twice, [m.loop_length], source=clip.frames)[0]
     assert seam <= 1.15 and wrap <= 1.3, (seam, wrap)
+
+
+# -- Wang construction -------------------------------------------------------------------------
+def test_wang_edges_hold_one_tile_per_left_top_bottom():
+    for k in (2, 3):
+        e = wang_edges(k).astype(int)
+        assert e.shape == (k ** 3, 4) and e.min() == 0 and e.max() == k - 1
+        assert len({(a, c, d) for a, _, c, d in e}) == k ** 3
+        assert ((e[:, 0] + e[:, 2] + e[:, 3]) % k == e[:, 1]).all()
+
+
+def test_corner_cut_keeps_each_strip_on_its_own_edge():
+    rng = np.random.default_rng(2)
+    for d, band in ((6, 2), (9, 3), (11, 1)):
+        hs, vs = rng.random((4, d, d, 3)), rng.random((4, d, d, 3))
+        take_h = corner_cut(hs, vs, band)
+        assert take_h[0].all()                              # the horizontal edge: its strip
+        assert take_h[band + 1:, 0].sum() == 0              # the vertical edge past the band: the other
+        first = np.argmax(take_h, axis=1)
+        assert (np.diff(first) >= 0).all() and (np.abs(first - np.arange(d)) <= band).all()
+    # a zero-cost staircase is the path taken
+    hs, vs = np.ones((1, 6, 6, 3)), np.zeros((1, 6, 6, 3))
+    for i in range(6):
+        hs[0, i, i] = vs[0, i, i] = 0
+    assert (np.argmax(corner_cut(hs, vs, 2), axis=1) == np.arange(6)).all()
+
+
+@pytest.fixture(scope="module")
+def wang_model():
+    return learn_tiles(_stochastic(), tile=24, construction="wang", min_loop=24)
+
+
+def test_wang_tiles_join_where_edge_colours_match(wang_model):
+    """Across an edge of one colour both tiles show the two halves of one strip: the step
+    across it is like a step inside a tile; across edges of different colours it is not."""
+    m = wang_model
+    assert m.wang and m.n_tiles == 8 and m.info["construction"] == "wang"
+    t = m.tiles.astype(np.float32)
+    e, d = m.edges, m.info["strip_depth"]
+    th, tw = m.tile_size
+    inner = ((t[:, :, :, 1:] - t[:, :, :, :-1]) ** 2).mean()
+    ratios = {True: [], False: []}
+    for a in range(8):
+        for b in range(8):
+            x = ((t[a, :, d:th - d, -1] - t[b, :, d:th - d, 0]) ** 2).mean() / inner
+            y = ((t[a, :, -1, d:tw - d] - t[b, :, 0, d:tw - d]) ** 2).mean() / inner
+            ratios[bool(e[a, 1] == e[b, 0])].append(x)
+            ratios[bool(e[a, 3] == e[b, 2])].append(y)
+    assert max(ratios[True]) < 1.5, max(ratios[True])
+    assert np.mean(ratios[False]) > 2 * np.mean(ratios[True])
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"construction": "hex"}, "construction must be one of"),
+    ({"construction": "wang", "n_tiles": 3}, "n_tiles applies to construction 'ring' only"),
+    ({"construction": "wang", "edge_colours": 5}, "edge_colours must be in"),
+    ({"construction": "wang", "mix": [_stochastic(seed=1)]}, "cannot mix textures"),
+])
+def test_wang_bad_options_are_clear_errors(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        learn_tiles(_stochastic(t=40), tile=16, min_loop=12, transition=4, **kwargs)

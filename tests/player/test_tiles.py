@@ -220,3 +220,53 @@ def test_blobs_preset_follows_the_seed(tiles_db):
             p.reseed(seed)
             np.testing.assert_array_equal(p.labels, maps[seed])
     assert not np.array_equal(maps[1], maps[2])
+
+
+# -- Wang tile sets ------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def ring_and_wang_dbs(tmp_path_factory):
+    """One stochastic clip cut both ways, tiles 16x16."""
+    from ..analyzer.test_tiles import _stochastic
+    frames = _stochastic(t=70, h=56, w=72)
+    out = {}
+    for construction in ("ring", "wang"):
+        model = learn_tiles(frames, tile=16, construction=construction, min_loop=20)
+        path = tmp_path_factory.mktemp(construction) / "tiles.h5"
+        with DatabaseWriter(path) as w:
+            w.put_texture("noise", load_clip(frames).source_info())
+            w.put_method("noise", "tiles", model)
+        out[construction] = path
+    return out
+
+
+@pytest.mark.parametrize("seed, size", [(0, (48, 32)), (5, (200, 120)), (9, (1000, 37))])
+def test_wang_arrangement_matches_every_edge(ring_and_wang_dbs, seed, size):
+    with TilesPlayer(ring_and_wang_dbs["wang"], size=size, seed=seed) as p:
+        assert p._wang_mismatch(p.arrangement) == 0
+        e = p.model.edges[p.arrangement]
+        assert (e[:, :-1, 1] == e[:, 1:, 0]).all() and (e[:-1, :, 3] == e[1:, :, 2]).all()
+        if p.arrangement.size >= 200:
+            assert len(np.unique(p.arrangement)) == 8            # the whole set is used
+
+
+def test_wang_output_repeats_far_less_at_the_tile_period(ring_and_wang_dbs):
+    """The ring every ring tile shares shows at every cell; Wang strips differ from edge to edge."""
+    lat = {}
+    for construction, path in ring_and_wang_dbs.items():
+        out = _frames(path, 20, size=(192, 160), seed=3)
+        lat[construction] = max(metrics.lattice_correlation(out, 16))
+    assert lat["wang"] < 0.5 * lat["ring"], lat
+
+
+def test_wang_state_with_mismatched_edges_is_refused_and_changes_nothing(ring_and_wang_dbs):
+    with TilesPlayer(ring_and_wang_dbs["wang"], size=(96, 64), seed=1) as p:
+        state = p.get_state()
+        bad = dict(state)
+        bad["arrangement"] = np.zeros_like(state["arrangement"]) + 1       # tile 1 beside itself: 0 | 1 edges
+        before = p.arrangement.copy()
+        with pytest.raises(ValueError, match="Wang edges of different colours"):
+            p.set_state(bad)
+        assert np.array_equal(p.arrangement, before)
+        reference = p.next_frame().copy()
+        p.set_state(state)
+        assert np.array_equal(p.next_frame(), reference)

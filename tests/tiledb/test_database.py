@@ -5,14 +5,14 @@ import h5py
 import numpy as np
 import pytest
 
-from dynatex.tiledb import (MethodNotFoundError, TextureNotFoundError, TileDBError, TileDBFormatError,
+from dynatex.tiledb import (FORMAT_VERSION, MethodNotFoundError, TextureNotFoundError, TileDBError, TileDBFormatError,
                             TileDBNotFoundError, TileDBVersionError, open_db)
 
 
 def test_open_lists_textures_and_reads_lds(lds_db):
     with open_db(lds_db) as db:
         assert db.textures == ("waves",)
-        assert db.version == (1, 0)
+        assert db.version == FORMAT_VERSION == (1, 1)
         tex = db.texture()            # the only one
         assert tex.methods == ("lds",)
         m = tex.read("lds")

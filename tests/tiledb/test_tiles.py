@@ -74,9 +74,54 @@ def _attr(name, value):
     (_attr("loop_length", 1), r"@loop_length: loop length 1 outside"),
     (_attr("n_tiles", 10**6), r"@n_tiles"),
     (lambda g: g.__delitem__("masks"), r"/masks: missing dataset"),
+    (_replace("edges", lambda a: np.full_like(a, 1)), r"/edges: a Wang set must be every tile of a single class"),
+    (_replace("edges", lambda a: np.full((len(a), 3), -1, np.int8)), r"/edges: has shape"),
 ])
 def test_damaged_group_is_refused(db_path, tmp_path, edit, match):
     path = _damaged(db_path, tmp_path, edit)
+    with TileDB(path) as db:
+        with pytest.raises(TileDBFormatError, match=match):
+            db.texture("waves").read("tiles")
+
+
+@pytest.fixture(scope="module")
+def wang_path(tmp_path_factory):
+    frames = wave_clip(50, 40, 48)
+    model = learn_tiles(frames, tile=16, construction="wang", min_loop=16)
+    path = tmp_path_factory.mktemp("wang") / "wang.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("waves", load_clip(frames).source_info())
+        w.put_method("waves", "tiles", model)
+    return path, model
+
+
+def test_wang_round_trip_and_a_ring_set_has_no_colours(wang_path, db_path):
+    path, model = wang_path
+    with TileDB(path) as db:
+        back = db.texture("waves").read("tiles")
+    assert back.wang and np.array_equal(back.edges, model.edges) and back.info["construction"] == "wang"
+    assert back.info["edge_colours"] == 2 and back.n_tiles == 8
+    with TileDB(db_path) as db:
+        ring = db.texture("waves").read("tiles")
+    assert not ring.wang and (ring.edges == -1).all()
+
+
+def test_tile_set_without_edges_reads_as_ring(db_path, tmp_path):
+    """A format 1.0 file has no ``edges``: every tile is outside any Wang set."""
+    path = _damaged(db_path, tmp_path, lambda g: g.__delitem__("edges"))
+    with TileDB(path) as db:
+        back = db.texture("waves").read("tiles")
+    assert not back.wang and back.edges.shape == (back.n_tiles, 4)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (_replace("edges", lambda a: np.where(np.arange(4) == 0, -1, a).astype(np.int8)), "some edges and -1 on others"),
+    (_replace("edges", lambda a: np.stack([a[:, 0], 1 - a[:, 1], a[:, 2], a[:, 3]], 1)),
+     "one tile per \\(left, top, bottom\\)"),
+    (_replace("edges", lambda a: np.concatenate([a[:1], a[:-1]])), "one tile per \\(left, top, bottom\\)"),
+])
+def test_damaged_wang_edges_are_refused(wang_path, tmp_path, edit, match):
+    path = _damaged(wang_path[0], tmp_path, edit)
     with TileDB(path) as db:
         with pytest.raises(TileDBFormatError, match=match):
             db.texture("waves").read("tiles")
