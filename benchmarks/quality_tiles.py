@@ -77,7 +77,7 @@ def measure(name: str, frames: np.ndarray, *, size: tuple[int, int], n_out: int,
     res: dict = {"clip": name, "source": list(frames.shape)}
     t0 = time.perf_counter()
     model = learn_tiles(frames, mix=[mix] if mix is not None else (),
-                        construction=construction if mix is None else None)
+                        construction=construction if construction and mix is None else "ring")
     res["construction"] = model.info["construction"]
     res["analysis_s"] = round(time.perf_counter() - t0, 2)
     th, tw = model.tile_size

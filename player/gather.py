@@ -49,7 +49,7 @@ are contracted, moving ``w`` by one).
 Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders runs of 64
 pixels starting at multiples of 64 on ``ROWS`` rows: a run inside the row whose source is
 linear (one cell, or two cells split at a boundary and merged bytewise; a per-pixel map
-with consecutive pixels and one tone) and whose frames span at most three neighbours is
+with consecutive pixels and one tone) and whose frames span at most five neighbours is
 blended and toned on 64-byte vectors in 16-bit lanes, tone factors pre-expanded per byte
 on the host; other runs, and other time steps, go pixel by pixel with the same integers.
 Where the device shares host memory (PoCL on the CPU; probed once at open,

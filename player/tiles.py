@@ -20,6 +20,10 @@ show their class primary, which the border tiles carry beyond the strip. Colour 
 (feathered pixels get a blended tone), so a ring keeps one tone wherever it appears.
 Without mixing the source is a cell grid (no per-pixel map is read); with mixing a
 per-pixel source map is built once per arrangement.
+
+A Wang tile set (``construction="wang"`` in the analyzer) is arranged row by row so that
+every shared edge has one colour on both sides (:meth:`TilesPlayer._wang_arrangement`);
+a state whose arrangement breaks an edge is refused.
 """
 from __future__ import annotations
 

@@ -92,8 +92,8 @@ inline void pixel(__global const uchar *restrict stack, __global const ushort *r
 // multiply-add, and u = (int)(256 (time - lo) + 0.5) gives its frame (lo + u / 256) and its
 // weight (u % 256) at once: the same integers as floor and weight in the header's formula.
 // When the run lies inside the row, its source is linear (inside one cell, or two cells
-// split at a boundary; a per-pixel map must be linear with one tone) and the frames span at
-// most three neighbours, the run is blended and toned in 16-bit lanes on 64-byte vectors:
+// split at a boundary; a per-pixel map must be linear with one tone) and its frames lie within
+// lo .. lo + MAX_SPAN + 1, the run is blended and toned in 16-bit lanes on 64-byte vectors:
 // three chunks of 64 bytes, each byte's pixel found by a shuffle. Any other run goes pixel
 // by pixel with the same formula. (Clang's ext_vector_type gives the 64-wide types OpenCL C
 // lacks: on AVX-512 one operation covers 32 or 64 lanes, where a float16 covers 16.)
@@ -105,7 +105,6 @@ typedef uint   u32x64 __attribute__((ext_vector_type(64)));
 typedef int    i32x64 __attribute__((ext_vector_type(64)));
 typedef float  f32x64 __attribute__((ext_vector_type(64)));
 typedef u8x64 __attribute__((aligned(1))) u8x64_u;
-#define MAX_SPAN 3   // a fast run blends frames lo .. lo + MAX_SPAN + 1 at most
 typedef u16x64 __attribute__((aligned(2))) u16x64_u;
 typedef int16 __attribute__((aligned(4))) int16_u;
 typedef float16 __attribute__((aligned(4))) float16_u;
@@ -116,6 +115,7 @@ typedef float16 __attribute__((aligned(4))) float16_u;
 #define AS_U16(x) __builtin_astype((x), u16x64)
 // lanes where m is all ones take b, the others a
 #define PICK(m, a, b) (((a) & ~(m)) | ((b) & (m)))
+#define MAX_SPAN 3   // a fast run blends frames lo .. lo + MAX_SPAN + 1 at most
 
 #define IOTA64 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 60, 61, 62, 63
 #define KLO 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8, 8
@@ -127,7 +127,7 @@ typedef float16 __attribute__((aligned(4))) float16_u;
 
 // One 64-byte chunk C (0..2) of a fast run: pick each byte's frames, blend, tone, store at
 // base + 64 C (a pointer of type PTR).
-#define CHUNK(C, PTR, base)                                                                                    \
+#define CHUNK(C, PTR, base)                                                                               \
     do {                                                                                                  \
         const long o0 = pa + 64 * C, o1 = pb + 64 * C;                                                    \
         u8x64 fa = LOAD64(stack + fo[0] + o0), fb = LOAD64(stack + fo[1] + o0);                           \
@@ -151,8 +151,9 @@ typedef float16 __attribute__((aligned(4))) float16_u;
             }                                                                                             \
         }                                                                                                 \
         const u16x64 wc = __builtin_shufflevector(w16, w16, PIX##C);                                      \
-        const u16x64 v = __builtin_convertvector(fa, u16x64) * ((ushort)256 - wc)                         \
-                         + __builtin_convertvector(fb, u16x64) * wc;                                      \
+        /* a (256 - w) + b w = 256 a + (b - a) w, exact in wrapping 16-bit lanes (the result fits) */   \
+        const u16x64 a16 = __builtin_convertvector(fa, u16x64);                                           \
+        const u16x64 v = (a16 << 8) + (__builtin_convertvector(fb, u16x64) - a16) * wc;                  \
         u16x64 g = LOADT(tn + 64 * C), ob = LOADT(tn + TONE_OB + 64 * C);                                 \
         if (toneb != tone) {                                                                              \
             const u16x64 mt = AS_U16(iota16 >= (short)(3 * split - 64 * C));                              \
