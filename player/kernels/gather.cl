@@ -55,6 +55,12 @@ inline int fast_floor(float v)
     return i - (int)((float)i > v);
 }
 
+// The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the host.
+#define GATHER_PARAMS __global const uchar *restrict stack, __global const int *restrict source,            \
+                      __global const float *restrict tmap, __global const ushort *restrict tones,          \
+                      __global uchar *restrict out, const int width, const int height, const int grid_w,   \
+                      const int tmap_w, const int tmap_h, const float t0
+
 // one channel: blended value v (256ths), tone gain g and offset o as in the header
 inline uchar tone1(uint v, uint g, uint o)
 {
@@ -167,15 +173,7 @@ typedef float16 __attribute__((aligned(4))) float16_u;
         *(PTR)((base) + 64 * C) = __builtin_convertvector(d > (ushort)255 ? (u16x64)255 : d, u8x64);      \
     } while (0)
 
-__kernel void gather(__global const uchar *restrict stack,
-                     __global const int *restrict source,
-                     __global const float *restrict tmap,
-                     __global const ushort *restrict tones,   // (ntones, TONE_STRIDE): see the host
-                     __global uchar *restrict out,
-                     const int width, const int height,
-                     const int grid_w,
-                     const int tmap_w, const int tmap_h,
-                     const float t0)
+__kernel void gather(GATHER_PARAMS)
 {
     stack += STACK_PAD;
     const int yi = (int)get_global_id(1) - 1;                    // the map rows yi, yi + 1
@@ -312,15 +310,7 @@ __kernel void gather(__global const uchar *restrict stack,
 #else
 // One work-item renders RUN consecutive pixels of one row (global size (ceil(W/RUN), H)):
 // on CPU devices a loop per work-item beats one work-item per pixel by a wide margin.
-__kernel void gather(__global const uchar *restrict stack,
-                     __global const int *restrict source,
-                     __global const float *restrict tmap,
-                     __global const ushort *restrict tones,   // (ntones, TONE_STRIDE): see the host
-                     __global uchar *restrict out,
-                     const int width, const int height,
-                     const int grid_w,
-                     const int tmap_w, const int tmap_h,
-                     const float t0)
+__kernel void gather(GATHER_PARAMS)
 {
     const int y = get_global_id(1);
     const int xstart = get_global_id(0) * RUN;
