@@ -28,6 +28,7 @@ from typing import Sequence
 import numpy as np
 
 from ..tiledb import QuiltModel
+from ._checks import check_int
 from .video import Clip, Progress
 
 DEFAULT_RANK = 15
@@ -86,7 +87,7 @@ def time_svd(matrix: np.ndarray, rank: int | None = DEFAULT_RANK) -> tuple[np.nd
     r = min(m, n)
     if rank is None:
         rank = r
-    rank = _int("rank", rank, 1, r)
+    rank = check_int("rank", rank, 1, r)
     if n <= m:
         gram = x.T.astype(np.float64) @ x.astype(np.float64)
         evals, evecs = np.linalg.eigh(gram)
@@ -301,16 +302,16 @@ def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
         size = (2 * w, 2 * h)
     out_w, out_h = _pair("size", size, 1, MAX_SIDE)
     tolerance = _float("tolerance", tolerance, 0.0)
-    seed = _int("seed", seed, 0)
+    seed = check_int("seed", seed, 0)
     if feather is None:
         feather = min(oy, ox) // 2
-    feather = _int("feather", feather, 0, min(oy, ox))
+    feather = check_int("feather", feather, 0, min(oy, ox))
     if lowpass is not None:
         lowpass = _float("lowpass", lowpass, 0.0)
         if lowpass <= 0:
             raise ValueError(f"lowpass must be a positive sigma in pixels or None, not {lowpass!r}")
     if rank is not None:
-        rank = _int("rank", rank, 1, min(h * w, t * c))
+        rank = check_int("rank", rank, 1, min(h * w, t * c))
     rng = np.random.default_rng(seed)
     timings: dict[str, float] = {}
 
@@ -471,7 +472,7 @@ def measure_comparison_speedup(frames: np.ndarray, *, rank: int = DEFAULT_RANK, 
     if bh > h or bw > w:
         raise ValueError(f"block {bw}x{bh} (width x height) is larger than the {w}x{h} source")
     o = overlap or max(2, round(min(bh, bw) / 6))
-    trials = _int("trials", trials, 1)
+    trials = check_int("trials", trials, 1)
     x = pixel_time_matrix(frames)
     t0 = time.perf_counter()
     coef, _, err = time_svd(x, rank=rank)
@@ -511,8 +512,8 @@ def spreading_clip(t: int = 48, h: int = 48, w: int = 64, *, seed: int = 0) -> n
     >>> f.shape, bool(f[-1].mean() < f[0].mean())
     ((10, 16, 16, 3), True)
     """
-    t, h, w = _int("t", t, 2), _int("h", h, 1), _int("w", w, 1)
-    rng = np.random.default_rng(_int("seed", seed, 0))
+    t, h, w = check_int("t", t, 2), check_int("h", h, 1), check_int("w", w, 1)
+    rng = np.random.default_rng(check_int("seed", seed, 0))
     field = rng.random((h, w))
     for _ in range(2):
         field = (field + np.roll(field, 1, 0) + np.roll(field, 1, 1) + np.roll(field, -1, 0)
@@ -535,14 +536,6 @@ def _check_frames(frames) -> np.ndarray:
     return frames
 
 
-def _int(name: str, v, lo: int, hi: int | None = None) -> int:
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, not {v!r}")
-    if v < lo or (hi is not None and v > hi):
-        raise ValueError(f"{name} must be in [{lo}, {'inf' if hi is None else hi}], not {v}")
-    return int(v)
-
-
 def _float(name: str, v, lo: float) -> float:
     try:
         f = float(v)
@@ -560,4 +553,4 @@ def _pair(name: str, v, lo: int, hi: int | None = None) -> tuple[int, int]:
         a, b = v
     except (TypeError, ValueError):
         raise TypeError(f"{name} must be an integer or a pair of integers, not {v!r}") from None
-    return _int(name, a, lo, hi), _int(name, b, lo, hi)
+    return check_int(name, a, lo, hi), check_int(name, b, lo, hi)

@@ -59,6 +59,7 @@ from typing import Sequence
 import numpy as np
 
 from ..tiledb.tiles import TilesModel
+from ._checks import check_int
 from .video import Clip, Progress
 
 DEFAULT_MIN_TILE = 32
@@ -487,7 +488,7 @@ def wang_edges(colours: int) -> np.ndarray:
     >>> e.shape, sorted({(int(a), int(b)) for a, _, b, _ in e}) == [(0, 0), (0, 1), (1, 0), (1, 1)]
     ((8, 4), True)
     """
-    k = _int("colours", colours, 1, 8)
+    k = check_int("colours", colours, 1, 8)
     return np.array([(w, (w + n + s) % k, n, s) for w in range(k) for n in range(k) for s in range(k)], np.int8)
 
 
@@ -670,19 +671,19 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     if construction == "wang" and n_tiles is not None:
         raise ValueError(f"n_tiles applies to construction 'ring' only; the Wang set has edge_colours ** 3 "
                          f"= {edge_colours ** 3} tiles")
-    n_tiles = _int("n_tiles", 4 if n_tiles is None else n_tiles, 1, 64)
-    edge_colours = _int("edge_colours", edge_colours, 2, 4)
+    n_tiles = check_int("n_tiles", 4 if n_tiles is None else n_tiles, 1, 64)
+    edge_colours = check_int("edge_colours", edge_colours, 2, 4)
     n_own = edge_colours ** 3 if construction == "wang" else n_tiles
-    min_loop = _int("min_loop", min_loop, 2)
-    transition = _int("transition", transition, 1)
+    min_loop = check_int("min_loop", min_loop, 2)
+    transition = check_int("transition", transition, 1)
     if max_loop is not None:
-        max_loop = _int("max_loop", max_loop, min_loop)
+        max_loop = check_int("max_loop", max_loop, min_loop)
     if transition >= min_loop:
         raise ValueError(f"transition ({transition}) must be smaller than min_loop ({min_loop})")
     if not (isinstance(flow_gain, (int, float)) and 0 <= flow_gain <= 10):
         raise ValueError(f"flow_gain must be a number in [0, 10], not {flow_gain!r}")
-    min_tile = _int("min_tile", min_tile, 8)
-    max_tile = _int("max_tile", max_tile, min_tile)
+    min_tile = check_int("min_tile", min_tile, 8)
+    max_tile = check_int("max_tile", max_tile, min_tile)
     total = 6 + n_own + len(extra) * (3 + n_tiles) + (len(extra) + 1) * len(extra)
     done = 0
 
@@ -725,14 +726,14 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     if overlap is None:
         b = max(2, min(th, tw) // 4) + int(round(2 * mean_flow))
     else:
-        b = _int("overlap", overlap, 2)
+        b = check_int("overlap", overlap, 2)
     by = max(2, min(b, h - th, *(f.shape[1] - th for f in extra)))
     bx = max(2, min(b, w - tw, *(f.shape[2] - tw for f in extra)))
     # a narrow ring: every tile of a class repeats it, so it is the only periodic content
-    r = max(2, min(th, tw) // 10) if ring is None else _int("ring", ring, 2)
+    r = max(2, min(th, tw) // 10) if ring is None else check_int("ring", ring, 2)
     if r > min(th, tw) // 2 - 1:
         raise ValueError(f"ring must be at most {min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {r}")
-    fe = max(r, min(th, tw) // 5) if feather is None else _int("feather", feather, 0)
+    fe = max(r, min(th, tw) // 5) if feather is None else check_int("feather", feather, 0)
     fe = min(fe, min(th, tw) // 2 - 1 - r)
     # border cuts may run deeper than the ring (the strip is the other class's toroidal
     # primary, which continues its own cells at any depth), as deep as leaves the fade
@@ -967,11 +968,3 @@ def _frames(name: str, clip: Clip | np.ndarray) -> np.ndarray:
     if frames.shape[3] == 1:
         frames = np.repeat(frames, 3, axis=3)
     return frames
-
-
-def _int(name: str, value, lo: int, hi: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name} must be an integer, not {value!r}")
-    if value < lo or (hi is not None and value > hi):
-        raise ValueError(f"{name} must be in [{lo}, {'inf' if hi is None else hi}], not {value}")
-    return int(value)

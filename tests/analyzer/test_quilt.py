@@ -168,14 +168,14 @@ def test_lowpass_gain_flattens_a_gradient():
 @pytest.mark.parametrize("kwargs, error, message", [
     (dict(block=40), ValueError, "block 40x40 .* larger than the 32x32 source"),
     (dict(block=(8, 33)), ValueError, "larger than"),
-    (dict(size=(0, 10)), ValueError, "size must be in"),
-    (dict(size=(10, 20000)), ValueError, "size must be in"),
+    (dict(size=(0, 10)), ValueError, "size must be an integer in"),
+    (dict(size=(10, 20000)), ValueError, "size must be an integer in"),
     (dict(size="big"), TypeError, "size must be"),
     (dict(block=8, overlap=5), ValueError, "overlap .* at most half"),
-    (dict(rank=0), ValueError, "rank must be in"),
+    (dict(rank=0), ValueError, "rank must be an integer in"),
     (dict(tolerance=-1), ValueError, "tolerance"),
     (dict(lowpass=0), ValueError, "lowpass"),
-    (dict(block=8, overlap=2, feather=3), ValueError, "feather must be in"),
+    (dict(block=8, overlap=2, feather=3), ValueError, "feather must be an integer in"),
     (dict(seed=1.5), TypeError, "seed must be an integer"),
 ])
 def test_bad_input(spread, kwargs, error, message):

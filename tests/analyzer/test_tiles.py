@@ -239,7 +239,7 @@ def test_wang_tiles_join_where_edge_colours_match(wang_model):
 @pytest.mark.parametrize("kwargs, message", [
     ({"construction": "hex"}, "construction must be one of"),
     ({"construction": "wang", "n_tiles": 3}, "n_tiles applies to construction 'ring' only"),
-    ({"construction": "wang", "edge_colours": 5}, "edge_colours must be in"),
+    ({"construction": "wang", "edge_colours": 5}, "edge_colours must be an integer in"),
     ({"construction": "wang", "mix": [_stochastic(seed=1)]}, "cannot mix textures"),
 ])
 def test_wang_bad_options_are_clear_errors(kwargs, message):
