@@ -322,6 +322,7 @@ class Gather:
         self.ctx, self.queue = ctx, queue
         self.direct = False       # frames written straight into the caller's array (set at open)
         self.wide = False         # the 64-lane kernel (time step 8 on a CPU device; set at open)
+        self._host_out = self._host_buf = None   # the caller's array the kernel writes into, and its buffer
         self._last_t = 0.0
         if backend == "opencl":
             self._setup_opencl(device)
@@ -375,7 +376,9 @@ class Gather:
     def _upload_tmap(self) -> None:
         if self.backend == "opencl":
             import pyopencl as cl
-            cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=True)
+            # not blocking: the queue runs in order, and pyopencl keeps the array alive until the
+            # copy is done (set_time_map replaces self._tmap rather than writing into it)
+            cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)
 
     def _upload_tones(self) -> None:
         if self.backend == "opencl":
@@ -390,6 +393,7 @@ class Gather:
         self._k_gather.set_args(self._d_stack, self._d_source, self._d_tmap, self._d_tones, self._d_out,
                                 np.int32(w), np.int32(h), np.int32(grid_w),
                                 np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0))
+        self._host_out = self._host_buf = None       # arg 4 is the device's frame buffer again
 
     # -- inputs --------------------------------------------------------------------------------
     def set_source_map(self, packed: np.ndarray) -> None:
@@ -522,13 +526,17 @@ class Gather:
         self._k_gather.set_arg(10, np.float32(t))
         if self.direct:
             # the kernel writes straight into the caller's array (the device shares host
-            # memory, checked at open): no device buffer, no copy
-            dst = cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=out.reshape(-1))
-            self._k_gather.set_arg(4, dst)
+            # memory, checked at open): no device buffer, no copy. The buffer wrapping it is
+            # kept while the caller passes the same array (held here, so it stays alive).
+            if out is not self._host_out:
+                self._host_buf = cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR,
+                                           hostbuf=out.reshape(-1))
+                self._host_out = out
+                self._k_gather.set_arg(4, self._host_buf)
             cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
             self.queue.finish()
-            self._k_gather.set_arg(4, self._d_out)
             return out
+        self._use_device_out()
         cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
         cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
         return out
@@ -540,8 +548,15 @@ class Gather:
             raise RuntimeError("render_on_device needs the opencl backend and a source")
         import pyopencl as cl
         self._k_gather.set_arg(10, np.float32(self._fold(float(t))))
+        self._use_device_out()
         cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
         self.queue.finish()
+
+    def _use_device_out(self) -> None:
+        """Point the kernel at its own frame buffer (after frames went to a caller's array)."""
+        if self._host_out is not None:
+            self._host_out = self._host_buf = None
+            self._k_gather.set_arg(4, self._d_out)
 
     def render_reference(self, t: float, out: np.ndarray | None = None) -> np.ndarray:
         """The numpy reference of :meth:`render` (usable with either backend, for checks)."""
