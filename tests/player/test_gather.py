@@ -288,3 +288,23 @@ def test_frame_traffic_counts_output_and_distinct_stored_pixels():
     m = Gather(stack, (8, 16), backend="numpy", interpolate=False)
     m.set_source_map(pack_source(np.arange(128).reshape(8, 16)))
     assert m.frame_traffic(0.0)["stored"] == 128 * 3     # every output pixel its own source
+
+
+def test_frames_land_in_whichever_array_comes_and_nowhere_else(cl_context):
+    """The buffer wrapping a caller's array is reused while that array comes back; switching
+    arrays, or rendering on the device in between, must not write into an array passed before."""
+    stack = _stack(n=6, h=16, w=64)
+    g = Gather(stack, (37, 130), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
+    g.set_source_grid(pack_source(np.arange(3 * 5).reshape(3, 5) % 2 * 32))
+    g.set_time_map(np.linspace(0, 3, 5 * 17, dtype=np.float32).reshape(5, 17))
+    a, b = np.zeros((37, 130, 3), np.uint8), np.zeros((37, 130, 3), np.uint8)
+    for t, target in ((0.5, a), (1.25, a), (2.0, b), (2.75, None), (3.5, a), (4.0, b)):
+        before = (a.copy(), b.copy())
+        if target is None:
+            g.render_on_device(t)
+        else:
+            g.render(t, out=target)
+            _close(target, g.render_reference(t))
+        for arr, old in zip((a, b), before):
+            if arr is not target:
+                assert np.array_equal(arr, old)
