@@ -901,11 +901,13 @@ def repetition_lag(output: np.ndarray, *, source: np.ndarray | None = None, tole
 # -- everything at once ---------------------------------------------------------------------
 def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | None = None, wrap: bool = False,
              events: Sequence[int] | None = None, window: int = 25, downscale: int | None = None,
-             seed: int = 0, n_samples: int = 1000) -> dict[str, Any]:
+             seed: int = 0, n_samples: int = 1000, period: Sequence[int] | None = None) -> dict[str, Any]:
     """Every metric of this module for one output against its source, as a JSON-ready dict.
 
     Size-bound metrics (stability, frame coverage) are None when the frame sizes differ;
-    when the output holds NaN/inf, only stability is computed.
+    when the output holds NaN/inf, only stability is computed. With ``period`` ``(py, px)``
+    (a tile lattice) the lattice correlation of the output and of the source (None where
+    the source is not larger than the period) at those lags.
 
     Examples
     --------
@@ -945,6 +947,12 @@ def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | Non
     report["patch_completeness"] = comp
     report["frame_coverage"] = frame_coverage(output, source) if same else None
     report["repetition_lag"] = repetition_lag(output, source=source)
+    if period is not None:
+        py, px = _pair("period", period, 1)
+        fits = source.shape[1] > py and source.shape[2] > px
+        report["lattice_correlation"] = {
+            "period": [py, px], "output": list(lattice_correlation(output[::max(1, len(output) // 30)], (py, px))),
+            "source": list(lattice_correlation(source[::max(1, len(source) // 30)], (py, px))) if fits else None}
     return report
 
 

@@ -171,8 +171,11 @@ def run(args: argparse.Namespace) -> int:
     labels, wrap = (None, False) if args.boundaries is None else parse_boundaries(args.boundaries, (h, w))
     wrap = wrap or args.wrap
     events = parse_events(args.events, t) if args.events else None
+    m = _GRID.match(args.boundaries or "")
+    period = (int(m.group(2)), int(m.group(1))) if m else None          # a tile grid: its spatial period too
     report = metrics.evaluate(output, source, labels=labels, wrap=wrap, events=events, window=args.window,
-                              downscale=args.downscale, seed=max(0, args.seed), n_samples=args.samples)
+                              downscale=args.downscale, seed=max(0, args.seed), n_samples=args.samples,
+                              period=period)
     report["source"] = args.source
     report["output"] = args.output
     if is_db:
@@ -225,6 +228,11 @@ def format_table(report: dict[str, Any]) -> str:
         rows.append(("frame coverage", same if cov is None else _fmt(cov), "near 1 for a player of frames"))
         lag = report["repetition_lag"]
         rows.append(("repetition lag (frames)", "none found" if lag is None else str(lag), "none, or long"))
+        lat = report.get("lattice_correlation")
+        if lat is not None:
+            src = "n/a" if lat["source"] is None else " / ".join(_fmt(v, 2) for v in lat["source"])
+            rows.append((f"lattice correlation y/x at {lat['period'][1]}x{lat['period'][0]}",
+                         " / ".join(_fmt(v, 2) for v in lat["output"]), f"near the source's ({src})"))
     head = (f"{report['output']} ({report['output_frames']} frames, {report['output_size'][0]}x"
             f"{report['output_size'][1]}) against {report['source']} ({report['source_frames']} frames, "
             f"{report['source_size'][0]}x{report['source_size'][1]})")

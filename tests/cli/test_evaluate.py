@@ -58,6 +58,19 @@ def test_json_report_video_against_itself(files, capsys):
     assert rep["frame_coverage"] == 1.0 and rep["repetition_lag"] is None
     assert rep["temporal_discontinuity"]["events"] == [10, 20]
     assert 0.7 < rep["seam_visibility"]["mean"] < 1.3
+    lat = rep["lattice_correlation"]
+    assert lat["period"] == [16, 16] and lat["output"] == lat["source"]       # the source against itself
+
+
+def test_a_tiled_output_shows_its_lattice(files, capsys, tmp_path):
+    """An output made of one 16x16 block repeated: correlation 1 at the grid period."""
+    src = np.load(files / "src.npy")
+    tiled = np.tile(src[:, :16, :16], (1, 3, 4, 1))
+    np.save(tmp_path / "tiled.npy", tiled)
+    rc, out, _ = _run(capsys, files / "src.npy", tmp_path / "tiled.npy", "--boundaries", "grid:16x16")
+    assert rc == 0
+    line = next(ln for ln in out.splitlines() if ln.startswith("lattice correlation y/x at 16x16"))
+    assert "1.00 / 1.00" in line
 
 
 def test_table_flags_a_loop(files, capsys):
