@@ -69,6 +69,7 @@ True
 """
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any, Sequence
 
@@ -76,6 +77,7 @@ import numpy as np
 
 from .base import BACKENDS, check_float, check_int, check_out
 
+log = logging.getLogger(__name__)
 WRAPS = ("loop", "clamp", "pingpong")
 MAX_FRAME_PIXELS = 1 << 24
 MAX_TONES = 256
@@ -330,7 +332,7 @@ class Gather:
     # -- device setup ------------------------------------------------------------------------
     def _setup_opencl(self, device: str | None) -> None:
         import pyopencl as cl
-        from .opencl import build_program, get_context, writes_through
+        from .opencl import KernelBuildError, build_program, get_context, writes_through
         if self.ctx is None:
             self.ctx = get_context(device)
         if self.queue is None:
@@ -358,7 +360,17 @@ class Gather:
                    "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN,
                    "STACK_PAD": STACK_PAD, "RUNS": RUNS, "WIDE": self.wide, "TONE_STRIDE": TONE_STRIDE,
                    "TONE_OB": TONE_OB}
-        prog = build_program(self.ctx, "gather.cl", defines)
+        try:
+            prog = build_program(self.ctx, "gather.cl", defines)
+        except KernelBuildError:
+            if not self.wide or self._wide_choice is not None:
+                raise
+            # the 64-lane kernel leans on clang vector extensions; a compiler without them
+            # still gets the per-pixel kernel (same integers, slower)
+            log.warning("the 64-lane gather kernel does not build on %s; using the per-pixel kernel",
+                        self.ctx.devices[0].name)
+            self.wide = False
+            prog = build_program(self.ctx, "gather.cl", {**defines, "WIDE": False})
         self._k_gather = prog.kernel("gather")
         self._k_smooth_x = prog.kernel("smooth_x")
         self._k_smooth_y = prog.kernel("smooth_y")

@@ -308,3 +308,26 @@ def test_frames_land_in_whichever_array_comes_and_nowhere_else(cl_context):
         for arr, old in zip((a, b), before):
             if arr is not target:
                 assert np.array_equal(arr, old)
+
+
+def test_a_compiler_without_the_wide_kernel_gets_the_per_pixel_one(cl_context, monkeypatch, caplog):
+    """If the 64-lane kernel fails to build (a compiler without clang's vector extensions),
+    the Gather says so and renders with the per-pixel kernel, the same integers."""
+    import dynatex.player.opencl as ocl
+    real = ocl.build_program
+
+    def no_wide(ctx, filename, defines=None):
+        if (defines or {}).get("WIDE"):
+            raise ocl.KernelBuildError("simulated: ext_vector_type(64) unsupported")
+        return real(ctx, filename, defines)
+
+    monkeypatch.setattr(ocl, "build_program", no_wide)
+    stack = _stack(n=5, h=16, w=64)
+    with caplog.at_level("WARNING", logger="dynatex.player.gather"):
+        g = Gather(stack, (20, 70), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
+    assert not g.wide and "per-pixel kernel" in caplog.text
+    g.set_source_grid(pack_source(np.zeros((2, 3), int)))
+    g.set_time_map(np.linspace(0, 2, 3 * 9, dtype=np.float32).reshape(3, 9))
+    _close(g.render(1.3), g.render_reference(1.3))
+    with pytest.raises(ocl.KernelBuildError, match="simulated"):
+        Gather(stack, (20, 70), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8, wide=True)
