@@ -907,7 +907,7 @@ def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | Non
     Size-bound metrics (stability, frame coverage) are None when the frame sizes differ;
     when the output holds NaN/inf, only stability is computed. With ``period`` ``(py, px)``
     (a tile lattice) the lattice correlation of the output and of the source (None where
-    the source is not larger than the period) at those lags.
+    a frame is not larger than the period) at those lags.
 
     Examples
     --------
@@ -949,10 +949,13 @@ def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | Non
     report["repetition_lag"] = repetition_lag(output, source=source)
     if period is not None:
         py, px = _pair("period", period, 1)
-        fits = source.shape[1] > py and source.shape[2] > px
-        report["lattice_correlation"] = {
-            "period": [py, px], "output": list(lattice_correlation(output[::max(1, len(output) // 30)], (py, px))),
-            "source": list(lattice_correlation(source[::max(1, len(source) // 30)], (py, px))) if fits else None}
+
+        def lattice(frames: np.ndarray) -> list[float] | None:
+            if frames.shape[1] <= py or frames.shape[2] <= px:
+                return None                     # no lag of the period fits inside the frame
+            return list(lattice_correlation(frames[::max(1, len(frames) // 30)], (py, px)))
+
+        report["lattice_correlation"] = {"period": [py, px], "output": lattice(output), "source": lattice(source)}
     return report
 
 

@@ -388,9 +388,10 @@ class Gather:
     def _upload_tmap(self) -> None:
         if self.backend == "opencl":
             import pyopencl as cl
-            # not blocking: the queue runs in order, and pyopencl keeps the array alive until the
-            # copy is done (set_time_map replaces self._tmap rather than writing into it)
-            cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)
+            # not blocking: the queue runs in order, and the event (kept until the next upload:
+            # dropping it would wait for the copy) holds the array until the copy is done
+            # (set_time_map replaces self._tmap rather than writing into it)
+            self._tmap_event = cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)
 
     def _upload_tones(self) -> None:
         if self.backend == "opencl":

@@ -570,6 +570,7 @@ class TilesPlayer(Player):
             max_shift = check_float("max_shift", state["max_shift"], 0.0, float(self.loop_length))
             tone = state.get("tone")
             self.tone_target(tone)                          # validates it
+            seed = check_seed("seed", state.get("seed", self.seed))
         except KeyError as exc:
             raise ValueError(f"state lacks {exc.args[0]!r}") from None
         if any(c.shape != self.grid_shape or not np.isfinite(c).all() for c in cells):
@@ -586,7 +587,7 @@ class TilesPlayer(Player):
         self._cells_a, self._cells_b = cells
         self.arrangement = arrangement
         self.speed, self.epoch, self._sigma, self._max_shift = speed, epoch, sigma, max_shift
-        self.seed = int(state.get("seed", self.seed))
+        self.seed = seed
         self.tone = tone
         self._build_source(arrangement)
         self._refresh_fields()

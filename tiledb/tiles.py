@@ -162,7 +162,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
         class_loop_cost=ds(group, "class_loop_cost", kind="f", shape=(c,)),
         class_toroid_cost=ds(group, "class_toroid_cost", kind="f", shape=(c, 2)),
         info=check.info(group),
-        edges=ds(group, "edges", kind="i", shape=(k, 4)).astype(np.int8) if "edges" in group else None,
+        edges=_edges(group, check, k),
     )
     if model.tiles.dtype != np.uint8:
         check.fail(group.name + "/tiles", f"dtype {model.tiles.dtype} is not uint8")
@@ -185,21 +185,45 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
     return model
 
 
+def _edges(group: h5py.Group, check: Checker, k: int) -> np.ndarray | None:
+    """The ``edges`` dataset, range-checked before it is narrowed to int8 (absent: None)."""
+    if "edges" not in group:
+        return None
+    e = check.dataset(group, "edges", kind="i", shape=(k, 4))
+    if e.size and (e.min() < -1 or e.max() > 7):
+        check.fail(group.name + "/edges", "values must be -1 or edge colours 0..7")
+    return e.astype(np.int8)
+
+
 def _check_edges(where: str, model: TilesModel, check: Checker) -> None:
     """Wang edges: whole rows of -1 or colours ``0 .. k-1``; one class; one tile per
     ``(left, top, bottom)`` with ``right = (left + top + bottom) mod k`` (the player fills
     cells row by row from the first three)."""
     e = np.asarray(model.edges)
+    kind = model.info.get("construction", "ring")
+    if kind not in ("ring", "wang"):
+        check.fail(where.rsplit("/", 1)[0] + "@construction", f"must be 'ring' or 'wang', not {kind!r}")
     if not model.wang:
         if (e != -1).any():
             check.fail(where, "values must be -1 or edge colours >= 0")
+        if kind == "wang":
+            check.fail(where, "construction is 'wang' but no tile has edge colours")
         return
+    if kind != "wang":
+        check.fail(where, f"tiles have edge colours but construction is {kind!r}")
     wang = (e >= 0).all(axis=1)
     if ((e >= 0).any(axis=1) & ~wang).any():
         check.fail(where, "a tile has colours on some edges and -1 on others")
     k = int(e[wang].max()) + 1
     if k > 8 or model.n_classes != 1 or not wang.all():
         check.fail(where, "a Wang set must be every tile of a single class, with at most 8 colours")
+    attrs = where.rsplit("/", 1)[0]
+    if int(model.info.get("edge_colours", k)) != k:
+        check.fail(attrs + "@edge_colours", f"says {model.info['edge_colours']} but the edges use {k} colours")
+    th, tw = model.tile_size
+    depth = int(model.info.get("strip_depth", 1))
+    if not 1 <= depth <= min(th, tw) // 2:
+        check.fail(attrs + "@strip_depth", f"{depth} outside 1..{min(th, tw) // 2} for {th}x{tw} tiles")
     want = {(a, (a + b + c) % k, b, c) for a in range(k) for b in range(k) for c in range(k)}
     have = {tuple(int(v) for v in row) for row in e}
     if len(e) != len(want) or have != want:

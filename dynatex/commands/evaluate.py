@@ -230,9 +230,10 @@ def format_table(report: dict[str, Any]) -> str:
         rows.append(("repetition lag (frames)", "none found" if lag is None else str(lag), "none, or long"))
         lat = report.get("lattice_correlation")
         if lat is not None:
-            src = "n/a" if lat["source"] is None else " / ".join(_fmt(v, 2) for v in lat["source"])
-            rows.append((f"lattice correlation y/x at {lat['period'][1]}x{lat['period'][0]}",
-                         " / ".join(_fmt(v, 2) for v in lat["output"]), f"near the source's ({src})"))
+            out, src = ("n/a: frame not larger than the grid" if v is None else " / ".join(_fmt(x, 2) for x in v)
+                        for v in (lat["output"], lat["source"]))
+            rows.append((f"lattice correlation y/x at {lat['period'][1]}x{lat['period'][0]}", out,
+                         f"near the source's ({src})"))
     head = (f"{report['output']} ({report['output_frames']} frames, {report['output_size'][0]}x"
             f"{report['output_size'][1]}) against {report['source']} ({report['source_frames']} frames, "
             f"{report['source_size'][0]}x{report['source_size'][1]})")

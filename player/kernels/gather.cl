@@ -216,7 +216,13 @@ __kernel void gather(GATHER_PARAMS)
         const float2 m2 = m4.hi < m4.lo ? m4.hi : m4.lo, x2 = x4.hi > x4.lo ? x4.hi : x4.lo;
         const float cmin = m2.hi < m2.lo ? m2.hi : m2.lo, cmax = x2.hi > x2.lo ? x2.hi : x2.lo;
         const int lo = fast_floor(t0 + cmin);
+        // the frame of the latest time as a lane computes it: a weight that rounds up to 256
+        // takes the next frame (weight 0), as floor and weight do in the header's formula
+#if INTERP
+        const int span = (int)(((t0 + cmax) - (float)lo) * 256.0f + 0.5f) >> 8;
+#else
         const int span = fast_floor(t0 + cmax) - lo;
+#endif
         // byte offsets of the frames lo .. lo + span + 1
         long fo[MAX_SPAN + 2];
         for (int k = 0; k < min(span, MAX_SPAN) + 2; ++k)
@@ -262,8 +268,8 @@ __kernel void gather(GATHER_PARAMS)
 #endif
             const f32x64 t = t0 + (top + wy * dtb);
             if (linear) {
-                // u = frame (above lo) * 256 + weight; past the bound only by rounding: held
-                // just below it (the last frame pair at weight 255/256)
+                // u = frame (above lo) * 256 + weight; past the bound only where a lane's float
+                // time rounds above the bound's: held just below it (weight 255/256, one grey level)
                 const f32x64 tl = t - (float)lo;
 #if INTERP
                 i32x64 u = __builtin_convertvector(tl * 256.0f + 0.5f, i32x64);

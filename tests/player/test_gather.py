@@ -313,7 +313,11 @@ def test_frames_land_in_whichever_array_comes_and_nowhere_else(cl_context):
 def test_a_compiler_without_the_wide_kernel_gets_the_per_pixel_one(cl_context, monkeypatch, caplog):
     """If the 64-lane kernel fails to build (a compiler without clang's vector extensions),
     the Gather says so and renders with the per-pixel kernel, the same integers."""
+    import pyopencl as cl
+
     import dynatex.player.opencl as ocl
+    if not cl_context.devices[0].type & cl.device_type.CPU:
+        pytest.skip("the wide kernel is the default on CPU devices only; this device renders per pixel anyway")
     real = ocl.build_program
 
     def no_wide(ctx, filename, defines=None):
@@ -331,3 +335,16 @@ def test_a_compiler_without_the_wide_kernel_gets_the_per_pixel_one(cl_context, m
     _close(g.render(1.3), g.render_reference(1.3))
     with pytest.raises(ocl.KernelBuildError, match="simulated"):
         Gather(stack, (20, 70), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8, wide=True)
+
+
+@pytest.mark.parametrize("wide", [True, False])
+def test_a_weight_rounding_up_to_256_takes_the_next_frame(cl_context, wide):
+    """At t = 0.999 the weight rounds to 256/256: the pixel is frame 1 itself, in both kernels
+    (found in review: the wide kernel once held such lanes at weight 255 on frame 0)."""
+    stack = np.zeros((3, 8, 64, 3), np.uint8)
+    stack[1:] = 255
+    g = Gather(stack, (16, 128), backend="opencl", ctx=cl_context, cell=(8, 64), time_step=8, wide=wide)
+    g.set_source_grid(pack_source(np.zeros((2, 2), int)))
+    for t in (0.999, 1.999, 2.999, 0.9985):
+        got = g.render(t)
+        assert np.array_equal(got, g.render_reference(t)), (t, np.unique(got))

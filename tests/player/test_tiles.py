@@ -270,3 +270,16 @@ def test_wang_state_with_mismatched_edges_is_refused_and_changes_nothing(ring_an
         reference = p.next_frame().copy()
         p.set_state(state)
         assert np.array_equal(p.next_frame(), reference)
+
+
+def test_a_state_with_a_bad_seed_changes_nothing(tiles_db):
+    with TilesPlayer(tiles_db, size=(64, 48), seed=2) as p:
+        p.next_frame()
+        good = p.get_state()
+        p.next_frame()
+        before = (p.arrangement.copy(), p.get_state()["t"])
+        bad = dict(good)
+        bad["seed"] = "x"
+        with pytest.raises((TypeError, ValueError), match="seed"):
+            p.set_state(bad)
+        assert np.array_equal(p.arrangement, before[0]) and p.get_state()["t"] == before[1]

@@ -74,7 +74,9 @@ def _attr(name, value):
     (_attr("loop_length", 1), r"@loop_length: loop length 1 outside"),
     (_attr("n_tiles", 10**6), r"@n_tiles"),
     (lambda g: g.__delitem__("masks"), r"/masks: missing dataset"),
-    (_replace("edges", lambda a: np.full_like(a, 1)), r"/edges: a Wang set must be every tile of a single class"),
+    (_replace("edges", lambda a: np.full_like(a, 1)), r"/edges: tiles have edge colours but construction is 'ring'"),
+    (lambda g: (_replace("edges", lambda a: np.full_like(a, 1))(g), _attr("construction", "wang")(g)),
+     r"/edges: a Wang set must be every tile of a single class"),
     (_replace("edges", lambda a: np.full((len(a), 3), -1, np.int8)), r"/edges: has shape"),
 ])
 def test_damaged_group_is_refused(db_path, tmp_path, edit, match):
@@ -119,6 +121,12 @@ def test_tile_set_without_edges_reads_as_ring(db_path, tmp_path):
     (_replace("edges", lambda a: np.stack([a[:, 0], 1 - a[:, 1], a[:, 2], a[:, 3]], 1)),
      "one tile per \\(left, top, bottom\\)"),
     (_replace("edges", lambda a: np.concatenate([a[:1], a[:-1]])), "one tile per \\(left, top, bottom\\)"),
+    (_replace("edges", lambda a: a.astype(np.int32) + 256), "values must be -1 or edge colours 0..7"),
+    (lambda g: g.__delitem__("edges"), "construction is 'wang' but no tile has edge colours"),
+    (_attr("construction", "ring"), "tiles have edge colours but construction is 'ring'"),
+    (_attr("construction", "hex"), "@construction: must be 'ring' or 'wang'"),
+    (_attr("edge_colours", 3), "@edge_colours: says 3 but the edges use 2 colours"),
+    (_attr("strip_depth", 99), "@strip_depth: 99 outside"),
 ])
 def test_damaged_wang_edges_are_refused(wang_path, tmp_path, edit, match):
     path = _damaged(wang_path[0], tmp_path, edit)
