@@ -4,7 +4,9 @@
 
 - Player: ``next_frame(out=...)`` end to end into a host buffer, with smoothed drifting time
   offsets (sigma 64 px) and colour tone (consensus), at 1280x720 and 3840x2160, OpenCL and
-  the numpy reference; the OpenCL kernel alone (into its device buffer) beside it.
+  the numpy reference; the OpenCL kernel alone (into its device buffer) beside it. Then
+  3840x2160 once more with the player's defaults (``dynatex play --mode tiles --size
+  3840x2160``: smoothed offsets, no tone).
 - Roofline: ``bytes_per_frame / copy GB/s`` measured in the same run. ``bytes_per_frame``
   is what a frame must move at least: the output written once (the kernel writes straight
   into the caller's array where the device shares host memory) plus the distinct tile
@@ -57,11 +59,12 @@ def write_db(path: str, frames: np.ndarray, model) -> None:
         w.put_method("t", "tiles", model)
 
 
-def bench_player(path: str, size: tuple[int, int], n: int, bandwidth: float) -> dict:
-    row: dict = {"size": f"{size[0]}x{size[1]}"}
+def bench_player(path: str, size: tuple[int, int], n: int, bandwidth: float, *, defaults: bool = False) -> dict:
+    row: dict = {"size": f"{size[0]}x{size[1]}", "settings": "defaults" if defaults else "sigma 64, consensus tone"}
     for backend in ("opencl", "numpy"):
-        with TilesPlayer(path, backend=backend, size=size, seed=1, tone="consensus") as p:
-            p.sigma = 64.0
+        with TilesPlayer(path, backend=backend, size=size, seed=1, tone=None if defaults else "consensus") as p:
+            if not defaults:
+                p.sigma = 64.0
             buf = np.empty(p.shape, np.uint8)
             count = n if backend == "opencl" else max(5, n // 30)
             row[backend] = summarize(time_calls(lambda: p.next_frame(out=buf), frames=count))
@@ -101,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sizes", default="1280x720,3840x2160")
     ap.add_argument("--json", action="store_true", help="print the results as JSON")
     ap.add_argument("--no-analysis", action="store_true")
+    ap.add_argument("--no-defaults", action="store_true", help="skip the 3840x2160 run with the player's defaults")
     args = ap.parse_args(argv)
     bw = copy_bandwidth()
     result: dict = {"copy_bandwidth": bw, "player": [], "analysis": []}
@@ -109,12 +113,14 @@ def main(argv: list[str] | None = None) -> int:
         grass = CLIPS / "grass_straw_wind_dyntex.avi"
         frames = load_clip(str(grass)).frames if grass.exists() else generated_clip(250, 288, 352)
         write_db(path, frames, learn_tiles(frames))
-        for text in args.sizes.split(","):
-            size = tuple(int(v) for v in text.lower().split("x"))
-            row = bench_player(path, size, args.frames, bw["gbs"])
+        runs = [(tuple(int(v) for v in text.lower().split("x")), False) for text in args.sizes.split(",")]
+        if not args.no_defaults:
+            runs.append(((3840, 2160), True))
+        for size, defaults in runs:
+            row = bench_player(path, size, args.frames, bw["gbs"], defaults=defaults)
             result["player"].append(row)
             tr = row["traffic"]
-            print(f"{row['size']}: OpenCL {row['opencl']['fps']:.0f} frames/s (median {row['opencl']['median_ms']:.2f} ms, "
+            print(f"{row['size']} ({row['settings']}): OpenCL {row['opencl']['fps']:.0f} frames/s (median {row['opencl']['median_ms']:.2f} ms, "
                   f"p99 {row['opencl']['p99_ms']:.2f} ms; kernel alone {row['opencl_kernel']['median_ms']:.2f} ms), "
                   f"numpy {row['numpy']['fps']:.1f} frames/s, "
                   f"x{row['speedup_vs_numpy']:.1f} vs numpy, {row['roofline_fraction']:.2f} of the roofline "

@@ -397,6 +397,13 @@ class Gather:
         if self.backend == "opencl":
             import pyopencl as cl
             cl.enqueue_copy(self.queue, self._d_tones, _expand_tones(self._tones), is_blocking=True)
+            self._k_gather.set_arg(11, np.int32(self._plain_tones()))
+
+    def _plain_tones(self) -> bool:
+        """Whether every tone is the identity (the wide kernel then skips the tone stage: with
+        G = 512 and O = 513 it computes round-half-up(v / 256), which (v + 128) >> 8 gives)."""
+        gain, offset = fixed_tones(self._tones)
+        return bool((gain == 512).all() and (offset == 513).all())
 
     def _set_args(self) -> None:
         if self.backend != "opencl" or self._d_source is None:
@@ -405,7 +412,8 @@ class Gather:
         grid_w = self._source.shape[1]
         self._k_gather.set_args(self._d_stack, self._d_source, self._d_tmap, self._d_tones, self._d_out,
                                 np.int32(w), np.int32(h), np.int32(grid_w),
-                                np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0))
+                                np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0),
+                                np.int32(self._plain_tones()))
         self._host_out = self._host_buf = None       # arg 4 is the device's frame buffer again
 
     # -- inputs --------------------------------------------------------------------------------

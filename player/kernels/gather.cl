@@ -55,11 +55,13 @@ inline int fast_floor(float v)
     return i - (int)((float)i > v);
 }
 
-// The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the host.
+// The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the host;
+// plain is 1 when every tone is the identity (the wide kernel then skips the tone stage).
 #define GATHER_PARAMS __global const uchar *restrict stack, __global const int *restrict source,            \
                       __global const float *restrict tmap, __global const ushort *restrict tones,          \
                       __global uchar *restrict out, const int width, const int height, const int grid_w,   \
-                      const int tmap_w, const int tmap_h, const float t0
+                      const int tmap_w, const int tmap_h, const float t0,                  \
+                      const int plain
 
 // one channel: blended value v (256ths), tone gain g and offset o as in the header
 inline uchar tone1(uint v, uint g, uint o)
@@ -157,20 +159,24 @@ typedef float16 __attribute__((aligned(4))) float16_u;
             }                                                                                             \
         }                                                                                                 \
         const u16x64 wc = __builtin_shufflevector(w16, w16, PIX##C);                                      \
-        /* a (256 - w) + b w = 256 a + (b - a) w, exact in wrapping 16-bit lanes (the result fits) */   \
+        /* a (256 - w) + b w = 256 a + (b - a) w, exact in wrapping 16-bit lanes (the result fits) */     \
         const u16x64 a16 = __builtin_convertvector(fa, u16x64);                                           \
-        const u16x64 v = (a16 << 8) + (__builtin_convertvector(fb, u16x64) - a16) * wc;                  \
-        u16x64 g = LOADT(tn + 64 * C), ob = LOADT(tn + TONE_OB + 64 * C);                                 \
-        if (toneb != tone) {                                                                              \
-            const u16x64 mt = AS_U16(iota16 >= (short)(3 * split - 64 * C));                              \
-            g = PICK(mt, g, LOADT(tnb + 64 * C));                                                         \
-            ob = PICK(mt, ob, LOADT(tnb + TONE_OB + 64 * C));                                             \
+        const u16x64 v = (a16 << 8) + (__builtin_convertvector(fb, u16x64) - a16) * wc;                   \
+        if (plain) {                  /* identity tone: round-half-up(v / 256), as the tone stage */      \
+            *(PTR)((base) + 64 * C) = __builtin_convertvector((v + (ushort)128) >> 8, u8x64);             \
+        } else {                                                                                          \
+            u16x64 g = LOADT(tn + 64 * C), ob = LOADT(tn + TONE_OB + 64 * C);                             \
+            if (toneb != tone) {                                                                          \
+                const u16x64 mt = AS_U16(iota16 >= (short)(3 * split - 64 * C));                          \
+                g = PICK(mt, g, LOADT(tnb + 64 * C));                                                     \
+                ob = PICK(mt, ob, LOADT(tnb + TONE_OB + 64 * C));                                         \
+            }                                                                                             \
+            const u16x64 r = __builtin_convertvector(                                                     \
+                (__builtin_convertvector(v, u32x64) * __builtin_convertvector(g, u32x64)) >> 16, u16x64); \
+            const u16x64 q = (r + ob) >> 1;                                                               \
+            const u16x64 d = q > (ushort)256 ? q - (ushort)256 : (u16x64)0;   /* saturating subtract */   \
+            *(PTR)((base) + 64 * C) = __builtin_convertvector(d > (ushort)255 ? (u16x64)255 : d, u8x64);  \
         }                                                                                                 \
-        const u16x64 r = __builtin_convertvector(                                                         \
-            (__builtin_convertvector(v, u32x64) * __builtin_convertvector(g, u32x64)) >> 16, u16x64);     \
-        const u16x64 q = (r + ob) >> 1;                                                                   \
-        const u16x64 d = q > (ushort)256 ? q - (ushort)256 : (u16x64)0;   /* saturating subtract */       \
-        *(PTR)((base) + 64 * C) = __builtin_convertvector(d > (ushort)255 ? (u16x64)255 : d, u8x64);      \
     } while (0)
 
 __kernel void gather(GATHER_PARAMS)

@@ -348,3 +348,16 @@ def test_a_weight_rounding_up_to_256_takes_the_next_frame(cl_context, wide):
     for t in (0.999, 1.999, 2.999, 0.9985):
         got = g.render(t)
         assert np.array_equal(got, g.render_reference(t)), (t, np.unique(got))
+
+
+def test_switching_between_identity_and_real_tones(cl_context):
+    """The wide kernel skips the tone stage while every tone is the identity; setting a real
+    tone, and back, must take effect at the next frame."""
+    stack = _stack(n=6, h=16, w=64)
+    g = Gather(stack, (24, 128), backend="opencl", ctx=cl_context, cell=(16, 64), time_step=8)
+    g.set_source_grid(pack_source(np.zeros((2, 2), int)))
+    g.set_time_map(np.linspace(0, 3, 3 * 16, dtype=np.float32).reshape(3, 16))
+    for gain, offset in (([1, 1, 1], [0, 0, 0]), ([1.3, 0.6, 1.0], [5, -9, 0]), ([1, 1, 1], [0, 0, 0])):
+        g.set_tones(np.array([gain], np.float32), np.array([offset], np.float32))
+        assert g._plain_tones() == (gain == [1, 1, 1] and offset == [0, 0, 0])
+        _close(g.render(2.6), g.render_reference(2.6))
