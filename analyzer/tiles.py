@@ -58,14 +58,13 @@ from typing import Sequence
 
 import numpy as np
 
-from ..tiledb.tiles import TilesModel
+from ..tiledb.tiles import CONSTRUCTIONS, TilesModel
 from ._checks import check_int
 from .video import Clip, Progress
 
 DEFAULT_MIN_TILE = 32
 DEFAULT_MAX_TILE = 256
 MAX_STEP = 3
-CONSTRUCTIONS = ("ring", "wang")
 _SAMPLE_FRAMES = 48       # loop frames summed in the cut errors (evenly spread)
 _PRE_FRAMES = 12          # loop frames used to rank candidate positions
 
@@ -591,9 +590,23 @@ class _Texture:
         self.primary = None
         self.primary_pos = (0, 0)
         self.toroid_cost = (0.0, 0.0)
+        self._activity = None
 
     def block(self, y, x, h, w, u=None):
         return looped_block(self.frames, self.start, self.length, self.tau, y, x, h, w, u)
+
+    @property
+    def activity(self) -> np.ndarray:
+        """Mean squared consecutive-frame difference per pixel over the loop (a few pairs; once)."""
+        if self._activity is None:
+            f = self.frames
+            idx = _sample(self.length - 1, 8) + self.start
+            acc = np.zeros(f.shape[1:3], np.float32)
+            for i in idx:
+                d = f[i + 1].astype(np.float32) - f[i].astype(np.float32)
+                acc += (d * d).sum(axis=2)
+            self._activity = acc / len(idx)
+        return self._activity
 
 
 def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = None,
@@ -742,7 +755,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     depth = max(r, min(th, tw) // 2 - 1 - fe)
 
     tiles, tcls, rcls, masks, costs = [], [], [], [], []
-    edges = np.zeros((0, 4), np.int8)
+    edges = None                       # ring sets: the model's default, no colours
     if construction == "wang":
         step()
         wang, edges, strip_depth = _wang_tiles(textures[0], th, tw, r, edge_colours, flow_gain, step)
@@ -781,7 +794,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         class_loop_start=np.array([tx.start for tx in textures], np.int64),
         class_loop_cost=np.array([tx.cost for tx in textures]),
         class_toroid_cost=np.array([tx.toroid_cost for tx in textures]),
-        edges=np.concatenate([edges, np.full((len(tiles) - len(edges), 4), -1, np.int8)]),
+        edges=edges,
         info={"construction": construction, **wang_info,
               "tile_h": th, "tile_w": tw, "loop_length": length, "transition": transition, "overlap_y": by,
               "overlap_x": bx, "ring": r, "feather": fe, "border_depth": depth,
@@ -799,10 +812,9 @@ def _primary(tx: _Texture, th: int, tw: int, by: int, bx: int, flow_gain: float)
     h, w = f.shape[1:3]
     hb, wb = th + by, tw + bx
     stride_y, stride_x = max(4, th // 4), max(4, tw // 4)
-    ys = np.unique(np.r_[np.arange(0, h - hb + 1, stride_y), h - hb])
-    xs = np.unique(np.r_[np.arange(0, w - wb + 1, stride_x), w - wb])
+    ys, xs = _starts(h, hb, stride_y), _starts(w, wb, stride_x)
     u = _sample(tx.length, _PRE_FRAMES)
-    act = _activity(tx)
+    act = tx.activity
     ranked = []
     for y in ys:
         for x in xs:
@@ -839,9 +851,8 @@ def _interiors(tx: _Texture, rings: Sequence[np.ndarray], th: int, tw: int, r: i
     ringmask = np.ones((th, tw), bool)
     ringmask[r:th - r, r:tw - r] = False
     stride_y, stride_x = max(4, th // 4), max(4, tw // 4)
-    places = [(int(y), int(x)) for y in np.unique(np.r_[np.arange(0, h - th + 1, stride_y), h - th])
-              for x in np.unique(np.r_[np.arange(0, w - tw + 1, stride_x), w - tw])]
-    act = _activity(tx)
+    places = [(int(y), int(x)) for y in _starts(h, th, stride_y) for x in _starts(w, tw, stride_x)]
+    act = tx.activity
     chosen: list[tuple[int, int]] = list(taken)
     out = []
     ranked, ranked_for = [], None
@@ -879,7 +890,7 @@ def _wang_tiles(tx: _Texture, th: int, tw: int, r: int, colours: int, flow_gain:
     """The stochastic Wang set of one texture (:func:`wang_edges`).
 
     Edge strips: ``colours`` horizontal and ``colours`` vertical pieces of the looped clip at
-    lively places apart from each other, each ``2 depth`` pixels across its edge (``depth``
+    typical places apart from each other, each ``2 depth`` pixels across its edge (``depth``
     = the ring plus its feathering, as far as a ring cut and its fade reach). A tile's ring
     is the inner halves of its four strips (:func:`wang_ring`), joined to an interior from
     yet another place by the ring cuts (:func:`ring_join`).
@@ -887,7 +898,7 @@ def _wang_tiles(tx: _Texture, th: int, tw: int, r: int, colours: int, flow_gain:
     d = r + _ring_feather(r, th, tw) + 1
     f = tx.frames
     h, w = f.shape[1:3]
-    act = _activity(tx)
+    act = tx.activity
     grad = np.zeros((h, w), np.float32)
     for i in _sample(tx.length, 8) + tx.start:
         g = _grey(f[i:i + 1])[0]
@@ -898,8 +909,7 @@ def _wang_tiles(tx: _Texture, th: int, tw: int, r: int, colours: int, flow_gain:
     def places(bh: int, bw: int) -> list[tuple[int, int]]:
         """Typical places first: spatial and temporal activity near the clip's median (a strip
         livelier or calmer than the rest would mark every edge it sits on), shuffled."""
-        ys = np.unique(np.r_[np.arange(0, h - bh + 1, max(2, bh // 4)), h - bh])
-        xs = np.unique(np.r_[np.arange(0, w - bw + 1, max(2, bw // 4)), w - bw])
+        ys, xs = _starts(h, bh, max(2, bh // 4)), _starts(w, bw, max(2, bw // 4))
         cand = [(int(y), int(x), float(act[y:y + bh, x:x + bw].mean()) + 1e-6,
                  float(grad[y:y + bh, x:x + bw].mean()) + 1e-6) for y in ys for x in xs]
         ma, mg = np.median([c[2] for c in cand]), np.median([c[3] for c in cand])
@@ -933,15 +943,9 @@ def _wang_tiles(tx: _Texture, th: int, tw: int, r: int, colours: int, flow_gain:
     return tiles, edges, d
 
 
-def _activity(tx: _Texture) -> np.ndarray:
-    """Mean squared consecutive-frame difference per pixel over the loop (a few pairs)."""
-    f = tx.frames
-    idx = _sample(tx.length - 1, 8) + tx.start
-    acc = np.zeros(f.shape[1:3], np.float32)
-    for i in idx:
-        d = f[i + 1].astype(np.float32) - f[i].astype(np.float32)
-        acc += (d * d).sum(axis=2)
-    return acc / len(idx)
+def _starts(extent: int, size: int, stride: int) -> np.ndarray:
+    """Block starts every ``stride`` pixels along an axis of ``extent``, the last flush with its end."""
+    return np.unique(np.r_[np.arange(0, extent - size + 1, stride), extent - size])
 
 
 def _lively(ranked: list) -> list:

@@ -39,6 +39,7 @@ from dynatex.analyzer import metrics
 from dynatex.analyzer.tiles import learn_tiles
 from dynatex.player.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter
+from dynatex.tiledb.tiles import CONSTRUCTIONS
 
 CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 
@@ -149,8 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--backend", default="opencl", choices=("opencl", "numpy"))
     ap.add_argument("--json", default=None)
-    ap.add_argument("--construction", default=None, choices=("wang", "ring"),
-                    help="tile construction of the single-texture runs (default: the analyzer's, wang)")
+    ap.add_argument("--construction", default=None, choices=CONSTRUCTIONS,
+                    help="tile construction of the single-texture runs (default: the analyzer's, ring)")
     ap.add_argument("--clips", default="grass,water,generated,grass+water",
                     help="comma-separated subset of grass, water, generated, grass+water (mixing)")
     args = ap.parse_args(argv)

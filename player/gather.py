@@ -47,14 +47,14 @@ within one grey level elsewhere (float32 times may round differently where multi
 are contracted, moving ``w`` by one).
 
 Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders runs of 64
-pixels starting at multiples of 64 on ``ROWS`` rows: a run inside the row whose source is
-linear (one cell, or two cells split at a boundary and merged bytewise; a per-pixel map
-with consecutive pixels and one tone) and whose frames span at most five neighbours is
-blended and toned on 64-byte vectors in 16-bit lanes, tone factors pre-expanded per byte
-on the host; other runs, and other time steps, go pixel by pixel with the same integers.
-Where the device shares host memory (PoCL on the CPU; probed once at open,
-:attr:`Gather.direct`) the kernel writes straight into the caller's array: one launch, no
-copy.
+pixels starting at multiples of 64 on the 8 rows of one pair of map rows: a run inside the
+row whose source is linear (one cell, or two cells split at a boundary and merged
+bytewise; a per-pixel map with consecutive pixels and one tone) and whose frames span at
+most five neighbours is blended and toned on 64-byte vectors in 16-bit lanes, tone factors
+pre-expanded per byte on the host; other runs, and other time steps, go pixel by pixel
+with the same integers. Where the device shares host memory (PoCL on the CPU; probed once
+at open, :attr:`Gather.direct`) the kernel writes straight into the caller's array: one
+launch, no copy.
 
 Examples
 --------
@@ -142,7 +142,7 @@ def gaussian_weights(sigma: float) -> np.ndarray:
 
 
 def gaussian_smooth(field: np.ndarray, sigma: float) -> np.ndarray:
-    """Separable Gaussian smoothing of a 2-D float map with clamped edges (reference of kernels ``smooth_x``, ``smooth_y``).
+    """Separable Gaussian smoothing of a 2-D float map with clamped edges (reference of kernel ``smooth``).
 
     Examples
     --------
@@ -372,8 +372,8 @@ class Gather:
             self.wide = False
             prog = build_program(self.ctx, "gather.cl", {**defines, "WIDE": False})
         self._k_gather = prog.kernel("gather")
-        self._k_smooth_x = prog.kernel("smooth_x")
-        self._k_smooth_y = prog.kernel("smooth_y")
+        self._k_smooth_x = prog.kernel("smooth")
+        self._k_smooth_y = prog.kernel("smooth")
         self.direct = writes_through(self.ctx)
         # kernel gather: the wide kernel renders RUNS runs of 64 pixels on the 8 rows of one pair
         # of map rows (rows 8k - 4 .. 8k + 3), the other RUN pixels of one row
@@ -498,9 +498,9 @@ class Gather:
         d_w = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=w)
         th, tw = self.tmap_shape
         dims = (np.int32(tw), np.int32(th), np.int32(r))
-        self._k_smooth_x.set_args(self._d_tmap, self._d_tmp, d_w, *dims)
+        self._k_smooth_x.set_args(self._d_tmap, self._d_tmp, d_w, *dims, np.int32(0))
         cl.enqueue_nd_range_kernel(self.queue, self._k_smooth_x, self._tsize, None)
-        self._k_smooth_y.set_args(self._d_tmp, self._d_tmap, d_w, *dims)
+        self._k_smooth_y.set_args(self._d_tmp, self._d_tmap, d_w, *dims, np.int32(1))
         cl.enqueue_nd_range_kernel(self.queue, self._k_smooth_y, self._tsize, None)
         self.queue.finish()
 

@@ -579,9 +579,9 @@ class TilesPlayer(Player):
             raise ValueError("state arrangement does not fit this tile set")
         if not (self.model.tile_class[arrangement] == labels).all():
             raise ValueError("state arrangement does not match its labels")
-        if self._wang_mismatch(arrangement):
-            raise ValueError(f"state arrangement puts {self._wang_mismatch(arrangement)} Wang edges of "
-                             "different colours together")
+        mismatched = self._wang_mismatch(arrangement)
+        if mismatched:
+            raise ValueError(f"state arrangement puts {mismatched} Wang edges of different colours together")
         # everything checked: now change the player
         self._rng, self.labels, self._t, self._phase = rng, labels, t, phase
         self._cells_a, self._cells_b = cells

@@ -18,6 +18,7 @@ from ._check import Checker
 from .source import SourceInfo
 
 MAX_TILES = 4096
+CONSTRUCTIONS = ("ring", "wang")   # how tiles join in x and y (attribute ``construction``)
 MAX_CLASSES = 10           # the player tone table (256 entries) holds blended tones for every pair
 
 
@@ -201,7 +202,7 @@ def _check_edges(where: str, model: TilesModel, check: Checker) -> None:
     cells row by row from the first three)."""
     e = np.asarray(model.edges)
     kind = model.info.get("construction", "ring")
-    if kind not in ("ring", "wang"):
+    if kind not in CONSTRUCTIONS:
         check.fail(where.rsplit("/", 1)[0] + "@construction", f"must be 'ring' or 'wang', not {kind!r}")
     if not model.wang:
         if (e != -1).any():

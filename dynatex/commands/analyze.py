@@ -9,6 +9,7 @@ import time
 from ..analyzer.methods import METHODS, get_method
 from ..analyzer.quilt import DEFAULT_BLOCK as QUILT_BLOCK
 from ..tiledb import DatabaseWriter
+from ..tiledb.tiles import CONSTRUCTIONS as TILE_CONSTRUCTIONS
 from ._common import UsageError, load_clip_arg, positive_int, size_arg, tqdm_progress
 
 
@@ -55,7 +56,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g = p.add_argument_group("tiles")
     g.add_argument("--tile", type=_tile_arg, default=None, metavar="N or WxH",
                    help="tile size in pixels (default: from the dominant spatial period)")
-    g.add_argument("--tiles-construction", choices=("ring", "wang"), default="ring",
+    g.add_argument("--tiles-construction", choices=TILE_CONSTRUCTIONS, default="ring",
                    help="ring: tiles share one boundary ring and join in any arrangement (default); wang: "
                         "edge-coloured tiles that join where colours match, with no content repeated at every "
                         "tile (one texture only)")

@@ -372,36 +372,23 @@ __kernel void gather(GATHER_PARAMS)
 
 #endif
 
-// Separable Gaussian smoothing of a float map, edges clamped; weights holds 2 * radius + 1
-// taps. smooth_x runs along rows, smooth_y along columns (two kernel objects, so each
-// keeps its own arguments).
-__kernel void smooth_x(__global const float *restrict src,
-                       __global float *restrict dst,
-                       __constant float *restrict weights,
-                       const int w, const int h, const int radius)
+// Separable Gaussian smoothing of a w x h float map, edges clamped; weights holds 2 * radius + 1
+// taps. along = 0 smooths along rows, 1 along columns (the host fetches two kernel objects,
+// so each keeps its own arguments).
+__kernel void smooth(__global const float *restrict src,
+                     __global float *restrict dst,
+                     __constant float *restrict weights,
+                     const int w, const int h, const int radius, const int along)
 {
     const int x = get_global_id(0);
     const int y = get_global_id(1);
     if (x >= w || y >= h)
         return;
-    __global const float *row = src + (size_t)y * w;
+    const int n = along ? h : w, i = along ? y : x;
+    const size_t step = along ? (size_t)w : 1;
+    __global const float *line = src + (along ? (size_t)x : (size_t)y * w);
     float acc = 0.0f;
     for (int k = -radius; k <= radius; ++k)
-        acc += weights[k + radius] * row[clamp(x + k, 0, w - 1)];
-    dst[(size_t)y * w + x] = acc;
-}
-
-__kernel void smooth_y(__global const float *restrict src,
-                       __global float *restrict dst,
-                       __constant float *restrict weights,
-                       const int w, const int h, const int radius)
-{
-    const int x = get_global_id(0);
-    const int y = get_global_id(1);
-    if (x >= w || y >= h)
-        return;
-    float acc = 0.0f;
-    for (int k = -radius; k <= radius; ++k)
-        acc += weights[k + radius] * src[(size_t)clamp(y + k, 0, h - 1) * w + x];
+        acc += weights[k + radius] * line[(size_t)clamp(i + k, 0, n - 1) * step];
     dst[(size_t)y * w + x] = acc;
 }
