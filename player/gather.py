@@ -36,25 +36,28 @@ tone
     (:meth:`Gather.set_tones`, tables ``(n, 3)``; tone 0 defaults to identity).
 
 Numerical contract: blend and tone are computed in fixed point, the same integers on the
-device and in the numpy reference (:func:`gather_reference`): the time weight in 256ths
-(``w = int(256 f + 0.5)``), ``v = a (256 - w) + b w``, gain ``G = round(512 gain)``, offset
-``O = round(2 offset) + 513``, ``out = clip((((v G) >> 16) + O) >> 1 - 256, 0, 255)``:
-every intermediate fits 16 bits (so the device works on 32 or 64 lanes at once). The result
-is the exact rounding of the blend at the quantised weight, gain and offset: within one grey
-level of the real-valued formula for gains up to 1.5 (tested; the weight's error grows as
-``|b - a| gain / 512``). The device and the reference agree exactly on integer times and
-within one grey level elsewhere (float32 times may round differently where multiply-adds
-are contracted, moving ``w`` by one).
+device and in the numpy reference (:func:`gather_reference`): the time weight in 255ths
+(``w = int(255 f + 0.5)``), ``v = (255 - w) (a - 128) + w (b - 128)``, gain
+``G = round(gain 2**17 / 255)``, offset ``O = round(2 (128 gain + offset)) + 1``,
+``out = clip((((v G) >> 16) + O) >> 1, 0, 255)``: every intermediate fits signed 16 bits for
+gains up to 63 (so the device works on 32 or 64 lanes at once, one multiply-add per pair of
+frames). The result is the rounding of the blend at the quantised weight, gain and offset:
+within one grey level of the real-valued formula for gains up to 1.5 (tested; the weight's
+error grows as ``|b - a| gain / 510``). The device and the reference agree exactly on
+integer times and within one grey level elsewhere (float32 times may round differently
+where multiply-adds are contracted, moving ``w`` by one).
 
 Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders runs of 64
-pixels starting at multiples of 64 on the 8 rows of one pair of map rows: a run inside the
-row whose source is linear (one cell, or two cells split at a boundary and merged
-bytewise; a per-pixel map with consecutive pixels and one tone) and whose frames span at
-most five neighbours is blended and toned on 64-byte vectors in 16-bit lanes, tone factors
-pre-expanded per byte on the host; other runs, and other time steps, go pixel by pixel
-with the same integers. Where the device shares host memory (PoCL on the CPU; probed once
-at open, :attr:`Gather.direct`) the kernel writes straight into the caller's array: one
-launch, no copy.
+pixels on the 8 rows of one pair of map rows: a run whose source is linear (one cell, or two
+cells split at a boundary and merged bytewise; a per-pixel map with consecutive pixels and
+one tone) and whose frames span at most five neighbours is blended and toned on 64-byte
+vectors in 16-bit lanes, tone factors pre-expanded per byte on the host; other runs, and
+other time steps, go pixel by pixel with the same integers. The runs are placed so that
+their stores are 64-byte aligned wherever the output's rows are a multiple of 64 bytes long
+and the output starts on a 16-byte boundary (any numpy array): they are then non-temporal,
+writing the frame once without reading it first. Where the device shares host memory (PoCL
+on the CPU; probed once at open, :attr:`Gather.direct`) the kernel writes straight into the
+caller's array: one launch, no copy.
 
 Examples
 --------
@@ -81,13 +84,18 @@ log = logging.getLogger(__name__)
 WRAPS = ("loop", "clamp", "pingpong")
 MAX_FRAME_PIXELS = 1 << 24
 MAX_TONES = 256
-MAX_GAIN, MAX_OFFSET = 64.0, 255.0   # the fixed-point tone's range (every intermediate fits 16 bits)
+MAX_GAIN, MAX_OFFSET = 63.0, 255.0   # the fixed-point tone's range (every intermediate fits 16 bits)
 RUN = 32              # output pixels per work-item of the per-pixel kernel (time steps other than 8)
 STACK_PAD = 256       # bytes of padding around the device copy of the frame stack (a run's 192 bytes fit)
-RUNS = 2              # wide kernel: a work-item renders RUNS runs of 64 pixels on 8 rows
+RUNS = 8              # wide kernel: a work-item renders RUNS runs of 64 pixels on 8 rows
 TONE_STRIDE = 384     # uint16 per device tone row: 192 gains then 192 offsets, the rgb pattern of a 64-pixel run
 TONE_OB = 192
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
+#: the bytes of a 64-pixel run in the order of the wide kernel's 16-bit lanes: per 64-byte
+#: chunk, the low then the high half of the x86 byte interleave (bytes 0-7 of each 16-byte
+#: lane, then 8-15)
+_CHUNK_BYTES = np.array([64 * c + 16 * lane + half + i for c in range(3) for half in (0, 8)
+                         for lane in range(4) for i in range(8)])
 
 
 # -- numpy references ------------------------------------------------------------------------
@@ -212,11 +220,14 @@ def source_indices(source: np.ndarray, shape: tuple[int, int], frame_w: int,
 
 def fixed_tones(tones: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The fixed-point tone ``(G, O)`` int32 ``(n, 3)`` of a float table ``(n, 6)`` (gain rgb,
-    offset rgb): ``G = round(512 gain)``, ``O = round(2 offset) + 513`` (module docstring)."""
+    offset rgb): ``G = round(gain 2**17 / 255)``, ``O = round(2 (128 gain + offset)) + 1``
+    (module docstring)."""
     tones = np.asarray(tones, np.float64)
-    gain = np.clip(np.rint(tones[:, :3] * 512), 0, 512 * MAX_GAIN)
-    offset = np.rint(np.clip(tones[:, 3:], -MAX_OFFSET, MAX_OFFSET) * 2) + 513
-    return gain.astype(np.int32), offset.astype(np.int32)
+    gain = np.clip(tones[:, :3], 0, MAX_GAIN)
+    offset = np.clip(tones[:, 3:], -MAX_OFFSET, MAX_OFFSET)
+    g = np.rint(gain * (2**17 / 255))
+    o = np.rint(2 * (128 * gain + offset)) + 1
+    return g.astype(np.int32), o.astype(np.int32)
 
 
 def gather_reference(stack: np.ndarray, pix: np.ndarray, tone: np.ndarray, times: np.ndarray,
@@ -232,14 +243,15 @@ def gather_reference(stack: np.ndarray, pix: np.ndarray, tone: np.ndarray, times
     times = np.asarray(times, np.float32)
     tf = np.floor(times)
     ti = tf.astype(np.int64)
-    v = flat[wrap_index(ti, n, wrap), pix].astype(np.int32) * 256
+    a = flat[wrap_index(ti, n, wrap), pix].astype(np.int32) - 128
     if interpolate:
-        w = np.clip(((times - tf) * np.float32(256) + np.float32(0.5)).astype(np.int32), 0, 256)[..., None]
-        b = flat[wrap_index(ti + 1, n, wrap), pix].astype(np.int32)
-        v += (b - v // 256) * w
+        w = np.clip(((times - tf) * np.float32(255) + np.float32(0.5)).astype(np.int32), 0, 255)[..., None]
+        b = flat[wrap_index(ti + 1, n, wrap), pix].astype(np.int32) - 128
+        v = (255 - w) * a + w * b
+    else:
+        v = 255 * a
     gain, offset = fixed_tones(tones)
-    r = ((v * gain[tone]) >> 16) + offset[tone]
-    res = np.clip((r >> 1) - 256, 0, 255).astype(np.uint8)
+    res = np.clip((((v * gain[tone]) >> 16) + offset[tone]) >> 1, 0, 255).astype(np.uint8)
     if out is None:
         return res
     out[...] = res
@@ -342,11 +354,6 @@ class Gather:
         # the 64-lane kernel (time step 8) is written for CPU vector units; elsewhere per pixel
         cpu = bool(self.ctx.devices[0].type & cl.device_type.CPU)
         self.wide = self.time_step == 8 and (cpu if self._wide_choice is None else bool(self._wide_choice))
-        # STACK_PAD bytes on both sides: vector loads of a run may read a few bytes past the
-        # frame stack's ends (lanes that a bytewise merge then drops)
-        padded = np.zeros(self._stack.nbytes + 2 * STACK_PAD, np.uint8)
-        padded[STACK_PAD:STACK_PAD + self._stack.nbytes] = self._stack.reshape(-1)
-        self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
         # 16 floats of padding: the time step 8 kernel reads the map 16 floats at a time
         self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
         self._d_tmp = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
@@ -371,13 +378,21 @@ class Gather:
                         self.ctx.devices[0].name)
             self.wide = False
             prog = build_program(self.ctx, "gather.cl", {**defines, "WIDE": False})
+        # STACK_PAD bytes on both sides: vector loads of a run may read a few bytes past the
+        # frame stack's ends (lanes that a bytewise merge then drops). The 64-lane kernel
+        # reads bytes value ^ 0x80: value - 128 as a signed byte, what its blend multiplies.
+        padded = np.zeros(self._stack.nbytes + 2 * STACK_PAD, np.uint8)
+        padded[STACK_PAD:STACK_PAD + self._stack.nbytes] = self._stack.reshape(-1)
+        if self.wide:
+            padded ^= 0x80
+        self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
         self._k_gather = prog.kernel("gather")
         self._k_smooth_x = prog.kernel("smooth")
         self._k_smooth_y = prog.kernel("smooth")
         self.direct = writes_through(self.ctx)
         # kernel gather: the wide kernel renders RUNS runs of 64 pixels on the 8 rows of one pair
         # of map rows (rows 8k - 4 .. 8k + 3), the other RUN pixels of one row
-        self._gsize = (-(-w // (64 * RUNS)), -(-(h + 4) // 8)) if self.wide else (-(-w // RUN), h)
+        self._gsize = (-(-(w + 64) // (64 * RUNS)), -(-(h + 4) // 8)) if self.wide else (-(-w // RUN), h)
         # one work-item per work-group there: left to itself PoCL may put the whole small
         # range into one work-group, which runs on one core
         self._lsize = (1, 1) if self.wide else None
@@ -397,13 +412,6 @@ class Gather:
         if self.backend == "opencl":
             import pyopencl as cl
             cl.enqueue_copy(self.queue, self._d_tones, _expand_tones(self._tones), is_blocking=True)
-            self._k_gather.set_arg(11, np.int32(self._plain_tones()))
-
-    def _plain_tones(self) -> bool:
-        """Whether every tone is the identity (the wide kernel then skips the tone stage: with
-        G = 512 and O = 513 it computes round-half-up(v / 256), which (v + 128) >> 8 gives)."""
-        gain, offset = fixed_tones(self._tones)
-        return bool((gain == 512).all() and (offset == 513).all())
 
     def _set_args(self) -> None:
         if self.backend != "opencl" or self._d_source is None:
@@ -412,8 +420,7 @@ class Gather:
         grid_w = self._source.shape[1]
         self._k_gather.set_args(self._d_stack, self._d_source, self._d_tmap, self._d_tones, self._d_out,
                                 np.int32(w), np.int32(h), np.int32(grid_w),
-                                np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0),
-                                np.int32(self._plain_tones()))
+                                np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0))
         self._host_out = self._host_buf = None       # arg 4 is the device's frame buffer again
 
     # -- inputs --------------------------------------------------------------------------------
@@ -505,7 +512,7 @@ class Gather:
         self.queue.finish()
 
     def set_tones(self, gain: np.ndarray, offset: np.ndarray | None = None) -> None:
-        """Tone table: ``gain`` and ``offset`` ``(n, 3)`` (or ``(3,)`` for one tone), gain in [0, 64],
+        """Tone table: ``gain`` and ``offset`` ``(n, 3)`` (or ``(3,)`` for one tone), gain in [0, 63],
         offset in [-255, 255] (the range of the fixed-point tone)."""
         gain = np.atleast_2d(np.asarray(gain, np.float32))
         offset = np.zeros_like(gain) if offset is None else np.atleast_2d(np.asarray(offset, np.float32))
@@ -638,12 +645,15 @@ class Gather:
 
 
 def _expand_tones(tones: np.ndarray) -> np.ndarray:
-    """Device tone table (uint16): per tone, the fixed-point rgb gains repeated for 64 pixels
-    (192 values), then the offsets likewise, so a run loads its per-byte factors with vector loads."""
+    """Device tone table (int16): per tone, the fixed-point gain of each byte of a 64-pixel run
+    (192 values), then the offsets likewise, each 64-byte chunk in the word order of the
+    wide kernel's byte interleave (:data:`_CHUNK_BYTES`), so a run loads its per-byte
+    factors with vector loads. Bytes 0-2 come first: the per-pixel kernel reads those."""
     gain, offset = fixed_tones(tones)
-    out = np.zeros((len(tones), TONE_STRIDE), np.uint16)
-    out[:, :TONE_OB] = np.tile(gain, 64)
-    out[:, TONE_OB:] = np.tile(offset, 64)
+    channel = _CHUNK_BYTES % 3
+    out = np.zeros((len(tones), TONE_STRIDE), np.int16)
+    out[:, :TONE_OB] = gain[:, channel]
+    out[:, TONE_OB:] = offset[:, channel]
     return out
 
 

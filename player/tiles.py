@@ -34,7 +34,7 @@ import numpy as np
 
 from ..tiledb import TileDB, TilesModel
 from .base import FloatControl, Player, check_float, check_int, check_seed, rng_from_state
-from .gather import Gather, gaussian_smooth, pack_source
+from .gather import MAX_GAIN, Gather, gaussian_smooth, pack_source
 
 TIME_STEP = 8              # output pixels per time-map sample
 MAX_SIZE = 16384
@@ -81,7 +81,7 @@ def _fit_gain(hist: np.ndarray, target: float) -> float:
     n = hist.sum()
     if n == 0 or (hist[1:].sum() == 0):
         return 1.0
-    lo, hi = 0.0, 64.0
+    lo, hi = 0.0, MAX_GAIN
     for _ in range(40):
         g = 0.5 * (lo + hi)
         mean = float((hist * np.minimum(255.0, np.rint(g * v))).sum() / n)

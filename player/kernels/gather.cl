@@ -13,17 +13,20 @@
 // clamped to the map.
 //
 // Fixed point (the numpy reference in gather.py computes exactly this): i = floor(time),
-// w = (int)((time - i) * 256 + 0.5) in [0, 256], v = a (256 - w) + b w for the channel
-// values a = F[wrap(i)], b = F[wrap(i + 1)]; tone gain G = round(512 gain), offset
-// O = round(2 offset) + 513: out = clamp((((v G) >> 16) + O) >> 1 - 256, 0, 255), which is
-// round(value * gain + offset) up to the quantisation. Every intermediate fits 16 bits.
+// w = (int)((time - i) * 255 + 0.5) in [0, 255], v = (255 - w) (a - 128) + w (b - 128) for
+// the channel values a = F[wrap(i)], b = F[wrap(i + 1)] (v = 255 (value - 128), signed 16
+// bit); tone gain G = round(gain 2^17 / 255), offset O = round(2 (128 gain + offset)) + 1:
+// out = clamp((((v G) >> 16) + O) >> 1, 0, 255) (arithmetic shifts), which is
+// round(value * gain + offset) up to the quantisation. Every intermediate fits 16 bits for
+// gains up to 63 and offsets within 255, so the 64-lane kernel blends with one pmaddubsw
+// and tones with one pmulhw per 32 lanes.
 //
 // Defines: FRAME_W, FRAME_PIXELS (stored frame width, width * height), NFRAMES, GRID,
 // CELL_H, CELL_W (cell size of the grid; compile-time so the divisions become multiplies),
 // WRAP (0 loop, 1 clamp, 2 ping-pong), INTERP (1: linear in time, 0: nearest earlier
 // frame), TSTEP, WIDE (1: the 64-lane kernel for TSTEP 8, for CPU devices), RUN (pixels per
 // work-item of the per-pixel kernel), RUNS (64-pixel runs per work-item of the wide kernel),
-// STACK_PAD, TONE_STRIDE, TONE_OB (ushorts per tone row, and where its offsets start).
+// STACK_PAD, TONE_STRIDE, TONE_OB (shorts per tone row, and where its offsets start).
 
 #define WRAP_LOOP 0
 #define WRAP_CLAMP 1
@@ -55,72 +58,81 @@ inline int fast_floor(float v)
     return i - (int)((float)i > v);
 }
 
-// The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the host;
-// plain is 1 when every tone is the identity (the wide kernel then skips the tone stage).
+// The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the host.
 #define GATHER_PARAMS __global const uchar *restrict stack, __global const int *restrict source,            \
-                      __global const float *restrict tmap, __global const ushort *restrict tones,          \
+                      __global const float *restrict tmap, __global const short *restrict tones,          \
                       __global uchar *restrict out, const int width, const int height, const int grid_w,   \
-                      const int tmap_w, const int tmap_h, const float t0,                  \
-                      const int plain
+                      const int tmap_w, const int tmap_h, const float t0
 
-// one channel: blended value v (256ths), tone gain g and offset o as in the header
-inline uchar tone1(uint v, uint g, uint o)
+// a stored byte as value - 128: the 64-lane kernel's stack holds value ^ 0x80 (a signed byte)
+#if TSTEP == 8 && WIDE
+#define SVAL(s) ((int)(char)(s))
+#else
+#define SVAL(s) ((int)(s) - 128)
+#endif
+
+// one channel: blended value v (255 (value - 128)), tone gain g and offset o as in the header
+inline uchar tone1(int v, int g, int o)
 {
-    return (uchar)min(max((((v * g) >> 16) + o) >> 1, 256u) - 256u, 255u);
+    return (uchar)clamp((((v * g) >> 16) + o) >> 1, 0, 255);
 }
 
 // one output pixel at time t from source pixel pix with tone
-inline void pixel(__global const uchar *restrict stack, __global const ushort *restrict tones, int pix, int tone,
+inline void pixel(__global const uchar *restrict stack, __global const short *restrict tones, int pix, int tone,
                   float t, __global uchar *restrict o)
 {
     const int ti = fast_floor(t);
     __global const uchar *p0 = stack + ((size_t)wrap_index(ti) * FRAME_PIXELS + pix) * 3;
 #if INTERP
-    const uint w = (uint)clamp((int)((t - (float)ti) * 256.0f + 0.5f), 0, 256);
+    const int w = clamp((int)((t - (float)ti) * 255.0f + 0.5f), 0, 255);
     __global const uchar *p1 = stack + ((size_t)wrap_index(ti + 1) * FRAME_PIXELS + pix) * 3;
 #else
-    const uint w = 0;
+    const int w = 0;
     __global const uchar *p1 = p0;
 #endif
-    __global const ushort *tn = tones + tone * TONE_STRIDE;
+    __global const short *tn = tones + tone * TONE_STRIDE;
     // scalar channels on purpose: PoCL's 3-vectors are an order of magnitude slower
-    o[0] = tone1(p0[0] * (256u - w) + p1[0] * w, tn[0], tn[TONE_OB]);
-    o[1] = tone1(p0[1] * (256u - w) + p1[1] * w, tn[1], tn[TONE_OB + 1]);
-    o[2] = tone1(p0[2] * (256u - w) + p1[2] * w, tn[2], tn[TONE_OB + 2]);
+    o[0] = tone1((255 - w) * SVAL(p0[0]) + w * SVAL(p1[0]), tn[0], tn[TONE_OB]);
+    o[1] = tone1((255 - w) * SVAL(p0[1]) + w * SVAL(p1[1]), tn[1], tn[TONE_OB + 1]);
+    o[2] = tone1((255 - w) * SVAL(p0[2]) + w * SVAL(p1[2]), tn[2], tn[TONE_OB + 2]);
 }
 
 
 #if TSTEP == 8 && WIDE
 // A work-item renders RUNS runs of 64 pixels (192 bytes) on the 8 rows that share one pair of
-// map rows (rows 8k - 4 .. 8k + 3). Runs start at multiples of 64, so the map intervals a run
-// covers, and each lane's place inside its interval, are the same for every run. Per run the
-// ten map columns of both map rows are read once, the 64 lanes' interpolations along x come
-// from shuffles, and the frames the 8 rows need are bounded by the samples' extremes (the
-// lanes interpolate between them): lo .. lo + span + 1. Per row a lane's time is one
-// multiply-add, and u = (int)(256 (time - lo) + 0.5) gives its frame (lo + u / 256) and its
-// weight (u % 256) at once: the same integers as floor and weight in the header's formula.
-// When the run lies inside the row, its source is linear (inside one cell, or two cells
-// split at a boundary; a per-pixel map must be linear with one tone) and its frames lie within
+// map rows (rows 8k - 4 .. 8k + 3). Runs start at multiples of 8 pixels (see x0 below), so
+// the map intervals a run covers, and each lane's place inside its interval, are the same
+// for every run. Per run the ten map columns of both map rows are read once, the 64 lanes'
+// interpolations along x come from shuffles, and the frames the 8 rows need are bounded by
+// the samples' extremes (the lanes interpolate between them): lo .. lo + span + 1. Per row
+// a lane's time is one multiply-add, and u = (int)(255 (time - lo) + 0.5) gives its frame
+// (lo + u / 255) and its weight (u % 255) at once: the same integers as floor and weight in
+// the header's formula. When the run's source is linear (inside one cell, or two cells split
+// at a boundary; a per-pixel map must be linear with one tone) and its frames lie within
 // lo .. lo + MAX_SPAN + 1, the run is blended and toned in 16-bit lanes on 64-byte vectors:
-// three chunks of 64 bytes, each byte's pixel found by a shuffle. Any other run goes pixel
-// by pixel with the same formula. (Clang's ext_vector_type gives the 64-wide types OpenCL C
-// lacks: on AVX-512 one operation covers 32 or 64 lanes, where a float16 covers 16.)
+// three chunks of 64 bytes, each byte's frames merged bytewise and its weight found by a
+// shuffle. Any other run goes pixel by pixel with the same formula. (Clang's ext_vector_type
+// gives the 64-wide types OpenCL C lacks: on AVX-512 one operation covers 32 or 64 lanes,
+// where a float16 covers 16.)
 typedef uchar  u8x64  __attribute__((ext_vector_type(64)));
 typedef char   i8x64  __attribute__((ext_vector_type(64)));
 typedef ushort u16x64 __attribute__((ext_vector_type(64)));
+typedef ushort u16x32 __attribute__((ext_vector_type(32)));
 typedef short  i16x64 __attribute__((ext_vector_type(64)));
+typedef short  i16x32 __attribute__((ext_vector_type(32)));
 typedef uint   u32x64 __attribute__((ext_vector_type(64)));
 typedef int    i32x64 __attribute__((ext_vector_type(64)));
+typedef int    i32x32 __attribute__((ext_vector_type(32)));
 typedef float  f32x64 __attribute__((ext_vector_type(64)));
 typedef u8x64 __attribute__((aligned(1))) u8x64_u;
-typedef u16x64 __attribute__((aligned(2))) u16x64_u;
+typedef i16x32 __attribute__((aligned(2))) i16x32_u;
 typedef int16 __attribute__((aligned(4))) int16_u;
 typedef float16 __attribute__((aligned(4))) float16_u;
 #define LOAD64(p) (*(__global const u8x64_u *)(p))
-#define LOADT(p) (*(__global const u16x64_u *)(p))
+#define LOADT(p) (*(__global const i16x32_u *)(p))
 // comparisons give signed lanes (0 or -1); these reinterpret them as masks
 #define AS_U8(x) __builtin_astype((x), u8x64)
-#define AS_U16(x) __builtin_astype((x), u16x64)
+#define AS_I16(x) __builtin_astype((x), i16x32)
 // lanes where m is all ones take b, the others a
 #define PICK(m, a, b) (((a) & ~(m)) | ((b) & (m)))
 #define MAX_SPAN 3   // a fast run blends frames lo .. lo + MAX_SPAN + 1 at most
@@ -132,11 +144,57 @@ typedef float16 __attribute__((aligned(4))) float16_u;
 #define PIX0 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9, 9, 10, 10, 10, 11, 11, 11, 12, 12, 12, 13, 13, 13, 14, 14, 14, 15, 15, 15, 16, 16, 16, 17, 17, 17, 18, 18, 18, 19, 19, 19, 20, 20, 20, 21
 #define PIX1 21, 21, 22, 22, 22, 23, 23, 23, 24, 24, 24, 25, 25, 25, 26, 26, 26, 27, 27, 27, 28, 28, 28, 29, 29, 29, 30, 30, 30, 31, 31, 31, 32, 32, 32, 33, 33, 33, 34, 34, 34, 35, 35, 35, 36, 36, 36, 37, 37, 37, 38, 38, 38, 39, 39, 39, 40, 40, 40, 41, 41, 41, 42, 42
 #define PIX2 42, 43, 43, 43, 44, 44, 44, 45, 45, 45, 46, 46, 46, 47, 47, 47, 48, 48, 48, 49, 49, 49, 50, 50, 50, 51, 51, 51, 52, 52, 52, 53, 53, 53, 54, 54, 54, 55, 55, 55, 56, 56, 56, 57, 57, 57, 58, 58, 58, 59, 59, 59, 60, 60, 60, 61, 61, 61, 62, 62, 62, 63, 63, 63
+// A chunk's 64 bytes in the word order of the byte interleave (x86 unpack: within each
+// 16-byte lane, bytes 0-7 go to the low half, 8-15 to the high half): the bytes each 16-bit
+// lane holds (BYTE_*), the interleave of two chunks (UNPACK_*), and the pixel of each lane
+// for chunk C of a run (W*C: lane -> (64 C + byte) / 3).
+#define BYTE_LO 0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22, 23, 32, 33, 34, 35, 36, 37, 38, 39, 48, 49, 50, 51, 52, 53, 54, 55
+#define BYTE_HI 8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27, 28, 29, 30, 31, 40, 41, 42, 43, 44, 45, 46, 47, 56, 57, 58, 59, 60, 61, 62, 63
+#define UNPACK_LO 0, 64, 1, 65, 2, 66, 3, 67, 4, 68, 5, 69, 6, 70, 7, 71, 16, 80, 17, 81, 18, 82, 19, 83, 20, 84, 21, 85, 22, 86, 23, 87, 32, 96, 33, 97, 34, 98, 35, 99, 36, 100, 37, 101, 38, 102, 39, 103, 48, 112, 49, 113, 50, 114, 51, 115, 52, 116, 53, 117, 54, 118, 55, 119
+#define UNPACK_HI 8, 72, 9, 73, 10, 74, 11, 75, 12, 76, 13, 77, 14, 78, 15, 79, 24, 88, 25, 89, 26, 90, 27, 91, 28, 92, 29, 93, 30, 94, 31, 95, 40, 104, 41, 105, 42, 106, 43, 107, 44, 108, 45, 109, 46, 110, 47, 111, 56, 120, 57, 121, 58, 122, 59, 123, 60, 124, 61, 125, 62, 126, 63, 127
+#define WLO0 0, 0, 0, 1, 1, 1, 2, 2, 5, 5, 6, 6, 6, 7, 7, 7, 10, 11, 11, 11, 12, 12, 12, 13, 16, 16, 16, 17, 17, 17, 18, 18
+#define WHI0 2, 3, 3, 3, 4, 4, 4, 5, 8, 8, 8, 9, 9, 9, 10, 10, 13, 13, 14, 14, 14, 15, 15, 15, 18, 19, 19, 19, 20, 20, 20, 21
+#define WLO1 21, 21, 22, 22, 22, 23, 23, 23, 26, 27, 27, 27, 28, 28, 28, 29, 32, 32, 32, 33, 33, 33, 34, 34, 37, 37, 38, 38, 38, 39, 39, 39
+#define WHI1 24, 24, 24, 25, 25, 25, 26, 26, 29, 29, 30, 30, 30, 31, 31, 31, 34, 35, 35, 35, 36, 36, 36, 37, 40, 40, 40, 41, 41, 41, 42, 42
+#define WLO2 42, 43, 43, 43, 44, 44, 44, 45, 48, 48, 48, 49, 49, 49, 50, 50, 53, 53, 54, 54, 54, 55, 55, 55, 58, 59, 59, 59, 60, 60, 60, 61
+#define WHI2 45, 45, 46, 46, 46, 47, 47, 47, 50, 51, 51, 51, 52, 52, 52, 53, 56, 56, 56, 57, 57, 57, 58, 58, 61, 61, 62, 62, 62, 63, 63, 63
+#define EVEN32 0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30, 32, 34, 36, 38, 40, 42, 44, 46, 48, 50, 52, 54, 56, 58, 60, 62
+#define ODD32 1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31, 33, 35, 37, 39, 41, 43, 45, 47, 49, 51, 53, 55, 57, 59, 61, 63
+#define PACK64 0, 1, 2, 3, 4, 5, 6, 7, 32, 33, 34, 35, 36, 37, 38, 39, 8, 9, 10, 11, 12, 13, 14, 15, 40, 41, 42, 43, 44, 45, 46, 47, 16, 17, 18, 19, 20, 21, 22, 23, 48, 49, 50, 51, 52, 53, 54, 55, 24, 25, 26, 27, 28, 29, 30, 31, 56, 57, 58, 59, 60, 61, 62, 63
 
-// One 64-byte chunk C (0..2) of a fast run: pick each byte's frames, blend, tone, store at
-// base + 64 C (a pointer of type PTR).
-#define CHUNK(C, PTR, base)                                                                               \
-    do {                                                                                                  \
+// u8 x s8 pairs summed into s16 lanes (x86 pmaddubsw; no lane here saturates), and two s16
+// vectors narrowed with unsigned saturation in the x86 pack order (packuswb): the
+// instructions where the compiler targets AVX-512BW, the same lanes in plain vector code elsewhere
+#ifdef __AVX512BW__
+#define MADDUBS(w, x) __builtin_ia32_pmaddubsw512(__builtin_astype((w), i8x64), __builtin_astype((x), i8x64))
+#define PACKUS(lo, hi) __builtin_astype(__builtin_ia32_packuswb512((lo), (hi)), u8x64)
+#else
+inline i16x32 maddubs(u8x64 w, i8x64 x)
+{
+    return __builtin_convertvector(__builtin_shufflevector(w, w, EVEN32), i16x32)
+         * __builtin_convertvector(__builtin_shufflevector(x, x, EVEN32), i16x32)
+         + __builtin_convertvector(__builtin_shufflevector(w, w, ODD32), i16x32)
+         * __builtin_convertvector(__builtin_shufflevector(x, x, ODD32), i16x32);
+}
+inline u8x64 packus(i16x32 lo, i16x32 hi)
+{
+    const i16x64 v = __builtin_shufflevector(lo, hi, PACK64);
+    return __builtin_convertvector(v < (short)0 ? (i16x64)0 : v > (short)255 ? (i16x64)255 : v, u8x64);
+}
+#define MADDUBS(w, x) maddubs(__builtin_astype((w), u8x64), __builtin_astype((x), i8x64))
+#define PACKUS(lo, hi) packus((lo), (hi))
+#endif
+// (a b) >> 16 in unsigned 16-bit lanes (pmulhuw)
+#define MULHU(a, b) __builtin_convertvector((__builtin_convertvector((a), u32x64) * (uint)(b)) >> 16, u16x64)
+// (v g) >> 16 in 16-bit lanes (pmulhw)
+#define MULHI(v, g) __builtin_convertvector((__builtin_convertvector((v), i32x32) * __builtin_convertvector((g), i32x32)) >> 16, i16x32)
+
+// One 64-byte chunk C (0..2) of a fast run, as a value: pick each byte's frames, blend, tone.
+// The stack holds bytes v ^ 0x80 (SVAL), so a byte read as signed is v - 128; the blend is
+// one pmaddubsw per 32 lanes: (v_a - 128, v_b - 128) interleaved against the lane's weight
+// pair (255 - w, w).
+#define CHUNK(C)                                                                                          \
+    ({                                                                                                    \
         const long o0 = pa + 64 * C, o1 = pb + 64 * C;                                                    \
         u8x64 fa = LOAD64(stack + fo[0] + o0), fb = LOAD64(stack + fo[1] + o0);                           \
         u8x64 mb = (u8x64)0;                                                                              \
@@ -158,40 +216,49 @@ typedef float16 __attribute__((aligned(4))) float16_u;
                 prev = fn;                                                                                \
             }                                                                                             \
         }                                                                                                 \
-        const u16x64 wc = __builtin_shufflevector(w16, w16, PIX##C);                                      \
-        /* a (256 - w) + b w = 256 a + (b - a) w, exact in wrapping 16-bit lanes (the result fits) */     \
-        const u16x64 a16 = __builtin_convertvector(fa, u16x64);                                           \
-        const u16x64 v = (a16 << 8) + (__builtin_convertvector(fb, u16x64) - a16) * wc;                   \
-        if (plain) {                  /* identity tone: round-half-up(v / 256), as the tone stage */      \
-            *(PTR)((base) + 64 * C) = __builtin_convertvector((v + (ushort)128) >> 8, u8x64);             \
-        } else {                                                                                          \
-            u16x64 g = LOADT(tn + 64 * C), ob = LOADT(tn + TONE_OB + 64 * C);                             \
-            if (toneb != tone) {                                                                          \
-                const u16x64 mt = AS_U16(iota16 >= (short)(3 * split - 64 * C));                          \
-                g = PICK(mt, g, LOADT(tnb + 64 * C));                                                     \
-                ob = PICK(mt, ob, LOADT(tnb + TONE_OB + 64 * C));                                         \
-            }                                                                                             \
-            const u16x64 r = __builtin_convertvector(                                                     \
-                (__builtin_convertvector(v, u32x64) * __builtin_convertvector(g, u32x64)) >> 16, u16x64); \
-            const u16x64 q = (r + ob) >> 1;                                                               \
-            const u16x64 d = q > (ushort)256 ? q - (ushort)256 : (u16x64)0;   /* saturating subtract */   \
-            *(PTR)((base) + 64 * C) = __builtin_convertvector(d > (ushort)255 ? (u16x64)255 : d, u8x64);  \
+        const i16x32 vl = MADDUBS(__builtin_shufflevector(pw, pw, WLO##C), __builtin_shufflevector(fa, fb, UNPACK_LO)); \
+        const i16x32 vh = MADDUBS(__builtin_shufflevector(pw, pw, WHI##C), __builtin_shufflevector(fa, fb, UNPACK_HI)); \
+        i16x32 gl = LOADT(tn + 64 * C), gh = LOADT(tn + 64 * C + 32);                                     \
+        i16x32 ol = LOADT(tn + TONE_OB + 64 * C), oh = LOADT(tn + TONE_OB + 64 * C + 32);                 \
+        if (toneb != tone) {                                                                              \
+            const short from = (short)(3 * split - 64 * C);                                               \
+            const i16x32 ml = AS_I16(byte_lo >= from), mh = AS_I16(byte_hi >= from);                      \
+            gl = PICK(ml, gl, LOADT(tnb + 64 * C));                                                       \
+            gh = PICK(mh, gh, LOADT(tnb + 64 * C + 32));                                                  \
+            ol = PICK(ml, ol, LOADT(tnb + TONE_OB + 64 * C));                                             \
+            oh = PICK(mh, oh, LOADT(tnb + TONE_OB + 64 * C + 32));                                        \
         }                                                                                                 \
-    } while (0)
+        PACKUS((MULHI(vl, gl) + ol) >> 1, (MULHI(vh, gh) + oh) >> 1);                                     \
+    })
+
+// A full run's 192 bytes go out with non-temporal 64-byte stores where they are 64-byte
+// aligned (the runs are placed so, see the kernel): such a store skips reading the line it
+// fills (a plain store reads it first: twice the memory traffic) and leaves the caches to
+// the frame stack.
+#define NT_STORE(p, v) __builtin_nontemporal_store((v), (__global u8x64 *)(p))
 
 __kernel void gather(GATHER_PARAMS)
 {
     stack += STACK_PAD;
     const int yi = (int)get_global_id(1) - 1;                    // the map rows yi, yi + 1
     const int ybeg = max(8 * yi + 4, 0), yend = min(8 * yi + 12, height);
-    const int xbeg = (int)get_global_id(0) * (RUNS * 64);
-    const int xend = min(xbeg + RUNS * 64, width);
     __global const float *trow0 = tmap + (size_t)clamp(yi, 0, tmap_h - 1) * tmap_w;
     __global const float *trow1 = tmap + (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w;
     const i8x64 iota8 = (i8x64)(IOTA64);
-    const i16x64 iota16 = (i16x64)(IOTA64);
+    const i16x32 byte_lo = (i16x32)(BYTE_LO), byte_hi = (i16x32)(BYTE_HI);
     const f32x64 wx = (f32x64)(WX64);
-    for (int xs = xbeg; xs < xend; xs += 64) {
+    // Runs start at x0 + 64 k: with rows a multiple of 64 bytes long and out 16, 32 or 48
+    // bytes off 64, x0 (16, 32 or 48 pixels) puts every run on 64-byte boundaries (3 x0 = -out
+    // mod 64; 43 = 1/3 mod 64); a head run k = -1 renders pixels 0 .. 63 and keeps x0 of them.
+    // x0 is a multiple of 8, so the map intervals of every run are still alike.
+    const int mis = (int)((size_t)out & 63);
+    const int x0 = (width * 3) % 64 == 0 && mis % 16 == 0 ? (43 * (64 - mis)) & 63 : 0;
+    const int kfirst = (int)get_global_id(0) * RUNS - (x0 > 0);
+    for (int k = kfirst; k < kfirst + RUNS; ++k) {
+        const int xs = max(x0 + 64 * k, 0);
+        if (xs >= width)
+            break;
+        const int nvalid = k < 0 ? x0 : min(64, width - xs);   // pixels of the run to store
         // the map columns j0 .. j0 + 9 (j0 = xs/8 - 1) of both map rows
         const int j0 = (xs >> 3) - 1;
         float16 a, b;
@@ -222,10 +289,11 @@ __kernel void gather(GATHER_PARAMS)
         const float2 m2 = m4.hi < m4.lo ? m4.hi : m4.lo, x2 = x4.hi > x4.lo ? x4.hi : x4.lo;
         const float cmin = m2.hi < m2.lo ? m2.hi : m2.lo, cmax = x2.hi > x2.lo ? x2.hi : x2.lo;
         const int lo = fast_floor(t0 + cmin);
-        // the frame of the latest time as a lane computes it: a weight that rounds up to 256
-        // takes the next frame (weight 0), as floor and weight do in the header's formula
+        // the frame of the latest time as a lane computes it (u / 255 below)
 #if INTERP
-        const int span = (int)(((t0 + cmax) - (float)lo) * 256.0f + 0.5f) >> 8;
+        const int span = (int)(((t0 + cmax) - (float)lo) * 255.0f + 0.5f) / 255;
+        // a lane's u = 255 (time - lo) + 0.5 = ua + wy ud
+        const f32x64 ua = ((t0 - (float)lo) + top) * 255.0f + 0.5f, ud = dtb * 255.0f;
 #else
         const int span = fast_floor(t0 + cmax) - lo;
 #endif
@@ -233,7 +301,6 @@ __kernel void gather(GATHER_PARAMS)
         long fo[MAX_SPAN + 2];
         for (int k = 0; k < min(span, MAX_SPAN) + 2; ++k)
             fo[k] = wrap_index(lo + k) * ((long)FRAME_PIXELS * 3);
-        const int nvalid = min(64, width - xs);           // pixels of the run inside the row
 #if GRID
         const int cx = xs / CELL_W;
         const int edge = (cx + 1) * CELL_W;               // the next cell's first pixel
@@ -272,38 +339,45 @@ __kernel void gather(GATHER_PARAMS)
                 tone = (base >> 24) & 0xFF;
             }
 #endif
-            const f32x64 t = t0 + (top + wy * dtb);
+            __global uchar *p = orow + 3 * xs;
             if (linear) {
-                // u = frame (above lo) * 256 + weight; past the bound only where a lane's float
-                // time rounds above the bound's: held just below it (weight 255/256, one grey level)
-                const f32x64 tl = t - (float)lo;
+                // u = 255 frame (above lo) + weight; past the bound only where a lane's float
+                // time rounds above the bound's: held just below it (weight 254/255, one grey level)
 #if INTERP
-                i32x64 u = __builtin_convertvector(tl * 256.0f + 0.5f, i32x64);
+                i32x64 u = __builtin_convertvector(ua + wy * ud, i32x64);
 #else
-                i32x64 u = __builtin_convertvector(tl, i32x64) << 8;
+                i32x64 u = __builtin_convertvector((t0 + (top + wy * dtb)) - (float)lo, i32x64) * 255;
 #endif
-                const int umax = 256 * span + 255;
-                u = PICK(u > umax, u, (i32x64)umax);
+                const int umax = 255 * span + 254;
+                u = u > umax ? (i32x64)umax : u;
                 const u16x64 u16 = __builtin_convertvector(u, u16x64);
-                const u16x64 w16 = u16 & (ushort)255;
-                const u8x64 s8 = __builtin_convertvector(u16 >> 8, u8x64);
+                // frame u / 255 (exact for u < 65535 with the +1), weight u % 255, and the lane's
+                // weight pair (255 - w, w) as one little-endian word: 255 (w + 1)
+                const u16x64 k16 = MULHU(u16 + (ushort)1, (ushort)257);
+                const u16x64 pw = (u16 - k16 * (ushort)255 + (ushort)1) * (ushort)255;
+                const u8x64 s8 = __builtin_convertvector(k16, u8x64);
                 const long pa = (long)pix0 * 3, pb = (long)pixb * 3;   // pb may lie before the stack: inside STACK_PAD
-                __global const ushort *tn = tones + tone * TONE_STRIDE, *tnb = tones + toneb * TONE_STRIDE;
-                if (nvalid == 64) {
-                    CHUNK(0, __global u8x64_u *, orow + 3 * xs);
-                    CHUNK(1, __global u8x64_u *, orow + 3 * xs);
-                    CHUNK(2, __global u8x64_u *, orow + 3 * xs);
-                } else {                                   // the run reaches past the row: its bytes
+                __global const short *tn = tones + tone * TONE_STRIDE, *tnb = tones + toneb * TONE_STRIDE;
+                if (nvalid == 64 && ((size_t)p & 63) == 0) {
+                    NT_STORE(p, CHUNK(0));
+                    NT_STORE(p + 64, CHUNK(1));
+                    NT_STORE(p + 128, CHUNK(2));
+                } else if (nvalid == 64) {
+                    *(__global u8x64_u *)p = CHUNK(0);
+                    *(__global u8x64_u *)(p + 64) = CHUNK(1);
+                    *(__global u8x64_u *)(p + 128) = CHUNK(2);
+                } else {                                   // the head run, or a run past the row's end
                     uchar part[192];
-                    CHUNK(0, u8x64_u *, part);
-                    CHUNK(1, u8x64_u *, part);
-                    CHUNK(2, u8x64_u *, part);
+                    *(u8x64_u *)part = CHUNK(0);
+                    *(u8x64_u *)(part + 64) = CHUNK(1);
+                    *(u8x64_u *)(part + 128) = CHUNK(2);
                     for (int i = 0; i < 3 * nvalid; ++i)
-                        orow[3 * xs + i] = part[i];
+                        p[i] = part[i];
                 }
             } else {
-                for (int p = 0; p < nvalid; ++p) {
-                    const int x = xs + p;
+                const f32x64 t = t0 + (top + wy * dtb);
+                for (int q = 0; q < nvalid; ++q) {
+                    const int x = xs + q;
 #if GRID
                     const int cxp = x / CELL_W;
                     const int pk = srow[cxp];
@@ -312,11 +386,14 @@ __kernel void gather(GATHER_PARAMS)
                     const int pk = srow[x];
                     const int pix = pk & 0xFFFFFF;
 #endif
-                    pixel(stack, tones, pix, (pk >> 24) & 0xFF, t[p], orow + 3 * x);
+                    pixel(stack, tones, pix, (pk >> 24) & 0xFF, t[q], orow + 3 * x);
                 }
             }
         }
     }
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_sfence();       // the non-temporal stores land before the kernel is seen done
+#endif
 }
 
 #else
