@@ -26,26 +26,31 @@ time
     and ``map`` is the time map (:meth:`Gather.set_time_map`), given per pixel
     (``step=1``) or on a coarser lattice sampled bilinearly (``step=s``: shape
     ``(ceil(H/s), ceil(W/s))``, sample ``(i, j)`` sits at pixel centre ``((i+0.5)s-0.5, ...)``).
-    Frame indices wrap by ``wrap`` (``"loop"``: modulo ``N``; ``"clamp"``: held at the ends;
-    ``"pingpong"``: forth and back with period ``2(N-1)``). With ``interpolate`` the pixel
-    is ``(1-f) F[wrap(i)] + f F[wrap(i+1)]``, ``i = floor(time)``, ``f = time - i``.
-    :meth:`Gather.smooth_time_map` Gaussian-smooths the map in place (separable, edges
-    clamped, ``sigma`` in output pixels).
+    A second map, the target, may be given with it: ``render(t, fade=f)`` then uses
+    ``map + f (target - map)``, faded on the device (a player moving between two maps
+    uploads them once, not every frame). Frame indices wrap by ``wrap`` (``"loop"``: modulo
+    ``N``; ``"clamp"``: held at the ends; ``"pingpong"``: forth and back with period
+    ``2(N-1)``). With ``interpolate`` the pixel is ``(1-f) F[wrap(i)] + f F[wrap(i+1)]``,
+    ``i = floor(time)``, ``f = time - i``. :meth:`Gather.smooth_time_map` Gaussian-smooths
+    the maps in place (separable, edges clamped, ``sigma`` in output pixels).
 tone
     ``out = round(v * gain[tone] + offset[tone])`` saturated to 0..255 per channel
     (:meth:`Gather.set_tones`, tables ``(n, 3)``; tone 0 defaults to identity).
 
-Numerical contract: blend and tone are computed in fixed point, the same integers on the
-device and in the numpy reference (:func:`gather_reference`): the time weight in 255ths
-(``w = int(255 f + 0.5)``), ``v = (255 - w) (a - 128) + w (b - 128)``, gain
-``G = round(gain 2**17 / 255)``, offset ``O = round(2 (128 gain + offset)) + 1``,
-``out = clip((((v G) >> 16) + O) >> 1, 0, 255)``: every intermediate fits signed 16 bits for
-gains up to 63 (so the device works on 32 or 64 lanes at once, one multiply-add per pair of
-frames). The result is the rounding of the blend at the quantised weight, gain and offset:
-within one grey level of the real-valued formula for gains up to 1.5 (tested; the weight's
-error grows as ``|b - a| gain / 510``). The device and the reference agree exactly on
-integer times and within one grey level elsewhere (float32 times may round differently
-where multiply-adds are contracted, moving ``w`` by one).
+Numerical contract: time, blend and tone are computed in integers, the same integers on the
+device and in the numpy reference (:func:`time_units`, :func:`gather_reference`; the
+tests compare every pixel for equality). Time: each map sample is rounded once to 4080ths
+(255 x 16) of a frame past ``floor(t)`` (float32, no contracted multiply-adds), the
+bilinear sampling runs in integers (halves of a step), and a pixel's time comes out in
+255ths of a frame: frame ``i`` and weight ``w`` in [0, 255) of the next frame, within
+1/255 of a frame of the real-valued interpolation. Blend and tone:
+``v = (255 - w) (a - 128) + w (b - 128)``, gain ``G = round(gain 2**17 / 255)``, offset
+``O = round(2 (128 gain + offset)) + 1``, ``out = clip((((v G) >> 16) + O) >> 1, 0, 255)``:
+every intermediate fits signed 16 bits for gains up to 63 (so the device works on 32 or 64
+lanes at once, one multiply-add per pair of frames). The result is the rounding of the blend
+at the quantised weight, gain and offset: within one grey level of the real-valued formula
+for gains up to 1.5 (tested; the weight's error grows as ``|b - a| gain / 510``). Time maps
+are limited to +-2048 frames (the integer time then fits 32 bits).
 
 Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders runs of 64
 pixels on the 8 rows of one pair of map rows: a run whose source is linear (one cell, or two
@@ -85,6 +90,7 @@ WRAPS = ("loop", "clamp", "pingpong")
 MAX_FRAME_PIXELS = 1 << 24
 MAX_TONES = 256
 MAX_GAIN, MAX_OFFSET = 63.0, 255.0   # the fixed-point tone's range (every intermediate fits 16 bits)
+MAX_TIME = 2048.0     # |time map| in frames: the integer time (4080ths, x 256) fits 32 bits
 RUN = 32              # output pixels per work-item of the per-pixel kernel (time steps other than 8)
 STACK_PAD = 256       # bytes of padding around the device copy of the frame stack (a run's 192 bytes fit)
 RUNS = 8              # wide kernel: a work-item renders RUNS runs of 64 pixels on 8 rows
@@ -177,29 +183,45 @@ def gaussian_smooth(field: np.ndarray, sigma: float) -> np.ndarray:
     return out
 
 
-def sample_time_map(tmap: np.ndarray, shape: tuple[int, int], step: int, rows: range | None = None) -> np.ndarray:
-    """The per-pixel time offsets ``(H, W)`` float32 a time map at lattice ``step`` describes
-    (only the output rows ``rows`` when given)."""
-    tmap = np.asarray(tmap, np.float32)
+def time_units(tmap: np.ndarray, t: float, shape: tuple[int, int], step: int, *,
+               target: np.ndarray | None = None, fade: float = 0.0,
+               rows: range | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel ``(frame, weight)`` int64 ``(H, W)`` (only the output rows ``rows`` when
+    given): the frame ``floor(time)`` and the weight of the next frame in 255ths, for time
+    ``t`` plus the time map ``tmap`` at lattice ``step`` (faded toward ``target`` by
+    ``fade``), computed in integers after one float32 rounding per map sample (module
+    docstring; the kernels compute the same integers).
+
+    Examples
+    --------
+    >>> f, w = time_units(np.zeros((1, 1), np.float32), 2.5, (1, 1), 1)
+    >>> int(f[0, 0]), int(w[0, 0])          # halfway to frame 3: 128/255 (rounded up)
+    (2, 128)
+    """
+    m = np.asarray(tmap, np.float32)
+    if target is not None:
+        m = m + np.float32(fade) * (np.asarray(target, np.float32) - m)
+    t = np.float32(t)
+    base = np.floor(t)
+    q = np.floor((t - base + m) * np.float32(4080) + np.float32(0.5)).astype(np.int64)
     h, w = shape
     rows = range(h) if rows is None else rows
     if step == 1:
-        return tmap[rows.start:rows.stop]
-    th, tw = tmap.shape
-    inv = np.float32(1.0 / step)
-    fy = (np.arange(rows.start, rows.stop, dtype=np.float32) + np.float32(0.5)) * inv - np.float32(0.5)
-    fx = (np.arange(w, dtype=np.float32) + np.float32(0.5)) * inv - np.float32(0.5)
-    y0f, x0f = np.floor(fy), np.floor(fx)
-    wy, wx = (fy - y0f)[:, None], (fx - x0f)[None, :]
-    y0 = np.clip(y0f.astype(np.int64), 0, th - 1)
-    y1 = np.clip(y0f.astype(np.int64) + 1, 0, th - 1)
-    x0 = np.clip(x0f.astype(np.int64), 0, tw - 1)
-    x1 = np.clip(x0f.astype(np.int64) + 1, 0, tw - 1)
-    a, b = tmap[y0][:, x0], tmap[y0][:, x1]
-    c, d = tmap[y1][:, x0], tmap[y1][:, x1]
-    top = a + wx * (b - a)
-    bot = c + wx * (d - c)
-    return (top + wy * (bot - top)).astype(np.float32)
+        u = (q[rows.start:rows.stop] + 8) // 16
+    else:
+        th, tw = q.shape
+        ny = 2 * np.arange(rows.start, rows.stop) + 1 - step
+        yi = ny // (2 * step)
+        ky = (ny - 2 * step * yi)[:, None]
+        nx = 2 * np.arange(w) + 1 - step
+        xi = nx // (2 * step)
+        kx = (nx - 2 * step * xi)[None, :]
+        c0, c1 = np.clip(xi, 0, tw - 1), np.clip(xi + 1, 0, tw - 1)
+        h_rows = [(q[r][:, c0] * (2 * step - kx) + q[r][:, c1] * kx + 16 * step) // (32 * step)
+                  for r in (np.clip(yi, 0, th - 1), np.clip(yi + 1, 0, th - 1))]
+        u = (h_rows[0] * (2 * step - ky) + h_rows[1] * ky + step) // (2 * step)
+    frame = u // 255
+    return int(base) + frame, u - 255 * frame
 
 
 def source_indices(source: np.ndarray, shape: tuple[int, int], frame_w: int,
@@ -230,23 +252,23 @@ def fixed_tones(tones: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return g.astype(np.int32), o.astype(np.int32)
 
 
-def gather_reference(stack: np.ndarray, pix: np.ndarray, tone: np.ndarray, times: np.ndarray,
-                     tones: np.ndarray, *, wrap: str = "loop", interpolate: bool = True,
+def gather_reference(stack: np.ndarray, pix: np.ndarray, tone: np.ndarray, frames: np.ndarray,
+                     weights: np.ndarray, tones: np.ndarray, *, wrap: str = "loop", interpolate: bool = True,
                      out: np.ndarray | None = None) -> np.ndarray:
     """Reference of kernel ``gather``: ``stack`` (N, h, w, 3) uint8, per-pixel ``pix``/``tone``
-    (H, W) ints, absolute ``times`` (H, W) float32, ``tones`` (n, 6) float32 (gain rgb, offset rgb).
+    (H, W) ints, per-pixel ``frames`` (any integers, folded by ``wrap``) and ``weights`` of
+    the next frame in 255ths (:func:`time_units`), ``tones`` (n, 6) float32 (gain rgb,
+    offset rgb).
 
     The fixed-point formula of the module docstring, evaluated exactly.
     """
     n = stack.shape[0]
     flat = stack.reshape(n, -1, 3)
-    times = np.asarray(times, np.float32)
-    tf = np.floor(times)
-    ti = tf.astype(np.int64)
-    a = flat[wrap_index(ti, n, wrap), pix].astype(np.int32) - 128
+    frames = np.asarray(frames, np.int64)
+    a = flat[wrap_index(frames, n, wrap), pix].astype(np.int32) - 128
     if interpolate:
-        w = np.clip(((times - tf) * np.float32(255) + np.float32(0.5)).astype(np.int32), 0, 255)[..., None]
-        b = flat[wrap_index(ti + 1, n, wrap), pix].astype(np.int32) - 128
+        w = np.clip(np.asarray(weights, np.int32), 0, 255)[..., None]
+        b = flat[wrap_index(frames + 1, n, wrap), pix].astype(np.int32) - 128
         v = (255 - w) * a + w * b
     else:
         v = 255 * a
@@ -331,13 +353,14 @@ class Gather:
         self._source: np.ndarray | None = None
         self._cell: tuple[int, int] | None = None
         self._tmap = np.zeros(self.tmap_shape, np.float32)
+        self._target: np.ndarray | None = None      # the map the time map fades toward (set_time_map)
         self._tones = np.zeros((1, 6), np.float32)
         self._tones[0, :3] = 1.0
         self.ctx, self.queue = ctx, queue
         self.direct = False       # frames written straight into the caller's array (set at open)
         self.wide = False         # the 64-lane kernel (time step 8 on a CPU device; set at open)
         self._host_out = self._host_buf = None   # the caller's array the kernel writes into, and its buffer
-        self._last_t = 0.0
+        self._last_t, self._last_fade = 0.0, 0.0
         if backend == "opencl":
             self._setup_opencl(device)
 
@@ -354,8 +377,9 @@ class Gather:
         # the 64-lane kernel (time step 8) is written for CPU vector units; elsewhere per pixel
         cpu = bool(self.ctx.devices[0].type & cl.device_type.CPU)
         self.wide = self.time_step == 8 and (cpu if self._wide_choice is None else bool(self._wide_choice))
-        # 16 floats of padding: the time step 8 kernel reads the map 16 floats at a time
+        # 16 floats of padding: the time step 8 kernel reads the maps 16 floats at a time
         self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
+        self._d_target = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
         self._d_tmp = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
         self._d_tones = cl.Buffer(self.ctx, mf.READ_ONLY, MAX_TONES * TONE_STRIDE * 2)
         self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
@@ -387,6 +411,7 @@ class Gather:
             padded ^= 0x80
         self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
         self._k_gather = prog.kernel("gather")
+        self._k_gather.set_arg(12, np.float32(0))
         self._k_smooth_x = prog.kernel("smooth")
         self._k_smooth_y = prog.kernel("smooth")
         self.direct = writes_through(self.ctx)
@@ -403,10 +428,13 @@ class Gather:
     def _upload_tmap(self) -> None:
         if self.backend == "opencl":
             import pyopencl as cl
-            # not blocking: the queue runs in order, and the event (kept until the next upload:
-            # dropping it would wait for the copy) holds the array until the copy is done
-            # (set_time_map replaces self._tmap rather than writing into it)
-            self._tmap_event = cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)
+            # not blocking: the queue runs in order, and the events (kept until the next upload:
+            # dropping one would wait for the copy) hold the arrays until the copies are done
+            # (set_time_map replaces the arrays rather than writing into them)
+            self._tmap_events = [cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)]
+            if self._target is not None:
+                self._tmap_events.append(cl.enqueue_copy(self.queue, self._d_target, self._target, is_blocking=False))
+            self._k_gather.set_arg(3, self._d_tmap if self._target is None else self._d_target)
 
     def _upload_tones(self) -> None:
         if self.backend == "opencl":
@@ -418,9 +446,11 @@ class Gather:
             return
         h, w = self.out_shape[:2]
         grid_w = self._source.shape[1]
-        self._k_gather.set_args(self._d_stack, self._d_source, self._d_tmap, self._d_tones, self._d_out,
-                                np.int32(w), np.int32(h), np.int32(grid_w),
-                                np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0))
+        self._k_gather.set_args(self._d_stack, self._d_source, self._d_tmap,
+                                self._d_tmap if self._target is None else self._d_target, self._d_tones,
+                                self._d_out, np.int32(w), np.int32(h), np.int32(grid_w),
+                                np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0),
+                                np.float32(0))
         self._host_out = self._host_buf = None       # arg 4 is the device's frame buffer again
 
     # -- inputs --------------------------------------------------------------------------------
@@ -473,42 +503,68 @@ class Gather:
         cl.enqueue_copy(self.queue, self._d_source, packed, is_blocking=True)
         self._set_args()
 
-    def set_time_map(self, tmap: np.ndarray) -> None:
-        """Per-pixel time offsets in frames, ``tmap_shape`` float32 (finite)."""
+    def set_time_map(self, tmap: np.ndarray, target: np.ndarray | None = None) -> None:
+        """Time offsets in frames, ``tmap_shape`` float32, finite, within +-2048 frames.
+
+        With ``target`` (same shape) the offsets fade toward it: :meth:`render` with ``fade``
+        ``f`` uses ``tmap + f (target - tmap)``, faded on the device, so a caller that moves
+        between two maps over many frames uploads them once.
+        """
+        maps = [self._check_tmap("tmap", tmap)]
+        if target is not None:
+            maps.append(self._check_tmap("target", target))
+        self._tmap = maps[0]
+        self._target = maps[1] if target is not None else None
+        self._upload_tmap()
+
+    def _check_tmap(self, name: str, tmap: np.ndarray) -> np.ndarray:
         tmap = np.asarray(tmap, np.float32)
         if tmap.shape != self.tmap_shape:
-            raise ValueError(f"tmap must have shape {self.tmap_shape}, not {tmap.shape}")
+            raise ValueError(f"{name} must have shape {self.tmap_shape}, not {tmap.shape}")
         if not np.isfinite(tmap).all():
-            raise ValueError("tmap must be finite")
-        self._tmap = np.array(tmap, np.float32, order="C")   # own copy: device reads land here
-        self._upload_tmap()
+            raise ValueError(f"{name} must be finite")
+        if tmap.size and np.abs(tmap).max() > MAX_TIME:
+            raise ValueError(f"{name} must lie within +-{MAX_TIME:g} frames, not {float(np.abs(tmap).max()):g}")
+        return np.array(tmap, np.float32, order="C")   # own copy: device reads land here
 
     @property
     def time_map(self) -> np.ndarray:
         """The current time map (read back from the device after smoothing)."""
+        return self._read_map(self._tmap, "_d_tmap")
+
+    @property
+    def target_map(self) -> np.ndarray | None:
+        """The map the time map fades toward, or None (see :meth:`set_time_map`)."""
+        return None if self._target is None else self._read_map(self._target, "_d_target")
+
+    def _read_map(self, host: np.ndarray, device: str) -> np.ndarray:
         if self.backend == "opencl":
             import pyopencl as cl
-            cl.enqueue_copy(self.queue, self._tmap, self._d_tmap, is_blocking=True)
-        return self._tmap.copy()
+            cl.enqueue_copy(self.queue, host, getattr(self, device), is_blocking=True)
+        return host.copy()
 
     def smooth_time_map(self, sigma: float) -> None:
-        """Gaussian-smooth the time map in place, ``sigma`` in output pixels (0: no change)."""
+        """Gaussian-smooth the time map (and its target, if set) in place, ``sigma`` in output
+        pixels (0: no change)."""
         sigma = check_float("sigma", sigma, 0.0, 1e4) / self.time_step
         w = gaussian_weights(sigma)
         if len(w) == 1:
             return
         if self.backend == "numpy":
             self._tmap = gaussian_smooth(self._tmap, sigma)
+            if self._target is not None:
+                self._target = gaussian_smooth(self._target, sigma)
             return
         import pyopencl as cl
         r = (len(w) - 1) // 2
         d_w = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=w)
         th, tw = self.tmap_shape
         dims = (np.int32(tw), np.int32(th), np.int32(r))
-        self._k_smooth_x.set_args(self._d_tmap, self._d_tmp, d_w, *dims, np.int32(0))
-        cl.enqueue_nd_range_kernel(self.queue, self._k_smooth_x, self._tsize, None)
-        self._k_smooth_y.set_args(self._d_tmp, self._d_tmap, d_w, *dims, np.int32(1))
-        cl.enqueue_nd_range_kernel(self.queue, self._k_smooth_y, self._tsize, None)
+        for d_map in [self._d_tmap] + ([self._d_target] if self._target is not None else []):
+            self._k_smooth_x.set_args(d_map, self._d_tmp, d_w, *dims, np.int32(0))
+            cl.enqueue_nd_range_kernel(self.queue, self._k_smooth_x, self._tsize, None)
+            self._k_smooth_y.set_args(self._d_tmp, d_map, d_w, *dims, np.int32(1))
+            cl.enqueue_nd_range_kernel(self.queue, self._k_smooth_y, self._tsize, None)
         self.queue.finish()
 
     def set_tones(self, gain: np.ndarray, offset: np.ndarray | None = None) -> None:
@@ -537,8 +593,9 @@ class Gather:
         return self._tones.copy()
 
     # -- rendering -----------------------------------------------------------------------------
-    def render(self, t: float, out: np.ndarray | None = None) -> np.ndarray:
-        """The frame at global time ``t`` (frames), ``(H, W, 3)`` uint8, written into ``out`` when given."""
+    def render(self, t: float, out: np.ndarray | None = None, *, fade: float = 0.0) -> np.ndarray:
+        """The frame at global time ``t`` (frames), ``(H, W, 3)`` uint8, written into ``out`` when
+        given; ``fade`` in [0, 1] moves the time map toward its target (:meth:`set_time_map`)."""
         if self._source is None:
             raise RuntimeError("set a source (set_source_map or set_source_grid) before render")
         if out is None:
@@ -546,12 +603,13 @@ class Gather:
         else:
             check_out(out, self.out_shape)
         t = self._fold(float(t))
-        self._last_t = t
+        self._last_t, self._last_fade = t, check_float("fade", fade, 0.0, 1.0)
         if self.backend == "numpy":
-            self.render_reference(t, out)
+            self.render_reference(t, out, fade=fade)
             return out
         import pyopencl as cl
-        self._k_gather.set_arg(10, np.float32(t))
+        self._k_gather.set_arg(11, np.float32(t))
+        self._k_gather.set_arg(12, np.float32(fade))
         if self.direct:
             # the kernel writes straight into the caller's array (the device shares host
             # memory, checked at open): no device buffer, no copy. The buffer wrapping it is
@@ -560,7 +618,7 @@ class Gather:
                 self._host_buf = cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR,
                                            hostbuf=out.reshape(-1))
                 self._host_out = out
-                self._k_gather.set_arg(4, self._host_buf)
+                self._k_gather.set_arg(5, self._host_buf)
             cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
             self.queue.finish()
             return out
@@ -569,13 +627,14 @@ class Gather:
         cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
         return out
 
-    def render_on_device(self, t: float) -> None:
+    def render_on_device(self, t: float, *, fade: float = 0.0) -> None:
         """Run the gather kernel alone into the device's own frame buffer and wait (no copy, no
         caller's array): the kernel-only time of the benchmarks."""
         if self.backend != "opencl" or self._source is None:
             raise RuntimeError("render_on_device needs the opencl backend and a source")
         import pyopencl as cl
-        self._k_gather.set_arg(10, np.float32(self._fold(float(t))))
+        self._k_gather.set_arg(11, np.float32(self._fold(float(t))))
+        self._k_gather.set_arg(12, np.float32(check_float("fade", fade, 0.0, 1.0)))
         self._use_device_out()
         cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
         self.queue.finish()
@@ -584,16 +643,20 @@ class Gather:
         """Point the kernel at its own frame buffer (after frames went to a caller's array)."""
         if self._host_out is not None:
             self._host_out = self._host_buf = None
-            self._k_gather.set_arg(4, self._d_out)
+            self._k_gather.set_arg(5, self._d_out)
 
-    def render_reference(self, t: float, out: np.ndarray | None = None) -> np.ndarray:
+    def render_reference(self, t: float, out: np.ndarray | None = None, *, fade: float = 0.0) -> np.ndarray:
         """The numpy reference of :meth:`render` (usable with either backend, for checks)."""
         h, w = self.out_shape[:2]
         pix, tone = source_indices(self._source, (h, w), self.frame_w, self._cell)
-        tmap = self.time_map if self.backend == "opencl" else self._tmap
-        times = np.float32(self._fold(float(t))) + sample_time_map(tmap, (h, w), self.time_step)
-        return gather_reference(self._stack, pix, tone, times.astype(np.float32), self._tones,
+        frames, weights = self._time_units(self._fold(float(t)), fade)
+        return gather_reference(self._stack, pix, tone, frames, weights, self._tones,
                                 wrap=self.wrap, interpolate=self.interpolate, out=out)
+
+    def _time_units(self, t: float, fade: float, rows: range | None = None) -> tuple[np.ndarray, np.ndarray]:
+        tmap = self.time_map if self.backend == "opencl" else self._tmap
+        target = self.target_map if self.backend == "opencl" else self._target
+        return time_units(tmap, t, self.out_shape[:2], self.time_step, target=target, fade=fade, rows=rows)
 
     def _fold(self, t: float) -> float:
         """Fold the global time into one period so float32 keeps sub-frame precision forever."""
@@ -623,14 +686,13 @@ class Gather:
         out = {"output": h * w * 3, "stored": 0}
         if self._source is None:
             return out
-        t = np.float32(self._fold(self._last_t if t is None else float(t)))
-        tmap = self.time_map if self.backend == "opencl" else self._tmap
+        t = self._fold(self._last_t if t is None else float(t))
         fp = self.frame_h * self.frame_w
         seen = np.zeros(self.n_frames * fp, bool)
         for r0 in range(0, h, 256):                     # in blocks of rows: bounded memory
             rows = range(r0, min(r0 + 256, h))
             pix, _ = source_indices(self._source, (h, w), self.frame_w, self._cell, rows)
-            i0 = np.floor(t + sample_time_map(tmap, (h, w), self.time_step, rows)).astype(np.int64)
+            i0, _ = self._time_units(t, self._last_fade, rows)
             seen[wrap_index(i0, self.n_frames, self.wrap) * fp + pix] = True
             if self.interpolate:
                 seen[wrap_index(i0 + 1, self.n_frames, self.wrap) * fp + pix] = True

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..tiledb import TileDB, TilesModel
 from .base import FloatControl, Player, check_float, check_int, check_seed, rng_from_state
-from .gather import MAX_GAIN, Gather, gaussian_smooth, pack_source
+from .gather import MAX_GAIN, MAX_TIME, Gather, gaussian_smooth, pack_source
 
 TIME_STEP = 8              # output pixels per time-map sample
 MAX_SIZE = 16384
@@ -367,11 +367,15 @@ class TilesPlayer(Player):
     def _refresh_fields(self) -> None:
         self._field_a = self._pixel_field(self._cells_a)
         self._field_b = self._pixel_field(self._cells_b)
+        self._gather.set_time_map(self._field_a, self._field_b)
+
+    def _fade(self) -> float:
+        """How far the time map has moved from field a toward field b (the device fades)."""
+        return 0.0 if self._epoch == 0 else self._phase / self._epoch
 
     def _time_map(self) -> np.ndarray:
-        if self._epoch == 0:
-            return self._field_a
-        f = np.float32(self._phase / self._epoch)
+        """The time map of the next frame, as the device fades it (float32, same operations)."""
+        f = np.float32(self._fade())
         return self._field_a + f * (self._field_b - self._field_a)
 
     def _advance_time(self) -> None:
@@ -383,6 +387,7 @@ class TilesPlayer(Player):
                 self._cells_a, self._field_a = self._cells_b, self._field_b
                 self._cells_b = self._cell_field()
                 self._field_b = self._pixel_field(self._cells_b)
+                self._gather.set_time_map(self._field_a, self._field_b)
 
     # -- controls ------------------------------------------------------------------------------------
     @property
@@ -400,7 +405,7 @@ class TilesPlayer(Player):
 
     @max_shift.setter
     def max_shift(self, value: float) -> None:
-        self._max_shift = check_float("max_shift", value, 0.0, float(self.loop_length))
+        self._max_shift = check_float("max_shift", value, 0.0, float(min(self.loop_length, MAX_TIME)))
         self._refresh_fields()
 
     @property
@@ -503,13 +508,10 @@ class TilesPlayer(Player):
 
     # -- synthesis ---------------------------------------------------------------------------------------
     def _warm(self) -> None:
-        scratch = np.empty(self._shape, np.uint8)
-        self._gather.set_time_map(self._time_map())
-        self._gather.render(self._t, scratch)
+        self._gather.render(self._t, np.empty(self._shape, np.uint8), fade=self._fade())
 
     def _render(self, out: np.ndarray) -> None:
-        self._gather.set_time_map(self._time_map())
-        self._gather.render(self._t, out)
+        self._gather.render(self._t, out, fade=self._fade())
         self._advance_time()
 
     def inpaint(self, frame: np.ndarray, mask: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -567,7 +569,7 @@ class TilesPlayer(Player):
             speed = check_float("speed", state["speed"], *SPEED_RANGE)
             epoch = check_int("epoch", state["epoch"], 0, 10**7)
             sigma = check_float("sigma", state["sigma"], 0.0, 4096.0)
-            max_shift = check_float("max_shift", state["max_shift"], 0.0, float(self.loop_length))
+            max_shift = check_float("max_shift", state["max_shift"], 0.0, float(min(self.loop_length, MAX_TIME)))
             tone = state.get("tone")
             self.tone_target(tone)                          # validates it
             seed = check_seed("seed", state.get("seed", self.seed))

@@ -7,14 +7,19 @@
 // per output pixel) or a grid of cells (GRID == 1, one entry per cell naming the cell's
 // top-left pixel; the pixel at (dy, dx) inside the cell reads origin + dy * FRAME_W + dx).
 //
-// Time: a map m sampled bilinearly at a step of TSTEP output pixels: with fy = (y + 0.5) /
-// TSTEP - 0.5 = yi + wy and fx = xi + wx likewise, top = m[yi][xi] + wx (m[yi][xi+1] -
-// m[yi][xi]), bot the same on row yi + 1, time(y, x) = t0 + (top + wy (bot - top)), indices
-// clamped to the map.
+// Time, in integers after one rounding per map sample (the numpy reference computes the
+// same integers): the map is m = m0 + fade (m1 - m0) (two maps, faded on the fly), sample
+// (i, j) in 4080ths (255 * 16) of a frame past base = floor(t0):
+// Q = floor((f0 + m[i][j]) * 4080 + 0.5), f0 = t0 - base, float32 without contraction.
+// The map is sampled bilinearly at a step of s = TSTEP output pixels, in halves of a step:
+// n = 2x + 1 - s = 2s xi + kx (0 <= kx < 2s), likewise yi, ky; indices clamped to the map.
+// H = floor((Q[yi][xi] (2s - kx) + Q[yi][xi+1] kx + 16s) / 32s) on map rows yi and yi + 1
+// (255ths), u = floor((H_top (2s - ky) + H_bot ky + s) / 2s) (s = 1: u = floor((Q + 8) / 16)):
+// the pixel's time in 255ths of a frame past base. Frame i = base + floor(u / 255), weight
+// w = u mod 255.
 //
-// Fixed point (the numpy reference in gather.py computes exactly this): i = floor(time),
-// w = (int)((time - i) * 255 + 0.5) in [0, 255], v = (255 - w) (a - 128) + w (b - 128) for
-// the channel values a = F[wrap(i)], b = F[wrap(i + 1)] (v = 255 (value - 128), signed 16
+// Blend and tone in fixed point: v = (255 - w) (a - 128) + w (b - 128) for the channel
+// values a = F[wrap(i)], b = F[wrap(i + 1)] (v = 255 (value - 128), signed 16
 // bit); tone gain G = round(gain 2^17 / 255), offset O = round(2 (128 gain + offset)) + 1:
 // out = clamp((((v G) >> 16) + O) >> 1, 0, 255) (arithmetic shifts), which is
 // round(value * gain + offset) up to the quantisation. Every intermediate fits 16 bits for
@@ -27,6 +32,8 @@
 // frame), TSTEP, WIDE (1: the 64-lane kernel for TSTEP 8, for CPU devices), RUN (pixels per
 // work-item of the per-pixel kernel), RUNS (64-pixel runs per work-item of the wide kernel),
 // STACK_PAD, TONE_STRIDE, TONE_OB (shorts per tone row, and where its offsets start).
+
+#pragma OPENCL FP_CONTRACT OFF      // the time samples round as the numpy reference's float32
 
 #define WRAP_LOOP 0
 #define WRAP_CLAMP 1
@@ -58,11 +65,32 @@ inline int fast_floor(float v)
     return i - (int)((float)i > v);
 }
 
+// floor(a / b) for b > 0
+inline int floor_div(int a, int b)
+{
+    const int q = a / b;
+    return q - (q * b > a);
+}
+
+inline long floor_divl(long a, long b)
+{
+    const long q = a / b;
+    return q - (q * b > a);
+}
+
+// a map sample in 4080ths of a frame past base (header)
+inline int time_q(float f0, __global const float *m0, __global const float *m1, float fade, size_t k)
+{
+    const float m = m0[k] + fade * (m1[k] - m0[k]);
+    return fast_floor((f0 + m) * 4080.0f + 0.5f);
+}
+
 // The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the host.
 #define GATHER_PARAMS __global const uchar *restrict stack, __global const int *restrict source,            \
-                      __global const float *restrict tmap, __global const short *restrict tones,          \
+                      __global const float *restrict tmap, __global const float *restrict tmap1,          \
+                      __global const short *restrict tones,                                                \
                       __global uchar *restrict out, const int width, const int height, const int grid_w,   \
-                      const int tmap_w, const int tmap_h, const float t0
+                      const int tmap_w, const int tmap_h, const float t0, const float fade
 
 // a stored byte as value - 128: the 64-lane kernel's stack holds value ^ 0x80 (a signed byte)
 #if TSTEP == 8 && WIDE
@@ -77,17 +105,15 @@ inline uchar tone1(int v, int g, int o)
     return (uchar)clamp((((v * g) >> 16) + o) >> 1, 0, 255);
 }
 
-// one output pixel at time t from source pixel pix with tone
+// one output pixel from source pixel pix with tone: frame ti, weight w (255ths of the next)
 inline void pixel(__global const uchar *restrict stack, __global const short *restrict tones, int pix, int tone,
-                  float t, __global uchar *restrict o)
+                  int ti, int w, __global uchar *restrict o)
 {
-    const int ti = fast_floor(t);
     __global const uchar *p0 = stack + ((size_t)wrap_index(ti) * FRAME_PIXELS + pix) * 3;
 #if INTERP
-    const int w = clamp((int)((t - (float)ti) * 255.0f + 0.5f), 0, 255);
     __global const uchar *p1 = stack + ((size_t)wrap_index(ti + 1) * FRAME_PIXELS + pix) * 3;
 #else
-    const int w = 0;
+    w = 0;
     __global const uchar *p1 = p0;
 #endif
     __global const short *tn = tones + tone * TONE_STRIDE;
@@ -137,10 +163,12 @@ typedef float16 __attribute__((aligned(4))) float16_u;
 #define PICK(m, a, b) (((a) & ~(m)) | ((b) & (m)))
 #define MAX_SPAN 3   // a fast run blends frames lo .. lo + MAX_SPAN + 1 at most
 
+#define IOTA32 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31
+#define IOTA32H 32, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 60, 61, 62, 63
 #define IOTA64 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 60, 61, 62, 63
 #define KLO 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8, 8
 #define KHI 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 5, 5, 5, 5, 5, 5, 5, 5, 6, 6, 6, 6, 6, 6, 6, 6, 7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8, 8, 8, 8, 8, 8, 9, 9, 9, 9
-#define WX64 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f, 0.5625f, 0.6875f, 0.8125f, 0.9375f, 0.0625f, 0.1875f, 0.3125f, 0.4375f
+#define KX64 9, 11, 13, 15, 1, 3, 5, 7, 9, 11, 13, 15, 1, 3, 5, 7, 9, 11, 13, 15, 1, 3, 5, 7, 9, 11, 13, 15, 1, 3, 5, 7, 9, 11, 13, 15, 1, 3, 5, 7, 9, 11, 13, 15, 1, 3, 5, 7, 9, 11, 13, 15, 1, 3, 5, 7, 9, 11, 13, 15, 1, 3, 5, 7
 #define PIX0 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9, 9, 10, 10, 10, 11, 11, 11, 12, 12, 12, 13, 13, 13, 14, 14, 14, 15, 15, 15, 16, 16, 16, 17, 17, 17, 18, 18, 18, 19, 19, 19, 20, 20, 20, 21
 #define PIX1 21, 21, 22, 22, 22, 23, 23, 23, 24, 24, 24, 25, 25, 25, 26, 26, 26, 27, 27, 27, 28, 28, 28, 29, 29, 29, 30, 30, 30, 31, 31, 31, 32, 32, 32, 33, 33, 33, 34, 34, 34, 35, 35, 35, 36, 36, 36, 37, 37, 37, 38, 38, 38, 39, 39, 39, 40, 40, 40, 41, 41, 41, 42, 42
 #define PIX2 42, 43, 43, 43, 44, 44, 44, 45, 45, 45, 46, 46, 46, 47, 47, 47, 48, 48, 48, 49, 49, 49, 50, 50, 50, 51, 51, 51, 52, 52, 52, 53, 53, 53, 54, 54, 54, 55, 55, 55, 56, 56, 56, 57, 57, 57, 58, 58, 58, 59, 59, 59, 60, 60, 60, 61, 61, 61, 62, 62, 62, 63, 63, 63
@@ -184,8 +212,28 @@ inline u8x64 packus(i16x32 lo, i16x32 hi)
 #define MADDUBS(w, x) maddubs(__builtin_astype((w), u8x64), __builtin_astype((x), i8x64))
 #define PACKUS(lo, hi) packus((lo), (hi))
 #endif
+// floor of 16 floats (exact for |v| < 2^31)
+inline int16 floor16(float16 v)
+{
+    const int16 i = convert_int16(v);
+    return i + (convert_float16(i) > v);                 // a true comparison is -1
+}
+
 // (a b) >> 16 in unsigned 16-bit lanes (pmulhuw)
+#ifdef __AVX512BW__
+typedef short v32hi __attribute__((vector_size(64)));
+inline u16x64 mulhu(u16x64 a, ushort b)
+{
+    const v32hi bb = __builtin_astype((u16x32)b, v32hi);
+    const v32hi lo = __builtin_astype(__builtin_shufflevector(a, a, IOTA32), v32hi);
+    const v32hi hi = __builtin_astype(__builtin_shufflevector(a, a, IOTA32H), v32hi);
+    return __builtin_shufflevector(__builtin_astype(__builtin_ia32_pmulhuw512(lo, bb), u16x32),
+                                   __builtin_astype(__builtin_ia32_pmulhuw512(hi, bb), u16x32), IOTA64);
+}
+#define MULHU(a, b) mulhu((a), (b))
+#else
 #define MULHU(a, b) __builtin_convertvector((__builtin_convertvector((a), u32x64) * (uint)(b)) >> 16, u16x64)
+#endif
 // (v g) >> 16 in 16-bit lanes (pmulhw)
 #define MULHI(v, g) __builtin_convertvector((__builtin_convertvector((v), i32x32) * __builtin_convertvector((g), i32x32)) >> 16, i16x32)
 
@@ -195,11 +243,15 @@ inline u8x64 packus(i16x32 lo, i16x32 hi)
 // pair (255 - w, w).
 #define CHUNK(C)                                                                                          \
     ({                                                                                                    \
-        const long o0 = pa + 64 * C, o1 = pb + 64 * C;                                                    \
+        /* the chunk's bytes from `from` on belong to the second cell: none, some or all */               \
+        const int from = 3 * split - 64 * C;                                                              \
+        const bool mixed = from > 0 && from < 64;                                                         \
+        const long o0 = (from <= 0 ? pb : pa) + 64 * C, o1 = pb + 64 * C;                                 \
+        __global const short *tc = from <= 0 ? tnb : tn;                                                  \
         u8x64 fa = LOAD64(stack + fo[0] + o0), fb = LOAD64(stack + fo[1] + o0);                           \
         u8x64 mb = (u8x64)0;                                                                              \
-        if (split < 64) {                                                                                 \
-            mb = AS_U8(iota8 >= (char)clamp(3 * split - 64 * C, 0, 64));                                  \
+        if (mixed) {                                                                                      \
+            mb = AS_U8(iota8 >= (char)from);                                                              \
             fa = PICK(mb, fa, LOAD64(stack + fo[0] + o1));                                                \
             fb = PICK(mb, fb, LOAD64(stack + fo[1] + o1));                                                \
         }                                                                                                 \
@@ -208,7 +260,7 @@ inline u8x64 packus(i16x32 lo, i16x32 hi)
             u8x64 prev = fb;                                                                              \
             for (int k = 1; k <= span; ++k) {                                                             \
                 u8x64 fn = LOAD64(stack + fo[k + 1] + o0);                                                \
-                if (split < 64)                                                                           \
+                if (mixed)                                                                                \
                     fn = PICK(mb, fn, LOAD64(stack + fo[k + 1] + o1));                                    \
                 const u8x64 mk = AS_U8(sc >= (uchar)k);                                                   \
                 fa = PICK(mk, fa, prev);                                                                  \
@@ -218,11 +270,10 @@ inline u8x64 packus(i16x32 lo, i16x32 hi)
         }                                                                                                 \
         const i16x32 vl = MADDUBS(__builtin_shufflevector(pw, pw, WLO##C), __builtin_shufflevector(fa, fb, UNPACK_LO)); \
         const i16x32 vh = MADDUBS(__builtin_shufflevector(pw, pw, WHI##C), __builtin_shufflevector(fa, fb, UNPACK_HI)); \
-        i16x32 gl = LOADT(tn + 64 * C), gh = LOADT(tn + 64 * C + 32);                                     \
-        i16x32 ol = LOADT(tn + TONE_OB + 64 * C), oh = LOADT(tn + TONE_OB + 64 * C + 32);                 \
-        if (toneb != tone) {                                                                              \
-            const short from = (short)(3 * split - 64 * C);                                               \
-            const i16x32 ml = AS_I16(byte_lo >= from), mh = AS_I16(byte_hi >= from);                      \
+        i16x32 gl = LOADT(tc + 64 * C), gh = LOADT(tc + 64 * C + 32);                                     \
+        i16x32 ol = LOADT(tc + TONE_OB + 64 * C), oh = LOADT(tc + TONE_OB + 64 * C + 32);                 \
+        if (mixed && toneb != tone) {                                                                     \
+            const i16x32 ml = AS_I16(byte_lo >= (short)from), mh = AS_I16(byte_hi >= (short)from);        \
             gl = PICK(ml, gl, LOADT(tnb + 64 * C));                                                       \
             gh = PICK(mh, gh, LOADT(tnb + 64 * C + 32));                                                  \
             ol = PICK(ml, ol, LOADT(tnb + TONE_OB + 64 * C));                                             \
@@ -242,11 +293,13 @@ __kernel void gather(GATHER_PARAMS)
     stack += STACK_PAD;
     const int yi = (int)get_global_id(1) - 1;                    // the map rows yi, yi + 1
     const int ybeg = max(8 * yi + 4, 0), yend = min(8 * yi + 12, height);
-    __global const float *trow0 = tmap + (size_t)clamp(yi, 0, tmap_h - 1) * tmap_w;
-    __global const float *trow1 = tmap + (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w;
+    const size_t row0 = (size_t)clamp(yi, 0, tmap_h - 1) * tmap_w, row1 = (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w;
+    const int base = fast_floor(t0);
+    const float f0 = t0 - (float)base;
+    const int ky0 = 2 * (ybeg - 8 * yi) - 7;                      // the first row's ky (header)
     const i8x64 iota8 = (i8x64)(IOTA64);
     const i16x32 byte_lo = (i16x32)(BYTE_LO), byte_hi = (i16x32)(BYTE_HI);
-    const f32x64 wx = (f32x64)(WX64);
+    const i32x64 kx = (i32x64)(KX64);
     // Runs start at x0 + 64 k: with rows a multiple of 64 bytes long and out 16, 32 or 48
     // bytes off 64, x0 (16, 32 or 48 pixels) puts every run on 64-byte boundaries (3 x0 = -out
     // mod 64; 43 = 1/3 mod 64); a head run k = -1 renders pixels 0 .. 63 and keeps x0 of them.
@@ -259,28 +312,29 @@ __kernel void gather(GATHER_PARAMS)
         if (xs >= width)
             break;
         const int nvalid = k < 0 ? x0 : min(64, width - xs);   // pixels of the run to store
-        // the map columns j0 .. j0 + 9 (j0 = xs/8 - 1) of both map rows
+        // the map columns j0 .. j0 + 9 (j0 = xs/8 - 1) of both map rows, faded
         const int j0 = (xs >> 3) - 1;
         float16 a, b;
-        if (j0 >= 0 && j0 + 9 < tmap_w) {            // one load each (the map is padded by 16 floats)
-            a = *(__global const float16_u *)(trow0 + j0);
-            b = *(__global const float16_u *)(trow1 + j0);
+        if (j0 >= 0 && j0 + 9 < tmap_w) {            // one load each (the maps are padded by 16 floats)
+            const float16 a0 = *(__global const float16_u *)(tmap + row0 + j0), a1 = *(__global const float16_u *)(tmap1 + row0 + j0);
+            const float16 b0 = *(__global const float16_u *)(tmap + row1 + j0), b1 = *(__global const float16_u *)(tmap1 + row1 + j0);
+            a = a0 + fade * (a1 - a0);
+            b = b0 + fade * (b1 - b0);
         } else {
             float ta[16], tb[16];
             for (int j = 0; j < 16; ++j) {
                 const int jj = clamp(j0 + min(j, 9), 0, tmap_w - 1);
-                ta[j] = trow0[jj];
-                tb[j] = trow1[jj];
+                ta[j] = tmap[row0 + jj] + fade * (tmap1[row0 + jj] - tmap[row0 + jj]);
+                tb[j] = tmap[row1 + jj] + fade * (tmap1[row1 + jj] - tmap[row1 + jj]);
             }
             a = vload16(0, ta);
             b = vload16(0, tb);
         }
-        // along x: top (map row yi) and bot (yi + 1) per lane
-        const f32x64 ta = __builtin_shufflevector(a, a, KLO), tb = __builtin_shufflevector(a, a, KHI);
-        const f32x64 ba = __builtin_shufflevector(b, b, KLO), bb = __builtin_shufflevector(b, b, KHI);
-        const f32x64 top = ta + wx * (tb - ta);
-        const f32x64 dtb = (ba + wx * (bb - ba)) - top;
-        // the extremes of both rows' lanes 0-9 (lanes 10-15 repeat lane 9) bound every time
+        // the samples in 4080ths past base; along x, H of both map rows per lane (255ths)
+        const int16 qa = floor16((f0 + a) * 4080.0f + 0.5f), qb = floor16((f0 + b) * 4080.0f + 0.5f);
+        const i32x64 ht = (__builtin_shufflevector(qa, qa, KLO) * (16 - kx) + __builtin_shufflevector(qa, qa, KHI) * kx + 128) >> 8;
+        const i32x64 hb = (__builtin_shufflevector(qb, qb, KLO) * (16 - kx) + __builtin_shufflevector(qb, qb, KHI) * kx + 128) >> 8;
+        // the extremes of both rows' samples 0-9 (lanes 10-15 repeat lane 9) bound every u
         const float16 a9 = shuffle(a, (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9));
         const float16 b9 = shuffle(b, (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9));
         const float16 m16 = b9 < a9 ? b9 : a9, x16 = b9 > a9 ? b9 : a9;
@@ -288,19 +342,18 @@ __kernel void gather(GATHER_PARAMS)
         const float4 m4 = m8.hi < m8.lo ? m8.hi : m8.lo, x4 = x8.hi > x8.lo ? x8.hi : x8.lo;
         const float2 m2 = m4.hi < m4.lo ? m4.hi : m4.lo, x2 = x4.hi > x4.lo ? x4.hi : x4.lo;
         const float cmin = m2.hi < m2.lo ? m2.hi : m2.lo, cmax = x2.hi > x2.lo ? x2.hi : x2.lo;
-        const int lo = fast_floor(t0 + cmin);
-        // the frame of the latest time as a lane computes it (u / 255 below)
-#if INTERP
-        const int span = (int)(((t0 + cmax) - (float)lo) * 255.0f + 0.5f) / 255;
-        // a lane's u = 255 (time - lo) + 0.5 = ua + wy ud
-        const f32x64 ua = ((t0 - (float)lo) + top) * 255.0f + 0.5f, ud = dtb * 255.0f;
-#else
-        const int span = fast_floor(t0 + cmax) - lo;
-#endif
-        // byte offsets of the frames lo .. lo + span + 1
+        // frames base + lo .. base + lo + span (+1 to blend): u is monotone in the samples
+        const int lo = floor_div((fast_floor((f0 + cmin) * 4080.0f + 0.5f) + 8) >> 4, 255);
+        const int span = floor_div((fast_floor((f0 + cmax) * 4080.0f + 0.5f) + 8) >> 4, 255) - lo;
+        // per row, 16 u + 8 relative to 255 lo: v = 16 rt + ky (rb - rt) + 8, ky += 2 a row
+        const i32x64 rt = ht - 255 * lo, drb = hb - ht;
+        const i32x64 v32 = 16 * rt + ky0 * drb + 8, d32 = 2 * drb;
+        i16x64 v16 = __builtin_convertvector(v32, i16x64);      // fits when span <= MAX_SPAN
+        const i16x64 d16 = __builtin_convertvector(d32, i16x64);
+        // byte offsets of the frames base + lo .. base + lo + span + 1
         long fo[MAX_SPAN + 2];
         for (int k = 0; k < min(span, MAX_SPAN) + 2; ++k)
-            fo[k] = wrap_index(lo + k) * ((long)FRAME_PIXELS * 3);
+            fo[k] = wrap_index(base + lo + k) * ((long)FRAME_PIXELS * 3);
 #if GRID
         const int cx = xs / CELL_W;
         const int edge = (cx + 1) * CELL_W;               // the next cell's first pixel
@@ -308,8 +361,7 @@ __kernel void gather(GATHER_PARAMS)
         // else a third cell in the run, or frames too far apart: per pixel
         const bool linear = span <= MAX_SPAN && (split == 64 || edge + CELL_W >= xs + nvalid);
 #endif
-        for (int y = ybeg; y < yend; ++y) {
-            const float wy = ((float)y + 0.5f) * 0.125f - 0.5f - (float)yi;
+        for (int y = ybeg; y < yend; ++y, v16 += d16) {
             __global uchar *orow = out + (size_t)y * width * 3;
             // source: lanes < split read pix0 + lane, lanes >= split read pixb + lane
 #if GRID
@@ -341,20 +393,16 @@ __kernel void gather(GATHER_PARAMS)
 #endif
             __global uchar *p = orow + 3 * xs;
             if (linear) {
-                // u = 255 frame (above lo) + weight; past the bound only where a lane's float
-                // time rounds above the bound's: held just below it (weight 254/255, one grey level)
-#if INTERP
-                i32x64 u = __builtin_convertvector(ua + wy * ud, i32x64);
-#else
-                i32x64 u = __builtin_convertvector((t0 + (top + wy * dtb)) - (float)lo, i32x64) * 255;
-#endif
-                const int umax = 255 * span + 254;
-                u = u > umax ? (i32x64)umax : u;
-                const u16x64 u16 = __builtin_convertvector(u, u16x64);
+                // u = 255 frame (above lo) + weight, within 255 (span + 1)
+                const u16x64 u16 = __builtin_astype(v16 >> 4, u16x64);
                 // frame u / 255 (exact for u < 65535 with the +1), weight u % 255, and the lane's
                 // weight pair (255 - w, w) as one little-endian word: 255 (w + 1)
                 const u16x64 k16 = MULHU(u16 + (ushort)1, (ushort)257);
+#if INTERP
                 const u16x64 pw = (u16 - k16 * (ushort)255 + (ushort)1) * (ushort)255;
+#else
+                const u16x64 pw = (u16x64)255;
+#endif
                 const u8x64 s8 = __builtin_convertvector(k16, u8x64);
                 const long pa = (long)pix0 * 3, pb = (long)pixb * 3;   // pb may lie before the stack: inside STACK_PAD
                 __global const short *tn = tones + tone * TONE_STRIDE, *tnb = tones + toneb * TONE_STRIDE;
@@ -375,7 +423,7 @@ __kernel void gather(GATHER_PARAMS)
                         p[i] = part[i];
                 }
             } else {
-                const f32x64 t = t0 + (top + wy * dtb);
+                const i32x64 uu = (v32 + (y - ybeg) * d32) >> 4;
                 for (int q = 0; q < nvalid; ++q) {
                     const int x = xs + q;
 #if GRID
@@ -386,7 +434,8 @@ __kernel void gather(GATHER_PARAMS)
                     const int pk = srow[x];
                     const int pix = pk & 0xFFFFFF;
 #endif
-                    pixel(stack, tones, pix, (pk >> 24) & 0xFF, t[q], orow + 3 * x);
+                    const int u = uu[q];
+                    pixel(stack, tones, pix, (pk >> 24) & 0xFF, base + lo + u / 255, u % 255, orow + 3 * x);
                 }
             }
         }
@@ -407,14 +456,13 @@ __kernel void gather(GATHER_PARAMS)
         return;
     stack += STACK_PAD;
     const int xend = min(xstart + RUN, width);
+    const int base = fast_floor(t0);
+    const float f0 = t0 - (float)base;
 #if TSTEP > 1
-    const float fy = ((float)y + 0.5f) * (1.0f / TSTEP) - 0.5f;
-    const int yi = fast_floor(fy);
-    const float wy = fy - (float)yi;
-    __global const float *trow0 = tmap + (size_t)clamp(yi, 0, tmap_h - 1) * tmap_w;
-    __global const float *trow1 = tmap + (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w;
+    const int ny = 2 * y + 1 - TSTEP, yi = floor_div(ny, 2 * TSTEP), ky = ny - 2 * TSTEP * yi;
+    const size_t row0 = (size_t)clamp(yi, 0, tmap_h - 1) * tmap_w, row1 = (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w;
 #else
-    __global const float *trow = tmap + (size_t)y * tmap_w;
+    const size_t row0 = (size_t)y * tmap_w;
 #endif
 #if GRID
     const int cy = y / CELL_H;
@@ -432,18 +480,20 @@ __kernel void gather(GATHER_PARAMS)
         const int packed = srow[x];
         const int pix = packed & 0xFFFFFF;
 #endif
+        // the pixel's time u in 255ths past base (header), in 64 bits: any step
 #if TSTEP > 1
-        const float fx = ((float)x + 0.5f) * (1.0f / TSTEP) - 0.5f;
-        const int xi = fast_floor(fx);
-        const float wx = fx - (float)xi;
-        const int x0 = clamp(xi, 0, tmap_w - 1), x1 = clamp(xi + 1, 0, tmap_w - 1);
-        const float top = trow0[x0] + wx * (trow0[x1] - trow0[x0]);
-        const float bot = trow1[x0] + wx * (trow1[x1] - trow1[x0]);
-        const float t = t0 + (top + wy * (bot - top));
+        const int nx = 2 * x + 1 - TSTEP, xi = floor_div(nx, 2 * TSTEP), kx = nx - 2 * TSTEP * xi;
+        const int c0 = clamp(xi, 0, tmap_w - 1), c1 = clamp(xi + 1, 0, tmap_w - 1);
+        const long ht = floor_divl((long)time_q(f0, tmap, tmap1, fade, row0 + c0) * (2 * TSTEP - kx)
+                                   + (long)time_q(f0, tmap, tmap1, fade, row0 + c1) * kx + 16 * TSTEP, 32 * TSTEP);
+        const long hb = floor_divl((long)time_q(f0, tmap, tmap1, fade, row1 + c0) * (2 * TSTEP - kx)
+                                   + (long)time_q(f0, tmap, tmap1, fade, row1 + c1) * kx + 16 * TSTEP, 32 * TSTEP);
+        const int u = (int)floor_divl(ht * (2 * TSTEP - ky) + hb * ky + TSTEP, 2 * TSTEP);
 #else
-        const float t = t0 + trow[x];
+        const int u = floor_div(time_q(f0, tmap, tmap1, fade, row0 + x) + 8, 16);
 #endif
-        pixel(stack, tones, pix, (packed >> 24) & 0xFF, t, out + ((size_t)y * width + x) * 3);
+        const int fi = floor_div(u, 255);
+        pixel(stack, tones, pix, (packed >> 24) & 0xFF, base + fi, u - 255 * fi, out + ((size_t)y * width + x) * 3);
     }
 }
 

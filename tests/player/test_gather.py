@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from dynatex.player.gather import (Gather, gather_reference, gaussian_smooth, gaussian_weights, pack_source,
-                                   sample_time_map, unpack_source, wrap_index)
+                                   time_units, unpack_source, wrap_index)
 
 
 def _stack(n=7, h=10, w=12, seed=0):
@@ -130,22 +130,51 @@ def test_fixed_point_is_within_one_grey_level_of_the_real_formula():
     flat = stack.reshape(4, -1, 3).astype(np.float64)
     for _ in range(5):
         pix = rng.integers(0, 64 * 64, (128, 128))
-        times = rng.uniform(-2, 6, (128, 128)).astype(np.float32)
+        frames = rng.integers(-2, 6, (128, 128))
+        weights = rng.integers(0, 256, (128, 128))
         tones = np.concatenate([rng.uniform(0, 1.5, (3, 3)), rng.uniform(-60, 60, (3, 3))], 1).astype(np.float32)
         tone = rng.integers(0, 3, (128, 128))
-        got = gather_reference(stack, pix, tone, times, tones).astype(int)
-        i = np.floor(times).astype(int)
-        f = (times - i)[..., None]
-        a, b = flat[i % 4, pix], flat[(i + 1) % 4, pix]
+        got = gather_reference(stack, pix, tone, frames, weights, tones).astype(int)
+        f = (weights / 255.0)[..., None]
+        a, b = flat[frames % 4, pix], flat[(frames + 1) % 4, pix]
         exact = np.clip(np.rint((a + f * (b - a)) * tones[tone][..., :3] + tones[tone][..., 3:]), 0, 255)
         assert np.abs(got - exact).max() <= 1
 
 
-def test_coarse_time_map_sampling_is_bilinear_and_exact_at_centres():
+def test_time_units_sample_the_map_bilinearly():
+    """Frame and weight (255ths) of t + the map: exact at sample centres, bilinear between,
+    within 1/255 of a frame of the real-valued interpolation, faded toward a target."""
     tmap = np.array([[0, 4], [8, 12]], np.float32)
-    full = sample_time_map(tmap, (8, 8), 4)
-    assert full[0, 0] == 0 and full[-1, -1] == 12
-    assert abs(float(full[1, 1]) - 0.0) < 1e-6 and abs(float(full[4, 4]) - 7.5) < 1e-5
+    frame, weight = time_units(tmap, 0.0, (8, 8), 4)
+    u = frame * 255 + weight
+    assert u[0, 0] == 0 and u[1, 1] == 0 and u[-1, -1] == 12 * 255 and u[-2, -2] == 12 * 255
+    yy, xx = np.mgrid[0:8, 0:8]
+    fy, fx = np.clip((yy + 0.5) / 4 - 0.5, 0, 1), np.clip((xx + 0.5) / 4 - 0.5, 0, 1)
+    real = 255 * (8 * fy + 4 * fx)
+    assert np.abs(u - real).max() <= 1
+    frame, weight = time_units(tmap, 2.25, (8, 8), 4, target=tmap + 4, fade=0.5)
+    assert np.abs(frame * 255 + weight - (real + 255 * 4.25)).max() <= 1
+    frame, weight = time_units(np.full((2, 2), -0.5, np.float32), 0.0, (2, 2), 1)
+    assert (frame == -1).all() and (weight == 128).all()
+
+
+@pytest.mark.parametrize("wide", [True, False])
+def test_device_and_reference_agree_exactly(cl_context, wide):
+    """Times are integers after one float32 rounding per map sample (the kernels turn off
+    contraction), so every pixel matches the reference: any map, fade, time and step."""
+    rng = np.random.default_rng(3)
+    stack = _stack(n=9, h=32, w=64)
+    for step, (h, w) in ((8, (37, 130)), (8, (64, 256)), (1, (20, 70)), (4, (37, 130))):
+        if wide and step != 8:
+            continue
+        g = Gather(stack, (h, w), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=step, wide=wide)
+        gh, gw = -(-h // 16), -(-w // 32)
+        g.set_source_grid(pack_source(rng.integers(0, 2, (gh, gw)) * 32 + rng.integers(0, 2, (gh, gw)) * 16 * 64))
+        th, tw = g.tmap_shape
+        g.set_time_map(rng.uniform(-3, 6, (th, tw)).astype(np.float32), rng.uniform(0, 12, (th, tw)).astype(np.float32))
+        g.set_tones(np.array([[1.2, 0.8, 1.0]], np.float32), np.array([[4, -6, 0]], np.float32))
+        for t, fade in ((0.25, 0.0), (2.5, 0.3), (-4.75, 1.0), (7.1, 0.77)):
+            assert np.array_equal(g.render(t, fade=fade), g.render_reference(t, fade=fade)), (step, h, w, t, fade)
 
 
 def test_bad_inputs_are_clear_errors():
@@ -167,6 +196,11 @@ def test_bad_inputs_are_clear_errors():
         g.set_time_map(np.zeros((3, 3)))
     with pytest.raises(ValueError, match="finite"):
         g.set_time_map(np.full((4, 4), np.nan))
+    with pytest.raises(ValueError, match="target must lie within"):
+        g.set_time_map(np.zeros((4, 4)), np.full((4, 4), 3000.0))
+    with pytest.raises(ValueError, match="fade"):
+        g.set_source_map(pack_source(np.arange(16).reshape(4, 4)))
+        g.render(0.0, fade=1.5)
     with pytest.raises(ValueError, match="gain"):
         g.set_tones(np.array([[-1, 1, 1]]))
     with pytest.raises(ValueError, match="offset must be finite within"):
@@ -380,3 +414,11 @@ def test_frames_land_whatever_the_arrays_alignment(cl_context, offset):
         g.render(t, out=out)
         _close(out, g.render_reference(t))
     assert not raw[:start].any() and not raw[start + h * w * 3:].any()   # nothing outside the array
+
+
+def test_doctests():
+    import doctest
+
+    import dynatex.player.gather as module
+    res = doctest.testmod(module, extraglobs={"np": np})
+    assert res.attempted > 5 and res.failed == 0
