@@ -161,7 +161,7 @@ typedef float16 __attribute__((aligned(4))) float16_u;
 #define AS_I16(x) __builtin_astype((x), i16x32)
 // lanes where m is all ones take b, the others a
 #define PICK(m, a, b) (((a) & ~(m)) | ((b) & (m)))
-#define MAX_SPAN 3   // a fast run blends frames lo .. lo + MAX_SPAN + 1 at most
+#define MAX_SPAN 5   // a fast run blends frames lo .. lo + MAX_SPAN + 1 at most
 
 #define IOTA32 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31
 #define IOTA32H 32, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 60, 61, 62, 63
