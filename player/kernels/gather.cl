@@ -127,17 +127,17 @@ inline void pixel(__global const uchar *restrict stack, __global const short *re
 #if TSTEP == 8 && WIDE
 // A work-item renders RUNS runs of 64 pixels (192 bytes) on the 8 rows that share one pair of
 // map rows (rows 8k - 4 .. 8k + 3). Runs start at multiples of 8 pixels (see x0 below), so
-// the map intervals a run covers, and each lane's place inside its interval, are the same
-// for every run. Per run the ten map columns of both map rows are read once, the 64 lanes'
-// interpolations along x come from shuffles, and the frames the 8 rows need are bounded by
-// the samples' extremes (the lanes interpolate between them): lo .. lo + span + 1. Per row
-// a lane's time is one multiply-add, and u = (int)(255 (time - lo) + 0.5) gives its frame
-// (lo + u / 255) and its weight (u % 255) at once: the same integers as floor and weight in
-// the header's formula. When the run's source is linear (inside one cell, or two cells split
+// the map intervals a run covers, and each lane's place inside its interval (kx), are the
+// same for every run. Per run the ten map columns of both map rows are read and faded once,
+// H of both map rows comes per lane from shuffles, and the frames the 8 rows need are
+// bounded by the samples' extremes (u is monotone in them): lo .. lo + span + 1. Per row a
+// lane's 16 u + 8 (relative to 255 lo) grows by a constant, 2 (H_bot - H_top), in 16-bit
+// lanes, and u gives its frame (lo + u / 255) and its weight (u % 255) at once: the
+// header's integers. When the run's source is linear (inside one cell, or two cells split
 // at a boundary; a per-pixel map must be linear with one tone) and its frames lie within
 // lo .. lo + MAX_SPAN + 1, the run is blended and toned in 16-bit lanes on 64-byte vectors:
 // three chunks of 64 bytes, each byte's frames merged bytewise and its weight found by a
-// shuffle. Any other run goes pixel by pixel with the same formula. (Clang's ext_vector_type
+// shuffle. Any other run goes pixel by pixel with the same integers. (Clang's ext_vector_type
 // gives the 64-wide types OpenCL C lacks: on AVX-512 one operation covers 32 or 64 lanes,
 // where a float16 covers 16.)
 typedef uchar  u8x64  __attribute__((ext_vector_type(64)));
@@ -149,7 +149,6 @@ typedef short  i16x32 __attribute__((ext_vector_type(32)));
 typedef uint   u32x64 __attribute__((ext_vector_type(64)));
 typedef int    i32x64 __attribute__((ext_vector_type(64)));
 typedef int    i32x32 __attribute__((ext_vector_type(32)));
-typedef float  f32x64 __attribute__((ext_vector_type(64)));
 typedef u8x64 __attribute__((aligned(1))) u8x64_u;
 typedef i16x32 __attribute__((aligned(2))) i16x32_u;
 typedef int16 __attribute__((aligned(4))) int16_u;
@@ -190,10 +189,21 @@ typedef float16 __attribute__((aligned(4))) float16_u;
 #define ODD32 1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31, 33, 35, 37, 39, 41, 43, 45, 47, 49, 51, 53, 55, 57, 59, 61, 63
 #define PACK64 0, 1, 2, 3, 4, 5, 6, 7, 32, 33, 34, 35, 36, 37, 38, 39, 8, 9, 10, 11, 12, 13, 14, 15, 40, 41, 42, 43, 44, 45, 46, 47, 16, 17, 18, 19, 20, 21, 22, 23, 48, 49, 50, 51, 52, 53, 54, 55, 24, 25, 26, 27, 28, 29, 30, 31, 56, 57, 58, 59, 60, 61, 62, 63
 
+// X86_BW: the compiler targets AVX-512BW and the x86 builtins below are used (PORTABLE=1, a
+// define for tests, takes the plain vector code instead, which computes the same lanes)
+#ifndef PORTABLE
+#define PORTABLE 0
+#endif
+#if defined(__AVX512BW__) && !PORTABLE
+#define X86_BW 1
+#else
+#define X86_BW 0
+#endif
+
 // u8 x s8 pairs summed into s16 lanes (x86 pmaddubsw; no lane here saturates), and two s16
 // vectors narrowed with unsigned saturation in the x86 pack order (packuswb): the
 // instructions where the compiler targets AVX-512BW, the same lanes in plain vector code elsewhere
-#ifdef __AVX512BW__
+#if X86_BW
 #define MADDUBS(w, x) __builtin_ia32_pmaddubsw512(__builtin_astype((w), i8x64), __builtin_astype((x), i8x64))
 #define PACKUS(lo, hi) __builtin_astype(__builtin_ia32_packuswb512((lo), (hi)), u8x64)
 #else
@@ -212,6 +222,7 @@ inline u8x64 packus(i16x32 lo, i16x32 hi)
 #define MADDUBS(w, x) maddubs(__builtin_astype((w), u8x64), __builtin_astype((x), i8x64))
 #define PACKUS(lo, hi) packus((lo), (hi))
 #endif
+
 // floor of 16 floats (exact for |v| < 2^31)
 inline int16 floor16(float16 v)
 {
@@ -220,7 +231,7 @@ inline int16 floor16(float16 v)
 }
 
 // (a b) >> 16 in unsigned 16-bit lanes (pmulhuw)
-#ifdef __AVX512BW__
+#if X86_BW
 typedef short v32hi __attribute__((vector_size(64)));
 inline u16x64 mulhu(u16x64 a, ushort b)
 {
@@ -397,13 +408,18 @@ __kernel void gather(GATHER_PARAMS)
                 const u16x64 u16 = __builtin_astype(v16 >> 4, u16x64);
                 // frame u / 255 (exact for u < 65535 with the +1), weight u % 255, and the lane's
                 // weight pair (255 - w, w) as one little-endian word: 255 (w + 1)
-                const u16x64 k16 = MULHU(u16 + (ushort)1, (ushort)257);
+                // (one frame pair, span 0: k = 0 everywhere)
+                u16x64 k16 = (u16x64)0;
+                u8x64 s8 = (u8x64)0;
+                if (span > 0) {
+                    k16 = MULHU(u16 + (ushort)1, (ushort)257);
+                    s8 = __builtin_convertvector(k16, u8x64);
+                }
 #if INTERP
                 const u16x64 pw = (u16 - k16 * (ushort)255 + (ushort)1) * (ushort)255;
 #else
                 const u16x64 pw = (u16x64)255;
 #endif
-                const u8x64 s8 = __builtin_convertvector(k16, u8x64);
                 const long pa = (long)pix0 * 3, pb = (long)pixb * 3;   // pb may lie before the stack: inside STACK_PAD
                 __global const short *tn = tones + tone * TONE_STRIDE, *tnb = tones + toneb * TONE_STRIDE;
                 if (nvalid == 64 && ((size_t)p & 63) == 0) {

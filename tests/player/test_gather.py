@@ -422,3 +422,25 @@ def test_doctests():
     import dynatex.player.gather as module
     res = doctest.testmod(module, extraglobs={"np": np})
     assert res.attempted > 5 and res.failed == 0
+
+
+def test_the_wide_kernels_plain_vector_code_computes_the_same_integers(cl_context, monkeypatch):
+    """Where the compiler does not target AVX-512BW the wide kernel blends, packs and divides
+    with plain vector code instead of x86 builtins; forced here (PORTABLE=1), it must still
+    match the reference exactly."""
+    import pyopencl as cl
+
+    import dynatex.player.opencl as ocl
+    if not cl_context.devices[0].type & cl.device_type.CPU:
+        pytest.skip("the wide kernel is the default on CPU devices only")
+    real = ocl.build_program
+    monkeypatch.setattr(ocl, "build_program", lambda ctx, name, defines=None: real(ctx, name, {**(defines or {}), "PORTABLE": 1}))
+    rng = np.random.default_rng(5)
+    stack = _stack(n=7, h=16, w=64)
+    g = Gather(stack, (40, 256), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
+    assert g.wide
+    g.set_source_grid(pack_source(rng.integers(0, 2, (3, 8)) * 32))
+    g.set_time_map(rng.uniform(0, 4, g.tmap_shape).astype(np.float32))
+    g.set_tones(np.array([[1.3, 0.7, 1.0]], np.float32), np.array([[9, -4, 0]], np.float32))
+    for t in (0.4, 3.9):
+        assert np.array_equal(g.render(t), g.render_reference(t))
