@@ -55,7 +55,7 @@ are limited to +-2048 frames (the integer time then fits 32 bits).
 Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders runs of 64
 pixels on the 8 rows of one pair of map rows: a run whose source is linear (one cell, or two
 cells split at a boundary and merged bytewise; a per-pixel map with consecutive pixels and
-one tone) and whose frames span at most five neighbours is blended and toned on 64-byte
+one tone) and whose frames span at most seven neighbours is blended and toned on 64-byte
 vectors in 16-bit lanes, tone factors pre-expanded per byte on the host; other runs, and
 other time steps, go pixel by pixel with the same integers. The runs are placed so that
 their stores are 64-byte aligned wherever the output's rows are a multiple of 64 bytes long
@@ -94,7 +94,7 @@ MAX_TIME = 2048.0     # |time map| in frames: the integer time (4080ths, x 256) 
 RUN = 32              # output pixels per work-item of the per-pixel kernel (time steps other than 8)
 STACK_PAD = 256       # bytes of padding around the device copy of the frame stack (a run's 192 bytes fit)
 RUNS = 8              # wide kernel: a work-item renders RUNS runs of 64 pixels on 8 rows
-TONE_STRIDE = 384     # uint16 per device tone row: 192 gains then 192 offsets, the rgb pattern of a 64-pixel run
+TONE_STRIDE = 384     # int16 per device tone row: 192 gains then 192 offsets, per byte of a 64-pixel run
 TONE_OB = 192
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
 #: the bytes of a 64-pixel run in the order of the wide kernel's 16-bit lanes: per 64-byte
@@ -451,7 +451,7 @@ class Gather:
                                 self._d_out, np.int32(w), np.int32(h), np.int32(grid_w),
                                 np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0),
                                 np.float32(0))
-        self._host_out = self._host_buf = None       # arg 4 is the device's frame buffer again
+        self._host_out = self._host_buf = None       # arg 5 is the device's frame buffer again
 
     # -- inputs --------------------------------------------------------------------------------
     def set_source_map(self, packed: np.ndarray) -> None:
@@ -667,7 +667,9 @@ class Gather:
         if self.wrap == "pingpong" and self.n_frames > 1:
             p = 2 * (self.n_frames - 1)
             return math.fmod(t, p) if abs(t) >= p else t
-        return t
+        # clamp (or a single frame): every time beyond the ends (maps stay within MAX_TIME) is
+        # the same as one just beyond, and the integer time must not overflow
+        return min(max(t, -2 * MAX_TIME), self.n_frames + 2 * MAX_TIME)
 
     def frame_traffic(self, t: float | None = None) -> dict[str, int]:
         """Bytes the frame at ``t`` (default: the last rendered) must move at least.

@@ -175,6 +175,15 @@ def test_device_and_reference_agree_exactly(cl_context, wide):
         g.set_tones(np.array([[1.2, 0.8, 1.0]], np.float32), np.array([[4, -6, 0]], np.float32))
         for t, fade in ((0.25, 0.0), (2.5, 0.3), (-4.75, 1.0), (7.1, 0.77)):
             assert np.array_equal(g.render(t, fade=fade), g.render_reference(t, fade=fade)), (step, h, w, t, fade)
+    # a per-pixel source: rows of consecutive pixels (the wide kernel's linear runs) and scattered ones
+    g = Gather(stack, (24, 192), backend="opencl", ctx=cl_context, time_step=8, wide=wide)
+    index = (np.arange(24)[:, None] % 32) * 64 + np.arange(192)[None, :] % 64
+    index[::3] = rng.integers(0, 32 * 64, (8, 192))
+    g.set_tones(np.array([[1.0, 1.0, 1.0], [0.7, 1.1, 1.4]], np.float32))
+    g.set_source_map(pack_source(index, (np.arange(192)[None, :] // 100).repeat(24, 0)))
+    g.set_time_map(rng.uniform(0, 5, g.tmap_shape).astype(np.float32), rng.uniform(0, 5, g.tmap_shape).astype(np.float32))
+    for t, fade in ((0.5, 0.1), (3.3, 0.9)):
+        assert np.array_equal(g.render(t, fade=fade), g.render_reference(t, fade=fade)), ("map", t, fade)
 
 
 def test_bad_inputs_are_clear_errors():
@@ -444,3 +453,15 @@ def test_the_wide_kernels_plain_vector_code_computes_the_same_integers(cl_contex
     g.set_tones(np.array([[1.3, 0.7, 1.0]], np.float32), np.array([[9, -4, 0]], np.float32))
     for t in (0.4, 3.9):
         assert np.array_equal(g.render(t), g.render_reference(t))
+
+
+def test_clamped_time_far_beyond_the_ends_holds_the_end_frames(cl_context):
+    """With wrap="clamp" any time past the ends shows the end frames; huge times must neither
+    overflow the integer time nor differ from the reference."""
+    stack = _stack(n=5, h=16, w=64)
+    g = Gather(stack, (16, 128), backend="opencl", ctx=cl_context, cell=(16, 64), time_step=8, wrap="clamp")
+    g.set_source_grid(pack_source(np.zeros((1, 2), int)))
+    for t, frame in ((1e12, 4), (-1e12, 0), (4.0 + 3000, 4)):
+        got = g.render(t)
+        assert np.array_equal(got, g.render_reference(t))
+        assert np.array_equal(got[:, :64], stack[frame])
