@@ -363,8 +363,13 @@ __kernel void gather(GATHER_PARAMS)
         const i16x64 d16 = __builtin_convertvector(d32, i16x64);
         // byte offsets of the frames base + lo .. base + lo + span + 1
         long fo[MAX_SPAN + 2];
+#if WRAP == WRAP_LOOP
+        for (int k = 0, f = wrap_index(base + lo); k < min(span, MAX_SPAN) + 2; ++k, f = f + 1 < NFRAMES ? f + 1 : 0)
+            fo[k] = f * ((long)FRAME_PIXELS * 3);
+#else
         for (int k = 0; k < min(span, MAX_SPAN) + 2; ++k)
             fo[k] = wrap_index(base + lo + k) * ((long)FRAME_PIXELS * 3);
+#endif
 #if GRID
         const int cx = xs / CELL_W;
         const int edge = (cx + 1) * CELL_W;               // the next cell's first pixel
@@ -372,13 +377,19 @@ __kernel void gather(GATHER_PARAMS)
         // else a third cell in the run, or frames too far apart: per pixel
         const bool linear = span <= MAX_SPAN && (split == 64 || edge + CELL_W >= xs + nvalid);
 #endif
+#if GRID
+        // the cell row of the first row, followed down the rows (cy, and dy within the cell)
+        int cy = ybeg / CELL_H, dy = (ybeg - cy * CELL_H) * FRAME_W;
+        __global const int *srow = source + cy * grid_w;
+#endif
         for (int y = ybeg; y < yend; ++y, v16 += d16) {
             __global uchar *orow = out + (size_t)y * width * 3;
             // source: lanes < split read pix0 + lane, lanes >= split read pixb + lane
 #if GRID
-            const int cy = y / CELL_H;
-            __global const int *srow = source + cy * grid_w;
-            const int dy = (y - cy * CELL_H) * FRAME_W;
+            if (dy == CELL_H * FRAME_W) {                 // the next cell row
+                srow += grid_w;
+                dy = 0;
+            }
             const int packed = srow[cx];
             const int pix0 = (packed & 0xFFFFFF) + dy + (xs - cx * CELL_W);
             const int tone = (packed >> 24) & 0xFF;
@@ -422,19 +433,20 @@ __kernel void gather(GATHER_PARAMS)
 #endif
                 const long pa = (long)pix0 * 3, pb = (long)pixb * 3;   // pb may lie before the stack: inside STACK_PAD
                 __global const short *tn = tones + tone * TONE_STRIDE, *tnb = tones + toneb * TONE_STRIDE;
+                const u8x64 c0 = CHUNK(0), c1 = CHUNK(1), c2 = CHUNK(2);
                 if (nvalid == 64 && ((size_t)p & 63) == 0) {
-                    NT_STORE(p, CHUNK(0));
-                    NT_STORE(p + 64, CHUNK(1));
-                    NT_STORE(p + 128, CHUNK(2));
+                    NT_STORE(p, c0);
+                    NT_STORE(p + 64, c1);
+                    NT_STORE(p + 128, c2);
                 } else if (nvalid == 64) {
-                    *(__global u8x64_u *)p = CHUNK(0);
-                    *(__global u8x64_u *)(p + 64) = CHUNK(1);
-                    *(__global u8x64_u *)(p + 128) = CHUNK(2);
+                    *(__global u8x64_u *)p = c0;
+                    *(__global u8x64_u *)(p + 64) = c1;
+                    *(__global u8x64_u *)(p + 128) = c2;
                 } else {                                   // the head run, or a run past the row's end
                     uchar part[192];
-                    *(u8x64_u *)part = CHUNK(0);
-                    *(u8x64_u *)(part + 64) = CHUNK(1);
-                    *(u8x64_u *)(part + 128) = CHUNK(2);
+                    *(u8x64_u *)part = c0;
+                    *(u8x64_u *)(part + 64) = c1;
+                    *(u8x64_u *)(part + 128) = c2;
                     for (int i = 0; i < 3 * nvalid; ++i)
                         p[i] = part[i];
                 }
@@ -454,6 +466,9 @@ __kernel void gather(GATHER_PARAMS)
                     pixel(stack, tones, pix, (pk >> 24) & 0xFF, base + lo + u / 255, u % 255, orow + 3 * x);
                 }
             }
+#if GRID
+            dy += FRAME_W;
+#endif
         }
     }
 #if defined(__x86_64__) || defined(__i386__)
