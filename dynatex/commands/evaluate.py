@@ -83,12 +83,13 @@ def parse_events(text: str, n_frames: int) -> list[int]:
     return events
 
 
-def parse_boundaries(spec: str, shape: tuple[int, int]) -> tuple[np.ndarray | None, bool]:
-    """``--boundaries`` -> (label map or None, wrap) for frames of ``shape`` = (H, W)."""
+def parse_boundaries(spec: str, shape: tuple[int, int]) -> tuple[np.ndarray | None, bool, tuple[int, int] | None]:
+    """``--boundaries`` -> (label map or None, wrap, the grid's period (H, W) or None) for frames
+    of ``shape`` = (H, W)."""
     from ..analyzer.metrics import grid_labels
     h, w = shape
     if spec.lower() == "border":
-        return None, True
+        return None, True, None
     mt = _GRID.match(spec)
     if mt:
         tw, th = int(mt.group(1)), int(mt.group(2))
@@ -98,7 +99,7 @@ def parse_boundaries(spec: str, shape: tuple[int, int]) -> tuple[np.ndarray | No
         labels = grid_labels((h, w), (th, tw), offset=(oy, ox))
         if labels.max() == 0:
             raise UsageError(f"--boundaries {spec}: the grid has no seam inside the {w}x{h} frame")
-        return labels, False
+        return labels, False, (th, tw)
     if spec.lower().startswith("grid:"):
         raise UsageError(f"--boundaries grid must be grid:WxH or grid:WxH+X+Y, not {spec!r}")
     if not os.path.isfile(spec):
@@ -115,7 +116,7 @@ def parse_boundaries(spec: str, shape: tuple[int, int]) -> tuple[np.ndarray | No
     else:
         flat = img.reshape(h * w, -1).astype(np.int64)
         labels = np.unique(flat, axis=0, return_inverse=True)[1].reshape(h, w)
-    return labels, False
+    return labels, False, None
 
 
 # -- inputs ------------------------------------------------------------------------------------
@@ -168,11 +169,9 @@ def run(args: argparse.Namespace) -> int:
     t, h, w = output.shape[:3]
     if output.shape[-1] != source.shape[-1]:        # grey against colour: compare in colour
         output, source = (np.repeat(a, 3, axis=-1) if a.shape[-1] == 1 else a for a in (output, source))
-    labels, wrap = (None, False) if args.boundaries is None else parse_boundaries(args.boundaries, (h, w))
+    labels, wrap, period = (None, False, None) if args.boundaries is None else parse_boundaries(args.boundaries, (h, w))
     wrap = wrap or args.wrap
     events = parse_events(args.events, t) if args.events else None
-    m = _GRID.match(args.boundaries or "")
-    period = (int(m.group(2)), int(m.group(1))) if m else None          # a tile grid: its spatial period too
     report = metrics.evaluate(output, source, labels=labels, wrap=wrap, events=events, window=args.window,
                               downscale=args.downscale, seed=max(0, args.seed), n_samples=args.samples,
                               period=period)
