@@ -85,12 +85,17 @@ inline int time_q(float f0, __global const float *m0, __global const float *m1, 
     return fast_floor((f0 + m) * 4080.0f + 0.5f);
 }
 
-// The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the host.
+// The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the
+// host; plain is 1 when every tone is the identity, G = IDENTITY_G and O = IDENTITY_O (the
+// 64-lane kernel then keeps them in registers: the same integers, no tone loads).
+#define IDENTITY_G 514
+#define IDENTITY_O 257
 #define GATHER_PARAMS __global const uchar *restrict stack, __global const int *restrict source,            \
                       __global const float *restrict tmap, __global const float *restrict tmap1,          \
                       __global const short *restrict tones,                                                \
                       __global uchar *restrict out, const int width, const int height, const int grid_w,   \
-                      const int tmap_w, const int tmap_h, const float t0, const float fade
+                      const int tmap_w, const int tmap_h, const float t0, const float fade,         \
+                      const int plain
 
 // a stored byte as value - 128: the 64-lane kernel's stack holds value ^ 0x80 (a signed byte)
 #if TSTEP == 8 && WIDE
@@ -281,14 +286,20 @@ inline u16x64 mulhu(u16x64 a, ushort b)
         }                                                                                                 \
         const i16x32 vl = MADDUBS(__builtin_shufflevector(pw, pw, WLO##C), __builtin_shufflevector(fa, fb, UNPACK_LO)); \
         const i16x32 vh = MADDUBS(__builtin_shufflevector(pw, pw, WHI##C), __builtin_shufflevector(fa, fb, UNPACK_HI)); \
-        i16x32 gl = LOADT(tc + 64 * C), gh = LOADT(tc + 64 * C + 32);                                     \
-        i16x32 ol = LOADT(tc + TONE_OB + 64 * C), oh = LOADT(tc + TONE_OB + 64 * C + 32);                 \
-        if (mixed && toneb != tone) {                                                                     \
-            const i16x32 ml = AS_I16(byte_lo >= (short)from), mh = AS_I16(byte_hi >= (short)from);        \
-            gl = PICK(ml, gl, LOADT(tnb + 64 * C));                                                       \
-            gh = PICK(mh, gh, LOADT(tnb + 64 * C + 32));                                                  \
-            ol = PICK(ml, ol, LOADT(tnb + TONE_OB + 64 * C));                                             \
-            oh = PICK(mh, oh, LOADT(tnb + TONE_OB + 64 * C + 32));                                        \
+        /* every tone the identity (plain): its G and O as constants, no loads */                         \
+        i16x32 gl = (i16x32)IDENTITY_G, gh = (i16x32)IDENTITY_G, ol = (i16x32)IDENTITY_O, oh = (i16x32)IDENTITY_O; \
+        if (!plain) {                                                                                     \
+            gl = LOADT(tc + 64 * C);                                                                      \
+            gh = LOADT(tc + 64 * C + 32);                                                                 \
+            ol = LOADT(tc + TONE_OB + 64 * C);                                                            \
+            oh = LOADT(tc + TONE_OB + 64 * C + 32);                                                       \
+            if (mixed && toneb != tone) {                                                                 \
+                const i16x32 ml = AS_I16(byte_lo >= (short)from), mh = AS_I16(byte_hi >= (short)from);    \
+                gl = PICK(ml, gl, LOADT(tnb + 64 * C));                                                   \
+                gh = PICK(mh, gh, LOADT(tnb + 64 * C + 32));                                              \
+                ol = PICK(ml, ol, LOADT(tnb + TONE_OB + 64 * C));                                         \
+                oh = PICK(mh, oh, LOADT(tnb + TONE_OB + 64 * C + 32));                                    \
+            }                                                                                             \
         }                                                                                                 \
         PACKUS((MULHI(vl, gl) + ol) >> 1, (MULHI(vh, gh) + oh) >> 1);                                     \
     })

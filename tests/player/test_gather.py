@@ -175,6 +175,8 @@ def test_device_and_reference_agree_exactly(cl_context, wide):
         g.set_tones(np.array([[1.2, 0.8, 1.0]], np.float32), np.array([[4, -6, 0]], np.float32))
         for t, fade in ((0.25, 0.0), (2.5, 0.3), (-4.75, 1.0), (7.1, 0.77)):
             assert np.array_equal(g.render(t, fade=fade), g.render_reference(t, fade=fade)), (step, h, w, t, fade)
+        g.set_tones(np.ones((1, 3), np.float32))            # the identity: kept in registers (wide kernel)
+        assert np.array_equal(g.render(3.6, fade=0.5), g.render_reference(3.6, fade=0.5)), (step, h, w, "identity")
     # a per-pixel source: rows of consecutive pixels (the wide kernel's linear runs) and scattered ones
     g = Gather(stack, (24, 192), backend="opencl", ctx=cl_context, time_step=8, wide=wide)
     index = (np.arange(24)[:, None] % 32) * 64 + np.arange(192)[None, :] % 64
@@ -394,13 +396,15 @@ def test_a_weight_rounding_up_to_255_is_the_next_frame(cl_context, wide):
 
 
 def test_switching_between_identity_and_real_tones(cl_context):
-    """Setting a real tone, and back to the identity, takes effect at the next frame."""
+    """The wide kernel keeps the identity tone in registers while every tone is the identity;
+    setting a real tone, and back, must take effect at the next frame."""
     stack = _stack(n=6, h=16, w=64)
     g = Gather(stack, (24, 128), backend="opencl", ctx=cl_context, cell=(16, 64), time_step=8)
     g.set_source_grid(pack_source(np.zeros((2, 2), int)))
     g.set_time_map(np.linspace(0, 3, 3 * 16, dtype=np.float32).reshape(3, 16))
     for gain, offset in (([1, 1, 1], [0, 0, 0]), ([1.3, 0.6, 1.0], [5, -9, 0]), ([1, 1, 1], [0, 0, 0])):
         g.set_tones(np.array([gain], np.float32), np.array([offset], np.float32))
+        assert g._plain_tones() == (gain == [1, 1, 1] and offset == [0, 0, 0])
         _close(g.render(2.6), g.render_reference(2.6))
 
 
