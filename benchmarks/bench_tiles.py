@@ -68,10 +68,14 @@ def bench_player(path: str, size: tuple[int, int], n: int, *, defaults: bool = F
     same load of this shared machine; the row reports the median over rounds), then numpy."""
     row: dict = {"size": f"{size[0]}x{size[1]}", "settings": "defaults" if defaults else "sigma 64, consensus tone",
                  "rounds": []}
-    opts = {} if defaults else {"tone": "consensus"}
-    with TilesPlayer(path, backend="opencl", size=size, seed=1, **opts) as p:
+
+    def player(backend: str) -> TilesPlayer:
+        p = TilesPlayer(path, backend=backend, size=size, seed=1, tone=None if defaults else "consensus")
         if not defaults:
             p.sigma = 64.0
+        return p
+
+    with player("opencl") as p:
         buf = np.empty(p.shape, np.uint8)
         g = p._gather
         e2e, kernel = [], []
@@ -90,9 +94,7 @@ def bench_player(path: str, size: tuple[int, int], n: int, *, defaults: bool = F
         row["direct_write"] = g.direct
         row["traffic"] = p.frame_traffic()
         row["bytes_per_frame"] = p.bytes_per_frame
-    with TilesPlayer(path, backend="numpy", size=size, seed=1, **opts) as p:
-        if not defaults:
-            p.sigma = 64.0
+    with player("numpy") as p:
         buf = np.empty(p.shape, np.uint8)
         row["numpy"] = summarize(time_calls(lambda: p.next_frame(out=buf), frames=max(5, n // 30)))
     fractions = [r["roofline_fraction"] for r in row["rounds"]]

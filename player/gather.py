@@ -615,8 +615,7 @@ class Gather:
             self.render_reference(t, out, fade=fade)
             return out
         import pyopencl as cl
-        self._k_gather.set_arg(11, np.float32(t))
-        self._k_gather.set_arg(12, np.float32(fade))
+        self._set_time_args(t, self._last_fade)
         if self.direct:
             # the kernel writes straight into the caller's array (the device shares host
             # memory, checked at open): no device buffer, no copy. The buffer wrapping it is
@@ -640,11 +639,15 @@ class Gather:
         if self.backend != "opencl" or self._source is None:
             raise RuntimeError("render_on_device needs the opencl backend and a source")
         import pyopencl as cl
-        self._k_gather.set_arg(11, np.float32(self._fold(float(t))))
-        self._k_gather.set_arg(12, np.float32(check_float("fade", fade, 0.0, 1.0)))
+        self._set_time_args(self._fold(float(t)), check_float("fade", fade, 0.0, 1.0))
         self._use_device_out()
         cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
         self.queue.finish()
+
+    def _set_time_args(self, t: float, fade: float) -> None:
+        """Kernel arguments 11 and 12: the folded time and the fade toward the target map."""
+        self._k_gather.set_arg(11, np.float32(t))
+        self._k_gather.set_arg(12, np.float32(fade))
 
     def _use_device_out(self) -> None:
         """Point the kernel at its own frame buffer (after frames went to a caller's array)."""
@@ -656,14 +659,16 @@ class Gather:
         """The numpy reference of :meth:`render` (usable with either backend, for checks)."""
         h, w = self.out_shape[:2]
         pix, tone = source_indices(self._source, (h, w), self.frame_w, self._cell)
-        frames, weights = self._time_units(self._fold(float(t)), fade)
+        tmap, target = self._maps()
+        frames, weights = time_units(tmap, self._fold(float(t)), (h, w), self.time_step, target=target, fade=fade)
         return gather_reference(self._stack, pix, tone, frames, weights, self._tones,
                                 wrap=self.wrap, interpolate=self.interpolate, out=out)
 
-    def _time_units(self, t: float, fade: float, rows: range | None = None) -> tuple[np.ndarray, np.ndarray]:
-        tmap = self.time_map if self.backend == "opencl" else self._tmap
-        target = self.target_map if self.backend == "opencl" else self._target
-        return time_units(tmap, t, self.out_shape[:2], self.time_step, target=target, fade=fade, rows=rows)
+    def _maps(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The time map and its target as the device holds them (read back once)."""
+        if self.backend == "opencl":
+            return self.time_map, self.target_map
+        return self._tmap, self._target
 
     def _fold(self, t: float) -> float:
         """Fold the global time into one period so float32 keeps sub-frame precision forever."""
@@ -696,12 +701,13 @@ class Gather:
         if self._source is None:
             return out
         t = self._fold(self._last_t if t is None else float(t))
+        tmap, target = self._maps()
         fp = self.frame_h * self.frame_w
         seen = np.zeros(self.n_frames * fp, bool)
         for r0 in range(0, h, 256):                     # in blocks of rows: bounded memory
             rows = range(r0, min(r0 + 256, h))
             pix, _ = source_indices(self._source, (h, w), self.frame_w, self._cell, rows)
-            i0, _ = self._time_units(t, self._last_fade, rows)
+            i0, _ = time_units(tmap, t, (h, w), self.time_step, target=target, fade=self._last_fade, rows=rows)
             seen[wrap_index(i0, self.n_frames, self.wrap) * fp + pix] = True
             if self.interpolate:
                 seen[wrap_index(i0 + 1, self.n_frames, self.wrap) * fp + pix] = True

@@ -78,11 +78,16 @@ inline long floor_divl(long a, long b)
     return q - (q * b > a);
 }
 
+// map sample k faded toward its target (header)
+inline float faded(__global const float *m0, __global const float *m1, float fade, size_t k)
+{
+    return m0[k] + fade * (m1[k] - m0[k]);
+}
+
 // a map sample in 4080ths of a frame past base (header)
 inline int time_q(float f0, __global const float *m0, __global const float *m1, float fade, size_t k)
 {
-    const float m = m0[k] + fade * (m1[k] - m0[k]);
-    return fast_floor((f0 + m) * 4080.0f + 0.5f);
+    return fast_floor((f0 + faded(m0, m1, fade, k)) * 4080.0f + 0.5f);
 }
 
 // The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the
@@ -108,6 +113,20 @@ inline int time_q(float f0, __global const float *m0, __global const float *m1, 
 inline uchar tone1(int v, int g, int o)
 {
     return (uchar)clamp((((v * g) >> 16) + o) >> 1, 0, 255);
+}
+
+// the stored pixel that output pixel x reads, from its row of the source (a row of cells, dy
+// the row's offset inside them; or a row of the per-pixel map); *packed gets the entry (its tone)
+inline int source_pixel(__global const int *srow, int dy, int x, int *packed)
+{
+#if GRID
+    const int cx = x / CELL_W;
+    *packed = srow[cx];
+    return (*packed & 0xFFFFFF) + dy + (x - cx * CELL_W);
+#else
+    *packed = srow[x];
+    return *packed & 0xFFFFFF;
+#endif
 }
 
 // one output pixel from source pixel pix with tone: frame ti, weight w (255ths of the next)
@@ -346,8 +365,8 @@ __kernel void gather(GATHER_PARAMS)
             float ta[16], tb[16];
             for (int j = 0; j < 16; ++j) {
                 const int jj = clamp(j0 + min(j, 9), 0, tmap_w - 1);
-                ta[j] = tmap[row0 + jj] + fade * (tmap1[row0 + jj] - tmap[row0 + jj]);
-                tb[j] = tmap[row1 + jj] + fade * (tmap1[row1 + jj] - tmap[row1 + jj]);
+                ta[j] = faded(tmap, tmap1, fade, row0 + jj);
+                tb[j] = faded(tmap, tmap1, fade, row1 + jj);
             }
             a = vload16(0, ta);
             b = vload16(0, tb);
@@ -412,7 +431,7 @@ __kernel void gather(GATHER_PARAMS)
             }
 #else
             __global const int *srow = source + (size_t)y * width;
-            const int split = 64, pixb = 0, toneb = 0;
+            const int dy = 0, split = 64, pixb = 0, toneb = 0;
             int pix0 = 0, tone = 0;
             bool linear = span <= MAX_SPAN && nvalid == 64;
             if (linear) {
@@ -465,14 +484,8 @@ __kernel void gather(GATHER_PARAMS)
                 const i32x64 uu = (v32 + (y - ybeg) * d32) >> 4;
                 for (int q = 0; q < nvalid; ++q) {
                     const int x = xs + q;
-#if GRID
-                    const int cxp = x / CELL_W;
-                    const int pk = srow[cxp];
-                    const int pix = (pk & 0xFFFFFF) + dy + (x - cxp * CELL_W);
-#else
-                    const int pk = srow[x];
-                    const int pix = pk & 0xFFFFFF;
-#endif
+                    int pk;
+                    const int pix = source_pixel(srow, dy, x, &pk);
                     const int u = uu[q];
                     pixel(stack, tones, pix, (pk >> 24) & 0xFF, base + lo + u / 255, u % 255, orow + 3 * x);
                 }
@@ -512,16 +525,11 @@ __kernel void gather(GATHER_PARAMS)
     const int dy = (y - cy * CELL_H) * FRAME_W;
 #else
     __global const int *srow = source + (size_t)y * width;
+    const int dy = 0;
 #endif
     for (int x = xstart; x < xend; ++x) {
-#if GRID
-        const int cx = x / CELL_W;
-        const int packed = srow[cx];
-        const int pix = (packed & 0xFFFFFF) + dy + (x - cx * CELL_W);
-#else
-        const int packed = srow[x];
-        const int pix = packed & 0xFFFFFF;
-#endif
+        int packed;
+        const int pix = source_pixel(srow, dy, x, &packed);
         // the pixel's time u in 255ths past base (header), in 64 bits: any step
 #if TSTEP > 1
         const int nx = 2 * x + 1 - TSTEP, xi = floor_div(nx, 2 * TSTEP), kx = nx - 2 * TSTEP * xi;
