@@ -257,18 +257,31 @@ inline int16 floor16(float16 v)
 // (a b) >> 16 in unsigned 16-bit lanes (pmulhuw)
 #if X86_BW
 typedef short v32hi __attribute__((vector_size(64)));
-inline u16x64 mulhu(u16x64 a, ushort b)
+inline u16x64 mulhu(u16x64 a, u16x64 b)
 {
-    const v32hi bb = __builtin_astype((u16x32)b, v32hi);
-    const v32hi lo = __builtin_astype(__builtin_shufflevector(a, a, IOTA32), v32hi);
-    const v32hi hi = __builtin_astype(__builtin_shufflevector(a, a, IOTA32H), v32hi);
-    return __builtin_shufflevector(__builtin_astype(__builtin_ia32_pmulhuw512(lo, bb), u16x32),
-                                   __builtin_astype(__builtin_ia32_pmulhuw512(hi, bb), u16x32), IOTA64);
+    const v32hi alo = __builtin_astype(__builtin_shufflevector(a, a, IOTA32), v32hi);
+    const v32hi ahi = __builtin_astype(__builtin_shufflevector(a, a, IOTA32H), v32hi);
+    const v32hi blo = __builtin_astype(__builtin_shufflevector(b, b, IOTA32), v32hi);
+    const v32hi bhi = __builtin_astype(__builtin_shufflevector(b, b, IOTA32H), v32hi);
+    return __builtin_shufflevector(__builtin_astype(__builtin_ia32_pmulhuw512(alo, blo), u16x32),
+                                   __builtin_astype(__builtin_ia32_pmulhuw512(ahi, bhi), u16x32), IOTA64);
 }
 #define MULHU(a, b) mulhu((a), (b))
 #else
-#define MULHU(a, b) __builtin_convertvector((__builtin_convertvector((a), u32x64) * (uint)(b)) >> 16, u16x64)
+#define MULHU(a, b) __builtin_convertvector((__builtin_convertvector((a), u32x64) * __builtin_convertvector((b), u32x64)) >> 16, u16x64)
 #endif
+
+// H - 255 lo of one map row in each lane, from its ten samples relative to 4080 lo (r, in 16
+// bits when the run's frames lie within MAX_SPAN + 1 of lo). With A, B the lane's samples and
+// kx its place: floor((A (16 - kx) + B kx + 128) / 256) = (A + 8 + floor((B - A) kx / 16)) >> 4
+// (A + 8 is whole), and floor(d kx / 16) = pmulhuw(d + 32768, kx 2^12) - 2048 kx. The sums
+// wrap modulo 2^16; the result fits.
+inline i16x64 map_row(ushort16 r)
+{
+    const u16x64 a = __builtin_shufflevector(r, r, KLO), b = __builtin_shufflevector(r, r, KHI);
+    const u16x64 kx = (u16x64)(KX64);
+    return __builtin_astype(a + MULHU(b - a + (ushort)32768, kx << 12) + ((ushort)8 - (kx << 11)), i16x64) >> 4;
+}
 // (v g) >> 16 in 16-bit lanes (pmulhw)
 #define MULHI(v, g) __builtin_convertvector((__builtin_convertvector((v), i32x32) * __builtin_convertvector((g), i32x32)) >> 16, i16x32)
 
@@ -340,7 +353,6 @@ __kernel void gather(GATHER_PARAMS)
     const int ky0 = 2 * (ybeg - 8 * yi) - 7;                      // the first row's ky (header)
     const i8x64 iota8 = (i8x64)(IOTA64);
     const i16x32 byte_lo = (i16x32)(BYTE_LO), byte_hi = (i16x32)(BYTE_HI);
-    const i32x64 kx = (i32x64)(KX64);
     // Runs start at x0 + 64 k: with rows a multiple of 64 bytes long and out 16, 32 or 48
     // bytes off 64, x0 (16, 32 or 48 pixels) puts every run on 64-byte boundaries (3 x0 = -out
     // mod 64; 43 = 1/3 mod 64); a head run k = -1 renders pixels 0 .. 63 and keeps x0 of them.
@@ -371,26 +383,23 @@ __kernel void gather(GATHER_PARAMS)
             a = vload16(0, ta);
             b = vload16(0, tb);
         }
-        // the samples in 4080ths past base; along x, H of both map rows per lane (255ths)
+        // the samples in 4080ths past base
         const int16 qa = floor16((f0 + a) * 4080.0f + 0.5f), qb = floor16((f0 + b) * 4080.0f + 0.5f);
-        const i32x64 ht = (__builtin_shufflevector(qa, qa, KLO) * (16 - kx) + __builtin_shufflevector(qa, qa, KHI) * kx + 128) >> 8;
-        const i32x64 hb = (__builtin_shufflevector(qb, qb, KLO) * (16 - kx) + __builtin_shufflevector(qb, qb, KHI) * kx + 128) >> 8;
         // the extremes of both rows' samples 0-9 (lanes 10-15 repeat lane 9) bound every u
-        const float16 a9 = shuffle(a, (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9));
-        const float16 b9 = shuffle(b, (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9));
-        const float16 m16 = b9 < a9 ? b9 : a9, x16 = b9 > a9 ? b9 : a9;
-        const float8 m8 = m16.hi < m16.lo ? m16.hi : m16.lo, x8 = x16.hi > x16.lo ? x16.hi : x16.lo;
-        const float4 m4 = m8.hi < m8.lo ? m8.hi : m8.lo, x4 = x8.hi > x8.lo ? x8.hi : x8.lo;
-        const float2 m2 = m4.hi < m4.lo ? m4.hi : m4.lo, x2 = x4.hi > x4.lo ? x4.hi : x4.lo;
-        const float cmin = m2.hi < m2.lo ? m2.hi : m2.lo, cmax = x2.hi > x2.lo ? x2.hi : x2.lo;
+        const int16 a9 = shuffle(qa, (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9));
+        const int16 b9 = shuffle(qb, (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9));
+        const int16 m16 = min(a9, b9), x16 = max(a9, b9);
+        const int8 m8 = min(m16.lo, m16.hi), x8 = max(x16.lo, x16.hi);
+        const int4 m4 = min(m8.lo, m8.hi), x4 = max(x8.lo, x8.hi);
+        const int2 m2 = min(m4.lo, m4.hi), x2 = max(x4.lo, x4.hi);
         // frames base + lo .. base + lo + span (+1 to blend): u is monotone in the samples
-        const int lo = floor_div((fast_floor((f0 + cmin) * 4080.0f + 0.5f) + 8) >> 4, 255);
-        const int span = floor_div((fast_floor((f0 + cmax) * 4080.0f + 0.5f) + 8) >> 4, 255) - lo;
-        // per row, 16 u + 8 relative to 255 lo: v = 16 rt + ky (rb - rt) + 8, ky += 2 a row
-        const i32x64 rt = ht - 255 * lo, drb = hb - ht;
-        const i32x64 v32 = 16 * rt + ky0 * drb + 8, d32 = 2 * drb;
-        i16x64 v16 = __builtin_convertvector(v32, i16x64);      // fits when span <= MAX_SPAN
-        const i16x64 d16 = __builtin_convertvector(d32, i16x64);
+        const int lo = floor_div((min(m2.lo, m2.hi) + 8) >> 4, 255);
+        const int span = floor_div((max(x2.lo, x2.hi) + 8) >> 4, 255) - lo;
+        // along x, H - 255 lo of both map rows per lane; per row, 16 u + 8 relative to 255 lo:
+        // v = 16 ht + ky (hb - ht) + 8, ky += 2 a row (fits 16 bits when span <= MAX_SPAN)
+        const i16x64 ht = map_row(convert_ushort16(qa - 4080 * lo)), hb = map_row(convert_ushort16(qb - 4080 * lo));
+        const i16x64 drb = hb - ht, d16 = drb + drb;
+        i16x64 v16 = __builtin_astype(__builtin_astype(ht, u16x64) * (ushort)16 + __builtin_astype(drb, u16x64) * (ushort)ky0 + (ushort)8, i16x64);
         // byte offsets of the frames base + lo .. base + lo + span + 1
         long fo[MAX_SPAN + 2];
 #if WRAP == WRAP_LOOP
@@ -453,7 +462,7 @@ __kernel void gather(GATHER_PARAMS)
                 u16x64 k16 = (u16x64)0;
                 u8x64 s8 = (u8x64)0;
                 if (span > 0) {
-                    k16 = MULHU(u16 + (ushort)1, (ushort)257);
+                    k16 = MULHU(u16 + (ushort)1, (u16x64)257);
                     s8 = __builtin_convertvector(k16, u8x64);
                 }
 #if INTERP
@@ -480,13 +489,16 @@ __kernel void gather(GATHER_PARAMS)
                     for (int i = 0; i < 3 * nvalid; ++i)
                         p[i] = part[i];
                 }
-            } else {
-                const i32x64 uu = (v32 + (y - ybeg) * d32) >> 4;
+            } else {                                       // the same integers in 32 bits
+                const int ky = ky0 + 2 * (y - ybeg);
                 for (int q = 0; q < nvalid; ++q) {
                     const int x = xs + q;
                     int pk;
                     const int pix = source_pixel(srow, dy, x, &pk);
-                    const int u = uu[q];
+                    const int j = (2 * q + 9) >> 4, kx = (2 * q + 9) & 15;   // the lane's map interval
+                    const int ht = ((qa[j] * (16 - kx) + qa[j + 1] * kx + 128) >> 8) - 255 * lo;
+                    const int hb = ((qb[j] * (16 - kx) + qb[j + 1] * kx + 128) >> 8) - 255 * lo;
+                    const int u = (16 * ht + ky * (hb - ht) + 8) >> 4;
                     pixel(stack, tones, pix, (pk >> 24) & 0xFF, base + lo + u / 255, u % 255, orow + 3 * x);
                 }
             }
