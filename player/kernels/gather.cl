@@ -360,6 +360,15 @@ __kernel void gather(GATHER_PARAMS)
     const int mis = (int)((size_t)out & 63);
     const int x0 = (width * 3) % 64 == 0 && mis % 16 == 0 ? (43 * (64 - mis)) & 63 : 0;
     const int kfirst = (int)get_global_id(0) * RUNS - (x0 > 0);
+    {   // the map columns of all RUNS runs, requested up front: each run waited on its own loads
+        const int jb = max((x0 >> 3) + 8 * kfirst - 1, 0), je = min((x0 >> 3) + 8 * (kfirst + RUNS) + 9, tmap_w);
+        for (int j = jb; j < je; j += 16) {
+            __builtin_prefetch(tmap + row0 + j);
+            __builtin_prefetch(tmap1 + row0 + j);
+            __builtin_prefetch(tmap + row1 + j);
+            __builtin_prefetch(tmap1 + row1 + j);
+        }
+    }
     for (int k = kfirst; k < kfirst + RUNS; ++k) {
         const int xs = max(x0 + 64 * k, 0);
         if (xs >= width)
