@@ -153,8 +153,9 @@ inline void pixel(__global const uchar *restrict stack, __global const short *re
 // map rows (rows 8k - 4 .. 8k + 3). Runs start at multiples of 8 pixels (see x0 below), so
 // the map intervals a run covers, and each lane's place inside its interval (kx), are the
 // same for every run. Per run the ten map columns of both map rows are read and faded once,
-// H of both map rows comes per lane from shuffles, and the frames the 8 rows need are
-// bounded by the samples' extremes (u is monotone in them): lo .. lo + span + 1. Per row a
+// the frames the 8 rows need are bounded by the samples' extremes (u is monotone in them):
+// lo .. lo + span + 1, and H - 255 lo of both map rows comes per lane from shuffles and one
+// multiply in 16-bit lanes (map_row). Per row a
 // lane's 16 u + 8 (relative to 255 lo) grows by a constant, 2 (H_bot - H_top), in 16-bit
 // lanes, and u gives its frame (lo + u / 255) and its weight (u % 255) at once: the
 // header's integers. When the run's source is linear (inside one cell, or two cells split
