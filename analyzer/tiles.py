@@ -471,7 +471,6 @@ def side_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, side: str, *,
     return tile, weight, cost
 
 
-# -- 8. colour statistics --------------------------------------------------------------------------
 # -- 6b. Wang edges ----------------------------------------------------------------------------
 def wang_edges(colours: int) -> np.ndarray:
     """Edge colours ``(left, right, top, bottom)`` of a stochastic Wang tile set, ``(k**3, 4)`` int8.
@@ -569,6 +568,7 @@ def wang_ring(hstrips: Sequence[np.ndarray], vstrips: Sequence[np.ndarray], edge
     return np.where(take_h[None, :, :, None], hc, vc)
 
 
+# -- 8. colour statistics --------------------------------------------------------------------------
 def colour_stats(tile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean RGB (0..255) and mean HSV (hue in degrees by circular mean, S and V in 0..1) of a tile."""
     import cv2

@@ -434,7 +434,11 @@ class Gather:
             self._tmap_events = [cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)]
             if self._target is not None:
                 self._tmap_events.append(cl.enqueue_copy(self.queue, self._d_target, self._target, is_blocking=False))
-            self._k_gather.set_arg(3, self._d_tmap if self._target is None else self._d_target)
+            self._k_gather.set_arg(3, self._target_buffer())
+
+    def _target_buffer(self):
+        """Kernel argument 3, the map the time map fades toward: the map itself when none is set."""
+        return self._d_tmap if self._target is None else self._d_target
 
     def _upload_tones(self) -> None:
         if self.backend == "opencl":
@@ -454,7 +458,7 @@ class Gather:
         h, w = self.out_shape[:2]
         grid_w = self._source.shape[1]
         self._k_gather.set_args(self._d_stack, self._d_source, self._d_tmap,
-                                self._d_tmap if self._target is None else self._d_target, self._d_tones,
+                                self._target_buffer(), self._d_tones,
                                 self._d_out, np.int32(w), np.int32(h), np.int32(grid_w),
                                 np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0),
                                 np.float32(0), np.int32(self._plain_tones()))

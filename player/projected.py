@@ -14,7 +14,7 @@ import os
 import numpy as np
 
 from ..tiledb import TileDB
-from .base import Player, check_float, check_int
+from .base import FloatControl, Player, check_int
 from .projection import Projector
 
 PRECISIONS = ("float32", "float16")
@@ -77,13 +77,7 @@ class ProjectionPlayer(Player):
         """The basis and mean read, plus the uint8 frame written."""
         return int(self.basis_bytes + 4 * self._proj.values + int(np.prod(self._shape)))
 
-    @property
-    def intensity(self) -> float:
-        return self._intensity
-
-    @intensity.setter
-    def intensity(self, value: float) -> None:
-        self._intensity = check_float("intensity", value, 0.0, MAX_INTENSITY)
+    intensity = FloatControl("intensity", 0.0, MAX_INTENSITY)
 
     # -- synthesis -----------------------------------------------------------------
     def advance(self, steps: int = 1, *, record: bool = False) -> np.ndarray | None:

@@ -662,18 +662,15 @@ class EvolvePlayer(Player):
                 "seed": self.seed, "rate_map": self.rate_map, "rate_sigma": self._rate_sigma}
 
     def _set_state(self, state: dict[str, Any]) -> None:
-        try:
-            seed = check_seed("state seed", state["seed"])
-            clock = check_float("state clock", state["clock"], -1e7, 1e7)
-            self.speed = state["speed"]
-            self.rate_sigma = state["rate_sigma"]
-            self.rate_map = state["rate_map"]
-            end = state["end"]
-            if end not in ENDS:
-                raise ValueError(f"state end must be one of {ENDS}, not {end!r}")
-            jitter = check_float("state jitter", state["jitter"], 0.0, float(self.n_frames))
-            self.seed, self._end, self._jitter = seed, end, jitter
-            self._make_warp()
-        except KeyError as exc:
-            raise ValueError(f"state lacks {exc.args[0]!r}") from None
+        seed = check_seed("state seed", state["seed"])
+        clock = check_float("state clock", state["clock"], -1e7, 1e7)
+        self.speed = state["speed"]
+        self.rate_sigma = state["rate_sigma"]
+        self.rate_map = state["rate_map"]
+        end = state["end"]
+        if end not in ENDS:
+            raise ValueError(f"state end must be one of {ENDS}, not {end!r}")
+        jitter = check_float("state jitter", state["jitter"], 0.0, float(self.n_frames))
+        self.seed, self._end, self._jitter = seed, end, jitter
+        self._make_warp()
         self._clock = clock

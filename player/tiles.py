@@ -183,8 +183,8 @@ class TilesPlayer(Player):
         self._speed = 1.0
         self._t = 0.0
         self._phase = 0
-        self._tone_spec = None
-        self.tone = tone
+        self.tone_target(tone)            # checked here, fitted once the arrangement exists (_retone)
+        self._tone_spec = tone
         self.reseed(seed)
         self._warm()
 
@@ -320,8 +320,7 @@ class TilesPlayer(Player):
 
     def _retone(self) -> None:
         """Refit the tone to the current arrangement (the target stays)."""
-        if getattr(self, "_tone_spec", None) is not None:
-            self._gather.set_tones(*self._tone_tables(self._tone_spec))
+        self._gather.set_tones(*self._tone_tables(self._tone_spec))
 
     def source_class_map(self, *, strict: bool = False) -> np.ndarray:
         """``(H, W)`` class (texture) each output pixel mostly comes from: the true texture borders.
@@ -559,22 +558,19 @@ class TilesPlayer(Player):
                 "tone": self._tone_spec}
 
     def _set_state(self, state: dict[str, Any]) -> None:
-        try:
-            rng = rng_from_state(state["rng"])
-            labels = self._check_labels(state["labels"])
-            cells = [np.asarray(state[k], np.float32) for k in ("cells_a", "cells_b")]
-            arrangement = np.asarray(state["arrangement"], np.int64)
-            t = check_float("t", state["t"], 0.0, float(self.loop_length))
-            phase = check_int("phase", state["phase"], 0)
-            speed = check_float("speed", state["speed"], *SPEED_RANGE)
-            epoch = check_int("epoch", state["epoch"], 0, 10**7)
-            sigma = check_float("sigma", state["sigma"], 0.0, 4096.0)
-            max_shift = check_float("max_shift", state["max_shift"], 0.0, float(min(self.loop_length, MAX_TIME)))
-            tone = state.get("tone")
-            self.tone_target(tone)                          # validates it
-            seed = check_seed("seed", state.get("seed", self.seed))
-        except KeyError as exc:
-            raise ValueError(f"state lacks {exc.args[0]!r}") from None
+        rng = rng_from_state(state["rng"])
+        labels = self._check_labels(state["labels"])
+        cells = [np.asarray(state[k], np.float32) for k in ("cells_a", "cells_b")]
+        arrangement = np.asarray(state["arrangement"], np.int64)
+        t = check_float("t", state["t"], 0.0, float(self.loop_length))
+        phase = check_int("phase", state["phase"], 0)
+        speed = check_float("speed", state["speed"], *SPEED_RANGE)
+        epoch = check_int("epoch", state["epoch"], 0, 10**7)
+        sigma = check_float("sigma", state["sigma"], 0.0, 4096.0)
+        max_shift = check_float("max_shift", state["max_shift"], 0.0, float(min(self.loop_length, MAX_TIME)))
+        tone = state.get("tone")
+        self.tone_target(tone)                          # validates it
+        seed = check_seed("seed", state.get("seed", self.seed))
         if any(c.shape != self.grid_shape or not np.isfinite(c).all() for c in cells):
             raise ValueError(f"state offsets must be finite with shape {self.grid_shape}")
         if arrangement.shape != self.grid_shape or arrangement.min() < 0 or arrangement.max() >= self.n_tiles:
@@ -589,7 +585,6 @@ class TilesPlayer(Player):
         self._cells_a, self._cells_b = cells
         self.arrangement = arrangement
         self.speed, self.epoch, self._sigma, self._max_shift = speed, epoch, sigma, max_shift
-        self.seed = seed
-        self.tone = tone
-        self._build_source(arrangement)
+        self.seed, self._tone_spec = seed, tone
+        self._build_source(arrangement)                 # fits the tone to the arrangement too
         self._refresh_fields()

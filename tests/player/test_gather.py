@@ -18,6 +18,19 @@ def _close(a: np.ndarray, b: np.ndarray) -> None:
     assert (diff > 0).mean() < 0.01
 
 
+def _render_both(cl_context, stack, size, tones, source, tmap, times, **options):
+    """The frames at ``times`` of one setup (``source`` a cell grid when ``cell`` is among the
+    options, else a per-pixel map) as (OpenCL, numpy) pairs, and the OpenCL Gather."""
+    frames, gathers = {}, {}
+    for backend in ("opencl", "numpy"):
+        g = Gather(stack, size, backend=backend, ctx=cl_context if backend == "opencl" else None, **options)
+        g.set_tones(*tones)
+        (g.set_source_grid if "cell" in options else g.set_source_map)(source)
+        g.set_time_map(tmap)
+        frames[backend], gathers[backend] = [g.render(t).copy() for t in times], g
+    return list(zip(frames["opencl"], frames["numpy"])), gathers["opencl"]
+
+
 def test_wrap_modes():
     i = np.arange(-5, 12)
     assert wrap_index(i, 4, "loop").tolist() == [(v % 4) for v in i]
@@ -69,15 +82,9 @@ def test_map_gather_opencl_matches_numpy(cl_context, wrap, interpolate):
     tmap = rng.uniform(-3, 3, (H, W)).astype(np.float32)
     gains = np.array([[1, 1, 1], [1.1, 0.9, 1.2]], np.float32)
     offs = np.array([[0, 0, 0], [5, -3, 0]], np.float32)
-    res = {}
-    for backend in ("opencl", "numpy"):
-        g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
-                   wrap=wrap, interpolate=interpolate)
-        g.set_tones(gains, offs)
-        g.set_source_map(packed)
-        g.set_time_map(tmap)
-        res[backend] = [g.render(t).copy() for t in (0.0, 2.25, 13.5, -4.75)]
-    for a, b in zip(res["opencl"], res["numpy"]):
+    pairs, _ = _render_both(cl_context, stack, (H, W), (gains, offs), packed, tmap, (0.0, 2.25, 13.5, -4.75),
+                            wrap=wrap, interpolate=interpolate)
+    for a, b in pairs:
         _close(a, b)
 
 
@@ -245,15 +252,9 @@ def test_vector_path_time_step_8_grid_matches_numpy(cl_context, cell, wrap):
     tmap[:, 7] += 25.0                                   # steep: runs spanning several frames
     gains = np.array([[1, 1, 1], [0.8, 1.3, 0.5], [1.5, 0.7, 1.1]], np.float32)
     offs = np.array([[0, 0, 0], [4, -6, 10], [-3, 2, 0]], np.float32)
-    res = {}
-    for backend in ("opencl", "numpy"):
-        g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
-                   cell=cell, time_step=8, wrap=wrap)
-        g.set_tones(gains, offs)
-        g.set_source_grid(origins)
-        g.set_time_map(tmap)
-        res[backend] = [g.render(t).copy() for t in (0.0, 3.4, 7.999, -5.25)]
-    for a, b in zip(res["opencl"], res["numpy"]):
+    pairs, _ = _render_both(cl_context, stack, (H, W), (gains, offs), origins, tmap, (0.0, 3.4, 7.999, -5.25),
+                            cell=cell, time_step=8, wrap=wrap)
+    for a, b in pairs:
         _close(a, b)
 
 
@@ -268,17 +269,11 @@ def test_time_step_8_kernels_agree_with_numpy_on_a_smooth_map(cl_context, wide):
     origins = pack_source(rng.integers(0, 3, (gh, gw)) * 90, rng.integers(0, 2, (gh, gw)))
     th, tw = -(-H // 8), -(-W // 8)
     tmap = gaussian_smooth(rng.uniform(0, 12, (th, tw)).astype(np.float32), 2.0)
-    res = {}
-    for backend in ("opencl", "numpy"):
-        g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
-                   cell=(40, 90), time_step=8, wide=wide)
-        g.set_tones(np.array([[1.1, 0.9, 1.0], [0.7, 1.2, 2.5]]), np.array([[2, -3, 0], [0, 5, -40]]))
-        g.set_source_grid(origins)
-        g.set_time_map(tmap)
-        res[backend] = [g.render(t).copy() for t in (0.0, 2.37, 13.9)]
-        if backend == "opencl":
-            assert g.wide == wide
-    for a, b in zip(res["opencl"], res["numpy"]):
+    tones = (np.array([[1.1, 0.9, 1.0], [0.7, 1.2, 2.5]]), np.array([[2, -3, 0], [0, 5, -40]]))
+    pairs, g = _render_both(cl_context, stack, (H, W), tones, origins, tmap, (0.0, 2.37, 13.9),
+                            cell=(40, 90), time_step=8, wide=wide)
+    assert g.wide == wide
+    for a, b in pairs:
         _close(a, b)
 
 
@@ -291,14 +286,9 @@ def test_vector_path_time_step_8_pixel_map_matches_numpy(cl_context):
     idx[rng.random((H, W)) < 0.02] = rng.integers(0, 480, int((rng.random((H, W)) < 0.02).sum()))[:1]
     packed = pack_source(idx, (np.arange(W)[None, :] // 50 % 2) * np.ones((H, 1), int))
     tmap = rng.uniform(0, 12, (-(-H // 8), -(-W // 8))).astype(np.float32)
-    res = {}
-    for backend in ("opencl", "numpy"):
-        g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None, time_step=8)
-        g.set_tones(np.array([[1, 1, 1], [1.2, 0.9, 0.6]], np.float32), np.array([[0, 0, 0], [3, 0, -2]], np.float32))
-        g.set_source_map(packed)
-        g.set_time_map(tmap)
-        res[backend] = [g.render(t).copy() for t in (0.5, 4.75)]
-    for a, b in zip(res["opencl"], res["numpy"]):
+    tones = (np.array([[1, 1, 1], [1.2, 0.9, 0.6]], np.float32), np.array([[0, 0, 0], [3, 0, -2]], np.float32))
+    pairs, _ = _render_both(cl_context, stack, (H, W), tones, packed, tmap, (0.5, 4.75), time_step=8)
+    for a, b in pairs:
         _close(a, b)
 
 
