@@ -444,13 +444,6 @@ class Gather:
         if self.backend == "opencl":
             import pyopencl as cl
             cl.enqueue_copy(self.queue, self._d_tones, _expand_tones(self._tones), is_blocking=True)
-            self._k_gather.set_arg(13, np.int32(self._plain_tones()))
-
-    def _plain_tones(self) -> bool:
-        """Whether every tone is the identity (G = 514, O = 257): the 64-lane kernel then keeps
-        those constants in registers instead of loading tone factors (the same integers)."""
-        gain, offset = fixed_tones(self._tones)
-        return bool((gain == 514).all() and (offset == 257).all())
 
     def _set_args(self) -> None:
         if self.backend != "opencl" or self._d_source is None:
@@ -461,7 +454,7 @@ class Gather:
                                 self._target_buffer(), self._d_tones,
                                 self._d_out, np.int32(w), np.int32(h), np.int32(grid_w),
                                 np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0),
-                                np.float32(0), np.int32(self._plain_tones()))
+                                np.float32(0))
         self._host_out = self._host_buf = None       # arg 5 is the device's frame buffer again
 
     # -- inputs --------------------------------------------------------------------------------

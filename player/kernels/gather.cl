@@ -90,17 +90,12 @@ inline int time_q(float f0, __global const float *m0, __global const float *m1, 
     return fast_floor((f0 + faded(m0, m1, fade, k)) * 4080.0f + 0.5f);
 }
 
-// The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the
-// host; plain is 1 when every tone is the identity, G = IDENTITY_G and O = IDENTITY_O (the
-// 64-lane kernel then keeps them in registers: the same integers, no tone loads).
-#define IDENTITY_G 514
-#define IDENTITY_O 257
+// The arguments of kernel gather (both variants below); tones is (ntones, TONE_STRIDE): see the host.
 #define GATHER_PARAMS __global const uchar *restrict stack, __global const int *restrict source,            \
                       __global const float *restrict tmap, __global const float *restrict tmap1,          \
                       __global const short *restrict tones,                                                \
                       __global uchar *restrict out, const int width, const int height, const int grid_w,   \
-                      const int tmap_w, const int tmap_h, const float t0, const float fade,         \
-                      const int plain
+                      const int tmap_w, const int tmap_h, const float t0, const float fade
 
 // a stored byte as value - 128: the 64-lane kernel's stack holds value ^ 0x80 (a signed byte)
 #if TSTEP == 8 && WIDE
@@ -162,7 +157,10 @@ inline void pixel(__global const uchar *restrict stack, __global const short *re
 // at a boundary; a per-pixel map must be linear with one tone) and its frames lie within
 // lo .. lo + MAX_SPAN + 1, the run is blended and toned in 16-bit lanes on 64-byte vectors:
 // three chunks of 64 bytes, each byte's frames merged bytewise and its weight found by a
-// shuffle. Any other run goes pixel by pixel with the same integers. (Clang's ext_vector_type
+// shuffle. A run's rows go in segments that share their sources (the rows of one cell row, or
+// one row of a per-pixel map): each chunk's source offsets and tone factors are set up once
+// per segment, so a row only loads frames, blends, tones and stores. Any other run goes pixel
+// by pixel with the same integers. (Clang's ext_vector_type
 // gives the 64-wide types OpenCL C lacks: on AVX-512 one operation covers 32 or 64 lanes,
 // where a float16 covers 16.)
 typedef uchar  u8x64  __attribute__((ext_vector_type(64)));
@@ -283,34 +281,33 @@ inline i16x64 map_row(ushort16 r)
     const u16x64 kx = (u16x64)(KX64);
     return __builtin_astype(a + MULHU(b - a + (ushort)32768, kx << 12) + ((ushort)8 - (kx << 11)), i16x64) >> 4;
 }
-// (v g) >> 16 in 16-bit lanes (pmulhw)
+// (v g) >> 16 in 16-bit lanes (pmulhw; the builtin, or the compiler keeps g widened to 32 bits)
+#if X86_BW
+#define MULHI(v, g) __builtin_astype(__builtin_ia32_pmulhw512(__builtin_astype((v), v32hi), __builtin_astype((g), v32hi)), i16x32)
+#else
 #define MULHI(v, g) __builtin_convertvector((__builtin_convertvector((v), i32x32) * __builtin_convertvector((g), i32x32)) >> 16, i16x32)
+#endif
 
-// One 64-byte chunk C (0..2) of a fast run, as a value: pick each byte's frames, blend, tone.
-// The stack holds bytes v ^ 0x80 (SVAL), so a byte read as signed is v - 128; the blend is
-// one pmaddubsw per 32 lanes: (v_a - 128, v_b - 128) interleaved against the lane's weight
-// pair (255 - w, w).
+// One 64-byte chunk C (0..2) of a fast run on the row `r` bytes below the segment's first,
+// as a value: pick each byte's frames, blend, tone. The stack holds bytes v ^ 0x80 (SVAL), so
+// a byte read as signed is v - 128; the blend is one pmaddubsw per 32 lanes: (v_a - 128,
+// v_b - 128) interleaved against the lane's weight pair (255 - w, w). The chunk's sources
+// (oa##C, ob##C, mixed##C, mb##C) and tone (gl##C .. oh##C) are the segment's (see the kernel).
 #define CHUNK(C)                                                                                          \
     ({                                                                                                    \
-        /* the chunk's bytes from `from` on belong to the second cell: none, some or all */               \
-        const int from = 3 * split - 64 * C;                                                              \
-        const bool mixed = from > 0 && from < 64;                                                         \
-        const long o0 = (from <= 0 ? pb : pa) + 64 * C, o1 = pb + 64 * C;                                 \
-        __global const short *tc = from <= 0 ? tnb : tn;                                                  \
+        const long o0 = oa##C + r, o1 = ob##C + r;                                                        \
         u8x64 fa = LOAD64(stack + fo[0] + o0), fb = LOAD64(stack + fo[1] + o0);                           \
-        u8x64 mb = (u8x64)0;                                                                              \
-        if (mixed) {                                                                                      \
-            mb = AS_U8(iota8 >= (char)from);                                                              \
-            fa = PICK(mb, fa, LOAD64(stack + fo[0] + o1));                                                \
-            fb = PICK(mb, fb, LOAD64(stack + fo[1] + o1));                                                \
+        if (mixed##C) {                                                                                   \
+            fa = PICK(mb##C, fa, LOAD64(stack + fo[0] + o1));                                             \
+            fb = PICK(mb##C, fb, LOAD64(stack + fo[1] + o1));                                             \
         }                                                                                                 \
         if (span > 0) {                  /* lanes at frame lo + k take the pair (k, k + 1) */             \
             const u8x64 sc = __builtin_shufflevector(s8, s8, PIX##C);                                     \
             u8x64 prev = fb;                                                                              \
             for (int k = 1; k <= span; ++k) {                                                             \
                 u8x64 fn = LOAD64(stack + fo[k + 1] + o0);                                                \
-                if (mixed)                                                                                \
-                    fn = PICK(mb, fn, LOAD64(stack + fo[k + 1] + o1));                                    \
+                if (mixed##C)                                                                             \
+                    fn = PICK(mb##C, fn, LOAD64(stack + fo[k + 1] + o1));                                 \
                 const u8x64 mk = AS_U8(sc >= (uchar)k);                                                   \
                 fa = PICK(mk, fa, prev);                                                                  \
                 fb = PICK(mk, fb, fn);                                                                    \
@@ -319,23 +316,26 @@ inline i16x64 map_row(ushort16 r)
         }                                                                                                 \
         const i16x32 vl = MADDUBS(__builtin_shufflevector(pw, pw, WLO##C), __builtin_shufflevector(fa, fb, UNPACK_LO)); \
         const i16x32 vh = MADDUBS(__builtin_shufflevector(pw, pw, WHI##C), __builtin_shufflevector(fa, fb, UNPACK_HI)); \
-        /* every tone the identity (plain): its G and O as constants, no loads */                         \
-        i16x32 gl = (i16x32)IDENTITY_G, gh = (i16x32)IDENTITY_G, ol = (i16x32)IDENTITY_O, oh = (i16x32)IDENTITY_O; \
-        if (!plain) {                                                                                     \
-            gl = LOADT(tc + 64 * C);                                                                      \
-            gh = LOADT(tc + 64 * C + 32);                                                                 \
-            ol = LOADT(tc + TONE_OB + 64 * C);                                                            \
-            oh = LOADT(tc + TONE_OB + 64 * C + 32);                                                       \
-            if (mixed && toneb != tone) {                                                                 \
-                const i16x32 ml = AS_I16(byte_lo >= (short)from), mh = AS_I16(byte_hi >= (short)from);    \
-                gl = PICK(ml, gl, LOADT(tnb + 64 * C));                                                   \
-                gh = PICK(mh, gh, LOADT(tnb + 64 * C + 32));                                              \
-                ol = PICK(ml, ol, LOADT(tnb + TONE_OB + 64 * C));                                         \
-                oh = PICK(mh, oh, LOADT(tnb + TONE_OB + 64 * C + 32));                                    \
-            }                                                                                             \
-        }                                                                                                 \
-        PACKUS((MULHI(vl, gl) + ol) >> 1, (MULHI(vh, gh) + oh) >> 1);                                     \
+        PACKUS((MULHI(vl, gl##C) + ol##C) >> 1, (MULHI(vh, gh##C) + oh##C) >> 1);                         \
     })
+
+// A segment's sources and tone for chunk C: bytes before `from` come from the first cell (pa),
+// the rest from the second (pb); a chunk with both mixes them bytewise (mb), its tone too.
+#define CHUNK_SETUP(C)                                                                                    \
+    const int from##C = 3 * split - 64 * C;                                                               \
+    const bool mixed##C = from##C > 0 && from##C < 64;                                                    \
+    const long oa##C = (from##C <= 0 ? pb : pa) + 64 * C, ob##C = pb + 64 * C;                           \
+    const u8x64 mb##C = AS_U8(iota8 >= (char)from##C);                                                    \
+    __global const short *tc##C = from##C <= 0 ? tnb : tn;                                                \
+    i16x32 gl##C = LOADT(tc##C + 64 * C), gh##C = LOADT(tc##C + 64 * C + 32);                             \
+    i16x32 ol##C = LOADT(tc##C + TONE_OB + 64 * C), oh##C = LOADT(tc##C + TONE_OB + 64 * C + 32);         \
+    if (mixed##C && toneb != tone) {                                                                      \
+        const i16x32 ml = AS_I16(byte_lo >= (short)from##C), mh = AS_I16(byte_hi >= (short)from##C);      \
+        gl##C = PICK(ml, gl##C, LOADT(tnb + 64 * C));                                                     \
+        gh##C = PICK(mh, gh##C, LOADT(tnb + 64 * C + 32));                                                \
+        ol##C = PICK(ml, ol##C, LOADT(tnb + TONE_OB + 64 * C));                                           \
+        oh##C = PICK(mh, oh##C, LOADT(tnb + TONE_OB + 64 * C + 32));                                      \
+    }
 
 // A full run's 192 bytes go out with non-temporal 64-byte stores where they are 64-byte
 // aligned (the runs are placed so, see the kernel): such a store skips reading the line it
@@ -426,29 +426,24 @@ __kernel void gather(GATHER_PARAMS)
         // else a third cell in the run, or frames too far apart: per pixel
         const bool linear = span <= MAX_SPAN && (split == 64 || edge + CELL_W >= xs + nvalid);
 #endif
+        // The rows go in segments that share their sources: the rows of one cell row (GRID), or
+        // one row (a per-pixel map). A segment's sources and tones are set up once.
+        for (int y = ybeg; y < yend;) {
 #if GRID
-        // the cell row of the first row, followed down the rows (cy, and dy within the cell)
-        int cy = ybeg / CELL_H, dy = (ybeg - cy * CELL_H) * FRAME_W;
-        __global const int *srow = source + cy * grid_w;
-#endif
-        for (int y = ybeg; y < yend; ++y, v16 += d16) {
-            __global uchar *orow = out + (size_t)y * width * 3;
-            // source: lanes < split read pix0 + lane, lanes >= split read pixb + lane
-#if GRID
-            if (dy == CELL_H * FRAME_W) {                 // the next cell row
-                srow += grid_w;
-                dy = 0;
-            }
+            const int cy = y / CELL_H, yseg = min(yend, (cy + 1) * CELL_H);
+            __global const int *srow = source + cy * grid_w;
+            const int dy = (y - cy * CELL_H) * FRAME_W;
             const int packed = srow[cx];
             const int pix0 = (packed & 0xFFFFFF) + dy + (xs - cx * CELL_W);
             const int tone = (packed >> 24) & 0xFF;
             int pixb = 0, toneb = tone;
-            if (split < 64) {
+            if (split < 64) {                             // lanes >= split read pixb + lane
                 const int next = srow[cx + 1];
                 pixb = (next & 0xFFFFFF) + dy - split;
                 toneb = (next >> 24) & 0xFF;
             }
 #else
+            const int yseg = y + 1;
             __global const int *srow = source + (size_t)y * width;
             const int dy = 0, split = 64, pixb = 0, toneb = 0;
             int pix0 = 0, tone = 0;
@@ -462,59 +457,65 @@ __kernel void gather(GATHER_PARAMS)
                 tone = (base >> 24) & 0xFF;
             }
 #endif
-            __global uchar *p = orow + 3 * xs;
             if (linear) {
-                // u = 255 frame (above lo) + weight, within 255 (span + 1)
-                const u16x64 u16 = __builtin_astype(v16 >> 4, u16x64);
-                // frame u / 255 (exact for u < 65535 with the +1), weight u % 255, and the lane's
-                // weight pair (255 - w, w) as one little-endian word: 255 (w + 1)
-                // (one frame pair, span 0: k = 0 everywhere)
-                u16x64 k16 = (u16x64)0;
-                u8x64 s8 = (u8x64)0;
-                if (span > 0) {
-                    k16 = MULHU(u16 + (ushort)1, (u16x64)257);
-                    s8 = __builtin_convertvector(k16, u8x64);
-                }
-#if INTERP
-                const u16x64 pw = (u16 - k16 * (ushort)255 + (ushort)1) * (ushort)255;
-#else
-                const u16x64 pw = (u16x64)255;
-#endif
                 const long pa = (long)pix0 * 3, pb = (long)pixb * 3;   // pb may lie before the stack: inside STACK_PAD
                 __global const short *tn = tones + tone * TONE_STRIDE, *tnb = tones + toneb * TONE_STRIDE;
-                const u8x64 c0 = CHUNK(0), c1 = CHUNK(1), c2 = CHUNK(2);
-                if (nvalid == 64 && ((size_t)p & 63) == 0) {
-                    NT_STORE(p, c0);
-                    NT_STORE(p + 64, c1);
-                    NT_STORE(p + 128, c2);
-                } else if (nvalid == 64) {
-                    *(__global u8x64_u *)p = c0;
-                    *(__global u8x64_u *)(p + 64) = c1;
-                    *(__global u8x64_u *)(p + 128) = c2;
-                } else {                                   // the head run, or a run past the row's end
-                    uchar part[192];
-                    *(u8x64_u *)part = c0;
-                    *(u8x64_u *)(part + 64) = c1;
-                    *(u8x64_u *)(part + 128) = c2;
-                    for (int i = 0; i < 3 * nvalid; ++i)
-                        p[i] = part[i];
+                CHUNK_SETUP(0)
+                CHUNK_SETUP(1)
+                CHUNK_SETUP(2)
+                long r = 0;
+                for (; y < yseg; ++y, v16 += d16, r += 3 * FRAME_W) {
+                    __global uchar *p = out + ((size_t)y * width + xs) * 3;
+                    // u = 255 frame (above lo) + weight, within 255 (span + 1)
+                    const u16x64 u16 = __builtin_astype(v16 >> 4, u16x64);
+                    // frame u / 255 (exact for u < 65535 with the +1), weight u % 255, and the lane's
+                    // weight pair (255 - w, w) as one little-endian word: 255 (w + 1)
+                    // (one frame pair, span 0: k = 0 everywhere)
+                    u16x64 k16 = (u16x64)0;
+                    u8x64 s8 = (u8x64)0;
+                    if (span > 0) {
+                        k16 = MULHU(u16 + (ushort)1, (u16x64)257);
+                        s8 = __builtin_convertvector(k16, u8x64);
+                    }
+#if INTERP
+                    const u16x64 pw = (u16 - k16 * (ushort)255 + (ushort)1) * (ushort)255;
+#else
+                    const u16x64 pw = (u16x64)255;
+#endif
+                    const u8x64 c0 = CHUNK(0), c1 = CHUNK(1), c2 = CHUNK(2);
+                    if (nvalid == 64 && ((size_t)p & 63) == 0) {
+                        NT_STORE(p, c0);
+                        NT_STORE(p + 64, c1);
+                        NT_STORE(p + 128, c2);
+                    } else if (nvalid == 64) {
+                        *(__global u8x64_u *)p = c0;
+                        *(__global u8x64_u *)(p + 64) = c1;
+                        *(__global u8x64_u *)(p + 128) = c2;
+                    } else {                                   // the head run, or a run past the row's end
+                        uchar part[192];
+                        *(u8x64_u *)part = c0;
+                        *(u8x64_u *)(part + 64) = c1;
+                        *(u8x64_u *)(part + 128) = c2;
+                        for (int i = 0; i < 3 * nvalid; ++i)
+                            p[i] = part[i];
+                    }
                 }
             } else {                                       // the same integers in 32 bits
-                const int ky = ky0 + 2 * (y - ybeg);
-                for (int q = 0; q < nvalid; ++q) {
-                    const int x = xs + q;
-                    int pk;
-                    const int pix = source_pixel(srow, dy, x, &pk);
-                    const int j = (2 * q + 9) >> 4, kx = (2 * q + 9) & 15;   // the lane's map interval
-                    const int ht = ((qa[j] * (16 - kx) + qa[j + 1] * kx + 128) >> 8) - 255 * lo;
-                    const int hb = ((qb[j] * (16 - kx) + qb[j + 1] * kx + 128) >> 8) - 255 * lo;
-                    const int u = (16 * ht + ky * (hb - ht) + 8) >> 4;
-                    pixel(stack, tones, pix, (pk >> 24) & 0xFF, base + lo + u / 255, u % 255, orow + 3 * x);
+                for (int ddy = dy; y < yseg; ++y, v16 += d16, ddy += FRAME_W) {
+                    __global uchar *orow = out + (size_t)y * width * 3;
+                    const int ky = ky0 + 2 * (y - ybeg);
+                    for (int q = 0; q < nvalid; ++q) {
+                        const int x = xs + q;
+                        int pk;
+                        const int pix = source_pixel(srow, ddy, x, &pk);
+                        const int j = (2 * q + 9) >> 4, kx = (2 * q + 9) & 15;   // the lane's map interval
+                        const int ht = ((qa[j] * (16 - kx) + qa[j + 1] * kx + 128) >> 8) - 255 * lo;
+                        const int hb = ((qb[j] * (16 - kx) + qb[j + 1] * kx + 128) >> 8) - 255 * lo;
+                        const int u = (16 * ht + ky * (hb - ht) + 8) >> 4;
+                        pixel(stack, tones, pix, (pk >> 24) & 0xFF, base + lo + u / 255, u % 255, orow + 3 * x);
+                    }
                 }
             }
-#if GRID
-            dy += FRAME_W;
-#endif
         }
     }
 #if defined(__x86_64__) || defined(__i386__)
