@@ -93,7 +93,7 @@ MAX_GAIN, MAX_OFFSET = 63.0, 255.0   # the fixed-point tone's range (every inter
 MAX_TIME = 2048.0     # |time map| in frames: the integer time (4080ths, x 256) fits 32 bits
 RUN = 32              # output pixels per work-item of the per-pixel kernel (time steps other than 8)
 STACK_PAD = 256       # bytes of padding around the device copy of the frame stack (a run's 192 bytes fit)
-RUNS = 8              # wide kernel: a work-item renders RUNS runs of 64 pixels on 8 rows
+BANDS = 8             # wide kernel: a work-item renders one run of 64 pixels on BANDS bands of 8 rows
 TONE_STRIDE = 384     # int16 per device tone row: 192 gains then 192 offsets, per byte of a 64-pixel run
 TONE_OB = 192
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
@@ -389,7 +389,7 @@ class Gather:
                    "NFRAMES": self.n_frames, "GRID": self.grid, "WRAP": _WRAP_CODE[self.wrap],
                    "CELL_H": (self.cell or (1, 1))[0], "CELL_W": (self.cell or (1, 1))[1],
                    "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN,
-                   "STACK_PAD": STACK_PAD, "RUNS": RUNS, "WIDE": self.wide, "TONE_STRIDE": TONE_STRIDE,
+                   "STACK_PAD": STACK_PAD, "BANDS": BANDS, "WIDE": self.wide, "TONE_STRIDE": TONE_STRIDE,
                    "TONE_OB": TONE_OB}
         try:
             prog = build_program(self.ctx, "gather.cl", defines)
@@ -415,9 +415,9 @@ class Gather:
         self._k_smooth_x = prog.kernel("smooth")
         self._k_smooth_y = prog.kernel("smooth")
         self.direct = writes_through(self.ctx)
-        # kernel gather: the wide kernel renders RUNS runs of 64 pixels on the 8 rows of one pair
-        # of map rows (rows 8k - 4 .. 8k + 3), the other RUN pixels of one row
-        self._gsize = (-(-(w + 64) // (64 * RUNS)), -(-(h + 4) // 8)) if self.wide else (-(-w // RUN), h)
+        # kernel gather: the wide kernel renders a run of 64 pixels on BANDS bands of 8 rows (a
+        # band: rows 8k - 4 .. 8k + 3, one pair of map rows), the other RUN pixels of one row
+        self._gsize = (-(-(w + 64) // 64), -(-(h + 4) // (8 * BANDS))) if self.wide else (-(-w // RUN), h)
         # one work-item per work-group there: left to itself PoCL may put the whole small
         # range into one work-group, which runs on one core
         self._lsize = (1, 1) if self.wide else None

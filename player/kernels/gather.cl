@@ -30,7 +30,7 @@
 // CELL_H, CELL_W (cell size of the grid; compile-time so the divisions become multiplies),
 // WRAP (0 loop, 1 clamp, 2 ping-pong), INTERP (1: linear in time, 0: nearest earlier
 // frame), TSTEP, WIDE (1: the 64-lane kernel for TSTEP 8, for CPU devices), RUN (pixels per
-// work-item of the per-pixel kernel), RUNS (64-pixel runs per work-item of the wide kernel),
+// work-item of the per-pixel kernel), BANDS (bands of 8 rows per work-item of the wide kernel),
 // STACK_PAD, TONE_STRIDE, TONE_OB (shorts per tone row, and where its offsets start).
 
 #pragma OPENCL FP_CONTRACT OFF      // the time samples round as the numpy reference's float32
@@ -144,23 +144,23 @@ inline void pixel(__global const uchar *restrict stack, __global const short *re
 
 
 #if TSTEP == 8 && WIDE
-// A work-item renders RUNS runs of 64 pixels (192 bytes) on the 8 rows that share one pair of
-// map rows (rows 8k - 4 .. 8k + 3). Runs start at multiples of 8 pixels (see x0 below), so
-// the map intervals a run covers, and each lane's place inside its interval (kx), are the
-// same for every run. Per run the ten map columns of both map rows are read and faded once,
-// the frames the 8 rows need are bounded by the samples' extremes (u is monotone in them):
-// lo .. lo + span + 1, and H - 255 lo of both map rows comes per lane from shuffles and one
-// multiply in 16-bit lanes (map_row). Per row a
-// lane's 16 u + 8 (relative to 255 lo) grows by a constant, 2 (H_bot - H_top), in 16-bit
-// lanes, and u gives its frame (lo + u / 255) and its weight (u % 255) at once: the
-// header's integers. When the run's source is linear (inside one cell, or two cells split
-// at a boundary; a per-pixel map must be linear with one tone) and its frames lie within
-// lo .. lo + MAX_SPAN + 1, the run is blended and toned in 16-bit lanes on 64-byte vectors:
-// three chunks of 64 bytes, each byte's frames merged bytewise and its weight found by a
-// shuffle. A run's rows go in segments that share their sources (the rows of one cell row, or
-// one row of a per-pixel map): each chunk's source offsets and tone factors are set up once
-// per segment, so a row only loads frames, blends, tones and stores. Any other run goes pixel
-// by pixel with the same integers. (Clang's ext_vector_type
+// A work-item renders one run of 64 pixels (192 bytes) on BANDS bands of 8 rows, a band being
+// the rows that share one pair of map rows (rows 8k - 4 .. 8k + 3). Runs start at multiples
+// of 8 pixels (see x0 below), so the map intervals a run covers, and each lane's place inside
+// its interval (kx), are the same for every run. Per band the ten map columns of the next map
+// row are read and faded once (the band above read the other row), the frames the 8 rows
+// need are bounded by the samples' extremes (u is monotone in them): lo .. lo + span + 1, and
+// H - 255 lo of both map rows comes per lane from shuffles and one multiply in 16-bit lanes
+// (map_row). Per row a lane's 16 u + 8 (relative to 255 lo) grows by a constant,
+// 2 (H_bot - H_top), in 16-bit lanes, and u gives its frame (lo + u / 255) and its weight
+// (u % 255) at once: the header's integers. When the run's source is linear (inside one
+// cell, or two cells split at a boundary; a per-pixel map must be linear with one tone) and
+// a band's frames lie within lo .. lo + MAX_SPAN + 1, the band is blended and toned in 16-bit
+// lanes on 64-byte vectors: three chunks of 64 bytes, each byte's frames merged bytewise and
+// its weight found by a shuffle. The rows go in segments that share their sources (the rows
+// of one cell row, across bands, or one row of a per-pixel map): each chunk's source offsets
+// and tone factors are set up once per segment, so a row only loads frames, blends, tones and
+// stores. Any other band goes pixel by pixel with the same integers. (Clang's ext_vector_type
 // gives the 64-wide types OpenCL C lacks: on AVX-512 one operation covers 32 or 64 lanes,
 // where a float16 covers 16.)
 typedef uchar  u8x64  __attribute__((ext_vector_type(64)));
@@ -319,23 +319,50 @@ inline i16x64 map_row(ushort16 r)
         PACKUS((MULHI(vl, gl##C) + ol##C) >> 1, (MULHI(vh, gh##C) + oh##C) >> 1);                         \
     })
 
-// A segment's sources and tone for chunk C: bytes before `from` come from the first cell (pa),
-// the rest from the second (pb); a chunk with both mixes them bytewise (mb), its tone too.
-#define CHUNK_SETUP(C)                                                                                    \
+// A run's bytes of chunk C before `from` come from the first cell, the rest from the second; a
+// chunk with both mixes them bytewise (mb). Declares the chunk's segment sources and tone too.
+#define CHUNK_SPLIT(C)                                                                                    \
     const int from##C = 3 * split - 64 * C;                                                               \
     const bool mixed##C = from##C > 0 && from##C < 64;                                                    \
-    const long oa##C = (from##C <= 0 ? pb : pa) + 64 * C, ob##C = pb + 64 * C;                           \
     const u8x64 mb##C = AS_U8(iota8 >= (char)from##C);                                                    \
-    __global const short *tc##C = from##C <= 0 ? tnb : tn;                                                \
-    i16x32 gl##C = LOADT(tc##C + 64 * C), gh##C = LOADT(tc##C + 64 * C + 32);                             \
-    i16x32 ol##C = LOADT(tc##C + TONE_OB + 64 * C), oh##C = LOADT(tc##C + TONE_OB + 64 * C + 32);         \
-    if (mixed##C && toneb != tone) {                                                                      \
-        const i16x32 ml = AS_I16(byte_lo >= (short)from##C), mh = AS_I16(byte_hi >= (short)from##C);      \
-        gl##C = PICK(ml, gl##C, LOADT(tnb + 64 * C));                                                     \
-        gh##C = PICK(mh, gh##C, LOADT(tnb + 64 * C + 32));                                                \
-        ol##C = PICK(ml, ol##C, LOADT(tnb + TONE_OB + 64 * C));                                           \
-        oh##C = PICK(mh, oh##C, LOADT(tnb + TONE_OB + 64 * C + 32));                                      \
+    long oa##C = 0, ob##C = 0;                                                                            \
+    i16x32 gl##C = 0, gh##C = 0, ol##C = 0, oh##C = 0;
+
+// A segment's sources (pa, pb) and tones for chunk C, the tone mixed like the bytes.
+#define CHUNK_SETUP(C)                                                                                    \
+    {                                                                                                     \
+        oa##C = (from##C <= 0 ? pb : pa) + 64 * C;                                                        \
+        ob##C = pb + 64 * C;                                                                              \
+        __global const short *tc = from##C <= 0 ? tnb : tn;                                               \
+        gl##C = LOADT(tc + 64 * C);                                                                       \
+        gh##C = LOADT(tc + 64 * C + 32);                                                                  \
+        ol##C = LOADT(tc + TONE_OB + 64 * C);                                                             \
+        oh##C = LOADT(tc + TONE_OB + 64 * C + 32);                                                        \
+        if (mixed##C && toneb != tone) {                                                                  \
+            const i16x32 ml = AS_I16(byte_lo >= (short)from##C), mh = AS_I16(byte_hi >= (short)from##C);  \
+            gl##C = PICK(ml, gl##C, LOADT(tnb + 64 * C));                                                 \
+            gh##C = PICK(mh, gh##C, LOADT(tnb + 64 * C + 32));                                            \
+            ol##C = PICK(ml, ol##C, LOADT(tnb + TONE_OB + 64 * C));                                       \
+            oh##C = PICK(mh, oh##C, LOADT(tnb + TONE_OB + 64 * C + 32));                                  \
+        }                                                                                                 \
     }
+
+// the faded map samples j0 .. j0 + 9 of map row `row` (lanes 10-15 repeat 9) in 4080ths past base
+inline int16 map_samples(__global const float *tmap, __global const float *tmap1, float fade, float f0,
+                         int tmap_w, size_t row, int j0)
+{
+    float16 a;
+    if (j0 >= 0 && j0 + 9 < tmap_w) {            // one load each (the maps are padded by 16 floats)
+        const float16 a0 = *(__global const float16_u *)(tmap + row + j0), a1 = *(__global const float16_u *)(tmap1 + row + j0);
+        a = a0 + fade * (a1 - a0);
+    } else {
+        float ta[16];
+        for (int j = 0; j < 16; ++j)
+            ta[j] = faded(tmap, tmap1, fade, row + clamp(j0 + min(j, 9), 0, tmap_w - 1));
+        a = vload16(0, ta);
+    }
+    return floor16((f0 + a) * 4080.0f + 0.5f);
+}
 
 // A full run's 192 bytes go out with non-temporal 64-byte stores where they are 64-byte
 // aligned (the runs are placed so, see the kernel): such a store skips reading the line it
@@ -346,12 +373,8 @@ inline i16x64 map_row(ushort16 r)
 __kernel void gather(GATHER_PARAMS)
 {
     stack += STACK_PAD;
-    const int yi = (int)get_global_id(1) - 1;                    // the map rows yi, yi + 1
-    const int ybeg = max(8 * yi + 4, 0), yend = min(8 * yi + 12, height);
-    const size_t row0 = (size_t)clamp(yi, 0, tmap_h - 1) * tmap_w, row1 = (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w;
     const int base = fast_floor(t0);
     const float f0 = t0 - (float)base;
-    const int ky0 = 2 * (ybeg - 8 * yi) - 7;                      // the first row's ky (header)
     const i8x64 iota8 = (i8x64)(IOTA64);
     const i16x32 byte_lo = (i16x32)(BYTE_LO), byte_hi = (i16x32)(BYTE_HI);
     // Runs start at x0 + 64 k: with rows a multiple of 64 bytes long and out 16, 32 or 48
@@ -360,44 +383,36 @@ __kernel void gather(GATHER_PARAMS)
     // x0 is a multiple of 8, so the map intervals of every run are still alike.
     const int mis = (int)((size_t)out & 63);
     const int x0 = (width * 3) % 64 == 0 && mis % 16 == 0 ? (43 * (64 - mis)) & 63 : 0;
-    const int kfirst = (int)get_global_id(0) * RUNS - (x0 > 0);
-    {   // the map columns of all RUNS runs, requested up front: each run waited on its own loads
-        const int jb = max((x0 >> 3) + 8 * kfirst - 1, 0), je = min((x0 >> 3) + 8 * (kfirst + RUNS) + 9, tmap_w);
-        for (int j = jb; j < je; j += 16) {
-            __builtin_prefetch(tmap + row0 + j);
-            __builtin_prefetch(tmap1 + row0 + j);
-            __builtin_prefetch(tmap + row1 + j);
-            __builtin_prefetch(tmap1 + row1 + j);
-        }
-    }
-    for (int k = kfirst; k < kfirst + RUNS; ++k) {
-        const int xs = max(x0 + 64 * k, 0);
-        if (xs >= width)
+    const int k = (int)get_global_id(0) - (x0 > 0);
+    const int xs = max(x0 + 64 * k, 0);
+    if (xs >= width)
+        return;
+    const int nvalid = k < 0 ? x0 : min(64, width - xs);   // pixels of the run to store
+    const int j0 = (xs >> 3) - 1;                         // the run's map columns j0 .. j0 + 9
+#if GRID
+    const int cx = xs / CELL_W;
+    const int edge = (cx + 1) * CELL_W;               // the next cell's first pixel
+    const int split = edge < xs + nvalid ? edge - xs : 64;
+    // else a third cell in the run: per pixel
+    const bool lin_src = split == 64 || edge + CELL_W >= xs + nvalid;
+    int cur_cy = -1, seg_y = 0;                       // the segment's cell row and first row
+#else
+    const int split = 64;
+#endif
+    CHUNK_SPLIT(0)
+    CHUNK_SPLIT(1)
+    CHUNK_SPLIT(2)
+    const int yi0 = (int)get_global_id(1) * BANDS - 1;
+    int16 qa = map_samples(tmap, tmap1, fade, f0, tmap_w, (size_t)clamp(yi0, 0, tmap_h - 1) * tmap_w, j0);
+    for (int yi = yi0; yi < yi0 + BANDS; ++yi) {          // the bands: map rows yi, yi + 1
+        const int ybeg = max(8 * yi + 4, 0), yend = min(8 * yi + 12, height);
+        if (ybeg >= yend)
             break;
-        const int nvalid = k < 0 ? x0 : min(64, width - xs);   // pixels of the run to store
-        // the map columns j0 .. j0 + 9 (j0 = xs/8 - 1) of both map rows, faded
-        const int j0 = (xs >> 3) - 1;
-        float16 a, b;
-        if (j0 >= 0 && j0 + 9 < tmap_w) {            // one load each (the maps are padded by 16 floats)
-            const float16 a0 = *(__global const float16_u *)(tmap + row0 + j0), a1 = *(__global const float16_u *)(tmap1 + row0 + j0);
-            const float16 b0 = *(__global const float16_u *)(tmap + row1 + j0), b1 = *(__global const float16_u *)(tmap1 + row1 + j0);
-            a = a0 + fade * (a1 - a0);
-            b = b0 + fade * (b1 - b0);
-        } else {
-            float ta[16], tb[16];
-            for (int j = 0; j < 16; ++j) {
-                const int jj = clamp(j0 + min(j, 9), 0, tmap_w - 1);
-                ta[j] = faded(tmap, tmap1, fade, row0 + jj);
-                tb[j] = faded(tmap, tmap1, fade, row1 + jj);
-            }
-            a = vload16(0, ta);
-            b = vload16(0, tb);
-        }
-        // the samples in 4080ths past base
-        const int16 qa = floor16((f0 + a) * 4080.0f + 0.5f), qb = floor16((f0 + b) * 4080.0f + 0.5f);
+        const int ky0 = 2 * (ybeg - 8 * yi) - 7;                      // the first row's ky (header)
+        const int16 qb = map_samples(tmap, tmap1, fade, f0, tmap_w, (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w, j0);
         // the extremes of both rows' samples 0-9 (lanes 10-15 repeat lane 9) bound every u
-        const int16 a9 = shuffle(qa, (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9));
-        const int16 b9 = shuffle(qb, (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9));
+        const uint16 to9 = (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9);
+        const int16 a9 = shuffle(qa, to9), b9 = shuffle(qb, to9);
         const int16 m16 = min(a9, b9), x16 = max(a9, b9);
         const int8 m8 = min(m16.lo, m16.hi), x8 = max(x16.lo, x16.hi);
         const int4 m4 = min(m8.lo, m8.hi), x4 = max(x8.lo, x8.hi);
@@ -410,60 +425,62 @@ __kernel void gather(GATHER_PARAMS)
         const i16x64 ht = map_row(convert_ushort16(qa - 4080 * lo)), hb = map_row(convert_ushort16(qb - 4080 * lo));
         const i16x64 drb = hb - ht, d16 = drb + drb;
         i16x64 v16 = __builtin_astype(__builtin_astype(ht, u16x64) * (ushort)16 + __builtin_astype(drb, u16x64) * (ushort)ky0 + (ushort)8, i16x64);
+        const int16 qt = qa;
+        qa = qb;
         // byte offsets of the frames base + lo .. base + lo + span + 1
         long fo[MAX_SPAN + 2];
 #if WRAP == WRAP_LOOP
-        for (int k = 0, f = wrap_index(base + lo); k < min(span, MAX_SPAN) + 2; ++k, f = f + 1 < NFRAMES ? f + 1 : 0)
-            fo[k] = f * ((long)FRAME_PIXELS * 3);
+        for (int i = 0, f = wrap_index(base + lo); i < min(span, MAX_SPAN) + 2; ++i, f = f + 1 < NFRAMES ? f + 1 : 0)
+            fo[i] = f * ((long)FRAME_PIXELS * 3);
 #else
-        for (int k = 0; k < min(span, MAX_SPAN) + 2; ++k)
-            fo[k] = wrap_index(base + lo + k) * ((long)FRAME_PIXELS * 3);
+        for (int i = 0; i < min(span, MAX_SPAN) + 2; ++i)
+            fo[i] = wrap_index(base + lo + i) * ((long)FRAME_PIXELS * 3);
 #endif
-#if GRID
-        const int cx = xs / CELL_W;
-        const int edge = (cx + 1) * CELL_W;               // the next cell's first pixel
-        const int split = edge < xs + nvalid ? edge - xs : 64;
-        // else a third cell in the run, or frames too far apart: per pixel
-        const bool linear = span <= MAX_SPAN && (split == 64 || edge + CELL_W >= xs + nvalid);
-#endif
-        // The rows go in segments that share their sources: the rows of one cell row (GRID), or
-        // one row (a per-pixel map). A segment's sources and tones are set up once.
+        // The rows go in segments that share their sources: the rows of one cell row (GRID,
+        // set up when the cell row changes), or one row (a per-pixel map).
         for (int y = ybeg; y < yend;) {
 #if GRID
+            const bool linear = span <= MAX_SPAN && lin_src;
             const int cy = y / CELL_H, yseg = min(yend, (cy + 1) * CELL_H);
             __global const int *srow = source + cy * grid_w;
-            const int dy = (y - cy * CELL_H) * FRAME_W;
-            const int packed = srow[cx];
-            const int pix0 = (packed & 0xFFFFFF) + dy + (xs - cx * CELL_W);
-            const int tone = (packed >> 24) & 0xFF;
-            int pixb = 0, toneb = tone;
-            if (split < 64) {                             // lanes >= split read pixb + lane
-                const int next = srow[cx + 1];
-                pixb = (next & 0xFFFFFF) + dy - split;
-                toneb = (next >> 24) & 0xFF;
-            }
-#else
-            const int yseg = y + 1;
-            __global const int *srow = source + (size_t)y * width;
-            const int dy = 0, split = 64, pixb = 0, toneb = 0;
-            int pix0 = 0, tone = 0;
-            bool linear = span <= MAX_SPAN && nvalid == 64;
-            if (linear) {
-                const int16 step = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-                const int base = srow[xs];
-                for (int k = 0; k < 4; ++k)
-                    linear = linear && all(*(__global const int16_u *)(srow + xs + 16 * k) - base == step + 16 * k);
-                pix0 = base & 0xFFFFFF;
-                tone = (base >> 24) & 0xFF;
-            }
-#endif
-            if (linear) {
-                const long pa = (long)pix0 * 3, pb = (long)pixb * 3;   // pb may lie before the stack: inside STACK_PAD
+            if (cy != cur_cy) {
+                const int dy = (y - cy * CELL_H) * FRAME_W;
+                const int packed = srow[cx];
+                const int tone = (packed >> 24) & 0xFF;
+                const long pa = (long)((packed & 0xFFFFFF) + dy + (xs - cx * CELL_W)) * 3;
+                int toneb = tone;
+                long pb = 0;                              // may lie before the stack: inside STACK_PAD
+                if (split < 64) {                         // lanes >= split read pixb + lane
+                    const int next = srow[cx + 1];
+                    pb = (long)((next & 0xFFFFFF) + dy - split) * 3;
+                    toneb = (next >> 24) & 0xFF;
+                }
                 __global const short *tn = tones + tone * TONE_STRIDE, *tnb = tones + toneb * TONE_STRIDE;
                 CHUNK_SETUP(0)
                 CHUNK_SETUP(1)
                 CHUNK_SETUP(2)
-                long r = 0;
+                cur_cy = cy;
+                seg_y = y;
+            }
+#else
+            const int yseg = y + 1, seg_y = y;
+            __global const int *srow = source + (size_t)y * width;
+            bool linear = span <= MAX_SPAN && nvalid == 64;
+            if (linear) {
+                const int16 step = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+                const int first = srow[xs];
+                for (int i = 0; i < 4; ++i)
+                    linear = linear && all(*(__global const int16_u *)(srow + xs + 16 * i) - first == step + 16 * i);
+                const int tone = (first >> 24) & 0xFF, toneb = tone;
+                const long pa = (long)(first & 0xFFFFFF) * 3, pb = 0;
+                __global const short *tn = tones + tone * TONE_STRIDE, *tnb = tn;
+                CHUNK_SETUP(0)
+                CHUNK_SETUP(1)
+                CHUNK_SETUP(2)
+            }
+#endif
+            if (linear) {
+                long r = (long)(y - seg_y) * (3 * FRAME_W);
                 for (; y < yseg; ++y, v16 += d16, r += 3 * FRAME_W) {
                     __global uchar *p = out + ((size_t)y * width + xs) * 3;
                     // u = 255 frame (above lo) + weight, within 255 (span + 1)
@@ -501,7 +518,12 @@ __kernel void gather(GATHER_PARAMS)
                     }
                 }
             } else {                                       // the same integers in 32 bits
-                for (int ddy = dy; y < yseg; ++y, v16 += d16, ddy += FRAME_W) {
+#if GRID
+                int ddy = (y - cy * CELL_H) * FRAME_W;
+#else
+                int ddy = 0;
+#endif
+                for (; y < yseg; ++y, v16 += d16, ddy += FRAME_W) {
                     __global uchar *orow = out + (size_t)y * width * 3;
                     const int ky = ky0 + 2 * (y - ybeg);
                     for (int q = 0; q < nvalid; ++q) {
@@ -509,9 +531,9 @@ __kernel void gather(GATHER_PARAMS)
                         int pk;
                         const int pix = source_pixel(srow, ddy, x, &pk);
                         const int j = (2 * q + 9) >> 4, kx = (2 * q + 9) & 15;   // the lane's map interval
-                        const int ht = ((qa[j] * (16 - kx) + qa[j + 1] * kx + 128) >> 8) - 255 * lo;
-                        const int hb = ((qb[j] * (16 - kx) + qb[j + 1] * kx + 128) >> 8) - 255 * lo;
-                        const int u = (16 * ht + ky * (hb - ht) + 8) >> 4;
+                        const int ht1 = ((qt[j] * (16 - kx) + qt[j + 1] * kx + 128) >> 8) - 255 * lo;
+                        const int hb1 = ((qb[j] * (16 - kx) + qb[j + 1] * kx + 128) >> 8) - 255 * lo;
+                        const int u = (16 * ht1 + ky * (hb1 - ht1) + 8) >> 4;
                         pixel(stack, tones, pix, (pk >> 24) & 0xFF, base + lo + u / 255, u % 255, orow + 3 * x);
                     }
                 }
