@@ -171,7 +171,8 @@ def test_device_and_reference_agree_exactly(cl_context, wide):
     contraction), so every pixel matches the reference: any map, fade, time and step."""
     rng = np.random.default_rng(3)
     stack = _stack(n=9, h=32, w=64)
-    for step, (h, w) in ((8, (37, 130)), (8, (64, 256)), (1, (20, 70)), (4, (37, 130))):
+    # (150, 96): three work-items down the frame in the wide kernel, cell rows crossing bands
+    for step, (h, w) in ((8, (37, 130)), (8, (64, 256)), (8, (150, 96)), (1, (20, 70)), (4, (37, 130))):
         if wide and step != 8:
             continue
         g = Gather(stack, (h, w), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=step, wide=wide)
@@ -182,7 +183,7 @@ def test_device_and_reference_agree_exactly(cl_context, wide):
         g.set_tones(np.array([[1.2, 0.8, 1.0]], np.float32), np.array([[4, -6, 0]], np.float32))
         for t, fade in ((0.25, 0.0), (2.5, 0.3), (-4.75, 1.0), (7.1, 0.77)):
             assert np.array_equal(g.render(t, fade=fade), g.render_reference(t, fade=fade)), (step, h, w, t, fade)
-        g.set_tones(np.ones((1, 3), np.float32))            # the identity: kept in registers (wide kernel)
+        g.set_tones(np.ones((1, 3), np.float32))            # the identity
         assert np.array_equal(g.render(3.6, fade=0.5), g.render_reference(3.6, fade=0.5)), (step, h, w, "identity")
     # a per-pixel source: rows of consecutive pixels (the wide kernel's linear runs) and scattered ones
     g = Gather(stack, (24, 192), backend="opencl", ctx=cl_context, time_step=8, wide=wide)
