@@ -52,16 +52,17 @@ at the quantised weight, gain and offset: within one grey level of the real-valu
 for gains up to 1.5 (tested; the weight's error grows as ``|b - a| gain / 510``). Time maps
 are limited to +-2048 frames (the integer time then fits 32 bits).
 
-Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders runs of 64
-pixels on the 8 rows of one pair of map rows: a run whose source is linear (one cell, or two
-cells split at a boundary and merged bytewise; a per-pixel map with consecutive pixels and
-one tone) and whose frames span at most seven neighbours is blended and toned on 64-byte
-vectors in 16-bit lanes, tone factors pre-expanded per byte on the host; other runs, and
-other time steps, go pixel by pixel with the same integers. The runs are placed so that
-their stores are 64-byte aligned wherever the output's rows are a multiple of 64 bytes long
-and the output starts on a 16-byte boundary (any numpy array): they are then non-temporal,
-writing the frame once without reading it first. Where the device shares host memory (PoCL
-on the CPU; probed once at open, :attr:`Gather.direct`) the kernel writes straight into the
+Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders a run of 64
+pixels down several bands of 8 rows (a band: the rows of one pair of map rows): a run whose
+source is linear (one cell, or two cells split at a boundary and merged bytewise; a
+per-pixel map with consecutive pixels and one tone) is blended and toned on 64-byte vectors
+in 16-bit lanes in every band whose frames span at most seven neighbours, tone factors
+pre-expanded per byte on the host and set up once per cell row; other bands, and other time
+steps, go pixel by pixel with the same integers. The runs are placed so that their stores
+are 64-byte aligned wherever the output's rows are a multiple of 64 bytes long and the
+output starts on a 16-byte boundary (any numpy array): they are then non-temporal, writing
+the frame once without reading it first. Where the device shares host memory (PoCL on the
+CPU; probed once at open, :attr:`Gather.direct`) the kernel writes straight into the
 caller's array: one launch, no copy.
 
 Examples

@@ -347,7 +347,8 @@ inline i16x64 map_row(ushort16 r)
         }                                                                                                 \
     }
 
-// the faded map samples j0 .. j0 + 9 of map row `row` (lanes 10-15 repeat 9) in 4080ths past base
+// the faded map samples j0 .. j0 + 9 of map row `row` in lanes 0-9, in 4080ths past base (lanes
+// 10-15 are padding: the columns after them, or sample 9 again at the map's edges)
 inline int16 map_samples(__global const float *tmap, __global const float *tmap1, float fade, float f0,
                          int tmap_w, size_t row, int j0)
 {
@@ -403,14 +404,15 @@ __kernel void gather(GATHER_PARAMS)
     CHUNK_SPLIT(1)
     CHUNK_SPLIT(2)
     const int yi0 = (int)get_global_id(1) * BANDS - 1;
-    int16 qa = map_samples(tmap, tmap1, fade, f0, tmap_w, (size_t)clamp(yi0, 0, tmap_h - 1) * tmap_w, j0);
+    int16 qnext = map_samples(tmap, tmap1, fade, f0, tmap_w, (size_t)clamp(yi0, 0, tmap_h - 1) * tmap_w, j0);
     for (int yi = yi0; yi < yi0 + BANDS; ++yi) {          // the bands: map rows yi, yi + 1
         const int ybeg = max(8 * yi + 4, 0), yend = min(8 * yi + 12, height);
         if (ybeg >= yend)
             break;
         const int ky0 = 2 * (ybeg - 8 * yi) - 7;                      // the first row's ky (header)
-        const int16 qb = map_samples(tmap, tmap1, fade, f0, tmap_w, (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w, j0);
-        // the extremes of both rows' samples 0-9 (lanes 10-15 repeat lane 9) bound every u
+        const int16 qa = qnext, qb = map_samples(tmap, tmap1, fade, f0, tmap_w, (size_t)clamp(yi + 1, 0, tmap_h - 1) * tmap_w, j0);
+        qnext = qb;                                     // the next band's upper map row
+        // the extremes of both rows' samples 0-9 (lanes 10-15 made copies of lane 9) bound every u
         const uint16 to9 = (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 9);
         const int16 a9 = shuffle(qa, to9), b9 = shuffle(qb, to9);
         const int16 m16 = min(a9, b9), x16 = max(a9, b9);
@@ -425,8 +427,6 @@ __kernel void gather(GATHER_PARAMS)
         const i16x64 ht = map_row(convert_ushort16(qa - 4080 * lo)), hb = map_row(convert_ushort16(qb - 4080 * lo));
         const i16x64 drb = hb - ht, d16 = drb + drb;
         i16x64 v16 = __builtin_astype(__builtin_astype(ht, u16x64) * (ushort)16 + __builtin_astype(drb, u16x64) * (ushort)ky0 + (ushort)8, i16x64);
-        const int16 qt = qa;
-        qa = qb;
         // byte offsets of the frames base + lo .. base + lo + span + 1
         long fo[MAX_SPAN + 2];
 #if WRAP == WRAP_LOOP
@@ -531,9 +531,9 @@ __kernel void gather(GATHER_PARAMS)
                         int pk;
                         const int pix = source_pixel(srow, ddy, x, &pk);
                         const int j = (2 * q + 9) >> 4, kx = (2 * q + 9) & 15;   // the lane's map interval
-                        const int ht1 = ((qt[j] * (16 - kx) + qt[j + 1] * kx + 128) >> 8) - 255 * lo;
-                        const int hb1 = ((qb[j] * (16 - kx) + qb[j + 1] * kx + 128) >> 8) - 255 * lo;
-                        const int u = (16 * ht1 + ky * (hb1 - ht1) + 8) >> 4;
+                        const int top = ((qa[j] * (16 - kx) + qa[j + 1] * kx + 128) >> 8) - 255 * lo;
+                        const int bot = ((qb[j] * (16 - kx) + qb[j + 1] * kx + 128) >> 8) - 255 * lo;
+                        const int u = (16 * top + ky * (bot - top) + 8) >> 4;
                         pixel(stack, tones, pix, (pk >> 24) & 0xFF, base + lo + u / 255, u % 255, orow + 3 * x);
                     }
                 }
