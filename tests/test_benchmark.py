@@ -1,0 +1,35 @@
+"""dynatex.benchmark: the copy bandwidth behind every roofline figure."""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from dynatex.benchmark import copy_bandwidth
+from dynatex.player.opencl import build_program
+
+
+def test_copy_kernels_copy_every_byte(cl_context):
+    """Both copies (plain and streaming stores) reproduce the source exactly: a bandwidth
+    is only meaningful if the kernel really moved the bytes."""
+    queue = cl.CommandQueue(cl_context)
+    prog = build_program(cl_context, "copy.cl")
+    src = np.random.default_rng(0).random(16 * 64 * 8, dtype=np.float32)   # 8 streaming work-items
+    for name, size in (("plain", src.size // 16), ("stream", src.size // (16 * 64))):
+        a = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=src)
+        b = cl.Buffer(cl_context, cl.mem_flags.WRITE_ONLY, src.nbytes)
+        copy = prog.kernel(f"copy_{name}")
+        copy.set_args(a, b)
+        cl.enqueue_nd_range_kernel(queue, copy, (size,), None)
+        out = np.zeros_like(src)
+        cl.enqueue_copy(queue, out, b)
+        queue.finish()
+        np.testing.assert_array_equal(out, src, err_msg=f"copy_{name}")
+
+
+def test_copy_bandwidth_is_the_fastest_copy():
+    bw = copy_bandwidth(mbytes=8, repeats=1)
+    assert "opencl_error" not in bw
+    for key in ("numpy_gbs", "opencl_plain_gbs", "opencl_stream_gbs"):
+        assert bw[key] > 0, key
+    assert bw["opencl_gbs"] == max(bw["opencl_plain_gbs"], bw["opencl_stream_gbs"])
+    assert bw["gbs"] == max(bw["numpy_gbs"], bw["opencl_gbs"])
