@@ -10,7 +10,12 @@ from typing import Callable
 import numpy as np
 
 from .player import open_player
+from .player.base import check_int
 from .tiledb import DatabaseWriter, LDSModel, SourceInfo
+
+
+#: float16 vectors per work-item of the streaming copy (``BLOCKS`` in player/kernels/copy.cl)
+COPY_BLOCKS = 64
 
 
 def copy_bandwidth(*, mbytes: int = 256, repeats: int = 5) -> dict[str, float]:
@@ -22,6 +27,8 @@ def copy_bandwidth(*, mbytes: int = 256, repeats: int = 5) -> dict[str, float]:
     with; the streaming copy is the one that shows the machine's bandwidth there. A read-only
     stream can beat copy bandwidth (no write traffic), so a read-bound kernel may exceed 1.0.
     """
+    mbytes = check_int("mbytes", mbytes, 1, 1 << 16)
+    repeats = check_int("repeats", repeats, 1, 1000)
     n = mbytes * 2**20 // 4
     src = np.ones(n, np.float32)
     dst = np.empty_like(src)
@@ -50,10 +57,9 @@ def _opencl_copy_bandwidth(src: np.ndarray, repeats: int) -> dict[str, float]:
     mf = cl.mem_flags
     a = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=src)
     b = cl.Buffer(ctx, mf.WRITE_ONLY, src.nbytes)
-    prog = build_program(ctx, "copy.cl")
-    blocks = 64                          # float16 per work-item of copy_stream (BLOCKS in copy.cl)
+    prog = build_program(ctx, "copy.cl", {"BLOCKS": COPY_BLOCKS})
     out = {}
-    for name, size in (("plain", src.size // 16), ("stream", src.size // (16 * blocks))):
+    for name, size in (("plain", src.size // 16), ("stream", src.size // (16 * COPY_BLOCKS))):
         copy = prog.kernel(f"copy_{name}")
         copy.set_args(a, b)
         cl.enqueue_nd_range_kernel(queue, copy, (size,), None).wait()

@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 import pyopencl as cl
+import pytest
 
-from dynatex.benchmark import copy_bandwidth
+from dynatex.benchmark import COPY_BLOCKS, copy_bandwidth
 from dynatex.player.opencl import build_program
 
 
@@ -12,9 +13,9 @@ def test_copy_kernels_copy_every_byte(cl_context):
     """Both copies (plain and streaming stores) reproduce the source exactly: a bandwidth
     is only meaningful if the kernel really moved the bytes."""
     queue = cl.CommandQueue(cl_context)
-    prog = build_program(cl_context, "copy.cl")
-    src = np.random.default_rng(0).random(16 * 64 * 8, dtype=np.float32)   # 8 streaming work-items
-    for name, size in (("plain", src.size // 16), ("stream", src.size // (16 * 64))):
+    prog = build_program(cl_context, "copy.cl", {"BLOCKS": COPY_BLOCKS})
+    src = np.random.default_rng(0).random(16 * COPY_BLOCKS * 8, dtype=np.float32)   # 8 streaming work-items
+    for name, size in (("plain", src.size // 16), ("stream", src.size // (16 * COPY_BLOCKS))):
         a = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=src)
         b = cl.Buffer(cl_context, cl.mem_flags.WRITE_ONLY, src.nbytes)
         copy = prog.kernel(f"copy_{name}")
@@ -33,3 +34,9 @@ def test_copy_bandwidth_is_the_fastest_copy():
         assert bw[key] > 0, key
     assert bw["opencl_gbs"] == max(bw["opencl_plain_gbs"], bw["opencl_stream_gbs"])
     assert bw["gbs"] == max(bw["numpy_gbs"], bw["opencl_gbs"])
+
+
+@pytest.mark.parametrize("kw", [{"mbytes": 0}, {"repeats": 0}, {"mbytes": 2.5}])
+def test_copy_bandwidth_rejects_bad_sizes(kw):
+    with pytest.raises((ValueError, TypeError), match=next(iter(kw))):
+        copy_bandwidth(**kw)
