@@ -906,16 +906,21 @@ def _wang_tiles(tx: _Texture, th: int, tw: int, r: int, colours: int, flow_gain:
         grad[1:] += np.diff(g, axis=0) ** 2
     rng = np.random.default_rng(seed)
 
+    typical: dict[tuple[int, int], list[tuple[int, int]]] = {}    # per strip shape, scored once
+
     def places(bh: int, bw: int) -> list[tuple[int, int]]:
         """Typical places first: spatial and temporal activity near the clip's median (a strip
         livelier or calmer than the rest would mark every edge it sits on), shuffled."""
-        ys, xs = _starts(h, bh, max(2, bh // 4)), _starts(w, bw, max(2, bw // 4))
-        cand = [(int(y), int(x), float(act[y:y + bh, x:x + bw].mean()) + 1e-6,
-                 float(grad[y:y + bh, x:x + bw].mean()) + 1e-6) for y in ys for x in xs]
-        ma, mg = np.median([c[2] for c in cand]), np.median([c[3] for c in cand])
-        score = np.array([abs(np.log(c[2] / ma)) + abs(np.log(c[3] / mg)) for c in cand])
-        best = np.argsort(score, kind="stable")[:max(2 * colours, len(cand) // 4)]
-        return [cand[i][:2] for i in rng.permutation(best)]
+        if (bh, bw) not in typical:
+            ys, xs = _starts(h, bh, max(2, bh // 4)), _starts(w, bw, max(2, bw // 4))
+            cand = [(int(y), int(x), float(act[y:y + bh, x:x + bw].mean()) + 1e-6,
+                     float(grad[y:y + bh, x:x + bw].mean()) + 1e-6) for y in ys for x in xs]
+            ma, mg = np.median([c[2] for c in cand]), np.median([c[3] for c in cand])
+            score = np.array([abs(np.log(c[2] / ma)) + abs(np.log(c[3] / mg)) for c in cand])
+            best = np.argsort(score, kind="stable")[:max(2 * colours, len(cand) // 4)]
+            typical[(bh, bw)] = [cand[i][:2] for i in best]
+        best = typical[(bh, bw)]
+        return [best[i] for i in rng.permutation(len(best))]
 
     taken: list[tuple[int, int, int, int]] = []
 

@@ -98,6 +98,8 @@ BANDS = 8             # wide kernel: a work-item renders one run of 64 pixels on
 TONE_STRIDE = 384     # int16 per device tone row: 192 gains then 192 offsets, per byte of a 64-pixel run
 TONE_OB = 192
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
+#: arguments of kernel gather (GATHER_PARAMS in kernels/gather.cl) that change after _set_args
+_ARG_TARGET, _ARG_OUT, _ARG_T, _ARG_FADE = 3, 5, 11, 12
 #: the bytes of a 64-pixel run in the order of the wide kernel's 16-bit lanes: per 64-byte
 #: chunk, the low then the high half of the x86 byte interleave (bytes 0-7 of each 16-byte
 #: lane, then 8-15)
@@ -412,7 +414,7 @@ class Gather:
             padded ^= 0x80
         self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
         self._k_gather = prog.kernel("gather")
-        self._k_gather.set_arg(12, np.float32(0))
+        self._k_gather.set_arg(_ARG_FADE, np.float32(0))
         self._k_smooth_x = prog.kernel("smooth")
         self._k_smooth_y = prog.kernel("smooth")
         self.direct = writes_through(self.ctx)
@@ -435,10 +437,10 @@ class Gather:
             self._tmap_events = [cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)]
             if self._target is not None:
                 self._tmap_events.append(cl.enqueue_copy(self.queue, self._d_target, self._target, is_blocking=False))
-            self._k_gather.set_arg(3, self._target_buffer())
+            self._k_gather.set_arg(_ARG_TARGET, self._target_buffer())
 
     def _target_buffer(self):
-        """Kernel argument 3, the map the time map fades toward: the map itself when none is set."""
+        """Kernel argument _ARG_TARGET, the map the time map fades toward: the map itself when none is set."""
         return self._d_tmap if self._target is None else self._d_target
 
     def _upload_tones(self) -> None:
@@ -456,7 +458,7 @@ class Gather:
                                 self._d_out, np.int32(w), np.int32(h), np.int32(grid_w),
                                 np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0),
                                 np.float32(0))
-        self._host_out = self._host_buf = None       # arg 5 is the device's frame buffer again
+        self._host_out = self._host_buf = None       # _ARG_OUT is the device's frame buffer again
 
     # -- inputs --------------------------------------------------------------------------------
     def set_source_map(self, packed: np.ndarray) -> None:
@@ -622,7 +624,7 @@ class Gather:
                 self._host_buf = cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR,
                                            hostbuf=out.reshape(-1))
                 self._host_out = out
-                self._k_gather.set_arg(5, self._host_buf)
+                self._k_gather.set_arg(_ARG_OUT, self._host_buf)
             cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
             self.queue.finish()
             return out
@@ -643,15 +645,15 @@ class Gather:
         self.queue.finish()
 
     def _set_time_args(self, t: float, fade: float) -> None:
-        """Kernel arguments 11 and 12: the folded time and the fade toward the target map."""
-        self._k_gather.set_arg(11, np.float32(t))
-        self._k_gather.set_arg(12, np.float32(fade))
+        """Kernel arguments _ARG_T and _ARG_FADE: the folded time and the fade toward the target map."""
+        self._k_gather.set_arg(_ARG_T, np.float32(t))
+        self._k_gather.set_arg(_ARG_FADE, np.float32(fade))
 
     def _use_device_out(self) -> None:
         """Point the kernel at its own frame buffer (after frames went to a caller's array)."""
         if self._host_out is not None:
             self._host_out = self._host_buf = None
-            self._k_gather.set_arg(5, self._d_out)
+            self._k_gather.set_arg(_ARG_OUT, self._d_out)
 
     def render_reference(self, t: float, out: np.ndarray | None = None, *, fade: float = 0.0) -> np.ndarray:
         """The numpy reference of :meth:`render` (usable with either backend, for checks)."""
