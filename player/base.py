@@ -9,6 +9,10 @@ import numpy as np
 from ..tiledb import Texture, TileDB
 
 BACKENDS = ("opencl", "numpy")
+#: what a player's ``backend`` may be: a backend, or "auto" (OpenCL on a verified device, else numpy)
+BACKEND_CHOICES = ("auto", *BACKENDS)
+
+_fallback_warned = False
 
 
 class Player:
@@ -28,12 +32,12 @@ class Player:
     mode: ClassVar[str] = ""
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "opencl", device: str | None = None) -> None:
-        if backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}, not {backend!r}")
-        self.backend = backend
+                 backend: str = "auto", device: str | None = None) -> None:
+        if backend not in BACKEND_CHOICES:
+            raise ValueError(f"backend must be one of {BACKEND_CHOICES}, not {backend!r}")
         self.queue = None
         self.ctx = None
+        self.backend = backend
         self._own_db = not isinstance(db, TileDB)
         self.db = TileDB(db) if self._own_db else db
         try:
@@ -41,10 +45,13 @@ class Player:
         except BaseException:
             self.close()
             raise
-        if backend == "opencl":
-            from . import opencl
+        if backend != "numpy":
+            self.ctx = _context(backend, device)
+        if self.ctx is None:
+            self.backend = "numpy"
+        else:
             import pyopencl as cl
-            self.ctx = opencl.get_context(device)
+            self.backend = "opencl"
             self.queue = cl.CommandQueue(self.ctx)
         self.frame_index = 0
 
@@ -228,3 +235,21 @@ def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = Non
     if (lo is not None and v < lo) or (hi is not None and v > hi):
         raise ValueError(f"{name} must be in [{lo}, {'inf' if hi is None else hi}], not {v}")
     return v
+
+
+def _context(backend: str, device: str | None):
+    """The OpenCL context for a player, or None when ``backend="auto"`` finds no verified device
+    (the numpy backend then, with one warning per process). A device asked for by ``device``
+    or ``PYOPENCL_CTX`` is never silently replaced."""
+    global _fallback_warned
+    from . import opencl
+    try:
+        return opencl.get_context(device)
+    except opencl.OpenCLUnavailableError as exc:
+        if backend == "opencl" or device is not None or isinstance(exc, opencl.DeviceNotVerifiedError):
+            raise
+        if not _fallback_warned:
+            _fallback_warned = True
+            import warnings
+            warnings.warn(f"dynatex player: using the numpy backend (slower): {exc}", RuntimeWarning, stacklevel=4)
+        return None

@@ -306,9 +306,11 @@ class Gather:
         Source given as a grid of ``ch x cw`` cells (:meth:`set_source_grid`) instead of a
         per-pixel map (:meth:`set_source_map`). Fixed at construction (a kernel define).
     wide : bool, optional
-        With ``time_step=8``, use the 64-lane kernel (True) or the per-pixel one (False).
-        Default: the 64-lane kernel on CPU devices, whose vector units it is written for.
-        Both compute the same integers (see the module docstring); :attr:`wide` says which runs.
+        With ``time_step=8``, use the x86 variant ``kernels/variants/gather_wide.cl`` (True)
+        or the portable kernel (False). Default: the variant where the device's self-test
+        verified it (CPU devices whose compiler is clang), else the portable kernel. Both
+        compute the same integers (see the module docstring); :attr:`wide` says which runs.
+        ``wide=True`` on a device where the variant is not verified is an error.
 
     After construction call :meth:`set_source_map` or :meth:`set_source_grid`, optionally
     :meth:`set_time_map` (default zeros), :meth:`smooth_time_map` and :meth:`set_tones`
@@ -370,16 +372,20 @@ class Gather:
     # -- device setup ------------------------------------------------------------------------
     def _setup_opencl(self, device: str | None) -> None:
         import pyopencl as cl
-        from .opencl import KernelBuildError, build_program, get_context, writes_through
+        from .opencl import OpenCLUnavailableError, build_program, get_context, variant_verified, writes_through
         if self.ctx is None:
             self.ctx = get_context(device)
         if self.queue is None:
             self.queue = cl.CommandQueue(self.ctx)
         mf = cl.mem_flags
         h, w = self.out_shape[:2]
-        # the 64-lane kernel (time step 8) is written for CPU vector units; elsewhere per pixel
-        cpu = bool(self.ctx.devices[0].type & cl.device_type.CPU)
-        self.wide = self.time_step == 8 and (cpu if self._wide_choice is None else bool(self._wide_choice))
+        # the x86 variant only where the self-test verified it on this device
+        verified = variant_verified(self.ctx.devices[0], "gather_wide")
+        if self._wide_choice and self.time_step == 8 and not verified:
+            raise OpenCLUnavailableError(
+                f"wide=True: the gather_wide variant is not verified on {self.ctx.devices[0].name} "
+                "(its self-test did not pass there); use wide=None or False")
+        self.wide = self.time_step == 8 and verified and self._wide_choice is not False
         # 16 floats of padding: the time step 8 kernel reads the maps 16 floats at a time
         self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
         self._d_target = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
@@ -392,28 +398,22 @@ class Gather:
                    "NFRAMES": self.n_frames, "GRID": self.grid, "WRAP": _WRAP_CODE[self.wrap],
                    "CELL_H": (self.cell or (1, 1))[0], "CELL_W": (self.cell or (1, 1))[1],
                    "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN,
-                   "STACK_PAD": STACK_PAD, "BANDS": BANDS, "WIDE": self.wide, "TONE_STRIDE": TONE_STRIDE,
+                   "STACK_PAD": STACK_PAD, "TONE_STRIDE": TONE_STRIDE,
                    "TONE_OB": TONE_OB}
-        try:
-            prog = build_program(self.ctx, "gather.cl", defines)
-        except KernelBuildError:
-            if not self.wide or self._wide_choice is not None:
-                raise
-            # the 64-lane kernel leans on clang vector extensions; a compiler without them
-            # still gets the per-pixel kernel (same integers, slower)
-            log.warning("the 64-lane gather kernel does not build on %s; using the per-pixel kernel",
-                        self.ctx.devices[0].name)
-            self.wide = False
-            prog = build_program(self.ctx, "gather.cl", {**defines, "WIDE": False})
+        if self.wide:
+            prog = build_program(self.ctx, ("gather.cl", "variants/gather_wide.cl"),
+                                 {**defines, "STACK_SIGNED": True, "BANDS": BANDS})
+        else:
+            prog = build_program(self.ctx, "gather.cl", {**defines, "STACK_SIGNED": False})
         # STACK_PAD bytes on both sides: vector loads of a run may read a few bytes past the
-        # frame stack's ends (lanes that a bytewise merge then drops). The 64-lane kernel
+        # frame stack's ends (lanes that a bytewise merge then drops). The wide variant
         # reads bytes value ^ 0x80: value - 128 as a signed byte, what its blend multiplies.
         padded = np.zeros(self._stack.nbytes + 2 * STACK_PAD, np.uint8)
         padded[STACK_PAD:STACK_PAD + self._stack.nbytes] = self._stack.reshape(-1)
         if self.wide:
             padded ^= 0x80
         self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
-        self._k_gather = prog.kernel("gather")
+        self._k_gather = prog.kernel("gather_wide" if self.wide else "gather")
         self._k_gather.set_arg(_ARG_FADE, np.float32(0))
         self._k_smooth_x = prog.kernel("smooth")
         self._k_smooth_y = prog.kernel("smooth")

@@ -54,8 +54,10 @@ class LDSPlayer(ProjectionPlayer):
         The tile database.
     texture : str, optional
         Texture name (optional when the database holds one texture).
-    backend : {"opencl", "numpy"}
-        ``"numpy"`` is the reference implementation and the fallback without OpenCL.
+    backend : {"auto", "opencl", "numpy"}
+        "auto" (default): OpenCL on the first device that passed the self-test, else the numpy
+        reference with one warning; "opencl" demands a verified device (else
+        :class:`~dynatex.player.OpenCLUnavailableError`); "numpy" is the reference.
     device : str, optional
         OpenCL device (see :func:`dynatex.player.opencl.get_context`).
     seed : int

@@ -84,8 +84,10 @@ class MixturePlayer(ProjectionPlayer):
         The tile database.
     texture : str, optional
         Texture name (optional when the database holds one texture).
-    backend : {"opencl", "numpy"}
-        ``"numpy"`` is the reference implementation and the fallback without OpenCL.
+    backend : {"auto", "opencl", "numpy"}
+        "auto" (default): OpenCL on the first device that passed the self-test, else the numpy
+        reference with one warning; "opencl" demands a verified device (else
+        :class:`~dynatex.player.OpenCLUnavailableError`); "numpy" is the reference.
     device : str, optional
         OpenCL device (see :func:`dynatex.player.opencl.get_context`).
     seed : int
@@ -114,7 +116,7 @@ class MixturePlayer(ProjectionPlayer):
     basis_name = "stacked_basis"
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "opencl", device: str | None = None, seed: int = 0,
+                 backend: str = "auto", device: str | None = None, seed: int = 0,
                  precision: str = "float32", draws: int = DEFAULT_DRAWS) -> None:
         self.draws = draws
         super().__init__(db, texture, backend=backend, device=device, seed=seed, precision=precision)

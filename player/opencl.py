@@ -1,5 +1,6 @@
-"""OpenCL plumbing shared by every player: device choice, one context per device,
-programs built once from ``player/kernels/*.cl`` and kernels fetched once.
+"""OpenCL plumbing shared by every player: device choice (only devices that passed the
+self-test, :mod:`dynatex.player.selftest`), one context per device, programs built once
+from ``player/kernels/*.cl`` and kernels fetched once.
 """
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import os
 import re
 import threading
 import warnings
+from dataclasses import dataclass
 from importlib import resources
 from typing import Mapping
 
@@ -40,109 +42,159 @@ _programs: dict[tuple, "Program"] = {}
 _kernel_fetches = 0
 
 
-def list_devices() -> list[tuple[str, str]]:
-    """``(platform name, device name)`` of every OpenCL device, in ``PYOPENCL_CTX`` index order."""
+class DeviceNotVerifiedError(OpenCLUnavailableError):
+    """An OpenCL device was asked for by name but did not pass the self-test."""
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    """What identifies one OpenCL device: its ``P:D`` index and the names its verdict is cached by."""
+
+    index: str
+    platform: str
+    platform_version: str
+    name: str
+    vendor: str
+    driver_version: str
+    is_cpu: bool
+
+    @property
+    def is_pocl(self) -> bool:
+        return "portable computing language" in self.platform.lower() or "pocl" in self.platform_version.lower()
+
+    def describe(self) -> str:
+        """One line: platform, version, device."""
+        return f"{self.platform} ({' '.join(self.platform_version.split()[:4])}) / {self.name}"
+
+
+def devices() -> list[DeviceInfo]:
+    """Every OpenCL device present, in ``PYOPENCL_CTX`` index order (none without OpenCL)."""
     _require_pyopencl()
-    out = []
     try:
         platforms = cl.get_platforms()
     except cl.Error:
-        return out
-    for p in platforms:
+        return []
+    out = []
+    for i, p in enumerate(platforms):
         try:
-            devices = p.get_devices()
+            devs = p.get_devices()
         except cl.Error:
             continue
-        out.extend((p.name, d.name) for d in devices)
+        for j, d in enumerate(devs):
+            out.append(DeviceInfo(f"{i}:{j}", p.name.strip(), p.version.strip(), d.name.strip(),
+                                  d.vendor.strip(), d.driver_version.strip(),
+                                  bool(d.type & cl.device_type.CPU)))
     return out
 
 
-def get_context(device: str | None = None) -> "cl.Context":
-    """The shared context for ``device``.
+def list_devices() -> list[tuple[str, str]]:
+    """``(platform name, device name)`` of every OpenCL device, in ``PYOPENCL_CTX`` index order."""
+    return [(d.platform, d.name) for d in devices()]
 
-    ``device`` is ``None`` (``PYOPENCL_CTX`` if set, else PoCL, else the first device),
-    ``"pocl"``, an index ``"P:D"`` (platform, device) or a substring of a device or platform name.
+
+def device_info(device: "cl.Device") -> DeviceInfo:
+    """The :class:`DeviceInfo` of a pyopencl device (its index found among :func:`devices`)."""
+    for info in devices():
+        if (info.platform, info.platform_version, info.name, info.driver_version) == (
+                device.platform.name.strip(), device.platform.version.strip(), device.name.strip(),
+                device.driver_version.strip()):
+            return info
+    raise OpenCLUnavailableError(f"device {device.name!r} is not among this process's OpenCL devices")
+
+
+def preference_order(infos: list[DeviceInfo]) -> list[DeviceInfo]:
+    """The order devices are tried in: PoCL first (newest version first), then the others as listed."""
+    def pocl_version(info: DeviceInfo) -> tuple[int, ...]:
+        m = re.search(r"PoCL (\d+)\.(\d+)", info.platform_version)
+        return tuple(int(v) for v in m.groups()) if m else (0, 0)
+    pocl = sorted((d for d in infos if d.is_pocl), key=pocl_version, reverse=True)
+    return pocl + [d for d in infos if not d.is_pocl]
+
+
+def get_context(device: str | None = None) -> "cl.Context":
+    """The shared context for a verified ``device``.
+
+    ``device`` is ``None`` (``PYOPENCL_CTX`` if set, else the first device that passes the
+    self-test, PoCL first), ``"pocl"``, an index ``"P:D"`` (platform, device) or a substring
+    of a device or platform name. A device named here or by ``PYOPENCL_CTX`` that fails the
+    self-test raises :class:`DeviceNotVerifiedError` saying why; no verified device at all
+    raises :class:`OpenCLUnavailableError` listing each device's failure.
     """
     _require_pyopencl()
     key = device if device is not None else "env:" + os.environ.get("PYOPENCL_CTX", "")
     with _lock:
         ctx = _contexts.get(key)
+    if ctx is not None:
+        return ctx
+    info = _pick_device(device)
+    with _lock:
+        ctx = _contexts.get(key)
         if ctx is None:
-            ctx = cl.Context([_pick_device(device)])
-            _contexts[key] = ctx
+            ctx = _contexts.get(info.index)
+        if ctx is None:
+            ctx = cl.Context([_cl_device(info)])
+            _contexts[info.index] = ctx
+        _contexts[key] = ctx
         return ctx
 
 
-def _pick_device(device: str | None) -> "cl.Device":
-    try:
-        platforms = cl.get_platforms()
-    except cl.Error as exc:
-        raise OpenCLUnavailableError(f"no OpenCL platform found ({exc}); {_FIX}") from None
-    pairs = []
-    for p in platforms:
-        try:
-            pairs.extend((p, d) for d in p.get_devices())
-        except cl.Error:
-            continue
-    if not pairs:
+def _cl_device(info: DeviceInfo) -> "cl.Device":
+    p, d = (int(v) for v in info.index.split(":"))
+    return cl.get_platforms()[p].get_devices()[d]
+
+
+def _pick_device(device: str | None) -> DeviceInfo:
+    from . import selftest
+    infos = devices()
+    if not infos:
         raise OpenCLUnavailableError(f"no OpenCL device found; {_FIX}")
-    if device is None:
-        env = os.environ.get("PYOPENCL_CTX")
-        if env:
-            return _match(pairs, platforms, env, "PYOPENCL_CTX")
-        pocl = [(p, d) for p, d in pairs if _is_pocl(p)]
-        others = [(p, d) for p, d in pairs if not _is_pocl(p)]
-        failures = []
-        for p, d in pocl + others:
-            err = _probe_build(d)
-            if err is None:
-                return d
-            version = re.search(r"PoCL [\w.+-]+", p.version or "")
-            failures.append(f"{version.group(0) if version else p.name} / {d.name}: {err}")
-        raise OpenCLUnavailableError(
-            "no OpenCL device here can compile kernels (" + "; ".join(failures) + "). "
-            "PoCL's LLVM may not know this CPU: run ./install.sh (it adds the system PoCL, "
-            "`apt-get install pocl-opencl-icd`), or pass backend='numpy'")
-    return _match(pairs, platforms, device, "device")
+    spec, what = device, "device"
+    if spec is None and os.environ.get("PYOPENCL_CTX"):
+        spec, what = os.environ["PYOPENCL_CTX"], "PYOPENCL_CTX"
+    if spec is not None:
+        info = _match(infos, spec, what)
+        if selftest.ALLOWED_VARIANTS is not None:     # the self-test's own child process
+            return info
+        verdict = selftest.verdict(info)
+        if not verdict.ok:
+            raise DeviceNotVerifiedError(f"{what}={spec!r}: {info.describe()} failed the self-test: "
+                                         f"{verdict.reason}")
+        return info
+    failures = []
+    for info in preference_order(infos):
+        verdict = selftest.verdict(info)
+        if verdict.ok:
+            return info
+        failures.append(f"{info.describe()}: {verdict.reason}")
+    raise OpenCLUnavailableError(
+        "no OpenCL device here passed the self-test (" + "; ".join(failures) + "). "
+        "Run ./install.sh (it adds the system PoCL, `apt-get install pocl-opencl-icd`), "
+        "or use backend='numpy'")
 
 
-def _is_pocl(platform: "cl.Platform") -> bool:
-    return "portable computing language" in platform.name.lower() or "pocl" in platform.vendor.lower()
+def variant_verified(device: "cl.Device", variant: str) -> bool:
+    """Whether kernel ``variant`` (a file of ``kernels/variants/``) passed the self-test on ``device``."""
+    from . import selftest
+    if selftest.ALLOWED_VARIANTS is not None:      # inside the self-test itself
+        return variant in selftest.ALLOWED_VARIANTS
+    return selftest.verdict(device_info(device)).variants.get(variant, False)
 
 
-_PROBE_SOURCE = "__kernel void probe(__global float *a) { a[get_global_id(0)] *= 2.0f; }"
-
-
-def _probe_build(device: "cl.Device") -> str | None:
-    """None when ``device`` compiles a trivial kernel, else the first line of the failure."""
-    try:
-        ctx = cl.Context([device])
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            cl.Program(ctx, _PROBE_SOURCE).build()
-    except cl.Error as exc:
-        lines = [ln.strip() for ln in str(exc).splitlines() if "error" in ln.lower() and ln.strip()]
-        return (lines[-1] if lines else str(exc).splitlines()[0])[:160]
-    return None
-
-
-def _match(pairs, platforms, spec: str, what: str) -> "cl.Device":
+def _match(infos: list[DeviceInfo], spec: str, what: str) -> DeviceInfo:
     spec = spec.strip()
-    if spec.lower() == "pocl":
-        spec = "portable computing language"
+    low = "portable computing language" if spec.lower() == "pocl" else spec.lower()
     parts = spec.split(":")
-    if all(p.isdigit() for p in parts if p) and parts[0]:
-        try:
-            plat = platforms[int(parts[0])]
-            devs = plat.get_devices()
-            return devs[int(parts[1]) if len(parts) > 1 and parts[1] else 0]
-        except (IndexError, cl.Error):
-            raise OpenCLUnavailableError(f"{what}={spec!r}: no such OpenCL platform/device index") from None
-    low = spec.lower()
-    for p, d in pairs:
-        if low in d.name.lower() or low in p.name.lower():
-            return d
-    names = "; ".join(f"{p.name}: {d.name}" for p, d in pairs)
+    if parts[0].isdigit() and all(p.isdigit() for p in parts[1:] if p) and len(parts) <= 2:
+        index = f"{int(parts[0])}:{int(parts[1]) if len(parts) > 1 and parts[1] else 0}"
+        for info in infos:
+            if info.index == index:
+                return info
+        raise OpenCLUnavailableError(f"{what}={spec!r}: no such OpenCL platform/device index "
+                                     f"(available: {', '.join(d.index for d in infos)})")
+    matches = [d for d in infos if low in d.name.lower() or low in d.platform.lower()]
+    if matches:
+        return preference_order(matches)[0]
+    names = "; ".join(f"{d.index} {d.platform}: {d.name}" for d in infos)
     raise OpenCLUnavailableError(f"{what}={spec!r} matches no OpenCL device (available: {names})")
 
 
@@ -193,13 +245,20 @@ def device_shares_host_memory(ctx: "cl.Context") -> bool:
         return dev.type & cl.device_type.CPU != 0
 
 
-class Program:
-    """A ``.cl`` file built once per context and set of defines (see :func:`build_program`)."""
+def kernel_source(filename: str | tuple[str, ...]) -> str:
+    """The text of ``kernels/filename``; a tuple of names is their texts one after another."""
+    names = (filename,) if isinstance(filename, str) else filename
+    root = resources.files("dynatex.player.kernels")
+    return "\n".join(root.joinpath(name).read_text() for name in names)
 
-    def __init__(self, ctx: "cl.Context", filename: str, defines: Mapping[str, object]) -> None:
-        self.filename = filename
+
+class Program:
+    """``.cl`` files built once per context and set of defines (see :func:`build_program`)."""
+
+    def __init__(self, ctx: "cl.Context", filename: str | tuple[str, ...], defines: Mapping[str, object]) -> None:
+        self.filename = filename if isinstance(filename, str) else " + ".join(filename)
         self.options = [f"-D{k}={_define(v)}" for k, v in sorted(defines.items())]
-        source = resources.files("dynatex.player.kernels").joinpath(filename).read_text()
+        source = kernel_source(filename)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
@@ -207,7 +266,8 @@ class Program:
             except cl.RuntimeError as exc:
                 logtext = str(exc).strip()
                 raise KernelBuildError(
-                    f"building player/kernels/{filename} with {' '.join(self.options)} failed:\n{logtext}") from None
+                    f"building player/kernels/{self.filename} with {' '.join(self.options)} failed:\n"
+                    f"{logtext}") from None
         for w in caught:
             log.debug("OpenCL compiler output for %s: %s", filename, w.message)
 
@@ -226,8 +286,10 @@ class Program:
         return k
 
 
-def build_program(ctx: "cl.Context", filename: str, defines: Mapping[str, object] | None = None) -> Program:
-    """The program ``filename`` built for ``ctx`` with ``defines``; built only the first time."""
+def build_program(ctx: "cl.Context", filename: str | tuple[str, ...],
+                  defines: Mapping[str, object] | None = None) -> Program:
+    """The program ``filename`` (or several files, in order) built for ``ctx`` with ``defines``;
+    built only the first time."""
     defines = dict(defines or {})
     key = (ctx.int_ptr, filename, tuple(sorted((k, _define(v)) for k, v in defines.items())))
     with _lock:
@@ -251,25 +313,45 @@ def _define(v: object) -> str:
 
 
 def _main(argv: list[str] | None = None) -> int:
-    """``python -m dynatex.player [--check]``: list devices; with --check exit 1 if none can build."""
+    """``python -m dynatex.player [--check] [--refresh]``: the devices, their self-test verdicts
+    and the one the player uses; with --check exit 1 when no device passed."""
     import argparse
-    parser = argparse.ArgumentParser(prog="python -m dynatex.player")
-    parser.add_argument("--check", action="store_true", help="exit 1 unless a device can compile kernels")
+    from . import selftest
+    parser = argparse.ArgumentParser(prog="python -m dynatex.player",
+                                     description="List the OpenCL devices and their self-test verdicts.")
+    parser.add_argument("--check", action="store_true",
+                        help="self-test every device (cached) and exit 1 unless one passed")
+    parser.add_argument("--refresh", action="store_true", help="run the self-tests again, ignoring cached verdicts")
     args = parser.parse_args(argv)
     try:
-        for plat, dev in list_devices():
-            print(f"{plat}: {dev}")
-        ctx = get_context()
+        infos = devices()
     except OpenCLUnavailableError as exc:
-        print(f"no usable OpenCL device: {exc}")
+        print(f"no usable OpenCL: {exc}")
         return 1
-    d = ctx.devices[0]
-    print(f"default device: {d.platform.name} {d.platform.version}: {d.name}")
-    if args.check:   # a device named by PYOPENCL_CTX is taken unprobed: probe it here
-        err = _probe_build(d)
-        if err is not None:
-            print(f"the default device cannot compile kernels: {err}")
+    if not infos:
+        print(f"no OpenCL device found; {_FIX}")
+        return 1
+    passed = []
+    for info in preference_order(infos):
+        if args.check or args.refresh:
+            v = selftest.verdict(info, refresh=args.refresh)
+        else:
+            v = selftest.cached_verdict(info)
+        if v is None:
+            state = "not yet verified (--check runs the self-test)"
+        elif v.ok:
+            variants = ", ".join(f"{k} {'ok' if ok else 'not used'}" for k, ok in sorted(v.variants.items()))
+            state = f"verified ({v.seconds:.1f} s{'; ' + variants if variants else ''})"
+            passed.append(info)
+        else:
+            state = f"FAILED: {v.reason}"
+        print(f"{info.index}  {info.describe()}, driver {info.driver_version}: {state}")
+    if args.check or args.refresh:
+        if not passed:
+            print("no OpenCL device passed the self-test; the player's numpy backend works without one")
             return 1
+        print(f"the player uses {passed[0].index} {passed[0].describe()}")
+    print(f"verdicts cached in {selftest.cache_path()}")
     return 0
 
 

@@ -33,7 +33,7 @@ class ProjectionPlayer(Player):
     basis_name = "basis"
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "opencl", device: str | None = None, seed: int = 0,
+                 backend: str = "auto", device: str | None = None, seed: int = 0,
                  precision: str = "float32") -> None:
         if precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")

@@ -263,8 +263,10 @@ class EvolvePlayer(Player):
         The tile database (the texture needs ``quilt`` data and stored frames).
     texture : str, optional
         Texture name (optional when the database holds one texture).
-    backend : {"opencl", "numpy"}
-        ``"numpy"`` is the reference implementation and the fallback without OpenCL.
+    backend : {"auto", "opencl", "numpy"}
+        "auto" (default): OpenCL on the first device that passed the self-test, else the numpy
+        reference with one warning; "opencl" demands a verified device (else
+        :class:`~dynatex.player.OpenCLUnavailableError`); "numpy" is the reference.
     device : str, optional
         OpenCL device (see :func:`dynatex.player.opencl.get_context`).
     seed : int
@@ -303,7 +305,7 @@ class EvolvePlayer(Player):
     mode = "evolve"
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "opencl", device: str | None = None, seed: int = 0,
+                 backend: str = "auto", device: str | None = None, seed: int = 0,
                  size: Sequence[int] | None = None, interpolate: bool = True, jitter: float = 0.0,
                  end: str = "hold", speed: float = 1.0, rate_map: np.ndarray | None = None,
                  rate_sigma: float = 0.0) -> None:

@@ -96,7 +96,10 @@ class TilesPlayer(Player):
     ----------
     db : path or TileDB
     texture : str, optional
-    backend : {"opencl", "numpy"}
+    backend : {"auto", "opencl", "numpy"}
+        "auto" (default): OpenCL on the first device that passed the self-test, else the numpy
+        reference with one warning; "opencl" demands a verified device (else
+        :class:`~dynatex.player.OpenCLUnavailableError`); "numpy" is the reference.
     device : str, optional
     seed : int
         Seed of the arrangement and of the time offsets; the same seed gives the same frames.
@@ -137,7 +140,7 @@ class TilesPlayer(Player):
     mode = "tiles"
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "opencl", device: str | None = None, seed: int = 0,
+                 backend: str = "auto", device: str | None = None, seed: int = 0,
                  size: Sequence[int] | None = None, labels: np.ndarray | None = None,
                  tone: Any = None) -> None:
         super().__init__(db, texture, backend=backend, device=device)

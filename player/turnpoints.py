@@ -43,8 +43,10 @@ class TurnPointPlayer(Player):
         The tile database (the texture needs ``turnpoints`` data and stored frames).
     texture : str, optional
         Texture name (optional when the database holds one texture).
-    backend : {"opencl", "numpy"}
-        ``"numpy"`` is the reference implementation and the fallback without OpenCL.
+    backend : {"auto", "opencl", "numpy"}
+        "auto" (default): OpenCL on the first device that passed the self-test, else the numpy
+        reference with one warning; "opencl" demands a verified device (else
+        :class:`~dynatex.player.OpenCLUnavailableError`); "numpy" is the reference.
     device : str, optional
         OpenCL device (see :func:`dynatex.player.opencl.get_context`).
     seed : int
@@ -79,7 +81,7 @@ class TurnPointPlayer(Player):
     mode = "turnpoints"
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "opencl", device: str | None = None, seed: int = 0,
+                 backend: str = "auto", device: str | None = None, seed: int = 0,
                  playback: str = "hybrid", start: int = 0) -> None:
         if playback not in PLAYBACKS:
             raise ValueError(f"playback must be one of {PLAYBACKS}, not {playback!r}")

@@ -1,13 +1,70 @@
 """Fixtures shared by the whole suite: real clips, generated clips, temporary databases,
-one OpenCL context for the session."""
+and the OpenCL devices the kernel tests run on.
+
+Before anything imports pyopencl, this file (1) points the self-test's verdict cache at a
+folder of this session, so every run proves its devices afresh and leaves the user's cache
+alone, and (2) where the test extra installed Intel's CPU OpenCL runtime, makes it visible
+beside the system's OpenCL platforms (its own ICD file names a path that does not exist),
+so that the kernels are compared with their references on two independent compilers.
+Set ``OCL_ICD_VENDORS`` yourself to choose the platforms instead.
+"""
 from __future__ import annotations
 
+import atexit
+import os
+import shutil
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
+SYSTEM_VENDORS = Path("/etc/OpenCL/vendors")
+
+
+def _session_folder(prefix: str) -> Path:
+    folder = Path(tempfile.mkdtemp(prefix=prefix))
+    atexit.register(shutil.rmtree, folder, True)
+    return folder
+
+
+def _add_intel_runtime() -> None:
+    """Make Intel's CPU runtime (pip package intel-opencl-rt) visible, if installed."""
+    lib = Path(sys.prefix) / "lib" / "libintelocl.so"
+    if "OCL_ICD_VENDORS" in os.environ or not lib.is_file():
+        return
+    vendors = _session_folder("dynatex-icd-")
+    if SYSTEM_VENDORS.is_dir():
+        for icd in SYSTEM_VENDORS.glob("*.icd"):
+            shutil.copy(icd, vendors)
+    (vendors / "intel-cpu-dynatex-tests.icd").write_text(f"{lib}\n")
+    os.environ["OCL_ICD_VENDORS"] = str(vendors)
+
+
+os.environ.setdefault("DYNATEX_CACHE_DIR", str(_session_folder("dynatex-cache-")))
+_add_intel_runtime()
+
+
+def verified_devices() -> list:
+    """The OpenCL devices that passed the self-test here, in the player's order of preference."""
+    from dynatex.player import opencl, selftest
+    try:
+        infos = opencl.preference_order(opencl.devices())
+    except opencl.OpenCLUnavailableError:
+        return []
+    return [d for d in infos if selftest.verdict(d).ok]
+
+
+def pytest_generate_tests(metafunc):
+    """Kernel tests (fixture ``cl_device`` or ``cl_context``) run once on every verified device."""
+    if "cl_device" in metafunc.fixturenames:
+        devices = verified_devices()
+        ids = [f"{d.index}-{d.platform.split()[0]}" for d in devices]
+        metafunc.parametrize("cl_device", [d.index for d in devices] or
+                             [pytest.param(None, marks=pytest.mark.skip(reason="no verified OpenCL device"))],
+                             ids=ids or None, scope="session")
 
 
 @pytest.fixture(scope="session")
@@ -19,10 +76,10 @@ def clips_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
-def cl_context():
-    """The session-wide OpenCL context the players use by default."""
+def cl_context(cl_device):
+    """The shared OpenCL context of device ``cl_device`` (one verified device per parameter)."""
     from dynatex.player.opencl import get_context
-    return get_context()
+    return get_context(cl_device)
 
 
 def wave_clip(t: int = 60, h: int = 24, w: int = 32, *, channels: int = 3, seed: int = 0,

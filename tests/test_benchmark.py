@@ -13,9 +13,10 @@ def test_copy_kernels_copy_every_byte(cl_context):
     """Both copies (plain and streaming stores) reproduce the source exactly: a bandwidth
     is only meaningful if the kernel really moved the bytes."""
     queue = cl.CommandQueue(cl_context)
-    prog = build_program(cl_context, "copy.cl", {"BLOCKS": COPY_BLOCKS})
+    plain = build_program(cl_context, "copy.cl")
+    stream = build_program(cl_context, "variants/copy_stream.cl", {"BLOCKS": COPY_BLOCKS})
     src = np.random.default_rng(0).random(16 * COPY_BLOCKS * 8, dtype=np.float32)   # 8 streaming work-items
-    for name, size in (("plain", src.size // 16), ("stream", src.size // (16 * COPY_BLOCKS))):
+    for name, prog, size in (("plain", plain, src.size // 16), ("stream", stream, src.size // (16 * COPY_BLOCKS))):
         a = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=src)
         b = cl.Buffer(cl_context, cl.mem_flags.WRITE_ONLY, src.nbytes)
         copy = prog.kernel(f"copy_{name}")

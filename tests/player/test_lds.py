@@ -31,8 +31,8 @@ def osc_db(tmp_path_factory):
 
 
 @pytest.mark.parametrize("precision", ["float32", "float16"])
-def test_opencl_matches_numpy_reference(lds_db, precision, cl_context):
-    with open_player(lds_db, seed=4, precision=precision) as pc, \
+def test_opencl_matches_numpy_reference(lds_db, precision, cl_device):
+    with open_player(lds_db, seed=4, precision=precision, backend="opencl", device=cl_device) as pc, \
             open_player(lds_db, seed=4, precision=precision, backend="numpy") as pn:
         for _ in range(20):
             a, b = pc.next_frame(), pn.next_frame()

@@ -29,8 +29,8 @@ def mix_db(tmp_path_factory):
 
 
 @pytest.mark.parametrize("precision", ["float32", "float16"])
-def test_opencl_matches_numpy_reference(mix_db, precision):
-    with MixturePlayer(mix_db, seed=5, precision=precision) as a, \
+def test_opencl_matches_numpy_reference(mix_db, precision, cl_device):
+    with MixturePlayer(mix_db, seed=5, precision=precision, backend="opencl", device=cl_device) as a, \
             MixturePlayer(mix_db, seed=5, backend="numpy", precision=precision) as b:
         for _ in range(15):
             fa, fb = a.next_frame(), b.next_frame()

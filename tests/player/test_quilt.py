@@ -50,11 +50,11 @@ def step_db(tmp_path, t=30, switch=12):
 
 # -- OpenCL == numpy ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("end", ENDS)
-def test_opencl_matches_numpy(spread_db, cl_context, end):
+def test_opencl_matches_numpy(spread_db, cl_device, end):
     path = spread_db[0]
     rate = ratemap.point_light((56, 72), (10, 40), 20.0, max_rate=3.0, min_rate=0.5)
     opts = dict(jitter=3.0, end=end, seed=4)
-    with EvolvePlayer(path, backend="numpy", **opts) as ref, EvolvePlayer(path, backend="opencl", **opts) as cl:
+    with EvolvePlayer(path, backend="numpy", **opts) as ref, EvolvePlayer(path, backend="opencl", device=cl_device, **opts) as cl:
         exact = 0
         for k in range(40):
             if k == 20:
@@ -69,7 +69,7 @@ def test_opencl_matches_numpy(spread_db, cl_context, end):
 
 
 @pytest.mark.parametrize("interpolate", [True, False])
-def test_opencl_matches_numpy_rate_classes(spread_db, cl_context, interpolate):
+def test_opencl_matches_numpy_rate_classes(spread_db, cl_device, interpolate):
     """Rate maps cut into runs of constant (quantized) rate: halves, a smoothed band, many
     steps that are not multiples of the quantization step."""
     path = spread_db[0]
@@ -78,7 +78,7 @@ def test_opencl_matches_numpy_rate_classes(spread_db, cl_context, interpolate):
     maps = [(ratemap.halves((h, w), 2.0, 1.0), 0.0), (ratemap.halves((h, w), 2.0, 1.0), 3.0),
             (np.tile(stairs, (h, 1)), 0.0)]
     opts = dict(jitter=2.5, seed=2, interpolate=interpolate, end="pingpong")
-    with EvolvePlayer(path, backend="numpy", **opts) as ref, EvolvePlayer(path, backend="opencl", **opts) as cl:
+    with EvolvePlayer(path, backend="numpy", **opts) as ref, EvolvePlayer(path, backend="opencl", device=cl_device, **opts) as cl:
         exact = total = 0
         for rate, sigma in maps:
             ref.rate_map = cl.rate_map = rate

@@ -37,9 +37,9 @@ def _close(a, b):
 
 
 @pytest.mark.parametrize("labels", [None, "halves", "checker"])
-def test_opencl_matches_numpy(tiles_db, labels):
+def test_opencl_matches_numpy(tiles_db, labels, cl_device):
     kw = dict(size=(70, 45), seed=2, labels=labels, tone="consensus")
-    _close(_frames(tiles_db, 6, backend="opencl", **kw), _frames(tiles_db, 6, backend="numpy", **kw))
+    _close(_frames(tiles_db, 6, backend="opencl", device=cl_device, **kw), _frames(tiles_db, 6, backend="numpy", **kw))
 
 
 def test_any_size_and_determinism(tiles_db):

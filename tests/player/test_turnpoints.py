@@ -29,10 +29,10 @@ def pend_db(tmp_path_factory):
 
 
 @pytest.mark.parametrize("playback", PLAYBACKS)
-def test_opencl_matches_numpy_exactly(pend_db, cl_context, playback):
+def test_opencl_matches_numpy_exactly(pend_db, cl_device, playback):
     path = pend_db[0]
     with TurnPointPlayer(path, backend="numpy", playback=playback, seed=5) as ref, \
-            TurnPointPlayer(path, backend="opencl", playback=playback, seed=5) as cl:
+            TurnPointPlayer(path, backend="opencl", device=cl_device, playback=playback, seed=5) as cl:
         blended, terms = 0, set()
         for k in range(160):
             if k % 40 == 0:

@@ -1,0 +1,422 @@
+"""The device self-test: proof, not a guess, that an OpenCL device runs dynatex's kernels.
+
+A device is used only after every kernel, built with the defines the modes use, rendered
+small inputs equal to its numpy reference (exactly where the contract is exact, within the
+documented tolerance for float paths). The test runs in a child process with a timeout, so
+a driver that crashes or hangs while compiling or running a kernel takes down the child,
+never the caller. Verdicts are cached per (platform, platform version, device, driver
+version, dynatex version, kernel sources) in the user's cache folder, so a game pays the
+test once per machine and driver.
+
+The checks open the small database shipped beside this module (``selftest.h5``, every
+method on a 48-frame 32x24 clip; ``tools/make_selftest_db.py`` rebuilds it) with every
+mode on the device and with the numpy backend, and compare frames; the gather engine is
+also checked directly on the defines the modes do not reach. Kernel variants
+(``kernels/variants/``, not portable OpenCL C) are checked last and separately: a variant
+that fails only keeps the device on its portable kernel.
+
+Examples
+--------
+>>> from dynatex.player import selftest
+>>> [v.ok for v in map(selftest.verdict, selftest.devices())]     # doctest: +SKIP
+[True, True]
+
+``python -m dynatex.player --check`` prints the same for every device.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .opencl import DeviceInfo, devices
+
+#: Seconds a device's whole self-test may take before it counts as hung
+#: (environment variable ``DYNATEX_SELFTEST_TIMEOUT`` overrides).
+TIMEOUT = 180.0
+#: Environment variable naming an extra ``.cl`` file to check first (kernel ``check(src, dst)``
+#: must copy 4096 bytes): how the tests inject a kernel that crashes, hangs or computes wrong.
+INJECT_ENV = "DYNATEX_SELFTEST_INJECT"
+#: The texture of ``selftest.h5``.
+TEXTURE = "selftest"
+#: Set in the self-test's child process: the kernel variants it may use (None: the cached verdicts decide).
+ALLOWED_VARIANTS: frozenset[str] | None = None
+
+_lock = threading.Lock()
+_verdicts: dict[str, "Verdict"] = {}
+
+
+@dataclass
+class Verdict:
+    """The self-test's finding for one device."""
+
+    ok: bool
+    reason: str = ""                       # what failed, one line ("" when ok)
+    variants: dict[str, bool] = field(default_factory=dict)
+    variant_reasons: dict[str, str] = field(default_factory=dict)
+    seconds: float = 0.0
+    device: str = ""
+
+
+# -- cache ---------------------------------------------------------------------------------
+def cache_path() -> Path:
+    """Where verdicts are kept: ``$DYNATEX_CACHE_DIR``, else the platform's user cache folder."""
+    root = os.environ.get("DYNATEX_CACHE_DIR")
+    if root:
+        return Path(root) / "devices.json"
+    if sys.platform == "win32":
+        base = Path(os.environ.get("LOCALAPPDATA", Path.home() / "AppData" / "Local"))
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Caches"
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "dynatex" / "devices.json"
+
+
+def _sources_hash() -> str:
+    """A digest of everything a verdict depends on besides the device: kernels, checks, data."""
+    h = hashlib.sha256()
+    kernels = resources.files("dynatex.player.kernels")
+    for item in sorted(_walk(kernels), key=lambda r: r.name):
+        h.update(item.name.encode() + b"\0" + item.read_bytes())
+    here = resources.files("dynatex.player")
+    for name in ("selftest.py", "selftest.h5", "gather.py", "projection.py", "quilt.py", "turnpoints.py"):
+        h.update(here.joinpath(name).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _walk(folder):
+    for item in folder.iterdir():
+        if item.is_dir():
+            yield from _walk(item)
+        elif item.name.endswith(".cl"):
+            yield item
+
+
+def _version() -> str:
+    from .. import __version__
+    return __version__
+
+
+def cache_key(info: DeviceInfo) -> str:
+    """The key a device's verdict is cached under (changes with its driver and with dynatex)."""
+    inject = os.environ.get(INJECT_ENV, "")
+    if inject:
+        inject = hashlib.sha256(Path(inject).read_bytes()).hexdigest()[:16] if Path(inject).is_file() else inject
+    parts = [info.platform, info.platform_version, info.name, info.vendor, info.driver_version,
+             _version(), _sources_hash(), inject]
+    return hashlib.sha256("\x1f".join(parts).encode()).hexdigest()[:24]
+
+
+def _read_cache() -> dict:
+    try:
+        data = json.loads(cache_path().read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _write_cache(key: str, verdict: Verdict) -> None:
+    """Add one verdict to the cache file atomically; a cache that cannot be written is only logged."""
+    path = cache_path()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        data = _read_cache()
+        data[key] = asdict(verdict)
+        fd, tmp = tempfile.mkstemp(prefix=".devices.", suffix=".tmp", dir=path.parent)
+        with os.fdopen(fd, "w") as f:
+            json.dump(data, f, indent=1, sort_keys=True)
+        os.replace(tmp, path)
+    except OSError as exc:
+        from .opencl import log
+        log.warning("cannot cache the OpenCL self-test verdict in %s: %s", path, exc)
+
+
+def cached_verdict(info: DeviceInfo) -> Verdict | None:
+    """The verdict already known for ``info`` (this process or the cache file), else None."""
+    key = cache_key(info)
+    with _lock:
+        if key in _verdicts:
+            return _verdicts[key]
+    entry = _read_cache().get(key)
+    if not isinstance(entry, dict):
+        return None
+    try:
+        v = Verdict(**entry)
+    except TypeError:
+        return None
+    with _lock:
+        _verdicts[key] = v
+    return v
+
+
+def verdict(info: DeviceInfo, *, refresh: bool = False) -> Verdict:
+    """The self-test verdict for ``info``: cached, or found now in a child process and cached."""
+    if not refresh:
+        v = cached_verdict(info)
+        if v is not None:
+            return v
+    v = run_child(info)
+    key = cache_key(info)
+    with _lock:
+        _verdicts[key] = v
+    _write_cache(key, v)
+    return v
+
+
+# -- the parent's side ------------------------------------------------------------------------
+def run_child(info: DeviceInfo, *, timeout: float | None = None) -> Verdict:
+    """Run the checks for ``info`` in a child process; a crash or hang there is a failed verdict."""
+    if timeout is None:
+        timeout = float(os.environ.get("DYNATEX_SELFTEST_TIMEOUT", TIMEOUT))
+    cmd = [sys.executable, "-m", "dynatex.player.selftest", info.index, info.name]
+    env = dict(os.environ, PYTHONFAULTHANDLER="0")
+    start = time.perf_counter()
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env,
+                              stdin=subprocess.DEVNULL)
+        out, code, hung = done.stdout, done.returncode, False
+    except subprocess.TimeoutExpired as exc:
+        out = exc.stdout.decode(errors="replace") if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+        code, hung = None, True
+    seconds = time.perf_counter() - start
+    return _parse(out, code, hung, timeout, seconds, info)
+
+
+def _parse(out: str, code: int | None, hung: bool, timeout: float, seconds: float, info: DeviceInfo) -> Verdict:
+    passed, current, failures, final = [], None, {}, None
+    for line in out.splitlines():
+        word, _, rest = line.partition(" ")
+        if word == "check":
+            current = rest
+        elif word == "pass":
+            passed.append(rest)
+            current = None
+        elif word == "fail":
+            name, _, why = rest.partition(": ")
+            failures[name] = why
+            current = None
+        elif word == "verdict":
+            final = rest
+    if final is not None and code == 0:
+        v = Verdict(**json.loads(final))
+        v.seconds = seconds
+        return v
+    if hung:
+        what = f"hung (no verdict after {timeout:.0f} s)"
+    elif code is not None and code < 0:
+        what = f"crashed (signal {-code})" + (" at exit, after its checks" if final is not None else "")
+    else:
+        what = f"exited with status {code}" + (" after its checks" if final is not None else "")
+    where = f" in check {current!r}" if current else ""
+    portable_done = current is not None and current.startswith("variant ")
+    v = Verdict(ok=portable_done and not any(not k.startswith("variant ") for k in failures),
+                reason="" if portable_done else f"{what}{where}", seconds=seconds, device=info.describe())
+    for name in CHECK_VARIANTS:
+        check = f"variant {name}"
+        v.variants[name] = check in passed
+        if check == current:
+            v.variant_reasons[name] = f"{what}{where}"
+        elif check in failures:
+            v.variant_reasons[name] = failures[check]
+    return v
+
+
+# -- the checks (run in the child) ------------------------------------------------------------
+def _db_path() -> str:
+    return str(resources.files("dynatex.player").joinpath("selftest.h5"))
+
+
+def _compare(name: str, got: np.ndarray, want: np.ndarray, max_abs: int, max_share: float) -> str | None:
+    if got.shape != want.shape:
+        return f"{name}: shape {got.shape}, reference {want.shape}"
+    d = np.abs(got.astype(np.int16) - want.astype(np.int16))
+    share = float((d > 0).mean()) if d.size else 0.0
+    if int(d.max(initial=0)) > max_abs or share > max_share:
+        return (f"{name}: {share:.1%} of values differ from the numpy reference, by up to {int(d.max())} "
+                f"(allowed {max_abs}, {max_share:.0%})")
+    return None
+
+
+def _mode_check(mode: str, options: dict, *, frames: int = 4, max_abs: int = 1,
+                max_share: float = 0.01) -> Callable[[str], str | None]:
+    def check(device: str) -> str | None:
+        from . import open_player
+        with open_player(_db_path(), TEXTURE, mode=mode, backend="opencl", device=device, **options) as pc, \
+                open_player(_db_path(), TEXTURE, mode=mode, backend="numpy", **options) as pn:
+            out = np.empty(pc.shape, np.uint8)
+            for k in range(frames):
+                pc.next_frame(out=out)
+                problem = _compare(f"frame {k}", out, pn.next_frame(), max_abs, max_share)
+                if problem:
+                    return problem
+        return None
+    return check
+
+
+def _gather_check(*, cell, time_step: int, wrap: str, interpolate: bool = True, size=(40, 136),
+                  wide: bool | None = False) -> Callable[[str], str | None]:
+    """The gather engine against its reference, exactly, on random maps and tones."""
+    def check(device: str) -> str | None:
+        from .gather import Gather, pack_source
+        rng = np.random.default_rng(7)
+        stack = rng.integers(0, 256, (6, 20, 36, 3), dtype=np.uint8)
+        g = Gather(stack, size, backend="opencl", device=device, wrap=wrap, interpolate=interpolate,
+                   time_step=time_step, cell=cell, wide=wide)
+        g.set_tones(rng.uniform(0.5, 1.5, (3, 3)).astype(np.float32), rng.uniform(-20, 20, (3, 3)).astype(np.float32))
+        h, w = size
+        if cell is None:
+            idx = rng.integers(0, 20 * 36, (h, w))
+            idx[: h // 2] = (np.arange(w) % 36)[None, :] + 36 * (np.arange(h // 2) % 20)[:, None]
+            g.set_source_map(pack_source(idx, rng.integers(0, 3, (h, w))))
+        else:
+            gh, gw = -(-h // cell[0]), -(-w // cell[1])
+            oy = rng.integers(0, 20 - cell[0] + 1, (gh, gw))
+            ox = rng.integers(0, 36 - cell[1] + 1, (gh, gw))
+            g.set_source_grid(pack_source(oy * 36 + ox, rng.integers(0, 3, (gh, gw))))
+        g.set_time_map(rng.uniform(-3, 9, g.tmap_shape).astype(np.float32),
+                       rng.uniform(0, 4, g.tmap_shape).astype(np.float32))
+        out = np.empty((h, w, 3), np.uint8)
+        for t, fade in ((0.0, 0.0), (2.3, 0.5), (-7.75, 1.0)):
+            g.render(t, out, fade=fade)
+            problem = _compare(f"t={t}", out, g.render_reference(t, fade=fade), 0, 0.0)
+            if problem:
+                return problem
+        return None
+    return check
+
+
+#: name -> check(device) returning None or what failed; run in this order, portable kernels only
+CHECKS: dict[str, Callable[[str], str | None]] = {
+    "gather: per-pixel source, time step 1, loop": _gather_check(cell=None, time_step=1, wrap="loop"),
+    "gather: cell grid, time step 8, clamp": _gather_check(cell=(8, 12), time_step=8, wrap="clamp"),
+    "gather: per-pixel source, time step 8, ping-pong, nearest": _gather_check(
+        cell=None, time_step=8, wrap="pingpong", interpolate=False),
+    "gather: cell grid, time step 3": _gather_check(cell=(5, 7), time_step=3, wrap="loop"),
+    "mode lds, float32": _mode_check("lds", {"seed": 3}),
+    "mode lds, float16": _mode_check("lds", {"seed": 3, "precision": "float16"}),
+    "mode mixture, float32": _mode_check("mixture", {"seed": 3}),
+    "mode mixture, float16": _mode_check("mixture", {"seed": 3, "precision": "float16"}),
+    "mode turnpoints": _mode_check("turnpoints", {"seed": 3}, frames=8, max_abs=0, max_share=0.0),
+    "mode tiles": _mode_check("tiles", {"seed": 3, "size": (72, 136), "tone": "consensus"}),
+    "mode evolve": _mode_check("evolve", {"seed": 3, "jitter": 2.0}, frames=6, max_share=1.0),
+    "mode evolve, rate map": _mode_check("evolve", {"seed": 3, "rate_sigma": 4.0,
+                                                    "rate_map": np.linspace(0.5, 2, 48 * 64).reshape(48, 64)},
+                                         frames=6, max_share=1.0),
+}
+
+#: kernel variant -> the checks that must pass before a device uses it (run after CHECKS)
+CHECK_VARIANTS: dict[str, dict[str, Callable[[str], str | None]]] = {
+    "gather_wide": {
+        "grid": _gather_check(cell=(8, 12), time_step=8, wrap="loop", size=(72, 200), wide=True),
+        "per-pixel source": _gather_check(cell=None, time_step=8, wrap="clamp", size=(40, 136), wide=True),
+        "mode tiles": _mode_check("tiles", {"seed": 3, "size": (72, 136), "tone": "consensus"}),
+    },
+}
+
+
+def _inject_check(path: str) -> Callable[[str], str | None]:
+    def check(device: str) -> str | None:
+        import pyopencl as cl
+        from .opencl import get_context
+        ctx = get_context(device)
+        queue = cl.CommandQueue(ctx)
+        src = np.arange(4096, dtype=np.uint32).astype(np.uint8)
+        dst = np.zeros_like(src)
+        mf = cl.mem_flags
+        a = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=src)
+        b = cl.Buffer(ctx, mf.WRITE_ONLY, dst.nbytes)
+        prog = cl.Program(ctx, Path(path).read_text()).build()
+        prog.check(queue, (src.size,), None, a, b)
+        cl.enqueue_copy(queue, dst, b)
+        queue.finish()
+        return _compare("injected kernel", dst, src, 0, 0.0)
+    return check
+
+
+def _child(index: str, name: str) -> int:
+    """Run every check on device ``index`` and print progress lines and the verdict (JSON)."""
+    global ALLOWED_VARIANTS
+    import warnings
+    warnings.simplefilter("ignore")                  # compiler chatter is not a verdict
+    from .opencl import _match
+    info = _match(devices(), index, "device")
+    if info.name != name:
+        print(f"verdict {json.dumps(asdict(Verdict(False, f'device {index} is {info.name!r}, not {name!r}')))}")
+        return 0
+    start = time.perf_counter()
+    ALLOWED_VARIANTS = frozenset()
+    checks = dict(CHECKS)
+    if os.environ.get(INJECT_ENV):
+        checks = {"injected kernel": _inject_check(os.environ[INJECT_ENV]), **checks}
+    v = Verdict(ok=True, device=info.describe())
+    for check_name, check in checks.items():
+        problem = _run_one(check_name, check, index)
+        if problem:
+            v.ok, v.reason = False, f"{check_name}: {problem}"
+            break
+    if v.ok:
+        for variant, vchecks in CHECK_VARIANTS.items():
+            ALLOWED_VARIANTS = frozenset({variant})
+            if not info.is_cpu:
+                v.variants[variant] = False
+                v.variant_reasons[variant] = "CPU devices only"
+                continue
+            problem = _run_one(f"variant {variant}", lambda d: _all(vchecks, d), index)
+            v.variants[variant] = problem is None
+            if problem:
+                v.variant_reasons[variant] = problem
+    v.seconds = time.perf_counter() - start
+    print(f"verdict {json.dumps(asdict(v))}", flush=True)
+    return 0
+
+
+def _all(checks: dict[str, Callable[[str], str | None]], device: str) -> str | None:
+    for name, check in checks.items():
+        problem = check(device)
+        if problem:
+            return f"{name}: {problem}"
+    return None
+
+
+def _one_line(exc: Exception) -> str:
+    """An exception in one line; for a build failure, the file and the compiler's first error."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    errors = [ln for ln in lines[1:] if "error" in ln.lower() and "errors generated" not in ln]
+    head = lines[0] if lines else ""
+    if errors:
+        head = head.split(" with ")[0] + ": " + errors[0]
+    return f"{type(exc).__name__}: {head[:300]}"
+
+
+def _run_one(name: str, check: Callable[[str], str | None], device: str) -> str | None:
+    print(f"check {name}", flush=True)
+    try:
+        problem = check(device)
+    except Exception as exc:                           # any failure is the device's verdict
+        problem = _one_line(exc)
+    if problem:
+        print(f"fail {name}: {problem}", flush=True)
+    else:
+        print(f"pass {name}", flush=True)
+    return problem
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3:
+        print("usage: python -m dynatex.player.selftest P:D DEVICE_NAME  (run by the player, not by hand: "
+              "use python -m dynatex.player --check)", file=sys.stderr)
+        raise SystemExit(2)
+    from dynatex.player import selftest as _module     # this file runs as __main__: use the module's globals
+    raise SystemExit(_module._child(sys.argv[1], sys.argv[2]))

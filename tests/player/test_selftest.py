@@ -1,0 +1,160 @@
+"""The device self-test: a device that crashes, hangs or computes wrong is found out in a child
+process and never used, the caller lives, and verdicts are cached."""
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dynatex.player import open_player, opencl, selftest
+from dynatex.player.base import Player
+
+from ..conftest import verified_devices
+
+KERNELS = {
+    # writes through a wild pointer: the device segfaults while running it
+    "crash": """__kernel void check(__global const uchar *src, __global uchar *dst)
+{
+    __global uchar *wild = (__global uchar *)((size_t)0x10 + get_global_id(0) * 4096);
+    wild[0] = src[get_global_id(0)];
+    dst[get_global_id(0)] = wild[0];
+}""",
+    # never returns
+    "hang": """__kernel void check(__global const uchar *src, __global uchar *dst)
+{
+    for (uint i = 0; ; ++i)
+        dst[i & 4095] = src[i & 4095] + (uchar)i;
+}""",
+    # one value off among 4096
+    "wrong": """__kernel void check(__global const uchar *src, __global uchar *dst)
+{
+    const size_t i = get_global_id(0);
+    dst[i] = src[i] + (i == 1000);
+}""",
+}
+
+
+@pytest.fixture
+def fresh_cache(tmp_path, monkeypatch):
+    """An empty verdict cache, and no device or verdict remembered by this process."""
+    monkeypatch.setenv("DYNATEX_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(selftest, "_verdicts", {})
+    monkeypatch.setattr(opencl, "_contexts", {})
+    return tmp_path / "cache" / "devices.json"
+
+
+@pytest.fixture
+def inject(tmp_path, monkeypatch, fresh_cache):
+    """``inject(kind)``: the self-test also runs one of KERNELS first, on every device."""
+    def use(kind: str) -> None:
+        path = tmp_path / f"{kind}.cl"
+        path.write_text(KERNELS[kind])
+        monkeypatch.setenv(selftest.INJECT_ENV, str(path))
+    return use
+
+
+@pytest.fixture(scope="module")
+def device():
+    """The first verified device: the self-test's machinery is proven on one device, not all."""
+    devices = verified_devices()
+    if not devices:
+        pytest.skip("no OpenCL device passed the self-test here")
+    return devices[0]
+
+
+def test_every_verified_device_ran_every_check(cl_device):
+    v = selftest.verdict(next(d for d in opencl.devices() if d.index == cl_device))
+    assert v.ok and v.reason == "" and v.seconds > 0
+    assert set(v.variants) == set(selftest.CHECK_VARIANTS)
+
+
+@pytest.mark.parametrize("kind, words", [("crash", "crashed (signal"), ("wrong", "differ from the numpy reference")])
+def test_a_device_that_crashes_or_computes_wrong_is_rejected(device, inject, kind, words):
+    inject(kind)
+    v = selftest.run_child(device)
+    assert not v.ok
+    assert words in v.reason and "injected kernel" in v.reason
+    assert "\n" not in v.reason
+    assert not any(v.variants.values())
+
+
+def test_a_device_that_hangs_is_rejected_after_the_timeout(device, inject):
+    inject("hang")
+    v = selftest.run_child(device, timeout=15)
+    assert not v.ok and v.reason == "hung (no verdict after 15 s) in check 'injected kernel'"
+    assert 15 <= v.seconds < 60
+
+
+def test_the_player_falls_back_to_numpy_when_no_device_passes(device, inject, monkeypatch):
+    """Every device crashes in its self-test: the caller lives, gets frames from the numpy
+    backend with one warning, and an explicit demand for OpenCL is a clear error."""
+    inject("crash")
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    monkeypatch.setattr("dynatex.player.base._fallback_warned", False)
+    db = str(Path(selftest._db_path()))
+    with pytest.warns(RuntimeWarning, match="numpy backend.*passed the self-test.*crashed"):
+        p = open_player(db, selftest.TEXTURE, mode="lds")
+    with p, open_player(db, selftest.TEXTURE, mode="lds") as q:      # warned once only
+        assert p.backend == q.backend == "numpy"
+        assert p.next_frame().shape == (24, 32, 3)
+    with pytest.raises(opencl.OpenCLUnavailableError, match="no OpenCL device here passed the self-test"):
+        open_player(db, selftest.TEXTURE, mode="lds", backend="opencl")
+    with pytest.raises(opencl.DeviceNotVerifiedError, match=rf"device='{device.index}'.*failed the self-test: crashed"):
+        open_player(db, selftest.TEXTURE, mode="lds", device=device.index)
+    monkeypatch.setenv("PYOPENCL_CTX", device.index)
+    with pytest.raises(opencl.DeviceNotVerifiedError, match="PYOPENCL_CTX"):
+        open_player(db, selftest.TEXTURE, mode="tiles")
+
+
+def test_verdicts_are_cached_per_device_and_driver(device, fresh_cache, monkeypatch):
+    info = device
+    v = selftest.verdict(info)
+    assert v.ok and selftest.cache_key(info) in json.loads(fresh_cache.read_text())
+    # a new process (nothing in memory) reads the file and runs no child
+    monkeypatch.setattr(selftest, "_verdicts", {})
+    monkeypatch.setattr(selftest, "run_child", lambda *a, **k: pytest.fail("the self-test ran again"))
+    assert selftest.verdict(info) == v
+    other = dataclasses.replace(info, driver_version=info.driver_version + "-next")
+    assert selftest.cache_key(other) != selftest.cache_key(info)
+    assert selftest.cached_verdict(other) is None
+
+
+def test_an_unwritable_cache_only_costs_the_cache(device, tmp_path, monkeypatch, caplog):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("DYNATEX_CACHE_DIR", str(blocker / "cache"))
+    monkeypatch.setattr(selftest, "_verdicts", {})
+    with caplog.at_level("WARNING"):
+        assert selftest.verdict(device).ok
+    assert "cannot cache the OpenCL self-test verdict" in caplog.text
+
+
+def test_a_crash_in_a_variant_keeps_the_device_on_its_portable_kernels():
+    info = opencl.DeviceInfo("0:0", "P", "OpenCL 3.0", "cpu", "v", "1", True)
+    out = "check mode lds\npass mode lds\ncheck variant gather_wide\n"
+    v = selftest._parse(out, -11, False, 60.0, 1.0, info)
+    assert v.ok and v.variants == {"gather_wide": False}
+    assert v.variant_reasons["gather_wide"] == "crashed (signal 11) in check 'variant gather_wide'"
+    v = selftest._parse("check mode lds\n", -6, False, 60.0, 1.0, info)
+    assert not v.ok and v.reason == "crashed (signal 6) in check 'mode lds'"
+
+
+def test_check_command_lists_every_device_with_its_verdict():
+    done = subprocess.run([sys.executable, "-m", "dynatex.player", "--check"], capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    lines = [ln for ln in done.stdout.splitlines() if ln[:1].isdigit()]
+    assert len(lines) == len(opencl.devices())
+    assert all(": verified (" in ln or ": FAILED: " in ln for ln in lines), lines
+    assert "the player uses " in done.stdout
+
+
+def test_players_open_on_a_verified_device_by_default(device):
+    with open_player(selftest._db_path(), selftest.TEXTURE, mode="turnpoints", seed=1) as p:
+        assert isinstance(p, Player) and p.backend == "opencl"
+        assert p.next_frame().dtype == np.uint8
