@@ -9,6 +9,7 @@ import argparse
 import importlib
 import sys
 import traceback
+import warnings
 
 from . import __version__
 
@@ -21,9 +22,10 @@ class UsageError(ValueError):
 
 
 def _input_errors() -> tuple[type[BaseException], ...]:
+    from .player.opencl import OpenCLUnavailableError
     from .tiledb import TileDBError
-    errors: list[type[BaseException]] = [UsageError, TileDBError, FileNotFoundError, IsADirectoryError,
-                                         PermissionError, ValueError, TypeError, KeyError]
+    errors: list[type[BaseException]] = [UsageError, TileDBError, OpenCLUnavailableError, FileNotFoundError,
+                                         IsADirectoryError, PermissionError, ValueError, TypeError, KeyError]
     return tuple(errors)
 
 
@@ -46,7 +48,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _warning_line(message, category, filename, lineno, line=None) -> str:
+    return f"dynatex: warning: {message}\n"
+
+
 def main(argv: list[str] | None = None) -> int:
+    warnings.formatwarning = _warning_line          # a warning is one line too, not a source location
     parser = build_parser()
     args = parser.parse_args(argv)
     debug = getattr(args, "debug", False)

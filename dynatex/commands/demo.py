@@ -99,7 +99,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
                        description="The embedded default: make a sample clip, analyze it, play it with "
                                    "several edits, write demo.mp4 and contact_sheet.png, print a short benchmark.")
     p.add_argument("-o", "--output", default="dynatex-demo", help="output folder (default ./dynatex-demo)")
-    p.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
+    p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto",
+                   help="auto (default): OpenCL on a device that passed the self-test, else numpy")
     p.add_argument("--seed", type=int, default=0)
     return p
 
@@ -129,9 +130,13 @@ def run(args: argparse.Namespace) -> int:
     from .play import FrameWriter
     video = FrameWriter(os.path.join(args.output, "demo.mp4"))
     rows = []
+    backend = args.backend
     for step in DEMO_STEPS:
-        with open_player(db, step.texture, mode=step.mode, backend=args.backend, seed=args.seed,
+        with open_player(db, step.texture, mode=step.mode, backend=backend, seed=args.seed,
                          **step.options) as p:
+            if backend == "auto":                  # the first player decided: keep it for the rest
+                backend = p.backend
+                print(f"player backend: {_backend_line(p)}")
             for key, value in step.controls.items():
                 setattr(p, key, value)
             shown = [p.next_frame() for _ in range(step.frames)]
@@ -144,9 +149,16 @@ def run(args: argparse.Namespace) -> int:
     _contact_sheet(rows, sheet)
     print(f"wrote {video.output} and {sheet}")
 
-    _short_benchmark(db, args.backend)
+    _short_benchmark(db, backend)
     print(f"demo finished in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _backend_line(p) -> str:
+    if p.backend == "numpy":
+        return "numpy (no OpenCL device passed the self-test; `python -m dynatex.player --check` says why)"
+    d = p.ctx.devices[0]
+    return f"OpenCL on {d.platform.name.strip()} / {d.name.strip()}"
 
 
 def _fit(frame: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
@@ -182,7 +194,7 @@ def _contact_sheet(rows: list[tuple[str, list[np.ndarray]]], path: str, thumb_h:
 def _short_benchmark(db: str, backend: str) -> None:
     from ..benchmark import bench_player, copy_bandwidth, format_result
     if backend != "opencl":
-        print("benchmark skipped: it compares the OpenCL player with the numpy reference (--backend opencl)")
+        print("benchmark skipped: it compares the OpenCL player with the numpy reference")
         return
     bw = copy_bandwidth(mbytes=64, repeats=3)
     print(f"benchmark (copy bandwidth {bw['gbs']:.1f} GB/s):")

@@ -42,7 +42,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--seed", type=int, default=0, help="player seed, also the patch-sampling seed")
     g.add_argument("--size", type=size_arg, default=None, metavar="WxH",
                    help="output size, for modes that synthesize any size")
-    g.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
+    g.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto",
+                   help="auto (default): OpenCL on a device that passed the self-test, else numpy")
     g = p.add_argument_group("source and metrics")
     g.add_argument("--source-size", type=size_arg, default=None, metavar="WxH",
                    help="resize the source frames (default: as stored, or as the database recorded)")

@@ -25,7 +25,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="output size, for modes that synthesize any size")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--fps", type=float, default=None, help="frame rate of the video (default: the source's)")
-    p.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
+    p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto",
+                   help="auto (default): OpenCL on a device that passed the self-test, else numpy")
     p.add_argument("--device", default=None, help="OpenCL device (index P:D, or a name substring)")
     p.add_argument("-o", "--output", required=True, help="out.mp4 / out.avi, frame_%%04d.png, or a folder")
     g = p.add_argument_group("lds controls")
