@@ -33,7 +33,7 @@ with open_player(selftest._db_path(), selftest.TEXTURE, mode=mode, backend="open
     p.next_frame()
     t2 = time.perf_counter()
     print(json.dumps({"open_s": t1 - t0, "first_frame_s": t2 - t0,
-                      "device": p.ctx.devices[0].name.strip() + " / " + p.ctx.devices[0].platform.version.strip()}))
+                      "device": " ".join(p.ctx.devices[0].platform.version.split()[:4])}))
 """
 
 

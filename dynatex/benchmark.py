@@ -48,22 +48,20 @@ def copy_bandwidth(*, mbytes: int = 256, repeats: int = 5) -> dict[str, float]:
 
 
 def _opencl_copy_bandwidth(src: np.ndarray, repeats: int) -> dict[str, float]:
-    """GB/s of the plain copy of ``src`` (player/kernels/copy.cl) and, where it builds, the
-    streaming copy (player/kernels/variants/copy_stream.cl), and the larger as ``opencl_gbs``;
+    """GB/s of the plain copy of ``src`` (player/kernels/copy.cl) and, where the self-test
+    verified it, the streaming copy (player/kernels/variants/copy_stream.cl), and the larger as ``opencl_gbs``;
     each the median of ``repeats`` after one warm-up."""
     import pyopencl as cl
-    from .player.opencl import KernelBuildError, build_program, get_context
+    from .player.opencl import build_program, get_context, variant_verified
     ctx = get_context()
     queue = cl.CommandQueue(ctx)
     mf = cl.mem_flags
     a = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=src)
     b = cl.Buffer(ctx, mf.WRITE_ONLY, src.nbytes)
     copies = [("plain", build_program(ctx, "copy.cl"), src.size // 16)]
-    try:
+    if variant_verified(ctx.devices[0], "copy_stream"):
         copies.append(("stream", build_program(ctx, "variants/copy_stream.cl", {"BLOCKS": COPY_BLOCKS}),
                        src.size // (16 * COPY_BLOCKS)))
-    except KernelBuildError:
-        pass                   # a compiler without clang's streaming stores: the plain copy only
     out = {}
     for name, prog, size in copies:
         copy = prog.kernel(f"copy_{name}")

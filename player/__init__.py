@@ -14,7 +14,7 @@ import os
 
 from .base import BACKENDS, Player
 from .modes import MODES, player_class
-from .opencl import KernelBuildError, OpenCLUnavailableError, list_devices
+from .opencl import DeviceNotVerifiedError, KernelBuildError, OpenCLUnavailableError, devices, list_devices
 
 
 def open_player(db: str | os.PathLike, texture: str | None = None, *, mode: str = "lds", **options) -> Player:
@@ -22,5 +22,5 @@ def open_player(db: str | os.PathLike, texture: str | None = None, *, mode: str 
     return player_class(mode)(db, texture, **options)
 
 
-__all__ = ["BACKENDS", "KernelBuildError", "MODES", "OpenCLUnavailableError", "Player", "list_devices",
-           "open_player", "player_class"]
+__all__ = ["BACKENDS", "DeviceNotVerifiedError", "KernelBuildError", "MODES", "OpenCLUnavailableError", "Player",
+           "devices", "list_devices", "open_player", "player_class"]

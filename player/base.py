@@ -46,7 +46,11 @@ class Player:
             self.close()
             raise
         if backend != "numpy":
-            self.ctx = _context(backend, device)
+            try:
+                self.ctx = _context(backend, device)
+            except BaseException:
+                self.close()
+                raise
         if self.ctx is None:
             self.backend = "numpy"
         else:
@@ -246,10 +250,10 @@ def _context(backend: str, device: str | None):
     try:
         return opencl.get_context(device)
     except opencl.OpenCLUnavailableError as exc:
-        if backend == "opencl" or device is not None or isinstance(exc, opencl.DeviceNotVerifiedError):
+        if backend == "opencl" or device is not None or os.environ.get("PYOPENCL_CTX"):
             raise
         if not _fallback_warned:
             _fallback_warned = True
             import warnings
-            warnings.warn(f"dynatex player: using the numpy backend (slower): {exc}", RuntimeWarning, stacklevel=4)
+            warnings.warn(f"the player uses the numpy backend (slower): {exc}", RuntimeWarning, stacklevel=4)
         return None

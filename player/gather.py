@@ -52,16 +52,18 @@ at the quantised weight, gain and offset: within one grey level of the real-valu
 for gains up to 1.5 (tested; the weight's error grows as ``|b - a| gain / 510``). Time maps
 are limited to +-2048 frames (the integer time then fits 32 bits).
 
-Device paths (kernels/gather.cl): with ``time_step=8`` a work-item renders a run of 64
-pixels down several bands of 8 rows (a band: the rows of one pair of map rows): a run whose
-source is linear (one cell, or two cells split at a boundary and merged bytewise; a
-per-pixel map with consecutive pixels and one tone) is blended and toned on 64-byte vectors
-in 16-bit lanes in every band whose frames span at most seven neighbours, tone factors
-pre-expanded per byte on the host and set up once per cell row; other bands, and other time
-steps, go pixel by pixel with the same integers. The runs are placed so that their stores
-are 64-byte aligned wherever the output's rows are a multiple of 64 bytes long and the
-output starts on a 16-byte boundary (any numpy array): they are then non-temporal, writing
-the frame once without reading it first. Where the device shares host memory (PoCL on the
+Device paths: the default kernel (kernels/gather.cl, portable OpenCL C) renders pixel by
+pixel, RUN pixels of a row per work-item. On CPU devices where the self-test verified it,
+``time_step=8`` uses the x86 variant (kernels/variants/gather_wide.cl, clang vector
+extensions): a work-item renders a run of 64 pixels down several bands of 8 rows (a band:
+the rows of one pair of map rows): a run whose source is linear (one cell, or two cells
+split at a boundary and merged bytewise; a per-pixel map with consecutive pixels and one
+tone) is blended and toned on 64-byte vectors in 16-bit lanes in every band whose frames
+span at most seven neighbours, tone factors pre-expanded per byte on the host and set up
+once per cell row; other bands go pixel by pixel with the same integers. The runs are
+placed so that their stores are 64-byte aligned wherever the output's rows are a multiple
+of 64 bytes long and the output starts on a 16-byte boundary (any numpy array): they are
+then non-temporal, writing the frame once without reading it first. Where the device shares host memory (PoCL on the
 CPU; probed once at open, :attr:`Gather.direct`) the kernel writes straight into the
 caller's array: one launch, no copy.
 
@@ -94,7 +96,7 @@ MAX_GAIN, MAX_OFFSET = 63.0, 255.0   # the fixed-point tone's range (every inter
 MAX_TIME = 2048.0     # |time map| in frames: the integer time (4080ths, x 256) fits 32 bits
 RUN = 32              # output pixels per work-item of the per-pixel kernel (time steps other than 8)
 STACK_PAD = 256       # bytes of padding around the device copy of the frame stack (a run's 192 bytes fit)
-BANDS = 8             # wide kernel: a work-item renders one run of 64 pixels on BANDS bands of 8 rows
+BANDS = 8             # wide variant: a work-item renders one run of 64 pixels on BANDS bands of 8 rows
 TONE_STRIDE = 384     # int16 per device tone row: 192 gains then 192 offsets, per byte of a 64-pixel run
 TONE_OB = 192
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
@@ -363,7 +365,7 @@ class Gather:
         self._tones[0, :3] = 1.0
         self.ctx, self.queue = ctx, queue
         self.direct = False       # frames written straight into the caller's array (set at open)
-        self.wide = False         # the 64-lane kernel (time step 8 on a CPU device; set at open)
+        self.wide = False         # the x86 variant renders (time step 8, verified on this device; set at open)
         self._host_out = self._host_buf = None   # the caller's array the kernel writes into, and its buffer
         self._last_t, self._last_fade = 0.0, 0.0
         if backend == "opencl":
@@ -380,12 +382,12 @@ class Gather:
         mf = cl.mem_flags
         h, w = self.out_shape[:2]
         # the x86 variant only where the self-test verified it on this device
-        verified = variant_verified(self.ctx.devices[0], "gather_wide")
-        if self._wide_choice and self.time_step == 8 and not verified:
+        wanted = self.time_step == 8 and self._wide_choice is not False
+        self.wide = wanted and variant_verified(self.ctx.devices[0], "gather_wide")
+        if wanted and self._wide_choice and not self.wide:
             raise OpenCLUnavailableError(
                 f"wide=True: the gather_wide variant is not verified on {self.ctx.devices[0].name} "
                 "(its self-test did not pass there); use wide=None or False")
-        self.wide = self.time_step == 8 and verified and self._wide_choice is not False
         # 16 floats of padding: the time step 8 kernel reads the maps 16 floats at a time
         self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
         self._d_target = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)

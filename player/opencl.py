@@ -151,10 +151,12 @@ def _pick_device(device: str | None) -> DeviceInfo:
     spec, what = device, "device"
     if spec is None and os.environ.get("PYOPENCL_CTX"):
         spec, what = os.environ["PYOPENCL_CTX"], "PYOPENCL_CTX"
+    if selftest.ALLOWED_VARIANTS is not None:         # the self-test's own child process
+        if device is None:
+            raise OpenCLUnavailableError("inside the self-test every context names its device")
+        return _match(infos, device, "device")
     if spec is not None:
         info = _match(infos, spec, what)
-        if selftest.ALLOWED_VARIANTS is not None:     # the self-test's own child process
-            return info
         verdict = selftest.verdict(info)
         if not verdict.ok:
             raise DeviceNotVerifiedError(f"{what}={spec!r}: {info.describe()} failed the self-test: "
@@ -173,11 +175,16 @@ def _pick_device(device: str | None) -> DeviceInfo:
 
 
 def variant_verified(device: "cl.Device", variant: str) -> bool:
-    """Whether kernel ``variant`` (a file of ``kernels/variants/``) passed the self-test on ``device``."""
+    """Whether kernel ``variant`` (a file of ``kernels/variants/``) passed the self-test on
+    ``device``: its cached verdict says so (no verdict, no variant; nothing is run here)."""
     from . import selftest
     if selftest.ALLOWED_VARIANTS is not None:      # inside the self-test itself
         return variant in selftest.ALLOWED_VARIANTS
-    return selftest.verdict(device_info(device)).variants.get(variant, False)
+    try:
+        verdict = selftest.cached_verdict(device_info(device))
+    except OpenCLUnavailableError:
+        return False
+    return bool(verdict and verdict.ok and verdict.variants.get(variant, False))
 
 
 def _match(infos: list[DeviceInfo], spec: str, what: str) -> DeviceInfo:

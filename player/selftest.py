@@ -21,10 +21,14 @@ Examples
 >>> [v.ok for v in map(selftest.verdict, selftest.devices())]     # doctest: +SKIP
 [True, True]
 
-``python -m dynatex.player --check`` prints the same for every device.
+``python -m dynatex.player --check`` prints the same for every device. Environment:
+``DYNATEX_CACHE_DIR`` (where verdicts are kept), ``DYNATEX_SELFTEST_TIMEOUT`` (seconds,
+default 180), ``DYNATEX_PYTHON`` (the interpreter for the child where ``sys.executable`` is
+an application embedding Python rather than Python itself).
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -54,6 +58,7 @@ TEXTURE = "selftest"
 ALLOWED_VARIANTS: frozenset[str] | None = None
 
 _lock = threading.Lock()
+_run_lock = threading.Lock()
 _verdicts: dict[str, "Verdict"] = {}
 
 
@@ -67,6 +72,7 @@ class Verdict:
     variant_reasons: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0
     device: str = ""
+    tested: bool = True                    # False: the child never reached a check (not the device's fault)
 
 
 # -- cache ---------------------------------------------------------------------------------
@@ -84,23 +90,22 @@ def cache_path() -> Path:
     return base / "dynatex" / "devices.json"
 
 
+@functools.lru_cache(maxsize=1)
 def _sources_hash() -> str:
-    """A digest of everything a verdict depends on besides the device: kernels, checks, data."""
+    """A digest of everything a verdict depends on besides the device: the player's modules,
+    kernels and the self-test's database (read once per process)."""
     h = hashlib.sha256()
-    kernels = resources.files("dynatex.player.kernels")
-    for item in sorted(_walk(kernels), key=lambda r: r.name):
+    for item in sorted(_walk(resources.files("dynatex.player")), key=lambda r: str(r)):
         h.update(item.name.encode() + b"\0" + item.read_bytes())
-    here = resources.files("dynatex.player")
-    for name in ("selftest.py", "selftest.h5", "gather.py", "projection.py", "quilt.py", "turnpoints.py"):
-        h.update(here.joinpath(name).read_bytes())
     return h.hexdigest()[:16]
 
 
 def _walk(folder):
     for item in folder.iterdir():
         if item.is_dir():
-            yield from _walk(item)
-        elif item.name.endswith(".cl"):
+            if item.name != "__pycache__":
+                yield from _walk(item)
+        elif item.name.endswith((".cl", ".py", ".h5")):
             yield item
 
 
@@ -162,16 +167,26 @@ def cached_verdict(info: DeviceInfo) -> Verdict | None:
 
 
 def verdict(info: DeviceInfo, *, refresh: bool = False) -> Verdict:
-    """The self-test verdict for ``info``: cached, or found now in a child process and cached."""
+    """The self-test verdict for ``info``: cached, or found now in a child process and cached.
+
+    Self-tests run one at a time (two threads opening players wait for one test). A child
+    that could not start or run its first check (no interpreter, an import failure) says
+    nothing about the device: that verdict is not kept."""
     if not refresh:
         v = cached_verdict(info)
         if v is not None:
             return v
-    v = run_child(info)
-    key = cache_key(info)
-    with _lock:
-        _verdicts[key] = v
-    _write_cache(key, v)
+    with _run_lock:
+        if not refresh:
+            v = cached_verdict(info)
+            if v is not None:
+                return v
+        v = run_child(info)
+        if v.tested:
+            key = cache_key(info)
+            with _lock:
+                _verdicts[key] = v
+            _write_cache(key, v)
     return v
 
 
@@ -180,31 +195,63 @@ def run_child(info: DeviceInfo, *, timeout: float | None = None) -> Verdict:
     """Run the checks for ``info`` in a child process; a crash or hang there is a failed verdict."""
     if timeout is None:
         timeout = float(os.environ.get("DYNATEX_SELFTEST_TIMEOUT", TIMEOUT))
-    cmd = [sys.executable, "-m", "dynatex.player.selftest", info.index, info.name]
-    env = dict(os.environ, PYTHONFAULTHANDLER="0")
+    python = os.environ.get("DYNATEX_PYTHON") or sys.executable
+    if not python or "python" not in Path(python).name.lower():
+        # embedded in an application whose executable is not Python: running it could start the app
+        return Verdict(False, f"cannot run the self-test: {python!r} is not a Python interpreter "
+                              "(set DYNATEX_PYTHON to one)", device=info.describe(), tested=False)
+    cmd = [python, "-m", "dynatex.player.selftest", json.dumps(asdict(info))]
+    env = dict(os.environ)
+    env.pop("PYTHONFAULTHANDLER", None)        # any value turns it on: its dump is not our protocol
     start = time.perf_counter()
     try:
-        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env,
-                              stdin=subprocess.DEVNULL)
-        out, code, hung = done.stdout, done.returncode, False
-    except subprocess.TimeoutExpired as exc:
-        out = exc.stdout.decode(errors="replace") if isinstance(exc.stdout, bytes) else (exc.stdout or "")
-        code, hung = None, True
+        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, errors="replace", env=env, start_new_session=os.name == "posix")
+    except OSError as exc:
+        return Verdict(False, f"cannot start the self-test: {exc}", device=info.describe(), tested=False)
+    hung = False
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        hung = True
+        _kill(proc)
+        try:
+            out, err = proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:   # something else still holds the pipes: give up on them
+            out, err = "", ""
     seconds = time.perf_counter() - start
-    return _parse(out, code, hung, timeout, seconds, info)
+    try:
+        return _parse(out, None if hung else proc.returncode, hung, timeout, seconds, info, err)
+    except (ValueError, TypeError) as exc:
+        return Verdict(False, f"unreadable self-test verdict ({exc})", device=info.describe(), tested=False)
 
 
-def _parse(out: str, code: int | None, hung: bool, timeout: float, seconds: float, info: DeviceInfo) -> Verdict:
-    passed, current, failures, final = [], None, {}, None
+def _kill(proc: subprocess.Popen) -> None:
+    """Kill the child and whatever it started (a compiler), so nothing keeps the pipes open."""
+    if os.name == "posix":
+        import signal
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except OSError:
+            proc.kill()
+    else:
+        proc.kill()
+
+
+def _parse(out: str, code: int | None, hung: bool, timeout: float, seconds: float, info: DeviceInfo,
+           err: str = "") -> Verdict:
+    """The verdict from the child's lines (tab-separated: check NAME, pass NAME, fail NAME WHY,
+    verdict JSON) and how it ended (``code`` None: killed after ``timeout``)."""
+    passed, current, failures, final, started = [], None, {}, None, False
     for line in out.splitlines():
-        word, _, rest = line.partition(" ")
+        word, _, rest = line.partition("\t")
         if word == "check":
-            current = rest
+            current, started = rest, True
         elif word == "pass":
             passed.append(rest)
             current = None
         elif word == "fail":
-            name, _, why = rest.partition(": ")
+            name, _, why = rest.partition("\t")
             failures[name] = why
             current = None
         elif word == "verdict":
@@ -213,6 +260,10 @@ def _parse(out: str, code: int | None, hung: bool, timeout: float, seconds: floa
         v = Verdict(**json.loads(final))
         v.seconds = seconds
         return v
+    if not started and not hung and (code is None or code >= 0):
+        last = err.strip().splitlines()[-1] if err.strip() else f"exit status {code}"
+        return Verdict(False, f"the self-test could not run: {last[:300]}", seconds=seconds,
+                       device=info.describe(), tested=False)
     if hung:
         what = f"hung (no verdict after {timeout:.0f} s)"
     elif code is not None and code < 0:
@@ -220,9 +271,10 @@ def _parse(out: str, code: int | None, hung: bool, timeout: float, seconds: floa
     else:
         what = f"exited with status {code}" + (" after its checks" if final is not None else "")
     where = f" in check {current!r}" if current else ""
-    portable_done = current is not None and current.startswith("variant ")
-    v = Verdict(ok=portable_done and not any(not k.startswith("variant ") for k in failures),
-                reason="" if portable_done else f"{what}{where}", seconds=seconds, device=info.describe())
+    failed = [(k, why) for k, why in failures.items() if not k.startswith("variant ")]
+    portable_done = not failed and current is not None and current.startswith("variant ")
+    reason = f"{failed[0][0]}: {failed[0][1]}" if failed else "" if portable_done else f"{what}{where}"
+    v = Verdict(ok=portable_done, reason=reason, seconds=seconds, device=info.describe())
     for name in CHECK_VARIANTS:
         check = f"variant {name}"
         v.variants[name] = check in passed
@@ -249,12 +301,17 @@ def _compare(name: str, got: np.ndarray, want: np.ndarray, max_abs: int, max_sha
     return None
 
 
-def _mode_check(mode: str, options: dict, *, frames: int = 4, max_abs: int = 1,
-                max_share: float = 0.01) -> Callable[[str], str | None]:
+def _mode_check(mode: str, options: dict, *, frames: int = 4, max_abs: int = 1, max_share: float = 0.01,
+                controls: dict | None = None) -> Callable[[str], str | None]:
+    """Mode ``mode`` opened with ``options`` (and ``controls`` set) on the device and on numpy:
+    ``frames`` frames compared."""
     def check(device: str) -> str | None:
         from . import open_player
         with open_player(_db_path(), TEXTURE, mode=mode, backend="opencl", device=device, **options) as pc, \
                 open_player(_db_path(), TEXTURE, mode=mode, backend="numpy", **options) as pn:
+            for name, value in (controls or {}).items():
+                setattr(pc, name, value)
+                setattr(pn, name, value)
             out = np.empty(pc.shape, np.uint8)
             for k in range(frames):
                 pc.next_frame(out=out)
@@ -297,6 +354,27 @@ def _gather_check(*, cell, time_step: int, wrap: str, interpolate: bool = True, 
     return check
 
 
+def _copy_check(device: str) -> str | None:
+    """The benchmark's streaming copy (kernels/variants/copy_stream.cl) copies every byte."""
+    import pyopencl as cl
+    from .opencl import build_program, get_context
+    ctx = get_context(device)
+    queue = cl.CommandQueue(ctx)
+    src = np.random.default_rng(1).random(16 * 4 * 8, dtype=np.float32)
+    mf = cl.mem_flags
+    a = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=src)
+    b = cl.Buffer(ctx, mf.WRITE_ONLY, src.nbytes)
+    kernel = build_program(ctx, "variants/copy_stream.cl", {"BLOCKS": 4}).kernel("copy_stream")
+    kernel.set_args(a, b)
+    cl.enqueue_nd_range_kernel(queue, kernel, (8,), None)
+    out = np.zeros_like(src)
+    cl.enqueue_copy(queue, out, b)
+    queue.finish()
+    return None if np.array_equal(out, src) else "the streaming copy lost bytes"
+
+
+_TILES = ("tiles", {"seed": 3, "size": (72, 136), "tone": "consensus"})
+
 #: name -> check(device) returning None or what failed; run in this order, portable kernels only
 CHECKS: dict[str, Callable[[str], str | None]] = {
     "gather: per-pixel source, time step 1, loop": _gather_check(cell=None, time_step=1, wrap="loop"),
@@ -309,7 +387,10 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
     "mode mixture, float32": _mode_check("mixture", {"seed": 3}),
     "mode mixture, float16": _mode_check("mixture", {"seed": 3, "precision": "float16"}),
     "mode turnpoints": _mode_check("turnpoints", {"seed": 3}, frames=8, max_abs=0, max_share=0.0),
-    "mode tiles": _mode_check("tiles", {"seed": 3, "size": (72, 136), "tone": "consensus"}),
+    "mode turnpoints, slow, crossfades": _mode_check("turnpoints", {"seed": 3, "playback": "jumps"}, frames=24,
+                                                     max_abs=0, max_share=0.0,
+                                                     controls={"speed": 0.37, "crossfade": 4}),
+    "mode tiles": _mode_check(*_TILES),
     "mode evolve": _mode_check("evolve", {"seed": 3, "jitter": 2.0}, frames=6, max_share=1.0),
     "mode evolve, rate map": _mode_check("evolve", {"seed": 3, "rate_sigma": 4.0,
                                                     "rate_map": np.linspace(0.5, 2, 48 * 64).reshape(48, 64)},
@@ -321,8 +402,9 @@ CHECK_VARIANTS: dict[str, dict[str, Callable[[str], str | None]]] = {
     "gather_wide": {
         "grid": _gather_check(cell=(8, 12), time_step=8, wrap="loop", size=(72, 200), wide=True),
         "per-pixel source": _gather_check(cell=None, time_step=8, wrap="clamp", size=(40, 136), wide=True),
-        "mode tiles": _mode_check("tiles", {"seed": 3, "size": (72, 136), "tone": "consensus"}),
+        "mode tiles": _mode_check(*_TILES),
     },
+    "copy_stream": {"copy": lambda device: _copy_check(device)},
 }
 
 
@@ -345,15 +427,16 @@ def _inject_check(path: str) -> Callable[[str], str | None]:
     return check
 
 
-def _child(index: str, name: str) -> int:
-    """Run every check on device ``index`` and print progress lines and the verdict (JSON)."""
+def _child(expected: DeviceInfo) -> int:
+    """Run every check on device ``expected`` and print progress lines and the verdict (JSON)."""
     global ALLOWED_VARIANTS
     import warnings
     warnings.simplefilter("ignore")                  # compiler chatter is not a verdict
-    from .opencl import _match
-    info = _match(devices(), index, "device")
-    if info.name != name:
-        print(f"verdict {json.dumps(asdict(Verdict(False, f'device {index} is {info.name!r}, not {name!r}')))}")
+    index = expected.index
+    info = next((d for d in devices() if d.index == index), None)
+    if info != expected:
+        v = Verdict(False, f"device {index} is not {expected.describe()} in the self-test's process")
+        print(f"verdict\t{json.dumps(asdict(v))}", flush=True)
         return 0
     start = time.perf_counter()
     ALLOWED_VARIANTS = frozenset()
@@ -378,7 +461,7 @@ def _child(index: str, name: str) -> int:
             if problem:
                 v.variant_reasons[variant] = problem
     v.seconds = time.perf_counter() - start
-    print(f"verdict {json.dumps(asdict(v))}", flush=True)
+    print(f"verdict\t{json.dumps(asdict(v))}", flush=True)
     return 0
 
 
@@ -401,22 +484,22 @@ def _one_line(exc: Exception) -> str:
 
 
 def _run_one(name: str, check: Callable[[str], str | None], device: str) -> str | None:
-    print(f"check {name}", flush=True)
+    print(f"check\t{name}", flush=True)
     try:
         problem = check(device)
     except Exception as exc:                           # any failure is the device's verdict
         problem = _one_line(exc)
     if problem:
-        print(f"fail {name}: {problem}", flush=True)
+        print(f"fail\t{name}\t{problem}", flush=True)
     else:
-        print(f"pass {name}", flush=True)
+        print(f"pass\t{name}", flush=True)
     return problem
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 3:
-        print("usage: python -m dynatex.player.selftest P:D DEVICE_NAME  (run by the player, not by hand: "
+    if len(sys.argv) != 2:
+        print("usage: python -m dynatex.player.selftest DEVICE_JSON  (run by the player, not by hand: "
               "use python -m dynatex.player --check)", file=sys.stderr)
         raise SystemExit(2)
     from dynatex.player import selftest as _module     # this file runs as __main__: use the module's globals
-    raise SystemExit(_module._child(sys.argv[1], sys.argv[2]))
+    raise SystemExit(_module._child(DeviceInfo(**json.loads(sys.argv[1]))))

@@ -2,11 +2,11 @@
 and the OpenCL devices the kernel tests run on.
 
 Before anything imports pyopencl, this file (1) points the self-test's verdict cache at a
-folder of this session, so every run proves its devices afresh and leaves the user's cache
-alone, and (2) where the test extra installed Intel's CPU OpenCL runtime, makes it visible
-beside the system's OpenCL platforms (its own ICD file names a path that does not exist),
-so that the kernels are compared with their references on two independent compilers.
-Set ``OCL_ICD_VENDORS`` yourself to choose the platforms instead.
+folder of this session (unless ``DYNATEX_CACHE_DIR`` names one), so every run proves its
+devices afresh and leaves the user's cache alone, and (2) where the test extra installed
+Intel's CPU OpenCL runtime, makes it visible beside the system's OpenCL platforms (its own
+ICD file names a path that does not exist), so that the kernels are compared with their
+references on two independent compilers. Set ``OCL_ICD_VENDORS`` yourself to choose the platforms instead.
 """
 from __future__ import annotations
 

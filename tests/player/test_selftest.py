@@ -75,6 +75,8 @@ def test_every_verified_device_ran_every_check(cl_device):
 
 @pytest.mark.parametrize("kind, words", [("crash", "crashed (signal"), ("wrong", "differ from the numpy reference")])
 def test_a_device_that_crashes_or_computes_wrong_is_rejected(device, inject, kind, words):
+    if kind == "crash" and not device.is_cpu:
+        pytest.skip("a wild write crashes the process on CPU devices; a GPU may report it instead")
     inject(kind)
     v = selftest.run_child(device)
     assert not v.ok
@@ -85,9 +87,9 @@ def test_a_device_that_crashes_or_computes_wrong_is_rejected(device, inject, kin
 
 def test_a_device_that_hangs_is_rejected_after_the_timeout(device, inject):
     inject("hang")
-    v = selftest.run_child(device, timeout=15)
-    assert not v.ok and v.reason == "hung (no verdict after 15 s) in check 'injected kernel'"
-    assert 15 <= v.seconds < 60
+    v = selftest.run_child(device, timeout=20)
+    assert not v.ok and v.reason == "hung (no verdict after 20 s) in check 'injected kernel'"
+    assert 20 <= v.seconds < 60
 
 
 def test_the_player_falls_back_to_numpy_when_no_device_passes(device, inject, monkeypatch):
@@ -97,7 +99,7 @@ def test_the_player_falls_back_to_numpy_when_no_device_passes(device, inject, mo
     monkeypatch.delenv("PYOPENCL_CTX", raising=False)
     monkeypatch.setattr("dynatex.player.base._fallback_warned", False)
     db = str(Path(selftest._db_path()))
-    with pytest.warns(RuntimeWarning, match="numpy backend.*passed the self-test.*crashed"):
+    with pytest.warns(RuntimeWarning, match="uses the numpy backend.*passed the self-test.*crashed"):
         p = open_player(db, selftest.TEXTURE, mode="lds")
     with p, open_player(db, selftest.TEXTURE, mode="lds") as q:      # warned once only
         assert p.backend == q.backend == "numpy"
@@ -136,15 +138,32 @@ def test_an_unwritable_cache_only_costs_the_cache(device, tmp_path, monkeypatch,
 
 def test_a_crash_in_a_variant_keeps_the_device_on_its_portable_kernels():
     info = opencl.DeviceInfo("0:0", "P", "OpenCL 3.0", "cpu", "v", "1", True)
-    out = "check mode lds\npass mode lds\ncheck variant gather_wide\n"
+    out = "check\tgather: a, b\npass\tgather: a, b\ncheck\tvariant gather_wide\n"
     v = selftest._parse(out, -11, False, 60.0, 1.0, info)
-    assert v.ok and v.variants == {"gather_wide": False}
-    assert v.variant_reasons["gather_wide"] == "crashed (signal 11) in check 'variant gather_wide'"
-    v = selftest._parse("check mode lds\n", -6, False, 60.0, 1.0, info)
+    assert v.ok and v.tested and v.variants == {"gather_wide": False, "copy_stream": False}
+    assert v.variant_reasons == {"gather_wide": "crashed (signal 11) in check 'variant gather_wide'"}
+    v = selftest._parse("check\tgather: a, b\nfail\tgather: a, b\tframe 0: wrong\n", 1, False, 60.0, 1.0, info)
+    assert not v.ok and v.reason == "gather: a, b: frame 0: wrong"
+    v = selftest._parse("check\tmode lds\n", -6, False, 60.0, 1.0, info)
     assert not v.ok and v.reason == "crashed (signal 6) in check 'mode lds'"
 
 
-def test_check_command_lists_every_device_with_its_verdict():
+def test_a_child_that_cannot_run_is_not_the_devices_fault(device, fresh_cache, monkeypatch, tmp_path):
+    """A child that fails before its first check (here: dynatex not importable) is a failed
+    verdict that is not cached, so a fixed environment is tested again."""
+    fake = tmp_path / "python3"
+    fake.write_text("#!/bin/sh\necho 'ModuleNotFoundError: No module named dynatex' >&2\nexit 1\n")
+    fake.chmod(0o755)
+    monkeypatch.setenv("DYNATEX_PYTHON", str(fake))
+    v = selftest.verdict(device)
+    assert not v.ok and not v.tested
+    assert v.reason == "the self-test could not run: ModuleNotFoundError: No module named dynatex"
+    assert not fresh_cache.exists()
+    monkeypatch.delenv("DYNATEX_PYTHON")
+    assert selftest.verdict(device).ok and fresh_cache.exists()
+
+
+def test_check_command_lists_every_device_with_its_verdict(device):
     done = subprocess.run([sys.executable, "-m", "dynatex.player", "--check"], capture_output=True, text=True,
                           timeout=600)
     assert done.returncode == 0, done.stdout + done.stderr
@@ -158,3 +177,15 @@ def test_players_open_on_a_verified_device_by_default(device):
     with open_player(selftest._db_path(), selftest.TEXTURE, mode="turnpoints", seed=1) as p:
         assert isinstance(p, Player) and p.backend == "opencl"
         assert p.next_frame().dtype == np.uint8
+
+
+def test_an_application_embedding_python_is_not_started_as_the_child(device, fresh_cache, monkeypatch):
+    """Where sys.executable is the host application (a game embedding Python), running it with
+    -m would start the application: the self-test refuses and says how to name an interpreter."""
+    python = sys.executable
+    monkeypatch.setattr(sys, "executable", "/opt/game/bin/mygame")
+    monkeypatch.delenv("DYNATEX_PYTHON", raising=False)
+    v = selftest.run_child(device)
+    assert not v.ok and "is not a Python interpreter (set DYNATEX_PYTHON" in v.reason
+    monkeypatch.setenv("DYNATEX_PYTHON", python)
+    assert selftest.run_child(device).ok
