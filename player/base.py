@@ -94,7 +94,7 @@ class Player:
 
         The frame is complete after ``handle.wait()``; until then ``out`` must not be read
         or reused. Alternate two buffers to overlap frame production with the caller's work.
-        Modes without an asynchronous path render before returning.
+        Every mode leaves the OpenCL frame in flight; the numpy backend renders before returning.
         """
         check_out(out, self.shape)
         event = self._start(out)
@@ -102,9 +102,9 @@ class Player:
         return PendingFrame(out, event)
 
     def _start(self, out: np.ndarray):
-        """Begin rendering into ``out``; return an event to wait on, or None when done."""
-        self._render(out)
-        return None
+        """Begin rendering the next frame into ``out`` and advance; return an event to wait on,
+        or None when ``out`` is complete. Every mode implements this."""
+        raise NotImplementedError
 
     def frames(self, count: int) -> Iterator[np.ndarray]:
         """Yield ``count`` new frames (each a fresh array)."""
@@ -113,7 +113,9 @@ class Player:
             yield self.next_frame()
 
     def _render(self, out: np.ndarray) -> None:
-        raise NotImplementedError
+        event = self._start(out)
+        if event is not None:
+            event.wait()
 
     # -- state -----------------------------------------------------------------
     def get_state(self) -> dict[str, Any]:
@@ -163,6 +165,11 @@ class PendingFrame:
     def __init__(self, out: np.ndarray, event: Any = None) -> None:
         self.out = out
         self._event = event
+
+    @property
+    def event(self) -> Any:
+        """The OpenCL event after which the frame is complete (None once it is known to be)."""
+        return self._event
 
     @property
     def done(self) -> bool:

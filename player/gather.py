@@ -100,8 +100,6 @@ BANDS = 8             # wide variant: a work-item renders one run of 64 pixels o
 TONE_STRIDE = 384     # int16 per device tone row: 192 gains then 192 offsets, per byte of a 64-pixel run
 TONE_OB = 192
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
-#: arguments of kernel gather (GATHER_PARAMS in kernels/gather.cl) that change after _set_args
-_ARG_TARGET, _ARG_OUT, _ARG_T, _ARG_FADE = 3, 5, 11, 12
 #: the bytes of a 64-pixel run in the order of the wide kernel's 16-bit lanes: per 64-byte
 #: chunk, the low then the high half of the x86 byte interleave (bytes 0-7 of each 16-byte
 #: lane, then 8-15)
@@ -365,8 +363,8 @@ class Gather:
         self._tones[0, :3] = 1.0
         self.ctx, self.queue = ctx, queue
         self.direct = False       # frames written straight into the caller's array (set at open)
+        self._out = None          # the gather kernel's FrameOut (OpenCL)
         self.wide = False         # the x86 variant renders (time step 8, verified on this device; set at open)
-        self._host_out = self._host_buf = None   # the caller's array the kernel writes into, and its buffer
         self._last_t, self._last_fade = 0.0, 0.0
         if backend == "opencl":
             self._setup_opencl(device)
@@ -374,7 +372,8 @@ class Gather:
     # -- device setup ------------------------------------------------------------------------
     def _setup_opencl(self, device: str | None) -> None:
         import pyopencl as cl
-        from .opencl import OpenCLUnavailableError, build_program, get_context, variant_verified, writes_through
+        from .engine import FrameOut, Kernel
+        from .opencl import OpenCLUnavailableError, build_program, get_context, variant_verified
         if self.ctx is None:
             self.ctx = get_context(device)
         if self.queue is None:
@@ -393,7 +392,6 @@ class Gather:
         self._d_target = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
         self._d_tmp = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
         self._d_tones = cl.Buffer(self.ctx, mf.READ_ONLY, MAX_TONES * TONE_STRIDE * 2)
-        self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
         self._d_source = None
         self._d_source_bytes = 0
         defines = {"FRAME_W": self.frame_w, "FRAME_PIXELS": self.frame_w * self.frame_h,
@@ -415,11 +413,14 @@ class Gather:
         if self.wide:
             padded ^= 0x80
         self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
-        self._k_gather = prog.kernel("gather_wide" if self.wide else "gather")
-        self._k_gather.set_arg(_ARG_FADE, np.float32(0))
-        self._k_smooth_x = prog.kernel("smooth")
-        self._k_smooth_y = prog.kernel("smooth")
-        self.direct = writes_through(self.ctx)
+        self._k_gather = Kernel(prog, "gather_wide" if self.wide else "gather")
+        self._k_gather.set(stack=self._d_stack, tmap=self._d_tmap, tones=self._d_tones, width=np.int32(w),
+                           height=np.int32(h), tmap_w=np.int32(self.tmap_shape[1]),
+                           tmap_h=np.int32(self.tmap_shape[0]), t0=np.float32(0), fade=np.float32(0))
+        self._out = FrameOut(self.ctx, self.queue, self._k_gather, "out", h * w * 3)
+        self._k_smooth_x = Kernel(prog, "smooth")
+        self._k_smooth_y = Kernel(prog, "smooth")
+        self.direct = self._out.direct
         # kernel gather: the wide kernel renders a run of 64 pixels on BANDS bands of 8 rows (a
         # band: rows 8k - 4 .. 8k + 3, one pair of map rows), the other RUN pixels of one row
         self._gsize = (-(-(w + 64) // 64), -(-(h + 4) // (8 * BANDS))) if self.wide else (-(-w // RUN), h)
@@ -439,11 +440,8 @@ class Gather:
             self._tmap_events = [cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)]
             if self._target is not None:
                 self._tmap_events.append(cl.enqueue_copy(self.queue, self._d_target, self._target, is_blocking=False))
-            self._k_gather.set_arg(_ARG_TARGET, self._target_buffer())
-
-    def _target_buffer(self):
-        """Kernel argument _ARG_TARGET, the map the time map fades toward: the map itself when none is set."""
-        return self._d_tmap if self._target is None else self._d_target
+            # tmap1: the map the time map fades toward (the map itself when none is set)
+            self._k_gather.set(tmap1=self._d_tmap if self._target is None else self._d_target)
 
     def _upload_tones(self) -> None:
         if self.backend == "opencl":
@@ -451,16 +449,8 @@ class Gather:
             cl.enqueue_copy(self.queue, self._d_tones, _expand_tones(self._tones), is_blocking=True)
 
     def _set_args(self) -> None:
-        if self.backend != "opencl" or self._d_source is None:
-            return
-        h, w = self.out_shape[:2]
-        grid_w = self._source.shape[1]
-        self._k_gather.set_args(self._d_stack, self._d_source, self._d_tmap,
-                                self._target_buffer(), self._d_tones,
-                                self._d_out, np.int32(w), np.int32(h), np.int32(grid_w),
-                                np.int32(self.tmap_shape[1]), np.int32(self.tmap_shape[0]), np.float32(0),
-                                np.float32(0))
-        self._host_out = self._host_buf = None       # _ARG_OUT is the device's frame buffer again
+        if self.backend == "opencl" and self._d_source is not None:
+            self._k_gather.set(source=self._d_source, grid_w=np.int32(self._source.shape[1]))
 
     # -- inputs --------------------------------------------------------------------------------
     def set_source_map(self, packed: np.ndarray) -> None:
@@ -570,10 +560,9 @@ class Gather:
         th, tw = self.tmap_shape
         dims = (np.int32(tw), np.int32(th), np.int32(r))
         for d_map in [self._d_tmap] + ([self._d_target] if self._target is not None else []):
-            self._k_smooth_x.set_args(d_map, self._d_tmp, d_w, *dims, np.int32(0))
-            cl.enqueue_nd_range_kernel(self.queue, self._k_smooth_x, self._tsize, None)
-            self._k_smooth_y.set_args(self._d_tmp, d_map, d_w, *dims, np.int32(1))
-            cl.enqueue_nd_range_kernel(self.queue, self._k_smooth_y, self._tsize, None)
+            for k, src, dst, along in ((self._k_smooth_x, d_map, self._d_tmp, 0), (self._k_smooth_y, self._d_tmp, d_map, 1)):
+                k.set(src=src, dst=dst, weights=d_w, w=dims[0], h=dims[1], radius=dims[2], along=np.int32(along))
+                k.launch(self.queue, self._tsize)
         self.queue.finish()
 
     def set_tones(self, gain: np.ndarray, offset: np.ndarray | None = None) -> None:
@@ -605,57 +594,34 @@ class Gather:
     def render(self, t: float, out: np.ndarray | None = None, *, fade: float = 0.0) -> np.ndarray:
         """The frame at global time ``t`` (frames), ``(H, W, 3)`` uint8, written into ``out`` when
         given; ``fade`` in [0, 1] moves the time map toward its target (:meth:`set_time_map`)."""
-        if self._source is None:
-            raise RuntimeError("set a source (set_source_map or set_source_grid) before render")
         if out is None:
             out = np.empty(self.out_shape, np.uint8)
-        else:
-            check_out(out, self.out_shape)
+        event = self.start(t, out, fade=fade)
+        if event is not None:
+            event.wait()
+        return out
+
+    def start(self, t: float, out: np.ndarray, *, fade: float = 0.0):
+        """Start rendering the frame at ``t`` into ``out``; returns the event after which ``out``
+        holds it (None: it already does). Maps, tones and sources may change at once."""
+        if self._source is None:
+            raise RuntimeError("set a source (set_source_map or set_source_grid) before render")
+        check_out(out, self.out_shape)
         t = self._fold(float(t))
         self._last_t, self._last_fade = t, check_float("fade", fade, 0.0, 1.0)
         if self.backend == "numpy":
             self.render_reference(t, out, fade=fade)
-            return out
-        import pyopencl as cl
-        self._set_time_args(t, self._last_fade)
-        if self.direct:
-            # the kernel writes straight into the caller's array (the device shares host
-            # memory, checked at open): no device buffer, no copy. The buffer wrapping it is
-            # kept while the caller passes the same array (held here, so it stays alive).
-            if out is not self._host_out:
-                self._host_buf = cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR,
-                                           hostbuf=out.reshape(-1))
-                self._host_out = out
-                self._k_gather.set_arg(_ARG_OUT, self._host_buf)
-            cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
-            self.queue.finish()
-            return out
-        self._use_device_out()
-        cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
-        cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
-        return out
+            return None
+        self._k_gather.set(t0=np.float32(t), fade=np.float32(self._last_fade))
+        return self._out.launch(out, self._gsize, self._lsize, wait=False)
 
     def render_on_device(self, t: float, *, fade: float = 0.0) -> None:
         """Run the gather kernel alone into the device's own frame buffer and wait (no copy, no
         caller's array): the kernel-only time of the benchmarks."""
         if self.backend != "opencl" or self._source is None:
             raise RuntimeError("render_on_device needs the opencl backend and a source")
-        import pyopencl as cl
-        self._set_time_args(self._fold(float(t)), check_float("fade", fade, 0.0, 1.0))
-        self._use_device_out()
-        cl.enqueue_nd_range_kernel(self.queue, self._k_gather, self._gsize, self._lsize)
-        self.queue.finish()
-
-    def _set_time_args(self, t: float, fade: float) -> None:
-        """Kernel arguments _ARG_T and _ARG_FADE: the folded time and the fade toward the target map."""
-        self._k_gather.set_arg(_ARG_T, np.float32(t))
-        self._k_gather.set_arg(_ARG_FADE, np.float32(fade))
-
-    def _use_device_out(self) -> None:
-        """Point the kernel at its own frame buffer (after frames went to a caller's array)."""
-        if self._host_out is not None:
-            self._host_out = self._host_buf = None
-            self._k_gather.set_arg(_ARG_OUT, self._d_out)
+        self._k_gather.set(t0=np.float32(self._fold(float(t))), fade=np.float32(check_float("fade", fade, 0.0, 1.0)))
+        self._out.launch_on_device(self._gsize, self._lsize).wait()
 
     def render_reference(self, t: float, out: np.ndarray | None = None, *, fade: float = 0.0) -> np.ndarray:
         """The numpy reference of :meth:`render` (usable with either backend, for checks)."""

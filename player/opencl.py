@@ -264,12 +264,15 @@ class Program:
 
     def __init__(self, ctx: "cl.Context", filename: str | tuple[str, ...], defines: Mapping[str, object]) -> None:
         self.filename = filename if isinstance(filename, str) else " + ".join(filename)
-        self.options = [f"-D{k}={_define(v)}" for k, v in sorted(defines.items())]
+        # argument names are kept so that kernels can be called by name (engine.Kernel)
+        self.options = [f"-D{k}={_define(v)}" for k, v in sorted(defines.items())] + ["-cl-kernel-arg-info"]
         source = kernel_source(filename)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                self.program = cl.Program(ctx, source).build(options=self.options)
+                # not pyopencl's binary cache: a program loaded from a binary may lack the argument
+                # names (Intel's runtime), and PoCL keeps its own cache of compiled kernels
+                self.program = cl.Program(ctx, source).build(options=self.options, cache_dir=False)
             except cl.RuntimeError as exc:
                 logtext = str(exc).strip()
                 raise KernelBuildError(

@@ -94,10 +94,6 @@ class ProjectionPlayer(Player):
         self.frame_index += steps
         return rec
 
-    def _render(self, out: np.ndarray) -> None:
-        self._project(self._vector(), out)
-        self._step()
-
     def _start(self, out: np.ndarray):
         self._coefficients(self._vector(), self._proj.coef)
         event = self._proj.run(out, wait=False)

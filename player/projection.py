@@ -61,7 +61,8 @@ class Projector:
             self._mean = mean
             return
         import pyopencl as cl
-        from .opencl import build_program, writes_through
+        from .engine import FrameOut, Kernel
+        from .opencl import build_program
         blocked = blocked_basis(basis)
         blocks = blocked.shape[0]
         padded = blocks * BLOCK
@@ -72,14 +73,13 @@ class Projector:
         del blocked
         self._d_mean = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p)
         self._d_coef = cl.Buffer(ctx, mf.READ_ONLY, self.coef.nbytes)
-        self._d_out = cl.Buffer(ctx, mf.WRITE_ONLY, padded * (3 // channels))
         prog = build_program(ctx, "lds.cl", {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels})
-        self._kernel = prog.kernel("project")
-        self._kernel.set_args(self._d_basis, self._d_mean, self._d_coef, self._d_out,
-                              np.int32(self.n), np.int32(self.values))
-        #: frames are written straight into the caller's array (no copy) where the device
-        #: shares host memory; probed once per context
-        self.direct = writes_through(ctx)
+        self._kernel = Kernel(prog, "project")
+        self._kernel.set(basis=self._d_basis, mean=self._d_mean, coef=self._d_coef,
+                         n=np.int32(self.n), values=np.int32(self.values))
+        self._out = FrameOut(ctx, queue, self._kernel, "out", padded * (3 // channels))
+        #: frames are written straight into the caller's array (no copy) where the device shares host memory
+        self.direct = self._out.direct
         self._gsize = (-(-blocks // LOCAL) * LOCAL,)
         self._lsize = (LOCAL,)
 
@@ -102,16 +102,4 @@ class Projector:
             return None
         import pyopencl as cl
         cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=not wait)
-        if self.direct:
-            dst = cl.Buffer(self.queue.context, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR,
-                            hostbuf=out.reshape(-1))
-            self._kernel.set_arg(3, dst)
-            event = cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, self._lsize)
-            self._kernel.set_arg(3, self._d_out)
-            if wait:
-                event.wait()
-                return None
-            return event
-        cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, self._lsize)
-        event = cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=wait)
-        return None if wait else event
+        return self._out.launch(out, self._gsize, self._lsize, wait=wait)

@@ -367,7 +367,8 @@ class EvolvePlayer(Player):
 
     def _setup_opencl(self, frames: np.ndarray) -> None:
         import pyopencl as cl
-        from .opencl import build_program, writes_through
+        from .engine import FrameOut, Kernel
+        from .opencl import build_program
         h, w = self._shape[:2]
         mf = cl.mem_flags
         ro = mf.READ_ONLY | mf.COPY_HOST_PTR
@@ -382,14 +383,12 @@ class EvolvePlayer(Player):
         self._d_code = cl.Buffer(self.ctx, ro, hostbuf=np.concatenate([runs["code"], np.zeros(SPILL, np.uint16)]))
         gain = np.zeros(4, np.float32) if self._gain is None else self._gain.reshape(-1)
         self._d_gain = cl.Buffer(self.ctx, ro, hostbuf=np.concatenate([gain, np.zeros(SPILL, np.float32)]))
-        self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, h * w * 3)
-        #: frames are written straight into the caller's array (no copy) where the device
-        #: shares host memory; probed once per context
-        self.direct = writes_through(self.ctx)
         defines = {"INTERP": self.interpolate, "GAIN": self._gain is not None}
-        self._kernel = build_program(self.ctx, "quilt.cl", defines).kernel("evolve")
-        self._kernel.set_args(self._d_stack, None, None, None, self._d_code, None, None, self._d_gain,
-                              self._d_out, np.int32(h))
+        self._kernel = Kernel(build_program(self.ctx, "quilt.cl", defines), "evolve")
+        self._kernel.set(stack=self._d_stack, code=self._d_code, gain=self._d_gain, height=np.int32(h))
+        self._out = FrameOut(self.ctx, self.queue, self._kernel, "out", h * w * 3)
+        #: frames are written straight into the caller's array (no copy) where the device shares host memory
+        self.direct = self._out.direct
         self._gsize = (h,)
         self._set_runs(None)
 
@@ -442,12 +441,8 @@ class EvolvePlayer(Player):
         self._d_row_start = cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(row_start))
         self._d_pair = cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(pair))
         self._d_bframe = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY, self._bframe.nbytes)
-        k = self._kernel
-        k.set_arg(1, self._d_runs)
-        k.set_arg(2, self._d_runs_b)
-        k.set_arg(3, self._d_row_start)
-        k.set_arg(5, self._d_pair)
-        k.set_arg(6, self._d_bframe)
+        self._kernel.set(runs=self._d_runs, runs_b=self._d_runs_b, row_start=self._d_row_start,
+                         run_pair=self._d_pair, bframe=self._d_bframe)
         self.device_bytes = int(self._flat.nbytes + base["code"].nbytes + self._shape[0] * self._shape[1] * 3
                                 + (self._gain.nbytes if self._gain is not None else 0)
                                 + runs.nbytes + runs_b.nbytes + row_start.nbytes + pair.nbytes + self._bframe.nbytes)
@@ -559,9 +554,10 @@ class EvolvePlayer(Player):
         tau = np.full(self._shape[:2], t, np.float32) if self._rate is None else (t * self._rate).astype(np.float32)
         return fold_time(tau, self.n_frames, self._end)
 
-    def _render(self, out: np.ndarray) -> None:
-        self._draw(self._clock, out)
+    def _start(self, out: np.ndarray):
+        event = self._draw(self._clock, out, wait=False)
         self._clock += self._speed
+        return event
 
     def render_at(self, t: float, out: np.ndarray | None = None) -> np.ndarray:
         """The frame at clock ``t`` without moving the clock."""
@@ -589,28 +585,26 @@ class EvolvePlayer(Player):
         out[...] = res
         return out
 
-    def _draw(self, t: float, out: np.ndarray) -> None:
+    def _draw(self, t: float, out: np.ndarray, *, wait: bool = True):
+        """The frame at clock ``t`` into ``out``; None once there, or (``wait=False``) the event after which it is."""
         if self.backend == "numpy":
             self.render_reference(t, out)
-            return
-        import pyopencl as cl
-        if self.direct:     # the kernel writes the caller's array itself
-            dst = cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=out.reshape(-1))
-            self._kernel.set_arg(8, dst)
-            try:
-                self._launch(t).wait()
-            finally:
-                self._kernel.set_arg(8, self._d_out)
-            return
-        self._launch(t)
-        cl.enqueue_copy(self.queue, out.reshape(-1), self._d_out, is_blocking=True)
+            return None
+        self._upload_block_frames(t)
+        return self._out.launch(out, self._gsize, wait=wait)
 
     def _launch(self, t: float):
-        """Enqueue the kernel for clock ``t`` and return its event (the frame lands in the
-        device buffer, or the caller's array while :meth:`_draw` has set it; benchmarks time it alone)."""
+        """Enqueue the kernel for clock ``t`` into the device buffer alone and return its event
+        (the benchmarks time it)."""
+        self._upload_block_frames(t)
+        return self._out.launch_on_device(self._gsize)
+
+    def _upload_block_frames(self, t: float) -> None:
         import pyopencl as cl
-        cl.enqueue_copy(self.queue, self._d_bframe, self._block_frames(t), is_blocking=False)
-        return cl.enqueue_nd_range_kernel(self.queue, self._kernel, self._gsize, None)
+        # a copy, since the previous frame's upload may still wait in the queue; the event is
+        # kept because dropping it would wait for the copy (and the frame before it)
+        self._bframe_upload = cl.enqueue_copy(self.queue, self._d_bframe, self._block_frames(t).copy(),
+                                              is_blocking=False)
 
     def _block_frames(self, t: float) -> np.ndarray:
         """Per time slot (a rate and a block, see :meth:`_set_runs`), the source time at

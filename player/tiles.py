@@ -512,9 +512,10 @@ class TilesPlayer(Player):
     def _warm(self) -> None:
         self._gather.render(self._t, np.empty(self._shape, np.uint8), fade=self._fade())
 
-    def _render(self, out: np.ndarray) -> None:
-        self._gather.render(self._t, out, fade=self._fade())
+    def _start(self, out: np.ndarray):
+        event = self._gather.start(self._t, out, fade=self._fade())
         self._advance_time()
+        return event
 
     def inpaint(self, frame: np.ndarray, mask: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """The caller's ``frame`` with its ``mask``-ed pixels replaced by the next synthesized frame.

@@ -162,6 +162,7 @@ class TurnPointPlayer(Player):
 
     def _setup_opencl(self, frames: np.ndarray) -> None:
         import pyopencl as cl
+        from .engine import FrameOut, Kernel
         from .opencl import build_program
         t = frames.shape[0]
         padded = np.zeros((t, self._vecs * VEC), np.uint8)
@@ -169,15 +170,14 @@ class TurnPointPlayer(Player):
         mf = cl.mem_flags
         self._d_frames = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
         del padded
-        self._params = np.zeros(8, np.int32)
-        self._d_params = cl.Buffer(self.ctx, mf.READ_ONLY, self._params.nbytes)
-        self._d_out = cl.Buffer(self.ctx, mf.WRITE_ONLY, self._vecs * VEC)
+        self._d_params = cl.Buffer(self.ctx, mf.READ_ONLY, 8 * 4)
         prog = build_program(self.ctx, "blend.cl", {"FRAME_VECS": self._vecs, "ITEMS": ITEMS})
-        self._kernels = {}
+        # the kernels store whole vectors past the frame's end: always through the device buffer
+        self._outs = {}
         for terms in (2, 4):
-            kernel = prog.kernel(f"blend{terms}")
-            kernel.set_args(self._d_frames, self._d_params, self._d_out)
-            self._kernels[terms] = kernel
+            kernel = Kernel(prog, f"blend{terms}")
+            kernel.set(frames=self._d_frames, params=self._d_params)
+            self._outs[terms] = FrameOut(self.ctx, self.queue, kernel, "out", self._vecs * VEC, direct=False)
         self._gsize = (self._vecs // ITEMS,)
 
     def _warm(self) -> None:
@@ -323,35 +323,32 @@ class TurnPointPlayer(Player):
         self._pending = EVENT_NONE
         return sources
 
-    def _render(self, out: np.ndarray) -> None:
-        self._compose(self._emit(), out)
+    def _start(self, out: np.ndarray):
+        event = self._compose(self._emit(), out, wait=False)
         self._advance_display()
+        return event
 
-    def _compose(self, sources: tuple[tuple[int, int], ...], out: np.ndarray) -> None:
+    def _compose(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, *, wait: bool = True):
+        """``out`` = the weighted sum of ``sources`` ((frame, weight in 256ths) pairs); returns
+        None once it is there, or (``wait=False``) the event after which it is."""
         if self.backend == "numpy":
             if len(sources) == 1:
                 out[...] = self._frames[sources[0][0]]
-                return
+                return None
             acc = np.full(self._shape, 128, np.uint16)
             for frame, w in sources:
                 acc += self._frames[frame].astype(np.uint16) * np.uint16(w)
             np.right_shift(acc, 8, out=acc)
             out[...] = acc
-            return
+            return None
         import pyopencl as cl
-        flat = out.reshape(-1)
         if len(sources) == 1:
-            cl.enqueue_copy(self.queue, flat, self._d_frames, src_offset=sources[0][0] * self._vecs * VEC,
-                            is_blocking=True)
-            return
-        p = self._params
-        p[:] = 0
+            return self._outs[2].copy_from(self._d_frames, out, offset=sources[0][0] * self._vecs * VEC, wait=wait)
+        p = np.zeros(8, np.int32)          # a new array per frame: the upload may still be in flight
         for k, (frame, w) in enumerate(sources):
             p[k], p[4 + k] = frame, w
-        cl.enqueue_copy(self.queue, self._d_params, p, is_blocking=False)
-        kernel = self._kernels[2 if len(sources) == 2 else 4]
-        cl.enqueue_nd_range_kernel(self.queue, kernel, self._gsize, None)
-        cl.enqueue_copy(self.queue, flat, self._d_out, is_blocking=True)
+        self._upload = cl.enqueue_copy(self.queue, self._d_params, p, is_blocking=False)   # kept: dropping it waits
+        return self._outs[2 if len(sources) == 2 else 4].launch(out, self._gsize, wait=wait)
 
     # -- state ---------------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:

@@ -1,0 +1,128 @@
+"""What the device engines share: kernels whose arguments are set by the names in their
+OpenCL signature, and one path that delivers a kernel's frame to the caller's array.
+
+The projection, gather, runs (evolve) and blend (turn points) engines each launch one
+kernel per frame. :class:`Kernel` binds arguments by name (the names the ``.cl`` file
+declares, read back from the compiled kernel), so no index has to mirror a signature.
+:class:`FrameOut` owns the frame's destination: where the device shares host memory (a CPU
+device, probed once per context) the kernel writes straight into the caller's array,
+otherwise into a device buffer copied into it; either way the frame may be left in flight
+and its event returned, which is what :meth:`Player.start_frame` hands to the caller.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+from typing import Any
+
+import numpy as np
+
+from .opencl import KernelBuildError, Program, writes_through
+
+#: caller's arrays whose host-pointer buffers stay wrapped (double buffering needs two)
+HELD_ARRAYS = 4
+
+
+class Kernel:
+    """One kernel object of ``program`` with its arguments set by name.
+
+    >>> k = Kernel(build_program(ctx, "lds.cl", defines), "project")   # doctest: +SKIP
+    >>> k.set(coef=d_coef, n=np.int32(12))                             # doctest: +SKIP
+    """
+
+    def __init__(self, program: Program, name: str) -> None:
+        import pyopencl as cl
+        self.name = name
+        self.kernel = program.kernel(name)
+        try:
+            self.args = tuple(self.kernel.get_arg_info(i, cl.kernel_arg_info.NAME)
+                              for i in range(self.kernel.num_args))
+        except cl.Error as exc:
+            raise KernelBuildError(f"kernel {name!r}: the device does not report its argument names ({exc})") from None
+        self._index = {arg: i for i, arg in enumerate(self.args)}
+
+    def set(self, **values: Any) -> None:
+        """Set the arguments named by the keywords (a buffer, a numpy scalar of the declared type)."""
+        for arg, value in values.items():
+            try:
+                index = self._index[arg]
+            except KeyError:
+                raise TypeError(f"kernel {self.name!r} has no argument {arg!r} (it has {', '.join(self.args)})") from None
+            self.kernel.set_arg(index, value)
+
+    def launch(self, queue, global_size: tuple[int, ...], local_size: tuple[int, ...] | None = None):
+        """Enqueue the kernel with its current arguments; returns the event."""
+        import pyopencl as cl
+        return cl.enqueue_nd_range_kernel(queue, self.kernel, global_size, local_size)
+
+
+class FrameOut:
+    """Delivers the frames ``kernel`` writes through its argument ``arg`` to callers' arrays.
+
+    ``nbytes`` is the device buffer's size (at least a frame; kernels that write whole
+    vectors past the frame's end need ``direct=False``: a caller's array has no slack).
+    ``direct=None`` writes straight into callers' arrays where the device shares host
+    memory (:func:`writes_through`).
+    """
+
+    def __init__(self, ctx, queue, kernel: Kernel, arg: str, nbytes: int, *, direct: bool | None = None) -> None:
+        import pyopencl as cl
+        self.ctx, self.queue, self.kernel, self.arg = ctx, queue, kernel, arg
+        self.direct = writes_through(ctx) if direct is None else bool(direct)
+        self.buffer = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, nbytes)
+        self._held: OrderedDict[int, tuple[np.ndarray, Any]] = OrderedDict()
+        self._bound: Any = None
+        self._bind(self.buffer)
+
+    def _bind(self, buffer) -> None:
+        if buffer is not self._bound:
+            self.kernel.set(**{self.arg: buffer})
+            self._bound = buffer
+
+    def _host_buffer(self, out: np.ndarray):
+        """The buffer wrapping ``out`` (kept, with ``out`` itself, for the last few arrays)."""
+        import pyopencl as cl
+        key = id(out)
+        held = self._held.get(key)
+        if held is not None and held[0] is out:
+            self._held.move_to_end(key)
+            return held[1]
+        buf = cl.Buffer(self.ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=out.reshape(-1))
+        self._held[key] = (out, buf)
+        while len(self._held) > HELD_ARRAYS:
+            self._held.popitem(last=False)
+        return buf
+
+    def launch(self, out: np.ndarray, global_size: tuple[int, ...], local_size: tuple[int, ...] | None = None,
+               *, wait: bool = True):
+        """Run the kernel for a frame that ends in ``out`` (C-contiguous uint8).
+
+        Returns None once ``out`` holds the frame (``wait=True``), else the event after which it does.
+        """
+        import pyopencl as cl
+        if self.direct:
+            self._bind(self._host_buffer(out))
+            event = self.kernel.launch(self.queue, global_size, local_size)
+        else:
+            self._bind(self.buffer)
+            self.kernel.launch(self.queue, global_size, local_size)
+            event = cl.enqueue_copy(self.queue, out.reshape(-1), self.buffer, is_blocking=False)
+        return finish(event, wait)
+
+    def launch_on_device(self, global_size: tuple[int, ...], local_size: tuple[int, ...] | None = None):
+        """Run the kernel into the device buffer alone (the benchmarks' kernel-only time); returns the event."""
+        self._bind(self.buffer)
+        return self.kernel.launch(self.queue, global_size, local_size)
+
+    def copy_from(self, src, out: np.ndarray, *, offset: int = 0, wait: bool = True):
+        """Copy a frame that already lies in device buffer ``src`` at byte ``offset`` into ``out``."""
+        import pyopencl as cl
+        event = cl.enqueue_copy(self.queue, out.reshape(-1), src, src_offset=offset, is_blocking=False)
+        return finish(event, wait)
+
+
+def finish(event, wait: bool):
+    """``event`` completed and None when ``wait``, else ``event`` itself."""
+    if wait:
+        event.wait()
+        return None
+    return event

@@ -1,0 +1,69 @@
+"""The engines' shared pieces: kernels called by argument name, frames delivered into the
+caller's array (directly or through a copy) and left in flight by every mode."""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from dynatex.player import open_player, selftest
+from dynatex.player.engine import FrameOut, Kernel
+from dynatex.player.opencl import build_program
+
+MODES = [("lds", {}), ("mixture", {}), ("turnpoints", {"playback": "jumps"}), ("tiles", {"size": (40, 72)}),
+         ("evolve", {"jitter": 2.0})]
+
+
+def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
+    k = Kernel(build_program(cl_context, "lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3}), "project")
+    assert k.args == ("basis", "mean", "coef", "out", "n", "values")
+    with pytest.raises(TypeError, match=r"kernel 'project' has no argument 'weights' \(it has basis, mean"):
+        k.set(weights=np.int32(1))
+
+
+@pytest.mark.parametrize("direct", [True, False])
+def test_frames_reach_the_callers_array_directly_or_by_copy(cl_context, direct):
+    """One kernel, both delivery paths, several arrays in turn (double buffering and more):
+    each array gets exactly its own frame, left in flight until its event completes."""
+    from dynatex.player.opencl import writes_through
+    if direct and not writes_through(cl_context):
+        pytest.skip("this device does not share host memory")
+    queue = cl.CommandQueue(cl_context)
+    prog = build_program(cl_context, "blend.cl", {"FRAME_VECS": 4, "ITEMS": 4})
+    frames = np.arange(3 * 64, dtype=np.uint8).reshape(3, 64)
+    d_frames = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=frames)
+    d_params = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY, 32)
+    k = Kernel(prog, "blend2")
+    k.set(frames=d_frames, params=d_params)
+    out = FrameOut(cl_context, queue, k, "out", 64, direct=direct)
+    assert out.direct == direct
+    arrays = [np.zeros(64, np.uint8) for _ in range(6)]
+    for i, a in enumerate(arrays):
+        params = np.array([i % 3, (i + 1) % 3, 0, 0, 256 - 40 * i, 40 * i, 0, 0], np.int32)
+        cl.enqueue_copy(queue, d_params, params)
+        event = out.launch(a, (1,), wait=False)
+        event.wait()
+        want = (frames[i % 3].astype(int) * (256 - 40 * i) + frames[(i + 1) % 3].astype(int) * 40 * i + 128) >> 8
+        assert np.array_equal(a, want.astype(np.uint8)), i
+    assert out.launch(arrays[0], (1,)) is None          # wait=True: done on return
+
+
+@pytest.mark.parametrize("mode, options", MODES, ids=[m for m, _ in MODES])
+def test_every_mode_leaves_its_frame_in_flight_and_double_buffers(cl_device, mode, options):
+    """start_frame returns before the frame is there (an event) on every mode, and two
+    alternating buffers give the same frames as next_frame."""
+    db = selftest._db_path()
+    with open_player(db, selftest.TEXTURE, mode=mode, device=cl_device, seed=5, **options) as a, \
+            open_player(db, selftest.TEXTURE, mode=mode, device=cl_device, seed=5, **options) as b:
+        want = [a.next_frame() for _ in range(6)]
+        bufs = [np.empty(b.shape, np.uint8) for _ in range(2)]
+        pending = b.start_frame(bufs[0])
+        in_flight = pending.event is not None
+        got = []
+        for i in range(1, 7):
+            nxt = b.start_frame(bufs[i % 2]) if i < 6 else None
+            got.append(pending.wait().copy())
+            pending = nxt
+    assert in_flight
+    for k, (x, y) in enumerate(zip(want, got)):
+        assert np.array_equal(x, y), (mode, k)
