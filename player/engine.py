@@ -46,7 +46,8 @@ class Kernel:
             try:
                 index = self._index[arg]
             except KeyError:
-                raise TypeError(f"kernel {self.name!r} has no argument {arg!r} (it has {', '.join(self.args)})") from None
+                raise TypeError(f"kernel {self.name!r} has no argument {arg!r} "
+                                f"(it has {', '.join(self.args)})") from None
             self.kernel.set_arg(index, value)
 
     def launch(self, queue, global_size: tuple[int, ...], local_size: tuple[int, ...] | None = None):

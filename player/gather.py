@@ -560,7 +560,8 @@ class Gather:
         th, tw = self.tmap_shape
         dims = (np.int32(tw), np.int32(th), np.int32(r))
         for d_map in [self._d_tmap] + ([self._d_target] if self._target is not None else []):
-            for k, src, dst, along in ((self._k_smooth_x, d_map, self._d_tmp, 0), (self._k_smooth_y, self._d_tmp, d_map, 1)):
+            passes = ((self._k_smooth_x, d_map, self._d_tmp, 0), (self._k_smooth_y, self._d_tmp, d_map, 1))
+            for k, src, dst, along in passes:
                 k.set(src=src, dst=dst, weights=d_w, w=dims[0], h=dims[1], radius=dims[2], along=np.int32(along))
                 k.launch(self.queue, self._tsize)
         self.queue.finish()
