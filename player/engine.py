@@ -3,7 +3,7 @@ OpenCL signature, and one path that delivers a kernel's frame to the caller's ar
 
 The projection, gather, runs (evolve) and blend (turn points) engines each launch one
 kernel per frame. :class:`Kernel` binds arguments by name (the names the ``.cl`` file
-declares, read back from the compiled kernel), so no index has to mirror a signature.
+declares), so no index has to mirror a signature.
 :class:`FrameOut` owns the frame's destination: where the device shares host memory (a CPU
 device, probed once per context) the kernel writes straight into the caller's array,
 otherwise into a device buffer copied into it; either way the frame may be left in flight
@@ -30,14 +30,12 @@ class Kernel:
     """
 
     def __init__(self, program: Program, name: str) -> None:
-        import pyopencl as cl
         self.name = name
         self.kernel = program.kernel(name)
-        try:
-            self.args = tuple(self.kernel.get_arg_info(i, cl.kernel_arg_info.NAME)
-                              for i in range(self.kernel.num_args))
-        except cl.Error as exc:
-            raise KernelBuildError(f"kernel {name!r}: the device does not report its argument names ({exc})") from None
+        self.args = program.arg_names.get(name, ())
+        if len(self.args) != self.kernel.num_args:
+            raise KernelBuildError(f"kernel {name!r}: {len(self.args)} argument names read from "
+                                   f"{program.filename}, but the kernel takes {self.kernel.num_args}")
         self._index = {arg: i for i, arg in enumerate(self.args)}
 
     def set(self, **values: Any) -> None:

@@ -259,20 +259,37 @@ def kernel_source(filename: str | tuple[str, ...]) -> str:
     return "\n".join(root.joinpath(name).read_text() for name in names)
 
 
+_COMMENT = re.compile(r"//[^\n]*|/\*.*?\*/", re.S)
+_MACRO = re.compile(r"^[ \t]*#[ \t]*define[ \t]+(\w+)[ \t]+((?:[^\n]*\\\n)*[^\n]*)", re.M)
+_KERNEL = re.compile(r"__kernel\s+void\s+(\w+)\s*\(([^)]*)\)")
+
+
+def kernel_arg_names(source: str) -> dict[str, tuple[str, ...]]:
+    """Each ``__kernel``'s argument names in ``source``; a parameter list may be one
+    object-like macro (``GATHER_PARAMS``), which is expanded. (Drivers report names only for
+    programs built from source with ``-cl-kernel-arg-info``, not for cached binaries.)"""
+    text = _COMMENT.sub(" ", source)
+    macros = {m.group(1): m.group(2).replace("\\\n", " ") for m in _MACRO.finditer(text)}
+    out = {}
+    for m in _KERNEL.finditer(text):
+        params = macros.get(m.group(2).strip(), m.group(2))
+        out[m.group(1)] = tuple(p.split()[-1].lstrip("*") for p in params.split(",") if p.strip())
+    return out
+
+
 class Program:
     """``.cl`` files built once per context and set of defines (see :func:`build_program`)."""
 
     def __init__(self, ctx: "cl.Context", filename: str | tuple[str, ...], defines: Mapping[str, object]) -> None:
         self.filename = filename if isinstance(filename, str) else " + ".join(filename)
-        # argument names are kept so that kernels can be called by name (engine.Kernel)
-        self.options = [f"-D{k}={_define(v)}" for k, v in sorted(defines.items())] + ["-cl-kernel-arg-info"]
+        self.options = [f"-D{k}={_define(v)}" for k, v in sorted(defines.items())]
         source = kernel_source(filename)
+        #: kernel name -> its argument names, as the source declares them (engine.Kernel sets arguments by name)
+        self.arg_names = kernel_arg_names(source)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                # not pyopencl's binary cache: a program loaded from a binary may lack the argument
-                # names (Intel's runtime), and PoCL keeps its own cache of compiled kernels
-                self.program = cl.Program(ctx, source).build(options=self.options, cache_dir=False)
+                self.program = cl.Program(ctx, source).build(options=self.options)
             except cl.RuntimeError as exc:
                 logtext = str(exc).strip()
                 raise KernelBuildError(

@@ -2,6 +2,8 @@
 caller's array (directly or through a copy) and left in flight by every mode."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pyopencl as cl
 import pytest
@@ -19,6 +21,29 @@ def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
     assert k.args == ("basis", "mean", "coef", "out", "n", "values")
     with pytest.raises(TypeError, match=r"kernel 'project' has no argument 'weights' \(it has basis, mean"):
         k.set(weights=np.int32(1))
+
+
+PROGRAMS = [("gather.cl", {"FRAME_W": 8, "FRAME_PIXELS": 64, "NFRAMES": 3, "GRID": 0, "WRAP": 0, "CELL_H": 1,
+                           "CELL_W": 1, "INTERP": 1, "TSTEP": 1, "RUN": 32, "STACK_PAD": 256, "STACK_SIGNED": 0,
+                           "TONE_STRIDE": 384, "TONE_OB": 192}),
+            ("lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3}), ("blend.cl", {"FRAME_VECS": 4, "ITEMS": 4}),
+            ("quilt.cl", {"INTERP": 1, "GAIN": 0}), ("copy.cl", {})]
+
+
+@pytest.mark.parametrize("filename, defines", PROGRAMS, ids=[f for f, _ in PROGRAMS])
+def test_argument_names_read_from_the_source_are_the_drivers(cl_context, filename, defines):
+    """The names engine.Kernel binds by, read from the .cl text, are those the compiler reports."""
+    from dynatex.player.opencl import kernel_arg_names, kernel_source
+    source = kernel_source(filename)
+    options = [f"-D{k}={v}" for k, v in defines.items()] + ["-cl-kernel-arg-info"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", cl.CompilerWarning)        # compiler chatter, as in opencl.Program
+        prog = cl.Program(cl_context, source).build(options=options, cache_dir=False)
+    names = kernel_arg_names(source)
+    assert names
+    for name, args in names.items():
+        k = cl.Kernel(prog, name)
+        assert args == tuple(k.get_arg_info(i, cl.kernel_arg_info.NAME) for i in range(k.num_args)), name
 
 
 @pytest.mark.parametrize("direct", [True, False])
