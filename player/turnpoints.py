@@ -25,13 +25,12 @@ import numpy as np
 from ..tiledb import TileDB
 from ..tiledb.turnpoints import TurnPointModel
 from .base import FloatControl, Player, check_float, check_int, rng_from_state
+from .blend import Blend
 
 PLAYBACKS = ("hybrid", "turns", "jumps")
 SPEED_RANGE = (0.0, 4.0)
 MAX_CROSSFADE = 16
 EVENT_NONE, EVENT_TURN, EVENT_JUMP = 0, 1, 2
-VEC = 16
-ITEMS = 4          # uchar16 per work-item of the blend kernels
 
 
 class TurnPointPlayer(Player):
@@ -120,13 +119,10 @@ class TurnPointPlayer(Player):
         frames = store.read()
         if frames.shape[-1] == 1:
             frames = np.repeat(frames, 3, axis=-1)
-        self.frame_bytes = int(np.prod(self._shape))
-        self._vecs = -(-self.frame_bytes // (VEC * ITEMS)) * ITEMS
-        self.memory_bytes = t * self._vecs * VEC
-        if self.backend == "numpy":
-            self._frames = np.ascontiguousarray(frames)
-        else:
-            self._setup_opencl(frames)
+        self._blend = Blend(frames, ctx=self.ctx, queue=self.queue)
+        del frames
+        #: bytes the stored frames occupy on the device (or in host memory with numpy)
+        self.memory_bytes = self._blend.memory_bytes
         self._warm()
 
     def _tables(self, model: TurnPointModel):
@@ -160,26 +156,6 @@ class TurnPointPlayer(Player):
                 table[int(i)] = (dd[sel].astype(np.int64), cum)
         return fwd, bwd
 
-    def _setup_opencl(self, frames: np.ndarray) -> None:
-        import pyopencl as cl
-        from .engine import FrameOut, Kernel
-        from .opencl import build_program
-        t = frames.shape[0]
-        padded = np.zeros((t, self._vecs * VEC), np.uint8)
-        padded[:, :self.frame_bytes] = frames.reshape(t, -1)
-        mf = cl.mem_flags
-        self._d_frames = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
-        del padded
-        self._d_params = cl.Buffer(self.ctx, mf.READ_ONLY, 8 * 4)
-        prog = build_program(self.ctx, "blend.cl", {"FRAME_VECS": self._vecs, "ITEMS": ITEMS})
-        # the kernels store whole vectors past the frame's end: always through the device buffer
-        self._outs = {}
-        for terms in (2, 4):
-            kernel = Kernel(prog, f"blend{terms}")
-            kernel.set(frames=self._d_frames, params=self._d_params)
-            self._outs[terms] = FrameOut(self.ctx, self.queue, kernel, "out", self._vecs * VEC, direct=False)
-        self._gsize = (self._vecs // ITEMS,)
-
     def _warm(self) -> None:
         scratch = np.empty(self._shape, np.uint8)
         last = self.n_frames - 1
@@ -191,7 +167,7 @@ class TurnPointPlayer(Player):
     @property
     def bytes_per_frame(self) -> int:
         """Bytes a frame moves at speed 1 between jumps: one stored frame read, the output written."""
-        return 2 * self.frame_bytes
+        return self._blend.bytes_per_frame
 
     speed = FloatControl("speed", *SPEED_RANGE)
 
@@ -331,24 +307,7 @@ class TurnPointPlayer(Player):
     def _compose(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, *, wait: bool = True):
         """``out`` = the weighted sum of ``sources`` ((frame, weight in 256ths) pairs); returns
         None once it is there, or (``wait=False``) the event after which it is."""
-        if self.backend == "numpy":
-            if len(sources) == 1:
-                out[...] = self._frames[sources[0][0]]
-                return None
-            acc = np.full(self._shape, 128, np.uint16)
-            for frame, w in sources:
-                acc += self._frames[frame].astype(np.uint16) * np.uint16(w)
-            np.right_shift(acc, 8, out=acc)
-            out[...] = acc
-            return None
-        import pyopencl as cl
-        if len(sources) == 1:
-            return self._outs[2].copy_from(self._d_frames, out, offset=sources[0][0] * self._vecs * VEC, wait=wait)
-        p = np.zeros(8, np.int32)          # a new array per frame: the upload may still be in flight
-        for k, (frame, w) in enumerate(sources):
-            p[k], p[4 + k] = frame, w
-        self._upload = cl.enqueue_copy(self.queue, self._d_params, p, is_blocking=False)   # kept: dropping it waits
-        return self._outs[2 if len(sources) == 2 else 4].launch(out, self._gsize, wait=wait)
+        return self._blend.render(sources, out, wait=wait)
 
     # -- state ---------------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:

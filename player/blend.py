@@ -1,0 +1,108 @@
+"""The blend engine: frames that are stored frames or weighted sums of up to four of them.
+
+``out = (sum_k w_k F[i_k] + 128) >> 8`` with integer weights ``w_k`` summing to 256, exact
+on both backends (``kernels/blend.cl``; the numpy reference below computes the same
+integers). One term is a plain copy of a stored frame. Mode ``turnpoints`` plays through it
+(fractional speeds blend two frames, crossfades at jumps up to four).
+
+Examples
+--------
+>>> import numpy as np
+>>> frames = np.stack([np.full((2, 2, 3), v, np.uint8) for v in (0, 100, 200)])
+>>> b = Blend(frames)                                   # the numpy reference
+>>> out = np.empty((2, 2, 3), np.uint8)
+>>> _ = b.render(((1, 128), (2, 128)), out)
+>>> int(out[0, 0, 0])
+150
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+VEC = 16
+ITEMS = 4          # uchar16 per work-item of the blend kernels
+MAX_TERMS = 4
+
+
+class Blend:
+    """Weighted sums of the frames of a stack ``(T, H, W, 3)`` uint8, into callers' arrays.
+
+    ``ctx`` and ``queue`` (pyopencl) put the stack on that device once; without them the
+    numpy reference renders. :meth:`render` takes ``((frame, weight), ...)`` with weights in
+    256ths summing to 256.
+    """
+
+    def __init__(self, frames: np.ndarray, *, ctx: Any = None, queue: Any = None) -> None:
+        frames = np.asarray(frames)
+        if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
+            raise ValueError(f"frames must be uint8 (T, H, W, 3) with T >= 1, not {frames.dtype} {frames.shape}")
+        self.n_frames = int(frames.shape[0])
+        self.shape = tuple(int(v) for v in frames.shape[1:])
+        self.frame_bytes = int(np.prod(self.shape))
+        self._vecs = -(-self.frame_bytes // (VEC * ITEMS)) * ITEMS
+        self.backend = "numpy" if ctx is None else "opencl"
+        if ctx is None:
+            self._frames = np.ascontiguousarray(frames)
+            #: bytes the stack occupies where it is kept
+            self.memory_bytes = int(self._frames.nbytes)
+            return
+        self.memory_bytes = self.n_frames * self._vecs * VEC
+        self._setup_opencl(ctx, queue, frames)
+
+    def _setup_opencl(self, ctx, queue, frames: np.ndarray) -> None:
+        import pyopencl as cl
+        from .engine import FrameOut, Kernel
+        from .opencl import build_program
+        padded = np.zeros((self.n_frames, self._vecs * VEC), np.uint8)   # every frame padded to whole work-items
+        padded[:, :self.frame_bytes] = frames.reshape(self.n_frames, -1)
+        mf = cl.mem_flags
+        self._d_frames = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
+        del padded
+        self._d_params = cl.Buffer(ctx, mf.READ_ONLY, 2 * MAX_TERMS * 4)
+        prog = build_program(ctx, "blend.cl", {"FRAME_VECS": self._vecs, "ITEMS": ITEMS})
+        # the kernels store whole vectors past the frame's end: always through the device buffer
+        self._outs = {}
+        for terms in (2, 4):
+            kernel = Kernel(prog, f"blend{terms}")
+            kernel.set(frames=self._d_frames, params=self._d_params)
+            self._outs[terms] = FrameOut(ctx, queue, kernel, "out", self._vecs * VEC, direct=False)
+        self._gsize = (self._vecs // ITEMS,)
+        self._upload = None
+
+    @property
+    def bytes_per_frame(self) -> int:
+        """Bytes a one-term frame moves: one stored frame read, the output written."""
+        return 2 * self.frame_bytes
+
+    def render(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, *, wait: bool = True):
+        """``out`` = the blend of ``sources``; None once it is there, or (``wait=False``) the
+        event after which it is."""
+        if not 1 <= len(sources) <= MAX_TERMS:
+            raise ValueError(f"a blend takes 1 to {MAX_TERMS} sources, not {len(sources)}")
+        if self.backend == "numpy":
+            blend_reference(self._frames, sources, out)
+            return None
+        import pyopencl as cl
+        if len(sources) == 1:
+            return self._outs[2].copy_from(self._d_frames, out, offset=sources[0][0] * self._vecs * VEC, wait=wait)
+        params = np.zeros(2 * MAX_TERMS, np.int32)        # a new array per frame: the last upload may still wait
+        for k, (frame, w) in enumerate(sources):
+            params[k], params[MAX_TERMS + k] = frame, w
+        # the event is kept: dropping it would wait for the copy (and the frame queued before it)
+        self._upload = cl.enqueue_copy(self._outs[2].queue, self._d_params, params, is_blocking=False)
+        return self._outs[2 if len(sources) == 2 else 4].launch(out, self._gsize, wait=wait)
+
+
+def blend_reference(frames: np.ndarray, sources: tuple[tuple[int, int], ...], out: np.ndarray) -> np.ndarray:
+    """The numpy reference of :meth:`Blend.render`: exact integers, one term a copy."""
+    if len(sources) == 1:
+        out[...] = frames[sources[0][0]]
+        return out
+    acc = np.full(frames.shape[1:], 128, np.uint16)
+    for frame, w in sources:
+        acc += frames[frame].astype(np.uint16) * np.uint16(w)
+    np.right_shift(acc, 8, out=acc)
+    out[...] = acc
+    return out

@@ -1,0 +1,52 @@
+"""The blend engine (mode turnpoints' device work): OpenCL against its numpy reference, exactly."""
+from __future__ import annotations
+
+import doctest
+
+import numpy as np
+import pytest
+
+from dynatex.player.blend import Blend, blend_reference
+
+
+def _frames(t=5, h=7, w=11, seed=0):
+    # 7 x 11 x 3 = 231 bytes: not a whole number of the kernel's 64-byte work-items
+    return np.random.default_rng(seed).integers(0, 256, (t, h, w, 3), dtype=np.uint8)
+
+
+def test_reference_is_the_rounded_weighted_sum():
+    f = _frames()
+    out = np.empty(f.shape[1:], np.uint8)
+    blend_reference(f, ((1, 64), (3, 192)), out)
+    want = (f[1].astype(int) * 64 + f[3].astype(int) * 192 + 128) >> 8
+    assert np.array_equal(out, want)
+    assert np.array_equal(blend_reference(f, ((4, 256),), out), f[4])
+
+
+@pytest.mark.parametrize("sources", [((2, 256),), ((0, 200), (4, 56)), ((1, 100), (2, 100), (3, 56)),
+                                     ((0, 64), (1, 64), (2, 64), (3, 64))], ids=["1", "2", "3", "4"])
+def test_opencl_equals_the_reference(cl_context, sources):
+    import pyopencl as cl
+    f = _frames()
+    b = Blend(f, ctx=cl_context, queue=cl.CommandQueue(cl_context))
+    ref = blend_reference(f, sources, np.empty(f.shape[1:], np.uint8))
+    out = np.zeros(f.shape[1:], np.uint8)
+    event = b.render(sources, out, wait=False)
+    assert event is not None
+    event.wait()
+    assert np.array_equal(out, ref)
+    assert b.memory_bytes == 5 * 256 and b.bytes_per_frame == 2 * 231
+
+
+def test_bad_inputs_are_clear_errors():
+    with pytest.raises(ValueError, match=r"frames must be uint8 \(T, H, W, 3\)"):
+        Blend(np.zeros((2, 3, 3), np.uint8))
+    b = Blend(_frames())
+    with pytest.raises(ValueError, match="a blend takes 1 to 4 sources, not 5"):
+        b.render(tuple((i, 51) for i in range(5)), np.empty((7, 11, 3), np.uint8))
+
+
+def test_docstring_examples_run():
+    import dynatex.player.blend as module
+    res = doctest.testmod(module)
+    assert res.attempted >= 3 and res.failed == 0
