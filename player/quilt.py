@@ -157,9 +157,11 @@ def _segments(key_a: np.ndarray, key_b: np.ndarray) -> tuple[np.ndarray, np.ndar
     return starts, np.diff(np.append(starts, h * w))
 
 
-def _merge_plain(key_a, key_b, swap, key_p):
+def _merge_plain(key_a, key_b, swap, key_p, span: int, n_pixels: int | None):
     """Fold each plain run into a neighbouring band of its row (the previous one, else the
-    next) whose stream pair holds its stream."""
+    next) whose stream pair holds its stream, unless the band's other stream, which the
+    kernel then reads (at weight 0) over the run's pixels, would leave the source frame
+    (``n_pixels``; a stream need not extend beyond its band in a hostile database)."""
     h, w = key_a.shape
     starts, lengths = _segments(key_a, key_b)
     ka, kb = key_a.ravel()[starts], key_b.ravel()[starts]
@@ -178,6 +180,16 @@ def _merge_plain(key_a, key_b, swap, key_p):
     run_of = np.repeat(np.arange(n), lengths)
     tgt = target[run_of].reshape(h, w)
     moved = tgt >= 0
+    if n_pixels is not None and moved.any():
+        ta, tb = ka[tgt[moved]], kb[tgt[moved]]
+        other = np.where(ta == key_p[moved], tb, ta)
+        x = np.broadcast_to(np.arange(w, dtype=np.int64)[None, :], (h, w))[moved]
+        src = other % span - w + x
+        outside = run_of.reshape(h, w)[moved][(src < 0) | (src >= n_pixels)]
+        if outside.size:
+            target[np.unique(outside)] = -1
+            tgt = target[run_of].reshape(h, w)
+            moved = tgt >= 0
     key_a, key_b, swap = key_a.copy(), key_b.copy(), swap.copy()
     key_a[moved] = ka[tgt[moved]]
     key_b[moved] = kb[tgt[moved]]
@@ -187,7 +199,7 @@ def _merge_plain(key_a, key_b, swap, key_p):
 
 def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None,
                pix2: np.ndarray | None = None, labels2: np.ndarray | None = None, *,
-               merge: bool = True) -> dict[str, np.ndarray]:
+               merge: bool = True, n_pixels: int | None = None) -> dict[str, np.ndarray]:
     """Cut the quilt's rows into runs, the unit of work of kernel ``evolve``.
 
     A *stream* is one block's source at a constant offset along a row (source pixel =
@@ -196,7 +208,9 @@ def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None
     its pair on both sides of the cut, where the primary and second sources swap). With
     ``merge`` (default), a plain run next to a band of its row whose pair holds its stream
     joins that band, its pixels blending with weight 0 (exactly the plain value): fewer,
-    longer runs, which the kernel does faster than more, shorter ones.
+    longer runs, which the kernel does faster than more, shorter ones. ``n_pixels`` (the
+    source frame's pixels) keeps every stream a run reads inside the frame: a merge that would
+    read the band's other stream outside it is not made.
 
     Returns ``starts`` (first output pixel, row-major index, int64), ``lengths``, and the
     kernel tables: ``runs`` ``(n, 4)`` int32 (first pixel, stream A's source pixel there,
@@ -232,7 +246,7 @@ def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None
         key_b = np.where(blend, np.maximum(key_p, key_s), -1)
         swap = blend & (key_p > key_s)
     if merge and blend.any():
-        key_a, key_b, swap = _merge_plain(key_a, key_b, swap, key_p)
+        key_a, key_b, swap = _merge_plain(key_a, key_b, swap, key_p, span, n_pixels)
     starts, lengths = _segments(key_a, key_b)
     col = starts % w
     ka, kb = key_a.ravel()[starts], key_b.ravel()[starts]
@@ -252,6 +266,21 @@ def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None
             "runs": runs.astype(np.uint32).view(np.int32), "runs_b": runs_b.astype(np.int32),
             "row_start": np.searchsorted(starts, np.arange(h + 1) * w).astype(np.int32),
             "code": np.repeat(code.ravel(), 3)}
+
+
+def _check_runs(runs: dict[str, np.ndarray], n_pixels: int, n_blocks: int) -> None:
+    """Every source pixel and block the run tables make kernel ``evolve`` read lies inside the
+    stack: the last guard between a database's maps and a read out of bounds."""
+    r = runs["runs"].view(np.uint32).astype(np.int64)
+    length = r[:, 3] & ((1 << 30) - 1)
+    first = runs["runs"][:, 1].astype(np.int64)
+    first_b = runs["runs_b"][:, 0].astype(np.int64)
+    blend = (r[:, 3] >> 31) == 1
+    bad = (first < 0) | (first + length > n_pixels) | (r[:, 2] >= n_blocks)
+    bad |= blend & ((first_b < 0) | (first_b + length > n_pixels) | (runs["runs_b"][:, 1] >= n_blocks))
+    if bad.any():
+        raise ValueError(f"the quilt's maps make {int(bad.sum())} run(s) read outside the source frames "
+                         f"({n_pixels} pixels, {n_blocks} blocks): the database is inconsistent")
 
 
 class EvolvePlayer(Player):
@@ -372,10 +401,12 @@ class EvolvePlayer(Player):
         h, w = self._shape[:2]
         mf = cl.mem_flags
         ro = mf.READ_ONLY | mf.COPY_HOST_PTR
+        n_pixels = self._flat.shape[1]
         if self._blend:
-            runs = build_runs(self._pix, self._labels, self._wq, self._pix2, self._labels2)
+            runs = build_runs(self._pix, self._labels, self._wq, self._pix2, self._labels2, n_pixels=n_pixels)
         else:
-            runs = build_runs(self._pix, self._labels)
+            runs = build_runs(self._pix, self._labels, n_pixels=n_pixels)
+        _check_runs(runs, n_pixels, self.n_blocks)
         self._n_blend_bytes = int(3 * runs["lengths"][runs["runs"][:, 3] < 0].sum())
         self._base_runs = runs
         pad = np.zeros(SPILL, np.uint8)   # a spilling chunk may read past the ends (values unused)

@@ -54,7 +54,8 @@ def test_opencl_matches_numpy(spread_db, cl_device, end):
     path = spread_db[0]
     rate = ratemap.point_light((56, 72), (10, 40), 20.0, max_rate=3.0, min_rate=0.5)
     opts = dict(jitter=3.0, end=end, seed=4)
-    with EvolvePlayer(path, backend="numpy", **opts) as ref, EvolvePlayer(path, backend="opencl", device=cl_device, **opts) as cl:
+    with EvolvePlayer(path, backend="numpy", **opts) as ref, \
+            EvolvePlayer(path, backend="opencl", device=cl_device, **opts) as cl:
         exact = 0
         for k in range(40):
             if k == 20:
@@ -78,7 +79,8 @@ def test_opencl_matches_numpy_rate_classes(spread_db, cl_device, interpolate):
     maps = [(ratemap.halves((h, w), 2.0, 1.0), 0.0), (ratemap.halves((h, w), 2.0, 1.0), 3.0),
             (np.tile(stairs, (h, 1)), 0.0)]
     opts = dict(jitter=2.5, seed=2, interpolate=interpolate, end="pingpong")
-    with EvolvePlayer(path, backend="numpy", **opts) as ref, EvolvePlayer(path, backend="opencl", device=cl_device, **opts) as cl:
+    with EvolvePlayer(path, backend="numpy", **opts) as ref, \
+            EvolvePlayer(path, backend="opencl", device=cl_device, **opts) as cl:
         exact = total = 0
         for rate, sigma in maps:
             ref.rate_map = cl.rate_map = rate
@@ -372,3 +374,51 @@ def test_rate_map_quantized_and_copy_path(spread_db, cl_context):
         p.direct = not p.direct
         for t, f in zip((4.2, 13.9), frames):
             np.testing.assert_array_equal(p.render_at(t), f)
+
+
+# -- hostile maps: no read outside the frame stack ----------------------------------------------------
+_RENDER_CHILD = """
+import sys, numpy as np
+from dynatex.player.quilt import EvolvePlayer
+with EvolvePlayer(sys.argv[1], backend="opencl", device=sys.argv[2], jitter=2.0) as cl, \\
+        EvolvePlayer(sys.argv[1], backend="numpy", jitter=2.0) as ref:
+    d = max(int(np.abs(cl.next_frame().astype(int) - ref.next_frame()).max()) for _ in range(5))
+print("maxdiff", d)
+"""
+
+
+@pytest.mark.parametrize("mutation", ["blend_map zeros", "blend_weight transposed"])
+def test_maps_whose_bands_extend_outside_the_frames_render_safely(spread_db, cl_device, tmp_path, mutation):
+    """Maps that pass validation but whose cross-fade streams, extended over a merged plain run,
+    would leave the source frame (found by a mutation probe: SIGSEGV on OpenCL): the runs are
+    not merged there, and the device renders what the reference does. Run in a child process,
+    so that a regression fails this test instead of killing the suite."""
+    import shutil
+    import subprocess
+    import sys
+
+    import h5py
+    path = tmp_path / "mutant.h5"
+    shutil.copy(spread_db[0], path)
+    with h5py.File(path, "r+") as f:
+        (name,) = f["textures"].keys()
+        g = f[f"textures/{name}/quilt"]
+        if mutation == "blend_map zeros":
+            g["blend_map"][...] = 0
+        else:
+            w = g["blend_weight"][...]
+            del g["blend_weight"]
+            g["blend_weight"] = np.ascontiguousarray(w[::-1, ::-1])   # same values and shape, other pixels
+    done = subprocess.run([sys.executable, "-c", _RENDER_CHILD, str(path), cl_device], capture_output=True,
+                          text=True, timeout=240)
+    assert done.returncode == 0, (done.returncode, done.stderr[-500:])
+    assert int(done.stdout.split()[-1]) <= 1
+
+
+def test_run_tables_that_leave_the_frames_are_refused():
+    from dynatex.player.quilt import _check_runs
+    pix = np.arange(16)[None] + 3
+    runs = build_runs(pix, np.zeros((1, 16)), n_pixels=32)
+    _check_runs(runs, 32, 1)
+    with pytest.raises(ValueError, match=r"make 1 run\(s\) read outside the source frames \(16 pixels"):
+        _check_runs(runs, 16, 1)
