@@ -24,6 +24,11 @@ class Player:
     next frame. :meth:`get_state` / :meth:`set_state` save and restore everything that
     decides future frames (position, controls, random generator).
 
+    ``backend`` is "auto" (default: OpenCL on the first device that passed the self-test,
+    else the numpy reference with one warning), "opencl" (a verified device or
+    :class:`~dynatex.player.OpenCLUnavailableError`) or "numpy" (the reference);
+    ``device`` names an OpenCL device (see :func:`dynatex.player.opencl.get_context`).
+
     Subclasses set ``mode``, implement ``_render(out)`` and ``_get_state``/``_set_state``
     (``_set_state`` reads and checks every entry before it changes anything; a missing
     entry's KeyError becomes the ValueError "state lacks '...'" here).

@@ -69,6 +69,7 @@ class Blend:
             kernel.set(frames=self._d_frames, params=self._d_params)
             self._outs[terms] = FrameOut(ctx, queue, kernel, "out", self._vecs * VEC, direct=False)
         self._gsize = (self._vecs // ITEMS,)
+        self._queue = queue
         self._upload = None
 
     @property
@@ -91,7 +92,7 @@ class Blend:
         for k, (frame, w) in enumerate(sources):
             params[k], params[MAX_TERMS + k] = frame, w
         # the event is kept: dropping it would wait for the copy (and the frame queued before it)
-        self._upload = cl.enqueue_copy(self._outs[2].queue, self._d_params, params, is_blocking=False)
+        self._upload = cl.enqueue_copy(self._queue, self._d_params, params, is_blocking=False)
         return self._outs[2 if len(sources) == 2 else 4].launch(out, self._gsize, wait=wait)
 
 

@@ -63,9 +63,9 @@ span at most seven neighbours, tone factors pre-expanded per byte on the host an
 once per cell row; other bands go pixel by pixel with the same integers. The runs are
 placed so that their stores are 64-byte aligned wherever the output's rows are a multiple
 of 64 bytes long and the output starts on a 16-byte boundary (any numpy array): they are
-then non-temporal, writing the frame once without reading it first. Where the device shares host memory (PoCL on the
-CPU; probed once at open, :attr:`Gather.direct`) the kernel writes straight into the
-caller's array: one launch, no copy.
+then non-temporal, writing the frame once without reading it first. Where the device
+shares host memory (PoCL on the CPU; probed once at open, :attr:`Gather.direct`) the kernel
+writes straight into the caller's array: one launch, no copy.
 
 Examples
 --------

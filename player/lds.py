@@ -55,9 +55,7 @@ class LDSPlayer(ProjectionPlayer):
     texture : str, optional
         Texture name (optional when the database holds one texture).
     backend : {"auto", "opencl", "numpy"}
-        "auto" (default): OpenCL on the first device that passed the self-test, else the numpy
-        reference with one warning; "opencl" demands a verified device (else
-        :class:`~dynatex.player.OpenCLUnavailableError`); "numpy" is the reference.
+        See :class:`~dynatex.player.base.Player`.
     device : str, optional
         OpenCL device (see :func:`dynatex.player.opencl.get_context`).
     seed : int

@@ -39,6 +39,7 @@ class KernelBuildError(RuntimeError):
 _lock = threading.Lock()
 _contexts: dict[str, "cl.Context"] = {}
 _programs: dict[tuple, "Program"] = {}
+_infos: dict[int, "DeviceInfo"] = {}          # device handle -> its DeviceInfo, for get_context's devices
 _kernel_fetches = 0
 
 
@@ -93,7 +94,11 @@ def list_devices() -> list[tuple[str, str]]:
 
 
 def device_info(device: "cl.Device") -> DeviceInfo:
-    """The :class:`DeviceInfo` of a pyopencl device (its index found among :func:`devices`)."""
+    """The :class:`DeviceInfo` of a pyopencl device (known for the devices of
+    :func:`get_context`'s contexts, else found among :func:`devices`)."""
+    info = _infos.get(device.int_ptr)
+    if info is not None:
+        return info
     for info in devices():
         if (info.platform, info.platform_version, info.name, info.driver_version) == (
                 device.platform.name.strip(), device.platform.version.strip(), device.name.strip(),
@@ -134,6 +139,7 @@ def get_context(device: str | None = None) -> "cl.Context":
         if ctx is None:
             ctx = cl.Context([_cl_device(info)])
             _contexts[info.index] = ctx
+            _infos[ctx.devices[0].int_ptr] = info
         _contexts[key] = ctx
         return ctx
 

@@ -97,9 +97,7 @@ class TilesPlayer(Player):
     db : path or TileDB
     texture : str, optional
     backend : {"auto", "opencl", "numpy"}
-        "auto" (default): OpenCL on the first device that passed the self-test, else the numpy
-        reference with one warning; "opencl" demands a verified device (else
-        :class:`~dynatex.player.OpenCLUnavailableError`); "numpy" is the reference.
+        See :class:`~dynatex.player.base.Player`.
     device : str, optional
     seed : int
         Seed of the arrangement and of the time offsets; the same seed gives the same frames.
