@@ -42,6 +42,8 @@ class Player:
             raise ValueError(f"backend must be one of {BACKEND_CHOICES}, not {backend!r}")
         self.queue = None
         self.ctx = None
+        #: the engine that draws the frames (set by the mode; closed with the player)
+        self.engine: Any = None
         self.backend = backend
         self._own_db = not isinstance(db, TileDB)
         self.db = TileDB(db) if self._own_db else db
@@ -152,8 +154,12 @@ class Player:
 
     # -- lifetime ----------------------------------------------------------------
     def close(self) -> None:
+        """Finish the frames in flight, release the engine's device memory and the database."""
         if self.queue is not None:
             self.queue.finish()
+        if getattr(self, "engine", None) is not None:
+            self.engine.close()
+            self.engine = None
         if getattr(self, "_own_db", False) and getattr(self, "db", None) is not None:
             self.db.close()
 

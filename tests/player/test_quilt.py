@@ -10,7 +10,8 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import seam_visibility
 from dynatex.analyzer.quilt import learn_quilt
 from dynatex.player import open_player, ratemap
-from dynatex.player.quilt import ENDS, RATE_STEP, SPILL, EvolvePlayer, build_runs, fold_time, jitter_warp
+from dynatex.player.quilt import ENDS, EvolvePlayer, fold_time, jitter_warp
+from dynatex.player.runs import RATE_STEP, quantize_rate
 from dynatex.tiledb import DatabaseWriter, MethodNotFoundError, QuiltModel
 from dynatex.analyzer.quilt import spreading_clip
 
@@ -92,46 +93,6 @@ def test_opencl_matches_numpy_rate_classes(spread_db, cl_device, interpolate):
                 exact += bool(diff.max() == 0)
                 total += 1
         assert exact >= total - 3
-
-
-def test_runs_describe_the_quilt(spread_db):
-    """The run tables of the kernel say exactly what the per-pixel quilt says, and a run's
-    last 16-byte chunk may spill only where it stays within its row."""
-    _, _, q = spread_db
-    h, w = q.labels.shape
-    sw = 32
-    pix = q.source_map[..., 0].astype(np.int64) * sw + q.source_map[..., 1]
-    pix2 = q.blend_map[..., 0].astype(np.int64) * sw + q.blend_map[..., 1]
-    wq = np.rint(q.blend_weight.astype(np.float64) * 256).astype(np.int64)
-    r = build_runs(pix, q.labels, wq, pix2, q.blend_labels)
-    runs = r["runs"].view(np.uint32).astype(np.int64)
-    start, length = runs[:, 0], runs[:, 3] & 0x3FFFFFFF
-    blend, spill = runs[:, 3] >> 31 == 1, (runs[:, 3] >> 30) & 1 == 1
-    np.testing.assert_array_equal(start, np.cumsum(np.append(0, length[:-1])))       # cover every pixel, in order
-    assert ((start % w) + length <= w).all()                                          # within a row
-    np.testing.assert_array_equal(r["row_start"], np.searchsorted(start, np.arange(h + 1) * w))
-    col3 = (start % w) * 3
-    assert (col3[spill] + -(-length[spill] * 3 // SPILL) * SPILL <= 3 * w).all()
-    assert spill.mean() > 0.9
-    code = r["code"].reshape(h, w, 3)
-    assert (code[..., 0] == code[..., 1]).all() and (code[..., 0] == code[..., 2]).all()
-    code = code[..., 0].astype(np.int64)
-    # per pixel: the primary and second source from the streams and the code
-    k = np.repeat(np.arange(len(start)), length)
-    x = np.arange(h * w) - start[k]
-    a_pix, a_lab = runs[k, 1] + x, runs[k, 2]
-    b_pix, b_lab = r["runs_b"][k, 0] + x, r["runs_b"][k, 1]
-    swap = (code >> 9).ravel() == 1
-    band = (wq > 0).ravel()
-    np.testing.assert_array_equal(np.where(swap, b_pix, a_pix), pix.ravel())
-    np.testing.assert_array_equal(np.where(swap, b_lab, a_lab), q.labels.ravel())
-    np.testing.assert_array_equal((code & 0x1FF).ravel(), wq.ravel())
-    np.testing.assert_array_equal(np.where(swap, a_pix, b_pix)[band], pix2.ravel()[band])
-    np.testing.assert_array_equal(np.where(swap, a_lab, b_lab)[band], q.blend_labels.ravel()[band])
-    assert (blend[k] | ~band).all()
-    assert len(start) < h * w / 4                                                     # runs, not pixels
-    plain = build_runs(pix, q.labels, wq, pix2, q.blend_labels, merge=False)          # bands only
-    assert len(plain["starts"]) > len(start) and not (plain["code"].reshape(h, w, 3)[..., 0][~(wq > 0)]).any()
 
 
 def test_integer_times_copy_source_pixels(spread_db):
@@ -359,10 +320,9 @@ def test_reseed_draws_new_jitter(spread_db):
             p.reseed(-2)
 
 
-def test_rate_map_quantized_and_copy_path(spread_db, cl_context):
+def test_rate_map_quantized_and_copy_path(spread_db, cl_device):
     """Both backends play the rate map quantized to RATE_STEP (so the OpenCL runs have one
     rate each); frames copied from the device buffer equal those written into the caller's array."""
-    from dynatex.player.quilt import quantize_rate
     path = spread_db[0]
     rate = ratemap.point_light((56, 72), (10, 40), 20.0, max_rate=3.0, min_rate=0.5)
     with EvolvePlayer(path, jitter=2.0, seed=3, rate_map=rate, rate_sigma=2.0) as p:
@@ -371,7 +331,7 @@ def test_rate_map_quantized_and_copy_path(spread_db, cl_context):
         q = np.rint(eff.astype(np.float64) / RATE_STEP)
         assert np.abs(q * RATE_STEP - eff).max() == 0
         frames = [p.render_at(t) for t in (4.2, 13.9)]
-        p.direct = not p.direct
+        p.engine.out.direct = not p.engine.out.direct
         for t, f in zip((4.2, 13.9), frames):
             np.testing.assert_array_equal(p.render_at(t), f)
 
@@ -413,12 +373,3 @@ def test_maps_whose_bands_extend_outside_the_frames_render_safely(spread_db, cl_
                           text=True, timeout=240)
     assert done.returncode == 0, (done.returncode, done.stderr[-500:])
     assert int(done.stdout.split()[-1]) <= 1
-
-
-def test_run_tables_that_leave_the_frames_are_refused():
-    from dynatex.player.quilt import _check_runs
-    pix = np.arange(16)[None] + 3
-    runs = build_runs(pix, np.zeros((1, 16)), n_pixels=32)
-    _check_runs(runs, 32, 1)
-    with pytest.raises(ValueError, match=r"make 1 run\(s\) read outside the source frames \(16 pixels"):
-        _check_runs(runs, 16, 1)
