@@ -9,7 +9,7 @@ Examples
 --------
 >>> import numpy as np
 >>> frames = np.stack([np.full((2, 2, 3), v, np.uint8) for v in (0, 100, 200)])
->>> b = Blend(frames)                                   # the numpy reference
+>>> b = open_blend(frames)                              # the numpy reference
 >>> out = np.empty((2, 2, 3), np.uint8)
 >>> _ = b.render(((1, 128), (2, 128)), out)
 >>> int(out[0, 0, 0])
@@ -29,32 +29,80 @@ MAX_TERMS = 4
 class Blend:
     """Weighted sums of the frames of a stack ``(T, H, W, 3)`` uint8, into callers' arrays.
 
-    ``ctx`` and ``queue`` (pyopencl) put the stack on that device once; without them the
-    numpy reference renders. :meth:`render` takes ``((frame, weight), ...)`` with weights in
-    256ths summing to 256.
+    The interface of both blend engines (:func:`open_blend` picks one): :meth:`render`
+    takes ``((frame, weight), ...)`` with 1 to 4 terms, frames in the stack and weights in
+    256ths summing to 256, checked before anything reads a frame.
     """
 
-    def __init__(self, frames: np.ndarray, *, ctx: Any = None, queue: Any = None) -> None:
+    backend = ""
+
+    def __init__(self, frames: np.ndarray) -> None:
         frames = np.asarray(frames)
         if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
             raise ValueError(f"frames must be uint8 (T, H, W, 3) with T >= 1, not {frames.dtype} {frames.shape}")
         self.n_frames = int(frames.shape[0])
         self.shape = tuple(int(v) for v in frames.shape[1:])
         self.frame_bytes = int(np.prod(self.shape))
-        self._vecs = -(-self.frame_bytes // (VEC * ITEMS)) * ITEMS
-        self.backend = "numpy" if ctx is None else "opencl"
-        if ctx is None:
-            self._frames = np.ascontiguousarray(frames)
-            #: bytes the stack occupies where it is kept
-            self.memory_bytes = int(self._frames.nbytes)
-            return
-        self.memory_bytes = self.n_frames * self._vecs * VEC
-        self._setup_opencl(ctx, queue, frames)
+        #: bytes the stack occupies where the engine keeps it
+        self.memory_bytes = 0
 
-    def _setup_opencl(self, ctx, queue, frames: np.ndarray) -> None:
+    @property
+    def bytes_per_frame(self) -> int:
+        """Bytes a one-term frame moves: one stored frame read, the output written."""
+        return 2 * self.frame_bytes
+
+    def render(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, *, wait: bool = True):
+        """``out`` = the blend of ``sources``; None once it is there, or (``wait=False``) the
+        event after which it is."""
+        if not 1 <= len(sources) <= MAX_TERMS:
+            raise ValueError(f"a blend takes 1 to {MAX_TERMS} sources, not {len(sources)}")
+        total = 0
+        for frame, weight in sources:
+            if not 0 <= frame < self.n_frames or weight < 0:
+                raise ValueError(f"blend source ({frame}, {weight}) names no frame of {self.n_frames} "
+                                 "or a negative weight")
+            total += weight
+        if total != 256:
+            raise ValueError(f"blend weights must sum to 256, not {total}")
+        return self._render(sources, out, wait)
+
+    def _render(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, wait: bool):
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release what the engine holds on a device (nothing for the reference)."""
+
+
+class BlendReference(Blend):
+    """The numpy reference (:func:`blend_reference`) over the stack in host memory."""
+
+    backend = "numpy"
+
+    def __init__(self, frames: np.ndarray) -> None:
+        super().__init__(frames)
+        self._frames = np.ascontiguousarray(frames)
+        self.memory_bytes = int(self._frames.nbytes)
+
+    def _render(self, sources, out, wait):
+        blend_reference(self._frames, sources, out)
+
+
+class BlendOpenCL(Blend):
+    """Kernels ``blend2``/``blend4`` of ``kernels/blend.cl`` over the stack, put on the device once.
+
+    ``ctx`` and ``queue`` belong to the caller (the mode's player); the engine owns its buffers.
+    """
+
+    backend = "opencl"
+
+    def __init__(self, frames: np.ndarray, *, ctx: Any, queue: Any) -> None:
+        super().__init__(frames)
         import pyopencl as cl
         from .engine import FrameOut, Kernel
         from .opencl import build_program
+        frames = np.asarray(frames)
+        self._vecs = -(-self.frame_bytes // (VEC * ITEMS)) * ITEMS
+        self.memory_bytes = self.n_frames * self._vecs * VEC
         padded = np.zeros((self.n_frames, self._vecs * VEC), np.uint8)   # every frame padded to whole work-items
         padded[:, :self.frame_bytes] = frames.reshape(self.n_frames, -1)
         mf = cl.mem_flags
@@ -72,19 +120,7 @@ class Blend:
         self._queue = queue
         self._upload = None
 
-    @property
-    def bytes_per_frame(self) -> int:
-        """Bytes a one-term frame moves: one stored frame read, the output written."""
-        return 2 * self.frame_bytes
-
-    def render(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, *, wait: bool = True):
-        """``out`` = the blend of ``sources``; None once it is there, or (``wait=False``) the
-        event after which it is."""
-        if not 1 <= len(sources) <= MAX_TERMS:
-            raise ValueError(f"a blend takes 1 to {MAX_TERMS} sources, not {len(sources)}")
-        if self.backend == "numpy":
-            blend_reference(self._frames, sources, out)
-            return None
+    def _render(self, sources, out, wait):
         import pyopencl as cl
         if len(sources) == 1:
             return self._outs[2].copy_from(self._d_frames, out, offset=sources[0][0] * self._vecs * VEC, wait=wait)
@@ -94,6 +130,20 @@ class Blend:
         # the event is kept: dropping it would wait for the copy (and the frame queued before it)
         self._upload = cl.enqueue_copy(self._queue, self._d_params, params, is_blocking=False)
         return self._outs[2 if len(sources) == 2 else 4].launch(out, self._gsize, wait=wait)
+
+    def close(self) -> None:
+        self._queue.finish()
+        for name in ("_d_frames", "_d_params"):
+            buf = self.__dict__.pop(name, None)
+            if buf is not None:
+                buf.release()
+
+
+def open_blend(frames: np.ndarray, *, ctx: Any = None, queue: Any = None) -> Blend:
+    """The OpenCL blend engine on ``ctx``/``queue``, or the numpy reference when ``ctx`` is None."""
+    if ctx is None:
+        return BlendReference(frames)
+    return BlendOpenCL(frames, ctx=ctx, queue=queue)
 
 
 def blend_reference(frames: np.ndarray, sources: tuple[tuple[int, int], ...], out: np.ndarray) -> np.ndarray:

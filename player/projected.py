@@ -3,7 +3,7 @@ projection of a small vector, advanced on the host once per frame, through a sto
 
 A mode subclasses :class:`ProjectionPlayer` and supplies its model (``_setup``), the
 vector it advances (``_vector``, ``_dim``, ``_step``) and how that vector becomes
-projection coefficients (``_coefficients``). The base builds the :class:`.Projector`,
+projection coefficients (``_coefficients``). The base opens the projection engine (:mod:`.projection`),
 warms it, and provides ``precision``, the ``intensity`` control, ``bytes_per_frame``,
 ``advance`` and the frame paths.
 """
@@ -15,7 +15,7 @@ import numpy as np
 
 from ..tiledb import TileDB
 from .base import FloatControl, Player, check_int
-from .projection import Projector
+from .projection import open_projector
 
 PRECISIONS = ("float32", "float16")
 MAX_INTENSITY = 100.0
@@ -47,9 +47,9 @@ class ProjectionPlayer(Player):
             basis = getattr(model, self.basis_name)
             if precision == "float16":
                 basis = basis.astype(np.float16)
-            self._proj = Projector(basis, model.mean, shape=self._shape, channels=self.texture.source.channels,
-                                   ctx=self.ctx, queue=self.queue)
-            self.basis_bytes = self._proj.basis_bytes
+            self.engine = open_projector(basis, model.mean, shape=self._shape,
+                                         channels=self.texture.source.channels, ctx=self.ctx, queue=self.queue)
+            self.basis_bytes = self.engine.basis_bytes
             self.reseed(seed)
             self._project(self._vector(), np.empty(self._shape, np.uint8))     # warm the kernel
         except BaseException:
@@ -75,7 +75,7 @@ class ProjectionPlayer(Player):
     @property
     def bytes_per_frame(self) -> int:
         """The basis and mean read, plus the uint8 frame written."""
-        return int(self.basis_bytes + 4 * self._proj.values + int(np.prod(self._shape)))
+        return self.engine.bytes_per_frame
 
     intensity = FloatControl("intensity", 0.0, MAX_INTENSITY)
 
@@ -95,8 +95,8 @@ class ProjectionPlayer(Player):
         return rec
 
     def _start(self, out: np.ndarray):
-        self._coefficients(self._vector(), self._proj.coef)
-        event = self._proj.run(out, wait=False)
+        self._coefficients(self._vector(), self.engine.coef)
+        event = self.engine.run(out, wait=False)
         self._step()
         return event
 
@@ -111,5 +111,5 @@ class ProjectionPlayer(Player):
         return out
 
     def _project(self, v: np.ndarray, out: np.ndarray) -> None:
-        self._coefficients(v, self._proj.coef)
-        self._proj.run(out)
+        self._coefficients(v, self.engine.coef)
+        self.engine.run(out)

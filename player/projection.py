@@ -1,12 +1,15 @@
 """The projection ``frame = mean + sum_i coef_i * basis[i]`` to uint8, shared by the modes
 whose frames are a linear combination of stored rows (``lds``, ``mixture``).
 
-OpenCL: kernel ``project`` of ``kernels/lds.cl`` over a blocked copy of the basis (for
-each block of ``BLOCK`` values, its ``n x BLOCK`` sub-matrix is contiguous), built once and
-with its arguments set once; per frame one small upload of the coefficients, one launch
-and one blocking copy into the caller's buffer. numpy: the reference implementation.
+OpenCL (:class:`ProjectorOpenCL`): kernel ``project`` of ``kernels/lds.cl`` over a blocked
+copy of the basis (for each block of ``BLOCK`` values, its ``n x BLOCK`` sub-matrix is
+contiguous), built once and with its arguments set once; per frame one small upload of the
+coefficients and one launch into the caller's array (or a device buffer copied into it).
+numpy: :class:`ProjectorReference`. :func:`open_projector` picks one.
 """
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -31,6 +34,10 @@ def blocked_basis(basis: np.ndarray, block: int = BLOCK) -> np.ndarray:
 class Projector:
     """Projects coefficient vectors through a fixed basis into ``(H, W, 3)`` uint8 frames.
 
+    The interface of both projection engines (:func:`open_projector` picks one). The
+    coefficients are written into :attr:`coef` (float32, length ``max(n, 1)``) and
+    :meth:`run` projects them.
+
     Parameters
     ----------
     basis : (n, P) float32 or float16
@@ -41,28 +48,71 @@ class Projector:
         Output frame shape.
     channels : {1, 3}
         Values per pixel in ``basis``; grey frames are replicated to RGB.
-    ctx, queue : pyopencl Context and CommandQueue, or None for the numpy reference.
-
-    The coefficients are written into :attr:`coef` (float32, length ``max(n, 1)``) and
-    :meth:`run` projects them.
     """
 
-    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
-                 ctx=None, queue=None) -> None:
+    backend = ""
+
+    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int) -> None:
         self.n, self.values = basis.shape
         self.shape = tuple(shape)
         self.channels = channels
         self.half = basis.dtype == np.float16
         self.basis_bytes = basis.nbytes
         self.coef = np.zeros(max(self.n, 1), np.float32)
-        self.queue = queue
-        if ctx is None:
-            self._basis = basis.astype(np.float32) if self.half else basis
-            self._mean = mean
-            return
+
+    @property
+    def bytes_per_frame(self) -> int:
+        """The basis and mean read, plus the uint8 frame written."""
+        return int(self.basis_bytes + 4 * self.values + int(np.prod(self.shape)))
+
+    def run(self, out: np.ndarray, *, wait: bool = True):
+        """Project :attr:`coef` into ``out`` ((H, W, 3) uint8, C-contiguous).
+
+        Returns None once ``out`` holds the frame, or (``wait=False``, OpenCL) the event after
+        which it does. :attr:`coef` may be changed as soon as this returns.
+        """
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release what the engine holds on a device (nothing for the reference)."""
+
+
+class ProjectorReference(Projector):
+    """The numpy reference: ``coef @ basis + mean``, rounded and saturated, in float32."""
+
+    backend = "numpy"
+
+    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int) -> None:
+        super().__init__(basis, mean, shape=shape, channels=channels)
+        self._basis = basis.astype(np.float32) if self.half else basis
+        self._mean = mean
+
+    def run(self, out: np.ndarray, *, wait: bool = True):
+        frame = self.coef[: self.n] @ self._basis
+        frame += self._mean
+        np.rint(frame, out=frame)
+        np.clip(frame, 0, 255, out=frame)
+        if self.channels == 3:
+            out.reshape(-1)[...] = frame
+        else:
+            out[...] = frame.reshape(self.shape[0], self.shape[1], 1)
+
+
+class ProjectorOpenCL(Projector):
+    """Kernel ``project`` of ``kernels/lds.cl`` over a blocked copy of the basis (module docstring).
+
+    ``ctx`` and ``queue`` belong to the caller (the mode's player); the engine owns its buffers.
+    """
+
+    backend = "opencl"
+
+    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
+                 ctx: Any, queue: Any) -> None:
+        super().__init__(basis, mean, shape=shape, channels=channels)
         import pyopencl as cl
         from .engine import FrameOut, Kernel
         from .opencl import build_program
+        self.queue = queue
         blocked = blocked_basis(basis)
         blocks = blocked.shape[0]
         padded = blocks * BLOCK
@@ -77,29 +127,32 @@ class Projector:
         self._kernel = Kernel(prog, "project")
         self._kernel.set(basis=self._d_basis, mean=self._d_mean, coef=self._d_coef,
                          n=np.int32(self.n), values=np.int32(self.values))
-        self._out = FrameOut(ctx, queue, self._kernel, "out", padded * (3 // channels))
-        #: frames are written straight into the caller's array (no copy) where the device shares host memory
-        self.direct = self._out.direct
+        #: the kernel's frame destination (writes straight into callers' arrays where the device shares host memory)
+        self.out = FrameOut(ctx, queue, self._kernel, "out", padded * (3 // channels))
         self._gsize = (-(-blocks // LOCAL) * LOCAL,)
         self._lsize = (LOCAL,)
 
-    def run(self, out: np.ndarray, *, wait: bool = True):
-        """Project :attr:`coef` into ``out`` ((H, W, 3) uint8, C-contiguous).
+    @property
+    def direct(self) -> bool:
+        """Frames are written straight into the caller's array (no copy)."""
+        return self.out.direct
 
-        With ``wait=False`` (OpenCL only) the copy into ``out`` is left in flight and its
-        event returned: ``out`` is complete once the event has completed. :attr:`coef` may
-        be changed as soon as this returns.
-        """
-        if self.queue is None:
-            frame = self.coef[: self.n] @ self._basis
-            frame += self._mean
-            np.rint(frame, out=frame)
-            np.clip(frame, 0, 255, out=frame)
-            if self.channels == 3:
-                out.reshape(-1)[...] = frame
-            else:
-                out[...] = frame.reshape(self.shape[0], self.shape[1], 1)
-            return None
+    def run(self, out: np.ndarray, *, wait: bool = True):
         import pyopencl as cl
         cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=not wait)
-        return self._out.launch(out, self._gsize, self._lsize, wait=wait)
+        return self.out.launch(out, self._gsize, self._lsize, wait=wait)
+
+    def close(self) -> None:
+        self.queue.finish()
+        for name in ("_d_basis", "_d_mean", "_d_coef"):
+            buf = self.__dict__.pop(name, None)
+            if buf is not None:
+                buf.release()
+
+
+def open_projector(basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
+                   ctx: Any = None, queue: Any = None) -> Projector:
+    """The OpenCL projection engine on ``ctx``/``queue``, or the numpy reference when ``ctx`` is None."""
+    if ctx is None:
+        return ProjectorReference(basis, mean, shape=shape, channels=channels)
+    return ProjectorOpenCL(basis, mean, shape=shape, channels=channels, ctx=ctx, queue=queue)

@@ -25,7 +25,7 @@ import numpy as np
 from ..tiledb import TileDB
 from ..tiledb.turnpoints import TurnPointModel
 from .base import FloatControl, Player, check_float, check_int, rng_from_state
-from .blend import Blend
+from .blend import open_blend
 
 PLAYBACKS = ("hybrid", "turns", "jumps")
 SPEED_RANGE = (0.0, 4.0)
@@ -117,10 +117,10 @@ class TurnPointPlayer(Player):
         frames = store.read()
         if frames.shape[-1] == 1:
             frames = np.repeat(frames, 3, axis=-1)
-        self._blend = Blend(frames, ctx=self.ctx, queue=self.queue)
+        self.engine = open_blend(frames, ctx=self.ctx, queue=self.queue)
         del frames
         #: bytes the stored frames occupy on the device (or in host memory with numpy)
-        self.memory_bytes = self._blend.memory_bytes
+        self.memory_bytes = self.engine.memory_bytes
         self._warm()
 
     def _tables(self, model: TurnPointModel):
@@ -165,7 +165,7 @@ class TurnPointPlayer(Player):
     @property
     def bytes_per_frame(self) -> int:
         """Bytes a frame moves at speed 1 between jumps: one stored frame read, the output written."""
-        return self._blend.bytes_per_frame
+        return self.engine.bytes_per_frame
 
     speed = FloatControl("speed", *SPEED_RANGE)
 
@@ -305,7 +305,7 @@ class TurnPointPlayer(Player):
     def _compose(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, *, wait: bool = True):
         """``out`` = the weighted sum of ``sources`` ((frame, weight in 256ths) pairs); returns
         None once it is there, or (``wait=False``) the event after which it is."""
-        return self._blend.render(sources, out, wait=wait)
+        return self.engine.render(sources, out, wait=wait)
 
     # -- state ---------------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:

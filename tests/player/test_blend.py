@@ -6,7 +6,7 @@ import doctest
 import numpy as np
 import pytest
 
-from dynatex.player.blend import Blend, blend_reference
+from dynatex.player.blend import BlendOpenCL, blend_reference, open_blend
 
 
 def _frames(t=5, h=7, w=11, seed=0):
@@ -28,7 +28,8 @@ def test_reference_is_the_rounded_weighted_sum():
 def test_opencl_equals_the_reference(cl_context, sources):
     import pyopencl as cl
     f = _frames()
-    b = Blend(f, ctx=cl_context, queue=cl.CommandQueue(cl_context))
+    b = open_blend(f, ctx=cl_context, queue=cl.CommandQueue(cl_context))
+    assert isinstance(b, BlendOpenCL)
     ref = blend_reference(f, sources, np.empty(f.shape[1:], np.uint8))
     out = np.zeros(f.shape[1:], np.uint8)
     event = b.render(sources, out, wait=False)
@@ -36,14 +37,31 @@ def test_opencl_equals_the_reference(cl_context, sources):
     event.wait()
     assert np.array_equal(out, ref)
     assert b.memory_bytes == 5 * 256 and b.bytes_per_frame == 2 * 231
+    b.close()
+    assert not hasattr(b, "_d_frames")
 
 
 def test_bad_inputs_are_clear_errors():
     with pytest.raises(ValueError, match=r"frames must be uint8 \(T, H, W, 3\)"):
-        Blend(np.zeros((2, 3, 3), np.uint8))
-    b = Blend(_frames())
+        open_blend(np.zeros((2, 3, 3), np.uint8))
+    b = open_blend(_frames())
+    out = np.empty((7, 11, 3), np.uint8)
     with pytest.raises(ValueError, match="a blend takes 1 to 4 sources, not 5"):
-        b.render(tuple((i, 51) for i in range(5)), np.empty((7, 11, 3), np.uint8))
+        b.render(tuple((i, 51) for i in range(5)), out)
+    with pytest.raises(ValueError, match=r"blend source \(5, 128\) names no frame of 5"):
+        b.render(((0, 128), (5, 128)), out)
+    with pytest.raises(ValueError, match="blend weights must sum to 256, not 255"):
+        b.render(((0, 128), (1, 127)), out)
+
+
+def test_a_bad_source_never_reaches_the_device(cl_context):
+    """An out-of-range frame is refused before the kernel could read past the stack."""
+    import pyopencl as cl
+    b = open_blend(_frames(), ctx=cl_context, queue=cl.CommandQueue(cl_context))
+    for sources in (((-1, 256),), ((0, 128), (7, 128)), ((0, 64), (1, 64), (2, 64), (99, 64))):
+        with pytest.raises(ValueError, match="names no frame of 5"):
+            b.render(sources, np.empty((7, 11, 3), np.uint8))
+    b.close()
 
 
 def test_docstring_examples_run():
