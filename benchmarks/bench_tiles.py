@@ -77,7 +77,7 @@ def bench_player(path: str, size: tuple[int, int], n: int, *, defaults: bool = F
 
     with player("opencl") as p:
         buf = np.empty(p.shape, np.uint8)
-        g = p._gather
+        g = p.engine
         e2e, kernel = [], []
         for _ in range(rounds):
             gbs = copy_bandwidth(mbytes=128, repeats=3)["gbs"]

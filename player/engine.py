@@ -1,9 +1,27 @@
-"""What the device engines share: kernels whose arguments are set by the names in their
-OpenCL signature, and one path that delivers a kernel's frame to the caller's array.
+"""The engine layer: what draws a mode's frames, and what the engines share.
 
-The projection, gather, runs (evolve) and blend (turn points) engines each launch one
-kernel per frame. :class:`Kernel` binds arguments by name (the names the ``.cl`` file
-declares), so no index has to mirror a signature.
+A mode (a :class:`~dynatex.player.base.Player`) is a model, a clock and controls; its
+frames come from one engine, ``player.engine``, of one of four kinds, each a pair of an
+OpenCL engine and its numpy reference behind one interface:
+
+=============  ===========================  ======================================
+engine         module                        draws
+=============  ===========================  ======================================
+projection     :mod:`.projection`           ``mean + coef @ basis`` (lds, mixture)
+gather         :mod:`.gather`               stored pixels at per-pixel times (tiles)
+runs           :mod:`.runs`                 a quilt's runs at per-block times (evolve)
+blend          :mod:`.blend`                weighted sums of stored frames (turnpoints)
+=============  ===========================  ======================================
+
+The interface: built from the model's arrays (uploaded once; ``ctx`` and ``queue`` are
+the player's, the buffers the engine's), a render call that writes a frame into the
+caller's array and returns None once it is there or the event after which it is (so every
+mode can keep a frame in flight), ``bytes_per_frame`` for roofline figures, ``backend``,
+and ``close()``, which the player calls. ``open_projector``, ``open_gather``,
+``open_runs`` and ``open_blend`` pick the OpenCL engine or the reference.
+
+What the OpenCL engines share lives here: :class:`Kernel` binds arguments by the names
+the ``.cl`` file declares, so no index has to mirror a signature.
 :class:`FrameOut` owns the frame's destination: where the device shares host memory (a CPU
 device, probed once per context) the kernel writes straight into the caller's array,
 otherwise into a device buffer copied into it; either way the frame may be left in flight

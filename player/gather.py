@@ -70,9 +70,9 @@ writes straight into the caller's array: one launch, no copy.
 Examples
 --------
 >>> import numpy as np
->>> from dynatex.player.gather import Gather, pack_source
+>>> from dynatex.player.gather import open_gather, pack_source
 >>> stack = np.random.default_rng(0).integers(0, 256, (8, 4, 6, 3), dtype=np.uint8)
->>> g = Gather(stack, (4, 6), backend="numpy")
+>>> g = open_gather(stack, (4, 6), backend="numpy")
 >>> g.set_source_map(pack_source(np.arange(24).reshape(4, 6)))   # identity map
 >>> g.set_time_map(np.zeros((4, 6), np.float32))
 >>> bool((g.render(3.0) == stack[3]).all())
@@ -287,15 +287,16 @@ def gather_reference(stack: np.ndarray, pix: np.ndarray, tone: np.ndarray, frame
 class Gather:
     """Render frames gathered from a frame stack (see the module docstring for the model).
 
+    The interface of both gather engines, :class:`GatherOpenCL` and :class:`GatherReference`
+    (:func:`open_gather` picks one): the checks, the host copies of sources, maps and tones,
+    and the numpy reference of every frame (:meth:`render_reference`).
+
     Parameters
     ----------
     frames : (N, h, w, 3) uint8
         The stored frame stack (copied to the device once).
     out_size : (H, W)
         Output frame size.
-    backend : {"opencl", "numpy"}
-    ctx, queue : pyopencl context and queue to share with the owner (the mode's player);
-        both ``None`` uses :func:`dynatex.player.opencl.get_context` (``device``) and a new queue.
     wrap : {"loop", "clamp", "pingpong"}
         How frame indices fold into ``[0, N)``. Fixed at construction (a kernel define).
     interpolate : bool
@@ -321,14 +322,15 @@ class Gather:
     --------
     >>> import numpy as np
     >>> stack = np.zeros((4, 2, 2, 3), np.uint8); stack[:, :, :, 0] = np.arange(4)[:, None, None] * 10
-    >>> g = Gather(stack, (2, 2), backend="numpy", cell=(2, 2))
+    >>> g = open_gather(stack, (2, 2), backend="numpy", cell=(2, 2))
     >>> g.set_source_grid(pack_source(np.zeros((1, 1), int)))
     >>> int(g.render(1.5)[0, 0, 0])      # halfway between 10 and 20
     15
     """
 
-    def __init__(self, frames: np.ndarray, out_size: Sequence[int], *, backend: str = "opencl",
-                 ctx: Any = None, queue: Any = None, device: str | None = None, wrap: str = "loop",
+    backend = ""
+
+    def __init__(self, frames: np.ndarray, out_size: Sequence[int], *, wrap: str = "loop",
                  interpolate: bool = True, time_step: int = 1, cell: Sequence[int] | None = None,
                  wide: bool | None = None) -> None:
         frames = np.asarray(frames)
@@ -338,14 +340,12 @@ class Gather:
             raise ValueError(f"frames hold {frames.shape[1] * frames.shape[2]} pixels each, more than {MAX_FRAME_PIXELS}")
         if wrap not in WRAPS:
             raise ValueError(f"wrap must be one of {WRAPS}, not {wrap!r}")
-        if backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}, not {backend!r}")
         h_out, w_out = _size("out_size", out_size)
         self.time_step = check_int("time_step", time_step, 1, 4096)
         if wide is not None and not isinstance(wide, (bool, np.bool_)):
             raise TypeError(f"wide must be None, True or False, not {wide!r}")
         self._wide_choice = wide
-        self.backend, self.wrap, self.interpolate = backend, wrap, bool(interpolate)
+        self.wrap, self.interpolate = wrap, bool(interpolate)
         self.n_frames, self.frame_h, self.frame_w = (int(v) for v in frames.shape[:3])
         self.cell = None if cell is None else _size("cell", cell)
         self.grid = self.cell is not None
@@ -361,96 +361,35 @@ class Gather:
         self._target: np.ndarray | None = None      # the map the time map fades toward (set_time_map)
         self._tones = np.zeros((1, 6), np.float32)
         self._tones[0, :3] = 1.0
-        self.ctx, self.queue = ctx, queue
-        self.direct = False       # frames written straight into the caller's array (set at open)
-        self._out = None          # the gather kernel's FrameOut (OpenCL)
-        self.wide = False         # the x86 variant renders (time step 8, verified on this device; set at open)
+        self.direct = False       # frames written straight into the caller's array (OpenCL, set at open)
+        self.wide = False         # the x86 variant renders (OpenCL, time step 8, verified on the device)
         self._last_t, self._last_fade = 0.0, 0.0
-        if backend == "opencl":
-            self._setup_opencl(device)
 
-    # -- device setup ------------------------------------------------------------------------
-    def _setup_opencl(self, device: str | None) -> None:
-        import pyopencl as cl
-        from .engine import FrameOut, Kernel
-        from .opencl import OpenCLUnavailableError, build_program, get_context, variant_verified
-        if self.ctx is None:
-            self.ctx = get_context(device)
-        if self.queue is None:
-            self.queue = cl.CommandQueue(self.ctx)
-        mf = cl.mem_flags
-        h, w = self.out_shape[:2]
-        # the x86 variant only where the self-test verified it on this device
-        wanted = self.time_step == 8 and self._wide_choice is not False
-        self.wide = wanted and variant_verified(self.ctx.devices[0], "gather_wide")
-        if wanted and self._wide_choice and not self.wide:
-            raise OpenCLUnavailableError(
-                f"wide=True: the gather_wide variant is not verified on {self.ctx.devices[0].name} "
-                "(its self-test did not pass there); use wide=None or False")
-        # 16 floats of padding: the time step 8 kernel reads the maps 16 floats at a time
-        self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
-        self._d_target = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
-        self._d_tmp = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
-        self._d_tones = cl.Buffer(self.ctx, mf.READ_ONLY, MAX_TONES * TONE_STRIDE * 2)
-        self._d_source = None
-        self._d_source_bytes = 0
-        defines = {"FRAME_W": self.frame_w, "FRAME_PIXELS": self.frame_w * self.frame_h,
-                   "NFRAMES": self.n_frames, "GRID": self.grid, "WRAP": _WRAP_CODE[self.wrap],
-                   "CELL_H": (self.cell or (1, 1))[0], "CELL_W": (self.cell or (1, 1))[1],
-                   "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN,
-                   "STACK_PAD": STACK_PAD, "TONE_STRIDE": TONE_STRIDE,
-                   "TONE_OB": TONE_OB}
-        if self.wide:
-            prog = build_program(self.ctx, ("gather.cl", "variants/gather_wide.cl"),
-                                 {**defines, "STACK_SIGNED": True, "BANDS": BANDS})
-        else:
-            prog = build_program(self.ctx, "gather.cl", {**defines, "STACK_SIGNED": False})
-        # STACK_PAD bytes on both sides: vector loads of a run may read a few bytes past the
-        # frame stack's ends (lanes that a bytewise merge then drops). The wide variant
-        # reads bytes value ^ 0x80: value - 128 as a signed byte, what its blend multiplies.
-        padded = np.zeros(self._stack.nbytes + 2 * STACK_PAD, np.uint8)
-        padded[STACK_PAD:STACK_PAD + self._stack.nbytes] = self._stack.reshape(-1)
-        if self.wide:
-            padded ^= 0x80
-        self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
-        self._k_gather = Kernel(prog, "gather_wide" if self.wide else "gather")
-        self._k_gather.set(stack=self._d_stack, tmap=self._d_tmap, tones=self._d_tones, width=np.int32(w),
-                           height=np.int32(h), tmap_w=np.int32(self.tmap_shape[1]),
-                           tmap_h=np.int32(self.tmap_shape[0]), t0=np.float32(0), fade=np.float32(0))
-        self._out = FrameOut(self.ctx, self.queue, self._k_gather, "out", h * w * 3)
-        self._k_smooth_x = Kernel(prog, "smooth")
-        self._k_smooth_y = Kernel(prog, "smooth")
-        self.direct = self._out.direct
-        # kernel gather: the wide kernel renders a run of 64 pixels on BANDS bands of 8 rows (a
-        # band: rows 8k - 4 .. 8k + 3, one pair of map rows), the other RUN pixels of one row
-        self._gsize = (-(-(w + 64) // 64), -(-(h + 4) // (8 * BANDS))) if self.wide else (-(-w // RUN), h)
-        # one work-item per work-group there: left to itself PoCL may put the whole small
-        # range into one work-group, which runs on one core
-        self._lsize = (1, 1) if self.wide else None
-        self._tsize = (_round_up(self.tmap_shape[1], 16), _round_up(self.tmap_shape[0], 4))
-        self._upload_tmap()
-        self._upload_tones()
+    # -- what an engine implements --------------------------------------------------------------
+    def _upload_source(self) -> None:
+        """Put :attr:`_source` where the frames are drawn (nothing to do in host memory)."""
 
     def _upload_tmap(self) -> None:
-        if self.backend == "opencl":
-            import pyopencl as cl
-            # not blocking: the queue runs in order, and the events (kept until the next upload:
-            # dropping one would wait for the copy) hold the arrays until the copies are done
-            # (set_time_map replaces the arrays rather than writing into them)
-            self._tmap_events = [cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)]
-            if self._target is not None:
-                self._tmap_events.append(cl.enqueue_copy(self.queue, self._d_target, self._target, is_blocking=False))
-            # tmap1: the map the time map fades toward (the map itself when none is set)
-            self._k_gather.set(tmap1=self._d_tmap if self._target is None else self._d_target)
+        """Put the time map and its target where the frames are drawn."""
 
     def _upload_tones(self) -> None:
-        if self.backend == "opencl":
-            import pyopencl as cl
-            cl.enqueue_copy(self.queue, self._d_tones, _expand_tones(self._tones), is_blocking=True)
+        """Put the tone table where the frames are drawn."""
 
-    def _set_args(self) -> None:
-        if self.backend == "opencl" and self._d_source is not None:
-            self._k_gather.set(source=self._d_source, grid_w=np.int32(self._source.shape[1]))
+    def _maps(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The time map and its target as the frames use them."""
+        return self._tmap, self._target
+
+    def _smooth(self, sigma: float, weights: np.ndarray) -> None:
+        """Gaussian-smooth the maps where they are kept (``sigma`` in map samples, its taps)."""
+        raise NotImplementedError
+
+    def _launch(self, t: float, out: np.ndarray):
+        """Start the frame at folded time ``t`` (fade: :attr:`_last_fade`) into ``out``; None or an event."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release what the engine holds on a device (nothing for the reference)."""
+
 
     # -- inputs --------------------------------------------------------------------------------
     def set_source_map(self, packed: np.ndarray) -> None:
@@ -493,14 +432,7 @@ class Gather:
 
     def _store_source(self, packed: np.ndarray, cell: tuple[int, int] | None) -> None:
         self._source, self._cell = packed, cell
-        if self.backend != "opencl":
-            return
-        import pyopencl as cl
-        if self._d_source is None or self._d_source_bytes < packed.nbytes:
-            self._d_source = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY, max(packed.nbytes, 4))
-            self._d_source_bytes = packed.nbytes
-        cl.enqueue_copy(self.queue, self._d_source, packed, is_blocking=True)
-        self._set_args()
+        self._upload_source()
 
     def set_time_map(self, tmap: np.ndarray, target: np.ndarray | None = None) -> None:
         """Time offsets in frames, ``tmap_shape`` float32, finite, within +-2048 frames.
@@ -528,19 +460,14 @@ class Gather:
 
     @property
     def time_map(self) -> np.ndarray:
-        """The current time map (read back from the device after smoothing)."""
-        return self._read_map(self._tmap, "_d_tmap")
+        """The current time map (after smoothing; a copy)."""
+        return self._maps()[0].copy()
 
     @property
     def target_map(self) -> np.ndarray | None:
-        """The map the time map fades toward, or None (see :meth:`set_time_map`)."""
-        return None if self._target is None else self._read_map(self._target, "_d_target")
-
-    def _read_map(self, host: np.ndarray, device: str) -> np.ndarray:
-        if self.backend == "opencl":
-            import pyopencl as cl
-            cl.enqueue_copy(self.queue, host, getattr(self, device), is_blocking=True)
-        return host.copy()
+        """The map the time map fades toward, or None (see :meth:`set_time_map`; a copy)."""
+        target = self._maps()[1]
+        return None if target is None else target.copy()
 
     def smooth_time_map(self, sigma: float) -> None:
         """Gaussian-smooth the time map (and its target, if set) in place, ``sigma`` in output
@@ -549,22 +476,7 @@ class Gather:
         w = gaussian_weights(sigma)
         if len(w) == 1:
             return
-        if self.backend == "numpy":
-            self._tmap = gaussian_smooth(self._tmap, sigma)
-            if self._target is not None:
-                self._target = gaussian_smooth(self._target, sigma)
-            return
-        import pyopencl as cl
-        r = (len(w) - 1) // 2
-        d_w = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=w)
-        th, tw = self.tmap_shape
-        dims = (np.int32(tw), np.int32(th), np.int32(r))
-        for d_map in [self._d_tmap] + ([self._d_target] if self._target is not None else []):
-            passes = ((self._k_smooth_x, d_map, self._d_tmp, 0), (self._k_smooth_y, self._d_tmp, d_map, 1))
-            for k, src, dst, along in passes:
-                k.set(src=src, dst=dst, weights=d_w, w=dims[0], h=dims[1], radius=dims[2], along=np.int32(along))
-                k.launch(self.queue, self._tsize)
-        self.queue.finish()
+        self._smooth(sigma, w)
 
     def set_tones(self, gain: np.ndarray, offset: np.ndarray | None = None) -> None:
         """Tone table: ``gain`` and ``offset`` ``(n, 3)`` (or ``(3,)`` for one tone), gain in [0, 63],
@@ -610,19 +522,7 @@ class Gather:
         check_out(out, self.out_shape)
         t = self._fold(float(t))
         self._last_t, self._last_fade = t, check_float("fade", fade, 0.0, 1.0)
-        if self.backend == "numpy":
-            self.render_reference(t, out, fade=fade)
-            return None
-        self._k_gather.set(t0=np.float32(t), fade=np.float32(self._last_fade))
-        return self._out.launch(out, self._gsize, self._lsize, wait=False)
-
-    def render_on_device(self, t: float, *, fade: float = 0.0) -> None:
-        """Run the gather kernel alone into the device's own frame buffer and wait (no copy, no
-        caller's array): the kernel-only time of the benchmarks."""
-        if self.backend != "opencl" or self._source is None:
-            raise RuntimeError("render_on_device needs the opencl backend and a source")
-        self._k_gather.set(t0=np.float32(self._fold(float(t))), fade=np.float32(check_float("fade", fade, 0.0, 1.0)))
-        self._out.launch_on_device(self._gsize, self._lsize).wait()
+        return self._launch(t, out)
 
     def render_reference(self, t: float, out: np.ndarray | None = None, *, fade: float = 0.0) -> np.ndarray:
         """The numpy reference of :meth:`render` (usable with either backend, for checks)."""
@@ -632,12 +532,6 @@ class Gather:
         frames, weights = time_units(tmap, self._fold(float(t)), (h, w), self.time_step, target=target, fade=fade)
         return gather_reference(self._stack, pix, tone, frames, weights, self._tones,
                                 wrap=self.wrap, interpolate=self.interpolate, out=out)
-
-    def _maps(self) -> tuple[np.ndarray, np.ndarray | None]:
-        """The time map and its target as the device holds them (read back once)."""
-        if self.backend == "opencl":
-            return self.time_map, self.target_map
-        return self._tmap, self._target
 
     def _fold(self, t: float) -> float:
         """Fold the global time into one period so float32 keeps sub-frame precision forever."""
@@ -688,6 +582,175 @@ class Gather:
         """Bytes one render must move at least: the output written plus the distinct stored
         pixels read (:meth:`frame_traffic`, which says what is counted and what may be cached)."""
         return sum(self.frame_traffic().values())
+
+
+class GatherReference(Gather):
+    """The numpy reference engine: every frame is :meth:`Gather.render_reference`."""
+
+    backend = "numpy"
+
+    def _smooth(self, sigma: float, weights: np.ndarray) -> None:
+        self._tmap = gaussian_smooth(self._tmap, sigma)
+        if self._target is not None:
+            self._target = gaussian_smooth(self._target, sigma)
+
+    def _launch(self, t: float, out: np.ndarray):
+        self.render_reference(t, out, fade=self._last_fade)
+
+
+class GatherOpenCL(Gather):
+    """Kernel ``gather`` (``kernels/gather.cl``, or its verified x86 variant) on a device.
+
+    ``ctx`` and ``queue`` are shared with the owner (the mode's player); both ``None`` use
+    :func:`dynatex.player.opencl.get_context` (``device``) and a new queue. The engine owns
+    its buffers: the frame stack, the source, the maps and the tones, uploaded when set;
+    the maps are smoothed on the device and read back only when asked for.
+    """
+
+    backend = "opencl"
+
+    def __init__(self, frames: np.ndarray, out_size: Sequence[int], *, ctx: Any = None, queue: Any = None,
+                 device: str | None = None, **options: Any) -> None:
+        super().__init__(frames, out_size, **options)
+        import pyopencl as cl
+        from .engine import FrameOut, Kernel
+        from .opencl import OpenCLUnavailableError, build_program, get_context, variant_verified
+        self.ctx = get_context(device) if ctx is None else ctx
+        self.queue = cl.CommandQueue(self.ctx) if queue is None else queue
+        mf = cl.mem_flags
+        h, w = self.out_shape[:2]
+        # the x86 variant only where the self-test verified it on this device
+        wanted = self.time_step == 8 and self._wide_choice is not False
+        self.wide = wanted and variant_verified(self.ctx.devices[0], "gather_wide")
+        if wanted and self._wide_choice and not self.wide:
+            raise OpenCLUnavailableError(
+                f"wide=True: the gather_wide variant is not verified on {self.ctx.devices[0].name} "
+                "(its self-test did not pass there); use wide=None or False")
+        # 16 floats of padding: the time step 8 kernel reads the maps 16 floats at a time
+        self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
+        self._d_target = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
+        self._d_tmp = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes)
+        self._d_tones = cl.Buffer(self.ctx, mf.READ_ONLY, MAX_TONES * TONE_STRIDE * 2)
+        self._d_source: Any = None
+        self._source_capacity = 0
+        self._tmap_events: list[Any] = []
+        defines = {"FRAME_W": self.frame_w, "FRAME_PIXELS": self.frame_w * self.frame_h,
+                   "NFRAMES": self.n_frames, "GRID": self.grid, "WRAP": _WRAP_CODE[self.wrap],
+                   "CELL_H": (self.cell or (1, 1))[0], "CELL_W": (self.cell or (1, 1))[1],
+                   "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN,
+                   "STACK_PAD": STACK_PAD, "TONE_STRIDE": TONE_STRIDE,
+                   "TONE_OB": TONE_OB}
+        if self.wide:
+            prog = build_program(self.ctx, ("gather.cl", "variants/gather_wide.cl"),
+                                 {**defines, "STACK_SIGNED": True, "BANDS": BANDS})
+        else:
+            prog = build_program(self.ctx, "gather.cl", {**defines, "STACK_SIGNED": False})
+        # STACK_PAD bytes on both sides: vector loads of a run may read a few bytes past the
+        # frame stack's ends (lanes that a bytewise merge then drops). The wide variant
+        # reads bytes value ^ 0x80: value - 128 as a signed byte, what its blend multiplies.
+        padded = np.zeros(self._stack.nbytes + 2 * STACK_PAD, np.uint8)
+        padded[STACK_PAD:STACK_PAD + self._stack.nbytes] = self._stack.reshape(-1)
+        if self.wide:
+            padded ^= 0x80
+        self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
+        self._k_gather = Kernel(prog, "gather_wide" if self.wide else "gather")
+        self._k_gather.set(stack=self._d_stack, tmap=self._d_tmap, tones=self._d_tones, width=np.int32(w),
+                           height=np.int32(h), tmap_w=np.int32(self.tmap_shape[1]),
+                           tmap_h=np.int32(self.tmap_shape[0]), t0=np.float32(0), fade=np.float32(0))
+        self._out = FrameOut(self.ctx, self.queue, self._k_gather, "out", h * w * 3)
+        self._k_smooth_x = Kernel(prog, "smooth")
+        self._k_smooth_y = Kernel(prog, "smooth")
+        self.direct = self._out.direct
+        # kernel gather: the wide kernel renders a run of 64 pixels on BANDS bands of 8 rows (a
+        # band: rows 8k - 4 .. 8k + 3, one pair of map rows), the other RUN pixels of one row
+        self._gsize = (-(-(w + 64) // 64), -(-(h + 4) // (8 * BANDS))) if self.wide else (-(-w // RUN), h)
+        # one work-item per work-group there: left to itself PoCL may put the whole small
+        # range into one work-group, which runs on one core
+        self._lsize = (1, 1) if self.wide else None
+        self._tsize = (_round_up(self.tmap_shape[1], 16), _round_up(self.tmap_shape[0], 4))
+        self._upload_tmap()
+        self._upload_tones()
+
+
+    def _upload_source(self) -> None:
+        import pyopencl as cl
+        packed = self._source
+        if self._d_source is None or self._source_capacity < packed.nbytes:
+            self._d_source = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY, max(packed.nbytes, 4))
+            self._source_capacity = packed.nbytes
+        cl.enqueue_copy(self.queue, self._d_source, packed, is_blocking=True)
+        self._k_gather.set(source=self._d_source, grid_w=np.int32(packed.shape[1]))
+
+    def _upload_tmap(self) -> None:
+        import pyopencl as cl
+        # not blocking: the queue runs in order, and the events (kept until the next upload:
+        # dropping one would wait for the copy) hold the arrays until the copies are done
+        # (set_time_map replaces the arrays rather than writing into them)
+        self._tmap_events = [cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)]
+        if self._target is not None:
+            self._tmap_events.append(cl.enqueue_copy(self.queue, self._d_target, self._target, is_blocking=False))
+        # tmap1: the map the time map fades toward (the map itself when none is set)
+        self._k_gather.set(tmap1=self._d_tmap if self._target is None else self._d_target)
+
+    def _upload_tones(self) -> None:
+        import pyopencl as cl
+        cl.enqueue_copy(self.queue, self._d_tones, _expand_tones(self._tones), is_blocking=True)
+
+    def _maps(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The maps as the device holds them (smoothed there), read back."""
+        import pyopencl as cl
+        maps = []
+        for host, device in ((self._tmap, self._d_tmap), (self._target, self._d_target)):
+            if host is None:
+                maps.append(None)
+                continue
+            m = np.empty_like(host)
+            cl.enqueue_copy(self.queue, m, device, is_blocking=True)
+            maps.append(m)
+        return maps[0], maps[1]
+
+    def _smooth(self, sigma: float, weights: np.ndarray) -> None:
+        import pyopencl as cl
+        r = (len(weights) - 1) // 2
+        d_w = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=weights)
+        th, tw = self.tmap_shape
+        dims = (np.int32(tw), np.int32(th), np.int32(r))
+        for d_map in [self._d_tmap] + ([self._d_target] if self._target is not None else []):
+            passes = ((self._k_smooth_x, d_map, self._d_tmp, 0), (self._k_smooth_y, self._d_tmp, d_map, 1))
+            for k, src, dst, along in passes:
+                k.set(src=src, dst=dst, weights=d_w, w=dims[0], h=dims[1], radius=dims[2], along=np.int32(along))
+                k.launch(self.queue, self._tsize)
+        self.queue.finish()
+
+    def _launch(self, t: float, out: np.ndarray):
+        self._k_gather.set(t0=np.float32(t), fade=np.float32(self._last_fade))
+        return self._out.launch(out, self._gsize, self._lsize, wait=False)
+
+    def render_on_device(self, t: float, *, fade: float = 0.0) -> None:
+        """Run the gather kernel alone into the device's own frame buffer and wait (no copy, no
+        caller's array): the kernel-only time of the benchmarks."""
+        if self._source is None:
+            raise RuntimeError("set a source (set_source_map or set_source_grid) before render_on_device")
+        self._k_gather.set(t0=np.float32(self._fold(float(t))), fade=np.float32(check_float("fade", fade, 0.0, 1.0)))
+        self._out.launch_on_device(self._gsize, self._lsize).wait()
+
+    def close(self) -> None:
+        self.queue.finish()
+        for name in ("_d_stack", "_d_tmap", "_d_target", "_d_tmp", "_d_tones", "_d_source"):
+            buf = self.__dict__.pop(name, None)
+            if buf is not None:
+                buf.release()
+
+
+def open_gather(frames: np.ndarray, out_size: Sequence[int], *, backend: str = "opencl", ctx: Any = None,
+                queue: Any = None, device: str | None = None, **options: Any) -> Gather:
+    """A gather engine: :class:`GatherOpenCL` (``backend="opencl"``, on ``ctx``/``queue`` or
+    ``device``) or :class:`GatherReference` (``"numpy"``); ``options`` as :class:`Gather`'s."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, not {backend!r}")
+    if backend == "numpy":
+        return GatherReference(frames, out_size, **options)
+    return GatherOpenCL(frames, out_size, ctx=ctx, queue=queue, device=device, **options)
 
 
 def _expand_tones(tones: np.ndarray) -> np.ndarray:

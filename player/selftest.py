@@ -326,11 +326,11 @@ def _gather_check(*, cell, time_step: int, wrap: str, interpolate: bool = True, 
                   wide: bool | None = False) -> Callable[[str], str | None]:
     """The gather engine against its reference, exactly, on random maps and tones."""
     def check(device: str) -> str | None:
-        from .gather import Gather, pack_source
+        from .gather import open_gather, pack_source
         rng = np.random.default_rng(7)
         stack = rng.integers(0, 256, (6, 20, 36, 3), dtype=np.uint8)
-        g = Gather(stack, size, backend="opencl", device=device, wrap=wrap, interpolate=interpolate,
-                   time_step=time_step, cell=cell, wide=wide)
+        g = open_gather(stack, size, backend="opencl", device=device, wrap=wrap, interpolate=interpolate,
+                        time_step=time_step, cell=cell, wide=wide)
         g.set_tones(rng.uniform(0.5, 1.5, (3, 3)).astype(np.float32), rng.uniform(-20, 20, (3, 3)).astype(np.float32))
         h, w = size
         if cell is None:

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..tiledb import TileDB, TilesModel
 from .base import FloatControl, Player, check_float, check_int, check_seed, rng_from_state
-from .gather import MAX_GAIN, MAX_TIME, Gather, gaussian_smooth, pack_source
+from .gather import MAX_GAIN, MAX_TIME, gaussian_smooth, open_gather, pack_source
 
 TIME_STEP = 8              # output pixels per time-map sample
 MAX_SIZE = 16384
@@ -171,8 +171,9 @@ class TilesPlayer(Player):
         # tiles stacked vertically in each stored frame: one tile's frame is contiguous, so a
         # cell's rows are read as one forward stream (hardware prefetch follows it)
         stack = np.ascontiguousarray(model.tiles.transpose(1, 0, 2, 3, 4).reshape(length, k * th, tw, 3))
-        self._gather = Gather(stack, (h, w), backend=self.backend, ctx=self.ctx, queue=self.queue,
-                              time_step=TIME_STEP, cell=None if mixing else (th, tw))
+        self.engine = self._gather = open_gather(stack, (h, w), backend=self.backend, ctx=self.ctx,
+                                                 queue=self.queue, time_step=TIME_STEP,
+                                                 cell=None if mixing else (th, tw))
         self.mixing = mixing
         c = model.n_classes
         #: quantization levels of a feathered pixel's tone share (tone table <= 256 entries)

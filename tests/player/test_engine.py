@@ -92,3 +92,23 @@ def test_every_mode_leaves_its_frame_in_flight_and_double_buffers(cl_device, mod
     assert in_flight
     for k, (x, y) in enumerate(zip(want, got)):
         assert np.array_equal(x, y), (mode, k)
+
+
+@pytest.mark.parametrize("mode, options", MODES, ids=[m for m, _ in MODES])
+def test_every_mode_draws_through_one_engine_and_closing_releases_it(cl_device, mode, options):
+    """Each mode's frames come from one engine of the backend it plays on, with the engine's
+    bytes per frame; closing the player with a frame in flight finishes that frame and
+    releases the engine's device buffers."""
+    db = selftest._db_path()
+    for backend, device in (("opencl", cl_device), ("numpy", None)):
+        p = open_player(db, selftest.TEXTURE, mode=mode, backend=backend, device=device, seed=5, **options)
+        engine = p.engine
+        assert engine.backend == backend == p.backend
+        assert p.bytes_per_frame == engine.bytes_per_frame > 0
+        out = np.zeros(p.shape, np.uint8)
+        pending = p.start_frame(out)
+        p.close()
+        assert p.engine is None and pending.done
+        if backend == "opencl":
+            assert not [k for k in vars(engine) if k.startswith("_d_")], "device buffers left after close"
+        assert out.any()

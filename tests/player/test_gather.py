@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynatex.player.gather import (Gather, gather_reference, gaussian_smooth, gaussian_weights, pack_source,
+from dynatex.player.gather import (gather_reference, gaussian_smooth, gaussian_weights, open_gather, pack_source,
                                    time_units, unpack_source, wrap_index)
 
 
@@ -30,7 +30,7 @@ def _render_both(cl_context, stack, size, tones, source, tmap, times, **options)
     options, else a per-pixel map) as (OpenCL, numpy) pairs, and the OpenCL Gather."""
     frames, gathers = {}, {}
     for backend in ("opencl", "numpy"):
-        g = Gather(stack, size, backend=backend, ctx=cl_context if backend == "opencl" else None, **options)
+        g = open_gather(stack, size, backend=backend, ctx=cl_context if backend == "opencl" else None, **options)
         g.set_tones(*tones)
         (g.set_source_grid if "cell" in options else g.set_source_map)(source)
         g.set_time_map(tmap)
@@ -73,7 +73,7 @@ def test_gaussian_smooth_reference_properties():
 
 def test_identity_map_integer_time_is_exact_copy():
     stack = _stack()
-    g = Gather(stack, (10, 12), backend="numpy")
+    g = open_gather(stack, (10, 12), backend="numpy")
     g.set_source_map(pack_source(np.arange(120).reshape(10, 12)))
     for t in (0, 3, 8, -2):
         assert (g.render(float(t)) == stack[t % 7]).all()
@@ -106,8 +106,8 @@ def test_grid_gather_with_coarse_time_opencl_matches_numpy(cl_context):
     tmap = np.repeat(np.repeat(rng.integers(0, 5, (gh, gw)).astype(np.float32), 2, 0), 2, 1)[:th, :tw]
     out = {}
     for backend in ("opencl", "numpy"):
-        g = Gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
-                   cell=(8, 8), time_step=step)
+        g = open_gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
+                        cell=(8, 8), time_step=step)
         g.set_tones(np.array([[1, 1, 1], [0.5, 0.5, 0.5], [1.5, 1, 1]], np.float32))
         g.set_source_grid(origins)
         g.set_time_map(tmap)
@@ -119,7 +119,7 @@ def test_grid_gather_with_coarse_time_opencl_matches_numpy(cl_context):
 
 def test_grid_pixels_come_from_the_named_cell():
     stack = _stack(n=3, h=4, w=8)
-    g = Gather(stack, (4, 8), backend="numpy", cell=(4, 4), interpolate=False)
+    g = open_gather(stack, (4, 8), backend="numpy", cell=(4, 4), interpolate=False)
     g.set_source_grid(pack_source(np.array([[4, 0]])))
     f = g.render(1.0)
     assert (f[:, :4] == stack[1, :, 4:]).all() and (f[:, 4:] == stack[1, :, :4]).all()
@@ -128,7 +128,7 @@ def test_grid_pixels_come_from_the_named_cell():
 def test_time_interpolation_halfway():
     stack = np.zeros((4, 1, 1, 3), np.uint8)
     stack[:, 0, 0, :] = np.array([0, 100, 200, 50])[:, None]
-    g = Gather(stack, (1, 1), backend="numpy")
+    g = open_gather(stack, (1, 1), backend="numpy")
     g.set_source_map(pack_source(np.zeros((1, 1), int)))
     assert int(g.render(0.5)[0, 0, 0]) == 50
     assert int(g.render(3.5)[0, 0, 0]) == 25          # loop: between frame 3 (50) and frame 0 (0)
@@ -183,7 +183,7 @@ def test_device_and_reference_agree_exactly(cl_context, wide):
     for step, (h, w) in ((8, (37, 130)), (8, (64, 256)), (8, (150, 96)), (1, (20, 70)), (4, (37, 130))):
         if wide and step != 8:
             continue
-        g = Gather(stack, (h, w), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=step, wide=wide)
+        g = open_gather(stack, (h, w), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=step, wide=wide)
         gh, gw = -(-h // 16), -(-w // 32)
         g.set_source_grid(pack_source(rng.integers(0, 2, (gh, gw)) * 32 + rng.integers(0, 2, (gh, gw)) * 16 * 64))
         th, tw = g.tmap_shape
@@ -194,7 +194,7 @@ def test_device_and_reference_agree_exactly(cl_context, wide):
         g.set_tones(np.ones((1, 3), np.float32))            # the identity
         assert np.array_equal(g.render(3.6, fade=0.5), g.render_reference(3.6, fade=0.5)), (step, h, w, "identity")
     # a per-pixel source: rows of consecutive pixels (the wide kernel's linear runs) and scattered ones
-    g = Gather(stack, (24, 192), backend="opencl", ctx=cl_context, time_step=8, wide=wide)
+    g = open_gather(stack, (24, 192), backend="opencl", ctx=cl_context, time_step=8, wide=wide)
     index = (np.arange(24)[:, None] % 32) * 64 + np.arange(192)[None, :] % 64
     index[::3] = rng.integers(0, 32 * 64, (8, 192))
     g.set_tones(np.array([[1.0, 1.0, 1.0], [0.7, 1.1, 1.4]], np.float32))
@@ -207,10 +207,10 @@ def test_device_and_reference_agree_exactly(cl_context, wide):
 def test_bad_inputs_are_clear_errors():
     stack = _stack()
     with pytest.raises(ValueError, match="frames must be uint8"):
-        Gather(stack.astype(np.float32), (4, 4), backend="numpy")
+        open_gather(stack.astype(np.float32), (4, 4), backend="numpy")
     with pytest.raises(ValueError, match="wrap"):
-        Gather(stack, (4, 4), backend="numpy", wrap="mirror")
-    g = Gather(stack, (4, 4), backend="numpy")
+        open_gather(stack, (4, 4), backend="numpy", wrap="mirror")
+    g = open_gather(stack, (4, 4), backend="numpy")
     with pytest.raises(RuntimeError, match="set a source"):
         g.render(0)
     with pytest.raises(ValueError, match="packed must have shape"):
@@ -233,14 +233,14 @@ def test_bad_inputs_are_clear_errors():
     with pytest.raises(ValueError, match="offset must be finite within"):
         g.set_tones(np.array([[1, 1, 1]]), np.array([[0, 300, 0]]))
     with pytest.raises(TypeError, match="wide"):
-        Gather(stack, (4, 4), backend="numpy", wide="yes")
+        open_gather(stack, (4, 4), backend="numpy", wide="yes")
     with pytest.raises(ValueError, match="sigma"):
         g.smooth_time_map(-1)
-    gg = Gather(stack, (4, 4), backend="numpy", cell=(4, 4))
+    gg = open_gather(stack, (4, 4), backend="numpy", cell=(4, 4))
     with pytest.raises(ValueError, match="reach outside"):
         gg.set_source_grid(pack_source(np.full((1, 1), 10)))
     with pytest.raises(ValueError, match="cell 11x4 is larger"):
-        Gather(stack, (4, 4), backend="numpy", cell=(11, 4))
+        open_gather(stack, (4, 4), backend="numpy", cell=(11, 4))
 
 
 @pytest.mark.parametrize("cell", [(8, 8), (5, 7), (9, 40), (7, 64), (9, 72), (12, 100)])
@@ -306,7 +306,7 @@ def test_render_writes_into_the_callers_array(cl_context):
     """On a device that shares host memory the frame lands in ``out`` without a copy; either way
     ``out`` holds the frame, also when it is a view into a larger array."""
     stack = _stack(n=5, h=8, w=24)
-    g = Gather(stack, (19, 45), backend="opencl", ctx=cl_context, cell=(8, 8), time_step=8)
+    g = open_gather(stack, (19, 45), backend="opencl", ctx=cl_context, cell=(8, 8), time_step=8)
     g.set_source_grid(pack_source(np.full((3, 6), 8)))
     from dynatex.player.opencl import device_shares_host_memory
     assert g.direct == device_shares_host_memory(cl_context)
@@ -321,7 +321,7 @@ def test_render_writes_into_the_callers_array(cl_context):
 def test_frame_traffic_counts_output_and_distinct_stored_pixels():
     """bytes_per_frame = the output written once + each distinct (frame, pixel) read once."""
     stack = _stack(n=6, h=8, w=16)                       # two 8x8 cells side by side
-    g = Gather(stack, (16, 40), backend="numpy", cell=(8, 8), time_step=8)
+    g = open_gather(stack, (16, 40), backend="numpy", cell=(8, 8), time_step=8)
     g.set_source_grid(pack_source(np.zeros((2, 5), int)))   # one cell repeated everywhere
     g.render(2.0)
     assert g.frame_traffic() == {"output": 16 * 40 * 3, "stored": 2 * 64 * 3}   # frames 2 and 3
@@ -330,7 +330,7 @@ def test_frame_traffic_counts_output_and_distinct_stored_pixels():
     g.set_time_map(tmap)
     assert g.frame_traffic(2.0)["stored"] == 4 * 64 * 3   # frames 2..5, each once
     assert g.bytes_per_frame == sum(g.frame_traffic().values())
-    m = Gather(stack, (8, 16), backend="numpy", interpolate=False)
+    m = open_gather(stack, (8, 16), backend="numpy", interpolate=False)
     m.set_source_map(pack_source(np.arange(128).reshape(8, 16)))
     assert m.frame_traffic(0.0)["stored"] == 128 * 3     # every output pixel its own source
 
@@ -339,7 +339,7 @@ def test_frames_land_in_whichever_array_comes_and_nowhere_else(cl_context):
     """The buffer wrapping a caller's array is reused while that array comes back; switching
     arrays, or rendering on the device in between, must not write into an array passed before."""
     stack = _stack(n=6, h=16, w=64)
-    g = Gather(stack, (37, 130), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
+    g = open_gather(stack, (37, 130), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
     g.set_source_grid(pack_source(np.arange(3 * 5).reshape(3, 5) % 2 * 32))
     g.set_time_map(np.linspace(0, 3, 5 * 17, dtype=np.float32).reshape(5, 17))
     a, b = np.zeros((37, 130, 3), np.uint8), np.zeros((37, 130, 3), np.uint8)
@@ -361,13 +361,13 @@ def test_a_device_without_the_verified_variant_gets_the_portable_kernel(cl_conte
     import dynatex.player.opencl as ocl
     monkeypatch.setattr(ocl, "variant_verified", lambda device, variant: False)
     stack = _stack(n=5, h=16, w=64)
-    g = Gather(stack, (20, 70), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
+    g = open_gather(stack, (20, 70), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
     assert not g.wide
     g.set_source_grid(pack_source(np.zeros((2, 3), int)))
     g.set_time_map(np.linspace(0, 2, 3 * 9, dtype=np.float32).reshape(3, 9))
     assert np.array_equal(g.render(1.3), g.render_reference(1.3))
     with pytest.raises(ocl.OpenCLUnavailableError, match="gather_wide variant is not verified"):
-        Gather(stack, (20, 70), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8, wide=True)
+        open_gather(stack, (20, 70), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8, wide=True)
 
 
 @pytest.mark.parametrize("wide", [True, False])
@@ -377,7 +377,7 @@ def test_a_weight_rounding_up_to_255_is_the_next_frame(cl_context, wide):
     _need_wide(cl_context, wide)
     stack = np.zeros((3, 8, 64, 3), np.uint8)
     stack[1:] = 255
-    g = Gather(stack, (16, 128), backend="opencl", ctx=cl_context, cell=(8, 64), time_step=8, wide=wide)
+    g = open_gather(stack, (16, 128), backend="opencl", ctx=cl_context, cell=(8, 64), time_step=8, wide=wide)
     g.set_source_grid(pack_source(np.zeros((2, 2), int)))
     for t in (0.999, 1.999, 2.999, 0.9985):
         got = g.render(t)
@@ -388,7 +388,7 @@ def test_switching_between_identity_and_real_tones(cl_context):
     """Setting a real tone, and back to the identity, must take effect at the next frame (the
     wide kernel loads a segment's tone once, before its rows)."""
     stack = _stack(n=6, h=16, w=64)
-    g = Gather(stack, (24, 128), backend="opencl", ctx=cl_context, cell=(16, 64), time_step=8)
+    g = open_gather(stack, (24, 128), backend="opencl", ctx=cl_context, cell=(16, 64), time_step=8)
     g.set_source_grid(pack_source(np.zeros((2, 2), int)))
     g.set_time_map(np.linspace(0, 3, 3 * 16, dtype=np.float32).reshape(3, 16))
     for gain, offset in (([1, 1, 1], [0, 0, 0]), ([1.3, 0.6, 1.0], [5, -9, 0]), ([1, 1, 1], [0, 0, 0])):
@@ -403,7 +403,7 @@ def test_frames_land_whatever_the_arrays_alignment(cl_context, offset):
     plainly otherwise (3 bytes off). Every pixel must match the reference either way."""
     stack = _stack(n=6, h=16, w=64)
     h, w = 37, 256                                     # 768-byte rows
-    g = Gather(stack, (h, w), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
+    g = open_gather(stack, (h, w), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
     g.set_source_grid(pack_source((np.arange(3 * 8).reshape(3, 8) % 3) * 16))
     g.set_time_map(np.linspace(0, 3, 5 * 32, dtype=np.float32).reshape(5, 32))
     g.set_tones(np.array([[1.2, 0.8, 1.0]], np.float32), np.array([[4, -6, 0]], np.float32))
@@ -436,7 +436,7 @@ def test_the_wide_kernels_plain_vector_code_computes_the_same_integers(cl_contex
                         lambda ctx, name, defines=None: real(ctx, name, {**(defines or {}), "PORTABLE": 1}))
     rng = np.random.default_rng(5)
     stack = _stack(n=7, h=16, w=64)
-    g = Gather(stack, (40, 256), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
+    g = open_gather(stack, (40, 256), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
     assert g.wide
     g.set_source_grid(pack_source(rng.integers(0, 2, (3, 8)) * 32))
     g.set_time_map(rng.uniform(0, 4, g.tmap_shape).astype(np.float32))
@@ -449,7 +449,7 @@ def test_clamped_time_far_beyond_the_ends_holds_the_end_frames(cl_context):
     """With wrap="clamp" any time past the ends shows the end frames; huge times must neither
     overflow the integer time nor differ from the reference."""
     stack = _stack(n=5, h=16, w=64)
-    g = Gather(stack, (16, 128), backend="opencl", ctx=cl_context, cell=(16, 64), time_step=8, wrap="clamp")
+    g = open_gather(stack, (16, 128), backend="opencl", ctx=cl_context, cell=(16, 64), time_step=8, wrap="clamp")
     g.set_source_grid(pack_source(np.zeros((1, 2), int)))
     for t, frame in ((1e12, 4), (-1e12, 0), (4.0 + 3000, 4)):
         got = g.render(t)
