@@ -29,9 +29,11 @@ class Player:
     :class:`~dynatex.player.OpenCLUnavailableError`) or "numpy" (the reference);
     ``device`` names an OpenCL device (see :func:`dynatex.player.opencl.get_context`).
 
-    Subclasses set ``mode``, implement ``_render(out)`` and ``_get_state``/``_set_state``
-    (``_set_state`` reads and checks every entry before it changes anything; a missing
-    entry's KeyError becomes the ValueError "state lacks '...'" here).
+    Subclasses set ``mode``, implement ``_start(out)`` and ``_get_state``/``_set_state``.
+    :meth:`set_state` is all or nothing: when ``_set_state`` raises on a bad entry, the state
+    taken before is applied again (``_set_state`` should still check entries before it
+    changes anything, which keeps a failed restore cheap); a missing entry's KeyError becomes
+    the ValueError "state lacks '...'".
     """
 
     mode: ClassVar[str] = ""
@@ -139,11 +141,15 @@ class Player:
             raise ValueError(f"state must come from a {self.mode!r} player")
         if state.get("texture") != self.texture.name:
             raise ValueError(f"state is for texture {state.get('texture')!r}, not {self.texture.name!r}")
+        before = self._get_state()
         try:
-            frame_index = int(state["frame_index"])
+            frame_index = check_int("state frame_index", state["frame_index"], 0)
             self._set_state(state)
-        except KeyError as exc:
-            raise ValueError(f"state lacks {exc.args[0]!r}") from None
+        except BaseException as exc:
+            self._set_state(before)          # all or nothing: a bad entry leaves the player as it was
+            if isinstance(exc, KeyError):
+                raise ValueError(f"state lacks {exc.args[0]!r}") from None
+            raise
         self.frame_index = frame_index
 
     def _get_state(self) -> dict[str, Any]:

@@ -362,13 +362,16 @@ class EvolvePlayer(Player):
     def _set_state(self, state: dict[str, Any]) -> None:
         seed = check_seed("state seed", state["seed"])
         clock = check_float("state clock", state["clock"], -1e7, 1e7)
-        self.speed = state["speed"]
-        self.rate_sigma = state["rate_sigma"]
-        self.rate_map = state["rate_map"]
+        speed = check_float("state speed", state["speed"], *SPEED_RANGE)
+        sigma = check_float("state rate_sigma", state["rate_sigma"], 0.0, MAX_SIGMA)
+        rate = None if state["rate_map"] is None else check_rate_map(state["rate_map"], self._shape[:2],
+                                                                     name="state rate_map")
         end = state["end"]
         if end not in ENDS:
             raise ValueError(f"state end must be one of {ENDS}, not {end!r}")
         jitter = check_float("state jitter", state["jitter"], 0.0, float(self.n_frames))
+        self._speed, self._rate_sigma, self._rate_raw = speed, sigma, rate
+        self._update_rate()
         self.seed, self._end, self._jitter = seed, end, jitter
         self._make_warp()
         self._clock = clock
