@@ -1,8 +1,6 @@
 """The blend engine (mode turnpoints' device work): OpenCL against its numpy reference, exactly."""
 from __future__ import annotations
 
-import doctest
-
 import numpy as np
 import pytest
 
@@ -63,8 +61,3 @@ def test_a_bad_source_never_reaches_the_device(cl_context):
             b.render(sources, np.empty((7, 11, 3), np.uint8))
     b.close()
 
-
-def test_docstring_examples_run():
-    import dynatex.player.blend as module
-    res = doctest.testmod(module)
-    assert res.attempted >= 3 and res.failed == 0

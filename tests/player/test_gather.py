@@ -417,14 +417,6 @@ def test_frames_land_whatever_the_arrays_alignment(cl_context, offset):
     assert not raw[:start].any() and not raw[start + h * w * 3:].any()   # nothing outside the array
 
 
-def test_doctests():
-    import doctest
-
-    import dynatex.player.gather as module
-    res = doctest.testmod(module, extraglobs={"np": np})
-    assert res.attempted > 5 and res.failed == 0
-
-
 def test_the_wide_kernels_plain_vector_code_computes_the_same_integers(cl_context, monkeypatch):
     """Where the compiler does not target AVX-512BW the wide variant blends, packs and divides
     with plain vector code instead of x86 builtins; forced here (PORTABLE=1), it must still
