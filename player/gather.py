@@ -1,18 +1,17 @@
 """Shared gather machinery: output pixel = stored frame stack sampled at a per-pixel source
 position and a per-pixel time, blended linearly in time, colour-toned.
 
-Modes ``tiles`` and ``quilt`` (and any mode that copies stored pixels) build on
-:class:`Gather`. It owns the device buffers of one frame stack and of the maps that say
-where and when every output pixel reads, builds ``kernels/gather.cl`` once at
-construction, and renders a frame with one kernel launch plus one copy into the caller's
-buffer. Every device path has a numpy reference (the ``numpy`` backend runs exactly those
+Mode ``tiles`` (and any mode that copies stored pixels at per-pixel times) draws through
+a gather engine (:func:`open_gather`). The OpenCL engine owns the device buffers of one
+frame stack and of the maps that say where and when every output pixel reads, builds
+``kernels/gather.cl`` once at construction, and renders a frame with one kernel launch
+into the caller's array (or a device buffer copied into it). Every device path has a numpy reference (the ``numpy`` backend runs exactly those
 functions), and tests compare the two.
 
 The pieces
 ----------
 frame stack
-    ``(N, h, w, 3)`` uint8: ``N`` stored frames (tiles side by side, a quilt's source
-    frames, ...). A source pixel is the linear index ``y * w + x`` inside one frame.
+    ``(N, h, w, 3)`` uint8: ``N`` stored frames (tiles side by side, ...). A source pixel is the linear index ``y * w + x`` inside one frame.
 source
     Either a per-pixel map (:meth:`Gather.set_source_map`, ``(H, W)`` packed int32) or,
     when the Gather is built with ``cell=(ch, cw)``, a grid of cells

@@ -36,11 +36,10 @@ def quantize_rate(rate: np.ndarray) -> np.ndarray:
     per-pixel time. The rate moves by at most 1/1024, so a pixel's local time ``t * M`` by
     at most ``t / 1024`` frames (0.1 frame at t = 100); where a smoothed map changes by
     less than a step from one pixel to the next, it becomes steps of ``t / 512`` frames.
-    On a 1024x1024 canvas, a 2 / 1 map smoothed with sigma 16 adds ~80k runs and ~8k
-    (rate, block) time slots to the uniform rate's 75k runs and 2.2k slots (1/64 cut the
-    band's centre in steps of two levels, which showed as a seam there; 1/1024 made the
-    slot tables the bottleneck). An unsmoothed map that changes at every pixel plays, but
-    at a run (and a slot) per pixel.
+    The step is a compromise between a visible seam (coarser steps cut a smoothed band
+    into visible levels) and the size of the slot tables (finer steps), measured in
+    CHANGELOG.md. An unsmoothed map that changes at every pixel plays, but at a run (and a
+    slot) per pixel.
 
     Examples
     --------

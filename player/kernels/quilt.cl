@@ -23,9 +23,7 @@
 // vector loads and stores. The last chunk of a run spills up to 15 bytes into the next
 // runs of its row, which rewrite them (the host flags the runs whose spill stays within
 // the row), or else is aligned to the run's end (rewriting a few bytes with the same
-// values); a run shorter than a chunk that may not spill goes byte by byte. (Per-pixel
-// times where the rate varied along a run cost ~10x a run pixel; the quantized, cut runs
-// made a 1024x1024 smoothed rate map ~2x faster.)
+// values); a run shorter than a chunk that may not spill goes byte by byte.
 //
 // Arithmetic is that of the numpy reference, in float32: v = v0 + f (v1 - v0) per source,
 // v = first + a (second - first) for a blend, v *= gain, rounded to nearest even and
@@ -90,8 +88,8 @@ inline void store16(uchar16 v, __global uchar *p)
     *(__global uchar16_u *)p = v;
 }
 
-// Round to nearest even and saturate to 0..255, as convert_uchar16_sat_rte but ~2x faster on
-// PoCL: clamping first makes rounding and saturating commute, and adding 1.5 * 2^23 leaves
+// Round to nearest even and saturate to 0..255, as convert_uchar16_sat_rte but faster on
+// PoCL (CHANGELOG.md): clamping first makes rounding and saturating commute, and adding 1.5 * 2^23 leaves
 // the rounded integer (current rounding mode: nearest even) in the low mantissa bits.
 inline uchar16 to_uchar16(float16 v)
 {
