@@ -7,6 +7,7 @@ from typing import Any, ClassVar, Iterator
 import numpy as np
 
 from ..tiledb import Texture, TileDB
+from .pixels import pixel_format
 
 BACKENDS = ("opencl", "numpy")
 #: what a player's ``backend`` may be: a backend, or "auto" (OpenCL on a verified device, else numpy)
@@ -28,6 +29,9 @@ class Player:
     else the numpy reference with one warning), "opencl" (a verified device or
     :class:`~dynatex.player.OpenCLUnavailableError`) or "numpy" (the reference);
     ``device`` names an OpenCL device (see :func:`dynatex.player.opencl.get_context`).
+    ``format`` is the frames' pixel format: "RGB" (default), "RGBA" or "BGRA" (alpha 255),
+    written straight from the kernels (:mod:`dynatex.player.pixels`); :attr:`shape` ends in
+    its bytes per pixel.
 
     Subclasses set ``mode``, implement ``_start(out)`` and ``_get_state``/``_set_state``.
     :meth:`set_state` is all or nothing: when ``_set_state`` raises on a bad entry, the state
@@ -39,9 +43,11 @@ class Player:
     mode: ClassVar[str] = ""
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "auto", device: str | None = None) -> None:
+                 backend: str = "auto", device: str | None = None, format: str = "RGB") -> None:
         if backend not in BACKEND_CHOICES:
             raise ValueError(f"backend must be one of {BACKEND_CHOICES}, not {backend!r}")
+        #: the frames' pixel format (:data:`dynatex.player.pixels.FORMATS`)
+        self.format = pixel_format(format)
         self.queue = None
         self.ctx = None
         #: the engine that draws the frames (set by the mode; closed with the player)
@@ -71,7 +77,8 @@ class Player:
     # -- frame contract --------------------------------------------------------
     @property
     def shape(self) -> tuple[int, int, int]:
-        """``(height, width, 3)`` of the frames this player produces (subclasses set ``_shape``)."""
+        """``(height, width, bytes)`` of the frames this player produces: ``bytes`` 3 for RGB, 4 for
+        RGBA and BGRA (subclasses set ``_shape``)."""
         return self._shape
 
     def reseed(self, seed: int) -> None:

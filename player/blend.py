@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from .pixels import pixel_format
+
 VEC = 16
 ITEMS = 4          # uchar16 per work-item of the blend kernels
 MAX_TERMS = 4
@@ -31,17 +33,20 @@ class Blend:
 
     The interface of both blend engines (:func:`open_blend` picks one): :meth:`render`
     takes ``((frame, weight), ...)`` with 1 to 4 terms, frames in the stack and weights in
-    256ths summing to 256, checked before anything reads a frame.
+    256ths summing to 256, checked before anything reads a frame. The stack is kept in the
+    output's pixel ``format`` (:data:`~dynatex.player.engine.FORMATS`; alpha 255 blends to
+    255), so every format blends byte by byte alike.
     """
 
     backend = ""
 
-    def __init__(self, frames: np.ndarray) -> None:
+    def __init__(self, frames: np.ndarray, *, format: str = "RGB") -> None:
         frames = np.asarray(frames)
         if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
             raise ValueError(f"frames must be uint8 (T, H, W, 3) with T >= 1, not {frames.dtype} {frames.shape}")
+        self.format = pixel_format(format)
         self.n_frames = int(frames.shape[0])
-        self.shape = tuple(int(v) for v in frames.shape[1:])
+        self.shape = (int(frames.shape[1]), int(frames.shape[2]), self.format.bytes)
         self.frame_bytes = int(np.prod(self.shape))
         #: bytes the stack occupies where the engine keeps it
         self.memory_bytes = 0
@@ -78,9 +83,9 @@ class BlendReference(Blend):
 
     backend = "numpy"
 
-    def __init__(self, frames: np.ndarray) -> None:
-        super().__init__(frames)
-        self._frames = np.ascontiguousarray(frames)
+    def __init__(self, frames: np.ndarray, *, format: str = "RGB") -> None:
+        super().__init__(frames, format=format)
+        self._frames = self.format.from_rgb(np.asarray(frames))
         self.memory_bytes = int(self._frames.nbytes)
 
     def _render(self, sources, out, wait):
@@ -95,8 +100,8 @@ class BlendOpenCL(Blend):
 
     backend = "opencl"
 
-    def __init__(self, frames: np.ndarray, *, ctx: Any, queue: Any) -> None:
-        super().__init__(frames)
+    def __init__(self, frames: np.ndarray, *, ctx: Any, queue: Any, format: str = "RGB") -> None:
+        super().__init__(frames, format=format)
         import pyopencl as cl
         from .engine import FrameOut, Kernel
         from .opencl import build_program
@@ -104,7 +109,7 @@ class BlendOpenCL(Blend):
         self._vecs = -(-self.frame_bytes // (VEC * ITEMS)) * ITEMS
         self.memory_bytes = self.n_frames * self._vecs * VEC
         padded = np.zeros((self.n_frames, self._vecs * VEC), np.uint8)   # every frame padded to whole work-items
-        padded[:, :self.frame_bytes] = frames.reshape(self.n_frames, -1)
+        padded[:, :self.frame_bytes] = self.format.from_rgb(frames).reshape(self.n_frames, -1)
         mf = cl.mem_flags
         self._d_frames = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
         del padded
@@ -139,11 +144,12 @@ class BlendOpenCL(Blend):
                 buf.release()
 
 
-def open_blend(frames: np.ndarray, *, ctx: Any = None, queue: Any = None) -> Blend:
-    """The OpenCL blend engine on ``ctx``/``queue``, or the numpy reference when ``ctx`` is None."""
+def open_blend(frames: np.ndarray, *, ctx: Any = None, queue: Any = None, format: str = "RGB") -> Blend:
+    """The OpenCL blend engine on ``ctx``/``queue``, or the numpy reference when ``ctx`` is None;
+    frames written in pixel ``format``."""
     if ctx is None:
-        return BlendReference(frames)
-    return BlendOpenCL(frames, ctx=ctx, queue=queue)
+        return BlendReference(frames, format=format)
+    return BlendOpenCL(frames, ctx=ctx, queue=queue, format=format)
 
 
 def blend_reference(frames: np.ndarray, sources: tuple[tuple[int, int], ...], out: np.ndarray) -> np.ndarray:

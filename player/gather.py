@@ -86,6 +86,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .base import BACKENDS, check_float, check_int, check_out
+from .pixels import pixel_format
 
 log = logging.getLogger(__name__)
 WRAPS = ("loop", "clamp", "pingpong")
@@ -310,7 +311,11 @@ class Gather:
         or the portable kernel (False). Default: the variant where the device's self-test
         verified it (CPU devices whose compiler is clang), else the portable kernel. Both
         compute the same integers (see the module docstring); :attr:`wide` says which runs.
-        ``wide=True`` on a device where the variant is not verified is an error.
+        ``wide=True`` on a device where the variant is not verified is an error. The variant
+        writes RGB only: other formats use the portable kernel.
+    format : {"RGB", "RGBA", "BGRA"}
+        Output pixel format (:data:`~dynatex.player.engine.FORMATS`); the stack stays RGB,
+        the kernel places the bytes (and alpha, 255) as it writes them.
 
     After construction call :meth:`set_source_map` or :meth:`set_source_grid`, optionally
     :meth:`set_time_map` (default zeros), :meth:`smooth_time_map` and :meth:`set_tones`
@@ -331,7 +336,7 @@ class Gather:
 
     def __init__(self, frames: np.ndarray, out_size: Sequence[int], *, wrap: str = "loop",
                  interpolate: bool = True, time_step: int = 1, cell: Sequence[int] | None = None,
-                 wide: bool | None = None) -> None:
+                 wide: bool | None = None, format: str = "RGB") -> None:
         frames = np.asarray(frames)
         if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
             raise ValueError(f"frames must be uint8 (N, h, w, 3) with N >= 1, not {frames.dtype} {frames.shape}")
@@ -351,7 +356,8 @@ class Gather:
         if self.grid and (self.cell[0] > self.frame_h or self.cell[1] > self.frame_w):
             raise ValueError(f"cell {self.cell[0]}x{self.cell[1]} is larger than the stored "
                              f"{self.frame_h}x{self.frame_w} frame")
-        self.out_shape = (h_out, w_out, 3)
+        self.format = pixel_format(format)
+        self.out_shape = (h_out, w_out, self.format.bytes)
         self.tmap_shape = (-(-h_out // self.time_step), -(-w_out // self.time_step))
         self._stack = np.array(frames, order="C")
         self._source: np.ndarray | None = None
@@ -529,8 +535,9 @@ class Gather:
         pix, tone = source_indices(self._source, (h, w), self.frame_w, self._cell)
         tmap, target = self._maps()
         frames, weights = time_units(tmap, self._fold(float(t)), (h, w), self.time_step, target=target, fade=fade)
-        return gather_reference(self._stack, pix, tone, frames, weights, self._tones,
-                                wrap=self.wrap, interpolate=self.interpolate, out=out)
+        rgb = gather_reference(self._stack, pix, tone, frames, weights, self._tones,
+                               wrap=self.wrap, interpolate=self.interpolate)
+        return self.format.from_rgb(rgb, out)
 
     def _fold(self, t: float) -> float:
         """Fold the global time into one period so float32 keeps sub-frame precision forever."""
@@ -559,7 +566,7 @@ class Gather:
         step 8 are tiny).
         """
         h, w = self.out_shape[:2]
-        out = {"output": h * w * 3, "stored": 0}
+        out = {"output": h * w * self.format.bytes, "stored": 0}
         if self._source is None:
             return out
         t = self._fold(self._last_t if t is None else float(t))
@@ -619,7 +626,7 @@ class GatherOpenCL(Gather):
         mf = cl.mem_flags
         h, w = self.out_shape[:2]
         # the x86 variant only where the self-test verified it on this device
-        wanted = self.time_step == 8 and self._wide_choice is not False
+        wanted = self.time_step == 8 and self._wide_choice is not False and self.format.name == "RGB"
         self.wide = wanted and variant_verified(self.ctx.devices[0], "gather_wide")
         if wanted and self._wide_choice and not self.wide:
             raise OpenCLUnavailableError(
@@ -638,7 +645,7 @@ class GatherOpenCL(Gather):
                    "CELL_H": (self.cell or (1, 1))[0], "CELL_W": (self.cell or (1, 1))[1],
                    "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN,
                    "STACK_PAD": STACK_PAD, "TONE_STRIDE": TONE_STRIDE,
-                   "TONE_OB": TONE_OB}
+                   "TONE_OB": TONE_OB, **self.format.defines}
         if self.wide:
             prog = build_program(self.ctx, ("gather.cl", "variants/gather_wide.cl"),
                                  {**defines, "STACK_SIGNED": True, "BANDS": BANDS})
@@ -656,7 +663,7 @@ class GatherOpenCL(Gather):
         self._k_gather.set(stack=self._d_stack, tmap=self._d_tmap, tones=self._d_tones, width=np.int32(w),
                            height=np.int32(h), tmap_w=np.int32(self.tmap_shape[1]),
                            tmap_h=np.int32(self.tmap_shape[0]), t0=np.float32(0), fade=np.float32(0))
-        self._out = FrameOut(self.ctx, self.queue, self._k_gather, "out", h * w * 3)
+        self._out = FrameOut(self.ctx, self.queue, self._k_gather, "out", h * w * self.format.bytes)
         self._k_smooth_x = Kernel(prog, "smooth")
         self._k_smooth_y = Kernel(prog, "smooth")
         self.direct = self._out.direct

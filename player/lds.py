@@ -58,6 +58,8 @@ class LDSPlayer(ProjectionPlayer):
         See :class:`~dynatex.player.base.Player`.
     device : str, optional
         OpenCL device (see :func:`dynatex.player.opencl.get_context`).
+    format : {"RGB", "RGBA", "BGRA"}
+        Pixel format of the frames (see :class:`~dynatex.player.base.Player`).
     seed : int
         Seed of the driving noise; the same seed gives the same frames.
     precision : {"float32", "float16"}
@@ -88,7 +90,7 @@ class LDSPlayer(ProjectionPlayer):
         src = self.texture.source
         self.n, self.k = model.n, model.k
         self._dim = self.n
-        self._shape = (src.height, src.width, 3)
+        self._shape = (src.height, src.width, self.format.bytes)
         self._A = model.A.copy()
         self._B = model.B.copy()
         self._x0 = model.x0.copy()

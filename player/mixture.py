@@ -88,6 +88,8 @@ class MixturePlayer(ProjectionPlayer):
         See :class:`~dynatex.player.base.Player`.
     device : str, optional
         OpenCL device (see :func:`dynatex.player.opencl.get_context`).
+    format : {"RGB", "RGBA", "BGRA"}
+        Pixel format of the frames (see :class:`~dynatex.player.base.Player`).
     seed : int
         Seed of the driving noise; the same seed gives the same frames.
     precision : {"float32", "float16"}
@@ -115,16 +117,17 @@ class MixturePlayer(ProjectionPlayer):
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
                  backend: str = "auto", device: str | None = None, seed: int = 0,
-                 precision: str = "float32", draws: int = DEFAULT_DRAWS) -> None:
+                 precision: str = "float32", draws: int = DEFAULT_DRAWS, format: str = "RGB") -> None:
         self.draws = draws
-        super().__init__(db, texture, backend=backend, device=device, seed=seed, precision=precision)
+        super().__init__(db, texture, backend=backend, device=device, seed=seed, precision=precision,
+                         format=format)
 
     def _setup(self, model: MixtureModel) -> None:
         src = self.texture.source
         self.components, self.dim, self.global_dim, self.order = (model.components, model.dim,
                                                                   model.global_dim, model.order)
         self._dim = self.global_dim
-        self._shape = (src.height, src.width, 3)
+        self._shape = (src.height, src.width, self.format.bytes)
         self.decoder = GlobalDecoder(model)
         self.train_coords = np.ascontiguousarray(model.global_coords)
         self._train_sq = (self.train_coords ** 2).sum(axis=1)

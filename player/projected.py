@@ -34,10 +34,10 @@ class ProjectionPlayer(Player):
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
                  backend: str = "auto", device: str | None = None, seed: int = 0,
-                 precision: str = "float32") -> None:
+                 precision: str = "float32", format: str = "RGB") -> None:
         if precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")
-        super().__init__(db, texture, backend=backend, device=device)
+        super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
             model = self.texture.read(self.mode)
             self.model_info = dict(model.info)
@@ -48,7 +48,8 @@ class ProjectionPlayer(Player):
             if precision == "float16":
                 basis = basis.astype(np.float16)
             self.engine = open_projector(basis, model.mean, shape=self._shape,
-                                         channels=self.texture.source.channels, ctx=self.ctx, queue=self.queue)
+                                         channels=self.texture.source.channels, ctx=self.ctx, queue=self.queue,
+                                         format=self.format)
             self.basis_bytes = self.engine.basis_bytes
             self.reseed(seed)
             self._project(self._vector(), np.empty(self._shape, np.uint8))     # warm the kernel

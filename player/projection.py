@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from .pixels import pixel_format
+
 BLOCK = 16
 #: Work-group size: left to choose, PoCL may make few large groups that leave a core idle
 #: (CHANGELOG.md has the measurement).
@@ -44,15 +46,19 @@ class Projector:
         Rows to combine; ``P = H * W * channels``. float16 halves the bytes read per frame.
     mean : (P,) float32
         Added to every frame.
-    shape : (H, W, 3)
-        Output frame shape.
+    shape : (H, W, bytes)
+        Output frame shape (``bytes`` those of a pixel of ``format``).
     channels : {1, 3}
         Values per pixel in ``basis``; grey frames are replicated to RGB.
+    format : {"RGB", "RGBA", "BGRA"}
+        Output pixel format (:data:`~dynatex.player.engine.FORMATS`).
     """
 
     backend = ""
 
-    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int) -> None:
+    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
+                 format: str = "RGB") -> None:
+        self.format = pixel_format(format)
         self.n, self.values = basis.shape
         self.shape = tuple(shape)
         self.channels = channels
@@ -82,8 +88,9 @@ class ProjectorReference(Projector):
 
     backend = "numpy"
 
-    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int) -> None:
-        super().__init__(basis, mean, shape=shape, channels=channels)
+    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
+                 format: str = "RGB") -> None:
+        super().__init__(basis, mean, shape=shape, channels=channels, format=format)
         self._basis = basis.astype(np.float32) if self.half else basis
         self._mean = mean
 
@@ -92,10 +99,11 @@ class ProjectorReference(Projector):
         frame += self._mean
         np.rint(frame, out=frame)
         np.clip(frame, 0, 255, out=frame)
-        if self.channels == 3:
-            out.reshape(-1)[...] = frame
+        h, w = self.shape[:2]
+        if self.format.name == "RGB":
+            out[...] = frame.reshape(h, w, self.channels)
         else:
-            out[...] = frame.reshape(self.shape[0], self.shape[1], 1)
+            self.format.from_rgb(np.broadcast_to(frame.reshape(h, w, self.channels), (h, w, 3)), out)
 
 
 class ProjectorOpenCL(Projector):
@@ -107,8 +115,8 @@ class ProjectorOpenCL(Projector):
     backend = "opencl"
 
     def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
-                 ctx: Any, queue: Any) -> None:
-        super().__init__(basis, mean, shape=shape, channels=channels)
+                 ctx: Any, queue: Any, format: str = "RGB") -> None:
+        super().__init__(basis, mean, shape=shape, channels=channels, format=format)
         import pyopencl as cl
         from .engine import FrameOut, Kernel
         from .opencl import build_program
@@ -123,12 +131,14 @@ class ProjectorOpenCL(Projector):
         del blocked
         self._d_mean = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p)
         self._d_coef = cl.Buffer(ctx, mf.READ_ONLY, self.coef.nbytes)
-        prog = build_program(ctx, "lds.cl", {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels})
+        prog = build_program(ctx, "lds.cl", {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels,
+                                             **self.format.defines})
         self._kernel = Kernel(prog, "project")
         self._kernel.set(basis=self._d_basis, mean=self._d_mean, coef=self._d_coef,
                          n=np.int32(self.n), values=np.int32(self.values))
         #: the kernel's frame destination (writes straight into callers' arrays where the device shares host memory)
-        self.out = FrameOut(ctx, queue, self._kernel, "out", padded * (3 // channels))
+        pixels = self.values // channels
+        self.out = FrameOut(ctx, queue, self._kernel, "out", max(padded * (3 // channels), pixels * self.format.bytes))
         self._gsize = (-(-blocks // LOCAL) * LOCAL,)
         self._lsize = (LOCAL,)
 
@@ -151,8 +161,8 @@ class ProjectorOpenCL(Projector):
 
 
 def open_projector(basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
-                   ctx: Any = None, queue: Any = None) -> Projector:
+                   ctx: Any = None, queue: Any = None, format: str = "RGB") -> Projector:
     """The OpenCL projection engine on ``ctx``/``queue``, or the numpy reference when ``ctx`` is None."""
     if ctx is None:
-        return ProjectorReference(basis, mean, shape=shape, channels=channels)
-    return ProjectorOpenCL(basis, mean, shape=shape, channels=channels, ctx=ctx, queue=queue)
+        return ProjectorReference(basis, mean, shape=shape, channels=channels, format=format)
+    return ProjectorOpenCL(basis, mean, shape=shape, channels=channels, ctx=ctx, queue=queue, format=format)

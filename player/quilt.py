@@ -116,6 +116,8 @@ class EvolvePlayer(Player):
         See :class:`~dynatex.player.base.Player`.
     device : str, optional
         OpenCL device (see :func:`dynatex.player.opencl.get_context`).
+    format : {"RGB", "RGBA", "BGRA"}
+        Pixel format of the frames (see :class:`~dynatex.player.base.Player`).
     seed : int
         Seed of the time jitter; the same seed gives the same frames.
     size : (width, height), optional
@@ -155,8 +157,8 @@ class EvolvePlayer(Player):
                  backend: str = "auto", device: str | None = None, seed: int = 0,
                  size: Sequence[int] | None = None, interpolate: bool = True, jitter: float = 0.0,
                  end: str = "hold", speed: float = 1.0, rate_map: np.ndarray | None = None,
-                 rate_sigma: float = 0.0) -> None:
-        super().__init__(db, texture, backend=backend, device=device)
+                 rate_sigma: float = 0.0, format: str = "RGB") -> None:
+        super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
             self._setup(self.texture.read("quilt"), seed, size, bool(interpolate))
             self.speed = speed
@@ -183,7 +185,7 @@ class EvolvePlayer(Player):
         self.seed = check_seed("seed", seed)
         self.model_info = dict(model.info)
         self.interpolate = interpolate
-        self._shape = (h, w, 3)
+        self._shape = (h, w, self.format.bytes)
         self.n_blocks = model.n_blocks
         src = self.texture.source
         frames = self.texture.frames().read()
@@ -209,7 +211,8 @@ class EvolvePlayer(Player):
         self._rate_sigma = 0.0
         self._warp = jitter_warp(self.n_blocks, self.n_frames, 0.0, seed=self.seed)
         self.engine = open_runs(flat, (h, w), pix, self._labels, n_blocks=self.n_blocks, blend=blend,
-                                gain=gain, interpolate=interpolate, ctx=self.ctx, queue=self.queue)
+                                gain=gain, interpolate=interpolate, ctx=self.ctx, queue=self.queue,
+                                format=self.format)
         self._reference = None
 
     def _warm(self) -> None:
@@ -333,7 +336,7 @@ class EvolvePlayer(Player):
         if self._reference is None:
             e = self.engine
             self._reference = open_runs(e.flat, e.shape, e.pix, e.labels, n_blocks=e.n_blocks, blend=e.blend,
-                                        gain=e.gain, interpolate=e.interpolate)
+                                        gain=e.gain, interpolate=e.interpolate, format=e.format)
             self._reference.set_rate(self._rate)
         if out is None:
             out = np.empty(self._shape, np.uint8)

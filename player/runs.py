@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from .pixels import pixel_format
+
 SPILL = 16           # bytes a kernel chunk may read past a run
 RATE_STEP = 1.0 / 512  # rate maps are quantized to this step (see quantize_rate)
 
@@ -100,7 +102,7 @@ def _merge_plain(key_a, key_b, swap, key_p, span: int, n_pixels: int | None):
 
 def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None,
                pix2: np.ndarray | None = None, labels2: np.ndarray | None = None, *,
-               merge: bool = True, n_pixels: int | None = None) -> dict[str, np.ndarray]:
+               merge: bool = True, n_pixels: int | None = None, pixel_bytes: int = 3) -> dict[str, np.ndarray]:
     """Cut the quilt's rows into runs, the unit of work of kernel ``evolve``.
 
     A *stream* is one block's source at a constant offset along a row (source pixel =
@@ -117,7 +119,7 @@ def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None
     kernel tables: ``runs`` ``(n, 4)`` int32 (first pixel, stream A's source pixel there,
     block of A, length | blend << 31 | spill << 30: the run's last 16-byte chunk may run
     past its end and stays within the row), ``runs_b`` ``(n, 2)`` int32 (stream B's source pixel
-    and block), ``row_start`` ``(H + 1,)`` int32, and ``code`` ``(H * W * 3,)`` uint16 per
+    and block), ``row_start`` ``(H + 1,)`` int32, and ``code`` ``(H * W * pixel_bytes,)`` uint16 per
     output byte: weight of the second source in 1/256 (bits 0-8), bit 9 set when the
     primary source is stream B (0 outside bands).
 
@@ -157,7 +159,8 @@ def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None
     runs[:, 0] = starts
     runs[:, 1] = ka % span - w + col
     runs[:, 2] = ka // span
-    may_spill = col * 3 + -(-lengths * 3 // SPILL) * SPILL <= w * 3    # the last chunk stays in the row
+    pb = pixel_bytes
+    may_spill = col * pb + -(-lengths * pb // SPILL) * SPILL <= w * pb    # the last chunk stays in the row
     runs[:, 3] = lengths | (is_blend.astype(np.int64) << 31) | (may_spill.astype(np.int64) << 30)
     runs_b = np.stack([kb % span - w + col, kb // span], axis=1)
     code = swap.astype(np.uint16) << 9
@@ -166,7 +169,7 @@ def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None
     return {"starts": starts, "lengths": lengths,
             "runs": runs.astype(np.uint32).view(np.int32), "runs_b": runs_b.astype(np.int32),
             "row_start": np.searchsorted(starts, np.arange(h + 1) * w).astype(np.int32),
-            "code": np.repeat(code.ravel(), 3)}
+            "code": np.repeat(code.ravel(), pixel_bytes)}
 
 
 def check_runs(runs: dict[str, np.ndarray], n_pixels: int, n_blocks: int) -> None:
@@ -184,7 +187,8 @@ def check_runs(runs: dict[str, np.ndarray], n_pixels: int, n_blocks: int) -> Non
                          f"({n_pixels} pixels, {n_blocks} blocks): the database is inconsistent")
 
 
-def cut_runs(base: dict[str, np.ndarray], rate: np.ndarray | None, shape: tuple[int, int], n_blocks: int):
+def cut_runs(base: dict[str, np.ndarray], rate: np.ndarray | None, shape: tuple[int, int], n_blocks: int, *,
+             pixel_bytes: int = 3):
     """The run tables of :func:`build_runs`'s runs ``base`` for a rate map (None: uniform rate 1):
     the runs cut where the quantized rate changes along a row, and their time slots.
 
@@ -207,7 +211,8 @@ def cut_runs(base: dict[str, np.ndarray], rate: np.ndarray | None, shape: tuple[
     lengths = np.diff(np.append(starts, flat.size))
     col = starts % w
     flags = runs[parent, 3].view(np.uint32).astype(np.int64) & (1 << 31)
-    may_spill = col * 3 + -(-lengths * 3 // SPILL) * SPILL <= w * 3
+    pb = pixel_bytes
+    may_spill = col * pb + -(-lengths * pb // SPILL) * SPILL <= w * pb
     r = np.empty((len(starts), 4), np.int64)
     r[:, 0] = starts
     r[:, 1] = runs[parent, 1] + off
@@ -256,13 +261,16 @@ class Runs:
         Per-pixel colour gain applied last.
     interpolate : bool
         Blend linearly between source frames at fractional times.
+    format : {"RGB", "RGBA", "BGRA"}
+        Output pixel format (:data:`~dynatex.player.engine.FORMATS`).
     """
 
     backend = ""
 
     def __init__(self, frames: np.ndarray, shape: tuple[int, int], pix: np.ndarray, labels: np.ndarray, *,
                  n_blocks: int, blend: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                 gain: np.ndarray | None = None, interpolate: bool = True) -> None:
+                 gain: np.ndarray | None = None, interpolate: bool = True, format: str = "RGB") -> None:
+        self.format = pixel_format(format)
         self.flat = frames
         self.n_frames, self.n_pixels = int(frames.shape[0]), int(frames.shape[1])
         self.shape = (int(shape[0]), int(shape[1]))
@@ -311,7 +319,8 @@ class RunsReference(Runs):
             v[sel] = v[sel] + a * (v2 - v[sel])
         if self.gain is not None:
             v = v * self.gain
-        out[...] = np.clip(np.rint(v), 0, 255).astype(np.uint8)
+        rgb = np.clip(np.rint(v), 0, 255).astype(np.uint8).reshape(*self.shape, 3)
+        self.format.from_rgb(rgb, out)
 
     @property
     def bytes_per_frame(self) -> int:
@@ -321,7 +330,7 @@ class RunsReference(Runs):
         px = h * w
         maps = px * (4 + (2 if self.n_blocks <= 0xFFFF else 4) + (4 if self.rate is not None else 0))
         gain = 12 * px if self.gain is not None else 0
-        return int(maps + gain + (2 if self.interpolate else 1) * 3 * px + 6 * px)
+        return int(maps + gain + (2 if self.interpolate else 1) * 3 * px + (3 + self.format.bytes) * px)
 
 
 class RunsOpenCL(Runs):
@@ -341,27 +350,32 @@ class RunsOpenCL(Runs):
         from .engine import FrameOut, Kernel
         from .opencl import build_program
         h, w = self.shape
+        pb = self.format.bytes
         if self.blend is not None:
             wq, pix2, labels2 = self.blend
-            runs = build_runs(pix, labels, wq, pix2, labels2, n_pixels=self.n_pixels)
+            runs = build_runs(pix, labels, wq, pix2, labels2, n_pixels=self.n_pixels, pixel_bytes=pb)
         else:
-            runs = build_runs(pix, labels, n_pixels=self.n_pixels)
+            runs = build_runs(pix, labels, n_pixels=self.n_pixels, pixel_bytes=pb)
         check_runs(runs, self.n_pixels, self.n_blocks)
         self.ctx, self.queue = ctx, queue
-        self._n_blend_bytes = int(3 * runs["lengths"][runs["runs"][:, 3] < 0].sum())
+        self._n_blend_bytes = int(pb * runs["lengths"][runs["runs"][:, 3] < 0].sum())
         self._base = runs
         mf = cl.mem_flags
         ro = mf.READ_ONLY | mf.COPY_HOST_PTR
         pad = np.zeros(SPILL, np.uint8)   # a spilling chunk may read past the ends (values unused)
-        self._d_stack = cl.Buffer(ctx, ro, hostbuf=np.concatenate([frames.reshape(-1), pad]))
+        # the stack, codes and gains hold output pixels (alpha 255, gain 1): the kernel moves bytes
+        stack = self.format.from_rgb(frames)
+        self._d_stack = cl.Buffer(ctx, ro, hostbuf=np.concatenate([stack.reshape(-1), pad]))
+        self._stack_bytes = stack.nbytes
+        del stack
         self._d_code = cl.Buffer(ctx, ro, hostbuf=np.concatenate([runs["code"], np.zeros(SPILL, np.uint16)]))
-        gain = np.zeros(4, np.float32) if self.gain is None else self.gain.reshape(-1)
+        gain = np.zeros(4, np.float32) if self.gain is None else _gain_bytes(self.gain, self.format).reshape(-1)
         self._d_gain = cl.Buffer(ctx, ro, hostbuf=np.concatenate([gain, np.zeros(SPILL, np.float32)]))
-        defines = {"INTERP": self.interpolate, "GAIN": self.gain is not None}
+        defines = {"INTERP": self.interpolate, "GAIN": self.gain is not None, "PIXEL_BYTES": pb}
         self._kernel = Kernel(build_program(ctx, "quilt.cl", defines), "evolve")
         self._kernel.set(stack=self._d_stack, code=self._d_code, gain=self._d_gain, height=np.int32(h))
         #: the kernel's frame destination (writes straight into callers' arrays where the device shares host memory)
-        self.out = FrameOut(ctx, queue, self._kernel, "out", h * w * 3)
+        self.out = FrameOut(ctx, queue, self._kernel, "out", h * w * pb)
         self._gsize = (h,)
         self._bframe_upload = None
         self.set_rate(None)
@@ -373,7 +387,7 @@ class RunsOpenCL(Runs):
         import pyopencl as cl
         super().set_rate(rate)
         runs, runs_b, row_start, pair, self._slot_block, self._slot_rate = cut_runs(
-            self._base, rate, self.shape, self.n_blocks)
+            self._base, rate, self.shape, self.n_blocks, pixel_bytes=self.format.bytes)
         self.n_runs = len(runs)
         self._bframe = np.zeros((len(self._slot_block), 4), np.int32)
         ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
@@ -386,8 +400,8 @@ class RunsOpenCL(Runs):
                          run_pair=self._d_pair, bframe=self._d_bframe)
         h, w = self.shape
         #: bytes the engine keeps on the device
-        self.device_bytes = int(self.flat.nbytes + self._base["code"].nbytes + h * w * 3
-                                + (self.gain.nbytes if self.gain is not None else 0)
+        self.device_bytes = int(self._stack_bytes + self._base["code"].nbytes + h * w * self.format.bytes
+                                + (self.gain.nbytes * self.format.bytes // 3 if self.gain is not None else 0)
                                 + runs.nbytes + runs_b.nbytes + row_start.nbytes + pair.nbytes + self._bframe.nbytes)
 
     def slot_frames(self, t: float, source_time: SourceTime, loop: bool) -> np.ndarray:
@@ -396,7 +410,7 @@ class RunsOpenCL(Runs):
         s = np.asarray(source_time(self._slot_rate, self._slot_block, np.float32(t)), np.float32)
         si = np.floor(s)
         i0 = si.astype(np.int32)
-        n, fb = self.n_frames, self.n_pixels * 3
+        n, fb = self.n_frames, self.n_pixels * self.format.bytes
         i1 = i0 + 1
         if loop:
             i0, i1 = np.mod(i0, n), np.mod(i1, n)
@@ -436,10 +450,11 @@ class RunsOpenCL(Runs):
         when interpolating), and the output (copied to the caller unless written directly)."""
         h, w = self.shape
         px = h * w
+        pb = self.format.bytes
         per_src = 2 if self.interpolate else 1
-        gain = 12 * px if self.gain is not None else 0
-        src = per_src * (3 * px + self._n_blend_bytes)
-        out = 3 * px if self.direct else 6 * px
+        gain = 4 * pb * px if self.gain is not None else 0
+        src = per_src * (pb * px + self._n_blend_bytes)
+        out = pb * px if self.direct else 2 * pb * px
         return int(32 * self.n_runs + 16 * len(self._slot_block) + 2 * self._n_blend_bytes + gain + src + out)
 
     def close(self) -> None:
@@ -450,6 +465,14 @@ class RunsOpenCL(Runs):
             buf = self.__dict__.pop(name, None)
             if buf is not None:
                 buf.release()
+
+
+def _gain_bytes(gain: np.ndarray, fmt) -> np.ndarray:
+    """A per-pixel RGB gain ``(H, W, 3)`` as one gain per output byte (alpha's 1)."""
+    out = np.ones(gain.shape[:2] + (fmt.bytes,), np.float32)
+    for c, at in enumerate(fmt.rgb):
+        out[..., at] = gain[..., c]
+    return out
 
 
 def open_runs(frames: np.ndarray, shape: tuple[int, int], pix: np.ndarray, labels: np.ndarray, *,

@@ -99,6 +99,8 @@ class TilesPlayer(Player):
     backend : {"auto", "opencl", "numpy"}
         See :class:`~dynatex.player.base.Player`.
     device : str, optional
+    format : {"RGB", "RGBA", "BGRA"}
+        Pixel format of the frames (see :class:`~dynatex.player.base.Player`).
     seed : int
         Seed of the arrangement and of the time offsets; the same seed gives the same frames.
     size : (width, height), optional
@@ -140,8 +142,8 @@ class TilesPlayer(Player):
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
                  backend: str = "auto", device: str | None = None, seed: int = 0,
                  size: Sequence[int] | None = None, labels: np.ndarray | None = None,
-                 tone: Any = None) -> None:
-        super().__init__(db, texture, backend=backend, device=device)
+                 tone: Any = None, format: str = "RGB") -> None:
+        super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
             self._setup(self.texture.read("tiles"), seed, size, labels, tone)
         except BaseException:
@@ -162,7 +164,7 @@ class TilesPlayer(Player):
             raise ValueError(f"size must be (width, height), not {size!r}") from None
         if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
             raise ValueError(f"size must be within 1..{MAX_SIZE} on each side, not {w}x{h}")
-        self._shape = (h, w, 3)
+        self._shape = (h, w, self.format.bytes)
         self.grid_shape = (-(-h // th), -(-w // tw))
         self.ring = int(model.info.get("ring", max(2, min(th, tw) // 5)))
         self.seed = check_seed("seed", seed)  # label presets such as "blobs" draw from it
@@ -173,7 +175,7 @@ class TilesPlayer(Player):
         stack = np.ascontiguousarray(model.tiles.transpose(1, 0, 2, 3, 4).reshape(length, k * th, tw, 3))
         self.engine = self._gather = open_gather(stack, (h, w), backend=self.backend, ctx=self.ctx,
                                                  queue=self.queue, time_step=TIME_STEP,
-                                                 cell=None if mixing else (th, tw))
+                                                 cell=None if mixing else (th, tw), format=self.format)
         self.mixing = mixing
         c = model.n_classes
         #: quantization levels of a feathered pixel's tone share (tone table <= 256 entries)

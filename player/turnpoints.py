@@ -46,6 +46,8 @@ class TurnPointPlayer(Player):
         See :class:`~dynatex.player.base.Player`.
     device : str, optional
         OpenCL device (see :func:`dynatex.player.opencl.get_context`).
+    format : {"RGB", "RGBA", "BGRA"}
+        Pixel format of the frames (see :class:`~dynatex.player.base.Player`).
     seed : int
         Seed of the random walk; the same seed gives the same frames.
     playback : {"hybrid", "turns", "jumps"}
@@ -79,10 +81,10 @@ class TurnPointPlayer(Player):
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
                  backend: str = "auto", device: str | None = None, seed: int = 0,
-                 playback: str = "hybrid", start: int = 0) -> None:
+                 playback: str = "hybrid", start: int = 0, format: str = "RGB") -> None:
         if playback not in PLAYBACKS:
             raise ValueError(f"playback must be one of {PLAYBACKS}, not {playback!r}")
-        super().__init__(db, texture, backend=backend, device=device)
+        super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
             self._setup(self.texture.read("turnpoints"), playback, seed, start)
         except BaseException:
@@ -96,7 +98,7 @@ class TurnPointPlayer(Player):
         self.playback = playback
         t = model.n_frames
         self.n_frames = t
-        self._shape = (src.height, src.width, 3)
+        self._shape = (src.height, src.width, self.format.bytes)
         self._a, self._z = model.first_turn, model.last_turn
         self._p_max = model.p_max.copy()
         self._is_turn = np.zeros(t, bool)
@@ -117,7 +119,7 @@ class TurnPointPlayer(Player):
         frames = store.read()
         if frames.shape[-1] == 1:
             frames = np.repeat(frames, 3, axis=-1)
-        self.engine = open_blend(frames, ctx=self.ctx, queue=self.queue)
+        self.engine = open_blend(frames, ctx=self.ctx, queue=self.queue, format=self.format)
         del frames
         #: bytes the stored frames occupy on the device (or in host memory with numpy)
         self.memory_bytes = self.engine.memory_bytes

@@ -33,7 +33,9 @@
 // WRAP (0 loop, 1 clamp, 2 ping-pong), INTERP (1: linear in time, 0: nearest earlier
 // frame), TSTEP, RUN (pixels per work-item), STACK_PAD, STACK_SIGNED (1: the stack holds
 // value ^ 0x80, as the variant reads it), TONE_STRIDE, TONE_OB (shorts per tone row, and
-// where its offsets start); the variant also takes BANDS.
+// where its offsets start), PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (bytes of an output pixel and
+// where each colour, and alpha (255; -1: none), goes); the variant also takes BANDS and
+// writes RGB only.
 
 #pragma OPENCL FP_CONTRACT OFF      // the time samples round as the numpy reference's float32
 
@@ -139,9 +141,12 @@ inline void pixel(__global const uchar *restrict stack, __global const short *re
 #endif
     __global const short *tn = tones + tone * TONE_STRIDE;
     // scalar channels on purpose: PoCL's 3-vectors are an order of magnitude slower
-    o[0] = tone1((255 - w) * SVAL(p0[0]) + w * SVAL(p1[0]), tn[0], tn[TONE_OB]);
-    o[1] = tone1((255 - w) * SVAL(p0[1]) + w * SVAL(p1[1]), tn[1], tn[TONE_OB + 1]);
-    o[2] = tone1((255 - w) * SVAL(p0[2]) + w * SVAL(p1[2]), tn[2], tn[TONE_OB + 2]);
+    o[R_AT] = tone1((255 - w) * SVAL(p0[0]) + w * SVAL(p1[0]), tn[0], tn[TONE_OB]);
+    o[G_AT] = tone1((255 - w) * SVAL(p0[1]) + w * SVAL(p1[1]), tn[1], tn[TONE_OB + 1]);
+    o[B_AT] = tone1((255 - w) * SVAL(p0[2]) + w * SVAL(p1[2]), tn[2], tn[TONE_OB + 2]);
+#if A_AT >= 0
+    o[A_AT] = 255;
+#endif
 }
 
 
@@ -187,7 +192,8 @@ __kernel void gather(GATHER_PARAMS)
         const int u = floor_div(time_q(f0, tmap, tmap1, fade, row0 + x) + 8, 16);
 #endif
         const int fi = floor_div(u, 255);
-        pixel(stack, tones, pix, (packed >> 24) & 0xFF, base + fi, u - 255 * fi, out + ((size_t)y * width + x) * 3);
+        pixel(stack, tones, pix, (packed >> 24) & 0xFF, base + fi, u - 255 * fi,
+              out + ((size_t)y * width + x) * PIXEL_BYTES);
     }
 }
 

@@ -4,7 +4,9 @@
 // its n x BLOCK sub-matrix is contiguous (row i at offset (b * n + i) * BLOCK), so one
 // work-item reads one contiguous run and consecutive work-items read consecutive runs.
 //
-// Defines: BLOCK (16), HALF (1: basis stored as half floats), CHANNELS (1 or 3).
+// Defines: BLOCK (16), HALF (1: basis stored as half floats), CHANNELS (1 or 3: values per
+// pixel of the basis; grey is replicated), PIXEL_BYTES (3 or 4: bytes per output pixel),
+// R_AT, G_AT, B_AT (the byte of each colour in an output pixel), A_AT (alpha's, 255; -1: none).
 
 #if BLOCK != 16
 #error "BLOCK must be 16"
@@ -41,23 +43,32 @@ __kernel void project(__global const basis_t *restrict basis,
         acc += coef[i] * LOAD_ROW(i);
     uchar16 px = convert_uchar16_sat_rte(acc);
     const size_t first = b * BLOCK;
-#if CHANNELS == 3
+#if CHANNELS == 3 && PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2
     if (first + BLOCK <= (size_t)values) {
         vstore16(px, b, out);
-    } else {
-        uchar tmp[16];
-        vstore16(px, 0, tmp);
-        for (size_t j = 0; first + j < (size_t)values; ++j)
-            out[first + j] = tmp[j];
+        return;
     }
-#else
+#endif
     uchar tmp[16];
     vstore16(px, 0, tmp);
     for (size_t j = 0; j < BLOCK && first + j < (size_t)values; ++j) {
-        const size_t o = 3 * (first + j);
-        out[o] = tmp[j];
-        out[o + 1] = tmp[j];
-        out[o + 2] = tmp[j];
-    }
+#if CHANNELS == 3
+        const size_t p = (first + j) / 3;
+        const int c = (int)(first + j - 3 * p);
+        __global uchar *o = out + p * PIXEL_BYTES;
+        o[c == 0 ? R_AT : (c == 1 ? G_AT : B_AT)] = tmp[j];
+#if A_AT >= 0
+        if (c == 0)
+            o[A_AT] = 255;
 #endif
+#else
+        __global uchar *o = out + (first + j) * PIXEL_BYTES;
+        o[R_AT] = tmp[j];
+        o[G_AT] = tmp[j];
+        o[B_AT] = tmp[j];
+#if A_AT >= 0
+        o[A_AT] = 255;
+#endif
+#endif
+    }
 }

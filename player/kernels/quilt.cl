@@ -29,7 +29,8 @@
 // v = first + a (second - first) for a blend, v *= gain, rounded to nearest even and
 // saturated.
 //
-// Defines: INTERP, GAIN (per-byte gain). The end mode, the rate map and the jitter live in
+// Defines: INTERP, GAIN (per-byte gain), PIXEL_BYTES (3 or 4: the stack, codes, gains and
+// output all hold pixels of that many bytes; a fourth byte is alpha, 255 in the stack, gain 1). The end mode, the rate map and the jitter live in
 // the host's per-frame slot table, so no control needs another kernel.
 //
 // Run tables: runs[r] = (first output pixel, pixel of stream A at it, block of A, length |
@@ -172,8 +173,8 @@ __kernel void evolve(__global const uchar *restrict stack,
         // the stream times of the run's slots: byte offsets of the two frames and the fraction
         const int4 fa = bframe[slot.x], fb = bframe[slot.y];
         stream_t a, b;
-        a.p0 = stack + (uint)fa.x + pa * 3; a.p1 = stack + (uint)fa.y + pa * 3; a.f = as_float(fa.z);
-        b.p0 = stack + (uint)fb.x + pb * 3; b.p1 = stack + (uint)fb.y + pb * 3; b.f = as_float(fb.z);
-        run_const(code, gain, out, (size_t)px * 3, npx * 3, blend, spill, a, b);
+        a.p0 = stack + (uint)fa.x + pa * PIXEL_BYTES; a.p1 = stack + (uint)fa.y + pa * PIXEL_BYTES; a.f = as_float(fa.z);
+        b.p0 = stack + (uint)fb.x + pb * PIXEL_BYTES; b.p1 = stack + (uint)fb.y + pb * PIXEL_BYTES; b.f = as_float(fb.z);
+        run_const(code, gain, out, (size_t)px * PIXEL_BYTES, npx * PIXEL_BYTES, blend, spill, a, b);
     }
 }

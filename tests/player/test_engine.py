@@ -11,13 +11,16 @@ import pytest
 from dynatex.player import open_player, selftest
 from dynatex.player.engine import FrameOut, Kernel
 from dynatex.player.opencl import build_program
+from dynatex.player.pixels import FORMATS
+
+RGB = FORMATS["RGB"].defines
 
 MODES = [("lds", {}), ("mixture", {}), ("turnpoints", {"playback": "jumps"}), ("tiles", {"size": (40, 72)}),
          ("evolve", {"jitter": 2.0})]
 
 
 def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
-    k = Kernel(build_program(cl_context, "lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3}), "project")
+    k = Kernel(build_program(cl_context, "lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}), "project")
     assert k.args == ("basis", "mean", "coef", "out", "n", "values")
     with pytest.raises(TypeError, match=r"kernel 'project' has no argument 'weights' \(it has basis, mean"):
         k.set(weights=np.int32(1))
@@ -25,9 +28,9 @@ def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
 
 PROGRAMS = [("gather.cl", {"FRAME_W": 8, "FRAME_PIXELS": 64, "NFRAMES": 3, "GRID": 0, "WRAP": 0, "CELL_H": 1,
                            "CELL_W": 1, "INTERP": 1, "TSTEP": 1, "RUN": 32, "STACK_PAD": 256, "STACK_SIGNED": 0,
-                           "TONE_STRIDE": 384, "TONE_OB": 192}),
-            ("lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3}), ("blend.cl", {"FRAME_VECS": 4, "ITEMS": 4}),
-            ("quilt.cl", {"INTERP": 1, "GAIN": 0}), ("copy.cl", {})]
+                           "TONE_STRIDE": 384, "TONE_OB": 192, **RGB}),
+            ("lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}), ("blend.cl", {"FRAME_VECS": 4, "ITEMS": 4}),
+            ("quilt.cl", {"INTERP": 1, "GAIN": 0, "PIXEL_BYTES": 3}), ("copy.cl", {})]
 
 
 @pytest.mark.parametrize("filename, defines", PROGRAMS, ids=[f for f, _ in PROGRAMS])
