@@ -86,7 +86,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .base import BACKENDS, check_float, check_int, check_out
-from .pixels import pixel_format
+from .pixels import FORMATS, pixel_format
 
 log = logging.getLogger(__name__)
 WRAPS = ("loop", "clamp", "pingpong")
@@ -312,7 +312,9 @@ class Gather:
         verified it (CPU devices whose compiler is clang), else the portable kernel. Both
         compute the same integers (see the module docstring); :attr:`wide` says which runs.
         ``wide=True`` on a device where the variant is not verified is an error. The variant
-        writes RGB only: other formats use the portable kernel.
+        writes RGB only: for other formats it renders into a device buffer that kernel
+        ``place`` (``kernels/pixels.cl``) places into the output, which measured faster than
+        the portable kernel's direct write (``benchmarks/bench_formats.py``).
     format : {"RGB", "RGBA", "BGRA"}
         Output pixel format (:data:`~dynatex.player.engine.FORMATS`); the stack stays RGB,
         the kernel places the bytes (and alpha, 255) as it writes them.
@@ -626,7 +628,7 @@ class GatherOpenCL(Gather):
         mf = cl.mem_flags
         h, w = self.out_shape[:2]
         # the x86 variant only where the self-test verified it on this device
-        wanted = self.time_step == 8 and self._wide_choice is not False and self.format.name == "RGB"
+        wanted = self.time_step == 8 and self._wide_choice is not False
         self.wide = wanted and variant_verified(self.ctx.devices[0], "gather_wide")
         if wanted and self._wide_choice and not self.wide:
             raise OpenCLUnavailableError(
@@ -645,7 +647,9 @@ class GatherOpenCL(Gather):
                    "CELL_H": (self.cell or (1, 1))[0], "CELL_W": (self.cell or (1, 1))[1],
                    "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN,
                    "STACK_PAD": STACK_PAD, "TONE_STRIDE": TONE_STRIDE,
-                   "TONE_OB": TONE_OB, **self.format.defines}
+                   "TONE_OB": TONE_OB}
+        # the variant writes RGB (kernel place then puts it in the format): so does its program
+        defines.update((FORMATS["RGB"] if self.wide else self.format).defines)
         if self.wide:
             prog = build_program(self.ctx, ("gather.cl", "variants/gather_wide.cl"),
                                  {**defines, "STACK_SIGNED": True, "BANDS": BANDS})
@@ -663,7 +667,17 @@ class GatherOpenCL(Gather):
         self._k_gather.set(stack=self._d_stack, tmap=self._d_tmap, tones=self._d_tones, width=np.int32(w),
                            height=np.int32(h), tmap_w=np.int32(self.tmap_shape[1]),
                            tmap_h=np.int32(self.tmap_shape[0]), t0=np.float32(0), fade=np.float32(0))
-        self._out = FrameOut(self.ctx, self.queue, self._k_gather, "out", h * w * self.format.bytes)
+        self._place = None
+        if self.wide and self.format.name != "RGB":
+            # the variant writes RGB into a device buffer; kernel place puts it in the format
+            self._d_rgb = cl.Buffer(self.ctx, mf.READ_WRITE, h * w * 3)
+            self._k_gather.set(out=self._d_rgb)
+            self._place = Kernel(build_program(self.ctx, "pixels.cl", self.format.defines), "place")
+            self._place.set(rgb=self._d_rgb, n=np.int32(h * w))
+            self._out = FrameOut(self.ctx, self.queue, self._place, "out", h * w * self.format.bytes)
+            self._place_gsize = (-(-h * w // 16),)
+        else:
+            self._out = FrameOut(self.ctx, self.queue, self._k_gather, "out", h * w * self.format.bytes)
         self._k_smooth_x = Kernel(prog, "smooth")
         self._k_smooth_y = Kernel(prog, "smooth")
         self.direct = self._out.direct
@@ -730,7 +744,10 @@ class GatherOpenCL(Gather):
 
     def _launch(self, t: float, out: np.ndarray):
         self._k_gather.set(t0=np.float32(t), fade=np.float32(self._last_fade))
-        return self._out.launch(out, self._gsize, self._lsize, wait=False)
+        if self._place is None:
+            return self._out.launch(out, self._gsize, self._lsize, wait=False)
+        self._k_gather.launch(self.queue, self._gsize, self._lsize)
+        return self._out.launch(out, self._place_gsize, wait=False)
 
     def render_on_device(self, t: float, *, fade: float = 0.0) -> None:
         """Run the gather kernel alone into the device's own frame buffer and wait (no copy, no
@@ -738,11 +755,15 @@ class GatherOpenCL(Gather):
         if self._source is None:
             raise RuntimeError("set a source (set_source_map or set_source_grid) before render_on_device")
         self._k_gather.set(t0=np.float32(self._fold(float(t))), fade=np.float32(check_float("fade", fade, 0.0, 1.0)))
-        self._out.launch_on_device(self._gsize, self._lsize).wait()
+        if self._place is None:
+            self._out.launch_on_device(self._gsize, self._lsize).wait()
+            return
+        self._k_gather.launch(self.queue, self._gsize, self._lsize)
+        self._out.launch_on_device(self._place_gsize).wait()
 
     def close(self) -> None:
         self.queue.finish()
-        for name in ("_d_stack", "_d_tmap", "_d_target", "_d_tmp", "_d_tones", "_d_source"):
+        for name in ("_d_stack", "_d_tmap", "_d_target", "_d_tmp", "_d_tones", "_d_source", "_d_rgb"):
             buf = self.__dict__.pop(name, None)
             if buf is not None:
                 buf.release()

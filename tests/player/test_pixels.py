@@ -61,7 +61,7 @@ def test_gather_writes_each_format(cl_context, fmt, step, cell):
     gs = [open_gather(stack, size, backend=b, ctx=cl_context if b == "opencl" else None, time_step=step, cell=cell,
                       format=fmt) for b in ("opencl", "numpy")]
     for g in gs:
-        assert g.out_shape == (19, 45, 4) and not g.wide
+        assert g.out_shape == (19, 45, 4)
         g.set_tones(gain, offset)
         if cell is None:
             g.set_source_map(pack_source(idx, 1))
@@ -73,3 +73,22 @@ def test_gather_writes_each_format(cl_context, fmt, step, cell):
         assert np.array_equal(got, gs[1].render(t)) and np.array_equal(got, gs[0].render_reference(t)), t
         assert (got[..., 3] == 255).all()
     gs[0].close()
+
+
+def test_place_kernel_equals_its_reference(cl_context):
+    """Kernel place (RGB rendered by an RGB-only kernel, put in the output's format): exact,
+    whole 16-pixel items and a tail."""
+    import pyopencl as cl
+
+    from dynatex.player.engine import FrameOut, Kernel
+    from dynatex.player.opencl import build_program
+    rgb = np.random.default_rng(4).integers(0, 256, (7, 11, 3), dtype=np.uint8)   # 77 pixels: 4 items + 13
+    queue = cl.CommandQueue(cl_context)
+    d_rgb = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=rgb)
+    for name in ("RGBA", "BGRA"):
+        fmt = FORMATS[name]
+        k = Kernel(build_program(cl_context, "pixels.cl", fmt.defines), "place")
+        k.set(rgb=d_rgb, n=np.int32(77))
+        out = np.zeros((7, 11, 4), np.uint8)
+        FrameOut(cl_context, queue, k, "out", out.nbytes).launch(out, (5,))
+        assert np.array_equal(out, fmt.from_rgb(rgb)), name
