@@ -1,12 +1,16 @@
 """The ``dynatex`` command: argparse subcommands, one module each in ``dynatex/commands``.
 
-Exit codes: 0 ok, 2 bad usage or bad input, 1 internal error. Errors print one line
-(``dynatex: error: ...``) unless ``--debug`` asks for the traceback.
+Exit codes: 0 ok, 2 bad usage or bad input (including output the system refuses: a full disk,
+a read-only folder), 1 internal error. Errors print one line (``dynatex: error: ...``) unless
+``--debug`` asks for the traceback. A reader that closes the pipe (``| head -1``) ends the
+command quietly with exit 0.
 """
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
+import os
 import sys
 import traceback
 import warnings
@@ -21,16 +25,31 @@ class UsageError(ValueError):
     """Bad command-line input detected after parsing (exit code 2)."""
 
 
+class OutputError(OSError):
+    """The command's output cannot be written: refused by the codec, the folder or the disk (exit code 2)."""
+
+
 def _input_errors() -> tuple[type[BaseException], ...]:
     from .player.opencl import OpenCLUnavailableError
     from .tiledb import TileDBError
-    errors: list[type[BaseException]] = [UsageError, TileDBError, OpenCLUnavailableError, FileNotFoundError,
-                                         IsADirectoryError, PermissionError, ValueError, TypeError, KeyError]
+    errors: list[type[BaseException]] = [UsageError, OutputError, TileDBError, OpenCLUnavailableError,
+                                         FileNotFoundError, IsADirectoryError, PermissionError, ValueError,
+                                         TypeError, KeyError]
     return tuple(errors)
 
 
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line that points to ``--help`` (exit code 2).
+
+    Subcommand parsers are of this class too (argparse makes them of the parent's class).
+    """
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {_one_line(message)} (see `{self.prog} --help`)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="dynatex", description="Endless, editable dynamic textures.")
+    parser = Parser(prog="dynatex", description="Endless, editable dynamic textures.")
     parser.add_argument("--version", action="version", version=f"dynatex {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -44,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
             raise
         p = module.add_parser(sub)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks on errors")
-        p.set_defaults(_run=module.run)
+        p.set_defaults(_run=module.run, _parser=p)
     return parser
 
 
@@ -55,24 +74,65 @@ def _warning_line(message, category, filename, lineno, line=None) -> str:
 def main(argv: list[str] | None = None) -> int:
     warnings.formatwarning = _warning_line          # a warning is one line too, not a source location
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # reported by the subcommand's parser, so that the line names the subcommand
+        getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(extra)}")
     debug = getattr(args, "debug", False)
     try:
-        return int(args._run(args) or 0)
+        code = int(args._run(args) or 0)
+        sys.stdout.flush()          # a closed pipe shows here when the output was short
+        return code
     except KeyboardInterrupt:
         print("dynatex: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        return _reader_gone()
     except _input_errors() as exc:
-        if debug:
-            traceback.print_exc()
-        print(f"dynatex: error: {_one_line(exc)}", file=sys.stderr)
-        return 2
+        return _report(exc, debug, 2)
+    except OSError as exc:
+        return _report(exc, debug, 2 if exc.errno in REFUSED_ERRNOS else 1)
     except Exception as exc:  # an internal error: still one line unless --debug
+        return _report(exc, debug, 1)
+
+
+#: What the system refuses for a reason outside dynatex (a full disk, a read-only folder): bad input, exit 2.
+REFUSED_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM,
+                            errno.ENAMETOOLONG, errno.ENOTDIR, errno.EISDIR, errno.ENOENT, errno.EFBIG})
+
+#: Exit code when the reader of our output went away (``dynatex info DB | head -1``): the reader chose
+#: to stop, which is not an error of ours. Not 141 (128 + SIGPIPE, a death by the signal), because
+#: whether the pipe closes before the last write is a race: ``set -o pipefail`` scripts would fail
+#: at random. A database being written at that moment is discarded whole (writes are atomic).
+EXIT_PIPE_CLOSED = 0
+
+
+def _reader_gone() -> int:
+    """End quietly: point stdout and stderr at the null device so that Python's final flush of
+    what is still buffered for the closed pipe cannot print an error of its own."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            os.dup2(null, stream.fileno())
+        except (OSError, ValueError):
+            pass
+    os.close(null)
+    return EXIT_PIPE_CLOSED
+
+
+def _report(exc: BaseException, debug: bool, code: int) -> int:
+    """One line on stderr (the traceback too with ``--debug``); ``code`` 2 is bad input, 1 internal."""
+    try:
         if debug:
             traceback.print_exc()
-        print(f"dynatex: internal error: {type(exc).__name__}: {_one_line(exc)} (run with --debug for details)",
-              file=sys.stderr)
-        return 1
+        if code == 2:
+            print(f"dynatex: error: {_one_line(exc)}", file=sys.stderr)
+        else:
+            print(f"dynatex: internal error: {type(exc).__name__}: {_one_line(exc)} (run with --debug for details)",
+                  file=sys.stderr)
+        sys.stderr.flush()
+    except BrokenPipeError:
+        return _reader_gone()
+    return code
 
 
 def _one_line(exc: BaseException) -> str:

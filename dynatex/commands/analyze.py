@@ -10,7 +10,21 @@ from ..analyzer.methods import METHODS, get_method
 from ..analyzer.quilt import DEFAULT_BLOCK as QUILT_BLOCK
 from ..tiledb import DatabaseWriter
 from ..tiledb.tiles import CONSTRUCTIONS as TILE_CONSTRUCTIONS
-from ._common import UsageError, load_clip_arg, positive_int, size_arg, tqdm_progress
+from ._common import (
+    MAX_COUNT,
+    MAX_SIDE,
+    Number,
+    Numbers,
+    UsageError,
+    count,
+    load_clip_arg,
+    positive_int,
+    seed,
+    size_arg,
+    tqdm_progress,
+)
+
+_N = Number(int, 1, MAX_COUNT)
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -24,25 +38,28 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help=f"comma-separated methods to run: {', '.join(METHODS)} (default: lds)")
     p.add_argument("--overwrite", action="store_true", help="start a new database instead of updating one")
     g = p.add_argument_group("clip input")
-    g.add_argument("--start", type=int, default=0, help="first frame (default 0)")
-    g.add_argument("--stop", type=int, default=None, help="stop before this frame")
+    g.add_argument("--start", type=count, default=0, help="first frame (default 0)")
+    g.add_argument("--stop", type=positive_int, default=None, help="stop before this frame")
     g.add_argument("--step", type=positive_int, default=1, help="take every STEP-th frame")
     g.add_argument("--crop", type=_crop_arg, default=None, metavar="X,Y,W,H", help="keep this region")
     g.add_argument("--resize", type=size_arg, default=None, metavar="WxH", help="resize frames")
     g.add_argument("--grey", action="store_true", help="analyse in grey levels instead of colour")
     g = p.add_argument_group("lds")
-    g.add_argument("--n", default="50", help="state order, or 'auto' (default 50)")
+    g.add_argument("--n", type=_n_arg, default=50, help=f"state order, {_N.describe()}, or 'auto' (default 50)")
     g.add_argument("--k", type=positive_int, default=None, help="noise rank (default n)")
-    g.add_argument("--energy", type=float, default=0.9, help="variance kept by --n auto (default 0.9)")
+    g.add_argument("--energy", type=Number(float, 0.0, 1.0, low_open=True), default=0.9,
+                   help="variance kept by --n auto, in %(type)s (default 0.9)")
     g.add_argument("--svd", choices=("auto", "gram", "randomized"), default="auto")
-    g.add_argument("--max-radius", type=float, default=0.995, help="largest pole magnitude (default 0.995)")
+    g.add_argument("--max-radius", type=Number(float, 0.0, 1.0, low_open=True, high_open=True), default=0.995,
+                   help="largest pole magnitude, in %(type)s (default 0.995)")
     g = p.add_argument_group("turnpoints")
-    g.add_argument("--tp-n", type=int, default=4, help="mirrored frame pairs of the symmetry test (default 4)")
-    g.add_argument("--tp-s", type=int, default=1, help="binomial smoothness, 0 <= s < n/2 (default 1)")
-    g.add_argument("--tp-r", type=int, default=4, help="turn points are more than R frames apart (default 4)")
-    g.add_argument("--tp-min-symmetry", type=float, default=0.3, help="weakest turn point, in [0, 1) (default 0.3)")
-    g.add_argument("--tp-max-cost", type=float, default=2.0,
-                   help="drop transitions costlier than this many median frame steps (default 2)")
+    g.add_argument("--tp-n", type=positive_int, default=4, help="mirrored frame pairs of the symmetry test (default 4)")
+    g.add_argument("--tp-s", type=count, default=1, help="binomial smoothness, 0 <= s < n/2 (default 1)")
+    g.add_argument("--tp-r", type=positive_int, default=4, help="turn points are more than R frames apart (default 4)")
+    g.add_argument("--tp-min-symmetry", type=Number(float, 0.0, 1.0, high_open=True), default=0.3,
+                   help="weakest turn point, in %(type)s (default 0.3)")
+    g.add_argument("--tp-max-cost", type=Number(float, 0.0, 1e6, low_open=True), default=2.0,
+                   help="drop transitions costlier than this many median frame steps, in %(type)s (default 2)")
     g.add_argument("--tp-plot", default=None, metavar="PNG",
                    help="write a plot of the symmetry curve, turn points and probabilities")
     g = p.add_argument_group("mixture")
@@ -60,17 +77,19 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="ring: tiles share one boundary ring and join in any arrangement (default); wang: "
                         "edge-coloured tiles that join where colours match, with no content repeated at every "
                         "tile (one texture only)")
-    g.add_argument("--tiles-n", type=positive_int, default=None,
-                   help="tiles per texture with the ring construction (default 4)")
-    g.add_argument("--tiles-edge-colours", type=positive_int, default=2,
-                   help="Wang edge colours per direction, 2..4 (default 2: 8 tiles)")
-    g.add_argument("--tiles-min-loop", type=positive_int, default=32, help="shortest loop in frames (default 32)")
+    g.add_argument("--tiles-n", type=Number(int, 1, 64), default=None,
+                   help="tiles per texture with the ring construction, %(type)s (default 4)")
+    g.add_argument("--tiles-edge-colours", type=Number(int, 2, 4), default=2,
+                   help="Wang edge colours per direction, %(type)s (default 2: 8 tiles)")
+    g.add_argument("--tiles-min-loop", type=Number(int, 2, MAX_COUNT), default=32,
+                   help="shortest loop in frames (default 32)")
     g.add_argument("--tiles-max-loop", type=positive_int, default=None, help="longest loop (default: the clip)")
     g.add_argument("--tiles-transition", type=positive_int, default=8,
                    help="frames over which the per-pixel temporal transitions spread (default 8)")
-    g.add_argument("--tiles-ring", type=positive_int, default=None, help="width of the band of the shared ring cuts (default tile/10)")
-    g.add_argument("--tiles-flow-gain", type=float, default=0.5,
-                   help="extra cut freedom per pixel/frame of optical flow (default 0.5, 0 = off)")
+    g.add_argument("--tiles-ring", type=Number(int, 2, MAX_SIDE), default=None,
+                   help="width of the band of the shared ring cuts (default tile/10)")
+    g.add_argument("--tiles-flow-gain", type=Number(float, 0.0, 10.0), default=0.5,
+                   help="extra cut freedom per pixel/frame of optical flow, in %(type)s (default 0.5, 0 = off)")
     g.add_argument("--tiles-mix", action="append", default=[], metavar="CLIP",
                    help="another texture to mix with (repeatable): cut to the same tiles, with border tiles")
     g.add_argument("--tiles-names", default=None, metavar="A,B,...",
@@ -82,33 +101,35 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help=f"block size; elongated blocks (e.g. 16x64) suit stretching features (default {QUILT_BLOCK})")
     g.add_argument("--quilt-overlap", type=positive_int, default=None, help="block overlap (default 5/16 of the block)")
     g.add_argument("--quilt-rank", type=positive_int, default=15, help="SVD rank of the comparisons (default 15)")
-    g.add_argument("--quilt-tolerance", type=float, default=0.1,
-                   help="pick among candidates within (1 + T) of the best error (default 0.1)")
-    g.add_argument("--quilt-feather", type=int, default=None, help="cross-fade half-width across cuts (default overlap/2, 0 = hard cuts)")
-    g.add_argument("--quilt-lowpass", type=float, default=None, metavar="SIGMA",
-                   help="low-pass gain normalisation with this Gaussian sigma in pixels (default off)")
+    g.add_argument("--quilt-tolerance", type=Number(float, 0.0, 1e6), default=0.1,
+                   help="pick among candidates within (1 + T) of the best error, T in %(type)s (default 0.1)")
+    g.add_argument("--quilt-feather", type=Number(int, 0, MAX_SIDE), default=None,
+                   help="cross-fade half-width across cuts (default overlap/2, 0 = hard cuts)")
+    g.add_argument("--quilt-lowpass", type=Number(float, 0.0, float(MAX_SIDE), low_open=True), default=None,
+                   metavar="SIGMA", help="low-pass gain normalisation with this Gaussian sigma in pixels, "
+                                         "in %(type)s (default off)")
     g.add_argument("--quilt-restore-gradient", action="store_true",
                    help="with --quilt-lowpass: keep the source's low-frequency gradient instead of flattening it")
-    g.add_argument("--quilt-seed", type=int, default=0, help="seed of the random block choices (default 0)")
+    g.add_argument("--quilt-seed", type=seed, default=0, help="seed of the random block choices (default 0)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
     return p
 
 
 def _crop_arg(text: str) -> tuple[int, int, int, int]:
-    try:
-        vals = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected X,Y,W,H, not {text!r}") from None
-    if len(vals) != 4:
-        raise argparse.ArgumentTypeError(f"expected X,Y,W,H, not {text!r}")
-    return vals  # type: ignore[return-value]
+    x, y, w, h = Numbers(Number(int, 0, MAX_COUNT), 4, "X,Y,W,H")(text)
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"crop {text!r}: width and height must be at least 1")
+    return x, y, w, h
+
+
+def _n_arg(text: str) -> int | str:
+    return "auto" if text.strip().lower() == "auto" else _N(text)
 
 
 def method_params(name: str, args: argparse.Namespace) -> dict:
     """Keyword arguments of method ``name``'s learn function, from the command line."""
     if name == "lds":
-        n = args.n if args.n == "auto" else _int("--n", args.n)
-        return {"n": n, "k": args.k, "energy": args.energy, "svd": args.svd, "max_radius": args.max_radius}
+        return {"n": args.n, "k": args.k, "energy": args.energy, "svd": args.svd, "max_radius": args.max_radius}
     if name == "mixture":
         return {"components": args.mix_components, "dim": args.mix_dim, "global_dim": args.mix_global_dim,
                 "pca_dim": args.mix_pca_dim, "neighbors": args.mix_neighbors, "pmax": args.mix_pmax}
@@ -134,20 +155,11 @@ def method_params(name: str, args: argparse.Namespace) -> dict:
 
 
 def _tile_arg(text: str):
-    try:
-        parts = [int(v) for v in text.lower().split("x")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected N or WxH, not {text!r}") from None
-    if len(parts) not in (1, 2) or min(parts) < 1:
-        raise argparse.ArgumentTypeError(f"expected N or WxH, not {text!r}")
+    side = Number(int, 1, MAX_SIDE)
+    parts = [side.parse(v) for v in text.lower().split("x")]
+    if len(parts) not in (1, 2) or any(p is None for p in parts):
+        raise argparse.ArgumentTypeError(f"expected N or WxH, each side an integer in {side}, not {text!r}")
     return parts[0] if len(parts) == 1 else (parts[1], parts[0])    # WxH -> (h, w)
-
-
-def _int(flag: str, text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise UsageError(f"{flag} must be an integer or 'auto', not {text!r}") from None
 
 
 def run(args: argparse.Namespace) -> int:

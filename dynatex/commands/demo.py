@@ -21,6 +21,7 @@ from ..analyzer.video import load_clip
 from ..player import open_player
 from ..sample import ripples
 from ..tiledb import DatabaseWriter
+from ._common import seed
 
 
 @dataclass(frozen=True)
@@ -101,7 +102,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", default="dynatex-demo", help="output folder (default ./dynatex-demo)")
     p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto",
                    help="auto (default): OpenCL on a device that passed the self-test, else numpy")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed, default=0, help="random seed of the players, %(type)s (default 0)")
     return p
 
 
@@ -127,8 +128,9 @@ def run(args: argparse.Namespace) -> int:
     video_hw = (96, 128)
     fps = 25.0
 
-    from .play import FrameWriter
+    from ._output import FrameWriter
     video = FrameWriter(os.path.join(args.output, "demo.mp4"))
+    video.open(video_hw, fps)
     rows = []
     backend = args.backend
     for step in DEMO_STEPS:
@@ -141,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
                 setattr(p, key, value)
             shown = [p.next_frame() for _ in range(step.frames)]
         for f in shown:
-            video.write(_fit(f, video_hw), fps)
+            video.write(_fit(f, video_hw))
         rows.append((step.title, shown[:: max(1, step.frames // 6)][:6]))
         print(f"played {step.title!r}: {step.frames} frames")
     video.close()

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from ._common import UsageError, load_clip_arg, positive_int, size_arg
+from ._common import UsageError, load_clip_arg, positive_int, seed, size_arg
 
 DB_SUFFIXES = (".h5", ".hdf5")
 
@@ -39,7 +39,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--mode", default="lds", help="player mode (default lds)")
     g.add_argument("--frames", type=positive_int, default=None,
                    help="frames to play from a database (default 300), or to read from a video")
-    g.add_argument("--seed", type=int, default=0, help="player seed, also the patch-sampling seed")
+    g.add_argument("--seed", type=seed, default=0, help="player seed, also the patch-sampling seed, %(type)s")
     g.add_argument("--size", type=size_arg, default=None, metavar="WxH",
                    help="output size, for modes that synthesize any size")
     g.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto",
@@ -174,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
     wrap = wrap or args.wrap
     events = parse_events(args.events, t) if args.events else None
     report = metrics.evaluate(output, source, labels=labels, wrap=wrap, events=events, window=args.window,
-                              downscale=args.downscale, seed=max(0, args.seed), n_samples=args.samples,
+                              downscale=args.downscale, seed=args.seed, n_samples=args.samples,
                               period=period)
     report["source"] = args.source
     report["output"] = args.output

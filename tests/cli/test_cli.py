@@ -119,12 +119,15 @@ def test_unknown_texture_and_bad_controls(tmp_path, clip_npy, capsys):
     cases = [
         (("--texture", "fire"), "no texture named 'fire'"),
         (("--speed", "4"), "speed must be a finite number in [-3.0, 3.0]"),
-        (("--intensity", "-1"), "intensity must be"),
-        (("--scales", "1,2"), "scales must be three numbers"),
     ]
     for extra, message in cases:
         code, _, err = _run(capsys, "play", db, "-o", out, *extra)
         assert code == 2 and message in _one_line_error(err)
+    for extra, message in [(("--intensity", "-1"), "argument --intensity: expected a finite number in [0, 100]"),
+                           (("--scales", "1,2"), "argument --scales: expected C,M,F: 3 numbers")]:
+        with pytest.raises(SystemExit) as e:
+            main(["play", str(db), "-o", str(out), *extra])
+        assert e.value.code == 2 and message in capsys.readouterr().err
     assert not out.exists()
 
 

@@ -20,7 +20,10 @@ def clip_npy(tmp_path):
 
 
 def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as e:             # a usage error argparse reports (exit code 2)
+        code = e.code
     out, err = capsys.readouterr()
     return code, out, err
 
@@ -62,7 +65,7 @@ def test_bad_parameters_leave_existing_database_untouched(tmp_path, clip_npy, ca
     cases = [
         (("--tp-n", "40"), "too short for n=40"),
         (("--tp-s", "2"), "s must satisfy"),
-        (("--tp-min-symmetry", "1.5"), "min_symmetry must be in"),
+        (("--tp-min-symmetry", "1.5"), "argument --tp-min-symmetry: expected a finite number in [0, 1)"),
     ]
     for extra, message in cases:
         code, _, err = _run(capsys, "analyze", clip_npy, "-o", db, "--methods", "turnpoints", "--name", "x",
@@ -79,7 +82,7 @@ def test_bad_parameters_leave_existing_database_untouched(tmp_path, clip_npy, ca
 def test_bad_controls(tmp_path, clip_npy, capsys):
     db = tmp_path / "p.h5"
     assert _run(capsys, "analyze", clip_npy, "-o", db, "--methods", "turnpoints", "-q")[0] == 0
-    for extra, message in [(("--speed", "5"), "speed must be"), (("--crossfade", "30"), "crossfade must be"),
+    for extra, message in [(("--speed", "5"), "speed must be"), (("--crossfade", "30"), "--crossfade: expected an integer in 0..16"),
                            (("--size", "64x64"), "--size is not supported by mode turnpoints"),
                            (("--start", "500"), "start must be")]:
         code, _, err = _run(capsys, "play", db, "--mode", "turnpoints", "-o", tmp_path / "o.mp4", *extra)
