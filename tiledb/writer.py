@@ -1,11 +1,19 @@
 """Writing a tile database atomically: a temporary file in the same folder, then a rename.
 
-An interrupted or failed write leaves the previous database exactly as it was.
+An interrupted or failed write leaves the previous database exactly as it was. A write killed
+outright (``kill -9``, a power cut) leaves its temporary file ``.NAME.XXXXXXXX.tmp`` behind;
+every writer holds a shared ``flock`` on its own temporary file while it lives, so the next
+writer of ``NAME`` recognises the leftovers (that exact name pattern, a lock nobody holds) and
+removes them. Locks die with their process, so a crash can never make a live file look stale
+or a stale one look live; on network file systems ``flock`` is emulated with POSIX locks, which
+reach across machines. Where there is no ``fcntl`` (Windows) nothing is locked or removed.
 """
 from __future__ import annotations
 
 import os
-import tempfile
+import re
+import secrets
+import stat
 from typing import Any
 
 import h5py
@@ -18,6 +26,15 @@ from .codecs import CODECS
 from .database import TileDB
 from .errors import TextureNotFoundError
 from .source import SourceInfo
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover (not POSIX)
+    fcntl = None  # type: ignore[assignment]
+
+#: ``tempfile.mkstemp``'s alphabet and length, so files left by earlier writers are recognised too.
+_TMP_CHARS = "abcdefghijklmnopqrstuvwxyz0123456789_"
+_TMP_LEN = 8
 
 
 class DatabaseWriter:
@@ -44,9 +61,14 @@ class DatabaseWriter:
         self._old: TileDB | None = None
         if os.path.exists(self.path) and not overwrite:
             self._old = TileDB(self.path)
-        fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(self.path)}.", suffix=".tmp", dir=folder)
-        os.close(fd)
-        self._file: h5py.File | None = h5py.File(self._tmp, "w")
+        remove_stale_temp_files(self.path)
+        self._tmp, self._lock = _create_temp(self.path)
+        try:
+            self._file: h5py.File | None = _open_for_writing(self._tmp, self._lock)
+        except BaseException:
+            os.unlink(self._tmp)
+            os.close(self._lock)
+            raise
         self._file.attrs[schema.ATTR_FORMAT] = schema.FORMAT_NAME
         self._file.attrs[schema.ATTR_VERSION] = np.asarray(schema.FORMAT_VERSION, np.int32)
         from . import __version__
@@ -121,10 +143,12 @@ class DatabaseWriter:
             if self._old is not None:
                 self._old.close()
                 self._old = None
+            _keep_mode(self._tmp, self.path)
             os.replace(self._tmp, self.path)
         except BaseException:
             self.abort()
             raise
+        self._release()
 
     def abort(self) -> None:
         """Discard everything written; ``path`` is left untouched."""
@@ -138,6 +162,12 @@ class DatabaseWriter:
             self._old = None
         if os.path.exists(self._tmp):
             os.unlink(self._tmp)
+        self._release()
+
+    def _release(self) -> None:
+        if self._lock is not None:
+            os.close(self._lock)        # drops the flock
+            self._lock = None
 
     def __enter__(self) -> DatabaseWriter:
         return self
@@ -153,3 +183,86 @@ class DatabaseWriter:
 def _check_name(name: str) -> None:
     if not isinstance(name, str) or not schema.TEXTURE_NAME_RE.match(name):
         raise ValueError(f"texture name {name!r} is invalid: use 1-64 letters, digits, '_', '.', '-'")
+
+
+def temp_file_pattern(path: str | os.PathLike) -> re.Pattern[str]:
+    """The names of the temporary files a writer of database ``path`` creates beside it."""
+    name = os.path.basename(os.fspath(path))
+    return re.compile(rf"\.{re.escape(name)}\.[{re.escape(_TMP_CHARS)}]{{{_TMP_LEN}}}\.tmp")
+
+
+def remove_stale_temp_files(path: str | os.PathLike) -> list[str]:
+    """Remove the temporary files that interrupted writers of database ``path`` left behind.
+
+    Only files named by :func:`temp_file_pattern` count, and only those no live writer holds:
+    a writer keeps a shared ``flock`` on its file, so an exclusive one is granted on stale files
+    alone. Returns the paths removed.
+    """
+    if fcntl is None:
+        return []
+    path = os.path.abspath(os.fspath(path))
+    folder = os.path.dirname(path)
+    pattern = temp_file_pattern(path)
+    removed = []
+    try:
+        entries = [e for e in os.scandir(folder) if pattern.fullmatch(e.name)]
+    except OSError:
+        return []
+    for entry in entries:
+        try:
+            if not entry.is_file(follow_symlinks=False):
+                continue
+            fd = os.open(entry.path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            held, now = os.fstat(fd), os.lstat(entry.path)
+            if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
+                os.unlink(entry.path)
+                removed.append(entry.path)
+        except OSError:         # held by a live writer (BlockingIOError), gone, or not ours to remove
+            pass
+        finally:
+            os.close(fd)
+    return removed
+
+
+def _create_temp(path: str) -> tuple[str, int]:
+    """A new temporary file beside ``path``, created with the umask's mode, and its lock descriptor."""
+    folder, name = os.path.split(path)
+    for _ in range(100):
+        token = "".join(secrets.choice(_TMP_CHARS) for _ in range(_TMP_LEN))
+        tmp = os.path.join(folder, f".{name}.{token}.tmp")
+        try:
+            fd = os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666)
+        except FileExistsError:
+            continue
+        if fcntl is None:
+            return tmp, fd
+        fcntl.flock(fd, fcntl.LOCK_SH)
+        if os.fstat(fd).st_nlink > 0:
+            return tmp, fd
+        os.close(fd)            # a cleaner took it between creation and lock: try another name
+    raise FileExistsError(f"{path}: cannot create a temporary file in {folder}")
+
+
+def _open_for_writing(tmp: str, lock: int | None) -> h5py.File:
+    """``tmp`` opened by HDF5 for writing without HDF5's own exclusive lock, which would conflict with
+    the writer's shared one. An HDF5 too old to open unlocked gets the file with its own lock, which
+    protects it from cleaners just as well while it is open."""
+    try:
+        return h5py.File(tmp, "w", locking=False)
+    except ValueError:
+        if lock is not None:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+        return h5py.File(tmp, "w")
+
+
+def _keep_mode(tmp: str, path: str) -> None:
+    """Give ``tmp`` the permission bits of the database it replaces (a new one keeps the umask's)."""
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    except FileNotFoundError:
+        return
+    os.chmod(tmp, mode)
