@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import unicodedata
 from typing import Any
 
 import h5py
@@ -95,8 +96,9 @@ class TileDB:
             except Exception as exc:
                 self._check.fail(group.name, f"cannot be listed ({_short(exc)})")
             for name in names:
-                if not schema.TEXTURE_NAME_RE.match(name):
-                    self._check.fail(f"{group.name}/{name}", "invalid texture name")
+                problem = schema.texture_name_problem(name)
+                if problem:
+                    self._check.fail(f"{group.name}/{name}", f"invalid texture name: {problem}")
                 self._textures[name] = Texture(self, name, self._check.group(group, name))
         except BaseException:
             self._file.close()
@@ -142,7 +144,7 @@ class TileDB:
             raise TextureNotFoundError(f"holds several textures ({', '.join(self._textures)}); name one",
                                        filename=self.filename)
         try:
-            return self._textures[name]
+            return self._textures[unicodedata.normalize("NFC", name) if isinstance(name, str) else name]
         except KeyError:
             raise TextureNotFoundError(
                 f"no texture named {name!r} (available: {', '.join(self._textures) or 'none'})",

@@ -5,11 +5,11 @@ through its API. ``FORMAT.md`` beside this file documents what they mean.
 """
 from __future__ import annotations
 
-import re
+import unicodedata
 
 FORMAT_NAME = "dynatex-tiledb"
 #: (major, minor). A reader refuses another major and accepts any minor.
-FORMAT_VERSION = (1, 1)
+FORMAT_VERSION = (1, 2)
 
 # Root attributes.
 ATTR_FORMAT = "format"
@@ -29,7 +29,49 @@ METHOD_QUILT = "quilt"
 METHOD_MIXTURE = "mixture"
 METHODS = (METHOD_LDS, METHOD_TURNPOINTS, METHOD_TILES, METHOD_QUILT, METHOD_MIXTURE)
 
-TEXTURE_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}$")
+#: Longest texture name, in characters.
+MAX_TEXTURE_NAME = 64
+#: What a texture name is, for messages.
+TEXTURE_NAME_RULE = (f"1-{MAX_TEXTURE_NAME} characters in Unicode NFC, no '/', no control characters or line "
+                     "breaks, not starting with '.' and without spaces at either end")
+
+
+def texture_name_problem(name: object) -> str | None:
+    """What makes ``name`` no valid texture name (see :data:`TEXTURE_NAME_RULE`), or None.
+
+    Any letter of any script is fine: the name is HDF5 link name (UTF-8) and the handle a game
+    passes to the player. Refused are what would break a path (``/``, a leading ``.``: ``.``
+    and ``..``), a line of output (control characters, line and paragraph separators), or a
+    lookup (two spellings of one name: names are stored in NFC).
+    """
+    if not isinstance(name, str):
+        return f"is a {type(name).__name__}, not a string"
+    if not 1 <= len(name) <= MAX_TEXTURE_NAME:
+        return f"has {len(name)} characters"
+    if "/" in name:
+        return "contains '/'"
+    if name[0] == ".":
+        return "starts with '.'"
+    if name != name.strip():
+        return "has spaces at an end"
+    for ch in name:
+        if unicodedata.category(ch)[0] == "C" or unicodedata.category(ch) in ("Zl", "Zp"):
+            return f"contains the control or unassigned character U+{ord(ch):04X}"
+    if unicodedata.normalize("NFC", name) != name:
+        return "is not in Unicode NFC"
+    return None
+
+
+def texture_name_from(text: str) -> str:
+    """A valid texture name made from ``text`` (a clip's file name without extension): NFC, characters
+    a name cannot hold replaced by ``_``, leading dots and end spaces dropped, at most
+    :data:`MAX_TEXTURE_NAME` characters; ``"texture"`` when nothing is left."""
+    text = unicodedata.normalize("NFC", text)
+    text = "".join("_" if ch == "/" or unicodedata.category(ch)[0] == "C" or unicodedata.category(ch) in ("Zl", "Zp")
+                   else ch for ch in text)
+    text = text.strip().lstrip(".").strip()[:MAX_TEXTURE_NAME].rstrip()
+    text = unicodedata.normalize("NFC", text)    # cutting may split a character from its combining marks
+    return text if texture_name_problem(text) is None else "texture"
 
 #: Largest dimension any stored array may declare; guards hostile files.
 MAX_ELEMENTS = 2**34

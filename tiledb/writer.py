@@ -14,6 +14,7 @@ import os
 import re
 import secrets
 import stat
+import unicodedata
 from typing import Any
 
 import h5py
@@ -79,7 +80,7 @@ class DatabaseWriter:
     # -- textures --------------------------------------------------------------
     def put_texture(self, name: str, source: SourceInfo) -> None:
         """Create texture ``name`` afresh (replacing any texture of that name) with its source description."""
-        _check_name(name)
+        name = _check_name(name)
         if name in self._textures:
             del self._textures[name]
         self._removed.add(name)  # the old file's copy is not carried over
@@ -87,6 +88,7 @@ class DatabaseWriter:
         _source.write(g.create_group(schema.SOURCE), source)
 
     def remove_texture(self, name: str) -> None:
+        name = _nfc(name)
         if name not in self._textures and not (self._old and name in self._old and name not in self._removed):
             raise TextureNotFoundError(f"no texture named {name!r}", filename=self.path)
         if name in self._textures:
@@ -115,6 +117,7 @@ class DatabaseWriter:
         return _source.read(g[schema.SOURCE], Checker(self._tmp))
 
     def _texture_group(self, name: str, skip: str | None = None) -> h5py.Group:
+        name = _nfc(name)
         if name in self._textures:
             return self._textures[name]
         if self._old is not None and name in self._old and name not in self._removed:
@@ -180,9 +183,17 @@ class DatabaseWriter:
             self.abort()
 
 
-def _check_name(name: str) -> None:
-    if not isinstance(name, str) or not schema.TEXTURE_NAME_RE.match(name):
-        raise ValueError(f"texture name {name!r} is invalid: use 1-64 letters, digits, '_', '.', '-'")
+def _nfc(name: str) -> str:
+    return unicodedata.normalize("NFC", name) if isinstance(name, str) else name
+
+
+def _check_name(name: str) -> str:
+    """``name`` in NFC, if it is a valid texture name."""
+    name = _nfc(name)
+    problem = schema.texture_name_problem(name)
+    if problem:
+        raise ValueError(f"texture name {name!r} is invalid: it {problem}; a name is {schema.TEXTURE_NAME_RULE}")
+    return name
 
 
 def temp_file_pattern(path: str | os.PathLike) -> re.Pattern[str]:

@@ -9,6 +9,7 @@ import time
 from ..analyzer.methods import METHODS, get_method
 from ..analyzer.quilt import DEFAULT_BLOCK as QUILT_BLOCK
 from ..tiledb import DatabaseWriter
+from ..tiledb.schema import texture_name_from
 from ..tiledb.tiles import CONSTRUCTIONS as TILE_CONSTRUCTIONS
 from ._common import (
     MAX_COUNT,
@@ -33,7 +34,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
                                    "database (other textures already in it are kept).")
     p.add_argument("clip", help="video file, folder of images, or .npy array (T, H, W[, C]) uint8")
     p.add_argument("-o", "--output", required=True, help="tile database to create or update (.h5)")
-    p.add_argument("--name", help="texture name (default: the clip's file name without extension)")
+    p.add_argument("--name", help="texture name: any letters, up to 64 characters, no '/' (default: the clip's file "
+                                  "name without extension)")
     p.add_argument("--methods", default="lds",
                    help=f"comma-separated methods to run: {', '.join(METHODS)} (default: lds)")
     p.add_argument("--overwrite", action="store_true", help="start a new database instead of updating one")
@@ -167,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
     if not names:
         raise UsageError("--methods names no method")
     methods = [get_method(m) for m in names]
-    texture = args.name or os.path.splitext(os.path.basename(os.path.normpath(args.clip)))[0]
+    texture = args.name or texture_name_from(os.path.splitext(os.path.basename(os.path.normpath(args.clip)))[0])
     show = not args.quiet
     t0 = time.perf_counter()
     # Open (and so validate) an existing database before the long work.

@@ -3,6 +3,7 @@ output writer's failures and a closed pipe, each run as a real ``dynatex`` proce
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import subprocess
@@ -334,3 +335,26 @@ def test_closed_stderr_of_play_ends_quietly(lds_db, tmp_path):
     code, stdout = _reader_gone(["play", lds_db, "-o", out, "--frames", "3", "--backend", "numpy"], "stderr")
     assert code == 0 and stdout == b""
     assert out.stat().st_size > 0
+
+
+# -- default texture names ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("filename, texture", [("my clip é.avi", "my clip é"), ("水.mp4", "水"),
+                                               (".hidden clip.npy", "hidden clip")])
+def test_default_texture_name_of_any_clip_name_is_accepted(tmp_path, capsys, filename, texture):
+    clip = tmp_path / filename
+    frames = wave_clip(t=24, h=16, w=16)
+    if filename.endswith(".npy"):
+        np.save(clip, frames)
+    else:
+        fourcc = {".avi": "MJPG", ".mp4": "mp4v"}[os.path.splitext(filename)[1]]
+        v = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*fourcc), 25.0, (16, 16))
+        for f in frames:
+            v.write(cv2.cvtColor(f, cv2.COLOR_RGB2BGR))
+        v.release()
+    db = tmp_path / "db.h5"
+    r = _dynatex("analyze", clip, "-o", db, "--n", "4", "-q")
+    assert r.returncode == 0, r.stderr                  # exit 2 "texture name ... is invalid" before
+    assert main(["info", str(db), "--json"]) == 0
+    assert list(json.loads(capsys.readouterr().out)["textures"]) == [texture]
+    assert main(["play", str(db), "--texture", texture, "--frames", "2", "-o", str(tmp_path / "o.avi"),
+                 "--backend", "numpy"]) == 0

@@ -12,7 +12,7 @@ from dynatex.tiledb import (FORMAT_VERSION, MethodNotFoundError, TextureNotFound
 def test_open_lists_textures_and_reads_lds(lds_db):
     with open_db(lds_db) as db:
         assert db.textures == ("waves",)
-        assert db.version == FORMAT_VERSION == (1, 1)
+        assert db.version == FORMAT_VERSION == (1, 2)
         tex = db.texture()            # the only one
         assert tex.methods == ("lds",)
         m = tex.read("lds")
