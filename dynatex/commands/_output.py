@@ -194,8 +194,13 @@ class FrameWriter:
         if log is None:
             yield
             return
-        sys.stderr.flush()
-        saved = os.dup(2)
+        try:
+            if sys.stderr is not None:
+                sys.stderr.flush()
+            saved = os.dup(2)
+        except (OSError, ValueError):   # no stderr to protect (closed, or a closed pipe)
+            yield
+            return
         try:
             os.dup2(log.fileno(), 2)
             yield
