@@ -2,8 +2,8 @@
 
 Exit codes: 0 ok, 2 bad usage or bad input (including output the system refuses: a full disk,
 a read-only folder), 1 internal error. Errors print one line (``dynatex: error: ...``) unless
-``--debug`` asks for the traceback. A reader that closes the pipe (``| head -1``) ends the
-command quietly with exit 0.
+``--debug`` asks for the traceback. A reader that closes stdout (``| head -1``) ends the
+command quietly with exit 0; a closed stderr drops warnings and progress, the work goes on.
 """
 from __future__ import annotations
 
@@ -78,6 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     if extra:  # reported by the subcommand's parser, so that the line names the subcommand
         getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(extra)}")
     debug = getattr(args, "debug", False)
+    stderr, sys.stderr = sys.stderr, _Diagnostics(sys.stderr)
     try:
         code = int(args._run(args) or 0)
         sys.stdout.flush()          # a closed pipe shows here when the output was short
@@ -93,6 +94,48 @@ def main(argv: list[str] | None = None) -> int:
         return _report(exc, debug, 2 if exc.errno in REFUSED_ERRNOS else 1)
     except Exception as exc:  # an internal error: still one line unless --debug
         return _report(exc, debug, 1)
+    finally:
+        sys.stderr = stderr
+
+
+class _Diagnostics:
+    """``sys.stderr`` while a command runs: when its reader goes away, warnings, progress and
+    summaries are dropped and the work goes on (a closed stdout, where the results go, ends
+    the command instead: see :func:`_reader_gone`)."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+        self._gone = stream is None
+
+    def write(self, text: str) -> int:
+        if not self._gone:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._drop()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self._gone:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._drop()
+
+    def isatty(self) -> bool:
+        return not self._gone and self._stream.isatty()
+
+    def _drop(self) -> None:
+        self._gone = True
+        try:
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, self._stream.fileno())    # the last buffered bytes must not fail at exit
+            os.close(null)
+        except (OSError, ValueError, AttributeError):
+            pass
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
 
 
 #: What the system refuses for a reason outside dynatex (a full disk, a read-only folder): bad input, exit 2.
@@ -107,13 +150,14 @@ EXIT_PIPE_CLOSED = 0
 
 
 def _reader_gone() -> int:
-    """End quietly: point stdout and stderr at the null device so that Python's final flush of
-    what is still buffered for the closed pipe cannot print an error of its own."""
+    """End quietly when stdout's reader went away: point stdout and stderr at the null device so
+    that Python's final flush of what is still buffered for the closed pipe cannot print an error
+    of its own."""
     null = os.open(os.devnull, os.O_WRONLY)
     for stream in (sys.stdout, sys.stderr):
         try:
             os.dup2(null, stream.fileno())
-        except (OSError, ValueError):
+        except (OSError, ValueError, AttributeError):
             pass
     os.close(null)
     return EXIT_PIPE_CLOSED

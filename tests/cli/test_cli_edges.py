@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
-from dynatex.tiledb import DatabaseWriter
+from dynatex.tiledb import DatabaseWriter, open_db
 
 from dynatex.cli import build_parser, main
 
@@ -328,6 +328,18 @@ def test_closed_stdout_after_analysis_keeps_the_database(tmp_path):
     assert code == 0
     assert b"BrokenPipe" not in err and b"error" not in err
     assert db.exists()
+
+
+def test_closed_stderr_drops_the_diagnostics_not_the_work(tmp_path):
+    """An analysis whose stderr reader went away still writes its database and says so on stdout."""
+    clip = tmp_path / "c.npy"
+    np.save(clip, wave_clip(t=30, h=16, w=16))
+    db = tmp_path / "c.h5"
+    code, out = _reader_gone(["analyze", clip, "-o", db, "--n", "4"], "stderr")   # summaries go to stderr
+    assert code == 0
+    assert out.decode().startswith("wrote texture 'c'")
+    with open_db(db) as d:
+        assert d.textures == ("c",)
 
 
 def test_closed_stderr_of_play_ends_quietly(lds_db, tmp_path):
