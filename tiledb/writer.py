@@ -5,8 +5,10 @@ outright (``kill -9``, a power cut) leaves its temporary file ``.NAME.XXXXXXXX.t
 every writer holds a shared ``flock`` on its own temporary file while it lives, so the next
 writer of ``NAME`` recognises the leftovers (that exact name pattern, a lock nobody holds) and
 removes them. Locks die with their process, so a crash can never make a live file look stale
-or a stale one look live; on network file systems ``flock`` is emulated with POSIX locks, which
-reach across machines. Where there is no ``fcntl`` (Windows) nothing is locked or removed.
+or a stale one look live. On NFS ``flock`` is emulated with POSIX locks, which reach across
+machines but lapse when the writer's HDF5 handle closes; a writer that starts in that moment
+can take the file, and the first writer's commit then fails (the database stays as it was).
+Where there is no ``fcntl`` (Windows) nothing is locked or removed.
 """
 from __future__ import annotations
 
@@ -68,7 +70,7 @@ class DatabaseWriter:
             self._file: h5py.File | None = _open_for_writing(self._tmp, self._lock)
         except BaseException:
             os.unlink(self._tmp)
-            os.close(self._lock)
+            self._release()
             raise
         self._file.attrs[schema.ATTR_FORMAT] = schema.FORMAT_NAME
         self._file.attrs[schema.ATTR_VERSION] = np.asarray(schema.FORMAT_VERSION, np.int32)
@@ -239,8 +241,9 @@ def remove_stale_temp_files(path: str | os.PathLike) -> list[str]:
     return removed
 
 
-def _create_temp(path: str) -> tuple[str, int]:
-    """A new temporary file beside ``path``, created with the umask's mode, and its lock descriptor."""
+def _create_temp(path: str) -> tuple[str, int | None]:
+    """A new temporary file beside ``path``, created with the umask's mode, and the descriptor that
+    holds its lock (None without ``fcntl``: an open descriptor would only stop the rename there)."""
     folder, name = os.path.split(path)
     for _ in range(100):
         token = "".join(secrets.choice(_TMP_CHARS) for _ in range(_TMP_LEN))
@@ -250,7 +253,8 @@ def _create_temp(path: str) -> tuple[str, int]:
         except FileExistsError:
             continue
         if fcntl is None:
-            return tmp, fd
+            os.close(fd)
+            return tmp, None
         fcntl.flock(fd, fcntl.LOCK_SH)
         if os.fstat(fd).st_nlink > 0:
             return tmp, fd
