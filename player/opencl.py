@@ -288,7 +288,9 @@ class Program:
 
     def __init__(self, ctx: "cl.Context", filename: str | tuple[str, ...], defines: Mapping[str, object]) -> None:
         self.filename = filename if isinstance(filename, str) else " + ".join(filename)
-        self.options = [f"-D{k}={_define(v)}" for k, v in sorted(defines.items())]
+        # -w: a compiler that prints its warnings to the process's stderr (PoCL's clang does, on
+        # the x86 variant's wide vectors) must not write into a game's console
+        self.options = [f"-D{k}={_define(v)}" for k, v in sorted(defines.items())] + ["-w"]
         source = kernel_source(filename)
         #: kernel name -> its argument names, as the source declares them (engine.Kernel sets arguments by name)
         self.arg_names = kernel_arg_names(source)

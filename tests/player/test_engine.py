@@ -115,3 +115,29 @@ def test_every_mode_draws_through_one_engine_and_closing_releases_it(cl_device, 
         if backend == "opencl":
             assert not [k for k in vars(engine) if k.startswith("_d_")], "device buffers left after close"
         assert out.any()
+
+
+_BUILD_CHILD = """
+import sys, numpy as np
+from dynatex.player.gather import open_gather, pack_source
+g = open_gather(np.zeros((3, 64, 64, 3), np.uint8), (64, 128), device=sys.argv[1], cell=(16, 16), time_step=8)
+g.set_source_grid(pack_source(np.zeros((4, 8), int)))
+g.render(0.5)
+print("built", g.wide)
+"""
+
+
+def test_kernel_builds_write_nothing_to_stderr(cl_device, tmp_path):
+    """A compiler that prints warnings to the process's stderr (PoCL's clang on the x86
+    variant) must not write into the host application's console: built in a child process
+    with empty kernel caches, stderr stays empty."""
+    import os
+    import subprocess
+    import sys
+    env = dict(os.environ, POCL_CACHE_DIR=str(tmp_path / "pocl"), PYOPENCL_NO_CACHE="1",
+               DYNATEX_CACHE_DIR=str(tmp_path / "dynatex"))
+    done = subprocess.run([sys.executable, "-c", _BUILD_CHILD, cl_device], capture_output=True, text=True,
+                          timeout=240, env=env)
+    assert done.returncode == 0, done.stderr[-500:]
+    assert done.stdout.startswith("built")
+    assert "warning" not in done.stderr.lower(), done.stderr[-500:]
