@@ -11,6 +11,8 @@ for the definition, units, range and good/bad values of each measure.
   :func:`patch_coherence`, :func:`patch_completeness` (both at once: :func:`patch_distances`).
 - Coverage and repetition: :func:`frame_coverage`, :func:`index_coverage`,
   :func:`repetition_lag` (:func:`repetition_profile`).
+- Repetition in space: :func:`lattice_prominence` (a cell lattice standing out),
+  :func:`lattice_correlation`.
 - All of them at once: :func:`evaluate`.
 """
 from __future__ import annotations
@@ -25,7 +27,7 @@ from ._checks import check_int
 
 __all__ = [
     "StabilityReport", "check_frames", "count_nonfinite", "evaluate", "frame_coverage", "frame_step_ratio",
-    "grid_labels", "index_coverage", "lattice_correlation", "patch_coherence", "patch_completeness",
+    "grid_labels", "index_coverage", "lattice_correlation", "lattice_lags", "lattice_prominence", "patch_coherence", "patch_completeness",
     "patch_distances",
     "repetition_lag", "repetition_profile", "seam_visibility", "spectrum_distance", "st_power_spectrum",
     "stability", "temporal_discontinuity",
@@ -192,13 +194,17 @@ class StabilityReport:
     """Result of :func:`stability`.
 
     ``ratios[k]`` is the mean dynamic energy of output window ``k`` over that of the source
-    (NaN for a window whose frames are all non-finite).
+    (NaN for a window whose frames are all non-finite). ``source_min_ratio`` and
+    ``source_max_ratio`` are the same ratios of the source's own windows: how much a real
+    clip's energy varies from window to window (boiling water: 0.55..2.12 in windows of 25).
     """
 
     ratios: np.ndarray
     window: int
     n_frames: int
     nonfinite_frames: int
+    source_min_ratio: float = 1.0
+    source_max_ratio: float = 1.0
 
     @property
     def min_ratio(self) -> float:
@@ -214,15 +220,26 @@ class StabilityReport:
     def final_ratio(self) -> float:
         return float(self.ratios[-1])
 
+    def bounds(self, *, low: float = 0.5, high: float = 2.0) -> tuple[float, float]:
+        """The band every window must lie in: ``[low, high]``, widened to the source's own
+        window-to-window range with a margin (``0.8 source_min_ratio``, ``1.25 source_max_ratio``),
+        so a clip whose energy varies over time is stable against itself."""
+        return min(low, 0.8 * self.source_min_ratio), max(high, 1.25 * self.source_max_ratio)
+
     def is_stable(self, *, low: float = 0.5, high: float = 2.0) -> bool:
-        """True when every frame is finite and every window's ratio lies in ``[low, high]``."""
+        """True when every frame is finite and every window's ratio lies in :meth:`bounds`."""
+        lo, hi = self.bounds(low=low, high=high)
         return bool(self.nonfinite_frames == 0 and np.isfinite(self.ratios).all()
-                    and self.ratios.min() >= low and self.ratios.max() <= high)
+                    and self.ratios.min() >= lo and self.ratios.max() <= hi)
 
     def as_dict(self) -> dict[str, Any]:
+        lo, hi = self.bounds()
         return {"window": self.window, "n_frames": self.n_frames, "nonfinite_frames": self.nonfinite_frames,
                 "min_ratio": _json_float(self.min_ratio), "max_ratio": _json_float(self.max_ratio),
                 "final_ratio": _json_float(self.final_ratio), "stable": self.is_stable(),
+                "source_min_ratio": _json_float(self.source_min_ratio),
+                "source_max_ratio": _json_float(self.source_max_ratio),
+                "bounds": [_json_float(lo), _json_float(hi)],
                 "ratios": [_json_float(v) for v in self.ratios]}
 
 
@@ -261,7 +278,8 @@ def stability(output: np.ndarray | Iterable[np.ndarray], source: np.ndarray, *, 
     for _, chunk in _chunks(source):
         mean += chunk.sum(axis=0, dtype=np.float64)
     mean = (mean / source.shape[0]).astype(np.float32)
-    src_e = float(np.mean(_energies(source, mean)))
+    src_energies = _energies(source, mean)
+    src_e = float(np.mean(src_energies))
     if src_e <= 0:
         raise ValueError("source has no temporal variation (every frame equals the mean frame)")
 
@@ -281,7 +299,9 @@ def stability(output: np.ndarray | Iterable[np.ndarray], source: np.ndarray, *, 
     for i in range(0, n, window):
         e, b = energies[i:i + window], bad[i:i + window]
         ratios.append(float(e[~b].mean()) / src_e if (~b).any() else float("nan"))
-    return StabilityReport(ratios=np.asarray(ratios), window=window, n_frames=n, nonfinite_frames=int(bad.sum()))
+    own = [float(src_energies[i:i + window].mean()) / src_e for i in range(0, len(src_energies), window)]
+    return StabilityReport(ratios=np.asarray(ratios), window=window, n_frames=n, nonfinite_frames=int(bad.sum()),
+                           source_min_ratio=min(own), source_max_ratio=max(own))
 
 
 def _energies(frames: np.ndarray, mean: np.ndarray) -> np.ndarray:
@@ -823,6 +843,88 @@ def lattice_correlation(frames: np.ndarray, period: int | Sequence[int]) -> tupl
     return float(acc[0] / t), float(acc[1] / t)
 
 
+def lattice_lags(tile: int | Sequence[int]) -> list[tuple[int, int]]:
+    """The lags of a ``(th, tw)`` cell lattice at which :func:`lattice_prominence` looks:
+    ``(0, tw), (th, 0), (th, tw), (0, 2 tw), (2 th, 0)``."""
+    th, tw = _pair("tile", tile, 1)
+    return [(0, tw), (th, 0), (th, tw), (0, 2 * tw), (2 * th, 0)]
+
+
+def _autocorrelation(g: np.ndarray, max_dy: int, max_dx: int) -> np.ndarray:
+    """Normalised autocorrelation of one mean-removed luma frame ``g (H, W)`` at lags
+    ``dy in [0, max_dy]``, ``dx in [-max_dx, max_dx]``: ``(max_dy + 1, 2 max_dx + 1)``, the mean
+    product over each lag's overlap divided by the frame's variance (zero-padded FFT, so no
+    wrap-around)."""
+    h, w = g.shape
+    fh, fw = 2 * h, 2 * w
+    spec = np.fft.rfft2(g, (fh, fw))
+    ac = np.fft.irfft2(spec * np.conj(spec), (fh, fw))
+    dys = np.arange(max_dy + 1)
+    dxs = np.arange(-max_dx, max_dx + 1)
+    raw = ac[dys[:, None], dxs[None, :] % fw]
+    count = (h - dys)[:, None] * (w - np.abs(dxs))[None, :]
+    var = float((g * g).mean())
+    return raw / count / var if var > 0 else np.zeros_like(raw)
+
+
+def lattice_prominence(frames: np.ndarray, tile: int | Sequence[int], *, max_frames: int = 30,
+                       per_lag: bool = False) -> float | None | tuple[float | None, dict]:
+    """How much a cell lattice ``(th, tw)`` stands out in the output's autocorrelation.
+
+    For each frame (at most ``max_frames``, evenly spread), the normalised autocorrelation of
+    its mean-removed luma at each lattice lag (:func:`lattice_lags`) minus the mean of the
+    autocorrelation over a ring of lags ``3 <= |d - lag| <= max(6, min(th, tw) / 4)`` around
+    it; the median over lags and frames. Content repeated at every cell makes a peak at the
+    lattice lags that its surroundings do not share (a wallpaper of one tile: about 1); a
+    natural texture, or a smooth correlation that merely decays with distance, gives about 0.
+    Lags whose ring does not fit inside the frame with at least a quarter of the frame
+    overlapping (in each direction) are left out; None when none fits.
+
+    With ``per_lag`` returns ``(prominence, {"(dy, dx)": median over frames})``.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> tile = rng.integers(0, 256, (1, 16, 16)).astype(np.uint8)
+    >>> round(lattice_prominence(np.tile(tile, (1, 6, 6)), 16), 2)
+    1.0
+    >>> noise = rng.integers(0, 256, (2, 96, 96)).astype(np.uint8)
+    >>> abs(lattice_prominence(noise, 16)) < 0.02
+    True
+    """
+    frames = check_frames(frames)
+    th, tw = _pair("tile", tile, 1)
+    max_frames = check_int("max_frames", max_frames, 1)
+    t, h, w = frames.shape[:3]
+    r = max(6.0, min(th, tw) / 4.0)
+    ri = int(np.ceil(r))
+    lags = [(dy, dx) for dy, dx in lattice_lags((th, tw)) if dy + ri <= h - h // 4 and dx + ri <= w - w // 4]
+    if not lags:
+        return (None, {}) if per_lag else None
+    max_dy = max(dy for dy, _ in lags) + ri
+    max_dx = max(dx for _, dx in lags) + ri
+    oy, ox = np.mgrid[-ri:ri + 1, -ri:ri + 1]
+    dist = np.sqrt(oy * oy + ox * ox)
+    ring = (dist >= 3) & (dist <= r)
+    ry, rx = oy[ring], ox[ring]
+    idx = np.unique(np.linspace(0, t - 1, min(max_frames, t)).round().astype(int))
+    values = np.empty((len(idx), len(lags)))
+    for fi, k in enumerate(idx):
+        g = _grey(frames[k:k + 1])[0].astype(np.float64)
+        g -= g.mean()
+        ac = _autocorrelation(g, max_dy, max_dx)
+        for li, (dy, dx) in enumerate(lags):
+            # the autocorrelation is symmetric: a lag of negative dy is the mirrored lag
+            yy, xx = dy + ry, dx + rx
+            xx = np.where(yy < 0, -xx, xx)
+            yy = np.abs(yy)
+            values[fi, li] = ac[dy, dx + max_dx] - ac[yy, xx + max_dx].mean()
+    prom = float(np.median(values))
+    if per_lag:
+        return prom, {f"({dy}, {dx})": float(np.median(values[:, li])) for li, (dy, dx) in enumerate(lags)}
+    return prom
+
+
 def repetition_profile(output: np.ndarray, *, source: np.ndarray | None = None,
                        max_lag: int | None = None) -> np.ndarray:
     """Mean frame difference at each lag, over the reference's median consecutive-frame difference.
@@ -901,13 +1003,16 @@ def repetition_lag(output: np.ndarray, *, source: np.ndarray | None = None, tole
 # -- everything at once ---------------------------------------------------------------------
 def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | None = None, wrap: bool = False,
              events: Sequence[int] | None = None, window: int = 25, downscale: int | None = None,
-             seed: int = 0, n_samples: int = 1000, period: Sequence[int] | None = None) -> dict[str, Any]:
+             seed: int = 0, n_samples: int = 1000, period: Sequence[int] | None = None,
+             lattice: Sequence[int] | None = None) -> dict[str, Any]:
     """Every metric of this module for one output against its source, as a JSON-ready dict.
 
     Size-bound metrics (stability, frame coverage) are None when the frame sizes differ;
     when the output holds NaN/inf, only stability is computed. With ``period`` ``(py, px)``
     (a tile lattice) the lattice correlation of the output and of the source (None where
-    a frame is not larger than the period) at those lags.
+    a frame is not larger than the period) at those lags. With ``lattice`` ``(th, tw)`` (the
+    player's cell lattice) the :func:`lattice_prominence` of the output and of the source (None
+    where no lag fits the frame), with the output's figure per lag.
 
     Examples
     --------
@@ -950,12 +1055,18 @@ def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | Non
     if period is not None:
         py, px = _pair("period", period, 1)
 
-        def lattice(frames: np.ndarray) -> list[float] | None:
+        def correlation(frames: np.ndarray) -> list[float] | None:
             if frames.shape[1] <= py or frames.shape[2] <= px:
                 return None                     # no lag of the period fits inside the frame
             return list(lattice_correlation(frames[::max(1, len(frames) // 30)], (py, px)))
 
-        report["lattice_correlation"] = {"period": [py, px], "output": lattice(output), "source": lattice(source)}
+        report["lattice_correlation"] = {"period": [py, px], "output": correlation(output),
+                                         "source": correlation(source)}
+    if lattice is not None:
+        th, tw = _pair("lattice", lattice, 1)
+        prom, lags = lattice_prominence(output, (th, tw), per_lag=True)
+        report["lattice_prominence"] = {"tile": [th, tw], "output": prom, "lags": lags,
+                                        "source": lattice_prominence(source, (th, tw))}
     return report
 
 

@@ -34,6 +34,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="frames that follow a jump (loop wrap, reversal): comma-separated indices, "
                         "or every:N for every N-th frame")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument("--sheet", default=None, metavar="PNG",
+                   help="also write a contact sheet: source frames beside output frames, to look at")
     g = p.add_argument_group("database output (the player)")
     g.add_argument("--texture", help="texture name (optional when the database holds one)")
     g.add_argument("--mode", default="lds", help="player mode (default lds)")
@@ -125,8 +127,9 @@ def _load(path: str, **opts: Any) -> np.ndarray:
     return load_clip_arg(path, **opts).frames
 
 
-def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any]]:
-    """Frames from the player, and the load options that reproduce the texture's source frames."""
+def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any], tuple[int, int] | None]:
+    """Frames from the player, the load options that reproduce the texture's source frames,
+    and the player's cell lattice ``(th, tw)`` (mode tiles; None for other modes)."""
     import inspect
 
     from ..player import open_player, player_class
@@ -139,6 +142,7 @@ def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any]]
     n = args.frames or 300
     with open_player(args.output, args.texture, mode=args.mode, **opts) as player:
         src = player.texture.source
+        tile = getattr(player, "tile_size", None)
         frames = np.empty((n,) + tuple(player.shape), np.uint8)
         for i in range(n):
             player.next_frame(out=frames[i])
@@ -149,7 +153,7 @@ def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any]]
     }
     if src.crop:
         source_opts["crop"] = tuple(int(v) for v in src.crop)
-    return frames, source_opts
+    return frames, source_opts, (None if tile is None else (int(tile[0]), int(tile[1])))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -159,8 +163,9 @@ def run(args: argparse.Namespace) -> int:
         for flag, val in (("--texture", args.texture), ("--size", args.size)):
             if val is not None:
                 raise UsageError(f"{flag} applies to a database output (.h5), not to {args.output}")
+    tile = None
     if is_db:
-        output, source_opts = play_database(args)
+        output, source_opts, tile = play_database(args)
     else:
         output = _load(args.output, **({"stop": args.frames} if args.frames else {}))
         source_opts = {}
@@ -175,7 +180,15 @@ def run(args: argparse.Namespace) -> int:
     events = parse_events(args.events, t) if args.events else None
     report = metrics.evaluate(output, source, labels=labels, wrap=wrap, events=events, window=args.window,
                               downscale=args.downscale, seed=args.seed, n_samples=args.samples,
-                              period=period)
+                              period=period, lattice=tile if tile is not None else period)
+    if args.sheet:
+        from ..analyzer.sheet import contact_sheet
+        title = f"{args.mode} {os.path.basename(args.output)}" if is_db else os.path.basename(args.output)
+        try:
+            contact_sheet(source, output, args.sheet, title=title)
+        except (OSError, ValueError) as e:
+            raise UsageError(f"--sheet {args.sheet}: cannot write it: {e}") from None
+        report["sheet"] = args.sheet
     report["source"] = args.source
     report["output"] = args.output
     if is_db:
@@ -205,13 +218,20 @@ def format_table(report: dict[str, Any]) -> str:
     if st is None:
         rows.append(("stability energy ratio", same, ""))
     else:
+        lo, hi = st["bounds"]
         rows.append(("stability energy ratio min/max",
-                     f"{_fmt(st['min_ratio'])} / {_fmt(st['max_ratio'])}", "0.5..2 (decay -> 0, blow-up >> 1)"))
+                     f"{_fmt(st['min_ratio'])} / {_fmt(st['max_ratio'])}",
+                     f"{_fmt(lo, 2)}..{_fmt(hi, 2)} (0.5..2 or the source's own range; decay -> 0, blow-up >> 1)"))
         rows.append(("stability final window", _fmt(st["final_ratio"]), "about 1"))
         rows.append(("non-finite frames", str(st["nonfinite_frames"]), "0"))
         if st["nonfinite_frames"]:
             rows.append(("other metrics", "skipped: the output holds NaN/inf", ""))
     if "frame_step_ratio" in report:
+        lp = report.get("lattice_prominence")
+        if lp is not None:
+            out, src = ("n/a: frame too small for the lags" if v is None else _fmt(v) for v in (lp["output"], lp["source"]))
+            rows.append((f"lattice prominence at {lp['tile'][1]}x{lp['tile'][0]} cells", out,
+                         f"<= 0.03, near the source's ({src}); a visible grid 0.1..1"))
         sv = report["seam_visibility"]
         rows.append(("seam visibility mean/max",
                      "n/a (no --boundaries)" if sv is None else f"{_fmt(sv['mean'])} / {_fmt(sv['max'])}",

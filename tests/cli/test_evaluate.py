@@ -173,3 +173,33 @@ def test_database_output_lds(files, capsys, tmp_path):
     assert json.loads(out2)["stability"] == rep["stability"]
     rc, _, err = _run(capsys, files / "src.npy", db, "--size", "32x32", "--backend", "numpy")
     assert rc == 2 and "--size is not supported by mode lds" in err
+
+
+def test_tiles_database_reports_lattice_prominence_and_writes_a_sheet(tmp_path, capsys):
+    from ..conftest import wave_clip
+    clip = tmp_path / "wave.npy"
+    np.save(clip, wave_clip(50, 40, 48))
+    db = tmp_path / "t.h5"
+    assert main(["analyze", str(clip), "-o", str(db), "--methods", "tiles", "--tile", "16", "--tiles-n", "2",
+                 "--tiles-min-loop", "16"]) == 0
+    capsys.readouterr()
+    sheet = tmp_path / "sheet.png"
+    rc, out, _ = _run(capsys, clip, db, "--mode", "tiles", "--size", "96x80", "--frames", "12", "--json",
+                      "--sheet", sheet, "--samples", "100")
+    assert rc == 0
+    rep = json.loads(out)
+    lp = rep["lattice_prominence"]
+    assert lp["tile"] == [16, 16] and -1.0 <= lp["output"] <= 1.0 and len(lp["lags"]) >= 3
+    assert lp["source"] is None or -1.0 <= lp["source"] <= 1.0
+    from PIL import Image
+    img = np.asarray(Image.open(sheet))
+    # three rows of the 48x40 source beside the 96x80 output
+    assert img.shape[1] == 48 + 8 + 96 and img.shape[0] > 3 * 80
+    assert rep["sheet"] == str(sheet)
+    rc, out, _ = _run(capsys, clip, db, "--mode", "tiles", "--size", "96x80", "--frames", "12", "--samples", "100")
+    assert rc == 0 and any(ln.startswith("lattice prominence at 16x16 cells") for ln in out.splitlines())
+
+
+def test_sheet_to_an_unwritable_place_is_one_line(files, capsys, tmp_path):
+    rc, _, err = _run(capsys, files / "src.npy", files / "src.npy", "--sheet", tmp_path / "no" / "such" / "s.png")
+    assert rc == 2 and "--sheet" in err and "Traceback" not in err
