@@ -23,7 +23,10 @@ per-pixel source map is built once per arrangement.
 
 A Wang tile set (``construction="wang"`` in the analyzer) is arranged row by row so that
 every shared edge has one colour on both sides (:meth:`TilesPlayer._wang_arrangement`);
-a state whose arrangement breaks an edge is refused.
+a state whose arrangement breaks an edge is refused. A quilted set (the analyzer's default
+for one texture) is the cells of one large torus: they are laid out in the torus's order,
+shifted by a random number of cells per seed (:meth:`TilesPlayer._torus_arrangement`), so the
+output is a window onto a seamless texture that repeats only with the torus's period.
 """
 from __future__ import annotations
 
@@ -228,6 +231,9 @@ class TilesPlayer(Player):
         if m.wang:
             self._build_source(self._wang_arrangement())
             return
+        if m.torus is not None:
+            self._build_source(self._torus_arrangement(*(int(v) for v in self._rng.integers(0, m.torus))))
+            return
         choice = np.empty(self.grid_shape, np.int64)
         for c in np.unique(self.labels):
             own = m.tiles_of(int(c))
@@ -254,6 +260,21 @@ class TilesPlayer(Player):
             choice[i] = lut[left, top, bottom]
             top = bottom
         return choice
+
+    def _torus_arrangement(self, dy: int, dx: int) -> np.ndarray:
+        """A quilted set's cells in their torus order, the torus shifted by ``(dy, dx)`` cells:
+        every shared edge is the torus continuing itself."""
+        rows, cols = self.model.torus
+        gh, gw = self.grid_shape
+        return ((np.arange(gh)[:, None] + dy) % rows) * cols + (np.arange(gw)[None, :] + dx) % cols
+
+    def _torus_mismatch(self, arrangement: np.ndarray) -> int:
+        """Cells of ``arrangement`` out of their torus order (0 for the other constructions)."""
+        if self.model.torus is None:
+            return 0
+        cols = self.model.torus[1]
+        first = int(arrangement.flat[0])
+        return int((arrangement != self._torus_arrangement(first // cols, first % cols)).sum())
 
     def _wang_mismatch(self, arrangement: np.ndarray) -> int:
         """Shared edges whose colours differ in ``arrangement`` (0 for a ring tile set)."""
@@ -585,6 +606,9 @@ class TilesPlayer(Player):
         mismatched = self._wang_mismatch(arrangement)
         if mismatched:
             raise ValueError(f"state arrangement puts {mismatched} Wang edges of different colours together")
+        mismatched = self._torus_mismatch(arrangement)
+        if mismatched:
+            raise ValueError(f"state arrangement puts {mismatched} cells of the quilted torus out of their order")
         # everything checked: now change the player
         self._rng, self.labels, self._t, self._phase = rng, labels, t, phase
         self._cells_a, self._cells_b = cells

@@ -1,11 +1,13 @@
 """The triple toroid-shaped tile set of a texture (the ``tiles`` group).
 
-Every tile is an ``L x th x tw`` RGB block that loops seamlessly in t. Two constructions
+Every tile is an ``L x th x tw`` RGB block that loops seamlessly in t. Three constructions
 join tiles in x and y. Ring: tiles of one class share one boundary ring (the class's
 primary toroidal tile outside a minimum cut), so any arrangement of them is seamless; a
 border tile is a class's primary with a strip of another class's primary along one side,
 used where two classes meet. Wang (one class): every tile edge carries one of a few edge
-colours, and tiles join where the colours of their shared edge match (``edges``).
+colours, and tiles join where the colours of their shared edge match (``edges``). Quilted
+(one class): the tiles are the cells of one large torus quilted from the clip
+(``torus_rows`` x ``torus_cols`` cells, row-major), laid out in that order.
 """
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ from ._check import Checker
 from .source import SourceInfo
 
 MAX_TILES = 4096
-CONSTRUCTIONS = ("ring", "wang")   # how tiles join in x and y (attribute ``construction``)
+CONSTRUCTIONS = ("quilted", "ring", "wang")   # how tiles join in x and y (attribute ``construction``)
 MAX_CLASSES = 10           # the player tone table (256 entries) holds blended tones for every pair
 
 
@@ -85,6 +87,14 @@ class TilesModel:
     def wang(self) -> bool:
         """Whether the tiles are a Wang set (join where edge colours match, ``edges``)."""
         return bool((np.asarray(self.edges) >= 0).any())
+
+    @property
+    def torus(self) -> tuple[int, int] | None:
+        """``(rows, cols)`` of cells of a quilted torus (tile ``k`` is cell ``divmod(k, cols)``),
+        or None for the other constructions."""
+        if self.info.get("construction") != "quilted":
+            return None
+        return int(self.info["torus_rows"]), int(self.info["torus_cols"])
 
     @property
     def n_tiles(self) -> int:
@@ -183,7 +193,26 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
     if (model.mean_rgb < 0).any() or (model.mean_rgb > 255).any():
         check.fail(group.name + "/mean_rgb", "values outside 0..255")
     _check_edges(group.name + "/edges", model, check)
+    _check_torus(group.name, model, check)
     return model
+
+
+def _check_torus(where: str, model: TilesModel, check: Checker) -> None:
+    """A quilted set: one class, no border tiles, ``torus_rows * torus_cols`` tiles."""
+    if model.info.get("construction") != "quilted":
+        return
+    for key in ("torus_rows", "torus_cols"):
+        if key not in model.info:
+            check.fail(where + "@" + key, "missing (construction 'quilted' needs the torus's cells)")
+    try:
+        rows, cols = int(model.info["torus_rows"]), int(model.info["torus_cols"])
+    except (TypeError, ValueError):
+        check.fail(where + "@torus_rows", "torus_rows and torus_cols must be integers")
+    if rows < 1 or cols < 1 or rows * cols != model.n_tiles:
+        check.fail(where + "@torus_rows", f"a {rows}x{cols} torus of cells needs {max(0, rows * cols)} tiles, "
+                                          f"not {model.n_tiles}")
+    if model.n_classes != 1 or (model.ring_class != model.tile_class).any():
+        check.fail(where + "/tile_class", "a quilted set is one class without border tiles")
 
 
 def _edges(group: h5py.Group, check: Checker, k: int) -> np.ndarray | None:
@@ -203,7 +232,7 @@ def _check_edges(where: str, model: TilesModel, check: Checker) -> None:
     e = np.asarray(model.edges)
     kind = model.info.get("construction", "ring")
     if kind not in CONSTRUCTIONS:
-        check.fail(where.rsplit("/", 1)[0] + "@construction", f"must be 'ring' or 'wang', not {kind!r}")
+        check.fail(where.rsplit("/", 1)[0] + "@construction", f"must be one of {CONSTRUCTIONS}, not {kind!r}")
     if not model.wang:
         if (e != -1).any():
             check.fail(where, "values must be -1 or edge colours >= 0")

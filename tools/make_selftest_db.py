@@ -48,7 +48,7 @@ def main() -> int:
             db.put_frames(TEXTURE, clip.frames)
             db.put_method(TEXTURE, "lds", learn_lds(clip, n=6))
             db.put_method(TEXTURE, "turnpoints", learn_turnpoints(clip))
-            db.put_method(TEXTURE, "tiles", learn_tiles(clip, tile=16))
+            db.put_method(TEXTURE, "tiles", learn_tiles(clip, tile=16, construction="ring"))
             db.put_method(TEXTURE, "quilt", learn_quilt(clip, size=(64, 48), block=12))
             db.put_method(TEXTURE, "mixture", learn_mixture(clip))
         OUT.write_bytes(path.read_bytes())

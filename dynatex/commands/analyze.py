@@ -74,11 +74,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="largest AR order tried (default 5, or less when the clip is short)")
     g = p.add_argument_group("tiles")
     g.add_argument("--tile", type=_tile_arg, default=None, metavar="N or WxH",
-                   help="tile size in pixels (default: from the dominant spatial period)")
-    g.add_argument("--tiles-construction", choices=TILE_CONSTRUCTIONS, default="ring",
-                   help="ring: tiles share one boundary ring and join in any arrangement (default); wang: "
-                        "edge-coloured tiles that join where colours match, with no content repeated at every "
-                        "tile (one texture only)")
+                   help="tile size in pixels (default: from the dominant spatial period); with the quilted "
+                        "construction the quilt block size N (default a third of the shorter side)")
+    g.add_argument("--tiles-construction", choices=TILE_CONSTRUCTIONS, default=None,
+                   help="quilted: one large seamless torus quilted from the clip, cut into cells laid out in "
+                        "order, no lattice (default for one texture); ring: tiles share one boundary ring and "
+                        "join in any arrangement (default with --tiles-mix, --tiles-n or --tiles-ring); wang: "
+                        "edge-coloured tiles that join where colours match (one texture only)")
+    g.add_argument("--tiles-period", type=_tile_arg, default=None, metavar="WxH",
+                   help="quilted: period of the torus (default at least 512 and twice the clip per side)")
     g.add_argument("--tiles-n", type=Number(int, 1, 64), default=None,
                    help="tiles per texture with the ring construction, %(type)s (default 4)")
     g.add_argument("--tiles-edge-colours", type=Number(int, 2, 4), default=2,
@@ -147,13 +151,18 @@ def method_params(name: str, args: argparse.Namespace) -> dict:
         return {"tile": args.tile, "construction": args.tiles_construction, "n_tiles": args.tiles_n,
                 "edge_colours": args.tiles_edge_colours, "min_loop": args.tiles_min_loop,
                 "max_loop": args.tiles_max_loop, "transition": args.tiles_transition, "ring": args.tiles_ring,
-                "flow_gain": args.tiles_flow_gain, "mix": mix, "names": names}
+                "flow_gain": args.tiles_flow_gain, "mix": mix, "names": names,
+                **({} if args.tiles_period is None else {"period": _pair(args.tiles_period)})}
     if name == "quilt":
         return {"size": args.quilt_size, "block": args.quilt_block, "overlap": args.quilt_overlap,
                 "rank": args.quilt_rank, "tolerance": args.quilt_tolerance, "feather": args.quilt_feather,
                 "lowpass": args.quilt_lowpass, "restore_gradient": args.quilt_restore_gradient,
                 "seed": args.quilt_seed}
     return {}
+
+
+def _pair(v) -> tuple[int, int]:
+    return (v, v) if isinstance(v, int) else v
 
 
 def _tile_arg(text: str):
@@ -206,6 +215,11 @@ def _summary(name: str, model) -> str:
                 f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
                 f"{info.get('recon_error_pca_dim', 0):.3f})")
     if name == "tiles":
+        if model.torus is not None:
+            return (f"quilted torus {info.get('period_w')}x{info.get('period_h')} of {model.n_tiles} cells of "
+                    f"{model.tile_size[1]}x{model.tile_size[0]} (blocks {info.get('quilt_block')}), loop "
+                    f"{model.loop_length} frames from {model.class_loop_start.tolist()}, "
+                    f"cut cost {info.get('quilt_seam_cost', 0):.4g}")
         kind = (f"Wang set of {info.get('edge_colours')} edge colours" if model.wang
                 else f"ring construction, toroidal cut cost {model.class_toroid_cost.mean():.4g}")
         return (f"{model.n_tiles} tiles of {model.tile_size[1]}x{model.tile_size[0]}, loop {model.loop_length} "

@@ -75,7 +75,7 @@ def test_bad_input_exits_2_with_one_line(tmp_path, clips, capsys):
     assert code == 2 and "fewer than the shortest loop" in _one_line_error(err)
     assert not db.exists()
     code, _, err = _run(capsys, "analyze", clips[0], "-o", db, "--methods", "tiles", "--tile", "16",
-                        "--tiles-min-loop", "16")
+                        "--tiles-min-loop", "16", "--tiles-construction", "ring")    # 16-pixel cells: 3x3 below
     assert code == 0, err
     before = db.read_bytes()
     code, _, err = _run(capsys, "analyze", clips[0], "-o", db, "--name", "x", "--methods", "tiles", "--tile", "64")
@@ -95,3 +95,21 @@ def test_bad_input_exits_2_with_one_line(tmp_path, clips, capsys):
     code, _, err = _run(capsys, "play", db, "--mode", "tiles", "--frames", "1", "-o", tmp_path / "o.png",
                         "--inpaint", video, "--mask", tmp_path / "mask.npy")
     assert code == 2 and "mask must have shape (40, 48)" in _one_line_error(err)
+
+
+def test_quilted_is_the_default_for_one_texture(tmp_path, clips, capsys):
+    db = tmp_path / "q.h5"
+    code, out, err = _run(capsys, "analyze", clips[0], "-o", db, "--methods", "tiles", "--tiles-min-loop", "16",
+                          "--tiles-period", "144x144")
+    assert code == 0, err
+    code, out, _ = _run(capsys, "info", db, "--json")
+    info = json.loads(out)["textures"]["calm"]["methods"]["tiles"]
+    assert info["construction"] == "quilted" and info["torus_rows"] * info["torus_cols"] == info["n_tiles"]
+    assert info["period_h"] == 144 and info["period_w"] == 144
+    code, _, err = _run(capsys, "play", db, "--mode", "tiles", "--size", "200x120", "--frames", "2",
+                        "-o", tmp_path / "q.png", "--tone", "main")
+    assert code == 0, err
+    assert cv2.imread(str(tmp_path / "q_00001.png")).shape == (120, 200, 3)
+    code, _, err = _run(capsys, "analyze", clips[0], "-o", tmp_path / "r.h5", "--methods", "tiles",
+                        "--tiles-period", "100x3000")
+    assert code == 2 and "period must be" in _one_line_error(err)
