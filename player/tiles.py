@@ -507,19 +507,31 @@ class TilesPlayer(Player):
     def _tone_tables(self, value: Any) -> tuple[np.ndarray, np.ndarray]:
         """Per-class gains (tone index = class): the seed's per-pixel multiplication fitting
         a class's mean RGB to the target. Per class, not per tile, so the shared ring of a
-        class gets one gain wherever it appears and stays seamless."""
+        class gets one gain wherever it appears and stays seamless.
+
+        A feathered border pixel already holds ``(1 - s) A + s R`` (interior class ``a``, ring
+        class ``r``, share ``s``), so one gain must stand for ``(1 - s) g_a A + s g_r R``. The
+        average of the two gains does not: where ``a`` is red and ``r`` blue, both gains are
+        large in the channel the other class lacks, and the band turned magenta. The gain
+        that carries the two classes' means there, ``((1 - s) g_a mu_a + s g_r mu_r) / ((1 - s)
+        mu_a + s mu_r)``, puts the band's mean between the two toned means.
+        """
         target = self.tone_target(value)
         c = self.model.n_classes
-        gain = np.ones((c, 3), np.float32)
+        gain = np.ones((c, 3), np.float64)
+        mu = np.ones((c, 3), np.float64)
         if target is not None:
             hist = self._class_histograms()
+            v = np.arange(256, dtype=np.float64)
             for ci in range(c):
                 for ch in range(3):
                     gain[ci, ch] = _fit_gain(hist[ci, ch], float(target[ch]))
+                    mu[ci, ch] = max(1.0, float((hist[ci, ch] * v).sum() / max(hist[ci, ch].sum(), 1e-12)))
         # blended entries for feathered border pixels: index c + (a * C + ring) * levels + q
-        share = np.linspace(0.0, 1.0, self._tone_levels, dtype=np.float32)
-        blend = [(1 - share[:, None]) * gain[a] + share[:, None] * gain[r] for a in range(c) for r in range(c)]
-        table = np.concatenate([gain] + blend).astype(np.float32)
+        share = np.linspace(0.0, 1.0, self._tone_levels)[:, None]
+        blend = [((1 - share) * gain[a] * mu[a] + share * gain[r] * mu[r]) / ((1 - share) * mu[a] + share * mu[r])
+                 for a in range(c) for r in range(c)]
+        table = np.clip(np.concatenate([gain] + blend), 0.0, MAX_GAIN).astype(np.float32)
         return table, np.zeros_like(table)
 
     def _on_reseed(self) -> None:
