@@ -799,6 +799,69 @@ def torus_cells(torus: np.ndarray, cell: Sequence[int]) -> np.ndarray:
                                 .reshape(m * n, length, ch, cw, c))
 
 
+# -- 9. spatial stationarity ---------------------------------------------------------------------
+STATIONARITY_WARN = 0.5     # below this a clip is not one texture all over (grass 0.74, sea 0.65)
+_STAT_OFFSETS = np.array([16.0, 4.0, 1.0])    # grey levels added to each statistic's median
+
+
+def stationarity(frames: np.ndarray, *, grid: int = 4, n_frames: int = 48) -> tuple[float, dict]:
+    """How alike the parts of each frame are: ``(figure, details)``, figure in (0, 1].
+
+    Each of up to ``n_frames`` frames is split into ``grid x grid`` windows; per window its
+    mean luma, its luma contrast (standard deviation) and its activity (mean absolute change
+    to the next frame). Per statistic and frame, the most unusual window's excess over the
+    median window, relative to the median (plus 16, 4 and 1 grey levels, so flat statistics
+    do not divide by zero): a texture has every window alike, a single object on a plain
+    background has one window unlike the rest. The median over frames of the largest of the
+    three excesses is ``spread``; the figure is ``1 / (1 + spread)``. Below
+    :data:`STATIONARITY_WARN` (spread above 1) the clip is not a texture all over, and tiles
+    cut from it repeat or misplace its structures (grass 0.74, sea 0.65; a moving disc on a
+    plain background 0.32; a pendulum clock 0.20).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> noise = rng.integers(0, 256, (6, 64, 64, 3)).astype(np.uint8)
+    >>> stationarity(noise)[0] > 0.8
+    True
+    >>> still = np.full((6, 64, 64, 3), 90, np.uint8); still[:, 5:15, 5:15] = 250
+    >>> stationarity(still)[0] < STATIONARITY_WARN
+    True
+    """
+    t, h, w = frames.shape[:3]
+    idx = np.unique(np.linspace(0, max(0, t - 2), min(max(1, t - 1), n_frames)).round().astype(int))
+    nxt = np.minimum(idx + 1, t - 1)
+    g = _grey(frames[idx])
+    act = np.abs(_grey(frames[nxt]) - g)
+    ys = np.linspace(0, h, grid + 1).astype(int)
+    xs = np.linspace(0, w, grid + 1).astype(int)
+    stats = np.empty((grid * grid, 3, len(idx)))
+    for i in range(grid):
+        for j in range(grid):
+            win = g[:, ys[i]:ys[i + 1], xs[j]:xs[j + 1]]
+            k = i * grid + j
+            stats[k, 0] = win.mean(axis=(1, 2))
+            stats[k, 1] = win.std(axis=(1, 2))
+            stats[k, 2] = act[:, ys[i]:ys[i + 1], xs[j]:xs[j + 1]].mean(axis=(1, 2))
+    med = np.median(stats, axis=0)
+    excess = np.abs(stats - med).max(axis=0) / (med + _STAT_OFFSETS[:, None])
+    per_stat = np.median(excess, axis=1)
+    spread = float(per_stat.max())
+    names = ("brightness", "contrast", "activity")
+    return 1.0 / (1.0 + spread), {"spread": spread, "worst": names[int(np.argmax(per_stat))],
+                                  **{f"spread_{n}": float(v) for n, v in zip(names, per_stat)}}
+
+
+def stationarity_warning(info: dict) -> str | None:
+    """The warning for a tiles model whose clip is not spatially stationary (None otherwise)."""
+    figure = info.get("stationarity")
+    if figure is None or float(figure) >= STATIONARITY_WARN:
+        return None
+    return (f"the clip is not one texture all over (stationarity {float(figure):.2f} < {STATIONARITY_WARN}: its "
+            f"{info.get('stationarity_worst', 'statistics')} differs between parts of the frame, as with a single "
+            f"object or a scene); tiles will repeat or misplace its structures")
+
+
 # -- 8. colour statistics --------------------------------------------------------------------------
 def colour_stats(tile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean RGB (0..255) and mean HSV (hue in degrees by circular mean, S and V in 0..1) of a tile."""
@@ -1053,7 +1116,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         class_loop_cost=np.array([tx.cost for tx in textures]),
         class_toroid_cost=np.array([tx.toroid_cost for tx in textures]),
         edges=edges,
-        info={"construction": construction, **wang_info,
+        info={"construction": construction, **wang_info, **_stationarity_info(main),
               "tile_h": th, "tile_w": tw, "loop_length": length, "transition": transition, "overlap_y": by,
               "overlap_x": bx, "ring": r, "feather": fe, "border_depth": depth,
               "ring_feather": _ring_feather(r, th, tw), "period_y": period[0], "period_x": period[1],
@@ -1062,6 +1125,11 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
               "median_frame_step": _median_step(main)})
     step(total)
     return model
+
+
+def _stationarity_info(frames: np.ndarray) -> dict:
+    figure, details = stationarity(frames)
+    return {"stationarity": figure, "stationarity_worst": details["worst"]}
 
 
 def _learn_quilted(main: np.ndarray, names: list[str], *, tile, min_loop: int, max_loop: int | None,
@@ -1111,7 +1179,7 @@ def _learn_quilted(main: np.ndarray, names: list[str], *, tile, min_loop: int, m
         mean_rgb=np.array([st[0] for st in stats]), mean_hsv=np.array([st[1] for st in stats]),
         class_names=names, class_loop_start=np.array([start], np.int64), class_loop_cost=np.array([loop_cost]),
         class_toroid_cost=np.zeros((1, 2)),
-        info={"construction": "quilted", "torus_rows": py // ch, "torus_cols": px // cw, **qinfo,
+        info={"construction": "quilted", **_stationarity_info(main), "torus_rows": py // ch, "torus_cols": px // cw, **qinfo,
               "quilt_seed": seed, "tile_h": ch, "tile_w": cw, "loop_length": length, "transition": transition,
               "overlap_y": b - step, "overlap_x": b - step, "ring": 0, "feather": 0, "border_depth": 0,
               "ring_feather": 0, "period_y": 0.0, "period_x": 0.0, "periodicity": 0.0, "mean_flow": 0.0,

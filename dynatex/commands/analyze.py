@@ -197,6 +197,11 @@ def run(args: argparse.Namespace) -> int:
                 plot_turnpoints(model, args.tp_plot, title=texture)
             if show:
                 print(f"{m.name}: {_summary(m.name, model)} ({time.perf_counter() - t:.1f} s)", file=sys.stderr)
+            if m.name == "tiles":
+                from ..analyzer.tiles import stationarity_warning
+                warning = stationarity_warning(model.info)
+                if warning:
+                    print(f"dynatex: warning: {texture}: {warning}", file=sys.stderr)
     if show:
         t, h, w, c = clip.frames.shape
         print(f"wrote texture {texture!r} ({w}x{h}x{c}, {t} frames, methods {', '.join(names)}) "

@@ -50,6 +50,10 @@ def _method_info(method: str, model) -> dict:
         info.setdefault("construction", "wang" if model.wang else "ring")
         if model.wang:
             info["wang_edges_left_right_top_bottom"] = model.edges.tolist()
+        from ..analyzer.tiles import stationarity_warning
+        warning = stationarity_warning(model.info)
+        if warning:
+            info["warning"] = warning
     return info
 
 
