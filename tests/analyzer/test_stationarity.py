@@ -6,9 +6,9 @@ import json
 
 import numpy as np
 import pytest
-
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.tiles import STATIONARITY_WARN, stationarity, stationarity_warning
+
 from dynatex.cli import main
 
 from .test_tiles import _stochastic
