@@ -45,7 +45,7 @@ Pipeline (each step is a public function, so it can be tested and reused):
    tile, and both ring and Wang sets repeat a handful of tiles, which a viewer sees as a
    grid (:func:`dynatex.analyzer.metrics.lattice_prominence`: 0.12-0.41 on real clips).
    :func:`quilted_torus` quilts blocks of the looped clip onto a torus of at least 512
-   pixels and twice the clip per side (image quilting of spatio-temporal blocks, like the
+   pixels (and twice the clip, up to 768) per side (image quilting of spatio-temporal blocks, like the
    quilt mode, with the overlap bands wrapping around so the torus tiles the plane), and
    :func:`torus_cells` cuts it into cells that the player lays out in torus order. Nothing
    repeats within the period; the cost is storage (the whole torus, so the loop is capped
@@ -581,6 +581,7 @@ def wang_ring(hstrips: Sequence[np.ndarray], vstrips: Sequence[np.ndarray], edge
 # -- 6c. quilted torus ------------------------------------------------------------------------------
 QUILT_MAX_RUN = 3         # blocks at most taken from one continuous piece of the clip, per direction
 QUILT_MIN_PERIOD = 512    # the torus is at least this large (and twice the clip) in each direction
+QUILT_MAX_PERIOD = 768    # ... but twice the clip only up to this
 QUILT_MAX_LOOP = 64       # default longest loop of the quilted construction (the torus is stored whole)
 _QUILT_FEATURE_FRAMES = 12
 _QUILT_COMPONENTS = 8
@@ -594,7 +595,8 @@ def quilt_geometry(h: int, w: int, *, block: int | None = None, period: Sequence
     by a quarter (``step = block - block // 4``); cells (the player's lattice, the stored
     tiles) are the fewest steps at least 64 pixels wide, so a 64-pixel run of the gather
     touches at most two cells; the period ``(py, px)`` is whole cells, at least 512 pixels
-    (four clip sides for a clip under 128 pixels) and twice the clip in each direction (or
+    (four clip sides for a clip under 128 pixels) and twice the clip up to 768 pixels in
+    each direction (the torus is stored whole: 768 x 768 x 64 frames is 113 MB) (or
     ``period``, rounded up to whole cells).
     """
     if block is None:
@@ -605,7 +607,8 @@ def quilt_geometry(h: int, w: int, *, block: int | None = None, period: Sequence
     step = block - block // 4
     cell = step * -(-64 // step)
     if period is None:
-        want = (max(min(QUILT_MIN_PERIOD, 4 * h), 2 * h), max(min(QUILT_MIN_PERIOD, 4 * w), 2 * w))
+        want = (max(min(QUILT_MIN_PERIOD, 4 * h), min(2 * h, QUILT_MAX_PERIOD)),
+                max(min(QUILT_MIN_PERIOD, 4 * w), min(2 * w, QUILT_MAX_PERIOD)))
     else:
         try:
             want = tuple(int(v) for v in period)
@@ -922,7 +925,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     construction : {"quilted", "ring", "wang"}, optional
         How tiles are made to join (module docstring). Default ``"quilted"`` for one
         texture, ``"ring"`` when mixing or when ``n_tiles`` or ``ring`` is given. ``"quilted"`` (one texture only): a torus of at
-        least 512 pixels and twice the clip in each direction, quilted from blocks of the
+        least 512 pixels (and twice the clip, up to 768) per side, quilted from blocks of the
         looped clip (:func:`quilted_torus`) and cut into cells that the player lays out in
         their torus order (shifted at random), so no content repeats within the period;
         ``tile`` is then the quilt block size (default from :func:`quilt_geometry`) and
