@@ -291,9 +291,14 @@ class TilesPlayer(Player):
         if not self.mixing:
             self._class_map = None
             h, w = self._shape[:2]
-            area = np.outer(np.minimum(th, h - th * np.arange(choice.shape[0])),
-                            np.minimum(tw, w - tw * np.arange(choice.shape[1])))
+            vis_h = np.minimum(th, h - th * np.arange(choice.shape[0]))
+            vis_w = np.minimum(tw, w - tw * np.arange(choice.shape[1]))
+            area = np.outer(vis_h, vis_w)
             self._tile_pixels = np.bincount(choice.ravel(), weights=area.ravel(), minlength=self.n_tiles)
+            # cells cut by the output's right or bottom edge show only their top-left part
+            partial = (vis_h[:, None] < th) | (vis_w[None, :] < tw)
+            self._partial_cells = [(int(choice[i, j]), int(vis_h[i]), int(vis_w[j]))
+                                   for i, j in zip(*np.nonzero(partial))]
             self._gather.set_source_grid(pack_source(choice * (th * tw), m.tile_class[choice]))
             self._retone()
             return
@@ -340,6 +345,7 @@ class TilesPlayer(Player):
             q = np.rint(weight[feathered] / 255.0 * (self._tone_levels - 1)).astype(np.int64)
             tone[feathered] = m.n_classes + pair * self._tone_levels + q
         self._tile_pixels = np.bincount(tile.ravel(), minlength=self.n_tiles).astype(float)
+        self._partial_cells = []
         self._gather.set_source_map(pack_source(index, tone))
         self._retone()
 
@@ -477,26 +483,36 @@ class TilesPlayer(Player):
 
     def _class_histograms(self) -> np.ndarray:
         """``(C, 3, 256)`` value histograms of each class as the current arrangement shows it:
-        every tile's histogram (a few loop frames, cached) weighted by its output pixels."""
+        every tile's histogram (a few loop frames, cached) weighted by its output pixels; a
+        cell cut by the output's edge counts with the histogram of the part it shows (a tile
+        of a quilted torus is not alike all over: flames in one corner, night in another)."""
         m = self.model
+        idx = np.unique(np.linspace(0, self.loop_length - 1, 16).round().astype(int))
+
+        def histogram(k: int, rows: int, cols: int) -> np.ndarray:
+            px = m.tiles[k, idx, :rows, :cols].reshape(-1, 3)
+            return np.stack([np.bincount(px[:, ch], minlength=256) / len(px) for ch in range(3)])
+
         if getattr(self, "_tile_hist", None) is None:
-            hist = np.zeros((self.n_tiles, 3, 256), np.float64)
-            idx = np.unique(np.linspace(0, self.loop_length - 1, 16).round().astype(int))
-            for k in range(self.n_tiles):
-                px = m.tiles[k, idx].reshape(-1, 3)
-                for ch in range(3):
-                    hist[k, ch] = np.bincount(px[:, ch], minlength=256) / len(px)
-            self._tile_hist = hist
+            th, tw = self.tile_size
+            self._tile_hist = np.stack([histogram(k, th, tw) for k in range(self.n_tiles)])
         counts = getattr(self, "_tile_pixels", None)
+        partial = getattr(self, "_partial_cells", [])
         if counts is None:
-            counts = np.ones(self.n_tiles)
+            counts, partial = np.ones(self.n_tiles), []
+        counts = np.array(counts, np.float64)
+        extra = np.zeros((m.n_classes, 3, 256), np.float64)
+        for k, rows, cols in partial:          # replace the full tile's share by the part shown
+            counts[k] -= rows * cols
+            extra[m.tile_class[k]] += rows * cols * histogram(k, rows, cols)
+        counts = np.maximum(counts, 0.0)
         out = np.zeros((m.n_classes, 3, 256), np.float64)
         for c in range(m.n_classes):
             own = m.tile_class == c
             w = np.where(own, counts, 0.0)
-            if w.sum() == 0:
+            if w.sum() == 0 and not extra[c].any():
                 w = own.astype(float)
-            out[c] = np.tensordot(w, self._tile_hist, axes=1)
+            out[c] = np.tensordot(w, self._tile_hist, axes=1) + extra[c]
         return out
 
     def class_mean_rgb(self) -> np.ndarray:
