@@ -487,7 +487,7 @@ class TilesPlayer(Player):
         cell cut by the output's edge counts with the histogram of the part it shows (a tile
         of a quilted torus is not alike all over: flames in one corner, night in another)."""
         m = self.model
-        idx = np.unique(np.linspace(0, self.loop_length - 1, 16).round().astype(int))
+        idx = np.unique(np.linspace(0, self.loop_length - 1, 32).round().astype(int))
 
         def histogram(k: int, rows: int, cols: int) -> np.ndarray:
             px = m.tiles[k, idx, :rows, :cols].reshape(-1, 3)
