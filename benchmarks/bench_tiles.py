@@ -130,23 +130,28 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-analysis", action="store_true")
     ap.add_argument("--no-defaults", action="store_true", help="skip the 3840x2160 run with the player's defaults")
     ap.add_argument("--rounds", type=int, default=5, help="rounds per size, each with its own copy-bandwidth measurement")
+    ap.add_argument("--constructions", default="quilted,ring",
+                    help="tile constructions to play, one database each, in one run (default quilted,ring)")
     args = ap.parse_args(argv)
     result: dict = {"player": [], "analysis": []}
     with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "tiles.h5")
         grass = CLIPS / "grass_straw_wind_dyntex.avi"
         frames = load_clip(str(grass)).frames if grass.exists() else generated_clip(250, 288, 352)
-        write_db(path, frames, learn_tiles(frames))
+        paths = {}
+        for construction in args.constructions.split(","):
+            paths[construction] = os.path.join(tmp, f"tiles_{construction}.h5")
+            write_db(paths[construction], frames, learn_tiles(frames, construction=construction))
         runs = [(tuple(int(v) for v in text.lower().split("x")), False) for text in args.sizes.split(",")]
         if not args.no_defaults:
             runs.append(((3840, 2160), True))
-        for size, defaults in runs:
-            row = bench_player(path, size, args.frames, defaults=defaults, rounds=args.rounds)
+        for (size, defaults), construction in [(r, c) for r in runs for c in paths]:
+            row = bench_player(paths[construction], size, args.frames, defaults=defaults, rounds=args.rounds)
+            row["construction"] = construction
             result["player"].append(row)
             tr = row["traffic"]
             lo, hi = row["roofline_fraction_range"]
             gbs = [r["gbs"] for r in row["rounds"]]
-            print(f"{row['size']} ({row['settings']}): OpenCL {row['opencl']['fps']:.0f} frames/s (median {row['opencl']['median_ms']:.2f} ms, "
+            print(f"{row['construction']} {row['size']} ({row['settings']}): OpenCL {row['opencl']['fps']:.0f} frames/s (median {row['opencl']['median_ms']:.2f} ms, "
                   f"p99 {row['opencl']['p99_ms']:.2f} ms; kernel alone {row['opencl_kernel']['median_ms']:.2f} ms), "
                   f"numpy {row['numpy']['fps']:.1f} frames/s, "
                   f"x{row['speedup_vs_numpy']:.1f} vs numpy, {row['roofline_fraction']:.2f} of the roofline "
