@@ -176,14 +176,13 @@ class TilesPlayer(Player):
         # tiles stacked vertically in each stored frame: one tile's frame is contiguous, so a
         # cell's rows are read as one forward stream (hardware prefetch follows it)
         stack = np.ascontiguousarray(model.tiles.transpose(1, 0, 2, 3, 4).reshape(length, k * th, tw, 3))
-        self.engine = self._gather = open_gather(stack, (h, w), backend=self.backend, ctx=self.ctx,
-                                                 queue=self.queue, time_step=TIME_STEP,
-                                                 cell=None if mixing else (th, tw), format=self.format)
+        self.engine = open_gather(stack, (h, w), backend=self.backend, ctx=self.ctx, queue=self.queue,
+                                  time_step=TIME_STEP, cell=None if mixing else (th, tw), format=self.format)
         self.mixing = mixing
         c = model.n_classes
         #: quantization levels of a feathered pixel's tone share (tone table <= 256 entries)
         self._tone_levels = max(2, min(32, (255 - c) // max(1, c * c)))
-        self._gather.set_tones(*self._tone_tables(None))
+        self.engine.set_tones(*self._tone_tables(None))
         self._sigma = 0.5 * min(th, tw)
         self._max_shift = min(length / 3.0, 16.0)
         self._epoch = 2 * length
@@ -299,7 +298,7 @@ class TilesPlayer(Player):
             partial = (vis_h[:, None] < th) | (vis_w[None, :] < tw)
             self._partial_cells = [(int(choice[i, j]), int(vis_h[i]), int(vis_w[j]))
                                    for i, j in zip(*np.nonzero(partial))]
-            self._gather.set_source_grid(pack_source(choice * (th * tw), m.tile_class[choice]))
+            self.engine.set_source_grid(pack_source(choice * (th * tw), m.tile_class[choice]))
             self._retone()
             return
         h, w = self._shape[:2]
@@ -346,12 +345,12 @@ class TilesPlayer(Player):
             tone[feathered] = m.n_classes + pair * self._tone_levels + q
         self._tile_pixels = np.bincount(tile.ravel(), minlength=self.n_tiles).astype(float)
         self._partial_cells = []
-        self._gather.set_source_map(pack_source(index, tone))
+        self.engine.set_source_map(pack_source(index, tone))
         self._retone()
 
     def _retone(self) -> None:
         """Refit the tone to the current arrangement (the target stays)."""
-        self._gather.set_tones(*self._tone_tables(self._tone_spec))
+        self.engine.set_tones(*self._tone_tables(self._tone_spec))
 
     def source_class_map(self, *, strict: bool = False) -> np.ndarray:
         """``(H, W)`` class (texture) each output pixel mostly comes from: the true texture borders.
@@ -386,18 +385,18 @@ class TilesPlayer(Player):
     def _pixel_field(self, cells: np.ndarray) -> np.ndarray:
         """Cell offsets spread on the time-map lattice and Gaussian-smoothed by ``sigma`` (device)."""
         th, tw = self.tile_size
-        mh, mw = self._gather.tmap_shape
+        mh, mw = self.engine.tmap_shape
         cy = np.minimum(((np.arange(mh) + 0.5) * TIME_STEP) // th, cells.shape[0] - 1).astype(int)
         cx = np.minimum(((np.arange(mw) + 0.5) * TIME_STEP) // tw, cells.shape[1] - 1).astype(int)
         field = (cells[cy][:, cx] * self._max_shift).astype(np.float32)
-        self._gather.set_time_map(field)
-        self._gather.smooth_time_map(self._sigma)
-        return self._gather.time_map
+        self.engine.set_time_map(field)
+        self.engine.smooth_time_map(self._sigma)
+        return self.engine.time_map
 
     def _refresh_fields(self) -> None:
         self._field_a = self._pixel_field(self._cells_a)
         self._field_b = self._pixel_field(self._cells_b)
-        self._gather.set_time_map(self._field_a, self._field_b)
+        self.engine.set_time_map(self._field_a, self._field_b)
 
     def _fade(self) -> float:
         """How far the time map has moved from field a toward field b (the device fades)."""
@@ -417,7 +416,7 @@ class TilesPlayer(Player):
                 self._cells_a, self._field_a = self._cells_b, self._field_b
                 self._cells_b = self._cell_field()
                 self._field_b = self._pixel_field(self._cells_b)
-                self._gather.set_time_map(self._field_a, self._field_b)
+                self.engine.set_time_map(self._field_a, self._field_b)
 
     # -- controls ------------------------------------------------------------------------------------
     @property
@@ -455,7 +454,7 @@ class TilesPlayer(Player):
 
     @tone.setter
     def tone(self, value: Any) -> None:
-        self._gather.set_tones(*self._tone_tables(value))
+        self.engine.set_tones(*self._tone_tables(value))
         self._tone_spec = value
 
     def tone_target(self, value: Any) -> np.ndarray | None:
@@ -560,10 +559,10 @@ class TilesPlayer(Player):
 
     # -- synthesis ---------------------------------------------------------------------------------------
     def _warm(self) -> None:
-        self._gather.render(self._t, np.empty(self._shape, np.uint8), fade=self._fade())
+        self.engine.render(self._t, np.empty(self._shape, np.uint8), fade=self._fade())
 
     def _start(self, out: np.ndarray):
-        event = self._gather.start(self._t, out, fade=self._fade())
+        event = self.engine.start(self._t, out, fade=self._fade())
         self._advance_time()
         return event
 
@@ -594,14 +593,14 @@ class TilesPlayer(Player):
         """Bytes the last frame had to move at least: ``output`` (the frame written once) and
         ``stored`` (the distinct tile pixels it read; a few tiles over the frames the time
         offsets reach: usually cache-resident). See :meth:`Gather.frame_traffic`."""
-        return self._gather.frame_traffic()
+        return self.engine.frame_traffic()
 
     @property
     def bytes_per_frame(self) -> int:
         """Bytes one frame must move at least: the output written plus the distinct tile data
         read (:meth:`frame_traffic`); the roofline figure of the benchmark divides this by
         the measured copy bandwidth."""
-        return self._gather.bytes_per_frame
+        return self.engine.bytes_per_frame
 
     # -- state --------------------------------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:

@@ -101,7 +101,7 @@ def test_tone_fits_a_target_colour(tiles_db):
         p.tone = "wild"
         assert np.allclose(p.tone_target("wild"), p.class_mean_rgb()[1])
         p.tone = None
-        assert np.allclose(p._gather.tones[:, :3], 1.0)
+        assert np.allclose(p.engine.tones[:, :3], 1.0)
     with pytest.raises(ValueError, match="tone names texture 'rock'"):
         TilesPlayer(tiles_db, tone="rock")
     with pytest.raises(ValueError, match="RGB colour"):
