@@ -1,4 +1,4 @@
-"""The dependency rule: the player ships without OpenCV, SciPy, matplotlib or the analyzer."""
+"""The dependency rule: the player ships without OpenCV, SciPy, matplotlib, PyAV, Pillow or the analyzer."""
 from __future__ import annotations
 
 import subprocess
@@ -7,7 +7,7 @@ import textwrap
 
 BLOCKER = textwrap.dedent("""
     import sys
-    BLOCKED = ("cv2", "scipy", "matplotlib", "tqdm", "dynatex.analyzer", "dynatex.commands")
+    BLOCKED = ("cv2", "scipy", "matplotlib", "tqdm", "av", "PIL", "dynatex.analyzer", "dynatex.commands")
 
     class Block:
         def find_spec(self, name, path=None, target=None):

@@ -1,10 +1,12 @@
-"""Writing rendered frames: a video (OpenCV's VideoWriter) or numbered PNG files.
+"""Writing rendered frames: H.264 MP4 (PyAV), MPEG-4 MKV and Motion JPEG AVI (OpenCV), animated
+WebP, PNG (APNG) and GIF (Pillow), or numbered PNG files; the output's extension chooses.
 
 Every way this can fail ends in one :class:`OutputError` naming the output and the reason:
-a frame rate or frame size the codec refuses is refused here before OpenCV sees it (an
+a frame rate or frame size the format refuses is refused here before an encoder sees it (an
 infinite frame rate made FFmpeg loop for ever), FFmpeg's own log lines are kept off the
-terminal and the last of them becomes the reason, and a video that cannot be read back
-whole after closing (disk full, a device instead of a file) is an error, not a silent loss.
+terminal and the last of them becomes the reason, and a video or animation that cannot be
+read back whole after closing (disk full, a device instead of a file) is an error, not a
+silent loss.
 """
 from __future__ import annotations
 
@@ -15,6 +17,7 @@ import sys
 import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -30,18 +33,54 @@ MIN_FPS = 0.01
 MAX_FPS = 1000.0
 
 
+#: Constant rate factor of the H.264 encoder: visually lossless for textures, a few MB a minute.
+H264_CRF = 18
+#: Animated images are encoded when closed, from frames held in memory up to this many bytes.
+MAX_ANIMATION_BYTES = 2**30
+
+
 @dataclass(frozen=True)
 class VideoCodec:
-    fourcc: str
+    fourcc: str         # OpenCV's fourcc, or the FFmpeg encoder when ``library`` is "pyav"
     label: str
     min_side: int       # width and height the encoder accepts
     max_side: int
+    library: str = "opencv"
 
 
 VIDEO_CODECS = {
-    ".mp4": VideoCodec("mp4v", "MPEG-4 (mp4v)", 2, 8191),
+    # yuv420p halves the chroma resolution: odd sides are padded by repeating the last row or column
+    ".mp4": VideoCodec("libx264", "H.264 (yuv420p)", 2, 8191, "pyav"),
     ".mkv": VideoCodec("XVID", "MPEG-4 (XVID)", 2, 8191),
     ".avi": VideoCodec("MJPG", "Motion JPEG", 1, 65535),
+}
+
+
+@dataclass(frozen=True)
+class Animation:
+    """An animated image format Pillow writes: frame delays are whole ``tick`` seconds."""
+
+    pillow: str         # Pillow's format name
+    label: str
+    max_side: int
+    tick: float         # seconds per unit of the format's frame delay
+    min_delay: int      # shortest delay (ticks) players honour
+    max_delay: int      # longest delay (ticks) the format stores
+
+    def fps_range(self) -> tuple[float, float]:
+        return max(MIN_FPS, 1 / (self.max_delay * self.tick)), min(MAX_FPS, 1 / (self.min_delay * self.tick))
+
+    def delays(self, count: int, fps: float) -> list[int]:
+        """Delays (ticks) of ``count`` frames at ``fps``: rounded so that the total never drifts."""
+        ends = [round((i + 1) / (fps * self.tick)) for i in range(count)]
+        return [max(self.min_delay, e - s) for s, e in zip([0] + ends[:-1], ends)]
+
+
+ANIMATIONS = {
+    # browsers show GIF delays under 2/100 s as 1/10 s
+    ".gif": Animation("GIF", "animated GIF", 65535, 0.01, 2, 65535),
+    ".webp": Animation("WEBP", "animated WebP", 16383, 0.001, 1, 2**24 - 1),
+    ".apng": Animation("PNG", "animated PNG", 2**31 - 1, 0.001, 1, 65535),
 }
 
 
@@ -58,11 +97,12 @@ def check_fps(fps: float, what: str = "frame rate") -> float:
 
 
 class FrameWriter:
-    """Writes ``(H, W, 3)`` RGB uint8 frames to ``output``: ``.mp4``/``.mkv``/``.avi``, a ``.png``
+    """Writes ``(H, W, 3)`` RGB uint8 frames to ``output``: a video (``.mp4`` H.264, ``.mkv``,
+    ``.avi``), an animated image (``.webp``, ``.apng``, ``.gif``, looping for ever), a ``.png``
     pattern (``%d`` in it, else ``NAME_00000.png``...) or a folder (``frame_00000.png``...).
 
     Call :meth:`open` with the frame shape and rate before the first :meth:`write`, so that a
-    refusal comes before any rendering; :meth:`close` checks that the video is complete.
+    refusal comes before any rendering; :meth:`close` checks that the output reads back whole.
     """
 
     def __init__(self, output: str) -> None:
@@ -70,20 +110,28 @@ class FrameWriter:
         self.index = 0
         self._video = None
         self._codec: VideoCodec | None = None
+        self._animation: Animation | None = None
+        self._frames: list[np.ndarray] = []
+        self._fps = 0.0
         self._shape: tuple[int, int] | None = None
         self._log = None
         low = output.lower()
+        ext = os.path.splitext(low)[1]
         if low.endswith(".png"):
             self.kind = "png"
             self.pattern = output if "%" in output else output[:-4] + "_%05d.png"
         elif os.path.isdir(output) or output.endswith(os.sep):
             self.kind = "png"
             self.pattern = os.path.join(output, "frame_%05d.png")
-        elif os.path.splitext(low)[1] in VIDEO_CODECS:
+        elif ext in VIDEO_CODECS:
             self.kind = "video"
-            self._codec = VIDEO_CODECS[os.path.splitext(low)[1]]
+            self._codec = VIDEO_CODECS[ext]
+        elif ext in ANIMATIONS:
+            self.kind = "animation"
+            self._animation = ANIMATIONS[ext]
         else:
-            raise OutputError(f"output {output!r}: use {', '.join(VIDEO_CODECS)}, a .png pattern or a folder")
+            raise OutputError(f"output {output!r}: use {', '.join([*VIDEO_CODECS, *ANIMATIONS])}, "
+                              f"a .png pattern or a folder")
         if self.kind == "png":
             try:
                 self.pattern % 0
@@ -105,31 +153,78 @@ class FrameWriter:
             except OSError as exc:
                 raise OutputError(f"cannot create output folder {folder}: {exc.strerror or exc}") from None
             return
+        fps = self._fps = check_fps(fps, f"frame rate of {self.output}")
+        if self.kind == "animation":
+            self._check_animation(h, w, fps)
+            self._touch()
+            return
         codec = self._codec
         assert codec is not None
-        fps = check_fps(fps, f"frame rate of {self.output}")
         if not (codec.min_side <= w <= codec.max_side and codec.min_side <= h <= codec.max_side):
             fits = [f"{ext} ({c.label})" for ext, c in VIDEO_CODECS.items()
                     if c.min_side <= min(w, h) and max(w, h) <= c.max_side]
             raise OutputError(f"cannot write {w}x{h} frames to {self.output}: {codec.label} takes widths and "
                               f"heights {codec.min_side}..{codec.max_side}; use {' or '.join(fits + ['PNG frames'])}")
-        existed = os.path.lexists(self.output)
-        if os.path.exists(self.output) and not os.path.isfile(self.output):
-            raise OutputError(f"cannot write video {self.output}: it exists and is not a regular file")
-        try:        # the OS's reason, which OpenCV would swallow
-            os.close(os.open(self.output, os.O_WRONLY | os.O_CREAT | getattr(os, "O_NONBLOCK", 0), 0o666))
-        except OSError as exc:
-            raise OutputError(f"cannot write video {self.output}: {exc.strerror or exc}") from None
-        import cv2
+        existed = self._touch()
         self._log = tempfile.TemporaryFile()  # noqa: SIM115 (kept open until close(): FFmpeg's log)
         with self._quiet("cannot open"):
-            self._video = cv2.VideoWriter(self.output, cv2.VideoWriter_fourcc(*codec.fourcc), fps, (w, h))
-            if not self._video.isOpened():
-                self._video = None
+            self._video = self._open_pyav(codec, h, w, fps) if codec.library == "pyav" else \
+                self._open_opencv(codec, h, w, fps)
         if self._video is None:
             if not existed and os.path.isfile(self.output) and os.path.getsize(self.output) == 0:
                 os.unlink(self.output)                  # OpenCV leaves an empty file behind
-            raise OutputError(f"cannot write video {self.output}: {self._reason('OpenCV refused to open it')}")
+            library = "PyAV" if codec.library == "pyav" else "OpenCV"
+            raise OutputError(f"cannot write video {self.output}: {self._reason(f'{library} refused to open it')}")
+
+    def _touch(self) -> bool:
+        """Create the output file, so that the OS's reason for refusing it reaches the user; whether it existed."""
+        existed = os.path.lexists(self.output)
+        if os.path.exists(self.output) and not os.path.isfile(self.output):
+            raise OutputError(f"cannot write {self.output}: it exists and is not a regular file")
+        try:        # the OS's reason, which the encoders would swallow
+            os.close(os.open(self.output, os.O_WRONLY | os.O_CREAT | getattr(os, "O_NONBLOCK", 0), 0o666))
+        except OSError as exc:
+            raise OutputError(f"cannot write {self.output}: {exc.strerror or exc}") from None
+        return existed
+
+    def _check_animation(self, h: int, w: int, fps: float) -> None:
+        anim = self._animation
+        assert anim is not None
+        if not (1 <= w <= anim.max_side and 1 <= h <= anim.max_side):
+            raise OutputError(f"cannot write {w}x{h} frames to {self.output}: {anim.label} takes widths and "
+                              f"heights 1..{anim.max_side}; use .mp4 or PNG frames")
+        lo, hi = anim.fps_range()
+        if not lo <= fps <= hi:
+            raise OutputError(f"cannot write {self.output} at {fps:g} frames per second: {anim.label} frame "
+                              f"delays take [{lo:.4g}, {hi:.4g}] frames per second; use .mp4 or another --fps")
+
+    def _open_opencv(self, codec: VideoCodec, h: int, w: int, fps: float):
+        import cv2
+        video = cv2.VideoWriter(self.output, cv2.VideoWriter_fourcc(*codec.fourcc), fps, (w, h))
+        return video if video.isOpened() else None
+
+    def _open_pyav(self, codec: VideoCodec, h: int, w: int, fps: float):
+        import av
+        try:
+            container = av.open(self.output, "w", format="mp4", options={"movflags": "+faststart"})
+        except (av.FFmpegError, OSError) as exc:
+            self._log_line(str(exc))
+            return None
+        try:
+            stream = container.add_stream(codec.fourcc, rate=Fraction(fps).limit_denominator(100_000))
+            stream.width, stream.height = w + w % 2, h + h % 2
+            stream.pix_fmt = "yuv420p"
+            stream.options = {"crf": str(H264_CRF), "preset": "medium"}
+            stream.codec_context.open()
+        except (av.FFmpegError, OSError, ValueError) as exc:
+            container.close()
+            self._log_line(str(exc))
+            return None
+        return container, stream
+
+    def _log_line(self, line: str) -> None:
+        if self._log is not None:
+            self._log.write(line.encode("utf-8", "replace") + b"\n")
 
     def write(self, frame: np.ndarray) -> None:
         """Append one RGB frame (the shape given to :meth:`open`)."""
@@ -138,11 +233,15 @@ class FrameWriter:
         if frame.shape[:2] != self._shape:
             raise ValueError(f"frame is {frame.shape[1]}x{frame.shape[0]}, the output was opened for "
                              f"{self._shape[1]}x{self._shape[0]}")
-        import cv2
-        bgr = cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)
-        if self.kind == "png":
+        if self.kind == "animation":
+            if (self.index + 1) * frame[..., :3].nbytes > MAX_ANIMATION_BYTES:
+                raise OutputError(f"cannot write {self.output}: animated images are encoded from memory, at most "
+                                  f"{MAX_ANIMATION_BYTES >> 20} MiB of frames; use .mp4 or fewer frames")
+            self._frames.append(np.array(frame[..., :3], np.uint8))
+        elif self.kind == "png":
+            import cv2
             path = self.pattern % self.index
-            ok, data = cv2.imencode(".png", bgr)
+            ok, data = cv2.imencode(".png", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
             if not ok:
                 raise OutputError(f"cannot encode frame {self.index} as PNG")
             try:
@@ -150,25 +249,43 @@ class FrameWriter:
                     f.write(data.tobytes())
             except OSError as exc:
                 raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+        elif self._video is None:
+            raise OutputError(f"video {self.output} is not open")
+        elif isinstance(self._video, tuple):
+            self._write_pyav(frame)
         else:
-            if self._video is None:
-                raise OutputError(f"video {self.output} is not open")
+            import cv2
             with self._quiet("cannot write"):
-                self._video.write(bgr)
+                self._video.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
         self.index += 1
 
+    def _write_pyav(self, frame: np.ndarray) -> None:
+        import av
+        container, stream = self._video
+        h, w = self._shape
+        rgb = np.ascontiguousarray(frame[..., :3])
+        if h % 2 or w % 2:
+            rgb = np.pad(rgb, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
+        vf = av.VideoFrame.from_ndarray(rgb, format="rgb24")
+        vf.pts = self.index
+        vf.time_base = 1 / stream.codec_context.framerate
+        try:
+            with self._quiet("cannot write"):
+                container.mux(stream.encode(vf))
+        except (av.FFmpegError, OSError) as exc:
+            raise OutputError(f"cannot write video {self.output}: {exc}") from None
+
     def close(self) -> None:
-        """Finish the video and check that it reads back with every frame written."""
+        """Finish the video or animation and check that it reads back with every frame written."""
+        if self.kind == "animation" and self._frames:
+            self._close_animation()
+            return
         if self._video is None:
             return
-        import cv2
         video, self._video = self._video, None
         try:
             with self._quiet("cannot finish"):
-                video.release()
-                cap = cv2.VideoCapture(self.output)
-                count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
-                cap.release()
+                count = self._close_pyav(video) if isinstance(video, tuple) else self._close_opencv(video)
             if count < self.index:
                 raise OutputError(f"video {self.output} is incomplete: {count} of {self.index} frames read back "
                                   f"(disk full, or not a regular file?)")
@@ -176,6 +293,48 @@ class FrameWriter:
             if self._log is not None:
                 self._log.close()
                 self._log = None
+
+    def _close_opencv(self, video) -> int:
+        import cv2
+        video.release()
+        cap = cv2.VideoCapture(self.output)
+        count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
+        cap.release()
+        return count
+
+    def _close_pyav(self, video) -> int:
+        import av
+        container, stream = video
+        try:
+            container.mux(stream.encode(None))
+            container.close()
+        except (av.FFmpegError, OSError) as exc:
+            raise OutputError(f"cannot finish video {self.output}: {exc}") from None
+        try:
+            with av.open(self.output) as back:
+                return back.streams.video[0].frames if back.streams.video else 0
+        except (av.FFmpegError, OSError):
+            return 0
+
+    def _close_animation(self) -> None:
+        from PIL import Image
+        anim = self._animation
+        assert anim is not None
+        frames, self._frames = self._frames, []
+        delays = anim.delays(len(frames), self._fps)
+        ms = [round(d * anim.tick * 1000) for d in delays]
+        images = [Image.fromarray(f, "RGB") for f in frames]
+        extra = {"lossless": False, "quality": 90, "method": 4} if anim.pillow == "WEBP" else {}
+        try:
+            images[0].save(self.output, format=anim.pillow, save_all=True, append_images=images[1:],
+                           duration=ms, loop=0, **extra)
+        except (OSError, ValueError) as exc:
+            raise OutputError(f"cannot write {self.output}: {getattr(exc, 'strerror', None) or exc}") from None
+        total = read_animation(self.output)[1] if os.path.isfile(self.output) else None
+        if total is None or abs(sum(ms) - sum(total)) > len(frames):
+            got = "nothing" if total is None else f"{sum(total)} ms of {sum(ms)} ms"
+            raise OutputError(f"{anim.label} {self.output} is incomplete: {got} read back "
+                              f"(disk full, or not a regular file?)")
 
     def __enter__(self) -> Self:
         return self
@@ -223,3 +382,23 @@ class FrameWriter:
                 line = line.split("]", 1)[1].strip()
             return f"{default} ({line})"
         return default
+
+
+def read_animation(path: str) -> tuple[int, list[int]] | None:
+    """Frame count and per-frame delays (ms) of an animated image, or None if Pillow cannot read it.
+
+    Consecutive identical frames may be stored as one longer frame, so the delays, not the
+    count, say whether every frame is there.
+    """
+    from PIL import Image
+    try:
+        with Image.open(path) as im:
+            n = getattr(im, "n_frames", 1)
+            delays = []
+            for i in range(n):
+                im.seek(i)
+                im.load()           # WebP sets a frame's duration when it decodes it
+                delays.append(int(im.info.get("duration", 0)))
+            return n, delays
+    except (OSError, ValueError, EOFError):
+        return None

@@ -38,8 +38,9 @@ FINITE = Number(float)
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("play", help="render frames of a texture to a video or PNG frames",
-                       description="Play a texture with the real-time player and write the frames to an "
-                                   "MP4/AVI video (OpenCV) or to numbered PNG files (an output ending in "
+                       description="Play a texture with the real-time player and write the frames to a "
+                                   "video (.mp4: H.264, browser-playable; .mkv, .avi), an animated image "
+                                   "(.webp, .apng, .gif; looping) or numbered PNG files (an output ending in "
                                    "'.png' or a folder).")
     p.add_argument("database")
     p.add_argument("--texture", help="texture name (optional when the database holds one)")
@@ -53,7 +54,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto",
                    help="auto (default): OpenCL on a device that passed the self-test, else numpy")
     p.add_argument("--device", default=None, help="OpenCL device (index P:D, or a name substring)")
-    p.add_argument("-o", "--output", required=True, help="out.mp4 / out.avi, frame_%%04d.png, or a folder")
+    p.add_argument("-o", "--output", required=True, help="out.mp4 / .mkv / .avi / .webp / .apng / .gif, frame_%%04d.png, or a folder")
     g = p.add_argument_group("lds controls")
     g.add_argument("--speed", type=SPEED, default=1.0, help="in [-3, 3]; negative plays backwards")
     g.add_argument("--intensity", type=Number(float, 0.0, _projected.MAX_INTENSITY), default=1.0,
