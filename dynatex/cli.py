@@ -18,7 +18,7 @@ import warnings
 from . import __version__
 
 #: subcommand -> module in dynatex.commands (each has ``add_parser(subparsers)`` and ``run(args)``)
-COMMANDS = ("analyze", "info", "play", "bench", "evaluate", "demo")
+COMMANDS = ("analyze", "info", "play", "bench", "evaluate", "demo", "export")
 
 
 class UsageError(ValueError):

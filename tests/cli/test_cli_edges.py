@@ -22,7 +22,7 @@ from ..conftest import wave_clip
 
 #: Positional and required arguments that let each subcommand's parser reach the option under test.
 REQUIRED = {"analyze": ["clip.npy", "-o", "x.h5"], "info": ["db.h5"], "play": ["db.h5", "-o", "x.mp4"],
-            "bench": [], "evaluate": ["a.npy", "b.npy"], "demo": []}
+            "bench": [], "evaluate": ["a.npy", "b.npy"], "demo": [], "export": ["db.h5", "-o", "out"]}
 NOISE = ("cap_ffmpeg", "[mpeg4", "VIDEOIO", "Traceback", "usage:")
 
 

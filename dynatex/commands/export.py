@@ -1,0 +1,250 @@
+"""``dynatex export DB.h5 -o FOLDER``: a flipbook bundle for game engines from any mode.
+
+Writes ``NAME_COLSxROWS.png`` (colour atlas, sRGB), ``NAME_COLSxROWS_mv.png`` (motion vectors,
+linear) and ``NAME.json`` (the values engines need; see :mod:`dynatex.analyzer.flipbook`), or
+with ``--layout array`` one raw layer per frame. ``--loop`` makes the frames a closed loop:
+
+- tiles: the tile loop itself (fixed time offsets), ``--frames`` steps around it;
+- turnpoints: the longest swing between two consecutive turn points and back, a path that
+  returns to its start (``--frames`` resamples it, blending neighbouring source frames);
+- lds, mixture, evolve: ``FRAMES + BLEND`` frames are rendered and the last ``BLEND`` are
+  crossfaded into the first ``BLEND``, so the frame after the last is the sequence's own
+  next frame.
+
+The wrap (last frame -> first) is measured with
+:func:`dynatex.analyzer.metrics.temporal_discontinuity` against the source's median frame step.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+
+import numpy as np
+
+from ..player import MODES, open_player
+from ..player import tiles as _tiles
+from ._common import Number, UsageError, seed, size_arg
+from ._output import MAX_FPS, MIN_FPS, OutputError
+
+#: Most frames a flipbook holds (a 64x64 grid).
+MAX_FRAMES = 4096
+#: Frames rendered when neither --frames nor a mode's own loop says how many.
+DEFAULT_FRAMES = 64
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    p = sub.add_parser("export", help="write a flipbook (atlas, motion vectors, engine sidecar) of a texture",
+                       description="Render frames of a texture and write a flipbook for Unity, Unreal or Godot: "
+                                   "NAME_COLSxROWS.png (colour atlas, sRGB, frames row-major from the top-left), "
+                                   "NAME_COLSxROWS_mv.png (optical-flow motion vectors, RG centred at 128, linear) "
+                                   "and NAME.json (grid, frame count, fps, motion-vector scale for Unity VFX Graph "
+                                   "and Unreal, the loop's wrap discontinuity).")
+    p.add_argument("database")
+    p.add_argument("-o", "--output", required=True, metavar="FOLDER", help="folder for the bundle (created)")
+    p.add_argument("--texture", help="texture name (optional when the database holds one)")
+    p.add_argument("--name", default=None, help="file name stem (default: the texture's name)")
+    p.add_argument("--mode", default="tiles", choices=sorted(MODES))
+    p.add_argument("--frames", type=Number(int, 1, MAX_FRAMES), default=None,
+                   help=f"frames in the flipbook, %(type)s (default {DEFAULT_FRAMES}, or with --loop the mode's "
+                        "own loop: tiles' loop length, turnpoints' swing)")
+    p.add_argument("--loop", action="store_true", help="a seamless closed loop (method per mode: see the README)")
+    p.add_argument("--blend", type=Number(int, 1, MAX_FRAMES), default=None,
+                   help="lds/mixture/evolve --loop: frames crossfaded across the wrap, %(type)s "
+                        "(default a quarter of the frames)")
+    p.add_argument("--size", type=size_arg, default=None, metavar="WxH", help="frame size, for tiles and evolve")
+    p.add_argument("--speed", type=Number(float, -16.0, 16.0), default=None,
+                   help="playback speed without --loop, in %(type)s, narrowed by the mode")
+    p.add_argument("--seed", type=seed, default=0, help="random seed, %(type)s (default 0)")
+    p.add_argument("--fps", type=Number(float, MIN_FPS, MAX_FPS), default=None,
+                   help="frame rate written to the sidecar, in %(type)s (default: the source's; a tiles or "
+                        "turnpoints loop resampled to --frames keeps the source's pace)")
+    p.add_argument("--grid", type=size_arg, default=None, metavar="COLSxROWS",
+                   help="grid (default: the smallest power-of-two grid holding the frames)")
+    p.add_argument("--tile", type=size_arg, default=None, metavar="WxH",
+                   help="size of one frame in the atlas (default: each side the power of two nearest the frame's)")
+    p.add_argument("--npot", action="store_true", help="keep the frame size (the atlas need not be a power of two)")
+    p.add_argument("--no-motion-vectors", action="store_true", help="write the colour atlas only")
+    p.add_argument("--layout", choices=("atlas", "array"), default="atlas",
+                   help="atlas (default), or array: NAME_array_rgba8.raw, one RGBA8 layer per frame "
+                        "(and NAME_array_rg8.raw), described in NAME.json")
+    p.add_argument("--source", default=None, metavar="CLIP",
+                   help="the clip the texture was analysed from, the reference of the wrap discontinuity "
+                        "(default: the frames the database stores, else the export's own frame step)")
+    p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto")
+    p.add_argument("--device", default=None, help="OpenCL device (index P:D, or a name substring)")
+    return p
+
+
+# -- frames ------------------------------------------------------------------------------------------
+def _player_options(args: argparse.Namespace) -> dict:
+    opts = {"backend": args.backend, "device": args.device, "seed": args.seed}
+    if args.size is not None:
+        if args.mode not in ("tiles", "evolve"):
+            raise UsageError(f"--size is not supported by mode {args.mode} (it plays at the clip's resolution)")
+        opts["size"] = args.size
+    return opts
+
+
+def render(args: argparse.Namespace) -> tuple[np.ndarray, str, float, np.ndarray | None]:
+    """The flipbook's frames ``(N, H, W, 3)``, a description of the loop, the frame rate and the
+    source frames (None when the database stores none)."""
+    if args.blend is not None and not (args.loop and args.mode in ("lds", "mixture", "evolve")):
+        raise UsageError("--blend belongs to --loop with mode lds, mixture or evolve")
+    if args.loop and args.speed is not None:
+        raise UsageError("--speed is set by --loop (the loop's length and --frames)")
+    with open_player(args.database, args.texture, mode=args.mode, **_player_options(args)) as player:
+        fps = args.fps if args.fps is not None else player.texture.source.fps
+        source = player.texture.frames().read() if player.texture.has_frames else None
+        if source is not None and source.shape[-1] == 1:
+            source = np.repeat(source, 3, axis=-1)
+        if args.speed is not None:
+            player.speed = args.speed
+        args.texture_name = player.texture.name
+        if not args.loop:
+            n = args.frames or DEFAULT_FRAMES
+            return _play(player, n), "none", fps, source
+        if args.mode in ("tiles", "turnpoints"):
+            frames, how, pace = (_tiles_loop(player, args.frames) if args.mode == "tiles"
+                                 else _swing_loop(player, source, args.frames))
+            if args.fps is None:
+                fps *= pace
+            return frames, how, fps, source
+        else:
+            n = args.frames or DEFAULT_FRAMES
+            blend = args.blend if args.blend is not None else max(1, n // 4)
+            if blend >= n:
+                raise UsageError(f"--blend {blend} must be fewer than the {n} frames")
+            frames = _crossfade_loop(_play(player, n + blend), n, blend)
+            how = f"crossfade of the last {blend} of {n + blend} frames into the first {blend}"
+        return frames, how, fps, source
+
+
+def _play(player, n: int) -> np.ndarray:
+    frames = np.empty((n,) + player.shape, np.uint8)
+    for k in range(n):
+        player.next_frame(out=frames[k])
+    return frames
+
+
+def _tiles_loop(player, n: int | None) -> tuple[np.ndarray, str, float]:
+    length = player.loop_length
+    n = n or length
+    speed = length / n
+    hi = _tiles.SPEED_RANGE[1]
+    if not speed <= hi:
+        raise UsageError(f"--frames {n}: a tiles loop of {length} frames needs at least "
+                         f"{math.ceil(length / hi)} frames (speed at most {hi:g})")
+    player.epoch = 0                # fixed time offsets: the output repeats with the tile loop
+    player.speed = speed
+    return _play(player, n), f"tile loop of {length} frames at speed {speed:.4g}", 1 / speed
+
+
+def _swing_loop(player, source: np.ndarray | None, n: int | None) -> tuple[np.ndarray, str, float]:
+    if source is None:
+        raise UsageError("a turnpoints loop needs the stored source frames")
+    turns = np.asarray(player.model.turn_points)
+    gaps = np.diff(turns)
+    i = int(np.argmax(gaps))
+    a, b = int(turns[i]), int(turns[i + 1])
+    period = 2 * (b - a)
+    n = n or period
+    pos = np.arange(n) * (period / n)
+    pos = np.where(pos <= b - a, a + pos, a + period - pos)        # a -> b -> back toward a
+    lo = np.floor(pos).astype(int)
+    hi = np.minimum(lo + 1, len(source) - 1)
+    w = (pos - lo)[:, None, None, None]
+    frames = np.rint((1 - w) * source[lo] + w * source[hi]).astype(np.uint8)
+    return frames, f"swing between turn points {a} and {b} and back ({period} source frames)", n / period
+
+
+def _crossfade_loop(frames: np.ndarray, n: int, blend: int) -> np.ndarray:
+    """``frames[:n]`` with ``frames[n:n + blend]`` faded into its start: frame ``n`` follows frame ``n - 1``."""
+    out = frames[:n].copy()
+    w = (np.arange(1, blend + 1) / (blend + 1))[:, None, None, None]
+    out[:blend] = np.rint((1 - w) * frames[n:n + blend] + w * frames[:blend]).astype(np.uint8)
+    return out
+
+
+# -- the bundle ---------------------------------------------------------------------------------------
+def wrap_report(frames: np.ndarray, source: np.ndarray | None) -> dict:
+    """Wrap discontinuity: the last->first frame difference over the median source frame step."""
+    from ..analyzer.metrics import temporal_discontinuity
+    if len(frames) < 2:
+        return {"ratio": None, "reference": "one frame: no wrap"}
+    seq = np.concatenate([frames, frames[:1]])
+    ref = source if source is not None and len(source) >= 2 else frames
+    try:
+        ratio = float(temporal_discontinuity(seq, [len(frames)], source=ref)[0])
+    except ValueError as exc:          # a reference that never changes
+        return {"ratio": None, "reference": str(exc)}
+    return {"ratio": round(ratio, 4),
+            "reference": "median frame step of the source" if ref is source else "median frame step of the export"}
+
+
+def _write_png(path: str, image: np.ndarray) -> None:
+    import cv2
+    ok, data = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise OutputError(f"cannot encode {path}")
+    _write_bytes(path, data.tobytes())
+
+
+def _write_bytes(path: str, data: bytes) -> None:
+    try:
+        with open(path, "wb") as f:
+            f.write(data)
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..analyzer import flipbook as fb
+    out = args.output
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise OutputError(f"output {out} exists and is not a folder")
+    frames, how, fps, source = render(args)
+    if args.source is not None:
+        from ._common import load_clip_arg
+        source = load_clip_arg(args.source).frames
+    name = args.name if args.name is not None else args.texture_name
+    if not name or "/" in name or name in (".", ".."):
+        raise UsageError(f"--name {name!r}: a file name stem without '/' is needed")
+    cols, rows = args.grid if args.grid is not None else (None, None)
+    tile = None if args.tile is None else (args.tile[1], args.tile[0])
+    try:
+        grid = fb.choose_grid(len(frames), frames.shape[1:3], cols=cols, rows=rows, tile=tile, pow2=not args.npot)
+    except ValueError as exc:
+        raise UsageError(f"--grid/--tile: {exc}") from None
+    tiles = np.stack([fb.fit(f, grid.tile) for f in frames])
+    wrap = wrap_report(frames, source)
+    strength = uv = None
+    if not args.no_motion_vectors:
+        uv = fb.flow_to_uv(fb.frame_motion(fb.optical_flow(tiles, wrap=args.loop), wrap=args.loop))
+        _, strength = fb.encode_vectors(uv)
+    src = {"texture": name, "mode": args.mode, "width": int(frames.shape[2]), "height": int(frames.shape[1]),
+           "seed": args.seed}
+    doc = fb.sidecar(name, grid, fps=fps, loop=how, strength=strength, source=src, wrap=wrap, layout=args.layout)
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create output folder {out}: {exc.strerror or exc}") from None
+    files = doc["files"]
+    if args.layout == "atlas":
+        _write_png(os.path.join(out, files["color"]), fb.color_atlas(tiles, grid))
+        if uv is not None:
+            _write_png(os.path.join(out, files["motion_vectors"]), fb.vector_atlas(uv, grid, strength)[0])
+    else:
+        rgba = np.concatenate([tiles, np.full(tiles.shape[:3] + (1,), 255, np.uint8)], -1)
+        _write_bytes(os.path.join(out, files["color"]), rgba.tobytes())
+        if uv is not None:
+            _write_bytes(os.path.join(out, files["motion_vectors"]), fb.encode_vectors(uv, strength)[0].tobytes())
+    _write_bytes(os.path.join(out, f"{name}.json"), (json.dumps(doc, indent=2, ensure_ascii=False) + "\n").encode())
+    ratio = wrap.get("ratio")
+    print(f"wrote {grid.frames} frames ({grid.cols}x{grid.rows} grid of {grid.tile[1]}x{grid.tile[0]}) to {out}: "
+          f"{', '.join(files.values())}, {name}.json; loop: {how}; wrap discontinuity "
+          f"{'n/a' if ratio is None else f'{ratio:.2f}'} x the "
+          f"{wrap['reference']}", file=sys.stderr)
+    return 0
