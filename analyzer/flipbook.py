@@ -59,6 +59,13 @@ def choose_grid(frames: int, frame_shape: tuple[int, int], *, cols: int | None =
     By default the grid is the smallest power-of-two one holding the frames (columns >= rows,
     a square grid for 4, 16, 64... frames) and each tile side is the power of two nearest the
     frame's, so the atlas is a power of two on both sides; ``tile`` sets the tile (H, W).
+
+    Examples
+    --------
+    >>> choose_grid(64, (288, 352))
+    Grid(cols=8, rows=8, tile=(256, 256), frames=64)
+    >>> choose_grid(22, (240, 240)).atlas_shape
+    (1024, 2048)
     """
     if frames < 1:
         raise ValueError(f"a flipbook needs at least one frame, not {frames}")
@@ -139,7 +146,14 @@ def encode_vectors(uv: np.ndarray, strength: float | None = None) -> tuple[np.nd
 
 
 def decode_vectors(rg: np.ndarray, strength: float) -> np.ndarray:
-    """UV offsets of RG bytes, as a shader decodes them: ``(rg / 255 * 2 - 1) * strength``."""
+    """UV offsets of RG bytes, as a shader decodes them: ``(rg / 255 * 2 - 1) * strength``.
+
+    Examples
+    --------
+    >>> rg, s = encode_vectors(np.array([[0.01, -0.02]]), 0.04)
+    >>> rg.tolist(), [round(float(v), 3) for v in decode_vectors(rg, s)[0]]
+    ([[159, 64]], [0.01, -0.02])
+    """
     return (rg.astype(np.float32) / 255.0 * 2.0 - 1.0) * np.float32(strength)
 
 

@@ -167,3 +167,22 @@ def test_vectors_decode_to_what_was_encoded():
     rg, s = fb.encode_vectors(uv, 0.05)
     assert np.abs(fb.decode_vectors(rg, s) - uv).max() <= 0.05 / 255 + 1e-7
     assert fb.encode_vectors(np.zeros((1, 1, 1, 2)), 1.0)[0].tolist() == [[[[128, 128]]]]
+
+
+@pytest.mark.clips
+def test_shader_motion_blend_beats_a_crossfade_on_a_real_clip(clips_dir):
+    """The flag clip (benchmarks/flipbook_export.py measures more): a flipbook of every second
+    frame, frame k + 1/2 against the true odd frame."""
+    frames = load_clip(str(clips_dir / "flag_wind_dyntex_571c110.avi"), stop=33).frames
+    even = frames[0::2]
+    grid = fb.choose_grid(len(even), even.shape[1:3], pow2=False)
+    uv = fb.flow_to_uv(fb.frame_motion(fb.optical_flow(even, wrap=False), wrap=False))
+    color = fb.color_atlas(even, grid)
+    vectors, strength = fb.vector_atlas(uv, grid)
+
+    def rms(a, b):
+        return float(np.sqrt(np.mean((a.astype(float) - b.astype(float)) ** 2)))
+
+    mv = np.array([rms(fb.shader_blend(color, vectors, grid, strength, k, 0.5), frames[2 * k + 1]) for k in range(16)])
+    xf = np.array([rms(fb.crossfade(color, grid, k, 0.5), frames[2 * k + 1]) for k in range(16)])
+    assert mv.mean() < 0.95 * xf.mean() and (mv < xf).mean() >= 0.75, (mv.mean(), xf.mean())
