@@ -277,8 +277,11 @@ class FrameWriter:
 
     def close(self) -> None:
         """Finish the video or animation and check that it reads back with every frame written."""
-        if self.kind == "animation" and self._frames:
-            self._close_animation()
+        if self.kind == "animation":
+            if self._frames:
+                self._close_animation()
+            elif self._shape is not None and os.path.isfile(self.output) and os.path.getsize(self.output) == 0:
+                os.unlink(self.output)          # opened, no frame written: no empty file left behind
             return
         if self._video is None:
             return

@@ -46,7 +46,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="FOLDER", help="folder for the bundle (created)")
     p.add_argument("--texture", help="texture name (optional when the database holds one)")
     p.add_argument("--name", default=None, help="file name stem (default: the texture's name)")
-    p.add_argument("--mode", default="tiles", choices=sorted(MODES))
+    p.add_argument("--mode", default="tiles", choices=sorted(MODES), help="player mode (default tiles)")
     p.add_argument("--frames", type=Number(int, 1, MAX_FRAMES), default=None,
                    help=f"frames in the flipbook, %(type)s (default {DEFAULT_FRAMES}, or with --loop the mode's "
                         "own loop: tiles' loop length, turnpoints' swing)")
@@ -65,7 +65,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="grid (default: the smallest power-of-two grid holding the frames)")
     p.add_argument("--tile", type=size_arg, default=None, metavar="WxH",
                    help="size of one frame in the atlas (default: each side the power of two nearest the frame's)")
-    p.add_argument("--npot", action="store_true", help="keep the frame size (the atlas need not be a power of two)")
+    p.add_argument("--npot", action="store_true", help="keep the frame size and use the smallest grid holding the frames "
+                        "(the atlas need not be a power of two)")
     p.add_argument("--no-motion-vectors", action="store_true", help="write the colour atlas only")
     p.add_argument("--layout", choices=("atlas", "array"), default="atlas",
                    help="atlas (default), or array: NAME_array_rgba8.raw, one RGBA8 layer per frame "

@@ -105,3 +105,12 @@ def test_rate_an_animation_cannot_time_is_refused_before_writing(tmp_path, ext, 
 def test_unknown_extension_names_the_choices(tmp_path):
     with pytest.raises(OutputError, match=r"\.mp4.*\.webp.*\.apng"):
         FrameWriter(str(tmp_path / "o.xyz"))
+
+
+def test_animation_opened_without_frames_leaves_no_file(tmp_path):
+    out = tmp_path / "o.webp"
+    w = FrameWriter(str(out))
+    w.open((8, 8, 3), 10.0)
+    assert out.exists()                  # created at open, so that the OS's refusal comes first
+    w.close()
+    assert not out.exists()
