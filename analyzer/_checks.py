@@ -5,8 +5,10 @@ from typing import Any
 
 import numpy as np
 
+from ..tiledb.errors import DynatexError
 
-class ArgumentTypeError(TypeError, ValueError):
+
+class ArgumentTypeError(DynatexError, TypeError, ValueError):
     """An argument of the wrong type. Also a ValueError: to a caller it is one more bad value."""
 
 

@@ -12,7 +12,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..tiledb import SourceInfo
+from ..tiledb import DynatexError, SourceInfo
 from ._checks import check_int
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
@@ -20,7 +20,7 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".p
 Progress = Callable[[int, int | None], None]
 
 
-class ClipError(ValueError):
+class ClipError(DynatexError, ValueError):
     """A clip cannot be read or does not hold usable frames."""
 
 

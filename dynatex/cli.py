@@ -16,12 +16,13 @@ import traceback
 import warnings
 
 from . import __version__
+from .tiledb.errors import DynatexError
 
 #: subcommand -> module in dynatex.commands (each has ``add_parser(subparsers)`` and ``run(args)``)
 COMMANDS = ("analyze", "info", "play", "bench", "evaluate", "demo", "export")
 
 
-class UsageError(ValueError):
+class UsageError(DynatexError, ValueError):
     """Bad command-line input detected after parsing (exit code 2)."""
 
 

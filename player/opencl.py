@@ -15,6 +15,8 @@ from typing import Mapping
 
 import numpy as np
 
+from ..tiledb.errors import DynatexError
+
 try:
     import pyopencl as cl
 except ImportError as _exc:  # pragma: no cover - pyopencl is a hard dependency
@@ -28,11 +30,11 @@ log = logging.getLogger(__name__)
 _FIX = "install an OpenCL platform with `pip install 'pyopencl[pocl]'`, or pass backend='numpy'"
 
 
-class OpenCLUnavailableError(RuntimeError):
+class OpenCLUnavailableError(DynatexError, RuntimeError):
     """No usable OpenCL platform or device."""
 
 
-class KernelBuildError(RuntimeError):
+class KernelBuildError(DynatexError, RuntimeError):
     """An OpenCL program failed to build; the message carries the compiler log."""
 
 

@@ -12,7 +12,7 @@ except PackageNotFoundError:  # running from a source tree that was never instal
     __version__ = "unknown"
 
 from .database import Texture, TileDB, open_db
-from .errors import (MethodNotFoundError, TextureNotFoundError, TileDBError, TileDBFormatError,
+from .errors import (DynatexError, MethodNotFoundError, TextureNotFoundError, TileDBError, TileDBFormatError,
                      TileDBNotFoundError, TileDBVersionError)
 from .frames import FrameStore
 from .lds import LDSModel
@@ -25,7 +25,7 @@ from .turnpoints import TurnPointModel
 from .writer import DatabaseWriter
 
 __all__ = [
-    "DatabaseWriter", "FORMAT_NAME", "FORMAT_VERSION", "FrameStore", "LDSModel", "MethodNotFoundError", "MixtureModel",
+    "DatabaseWriter", "DynatexError", "FORMAT_NAME", "FORMAT_VERSION", "FrameStore", "LDSModel", "MethodNotFoundError", "MixtureModel",
     "QuiltModel",
     "SourceInfo", "Texture", "TextureNotFoundError", "TileDB", "TileDBError", "TileDBFormatError",
     "TileDBNotFoundError", "TileDBVersionError", "TilesModel", "TurnPointModel", "open_db",

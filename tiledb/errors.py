@@ -1,5 +1,7 @@
-"""Exceptions raised by the tile database.
+"""Exceptions raised by the tile database, and the root of every dynatex error.
 
+:class:`DynatexError` lives here because this package is the bottom layer (it imports
+nothing of ours); the analyzer, the player and the CLI derive their errors from it.
 Callers catch :class:`TileDBError`; each subclass also derives from the builtin it
 refines, so ``except FileNotFoundError`` or ``except KeyError`` work as expected.
 Messages read ``FILE: OBJECT-PATH: problem``.
@@ -9,7 +11,11 @@ from __future__ import annotations
 import os
 
 
-class TileDBError(Exception):
+class DynatexError(Exception):
+    """Root of every error dynatex raises on purpose: bad input, a bad database, no device."""
+
+
+class TileDBError(DynatexError):
     """Base class of every tile database error."""
 
     def __init__(self, problem: str, *, filename: str | os.PathLike | None = None,
