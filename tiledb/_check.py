@@ -11,6 +11,9 @@ from .schema import MAX_ELEMENTS
 
 _KINDS = {"f": "floating point", "i": "signed integer", "u": "unsigned integer",
           "iu": "integer", "S": "string"}
+#: the dtypes a dataset of each kind may have: float16 has too little range and precision for
+#: a model (and linear algebra refuses it), longer floats and complex numbers are not ours
+_ALLOWED = {"f": {"f4", "f8"}, "i": {"i1", "i2", "i4", "i8"}, "u": {"u1", "u2", "u4", "u8"}}
 
 
 class Checker:
@@ -54,8 +57,9 @@ class Checker:
             dshape = obj.shape
         except Exception as exc:
             self.fail(path, f"cannot be read ({exc})")
-        if dt.kind not in kind:
-            self.fail(path, f"dtype {dt} is not {_KINDS.get(kind, kind)}")
+        if dt.kind not in kind or (dt.kind in _ALLOWED and f"{dt.kind}{dt.itemsize}" not in _ALLOWED[dt.kind]):
+            self.fail(path, f"dtype {dt} is not {_KINDS.get(kind, kind)}"
+                            + (" of 32 or 64 bits" if kind == "f" else ""))
         if dshape is None or len(dshape) != len(shape):
             self.fail(path, f"has shape {dshape}, expected {len(shape)} dimensions")
         for got, want in zip(dshape, shape):
@@ -74,7 +78,7 @@ class Checker:
         return arr
 
     def attr(self, obj: h5py.HLObject, name: str, kind: type, default: Any = ...) -> Any:
-        """Read attribute ``name`` as ``kind`` (int, float, str, tuple)."""
+        """Read attribute ``name`` as ``kind`` (int, float, str, bool); :meth:`ints` reads integer arrays."""
         path = f"{obj.name}@{name}"
         try:
             present = name in obj.attrs
@@ -92,8 +96,6 @@ class Checker:
                 if not isinstance(value, str):
                     raise TypeError(type(value).__name__)
                 return value
-            if kind is tuple:
-                return tuple(np.asarray(value).ravel().tolist())
             arr = np.asarray(value)
             if arr.ndim != 0:
                 raise TypeError(f"expected a scalar, got shape {arr.shape}")
@@ -113,6 +115,24 @@ class Checker:
         except (TypeError, ValueError, UnicodeDecodeError) as exc:
             self.fail(path, f"has an invalid value ({exc})")
         raise TypeError(f"unsupported attribute kind {kind!r}")
+
+    def ints(self, obj: h5py.HLObject, name: str, length: int, default: tuple[int, ...] | None = None,
+             ) -> tuple[int, ...]:
+        """Attribute ``name`` as ``length`` integers (an integer array of that length)."""
+        path = f"{obj.name}@{name}"
+        try:
+            present = name in obj.attrs
+            value = np.asarray(obj.attrs[name]) if present else None
+        except Exception as exc:
+            self.fail(path, f"cannot be read ({exc})")
+        if not present:
+            if default is None:
+                self.fail(path, "missing attribute")
+            return default
+        if value.dtype.kind not in "iu" or value.shape != (length,):
+            self.fail(path, f"has an invalid value (expected {length} integers, got {value.dtype} "
+                            f"of shape {value.shape})")
+        return tuple(int(v) for v in value)
 
     def info(self, group: h5py.Group, skip: Sequence[str] = ()) -> dict[str, Any]:
         """Every attribute of ``group`` (but ``skip``) as plain Python values: a model's ``info``."""

@@ -110,10 +110,8 @@ class TileDB:
         if fmt != schema.FORMAT_NAME:
             raise TileDBFormatError(f"not a dynatex tile database (format attribute is {fmt!r})",
                                     filename=self.filename, objpath="/")
-        version = self._check.attr(f, schema.ATTR_VERSION, tuple)
-        if len(version) != 2:
-            self._check.fail("/@" + schema.ATTR_VERSION, f"expected (major, minor), got {version}")
-        self.version = (int(version[0]), int(version[1]))
+        major, minor = self._check.ints(f, schema.ATTR_VERSION, 2)
+        self.version = (major, minor)
         if self.version[0] != schema.FORMAT_VERSION[0]:
             raise TileDBVersionError(
                 f"format version {self.version[0]}.{self.version[1]} is not supported by this dynatex "

@@ -16,6 +16,8 @@ from .source import SourceInfo
 
 #: Largest spectral radius a stored transition matrix may have.
 MAX_SPECTRAL_RADIUS = 1.0 - 1e-9
+#: Largest condition number of ``A``'s eigenvectors: the player inverts them to edit the poles.
+MAX_EIGVEC_CONDITION = 1e10
 
 
 @dataclass
@@ -99,9 +101,75 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
     )
     if model.singular_values.shape[0] < n:
         check.fail(group.name + "/singular_values", f"holds {model.singular_values.shape[0]} values, fewer than n={n}")
-    rho = float(np.max(np.abs(np.linalg.eigvals(model.A))))
-    if not rho < MAX_SPECTRAL_RADIUS:
-        check.fail(group.name + "/A", f"is not stable (spectral radius {rho:.6g} >= 1)")
     if model.mean.min() < -1 or model.mean.max() > 256:
         check.fail(group.name + "/mean", "values outside the 0..255 pixel range")
+    _check_dynamics(group.name, model, check, p)
     return model
+
+
+def _check_dynamics(path: str, model: LDSModel, check: Checker, pixels: int) -> None:
+    """Reject models that cannot make frames: a basis that is not orthonormal (a zero basis), a
+    transition matrix that is unstable or not diagonalisable (the player edits its poles), no
+    driving noise, or states that leave the pixel range.
+
+    With orthonormal basis rows ``||frame - mean|| = ||x||``, and a frame and the mean both lie
+    in the 0..255 cube, so the state of any frame has ``||x|| <= 256 sqrt(P)``. The stored
+    states, the expected state ``A^t x0`` of every frame to come and the stationary spread
+    ``trace(P)`` must respect that bound; beyond it the state only saturates pixels, and far
+    beyond it (an ``x0`` of 1e308) it overflows to a black screen.
+    """
+    with np.errstate(all="ignore"):         # huge values overflow to inf, which every test below refuses
+        _check_basis(path, model, check)
+        _check_poles(path, model, check)
+        _check_noise(path, model, check, 256.0 * np.sqrt(pixels))
+        _check_states(path, model, check, 256.0 * np.sqrt(pixels))
+
+
+def _check_basis(path: str, model: LDSModel, check: Checker) -> None:
+    norms = np.sqrt(np.einsum("ij,ij->i", model.basis, model.basis, dtype=np.float64))
+    if not np.abs(norms - 1).max() <= 1e-3:
+        check.fail(path + "/basis", f"rows are not of unit length (norms {norms.min():.3g}..{norms.max():.3g}): "
+                                    "the basis must be orthonormal")
+
+
+def _check_poles(path: str, model: LDSModel, check: Checker) -> None:
+    poles, vecs = np.linalg.eig(model.A)
+    rho = float(np.max(np.abs(poles)))
+    if not rho < MAX_SPECTRAL_RADIUS:
+        check.fail(path + "/A", f"is not stable (spectral radius {rho:.6g} >= 1)")
+    cond = float(np.linalg.cond(vecs))
+    if not cond < MAX_EIGVEC_CONDITION:
+        check.fail(path + "/A", f"is not diagonalisable (eigenvector condition number {cond:.3g}); the player's "
+                                "speed edit rotates its poles")
+
+
+def _check_noise(path: str, model: LDSModel, check: Checker, bound: float) -> None:
+    q = model.B @ model.B.T
+    cov = model.stationary_cov
+    if not np.trace(q) > 0:
+        check.fail(path + "/B", "is zero: without driving noise the texture settles to a still image")
+    scale = np.abs(cov).max()
+    if not (np.abs(cov - cov.T).max() <= 1e-9 * scale and np.linalg.eigvalsh(cov).min() >= -1e-9 * np.trace(cov)):
+        check.fail(path + "/stationary_cov", "is not symmetric positive semi-definite")
+    if not np.trace(cov) <= bound ** 2:
+        check.fail(path + "/stationary_cov", f"spread sqrt(trace) {np.sqrt(np.trace(cov)):.3g} exceeds the pixel "
+                                             f"range's {bound:.3g}")
+    resid = cov - model.A @ cov @ model.A.T - q
+    if not np.abs(resid).max() <= 1e-6 * max(scale, np.abs(q).max()):
+        check.fail(path + "/stationary_cov", "does not solve P = A P A^T + B B^T")
+
+
+def _check_states(path: str, model: LDSModel, check: Checker, bound: float) -> None:
+    norms = np.sqrt((model.states ** 2).sum(axis=0))
+    if norms.size and not norms.max() <= bound:
+        check.fail(path + "/states", f"a state of norm {norms.max():.3g} lies outside the pixel range (norm <= "
+                                     f"{bound:.3g})")
+    x = model.x0.copy()
+    for t in range(max(64, 4 * model.n)):
+        size = float(np.sqrt(x @ x))
+        if not size <= bound:
+            what = "x0 has" if t == 0 else f"the expected state A^{t} x0 has"
+            check.fail(path + "/x0", f"{what} norm {size:.3g}, outside the pixel range (norm <= {bound:.3g})")
+        if size < 1e-9 * bound:
+            break
+        x = model.A @ x

@@ -22,6 +22,8 @@ MAX_SPECTRAL_RADIUS = 1.0 - 1e-9
 MAX_COMPONENTS = 64
 MAX_DIM = 512
 MAX_ORDER = 64
+#: How far past the pixel range a component's ellipsoid of decoded coordinates may reach.
+ELLIPSOID_SLACK = 4.0
 
 
 @dataclass
@@ -201,7 +203,57 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         check.fail(path + "/ar_coefs", f"the AR process is not stable (spectral radius {rho:.6g} >= 1)")
     if model.mean.min() < -1 or model.mean.max() > 256:
         check.fail(path + "/mean", "values outside the 0..255 pixel range")
+    with np.errstate(all="ignore"):         # huge values overflow to inf, which every test below refuses
+        _check_extent(path, model, check, 256.0 * np.sqrt(p))
     return model
+
+
+def _check_extent(path: str, model: MixtureModel, check: Checker, bound: float) -> None:
+    """Reject values that take synthesis out of the pixel range or to inf: loadings longer than
+    1 (or all zero), component offsets and local ellipsoids beyond the pixel
+    range, global coordinates that are not the stated centred unit-covariance cloud, and AR
+    means, noise and Gaussians far outside that cloud.
+
+    Loadings are orthonormal vectors of the reduced PCA space mapped into pixels by its
+    orthonormal basis (rows past the clip's rank are zero), so they never lengthen; a frame's deviation from the mean, hence each
+    component's offset and decoded local coordinate, is at most ``256 sqrt(P)``; the decoded
+    coordinates are pulled back into each component's ellipsoid, whose semi-axes may exceed its
+    frames' extent but not that bound by more than ``ELLIPSOID_SLACK``. ``T`` centred points of
+    unit covariance in ``D`` dimensions lie within ``sqrt(T D)`` of the origin; so do their
+    weighted means, and least-squares innovations have at most their total variance.
+    """
+    s, d = model.components, model.dim
+    rows = model.stacked_basis.reshape(s, d + 1, -1)
+    norms = np.sqrt(np.einsum("sjp,sjp->sj", rows, rows, dtype=np.float64))
+    if not norms[:, 1:].max() <= 1 + 1e-3:
+        check.fail(path + "/stacked_basis", f"a loading row has norm {norms[:, 1:].max():.3g}: loadings are "
+                                            "orthonormal in the reduced space, so at most 1 in pixels")
+    if not norms[:, 1:].max() >= 0.5:
+        check.fail(path + "/stacked_basis", "every loading is (nearly) zero: the mixture has no appearance to vary")
+    if not norms[:, 0].max() <= bound:
+        check.fail(path + "/stacked_basis", f"a component's mean offset has norm {norms[:, 0].max():.3g}, outside "
+                                            f"the pixel range (<= {bound:.3g})")
+    offsets = np.sqrt((model.decode_offset ** 2).sum(axis=1))
+    if not offsets.max() <= bound:
+        check.fail(path + "/decode_offset", f"norm {offsets.max():.3g} lies outside the pixel range (<= {bound:.3g})")
+    axes = model.local_radius * np.sqrt(np.linalg.eigvalsh(model.local_cov).max(axis=1))
+    if not axes.max() <= ELLIPSOID_SLACK * bound:
+        check.fail(path + "/local_radius", f"the ellipsoid of decoded coordinates reaches {axes.max():.3g}, past "
+                                           f"{ELLIPSOID_SLACK:g} x the pixel range ({bound:.3g})")
+    g = model.global_coords
+    t, dg = g.shape
+    if not (np.abs(g.mean(axis=0)).max() <= 1e-6 and np.abs(g.T @ g / t - np.eye(dg)).max() <= 1e-6):
+        check.fail(path + "/global_coords", "are not centred with unit covariance")
+    cloud = np.sqrt(t * dg)
+    ar_mean = np.linalg.solve(np.eye(dg) - model.ar_coefs.sum(axis=0), model.ar_intercept)
+    for name, size in (("gauss_mean", np.sqrt((model.gauss_mean ** 2).sum(axis=1)).max()),
+                       ("ar_intercept", np.sqrt(ar_mean @ ar_mean))):
+        if not size <= cloud:
+            check.fail(f"{path}/{name}", f"a mean of norm {size:.3g} lies outside the training coordinates "
+                                         f"(<= {cloud:.3g})")
+    if not np.trace(model.ar_noise_cov) <= t * dg:
+        check.fail(path + "/ar_noise_cov", f"trace {np.trace(model.ar_noise_cov):.3g} exceeds the training "
+                                           f"coordinates' total variance {t * dg}")
 
 
 def _positive_definite(m: np.ndarray) -> bool:

@@ -7,6 +7,7 @@ import h5py
 
 from ._check import Checker
 
+
 @dataclass(frozen=True)
 class SourceInfo:
     """Where a texture came from and the pixel layout every method of it uses.
@@ -73,12 +74,16 @@ def read(group: h5py.Group, check: Checker) -> SourceInfo:
     order = att(group, "color_order", str)
     if order != ("RGB" if channels == 3 else "GRAY"):
         check.fail(group.name + "@color_order", f"{order!r} does not match {channels} channels")
-    crop = att(group, "crop", tuple, (-1, -1, -1, -1))
-    size = att(group, "source_size", tuple, (-1, -1))
+    crop = check.ints(group, "crop", 4, (-1, -1, -1, -1))
+    size = check.ints(group, "source_size", 2, (-1, -1))
+    if min(crop) < 0 and max(crop) != -1 or min(crop) >= 0 and (crop[2] < 1 or crop[3] < 1):
+        check.fail(group.name + "@crop", f"{crop} is neither (x, y, w, h) with x, y >= 0 and w, h >= 1 "
+                                         "nor (-1, -1, -1, -1)")
+    if min(size) < 0 and max(size) != -1 or min(size) == 0:
+        check.fail(group.name + "@source_size", f"{size} is neither (w, h) with w, h >= 1 nor (-1, -1)")
     return SourceInfo(
         filename=att(group, "filename", str), sha256=att(group, "sha256", str), fps=fps,
         width=width, height=height, channels=channels, n_frames=n_frames,
         frame_start=att(group, "frame_start", int, 0), frame_step=att(group, "frame_step", int, 1),
-        crop=() if min(crop) < 0 else tuple(int(v) for v in crop),
-        source_size=() if min(size) < 0 else tuple(int(v) for v in size),
+        crop=() if min(crop) < 0 else crop, source_size=() if min(size) < 0 else size,
     )

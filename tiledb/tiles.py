@@ -172,7 +172,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
         class_loop_start=ds(group, "class_loop_start", kind="iu", shape=(c,)),
         class_loop_cost=ds(group, "class_loop_cost", kind="f", shape=(c,)),
         class_toroid_cost=ds(group, "class_toroid_cost", kind="f", shape=(c, 2)),
-        info=check.info(group),
+        info=_info(group, check, th, tw),
         edges=_edges(group, check, k),
     )
     if model.tiles.dtype != np.uint8:
@@ -213,6 +213,20 @@ def _check_torus(where: str, model: TilesModel, check: Checker) -> None:
                                           f"not {model.n_tiles}")
     if model.n_classes != 1 or (model.ring_class != model.tile_class).any():
         check.fail(where + "/tile_class", "a quilted set is one class without border tiles")
+
+
+def _info(group: h5py.Group, check: Checker, th: int, tw: int) -> dict:
+    """The attributes, with those the reader and the player use checked for type and range."""
+    info = check.info(group)
+    for name, lo, hi in (("ring", 0, min(th, tw)), ("edge_colours", 1, 8), ("strip_depth", 1, min(th, tw))):
+        value = check.attr(group, name, int, None)
+        if value is not None:
+            if not lo <= value <= hi:
+                check.fail(f"{group.name}@{name}", f"{value} outside {lo}..{hi}")
+            info[name] = value
+    if "construction" in info:
+        info["construction"] = check.attr(group, "construction", str)
+    return info
 
 
 def _edges(group: h5py.Group, check: Checker, k: int) -> np.ndarray | None:
