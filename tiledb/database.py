@@ -28,6 +28,8 @@ class Texture:
         check = db._check
         self.source: SourceInfo = _source.read(check.group(group, schema.SOURCE), check)
         self.methods: tuple[str, ...] = tuple(m for m in CODECS if m in group)
+        if self.has_frames:
+            self.frames()       # the frame store's structure (dtype, shape, count); its data is read lazily
 
     def __repr__(self) -> str:
         s = self.source

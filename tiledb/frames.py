@@ -47,11 +47,14 @@ class FrameStore:
 
 def read(parent: h5py.Group, name: str, check: Checker, source: SourceInfo,
          *, frame_shape: tuple[int, int, int] | None = None) -> FrameStore:
-    """Open ``parent/name`` as a :class:`FrameStore` whose frames are ``frame_shape`` (default: the source's)."""
+    """Open ``parent/name`` as a :class:`FrameStore` of the source's ``n_frames`` frames of
+    ``frame_shape`` (default: the source's); the methods index them by the source's count."""
     shape = frame_shape or source.frame_shape
     ds = check.dataset(parent, name, kind="u", shape=(None, *shape), read=False)
     if ds.dtype != np.uint8:
         check.fail(ds.name, f"dtype {ds.dtype} is not uint8")
     if ds.shape[0] < 1:
         check.fail(ds.name, "holds no frames")
+    if ds.shape[0] != source.n_frames:
+        check.fail(ds.name, f"holds {ds.shape[0]} frames, the source says {source.n_frames}")
     return FrameStore(ds, check)

@@ -182,3 +182,24 @@ def test_tiles_attributes_the_player_uses_are_checked(tmp_path, value):
     _set_attr(path, "textures/t/tiles", "ring", value)
     _rejected(path, "/tiles@ring", "ring", method="tiles")
 
+
+
+@pytest.mark.parametrize("count", [39, 41, 0])
+def test_frame_store_must_hold_the_source_frames(tmp_path, count):
+    # the fuzzer: a turn-point texture with one stored frame missing passed `info`; numpy raised
+    # IndexError and OpenCL read past the frame stack. The count is now checked on open.
+    from dynatex.analyzer import load_clip
+    from dynatex.analyzer.turnpoints import learn_turnpoints, pendulum_clip
+    from dynatex.player import open_player
+    from dynatex.tiledb import DatabaseWriter
+    clip = load_clip(pendulum_clip(40, 16)[0])
+    path = tmp_path / "tp.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("t", clip.source_info())
+        w.put_frames("t", clip.frames)
+        w.put_method("t", "turnpoints", learn_turnpoints(clip))
+    _replace(path, "textures/t/frames", lambda a: np.concatenate([a, a])[:count])
+    with pytest.raises(TileDBFormatError, match="/textures/t/frames: holds"):
+        open_db(path)
+    with pytest.raises(TileDBFormatError, match="/textures/t/frames: holds"):
+        open_player(path, mode="turnpoints", backend="numpy")
