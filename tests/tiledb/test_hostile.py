@@ -25,9 +25,8 @@ def _replace(path, dataset, fn):
 
 
 def _rejected(path, where, match, method="lds"):
-    with pytest.raises(TileDBFormatError, match=match) as e:
-        with open_db(path) as db:
-            db.texture().read(method)
+    with pytest.raises(TileDBFormatError, match=match) as e, open_db(path) as db:
+        db.texture().read(method)
     text = str(e.value)
     assert str(path) in text and where in text and "\n" not in text
     return text

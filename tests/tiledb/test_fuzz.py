@@ -1,0 +1,73 @@
+"""The database fuzzer in the suite: 500 seeded mutants of every method's database through
+``info`` and a short render on numpy and a verified OpenCL device, in worker processes.
+
+No mutant may crash a worker, hang, raise anything but a one-line DynatexError, or pass
+validation and then render flat or frozen frames where the unmutated database does not.
+``tools/fuzz_databases.py`` runs the same mutants (and more) with an outcome table.
+"""
+from __future__ import annotations
+
+import pytest
+
+from . import fuzzing
+
+SEED = 16
+COUNT = 500
+
+
+@pytest.fixture(scope="module")
+def bases(tmp_path_factory):
+    return fuzzing.build_bases(tmp_path_factory.mktemp("fuzz-bases"))
+
+
+@pytest.fixture(scope="module")
+def runner(bases, tmp_path_factory):
+    r = fuzzing.Runner(bases, tmp_path_factory.mktemp("fuzz"), devices=fuzzing.verified_device(), timeout=60.0,
+                       workers=2)
+    yield r
+    r.close()
+
+
+def test_controls_render_moving_pictures(runner):
+    for method in fuzzing.METHOD_MODES:
+        steps = runner.control(method)
+        assert set(steps) == {"info"} | {"numpy" if d is None else f"opencl:{d}" for d in runner.devices}
+        for key, step in steps.items():
+            assert step["outcome"] == "ok", (method, key, step)
+            if key != "info":
+                assert step["frames"] == {"flat": False, "frozen": False}, (method, key)
+
+
+def test_runner_survives_crashes_and_hangs(runner, bases):
+    path = str(bases["lds"])
+    jobs = [{"path": path, "mode": "lds", "devices": [None], "die": "signal"},
+            {"path": path, "mode": "lds", "devices": [None]},
+            {"path": path, "mode": "lds", "devices": [None], "die": "hang"},
+            {"path": path, "mode": "lds", "devices": [None]}]
+    specs = [{"method": "lds", "kind": k} for k in ("crash", "after", "hang", "after")]
+    old, runner.timeout = runner.timeout, 10.0
+    try:
+        out = runner._run_all(jobs, specs)
+    finally:
+        runner.timeout = old
+    assert [r.outcome for r in out][::2] == ["crash", "hang"]
+    assert out[0].steps["exit"] == -11
+    assert [r.outcome for r in out][1::2] == ["ok", "ok"]       # a fresh worker took the next mutant
+
+
+def test_mutants_are_reproducible(runner):
+    a = [fuzzing.plan(SEED, i, runner.inventories) for i in range(40)]
+    b = [fuzzing.plan(SEED, i, runner.inventories) for i in range(40)]
+    assert a == b
+    assert {s["kind"] for s in a} == set(fuzzing.KINDS) and {s["method"] for s in a} == set(fuzzing.METHOD_MODES)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1200)
+def test_mutated_databases_are_rejected_or_played(runner):
+    results = runner.run(SEED, range(COUNT))
+    assert len(results) == COUNT
+    bad = [r.line() for r in results if r.outcome in fuzzing.BAD]
+    assert not bad, f"{len(bad)} bad mutants:\n" + "\n".join(bad[:20]) + "\n" + fuzzing.table(results)
+    counts = {o: sum(r.outcome == o for r in results) for o in fuzzing.OUTCOMES}
+    assert counts["rejected"] > COUNT // 4 and counts["ok"] > COUNT // 10, counts   # the mutations bite, not all
