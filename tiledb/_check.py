@@ -135,12 +135,29 @@ class Checker:
         return tuple(int(v) for v in value)
 
     def info(self, group: h5py.Group, skip: Sequence[str] = ()) -> dict[str, Any]:
-        """Every attribute of ``group`` (but ``skip``) as plain Python values: a model's ``info``."""
+        """Every attribute of ``group`` (but ``skip``) as plain Python values: a model's ``info``.
+
+        Numbers, strings and arrays of them become ``int``/``float``/``bool``/``str`` and lists
+        (bytes decoded as UTF-8, bad bytes replaced), so ``dynatex info --json`` can print any
+        file; other types (complex, compound, references) are refused.
+        """
         try:
-            return {key: (v.item() if isinstance(v, np.generic) else v)
-                    for key, v in group.attrs.items() if key not in skip}
+            items = [(key, v) for key, v in group.attrs.items() if key not in skip]
         except Exception as exc:
             self.fail(group.name, f"attributes cannot be read ({exc})")
+        return {key: self._plain(f"{group.name}@{key}", v) for key, v in items}
+
+    def _plain(self, path: str, value: Any) -> Any:
+        if isinstance(value, (bytes, np.bytes_)):
+            return bytes(value).decode("utf-8", "replace")
+        if isinstance(value, str):
+            return value
+        arr = np.asarray(value)
+        if arr.dtype.kind in "SO" and arr.ndim:
+            return [self._plain(path, v) for v in arr.ravel()]
+        if arr.dtype.kind not in "biufU":
+            self.fail(path, f"has an unsupported type {arr.dtype}")
+        return arr.tolist() if arr.ndim else arr.item()
 
     def index_range(self, path: str, arr: np.ndarray, stop: int) -> None:
         """Every integer in ``arr`` must lie in ``[0, stop)``."""

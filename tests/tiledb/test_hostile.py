@@ -202,3 +202,18 @@ def test_frame_store_must_hold_the_source_frames(tmp_path, count):
         open_db(path)
     with pytest.raises(TileDBFormatError, match="/textures/t/frames: holds"):
         open_player(path, mode="turnpoints", backend="numpy")
+
+
+@pytest.mark.parametrize("value, code", [(np.complex128(1 + 2j), 2), (np.array([b"a", b"\xff"]), 0),
+                                         (b"\xff\xfe", 0), (np.array([[1, 2], [3, 4]]), 0)])
+def test_reported_attributes_are_plain_values(lds_db, capsys, value, code):
+    # `dynatex info --json` died on an attribute it only reports ("Object of type complex is not
+    # JSON serializable"); such attributes now reach `info` as plain values, or are refused
+    import json
+    _set_attr(lds_db, "textures/waves/lds", "svd", value)
+    assert main(["info", "--json", str(lds_db)]) == code
+    out, err = capsys.readouterr()
+    if code:
+        assert "/textures/waves/lds@svd: has an unsupported type complex128" in err and len(err.splitlines()) == 1
+    else:
+        json.loads(out)
