@@ -48,7 +48,7 @@ OUTCOMES = ("rejected", "ok", "garbage", "error", "crash", "hang")
 BAD = ("garbage", "error", "crash", "hang")
 #: frames rendered per backend, and the player options that keep them small
 FRAMES = 4
-MODE_OPTIONS = {"tiles": {"size": (24, 40)}, "evolve": {"size": (24, 32)}}
+MODE_OPTIONS = {"tiles": {"size": (24, 40), "tone": "consensus"}, "evolve": {"size": (24, 32), "jitter": 2.0}}
 #: pixel stores: any byte is a valid pixel, so overwriting them whole gives a faithfully flat texture
 _PIXELS = ("frames", "tiles")
 TEXTURE = "t"
