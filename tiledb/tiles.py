@@ -21,6 +21,8 @@ from .source import SourceInfo
 
 MAX_TILES = 4096
 CONSTRUCTIONS = ("quilted", "ring", "wang")   # how tiles join in x and y (attribute ``construction``)
+#: How far a stored mean colour may lie from the tiles' (the analyzer averages 16 sampled frames).
+MEAN_RGB_TOLERANCE = 32.0
 MAX_CLASSES = 10           # the player tone table (256 entries) holds blended tones for every pair
 
 
@@ -192,6 +194,11 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
         check.fail(group.name + "/border_side", "must be 0..3 for border tiles and -1 for the others")
     if (model.mean_rgb < 0).any() or (model.mean_rgb > 255).any():
         check.fail(group.name + "/mean_rgb", "values outside 0..255")
+    actual = model.tiles.reshape(k, -1, 3).mean(axis=1, dtype=np.float64)
+    worst = float(np.abs(model.mean_rgb - actual).max())
+    if worst > MEAN_RGB_TOLERANCE:
+        check.fail(group.name + "/mean_rgb", f"differs from the tiles' own mean colour by {worst:.0f} levels "
+                                             f"(more than {MEAN_RGB_TOLERANCE:g}); the player fits colour tone to it")
     _check_edges(group.name + "/edges", model, check)
     _check_torus(group.name, model, check)
     return model

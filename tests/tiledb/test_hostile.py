@@ -217,3 +217,19 @@ def test_reported_attributes_are_plain_values(lds_db, capsys, value, code):
         assert "/textures/waves/lds@svd: has an unsupported type complex128" in err and len(err.splitlines()) == 1
     else:
         json.loads(out)
+
+
+@pytest.mark.parametrize("value", [0.0, 255.0])
+def test_tile_mean_colours_must_match_the_tiles(tmp_path, value):
+    # the value sweep: mean_rgb all 0 (or 255) passed, and the player's colour tone, fitted to
+    # those means, turned every frame flat black (or white)
+    from dynatex.analyzer import load_clip
+    from dynatex.analyzer.tiles import learn_tiles
+    from dynatex.tiledb import DatabaseWriter
+    clip = load_clip(wave_clip(t=40, h=32, w=32))
+    path = tmp_path / "tiles.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("t", clip.source_info())
+        w.put_method("t", "tiles", learn_tiles(clip, tile=12, min_loop=12, transition=4))
+    _replace(path, "textures/t/tiles/mean_rgb", lambda a: np.full_like(a, value))
+    _rejected(path, "/tiles/mean_rgb", "differs from the tiles' own mean colour", method="tiles")
