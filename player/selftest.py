@@ -77,17 +77,10 @@ class Verdict:
 
 # -- cache ---------------------------------------------------------------------------------
 def cache_path() -> Path:
-    """Where verdicts are kept: ``$DYNATEX_CACHE_DIR``, else the platform's user cache folder."""
-    root = os.environ.get("DYNATEX_CACHE_DIR")
-    if root:
-        return Path(root) / "devices.json"
-    if sys.platform == "win32":
-        base = Path(os.environ.get("LOCALAPPDATA", Path.home() / "AppData" / "Local"))
-    elif sys.platform == "darwin":
-        base = Path.home() / "Library" / "Caches"
-    else:
-        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return base / "dynatex" / "devices.json"
+    """Where verdicts are kept: ``devices.json`` in dynatex's cache folder (``$DYNATEX_CACHE_DIR``,
+    else the platform's user cache folder; :func:`dynatex.tiledb.probe.cache_dir`)."""
+    from ..tiledb.probe import cache_dir
+    return cache_dir() / "devices.json"
 
 
 @functools.lru_cache(maxsize=1)

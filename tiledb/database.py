@@ -2,16 +2,13 @@
 from __future__ import annotations
 
 import os
-import select
-import signal
-import threading
 import unicodedata
-import warnings
 from typing import Any
 
 import h5py
 
 from . import frames as _frames
+from . import probe as _probe
 from . import schema
 from . import source as _source
 from ._check import Checker
@@ -74,6 +71,10 @@ class Texture:
 class TileDB:
     """A read-only, validated tile database. Use :func:`open_db` or the constructor.
 
+    Before the file is first read in this process, a child process reads all of it
+    (:mod:`.probe`: the HDF5 library crashes or hangs on some corrupt files; a file that
+    passed is remembered); ``probe=False`` skips that, for a file this process just wrote.
+
     Examples
     --------
     >>> from dynatex.tiledb import open_db
@@ -89,7 +90,7 @@ class TileDB:
         if os.path.isdir(self.filename):
             raise TileDBFormatError("is a folder, not a database file", filename=self.filename)
         if probe:
-            _probe(self.filename)
+            _probe.probe(self.filename)
         try:
             self._file = h5py.File(self.filename, "r")
         except OSError as exc:
@@ -183,70 +184,6 @@ class TileDB:
 def open_db(path: str | os.PathLike) -> TileDB:
     """Open and validate a tile database for reading."""
     return TileDB(path)
-
-
-#: seconds a probe may take: this plus one second per PROBE_BYTES_PER_S of file
-PROBE_TIMEOUT_S = 30.0
-PROBE_BYTES_PER_S = 20 * 2**20
-_probed: dict[tuple, str | None] = {}          # file identity -> the problem found (None: it is safe)
-_probe_lock = threading.Lock()
-
-
-def _probe(filename: str) -> None:
-    """Read the whole file once in a forked child before this process touches it.
-
-    The HDF5 library itself crashes (SIGSEGV) or loops forever on some corrupt metadata: the
-    fuzzer found byte flips in attribute messages that do either when an attribute is read. A
-    child that opens the file, validates every method and reads every frame takes that fall;
-    the reads that follow here are the same reads, so they are safe once the child survived.
-    A child that raised (an ordinary format error) says nothing: opening here reports the
-    error. Each unchanged file is probed once per process. Where ``os.fork`` is missing the
-    probe is skipped.
-    """
-    if not hasattr(os, "fork"):
-        return
-    st = os.stat(filename)
-    key = (os.path.realpath(filename), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
-    with _probe_lock:
-        if key not in _probed:
-            timeout = PROBE_TIMEOUT_S + st.st_size / PROBE_BYTES_PER_S
-            status = _run_child(filename, timeout)
-            _probed[key] = (f"reading the file did not finish within {timeout:.0f} s (the HDF5 library loops on "
-                            "it): it is corrupt" if status is None else
-                            f"the HDF5 library crashed (signal {os.WTERMSIG(status)}) reading the file: it is "
-                            "corrupt" if os.WIFSIGNALED(status) else None)
-        problem = _probed[key]
-    if problem:
-        raise TileDBFormatError(problem, filename=filename)
-
-
-def _run_child(filename: str, timeout: float) -> int | None:
-    """Wait status of a forked child that opens and fully reads ``filename``; None when it overran."""
-    read_end, write_end = os.pipe()
-    with warnings.catch_warnings():   # Python 3.12 warns about fork with threads; the child uses only its own
-        warnings.simplefilter("ignore", DeprecationWarning)
-        pid = os.fork()
-    if pid == 0:                                            # the child: never returns
-        code = 1
-        try:
-            os.close(read_end)
-            with TileDB(filename, probe=False) as db:
-                db.validate(every_frame=True)
-            code = 0
-        except BaseException:  # noqa: BLE001 - any error: the parent reports it by opening the file itself
-            pass
-        finally:
-            os._exit(code)
-    os.close(write_end)
-    try:
-        ready, _, _ = select.select([read_end], [], [], timeout)   # EOF when the child exits
-        if not ready:
-            os.kill(pid, signal.SIGKILL)
-            os.waitpid(pid, 0)
-            return None
-        return os.waitpid(pid, 0)[1]
-    finally:
-        os.close(read_end)
 
 
 def _short(exc: BaseException) -> str:

@@ -75,7 +75,7 @@ def test_mutated_databases_are_rejected_or_played(runner):
 
 def test_files_that_crash_or_hang_the_hdf5_library_are_rejected(runner):
     # mutants 2240 and 4377 of seed 16 (byte flips in attribute messages): reading an attribute
-    # made libhdf5 itself segfault or loop forever; the probe in a forked child now takes the fall
+    # made libhdf5 itself segfault or loop forever; the probe in a child process now takes the fall
     results = runner.run(SEED, [2240, 4377])
     assert [r.outcome for r in results] == ["rejected", "rejected"], [r.line() for r in results]
     for r in results:

@@ -1,0 +1,148 @@
+"""A database is read in a child process before a process of ours touches it.
+
+The HDF5 library itself segfaults or never returns on some corrupt files (byte flips in
+attribute messages, found by ``tools/fuzz_databases.py``), and no check of ours can run
+before its reads. :func:`probe` runs ``python -m dynatex.tiledb.probe FILE`` in a fresh
+interpreter (safe in a process with threads, and on every platform, unlike ``fork``),
+which opens the file, validates every method and reads every stored frame:
+
+- the child exits 0: the file is safe to read here;
+- it exits 1 (an ordinary error, a :class:`~dynatex.tiledb.TileDBError` for instance): the
+  probe says nothing, and opening the file here reports the error;
+- it is killed by a signal (any other exit status) or overruns its time (30 s plus 1 s per
+  20 MB of file): :class:`~dynatex.tiledb.TileDBFormatError`, "the HDF5 library crashed
+  reading the file" or "did not finish within N s".
+
+A file that passed is remembered by its identity (path, device, inode, size, modification
+time) and dynatex's version, in this process and in the user's cache folder
+(``databases.json`` beside the OpenCL device verdicts), so a game pays the probe once per
+new database file, not at every start. Where no Python interpreter can be started (Python
+embedded in an application whose executable is not Python, and ``DYNATEX_PYTHON`` unset)
+the probe is skipped.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+from .errors import TileDBFormatError
+
+#: seconds a probe may take: this plus one second per PROBE_BYTES_PER_S of file
+PROBE_TIMEOUT_S = 30.0
+PROBE_BYTES_PER_S = 20 * 2**20
+#: files that passed, remembered in the cache folder (the oldest are dropped beyond this)
+MAX_REMEMBERED = 512
+
+_lock = threading.Lock()
+_known: dict[str, str | None] = {}        # identity -> the problem found (None: safe)
+
+
+def cache_dir() -> Path:
+    """The user's cache folder of dynatex: ``$DYNATEX_CACHE_DIR``, else the platform's."""
+    root = os.environ.get("DYNATEX_CACHE_DIR")
+    if root:
+        return Path(root)
+    if sys.platform == "win32":
+        base = Path(os.environ.get("LOCALAPPDATA", Path.home() / "AppData" / "Local"))
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Caches"
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "dynatex"
+
+
+def probe(filename: str) -> None:
+    """Raise :class:`TileDBFormatError` when reading ``filename`` crashes or hangs a child process."""
+    st = os.stat(filename)
+    from .. import __version__
+    key = "|".join(str(v) for v in (os.path.realpath(filename), st.st_dev, st.st_ino, st.st_size,
+                                    st.st_mtime_ns, __version__))
+    with _lock:
+        if key not in _known:
+            _known[key] = None if key in _remembered() else _run_child(filename, st.st_size)
+            if _known[key] is None:
+                _remember(key)
+        problem = _known[key]
+    if problem:
+        raise TileDBFormatError(problem, filename=filename)
+
+
+def _run_child(filename: str, size: int) -> str | None:
+    """The problem a child reading ``filename`` ran into (a crash or a hang), else None."""
+    python = os.environ.get("DYNATEX_PYTHON") or sys.executable
+    if not python or "python" not in Path(python).name.lower():
+        return None            # no interpreter to run the child with: read here unprobed
+    timeout = PROBE_TIMEOUT_S + size / PROBE_BYTES_PER_S
+    env = dict(os.environ)
+    env.pop("PYTHONFAULTHANDLER", None)
+    try:
+        proc = subprocess.Popen([python, "-m", "dynatex.tiledb.probe", os.path.abspath(filename)],
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                env=env, start_new_session=os.name == "posix")
+    except OSError:
+        return None
+    try:
+        status = proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        _kill(proc)
+        return f"reading the file did not finish within {timeout:.0f} s (the HDF5 library loops on it): it is corrupt"
+    if status in (0, 1):
+        return None
+    how = f"signal {-status}" if status < 0 else f"exit status {status}"
+    return f"the HDF5 library crashed ({how}) reading the file: it is corrupt"
+
+
+def _kill(proc: subprocess.Popen) -> None:
+    try:
+        if os.name == "posix":
+            os.killpg(proc.pid, signal.SIGKILL)
+        else:
+            proc.kill()
+    except OSError:
+        pass
+    proc.wait()
+
+
+def _cache_file() -> Path:
+    return cache_dir() / "databases.json"
+
+
+def _remembered() -> list[str]:
+    try:
+        data = json.loads(_cache_file().read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return []
+    return [k for k in data if isinstance(k, str)] if isinstance(data, list) else []
+
+
+def _remember(key: str) -> None:
+    """Add ``key`` to the files known to be safe (best effort: a read-only cache folder only costs time)."""
+    path = _cache_file()
+    known = [k for k in _remembered() if k != key] + [key]
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(known[-MAX_REMEMBERED:], indent=0), encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
+def _main(argv: list[str]) -> int:
+    """The child: open ``argv[0]`` and read all of it; 0 when that worked, 1 on an ordinary error."""
+    from .database import TileDB
+    try:
+        with TileDB(argv[0], probe=False) as db:
+            db.validate(every_frame=True)
+    except Exception:  # noqa: BLE001 - any ordinary error: the parent reports it by opening the file itself
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main(sys.argv[1:]))
