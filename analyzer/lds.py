@@ -5,6 +5,10 @@ mean-subtracted clip (through the small ``tau x tau`` Gram matrix, or a randomiz
 ``A`` by least squares on the states, ``B`` from the residuals with the
 ``1/sqrt(tau - 1)`` normalisation the seed's pseudocode leaves out, so that the
 synthesized state covariance matches the training one.
+
+A :class:`~dynatex.analyzer.stream.DiskClip` is learned out of core: the Gram matrix is
+summed over blocks of pixel columns read from disk and the basis is projected block by
+block, so the float32 clip never exists in memory; ``max_memory`` sizes the blocks.
 """
 from __future__ import annotations
 
@@ -14,22 +18,30 @@ import numpy as np
 
 from ..tiledb import LDSModel
 from ._checks import check_int, clip_frames
+from .stream import DiskClip
 from .video import Clip, Progress
 
 SVD_METHODS = ("auto", "gram", "randomized")
 DEFAULT_N = 50
 DEFAULT_MAX_RADIUS = 0.995
+#: Default bound of an out-of-core learn when none is given.
+DEFAULT_MAX_MEMORY = 2 << 30
+#: Memory assumed taken before learning starts (interpreter, numpy, h5py, OpenCV).
+BASE_MEMORY = 320 << 20
 
 
-def learn_lds(clip: Clip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | None = None,
+def learn_lds(clip: Clip | DiskClip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | None = None,
               energy: float = 0.9, svd: str = "auto", max_radius: float = DEFAULT_MAX_RADIUS,
-              calibrate: bool = True, seed: int = 0, progress: Progress | None = None) -> LDSModel:
+              calibrate: bool = True, seed: int = 0, max_memory: int | None = None,
+              progress: Progress | None = None) -> LDSModel:
     """Learn a linear dynamic texture from a clip.
 
     Parameters
     ----------
-    clip : Clip or ndarray
-        Frames ``(T, H, W, C)`` uint8 (or a :class:`~dynatex.analyzer.Clip`).
+    clip : Clip, DiskClip or ndarray
+        Frames ``(T, H, W, C)`` uint8 (or a :class:`~dynatex.analyzer.Clip`). A
+        :class:`~dynatex.analyzer.stream.DiskClip` is learned out of core, always through
+        the exact Gram matrix (``svd`` is ignored).
     n : int or "auto"
         State order. ``"auto"`` picks the smallest order whose components hold ``energy``
         of the clip's variance (at least 2, at most ``min(T - 1, 50)``).
@@ -47,6 +59,9 @@ def learn_lds(clip: Clip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | Non
         (stability clipping otherwise changes the texture's energy).
     seed : int
         Seed of the randomized SVD.
+    max_memory : int, optional
+        Bytes an out-of-core learn may use in all, the returned model and the database
+        write included (default 2 GiB); too small a bound for the clip is a ValueError.
     progress : callable(done, total), optional
         Called after each of the 5 stages.
 
@@ -64,8 +79,9 @@ def learn_lds(clip: Clip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | Non
     >>> model.basis.shape, bool(model.info["spectral_radius"] < 1)
     ((4, 384), True)
     """
-    frames = clip_frames(clip)
-    tau = frames.shape[0]
+    streamed = isinstance(clip, DiskClip)
+    frames = None if streamed else clip_frames(clip)
+    tau = clip.n_frames if streamed else frames.shape[0]
     if tau < 3:
         raise ValueError(f"clip has {tau} frames; learning an LDS needs at least 3")
     if svd not in SVD_METHODS:
@@ -82,25 +98,14 @@ def learn_lds(clip: Clip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | Non
         if n > tau - 1:
             raise ValueError(f"n={n} is larger than the clip allows: it has {tau} frames, so n <= {tau - 1}")
     step = _stepper(progress, 5)
-
-    # One float32 copy of the clip, mean-subtracted in place.
-    y = frames.reshape(tau, -1).astype(np.float32)
-    mean = y.mean(axis=0, dtype=np.float64).astype(np.float32)
-    y -= mean
-    total_energy = float(np.einsum("ij,ij->", y, y, dtype=np.float64))
-    if total_energy == 0.0:
-        raise ValueError("clip is constant: every frame is the same, there is no dynamics to learn")
-    step()
-
-    method = svd if svd != "auto" else ("gram" if tau <= 1500 else "randomized")
     rank_cap = min(tau - 1, DEFAULT_N) if auto else int(n)
-    if method == "gram":
-        basis, sv, states = _svd_gram(y, rank_cap if not auto else tau - 1)
+    if streamed:
+        mean, basis, sv, states, total_energy, blocks = _learn_subspace_streamed(
+            clip, rank_cap, energy if auto else None, max_memory, step)
+        method = "gram-streamed"
     else:
-        basis, sv, states = _svd_randomized(y, rank_cap, seed)
-    del y
-    step()
-
+        mean, basis, sv, states, total_energy, method = _learn_subspace(frames, svd, auto, rank_cap, seed, step)
+        blocks = 0
     if auto:
         cum = np.cumsum(sv ** 2) / total_energy
         n = int(np.clip(np.searchsorted(cum, energy) + 1, 2, rank_cap))
@@ -113,7 +118,61 @@ def learn_lds(clip: Clip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | Non
     k = n if k is None else k
     k = check_int("k", k, 1, n, rule=f"an integer in 1..n={n}")
     step()
+    model = _fit_dynamics(mean, basis, sv, x, total_energy, tau, k, max_radius, calibrate, energy, auto, method, step)
+    if streamed:
+        model.info["column_blocks"] = int(blocks)
+    return model
 
+
+def _learn_subspace(frames: np.ndarray, svd: str, auto: bool, rank_cap: int, seed: int, step):
+    """In memory: mean, basis, singular values, states and total energy of the clip."""
+    tau = frames.shape[0]
+    # One float32 copy of the clip, mean-subtracted in place.
+    y = frames.reshape(tau, -1).astype(np.float32)
+    mean = y.mean(axis=0, dtype=np.float64).astype(np.float32)
+    y -= mean
+    total_energy = float(np.einsum("ij,ij->", y, y, dtype=np.float64))
+    if total_energy == 0.0:
+        raise ValueError("clip is constant: every frame is the same, there is no dynamics to learn")
+    step()
+
+    method = svd if svd != "auto" else ("gram" if tau <= 1500 else "randomized")
+    if method == "gram":
+        basis, sv, states = _svd_gram(y, rank_cap if not auto else tau - 1)
+    else:
+        basis, sv, states = _svd_randomized(y, rank_cap, seed)
+    del y
+    step()
+    return mean, basis, sv, states, total_energy, method
+
+
+def _learn_subspace_streamed(clip: DiskClip, rank_cap: int, energy: float | None, max_memory: int | None, step,
+                             extra_rows: int = 0):
+    """Out of core: as :func:`_learn_subspace`, keeping ``rank_cap`` components (or, with
+    ``energy``, the fewest that hold it, at least 2); ``extra_rows`` more pixel-sized rows
+    (a caller's own basis) are counted in the memory plan."""
+    width = plan_columns(clip, rank_cap + extra_rows, max_memory)
+    mean, gram = gram_streamed(clip, width)
+    total_energy = float(np.trace(gram))
+    if total_energy == 0.0:
+        raise ValueError("clip is constant: every frame is the same, there is no dynamics to learn")
+    step()
+    sv, v = _eig_gram(gram)
+    del gram
+    rows = min(rank_cap, int(np.sum(sv > sv[0] * 1e-7)))
+    if energy is not None:
+        cum = np.cumsum(sv ** 2) / total_energy
+        rows = min(rows, max(2, int(np.searchsorted(cum, energy) + 1)))
+    basis = basis_streamed(clip, mean, v[:, :rows], sv[:rows], width)
+    states = sv[:rows, None] * v[:, :rows].T
+    basis, states = _fix_signs(basis, states)
+    step()
+    return mean, basis, sv[: clip.n_frames - 1], states, total_energy, -(-clip.pixels // width)
+
+
+def _fit_dynamics(mean, basis, sv, x, total_energy, tau, k, max_radius, calibrate, energy, auto, method, step):
+    """A, B, the stationary covariance and the info of an LDS on states ``x``."""
+    n = basis.shape[0]
     x0, x1 = x[:, :-1], x[:, 1:]
     a_raw = np.linalg.lstsq(x0.T, x1.T, rcond=None)[0].T
     a, radius_raw, n_clipped = stabilize(a_raw, max_radius)
@@ -171,12 +230,69 @@ def stationary_covariance(a: np.ndarray, q: np.ndarray, *, tol: float = 1e-12) -
     return (p + p.T) / 2
 
 
-def _svd_gram(y: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    gram = (y @ y.T).astype(np.float64)
+def plan_columns(clip: DiskClip, rows: int, max_memory: int | None) -> int:
+    """Pixel columns per block of an out-of-core learn of ``rows`` basis rows within ``max_memory`` bytes.
+
+    Counted: :data:`BASE_MEMORY`, the basis twice (the model and the database check's
+    read-back), the mean, the Gram matrix and its eigendecomposition, and per column of a
+    block its uint8 and float32 values and its projected rows.
+    """
+    bound = DEFAULT_MAX_MEMORY if max_memory is None else int(max_memory)
+    tau, pixels = clip.n_frames, clip.pixels
+    fixed = BASE_MEMORY + 2 * rows * pixels * 4 + 3 * pixels * 4 + 4 * tau * tau * 8
+    per_column = tau * (1 + 4) + rows * 4 + 4
+    width = (bound - fixed) // per_column
+    if width < min(pixels, 1024):
+        need = fixed + per_column * min(pixels, 1024)
+        raise ValueError(f"max_memory {bound / 2**30:.2f} GiB is too small for {clip.filename} "
+                         f"({tau} frames of {pixels} values, {rows} components): it needs at least "
+                         f"{need / 2**30:.2f} GiB")
+    return int(min(width, pixels))
+
+
+def gram_streamed(clip: DiskClip, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mean frame (float32) and the ``T x T`` Gram matrix (float64) of the mean-subtracted clip,
+    summed over blocks of ``width`` pixel columns."""
+    tau, pixels = clip.n_frames, clip.pixels
+    mean = np.empty(pixels, np.float32)
+    gram = np.zeros((tau, tau), np.float64)
+    raw = np.empty((tau, width), np.uint8)
+    block = np.empty((tau, width), np.float32)
+    for p0 in range(0, pixels, width):
+        p1 = min(p0 + width, pixels)
+        b = block[:, :p1 - p0]
+        np.copyto(b, clip.columns(p0, p1, raw))
+        mean[p0:p1] = b.mean(axis=0, dtype=np.float64)
+        b -= mean[p0:p1]
+        gram += b @ b.T
+    return mean, gram
+
+
+def basis_streamed(clip: DiskClip, mean: np.ndarray, v: np.ndarray, sv: np.ndarray, width: int) -> np.ndarray:
+    """``(v / sv).T @ (Y - mean)``, the orthonormal basis rows, computed block by block."""
+    tau, pixels = clip.n_frames, clip.pixels
+    coef = np.ascontiguousarray((v / sv[None, :]).T.astype(np.float32))
+    basis = np.empty((coef.shape[0], pixels), np.float32)
+    raw = np.empty((tau, width), np.uint8)
+    block = np.empty((tau, width), np.float32)
+    for p0 in range(0, pixels, width):
+        p1 = min(p0 + width, pixels)
+        b = block[:, :p1 - p0]
+        np.copyto(b, clip.columns(p0, p1, raw))
+        b -= mean[p0:p1]
+        np.matmul(coef, b, out=basis[:, p0:p1])
+    return basis
+
+
+def _eig_gram(gram: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Singular values (descending) and right singular vectors from a Gram matrix."""
     ev, v = np.linalg.eigh(gram)
     order = np.argsort(ev)[::-1]
-    ev, v = np.clip(ev[order], 0, None), v[:, order]
-    sv = np.sqrt(ev)
+    return np.sqrt(np.clip(ev[order], 0, None)), v[:, order]
+
+
+def _svd_gram(y: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    sv, v = _eig_gram((y @ y.T).astype(np.float64))
     n = min(n, int(np.sum(sv > sv[0] * 1e-7)))
     basis = (v[:, :n].T.astype(np.float32) @ y) / sv[:n, None].astype(np.float32)
     states = sv[:n, None] * v[:, :n].T

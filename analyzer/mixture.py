@@ -21,7 +21,8 @@ import numpy as np
 from ..tiledb import MixtureModel
 from ..tiledb.mixture import companion_radius
 from ._checks import check_int, clip_frames
-from .lds import _stepper, _svd_gram, _svd_randomized
+from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
+from .stream import DiskClip
 from .video import Clip, Progress
 
 DEFAULT_COMPONENTS = 3
@@ -33,17 +34,18 @@ DEFAULT_MAX_RADIUS = 0.995
 LLE_REG = 1e-3
 
 
-def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONENTS, dim: int = DEFAULT_DIM,
+def learn_mixture(clip: Clip | DiskClip | np.ndarray, *, components: int = DEFAULT_COMPONENTS, dim: int = DEFAULT_DIM,
                   global_dim: int | None = None, pca_dim: int = DEFAULT_PCA_DIM,
                   neighbors: int = DEFAULT_NEIGHBORS, pmax: int | None = None,
                   max_radius: float = DEFAULT_MAX_RADIUS, max_iter: int = 200, tol: float = 1e-6,
-                  seed: int = 0, progress: Progress | None = None) -> MixtureModel:
+                  seed: int = 0, max_memory: int | None = None, progress: Progress | None = None) -> MixtureModel:
     """Learn a subspace-mixture dynamic texture from a clip.
 
     Parameters
     ----------
-    clip : Clip or ndarray
-        Frames ``(T, H, W, C)`` uint8.
+    clip : Clip, DiskClip or ndarray
+        Frames ``(T, H, W, C)`` uint8. A :class:`~dynatex.analyzer.stream.DiskClip` has its
+        PCA stage learned out of core (as :func:`~dynatex.analyzer.lds.learn_lds` does).
     components : int
         Number ``S`` of PPCA components (>= 1; needs ``S * (dim + 1) < T``).
     dim : int
@@ -64,6 +66,8 @@ def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONEN
         ``tol`` (relative).
     seed : int
         Seed of the EM initialisation (k-means++) and the randomized SVD.
+    max_memory : int, optional
+        Bytes an out-of-core PCA stage may use (default 2 GiB).
     progress : callable(done, total), optional
         Called after each of the 5 stages.
 
@@ -81,8 +85,9 @@ def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONEN
     >>> m.stacked_basis.shape, m.global_coords.shape, 1 <= m.order <= 3
     ((6, 384), (60, 2), True)
     """
-    frames = clip_frames(clip)
-    tau = frames.shape[0]
+    streamed = isinstance(clip, DiskClip)
+    frames = None if streamed else clip_frames(clip)
+    tau = clip.n_frames if streamed else frames.shape[0]
     components = check_int("components", components, 1)
     dim = check_int("dim", dim, 1)
     pca_dim = check_int("pca_dim", pca_dim, 1)
@@ -115,18 +120,24 @@ def learn_mixture(clip: Clip | np.ndarray, *, components: int = DEFAULT_COMPONEN
     step = _stepper(progress, 5)
 
     # 1. Reduced PCA space.
-    y = frames.reshape(tau, -1).astype(np.float32)
-    mean = y.mean(axis=0, dtype=np.float64).astype(np.float32)
-    y -= mean
-    total = float(np.einsum("ij,ij->", y, y, dtype=np.float64))
-    if total <= 1e-6 * y.shape[1]:
-        raise ValueError("clip is constant: every frame is the same, there is no appearance variation to model")
     cap = min(pca_dim, tau - 1)
-    if tau <= 1500:
-        basis, sv, states = _svd_gram(y, cap)
+    if streamed:
+        mean, basis, sv, states, total, _ = _learn_subspace_streamed(clip, cap, None, max_memory, lambda: None,
+                                                               extra_rows=components * (dim + 1))
+        constant = total <= 1e-6 * clip.pixels
     else:
-        basis, sv, states = _svd_randomized(y, cap, seed)
-    del y
+        y = frames.reshape(tau, -1).astype(np.float32)
+        mean = y.mean(axis=0, dtype=np.float64).astype(np.float32)
+        y -= mean
+        total = float(np.einsum("ij,ij->", y, y, dtype=np.float64))
+        constant = total <= 1e-6 * y.shape[1]
+        if not constant and tau <= 1500:
+            basis, sv, states = _svd_gram(y, cap)
+        elif not constant:
+            basis, sv, states = _svd_randomized(y, cap, seed)
+        del y
+    if constant:
+        raise ValueError("clip is constant: every frame is the same, there is no appearance variation to model")
     q = int(min(cap, np.sum(sv > sv[0] * 1e-6)))
     if dim >= q:
         raise ValueError(f"dim={dim} must be smaller than the clip's rank in the reduced space ({q}); "
