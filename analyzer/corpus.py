@@ -34,6 +34,8 @@ CLIP_SUFFIXES = (".avi", ".mp4", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg
 STREAMED_METHODS = ("lds", "mixture")
 
 OK, SKIPPED, FAILED = "ok", "skipped", "failed"
+#: Thread-count variables of the BLAS libraries numpy may use, set for local workers.
+BLAS_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
 
 
 class SchedulerError(ConnectionError, ValueError):
@@ -395,7 +397,7 @@ def analyze_corpus(clips: Iterable[str | os.PathLike], output_dir: str | os.Path
     elif scheduler == "none":
         results = _run_local(tasks, progress)
     else:
-        with _make_client(scheduler, workers, len(tasks)) as c:
+        with connect(scheduler, workers, len(tasks)) as c:
             results = _run_dask(c, tasks, progress)
     if merge is not None:
         merge_databases(results, merge)
@@ -417,7 +419,7 @@ def blas_threads(workers: int) -> int:
     return max(1, (os.cpu_count() or 1) // max(1, workers))
 
 
-def _make_client(scheduler: str, workers: int | None, n_tasks: int):
+def connect(scheduler: str, workers: int | None, n_tasks: int):
     try:
         import dask
         from distributed import Client, LocalCluster
@@ -425,13 +427,24 @@ def _make_client(scheduler: str, workers: int | None, n_tasks: int):
         raise ImportError("--scheduler local or an address needs Dask: pip install 'dynatex[dask]'") from None
     if scheduler == "local":
         n = workers or max(1, min(os.cpu_count() or 1, n_tasks))
-        threads = str(blas_threads(n))
-        env = {k: threads for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                                    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
-        # Workers that are not daemons may start a child to decode a hostile video safely.
-        with dask.config.set({"distributed.worker.daemon": False}):
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, env=env,
-                                   dashboard_address=None)
+        threads = blas_threads(n)
+        # Set before a worker process starts (numpy's BLAS reads them once, at import); workers
+        # that are not daemons may start a child to decode a hostile video safely.
+        blas = {k: str(threads) for k in BLAS_VARIABLES}
+        environ = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **blas}
+        # Dask's nanny lets the variables of this process override its pre-spawn ones (and
+        # leaves its own in this process), so both are set while the workers start.
+        saved = {k: os.environ.get(k) for k in BLAS_VARIABLES}
+        os.environ.update(blas)
+        try:
+            with dask.config.set({"distributed.nanny.pre-spawn-environ": environ, "distributed.worker.daemon": False}):
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+        finally:
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
         return _OwnedClient(Client(cluster), cluster)
     if not re.match(r"^[a-z+]+://", scheduler):
         raise ValueError(f"scheduler must be 'none', 'local' or an address like tcp://host:8786, not {scheduler!r}")

@@ -6,13 +6,10 @@ import os
 import cv2
 import numpy as np
 import pytest
+
 from dynatex.analyzer import analyze_corpus, format_table
-from dynatex.analyzer.corpus import (
-    _from_disk,
-    find_clips,
-    remove_stale_temporaries,
-    texture_names,
-)
+from dynatex.analyzer.corpus import (_from_disk, blas_threads, connect, find_clips, remove_stale_temporaries,
+                                     texture_names)
 from dynatex.analyzer.stream import spill_clip
 from dynatex.tiledb import open_db
 
@@ -162,12 +159,19 @@ def test_max_memory_streams_lds_and_refuses_in_memory_methods_that_do_not_fit(tm
         _from_disk(disk, "tiles", disk.nbytes)
 
 
+def _blas_threads() -> str:
+    return os.environ["OPENBLAS_NUM_THREADS"]
+
+
 def test_local_cluster_gives_the_sequential_models(tmp_path, corpus):
     pytest.importorskip("distributed", reason="the dask extra is not installed")
     clips = [corpus / "a.npy", corpus / "b.npy", corpus / "c.avi", corpus / "e_notes.avi"]
     seq = analyze_corpus(clips, tmp_path / "seq", methods=("lds",), params={"lds": {"n": 6}}, progress=False)
-    par = analyze_corpus(clips, tmp_path / "par", methods=("lds",), params={"lds": {"n": 6}}, scheduler="local",
-                         workers=2, progress=False)
+    with connect("local", 2, len(clips)) as client:
+        par = analyze_corpus(clips, tmp_path / "par", methods=("lds",), params={"lds": {"n": 6}}, client=client,
+                             progress=False)
+        threads = client.run(_blas_threads)
+    assert sorted(threads.values()) == [str(blas_threads(2))] * 2 == [str(max(1, os.cpu_count() // 2))] * 2
     assert [r.status for r in par] == [r.status for r in seq] == ["ok", "ok", "ok", "failed"]
     assert par[3].reason == seq[3].reason
     assert {r.worker for r in par[:3]} <= {0, 1, "0", "1"} and all(r.worker == "" for r in seq)

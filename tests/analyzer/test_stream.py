@@ -4,6 +4,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+
 from dynatex.analyzer import lds as lds_mod
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds

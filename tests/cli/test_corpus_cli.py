@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from dynatex.tiledb import open_db
 
 from dynatex.cli import main
+from dynatex.tiledb import open_db
 
 from ..conftest import wave_clip
 
