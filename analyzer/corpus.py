@@ -54,6 +54,7 @@ class ClipTask:
     load: dict = field(default_factory=dict)         # start, stop, step, crop, size, color
     max_memory: int | None = None
     spill_dir: str | None = None
+    skip_complete: bool = True
 
 
 @dataclass
@@ -152,7 +153,7 @@ def analyze_clip(task: ClipTask) -> ClipResult:
     worker = _worker_name()
     try:
         remove_stale_temporaries(task.database)
-        if database_is_complete(task):
+        if task.skip_complete and database_is_complete(task):
             return ClipResult(task.clip, task.texture, task.database, task.methods,
                               time.perf_counter() - t0, SKIPPED, worker=worker)
         _learn_and_write(task)
@@ -339,7 +340,7 @@ def analyze_corpus(clips: Iterable[str | os.PathLike], output_dir: str | os.Path
                    params: dict[str, dict] | None = None, load: dict | None = None,
                    scheduler: str = "none", workers: int | None = None, merge: str | os.PathLike | None = None,
                    max_memory: int | str | None = None, spill_dir: str | None = None,
-                   progress: bool = True, client: Any = None) -> list[ClipResult]:
+                   overwrite: bool = False, progress: bool = True, client: Any = None) -> list[ClipResult]:
     """Analyse many clips, one database per clip in ``output_dir``; return the summary table.
 
     Parameters
@@ -362,10 +363,13 @@ def analyze_corpus(clips: Iterable[str | os.PathLike], output_dir: str | os.Path
         Workers of a local cluster (default: the CPU count, at most the number of clips).
     merge : path, optional
         Gather every analysed texture into this database afterwards (atomic; other
-        textures in it are kept).
+        textures in it are kept unless ``overwrite``).
     max_memory : int or str, optional
         Bound per clip (``"2GB"``): LDS and the mixture's PCA learn out of core from a
         spilled copy of the clip in ``spill_dir``; other methods fail on clips too large for it.
+    overwrite : bool
+        Analyse every clip again, even where its database is complete, and start the
+        ``merge`` database afresh.
     progress : bool
         A progress bar across the corpus on stderr (when it is a terminal).
     client : dask.distributed.Client, optional
@@ -391,7 +395,7 @@ def analyze_corpus(clips: Iterable[str | os.PathLike], output_dir: str | os.Path
             get_method(m)
         tasks.append(ClipTask(clip=os.path.abspath(path), texture=name, database=os.path.join(out, f"{name}.h5"),
                               methods=chosen, params={m: dict((params or {}).get(m, {})) for m in chosen},
-                              load=load, max_memory=bound, spill_dir=spill_dir))
+                              load=load, max_memory=bound, spill_dir=spill_dir, skip_complete=not overwrite))
     if client is not None:
         results = _run_dask(client, tasks, progress)
     elif scheduler == "none":
@@ -400,7 +404,7 @@ def analyze_corpus(clips: Iterable[str | os.PathLike], output_dir: str | os.Path
         with connect(scheduler, workers, len(tasks)) as c:
             results = _run_dask(c, tasks, progress)
     if merge is not None:
-        merge_databases(results, merge)
+        merge_databases(results, merge, overwrite=overwrite)
     return results
 
 
@@ -482,7 +486,10 @@ def _run_dask(client, tasks: list[ClipTask], progress: bool) -> list[ClipResult]
         if fut.status == "finished":
             results[i] = fut.result()
         else:
-            exc = fut.exception()
+            try:
+                exc = fut.exception()
+            except Exception as err:  # noqa: BLE001 - a cancelled future raises instead of returning
+                exc = err
             reason = _reason(exc)
             if type(exc).__name__ == "KilledWorker":
                 reason = f"the worker analysing it died repeatedly (killed, or a decoder crash): {reason}"

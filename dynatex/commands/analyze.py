@@ -49,7 +49,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
                                   "name without extension; one clip only)")
     p.add_argument("--methods", default="lds",
                    help=f"comma-separated methods to run: {', '.join(METHODS)} (default: lds)")
-    p.add_argument("--overwrite", action="store_true", help="start a new database instead of updating one")
+    p.add_argument("--overwrite", action="store_true",
+                   help="start a new database instead of updating one; with several clips, analyse every clip "
+                        "again (even those whose database is complete) and start --merge afresh")
     g = p.add_argument_group("corpus and scale")
     g.add_argument("--scheduler", default="none", metavar="none|local|tcp://HOST:PORT",
                    help="where clips run: none (in this process, default), local (a Dask LocalCluster on this "
@@ -273,7 +275,8 @@ def _run_corpus(args: argparse.Namespace, clips: list[str], names: list[str], ma
     params = {name: method_params(name, args) for name in names}
     results = analyze_corpus(clips, args.output, methods=names, params=params, load=_load_options(args),
                              scheduler=args.scheduler, workers=args.workers, merge=args.merge,
-                             max_memory=max_memory, spill_dir=args.spill_dir, progress=not args.quiet)
+                             max_memory=max_memory, spill_dir=args.spill_dir, overwrite=args.overwrite,
+                             progress=not args.quiet)
     failed = [r for r in results if r.status == FAILED]
     if not args.quiet:
         print(format_table(results))

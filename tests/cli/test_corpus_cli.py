@@ -42,6 +42,9 @@ def test_corpus_summary_merge_and_exit_code(tmp_path, clips, capsys):
     assert code == 0 and stdout == ""
     code, stdout, _ = _run(capsys, "analyze", clips / "sea.npy", clips / "fire.npy", "-o", out, "--n", "4")
     assert code == 0 and "2 clips: 0 analysed, 2 skipped (database complete), 0 failed" in stdout
+    code, stdout, _ = _run(capsys, "analyze", clips / "sea.npy", clips / "fire.npy", "-o", out, "--n", "4",
+                           "--overwrite", "--merge", merged)
+    assert code == 0 and "2 clips: 2 analysed, 0 skipped" in stdout
 
 
 def test_one_clip_with_max_memory_learns_out_of_core(tmp_path, clips, capsys):
