@@ -108,11 +108,11 @@ class TreeMemory:
 
 
 # -- comparing databases -------------------------------------------------------------------
-def compare_databases(a: str, b: str, texture: str) -> dict[str, float]:
-    """Per method, the largest difference between the two databases' arrays, relative to the
-    largest magnitude of each array, or absolute for arrays whose values are all below 1e-3
-    (round-off-level arrays such as the mixture's decoder offsets); 0 = identical, integer
-    arrays count 1 when they differ."""
+def compare_databases(a: str, b: str, texture: str) -> dict[str, dict]:
+    """Per method, the largest difference between the two databases' arrays (and the array it is
+    in), relative to the largest magnitude of each array, or absolute for arrays whose values
+    are all below 1e-3 (round-off-level arrays such as the mixture's decoder offsets);
+    0 = identical, integer arrays count 1 when they differ."""
     from dynatex.tiledb import open_db
     out = {}
     with open_db(a) as da, open_db(b) as db:
@@ -121,19 +121,21 @@ def compare_databases(a: str, b: str, texture: str) -> dict[str, float]:
         ta, tb = da.texture(texture), db.texture(texture)
         for method in tb.methods:
             ma, mb = ta.read(method), tb.read(method)
-            worst = 0.0
+            worst, where = 0.0, ""
             for f in dataclasses.fields(mb):
                 x, y = getattr(ma, f.name), getattr(mb, f.name)
                 if not isinstance(y, np.ndarray) or y.dtype.kind not in "fiub":
                     continue
                 if x.shape != y.shape:
-                    worst = max(worst, float("inf"))
+                    diff = float("inf")
                 elif y.dtype.kind == "f":
                     scale = max(float(np.abs(y).max(initial=0)), 1e-3)
-                    worst = max(worst, float(np.abs(x.astype(np.float64) - y).max(initial=0)) / scale)
-                elif not np.array_equal(x, y):
-                    worst = max(worst, 1.0)
-            out[method] = worst
+                    diff = float(np.abs(x.astype(np.float64) - y).max(initial=0)) / scale
+                else:
+                    diff = 0.0 if np.array_equal(x, y) else 1.0
+                if diff > worst:
+                    worst, where = diff, f.name
+            out[method] = {"max": worst, "array": where}
     return out
 
 
@@ -215,24 +217,29 @@ def _count(results) -> dict:
 
 # -- a clip larger than memory -----------------------------------------------------------------
 def write_clip(path: str, frames: int, size=(720, 1280), seed: int = 0) -> None:
-    """Travelling waves (a separable sum, cheap per frame) plus noise from a small bank of
-    noise fields, written frame by frame to a ``.npy`` array on disk (never all in memory)."""
+    """Two layers of smooth random texture drifting in different directions, plus noise from a
+    small bank, written frame by frame to a ``.npy`` array on disk (never all in memory).
+    Each frame costs a few copies, so writing is quick even on a busy machine."""
+    import cv2
     h, w = size
     rng = np.random.default_rng(seed)
-    waves = [(rng.uniform(0.02, 0.3), rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), rng.uniform(10, 40))
-             for _ in range(6)]
-    yy, xx = np.arange(h, dtype=np.float32), np.arange(w, dtype=np.float32)
+
+    def smooth(shape, sigma):
+        field = cv2.GaussianBlur(rng.normal(0, 1, shape).astype(np.float32), (0, 0), sigma)
+        field = (field - field.mean()) / field.std()
+        return field
+
+    drift = smooth((h, w + frames), 6)                          # moves one pixel per frame to the left
+    rise = smooth((h + frames // 2 + 1, w), 12)                 # moves one pixel every other frame upwards
+    noise = rng.integers(0, 9, (5, h, w, 1), dtype=np.uint8)
     gains = np.array([1.0, 0.8, 0.6], np.float32)
-    noise = rng.normal(0, 4, (7, h, w)).astype(np.float32)
     header = {"descr": "|u1", "fortran_order": False, "shape": (frames, h, w, 3)}
     with open(path, "wb") as f:
         np.lib.format.write_array_header_1_0(f, header)
         for t in range(frames):
-            img = 128 + noise[t % 7]
-            for omega, kx, ky, amp in waves:
-                row = omega * t + kx * xx
-                img += amp * (np.outer(np.cos(ky * yy), np.sin(row)) + np.outer(np.sin(ky * yy), np.cos(row)))
-            f.write(np.clip(img[..., None] * gains, 0, 255).astype(np.uint8).tobytes())
+            img = 120 + 40 * drift[:, t:t + w] + 30 * rise[t // 2:t // 2 + h]
+            frame = np.clip(img[..., None] * gains, 0, 246).astype(np.uint8) + noise[t % 5]
+            f.write(frame.tobytes())
 
 
 def subspace_angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
