@@ -127,3 +127,21 @@ def test_real_clip_analysis(clips_dir):
     m = learn_lds(clip)
     assert m.n == 50 and m.info["spectral_radius"] < 1
     assert m.mean.shape == (176 * 144 * 3,)
+
+
+def test_weak_components_have_unit_rows_and_the_database_accepts_them(tmp_path):
+    """A clip of nearly rank 2 learned with n = 3: the third row, v.T Y / s summed in float32
+    with s 200 times below the first, came out 0.2% too long and the format refused it."""
+    from dynatex.tiledb import DatabaseWriter, TileDB
+    t = np.arange(20)[:, None, None, None]
+    x = np.arange(12)[None, None, :, None]
+    clip = np.repeat((128 + 60 * np.sin(0.3 * t + 0.5 * x + 0 * np.arange(8)[None, :, None, None])).astype(np.uint8),
+                     3, axis=3)
+    model = learn_lds(load_clip(clip), n=3)
+    norms = np.sqrt((model.basis.astype(np.float64) ** 2).sum(axis=1))
+    assert np.abs(norms - 1).max() < 1e-5
+    with DatabaseWriter(tmp_path / "w.h5") as w:
+        w.put_texture("w", load_clip(clip).source_info())
+        w.put_method("w", "lds", model)
+    with TileDB(tmp_path / "w.h5") as db:
+        assert db.texture("w").read("lds").basis.shape[0] == 3
