@@ -16,7 +16,8 @@ which opens the file, validates every method and reads every stored frame:
 A file that passed is remembered by its identity (path, device, inode, size, modification
 time) and dynatex's version, in this process and in the user's cache folder
 (``databases.json`` beside the OpenCL device verdicts), so a game pays the probe once per
-new database file, not at every start. Where no Python interpreter can be started (Python
+new database file, not at every start; a file the writer has just written and read back is
+remembered without a probe (:func:`remember`). Where no Python interpreter can be started (Python
 embedded in an application whose executable is not Python, and ``DYNATEX_PYTHON`` unset)
 the probe is skipped.
 """
@@ -58,18 +59,32 @@ def cache_dir() -> Path:
 
 def probe(filename: str) -> None:
     """Raise :class:`TileDBFormatError` when reading ``filename`` crashes or hangs a child process."""
-    st = os.stat(filename)
-    from .. import __version__
-    key = "|".join(str(v) for v in (os.path.realpath(filename), st.st_dev, st.st_ino, st.st_size,
-                                    st.st_mtime_ns, __version__))
+    key = _identity(filename)
     with _lock:
         if key not in _known:
-            _known[key] = None if key in _remembered() else _run_child(filename, st.st_size)
+            _known[key] = None if key in _remembered() else _run_child(filename, os.stat(filename).st_size)
             if _known[key] is None:
                 _remember(key)
         problem = _known[key]
     if problem:
         raise TileDBFormatError(problem, filename=filename)
+
+
+def remember(filename: str) -> None:
+    """Record ``filename`` as safe to read without a probe: the writer calls this for a file it
+    has just written and read back in this process (had its reads crashed, so would have we)."""
+    key = _identity(filename)
+    with _lock:
+        _known[key] = None
+        _remember(key)
+
+
+def _identity(filename: str) -> str:
+    """What a verdict is kept under: the file's path, device, inode, size, modification time and dynatex's version."""
+    from .. import __version__
+    st = os.stat(filename)
+    return "|".join(str(v) for v in (os.path.realpath(filename), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns,
+                                     __version__))
 
 
 def _run_child(filename: str, size: int) -> str | None:

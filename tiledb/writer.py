@@ -23,6 +23,7 @@ import h5py
 import numpy as np
 
 from . import frames as _frames
+from . import probe as _probe
 from . import schema
 from . import source as _source
 from .codecs import CODECS
@@ -150,6 +151,7 @@ class DatabaseWriter:
                 self._old = None
             _keep_mode(self._tmp, self.path)
             os.replace(self._tmp, self.path)
+            _probe.remember(self.path)       # read back above: no probe needed to open it
         except BaseException:
             self.abort()
             raise
