@@ -66,7 +66,7 @@ def bench_player(folder: str, frames: int, bandwidth: float) -> dict:
                 out["bytes_per_frame"] = p.bytes_per_frame
         # speed 1: one stored frame read and the output written; speed 0.5: two frames read,
         # the blend written to the device buffer, then read and written again by the copy out.
-        moved = p.bytes_per_frame if speed == 1.0 else p.bytes_per_frame * 2
+        moved = out["bytes_per_frame"] if speed == 1.0 else out["bytes_per_frame"] * 2
         roof_ms = moved / (bandwidth * 1e9) * 1e3
         row["roofline_ms"] = roof_ms
         row["roofline_fraction"] = roof_ms / row["opencl"]["median_ms"]
