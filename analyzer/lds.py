@@ -253,32 +253,32 @@ def plan_columns(clip: DiskClip, rows: int, max_memory: int | None) -> int:
 def gram_streamed(clip: DiskClip, width: int) -> tuple[np.ndarray, np.ndarray]:
     """Mean frame (float32) and the ``T x T`` Gram matrix (float64) of the mean-subtracted clip,
     summed over blocks of ``width`` pixel columns."""
-    tau, pixels = clip.n_frames, clip.pixels
-    mean = np.empty(pixels, np.float32)
-    gram = np.zeros((tau, tau), np.float64)
-    raw = np.empty((tau, width), np.uint8)
-    block = np.empty((tau, width), np.float32)
-    for p0 in range(0, pixels, width):
-        p1 = min(p0 + width, pixels)
-        b = block[:, :p1 - p0]
-        np.copyto(b, clip.columns(p0, p1, raw))
+    mean = np.empty(clip.pixels, np.float32)
+    gram = np.zeros((clip.n_frames, clip.n_frames), np.float64)
+    for p0, p1, b in _column_blocks(clip, width):
         mean[p0:p1] = b.mean(axis=0, dtype=np.float64)
         b -= mean[p0:p1]
         gram += b @ b.T
     return mean, gram
 
 
-def basis_streamed(clip: DiskClip, mean: np.ndarray, v: np.ndarray, sv: np.ndarray, width: int) -> np.ndarray:
-    """``(v / sv).T @ (Y - mean)``, the orthonormal basis rows, computed block by block."""
-    tau, pixels = clip.n_frames, clip.pixels
-    coef = np.ascontiguousarray((v / sv[None, :]).T.astype(np.float32))
-    basis = np.empty((coef.shape[0], pixels), np.float32)
-    raw = np.empty((tau, width), np.uint8)
-    block = np.empty((tau, width), np.float32)
-    for p0 in range(0, pixels, width):
-        p1 = min(p0 + width, pixels)
+def _column_blocks(clip: DiskClip, width: int):
+    """``(p0, p1, block)``: the clip's pixel columns ``p0:p1`` as float32 ``(T, p1 - p0)``, block
+    after block (one buffer reused: a block is valid until the next is yielded)."""
+    raw = np.empty((clip.n_frames, width), np.uint8)
+    block = np.empty((clip.n_frames, width), np.float32)
+    for p0 in range(0, clip.pixels, width):
+        p1 = min(p0 + width, clip.pixels)
         b = block[:, :p1 - p0]
         np.copyto(b, clip.columns(p0, p1, raw))
+        yield p0, p1, b
+
+
+def basis_streamed(clip: DiskClip, mean: np.ndarray, v: np.ndarray, sv: np.ndarray, width: int) -> np.ndarray:
+    """``(v / sv).T @ (Y - mean)``, the orthonormal basis rows, computed block by block."""
+    coef = np.ascontiguousarray((v / sv[None, :]).T.astype(np.float32))
+    basis = np.empty((coef.shape[0], clip.pixels), np.float32)
+    for p0, p1, b in _column_blocks(clip, width):
         b -= mean[p0:p1]
         np.matmul(coef, b, out=basis[:, p0:p1])
     return basis
