@@ -1,7 +1,7 @@
-"""Exceptions raised by the tile database, and the root of every dynatex error.
+"""Exceptions raised by the tile database.
 
-:class:`DynatexError` lives here because this package is the bottom layer (it imports
-nothing of ours); the analyzer, the player and the CLI derive their errors from it.
+Every error derives from :class:`~dynatex.errors.DynatexError`, the root in the leaf module
+:mod:`dynatex.errors` that every layer imports.
 Callers catch :class:`TileDBError`; each subclass also derives from the builtin it
 refines, so ``except FileNotFoundError`` or ``except KeyError`` work as expected.
 Messages read ``FILE: OBJECT-PATH: problem``.
@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import os
 
-
-class DynatexError(Exception):
-    """Root of every error dynatex raises on purpose: bad input, a bad database, no device."""
+from ..errors import DynatexError
 
 
 class TileDBError(DynatexError):

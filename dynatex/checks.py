@@ -1,0 +1,376 @@
+"""Argument checks shared by every layer, and the value kinds that declare them.
+
+One home for the rules an argument must follow. A check function takes the argument's name
+and value and returns the value normalized (``check_int("n", np.int64(3), 1) == 3``) or
+raises an :class:`~dynatex.errors.InvalidArgumentError` that names the argument and the rule
+(an :class:`~dynatex.errors.ArgumentTypeError` for a value of the wrong type).
+
+A *kind* (:class:`Range`, :class:`Choice`, :class:`Flag`, :class:`Numbers`, :class:`Text`,
+:class:`Size`, :class:`Either`) is a rule as an object: the same object checks a Python value
+(:meth:`~Range.check`), parses a command-line string (:meth:`~Range.parse`) and says the
+rule in words for help and docs (:meth:`~Range.describe`, ``str()``). Declarations of method
+parameters and player controls (:mod:`dynatex.params`) are built from kinds, so a range is
+written once. This module imports only numpy and :mod:`dynatex.errors`.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+import numpy as np
+
+from .errors import ArgumentTypeError, InvalidArgumentError
+
+
+# -- check functions ---------------------------------------------------------------------------
+def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None, *,
+              rule: str | None = None) -> int:
+    """``value`` as an int in ``[lo, hi]`` (either bound may be None).
+
+    Bools and floats are refused with an :class:`ArgumentTypeError`; a value out of range
+    raises ``"{name} must be {rule}, not {value}"``. ``rule`` defaults to words for the
+    bounds; pass it where a bound has a name (``"an integer in 1..n=5"``).
+
+    Examples
+    --------
+    >>> check_int("n", np.int64(3), 1)
+    3
+    >>> check_int("n", 0, 1)
+    Traceback (most recent call last):
+    ...
+    dynatex.errors.InvalidArgumentError: n must be an integer >= 1, not 0
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ArgumentTypeError(f"{name} must be an integer, not {value!r}")
+    v = int(value)
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise InvalidArgumentError(f"{name} must be {rule or Range(int, lo, hi).describe()}, not {v}")
+    return v
+
+
+def check_float(name: str, value: Any, lo: float | None = None, hi: float | None = None) -> float:
+    """``value`` as a finite float in ``[lo, hi]`` (either bound may be None).
+
+    Examples
+    --------
+    >>> check_float("speed", 2, -3, 3)
+    2.0
+    >>> check_float("speed", float("nan"))
+    Traceback (most recent call last):
+    ...
+    dynatex.errors.InvalidArgumentError: speed must be a finite number, not nan
+    """
+    return Range(float, lo, hi).check(name, value)
+
+
+def check_seed(name: str, value: Any) -> int:
+    """``value`` as a seed: a non-negative integer."""
+    return check_int(name, value, 0)
+
+
+def check_choice(name: str, value: Any, choices: Sequence[Any]) -> Any:
+    """``value`` if it is one of ``choices``.
+
+    >>> check_choice("end", "loop", ("hold", "loop"))
+    'loop'
+    """
+    return Choice(*choices).check(name, value)
+
+
+def check_size(name: str, value: Any, max_side: int) -> tuple[int, int]:
+    """``value`` as a ``(height, width)`` pair of integers in ``1..max_side``.
+
+    >>> check_size("size", (24, 40), 16384)
+    (24, 40)
+    """
+    return Size(max_side).check(name, value)
+
+
+def check_out(out: Any, shape: tuple[int, ...]) -> None:
+    """Check that ``out`` is a C-contiguous, writeable uint8 array of ``shape`` (a frame buffer)."""
+    if not isinstance(out, np.ndarray):
+        raise ArgumentTypeError(f"out must be a numpy array, not {type(out).__name__}")
+    if out.dtype != np.uint8 or out.shape != tuple(shape):
+        raise InvalidArgumentError(f"out must be uint8 with shape {tuple(shape)}, got {out.dtype} {out.shape}")
+    if not out.flags.c_contiguous or not out.flags.writeable:
+        raise InvalidArgumentError("out must be C-contiguous and writeable")
+
+
+# -- kinds -------------------------------------------------------------------------------------
+class Kind:
+    """A rule for one argument: checks Python values, parses command-line text, says itself."""
+
+    #: what the command line shows for the value (None: argparse's default)
+    metavar: str | None = None
+
+    def check(self, name: str, value: Any) -> Any:
+        """``value`` normalized, or an :class:`InvalidArgumentError` naming ``name``."""
+        raise NotImplementedError
+
+    def parse(self, text: str) -> Any:
+        """The value ``text`` (from a command line) stands for, or an :class:`InvalidArgumentError`."""
+        return self.check("value", text)
+
+    def describe(self) -> str:
+        """The rule in words, as it completes "must be ...": ``"an integer in 1..8"``."""
+        raise NotImplementedError
+
+    def __str__(self) -> str:
+        return self.describe()
+
+
+class Range(Kind):
+    """A finite ``int`` or ``float`` within bounds; ``low_open``/``high_open`` exclude a bound.
+
+    Examples
+    --------
+    >>> speed = Range(float, -3, 3)
+    >>> speed.check("speed", 2), str(speed), speed.parse(" -1.5 ")
+    (2.0, '[-3, 3]', -1.5)
+    >>> Range(float, 0, 1, low_open=True).describe()
+    'a finite number in (0, 1]'
+    """
+
+    def __init__(self, kind: type, low: float | None = None, high: float | None = None, *,
+                 low_open: bool = False, high_open: bool = False) -> None:
+        if kind not in (int, float):
+            raise TypeError("kind must be int or float")
+        self.kind, self.low, self.high = kind, low, high
+        self.low_open, self.high_open = low_open, high_open
+
+    def contains(self, v: float) -> bool:
+        return (math.isfinite(v)
+                and (self.low is None or (v > self.low if self.low_open else v >= self.low))
+                and (self.high is None or (v < self.high if self.high_open else v <= self.high)))
+
+    def check(self, name: str, value: Any) -> int | float:
+        if self.kind is int:
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise ArgumentTypeError(f"{name} must be an integer, not {value!r}")
+            v: int | float = int(value)
+        else:
+            if isinstance(value, (str, bytes)):
+                raise ArgumentTypeError(f"{name} must be a number, not {value!r}")
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                raise ArgumentTypeError(f"{name} must be a number, not {value!r}") from None
+        if not self.contains(v):
+            raise InvalidArgumentError(f"{name} must be {self.describe()}, not {value!r}")
+        return v
+
+    def parse(self, text: str) -> int | float:
+        try:
+            value = self.kind(text.strip())
+        except (TypeError, ValueError, OverflowError):
+            raise InvalidArgumentError(f"expected {self.describe()}, not {text!r}") from None
+        if not self.contains(value):
+            raise InvalidArgumentError(f"expected {self.describe()}, not {text!r}")
+        return value
+
+    def describe(self) -> str:
+        what = "an integer" if self.kind is int else "a finite number"
+        rng = self.bounds()
+        if not rng:
+            return what
+        if self.kind is int and self.low == 0 and self.high is None:
+            return "a non-negative integer"
+        return f"{what} {rng}" if rng[0] in "<>" else f"{what} in {rng}"
+
+    def bounds(self) -> str:
+        """The bounds alone: ``"[0, 1)"``, ``"1..8"``, ``">= 0"`` (empty when unbounded)."""
+        lo, hi = self.low, self.high
+        if lo is None and hi is None:
+            return ""
+        if hi is None:
+            return f"{'>' if self.low_open else '>='} {_g(lo)}"
+        if lo is None:
+            return f"{'<' if self.high_open else '<='} {_g(hi)}"
+        if self.kind is int and not (self.low_open or self.high_open):
+            return f"{_g(lo)}..{_g(hi)}"
+        return f"{'(' if self.low_open else '['}{_g(lo)}, {_g(hi)}{')' if self.high_open else ']'}"
+
+    def __str__(self) -> str:
+        return self.bounds()
+
+    def __repr__(self) -> str:
+        return f"Range({self.kind.__name__}, {self.bounds()})"
+
+
+def _g(v: float) -> str:
+    return str(v) if isinstance(v, int) else f"{v:g}"
+
+
+class Choice(Kind):
+    """One of a fixed set of values (strings on the command line).
+
+    >>> Choice("hold", "loop").check("end", "pingpong")
+    Traceback (most recent call last):
+    ...
+    dynatex.errors.InvalidArgumentError: end must be one of 'hold', 'loop', not 'pingpong'
+    """
+
+    def __init__(self, *choices: Any) -> None:
+        self.choices = tuple(choices)
+
+    def check(self, name: str, value: Any) -> Any:
+        try:
+            ok = value in self.choices
+        except TypeError:
+            ok = False
+        if not ok:
+            raise InvalidArgumentError(f"{name} must be {self.describe()}, not {value!r}")
+        return value
+
+    def parse(self, text: str) -> Any:
+        for c in self.choices:
+            if str(c) == text:
+                return c
+        raise InvalidArgumentError(f"expected {self.describe()}, not {text!r}")
+
+    def describe(self) -> str:
+        return "one of " + ", ".join(repr(c) for c in self.choices)
+
+    def __str__(self) -> str:
+        return "{" + ",".join(str(c) for c in self.choices) + "}"
+
+
+class Flag(Kind):
+    """A bool (on the command line a switch that takes no value)."""
+
+    def check(self, name: str, value: Any) -> bool:
+        if not isinstance(value, (bool, np.bool_)):
+            raise ArgumentTypeError(f"{name} must be True or False, not {value!r}")
+        return bool(value)
+
+    def describe(self) -> str:
+        return "True or False"
+
+
+class Numbers(Kind):
+    """``count`` values of one :class:`Range`: a tuple in Python, ``a,b,c`` on the command line.
+
+    >>> Numbers(Range(float, 0, 10), 3, "C,M,F").parse("1,2,0.5")
+    (1.0, 2.0, 0.5)
+    """
+
+    def __init__(self, item: Range, count: int, form: str) -> None:
+        self.item, self.count, self.form = item, count, form
+        self.metavar = form
+
+    def check(self, name: str, value: Any) -> tuple:
+        if isinstance(value, (str, bytes)):
+            raise ArgumentTypeError(f"{name} must be {self.describe()}, not {value!r}")
+        try:
+            items = list(value)
+        except TypeError:
+            raise ArgumentTypeError(f"{name} must be {self.describe()}, not {value!r}") from None
+        if len(items) != self.count:
+            raise InvalidArgumentError(f"{name} must be {self.describe()}, not {value!r}")
+        return tuple(self.item.check(f"{name}[{i}]", v) for i, v in enumerate(items))
+
+    def parse(self, text: str) -> tuple:
+        parts = text.split(",")
+        try:
+            if len(parts) != self.count:
+                raise InvalidArgumentError("count")
+            return tuple(self.item.parse(p) for p in parts)
+        except InvalidArgumentError:
+            raise InvalidArgumentError(f"expected {self.describe()}, not {text!r}") from None
+
+    def describe(self) -> str:
+        return f"{self.form}: {self.count} numbers, each {self.item.describe()}"
+
+    def __str__(self) -> str:
+        return f"{self.form}, each {self.item.describe()}"
+
+
+class Size(Kind):
+    """A ``(height, width)`` pair of integers in ``1..max_side``; ``WxH`` on the command line.
+
+    >>> Size(16384).parse("40x24")
+    (24, 40)
+    """
+
+    metavar = "WxH"
+
+    def __init__(self, max_side: int) -> None:
+        self.max_side = max_side
+
+    def check(self, name: str, value: Any) -> tuple[int, int]:
+        side = Range(int, 1, self.max_side)
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
+            raise ArgumentTypeError(f"{name} must be (height, width), not {value!r}")
+        h, w = (side.check(f"{name} {part}", v) for part, v in zip(("height", "width"), value))
+        return int(h), int(w)
+
+    def parse(self, text: str) -> tuple[int, int]:
+        parts = text.lower().split("x")
+        side = Range(int, 1, self.max_side)
+        try:
+            if len(parts) != 2:
+                raise InvalidArgumentError("form")
+            w, h = (side.parse(p) for p in parts)
+        except InvalidArgumentError:
+            raise InvalidArgumentError(f"expected WIDTHxHEIGHT, each side in {side}, not {text!r}") from None
+        return h, w
+
+    def describe(self) -> str:
+        return f"(height, width), each in 1..{self.max_side}"
+
+    def __str__(self) -> str:
+        return f"WIDTHxHEIGHT, each side in 1..{self.max_side}"
+
+
+class Text(Kind):
+    """A non-empty string (a path, a name, a preset); ``metavar`` names it in help."""
+
+    def __init__(self, metavar: str | None = None) -> None:
+        self.metavar = metavar
+
+    def check(self, name: str, value: Any) -> str:
+        if not isinstance(value, str) or not value:
+            raise ArgumentTypeError(f"{name} must be a non-empty string, not {value!r}")
+        return value
+
+    def parse(self, text: str) -> str:
+        return self.check("value", text)
+
+    def describe(self) -> str:
+        return "a non-empty string" if self.metavar is None else self.metavar
+
+
+class Either(Kind):
+    """The first of several kinds that takes the value (an integer or ``"auto"``).
+
+    >>> n = Either(Range(int, 1, 100), Choice("auto"))
+    >>> n.parse("auto"), n.parse("7"), n.describe()
+    ('auto', 7, "an integer in 1..100 or one of 'auto'")
+    """
+
+    def __init__(self, *kinds: Kind, metavar: str | None = None) -> None:
+        self.kinds = kinds
+        self.metavar = metavar
+
+    def check(self, name: str, value: Any) -> Any:
+        for kind in self.kinds:
+            try:
+                return kind.check(name, value)
+            except InvalidArgumentError:
+                continue
+        raise InvalidArgumentError(f"{name} must be {self.describe()}, not {value!r}")
+
+    def parse(self, text: str) -> Any:
+        for kind in self.kinds:
+            try:
+                return kind.parse(text)
+            except InvalidArgumentError:
+                continue
+        raise InvalidArgumentError(f"expected {self.describe()}, not {text!r}")
+
+    def describe(self) -> str:
+        return " or ".join(k.describe() for k in self.kinds)
+
+
+__all__ = ["Choice", "Either", "Flag", "Kind", "Numbers", "Range", "Size", "Text", "check_choice", "check_float",
+           "check_int", "check_out", "check_seed", "check_size"]

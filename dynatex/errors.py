@@ -1,0 +1,23 @@
+"""The root of every error dynatex raises on purpose, and the errors of bad arguments.
+
+This module imports nothing of ours, so every layer (the tile database at the bottom, the
+analyzer and the player above it, the CLI on top) may derive its errors from it. Each error
+also derives from the builtin it refines, so ``except ValueError`` keeps working; the CLI
+turns a :class:`DynatexError` into one line and exit code 2, anything else into exit code 1.
+"""
+from __future__ import annotations
+
+
+class DynatexError(Exception):
+    """Root of every error dynatex raises on purpose: bad input, a bad database, no device."""
+
+
+class InvalidArgumentError(DynatexError, ValueError):
+    """An argument with a value out of its range or set (names the argument and the rule)."""
+
+
+class ArgumentTypeError(InvalidArgumentError, TypeError):
+    """An argument of the wrong type. Also a ValueError: to a caller it is one more bad value."""
+
+
+__all__ = ["ArgumentTypeError", "DynatexError", "InvalidArgumentError"]
