@@ -10,7 +10,7 @@ from typing import Callable
 import numpy as np
 
 from .player import open_player
-from .player.base import check_int
+from .checks import check_int
 from .tiledb import DatabaseWriter, LDSModel, SourceInfo
 
 

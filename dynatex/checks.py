@@ -115,6 +115,10 @@ class Kind:
         """The rule in words, as it completes "must be ...": ``"an integer in 1..8"``."""
         raise NotImplementedError
 
+    def describe_text(self) -> str:
+        """The rule for the text a command line gives (where it differs from the Python value's)."""
+        return self.describe()
+
     def __str__(self) -> str:
         return self.describe()
 
@@ -318,8 +322,68 @@ class Size(Kind):
     def describe(self) -> str:
         return f"(height, width), each in 1..{self.max_side}"
 
+    def describe_text(self) -> str:
+        return f"WIDTHxHEIGHT, each side in 1..{self.max_side}"
+
     def __str__(self) -> str:
         return f"WIDTHxHEIGHT, each side in 1..{self.max_side}"
+
+
+class Array(Kind):
+    """A float array of finite values within bounds (``ndim`` dimensions when given); Python only.
+
+    >>> Array(0, 10, ndim=1).check("weights", [1, 2.5])
+    array([1. , 2.5])
+    """
+
+    def __init__(self, low: float | None = None, high: float | None = None, *, ndim: int | None = None) -> None:
+        self.range = Range(float, low, high)
+        self.ndim = ndim
+
+    def check(self, name: str, value: Any) -> np.ndarray:
+        try:
+            arr = np.array(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ArgumentTypeError(f"{name} must be {self.describe()}, not {type(value).__name__}") from None
+        if self.ndim is not None and arr.ndim != self.ndim:
+            raise InvalidArgumentError(f"{name} must be {self.describe()}, not of shape {arr.shape}")
+        if arr.size and not (np.isfinite(arr).all() and self.range.contains(float(arr.min()))
+                             and self.range.contains(float(arr.max()))):
+            raise InvalidArgumentError(f"{name} must be {self.describe()}")
+        return arr
+
+    def parse(self, text: str) -> np.ndarray:
+        raise InvalidArgumentError("an array is not given on the command line")
+
+    def describe(self) -> str:
+        dims = "an array" if self.ndim is None else f"a {self.ndim}-D array"
+        rng = self.range.bounds()
+        return f"{dims} of finite numbers" + (f" in {rng}" if rng and rng[0] not in "<>" else f" {rng}" if rng else "")
+
+
+class NpyFile(Kind):
+    """An array in Python; on the command line the path of an ``.npy`` file holding it (no pickles)."""
+
+    metavar = "FILE.npy"
+
+    def check(self, name: str, value: Any) -> np.ndarray:
+        if not isinstance(value, np.ndarray):
+            raise ArgumentTypeError(f"{name} must be a numpy array, not {type(value).__name__}")
+        return value
+
+    def parse(self, text: str) -> np.ndarray:
+        if not text.endswith(".npy"):
+            raise InvalidArgumentError(f"expected a FILE.npy, not {text!r}")
+        try:
+            return np.load(text, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise InvalidArgumentError(f"cannot read {text!r}: {exc}") from None
+
+    def describe(self) -> str:
+        return "a numpy array"
+
+    def describe_text(self) -> str:
+        return "a FILE.npy"
 
 
 class Text(Kind):
@@ -371,6 +435,9 @@ class Either(Kind):
     def describe(self) -> str:
         return " or ".join(k.describe() for k in self.kinds)
 
+    def describe_text(self) -> str:
+        return " or ".join(k.describe_text() for k in self.kinds)
 
-__all__ = ["Choice", "Either", "Flag", "Kind", "Numbers", "Range", "Size", "Text", "check_choice", "check_float",
+
+__all__ = ["Array", "Choice", "Either", "Flag", "Kind", "NpyFile", "Numbers", "Range", "Size", "Text", "check_choice", "check_float",
            "check_int", "check_out", "check_seed", "check_size"]

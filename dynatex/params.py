@@ -7,6 +7,7 @@ docs are generated from those declarations, so adding a parameter touches one pl
 """
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -78,13 +79,16 @@ class Param:
         return str(self.default)
 
     def help(self) -> str:
-        """One paragraph for ``--help`` and the docs: what, the rule, the default."""
-        rule = self.kind.describe()
+        """One paragraph for ``--help``: what, the rule for the flag's text, the default."""
+        rule = self.kind.describe_text()
         return f"{self.doc} {rule[0].upper()}{rule[1:]} (default {self.default_text()})."
 
     def numpydoc(self) -> str:
         """The parameter as a numpydoc entry (``name : rule`` and the indented description)."""
-        return f"{self.name} : {self.kind.describe()}\n    {self.doc} Default {self.default_text()}."
+        default = self.default_text()
+        text = self.doc + (f" Default {default}." if default else "")
+        return f"{self.name} : {self.kind.describe()}\n" + textwrap.fill(text, 88, initial_indent="    ",
+                                                                          subsequent_indent="    ")
 
 
 __all__ = ["Param"]

@@ -6,12 +6,34 @@ from typing import Any, ClassVar, Iterator
 
 import numpy as np
 
+from ..checks import Choice, Range, Text, check_int, check_out, check_seed
+from ..errors import InvalidArgumentError
+from ..params import Param
 from ..tiledb import Texture, TileDB
-from .pixels import pixel_format
+from .controls import Capabilities, Control, controls_of, document
+from .pixels import FORMATS, pixel_format
 
 BACKENDS = ("opencl", "numpy")
 #: what a player's ``backend`` may be: a backend, or "auto" (OpenCL on a verified device, else numpy)
 BACKEND_CHOICES = ("auto", *BACKENDS)
+#: largest seed (NumPy's generators take any non-negative integer; a seed is stored as int64)
+MAX_SEED = 2**63 - 1
+
+#: the parameters every mode takes, in the order of its docstring
+COMMON_OPTIONS: tuple[Param, ...] = (
+    Param("db", Text("path or TileDB"), None, "The tile database (a path or an open TileDB).", flag=None,
+          default_doc=""),
+    Param("texture", Text("NAME"), None, "Texture name.", optional=True,
+          default_doc="the database's only texture"),
+    Param("backend", Choice(*BACKEND_CHOICES), "auto",
+          "auto: OpenCL on the first device that passed the self-test, else the numpy reference with one "
+          "warning; opencl: a verified device or OpenCLUnavailableError; numpy: the reference."),
+    Param("device", Text("P:D|NAME"), None, "OpenCL device: index P:D or a name substring "
+          "(see dynatex.player.opencl.get_context).", optional=True, default_doc="the first verified device"),
+    Param("format", Choice(*FORMATS), "RGB", "Pixel format of the frames, written by the kernels (alpha 255)."),
+    Param("seed", Range(int, 0, MAX_SEED), 0, "Seed of the mode's random choices; the same seed gives the same "
+          "frames."),
+)
 
 _fallback_warned = False
 
@@ -33,19 +55,39 @@ class Player:
     written straight from the kernels (:mod:`dynatex.player.pixels`); :attr:`shape` ends in
     its bytes per pixel.
 
-    Subclasses set ``mode``, implement ``_start(out)`` and ``_get_state``/``_set_state``.
-    :meth:`set_state` is all or nothing: when ``_set_state`` raises on a bad entry, the state
-    taken before is applied again (``_set_state`` should still check entries before it
-    changes anything, which keeps a failed restore cheap); a missing entry's KeyError becomes
-    the ValueError "state lacks '...'".
+    Subclasses set ``mode``, declare their live controls as :class:`~.controls.Control`
+    attributes, their constructor options in ``options`` and what they can do in
+    ``capabilities`` (:mod:`dynatex.player.controls`; the CLI and the docstring follow from
+    these), implement ``_start(out)``, and ``_get_state``/``_set_state`` for the state that
+    is not a control (position, random generator). :meth:`set_state` is all or nothing:
+    every control entry is checked first, and when anything raises the state taken before
+    is applied again; a missing entry's KeyError becomes the ValueError "state lacks '...'".
     """
 
     mode: ClassVar[str] = ""
+    #: constructor options beyond :data:`COMMON_OPTIONS` (fixed for the player's lifetime)
+    options: ClassVar[tuple[Param, ...]] = ()
+    capabilities: ClassVar[Capabilities] = Capabilities()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.__dict__.get("mode"):
+            document(cls, COMMON_OPTIONS)
+
+    @classmethod
+    def controls(cls) -> dict[str, Control]:
+        """The mode's live controls by name, in declaration order."""
+        return controls_of(cls)
+
+    def _init_controls(self) -> None:
+        """Give every control with a declared default that value (through its setter)."""
+        for name, c in self.controls().items():
+            if c.param.default is not None:
+                setattr(self, name, c.param.default)
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
                  backend: str = "auto", device: str | None = None, format: str = "RGB") -> None:
-        if backend not in BACKEND_CHOICES:
-            raise ValueError(f"backend must be one of {BACKEND_CHOICES}, not {backend!r}")
+        backend = Choice(*BACKEND_CHOICES).check("backend", backend)
         #: the frames' pixel format (:data:`dynatex.player.pixels.FORMATS`)
         self.format = pixel_format(format)
         self.queue = None
@@ -135,8 +177,10 @@ class Player:
 
     # -- state -----------------------------------------------------------------
     def get_state(self) -> dict[str, Any]:
-        """Everything that decides future frames, as plain Python and numpy values."""
-        state = self._get_state()
+        """Everything that decides future frames, as plain Python and numpy values: every
+        control, the mode's position and random generator."""
+        state = {name: c.saved(self) for name, c in self.controls().items() if c.state}
+        state.update(self._get_state())
         state["mode"] = self.mode
         state["texture"] = self.texture.name
         state["frame_index"] = self.frame_index
@@ -145,18 +189,24 @@ class Player:
     def set_state(self, state: dict[str, Any]) -> None:
         """Restore a state from :meth:`get_state` of a player of the same mode and texture."""
         if not isinstance(state, dict) or state.get("mode") != self.mode:
-            raise ValueError(f"state must come from a {self.mode!r} player")
+            raise InvalidArgumentError(f"state must come from a {self.mode!r} player")
         if state.get("texture") != self.texture.name:
-            raise ValueError(f"state is for texture {state.get('texture')!r}, not {self.texture.name!r}")
-        before = self._get_state()
+            raise InvalidArgumentError(f"state is for texture {state.get('texture')!r}, not {self.texture.name!r}")
+        before = self.get_state()
         try:
-            frame_index = check_int("state frame_index", state["frame_index"], 0)
-            self._set_state(state)
+            self._apply_state(state)
         except BaseException as exc:
-            self._set_state(before)          # all or nothing: a bad entry leaves the player as it was
+            self._apply_state(before)        # all or nothing: a bad entry leaves the player as it was
             if isinstance(exc, KeyError):
-                raise ValueError(f"state lacks {exc.args[0]!r}") from None
+                raise InvalidArgumentError(f"state lacks {exc.args[0]!r}") from None
             raise
+
+    def _apply_state(self, state: dict[str, Any]) -> None:
+        frame_index = check_int("state frame_index", state["frame_index"], 0)
+        controls = {name: c.param.check(state[name]) for name, c in self.controls().items() if c.state}
+        self._set_state(state)
+        for name, value in controls.items():
+            setattr(self, name, value)
         self.frame_index = frame_index
 
     def _get_state(self) -> dict[str, Any]:
@@ -210,66 +260,11 @@ class PendingFrame:
         return self.out
 
 
-class FloatControl:
-    """A player control holding a finite float in ``[lo, hi]``, checked on assignment.
-
-    ``speed = FloatControl("speed", 0.0, 4.0)`` in a player class stores the value in
-    ``self._speed``; a bad value raises the error of :func:`check_float` and keeps the old one.
-    """
-
-    def __init__(self, name: str, lo: float | None, hi: float | None) -> None:
-        self.name, self.lo, self.hi = name, lo, hi
-        self.attr = "_" + name
-
-    def __get__(self, obj: Any, owner: type | None = None) -> Any:
-        return self if obj is None else getattr(obj, self.attr)
-
-    def __set__(self, obj: Any, value: Any) -> None:
-        setattr(obj, self.attr, check_float(self.name, value, self.lo, self.hi))
-
-
-def check_out(out: Any, shape: tuple[int, ...]) -> None:
-    if not isinstance(out, np.ndarray):
-        raise TypeError(f"out must be a numpy array, not {type(out).__name__}")
-    if out.dtype != np.uint8 or out.shape != tuple(shape):
-        raise ValueError(f"out must be uint8 with shape {tuple(shape)}, got {out.dtype} {out.shape}")
-    if not out.flags.c_contiguous or not out.flags.writeable:
-        raise ValueError("out must be C-contiguous and writeable")
-
-
-def check_float(name: str, value: Any, lo: float | None = None, hi: float | None = None) -> float:
-    """``value`` as a finite float in ``[lo, hi]``, else a ValueError naming ``name``."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a number, not {value!r}") from None
-    if not np.isfinite(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
-        rng = f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
-        raise ValueError(f"{name} must be a finite number in {rng}, not {value!r}")
-    return v
-
-
 def rng_from_state(state: Any) -> np.random.Generator:
     """The PCG64 generator whose ``bit_generator.state`` a player's :meth:`Player.get_state` saved."""
     rng = np.random.Generator(np.random.PCG64())
     rng.bit_generator.state = state
     return rng
-
-
-def check_seed(name: str, value: Any) -> int:
-    """``value`` as a seed (a non-negative integer), else a ValueError naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
-        raise ValueError(f"{name} must be a non-negative integer, not {value!r}")
-    return int(value)
-
-
-def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, not {value!r}")
-    v = int(value)
-    if (lo is not None and v < lo) or (hi is not None and v > hi):
-        raise ValueError(f"{name} must be in [{lo}, {'inf' if hi is None else hi}], not {v}")
-    return v
 
 
 def _context(backend: str, device: str | None):

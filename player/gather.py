@@ -85,7 +85,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .base import BACKENDS, check_float, check_int, check_out
+from ..checks import check_float, check_int, check_out
+from .base import BACKENDS
 from .pixels import FORMATS, pixel_format
 
 log = logging.getLogger(__name__)

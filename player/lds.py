@@ -11,8 +11,11 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import Array, Numbers, Range
+from ..errors import InvalidArgumentError
 from ..tiledb import LDSModel
-from .base import check_float, rng_from_state
+from .base import rng_from_state
+from .controls import Control
 from .projected import ProjectionPlayer
 
 MAX_WEIGHT = 10.0
@@ -48,35 +51,6 @@ def edited_poles(poles: np.ndarray, speed: float) -> np.ndarray:
 class LDSPlayer(ProjectionPlayer):
     """Endless frames from a texture's ``lds`` model, with live edits.
 
-    Parameters
-    ----------
-    db : path or TileDB
-        The tile database.
-    texture : str, optional
-        Texture name (optional when the database holds one texture).
-    backend : {"auto", "opencl", "numpy"}
-        See :class:`~dynatex.player.base.Player`.
-    device : str, optional
-        OpenCL device (see :func:`dynatex.player.opencl.get_context`).
-    format : {"RGB", "RGBA", "BGRA"}
-        Pixel format of the frames (see :class:`~dynatex.player.base.Player`).
-    seed : int
-        Seed of the driving noise; the same seed gives the same frames.
-    precision : {"float32", "float16"}
-        Storage of the basis on the device. ``"float16"`` halves the bytes each frame
-        reads (faster, memory-bound) at PSNR above 45 dB against float32.
-
-    Controls (attributes, changeable between any two frames)
-    ---------------------------------------------------------
-    speed : float in [-3, 3]
-        Pole angles scaled by ``speed``; negative plays time backwards.
-    intensity : float >= 0
-        Scale of the driving noise covariance ``Q`` (0 lets the texture settle to the mean).
-    scales : (coarse, medium, fine), each in [0, 10]
-        Weights of the three groups of components.
-    weights : (n,) array, each in [0, 10]
-        Per-component weights, multiplied with ``scales``.
-
     Examples
     --------
     >>> with LDSPlayer("water.h5", seed=3) as p:     # doctest: +SKIP
@@ -99,54 +73,44 @@ class LDSPlayer(ProjectionPlayer):
         self._vecs_inv = np.linalg.inv(self._vecs)
         self._groups = scale_groups(self.n)
         self._speed = 1.0
-        self._scales = np.ones(3)
+        self._scales = (1.0, 1.0, 1.0)
         self._weights = np.ones(self.n)
         self._A_edit = self._A
         self._w = np.ones(self.n)
         self._x = self._x0.copy()
 
     # -- controls ----------------------------------------------------------------
-    @property
-    def speed(self) -> float:
-        return self._speed
+    speed = Control(Range(float, *SPEED_RANGE), 1.0, "Pole angles scaled by speed; negative plays time backwards.")
 
     @speed.setter
     def speed(self, value: float) -> None:
-        self._speed = check_float("speed", value, *SPEED_RANGE)
-        if self._speed == 1.0:
+        self._speed = value
+        if value == 1.0:
             self._A_edit = self._A
         else:
-            poles = edited_poles(self._poles, self._speed)
+            poles = edited_poles(self._poles, value)
             self._A_edit = np.ascontiguousarray(((self._vecs * poles) @ self._vecs_inv).real)
 
-    @property
-    def scales(self) -> tuple[float, float, float]:
-        return tuple(float(v) for v in self._scales)  # type: ignore[return-value]
+    scales = Control(Numbers(Range(float, 0.0, MAX_WEIGHT), 3, "C,M,F"), (1.0, 1.0, 1.0),
+                     "Weights of the coarse, medium and fine groups of components.")
 
     @scales.setter
-    def scales(self, value) -> None:
-        vals = np.asarray(value, dtype=float) if not isinstance(value, str) else None
-        if vals is None or vals.shape != (3,):
-            raise ValueError(f"scales must be three numbers (coarse, medium, fine), not {value!r}")
-        self._scales = np.array([check_float(f"scales[{i}]", v, 0.0, MAX_WEIGHT) for i, v in enumerate(vals)])
+    def scales(self, value: tuple[float, float, float]) -> None:
+        self._scales = value
         self._update_w()
 
-    @property
-    def weights(self) -> np.ndarray:
-        return self._weights.copy()
+    weights = Control(Array(0.0, MAX_WEIGHT, ndim=1), None, "Per-component weights, multiplied with scales.",
+                      flag=None, default_doc="all 1")
 
     @weights.setter
-    def weights(self, value) -> None:
-        vals = np.asarray(value, dtype=float)
-        if vals.shape != (self.n,):
-            raise ValueError(f"weights must have shape ({self.n},), not {vals.shape}")
-        if not np.isfinite(vals).all() or vals.min() < 0 or vals.max() > MAX_WEIGHT:
-            raise ValueError(f"weights must be finite and within [0, {MAX_WEIGHT}]")
-        self._weights = vals.copy()
+    def weights(self, value: np.ndarray) -> None:
+        if value.shape != (self.n,):
+            raise InvalidArgumentError(f"weights must have shape ({self.n},), not {value.shape}")
+        self._weights = value
         self._update_w()
 
     def _update_w(self) -> None:
-        self._w = self._scales[self._groups] * self._weights
+        self._w = np.asarray(self._scales)[self._groups] * self._weights
 
     @property
     def groups(self) -> np.ndarray:
@@ -175,19 +139,13 @@ class LDSPlayer(ProjectionPlayer):
 
     # -- state ---------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:
-        return {"x": self._x.copy(), "rng": self._rng.bit_generator.state, "seed": self.seed,
-                "speed": self._speed, "intensity": self._intensity, "scales": self._scales.copy(),
-                "weights": self._weights.copy()}
+        return {"x": self._x.copy(), "rng": self._rng.bit_generator.state, "seed": self.seed}
 
     def _set_state(self, state: dict[str, Any]) -> None:
         x = np.asarray(state["x"], dtype=float)
         if x.shape != (self.n,) or not np.isfinite(x).all():
-            raise ValueError(f"state x must be finite with shape ({self.n},)")
+            raise InvalidArgumentError(f"state x must be finite with shape ({self.n},)")
         rng = rng_from_state(state["rng"])
-        self.speed = state["speed"]
-        self.intensity = state["intensity"]
-        self.scales = state["scales"]
-        self.weights = state["weights"]
         self._x = x.copy()
         self._rng = rng
         self.seed = int(state.get("seed", self.seed))

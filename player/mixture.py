@@ -15,8 +15,11 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import Range
+from ..errors import InvalidArgumentError
 from ..tiledb import MixtureModel, TileDB
-from .base import check_int, rng_from_state
+from .base import rng_from_state
+from .controls import Control
 from .projected import ProjectionPlayer
 
 DEFAULT_DRAWS = 16
@@ -78,33 +81,6 @@ def nearest_distance(train: np.ndarray, g: np.ndarray) -> np.ndarray:
 class MixturePlayer(ProjectionPlayer):
     """Endless frames from a texture's ``mixture`` model.
 
-    Parameters
-    ----------
-    db : path or TileDB
-        The tile database.
-    texture : str, optional
-        Texture name (optional when the database holds one texture).
-    backend : {"auto", "opencl", "numpy"}
-        See :class:`~dynatex.player.base.Player`.
-    device : str, optional
-        OpenCL device (see :func:`dynatex.player.opencl.get_context`).
-    format : {"RGB", "RGBA", "BGRA"}
-        Pixel format of the frames (see :class:`~dynatex.player.base.Player`).
-    seed : int
-        Seed of the driving noise; the same seed gives the same frames.
-    precision : {"float32", "float16"}
-        Storage of the stacked basis on the device.
-    draws : int
-        Initial value of the ``draws`` control.
-
-    Controls (attributes, changeable between any two frames)
-    ---------------------------------------------------------
-    draws : int in [1, 1024]
-        Noise draws per step; the candidate nearest the training manifold is kept
-        (1 = the plain AR process).
-    intensity : float in [0, 100]
-        Scale of the AR noise covariance (0 follows the deterministic AR prediction).
-
     Examples
     --------
     >>> with MixturePlayer("water.h5", seed=3) as p:     # doctest: +SKIP
@@ -139,13 +115,9 @@ class MixturePlayer(ProjectionPlayer):
         self._hist = self._hist0.copy()
 
     # -- controls ----------------------------------------------------------------
-    @property
-    def draws(self) -> int:
-        return self._draws
-
-    @draws.setter
-    def draws(self, value: int) -> None:
-        self._draws = check_int("draws", value, 1, MAX_DRAWS)
+    draws = Control(Range(int, 1, MAX_DRAWS), DEFAULT_DRAWS,
+                    "Noise draws per step; the candidate nearest the learned manifold is kept (1: the plain AR "
+                    "process).")
 
     # -- synthesis -----------------------------------------------------------------
     @property
@@ -177,16 +149,13 @@ class MixturePlayer(ProjectionPlayer):
 
     # -- state ---------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:
-        return {"history": self._hist.copy(), "rng": self._rng.bit_generator.state, "seed": self.seed,
-                "draws": self._draws, "intensity": self._intensity}
+        return {"history": self._hist.copy(), "rng": self._rng.bit_generator.state, "seed": self.seed}
 
     def _set_state(self, state: dict[str, Any]) -> None:
         hist = np.asarray(state["history"], dtype=float)
         if hist.shape != self._hist.shape or not np.isfinite(hist).all():
-            raise ValueError(f"state history must be finite with shape {self._hist.shape}")
+            raise InvalidArgumentError(f"state history must be finite with shape {self._hist.shape}")
         rng = rng_from_state(state["rng"])
-        self.draws = state["draws"]
-        self.intensity = state["intensity"]
         self._hist = hist.copy()
         self._rng = rng
         self.seed = int(state.get("seed", self.seed))

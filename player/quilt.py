@@ -27,8 +27,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..checks import Choice, Flag, NpyFile, Range, Size, check_float, check_seed
+from ..errors import ArgumentTypeError, InvalidArgumentError
+from ..params import Param
 from ..tiledb import QuiltModel, TileDB
-from .base import FloatControl, Player, check_float, check_seed
+from .base import Player
+from .controls import Capabilities, Control
 from .gather import gaussian_smooth
 from .ratemap import check_rate_map
 from .runs import open_runs, quantize_rate
@@ -56,7 +60,7 @@ def jitter_warp(n_blocks: int, n_frames: int, jitter: float, *, end: str = "hold
     (True, True)
     """
     if end not in ENDS:
-        raise ValueError(f"end must be one of {ENDS}, not {end!r}")
+        raise InvalidArgumentError(f"end must be one of {ENDS}, not {end!r}")
     jitter = check_float("jitter", jitter, 0.0, float(n_frames))
     k = np.arange(n_frames + 1, dtype=np.float64)
     last = float(n_frames if end == "loop" else n_frames - 1)
@@ -106,43 +110,9 @@ def warp_time(warp: np.ndarray, labels: np.ndarray, tau: np.ndarray) -> np.ndarr
 class EvolvePlayer(Player):
     """Endless frames of a time-varying texture from its ``quilt`` and stored frames.
 
-    Parameters
-    ----------
-    db : path or TileDB
-        The tile database (the texture needs ``quilt`` data and stored frames).
-    texture : str, optional
-        Texture name (optional when the database holds one texture).
-    backend : {"auto", "opencl", "numpy"}
-        See :class:`~dynatex.player.base.Player`.
-    device : str, optional
-        OpenCL device (see :func:`dynatex.player.opencl.get_context`).
-    format : {"RGB", "RGBA", "BGRA"}
-        Pixel format of the frames (see :class:`~dynatex.player.base.Player`).
-    seed : int
-        Seed of the time jitter; the same seed gives the same frames.
-    size : (width, height), optional
-        Must equal the stored quilt's canvas (the quilt fixes the output size; re-run the
-        analysis with another ``size`` for another canvas).
-    interpolate : bool
-        Blend linearly between source frames at fractional times (otherwise the earlier frame).
-    jitter, end, speed, rate_map, rate_sigma
-        Initial values of the controls below.
-
-    Controls (attributes, changeable between any two frames)
-    ---------------------------------------------------------
-    speed : float in [-16, 16]
-        Source frames the clock advances per output frame.
-    time : float
-        The clock (source frames at rate 1); assign to seek.
-    jitter : float in [0, n_frames]
-        ``e``: largest deviation of a block's time from the true time, in frames.
-    end : {"hold", "loop", "pingpong"}
-        What happens after the last source frame.
-    rate_map : (H, W) array in [0, 64], or None (uniform 1)
-        Per-pixel rate ``M``; see :mod:`dynatex.player.ratemap` for generators. Played
-        quantized to steps of 1/512 after smoothing (:func:`quantize_rate`).
-    rate_sigma : float >= 0
-        Gaussian smoothing of the rate map in output pixels (0: none).
+    The clock (:attr:`time`, in source frames at rate 1; assign to seek) is part of the state.
+    The rate map is played quantized to steps of 1/512 after smoothing (:func:`quantize_rate`);
+    :mod:`dynatex.player.ratemap` makes rate maps.
 
     Examples
     --------
@@ -152,6 +122,13 @@ class EvolvePlayer(Player):
     """
 
     mode = "evolve"
+    options = (
+        Param("size", Size(16384), None, "Output size; must equal the stored quilt's canvas (re-run the analysis "
+              "with another size for another canvas).", optional=True, default_doc="the quilt's"),
+        Param("interpolate", Flag(), True, "Blend linearly between source frames at fractional times (otherwise "
+              "the earlier frame)."),
+    )
+    capabilities = Capabilities(needs_frames=True)
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
                  backend: str = "auto", device: str | None = None, seed: int = 0,
@@ -178,9 +155,9 @@ class EvolvePlayer(Player):
             try:
                 sw, sh = (int(v) for v in size)
             except (TypeError, ValueError):
-                raise TypeError(f"size must be (width, height), not {size!r}") from None
+                raise ArgumentTypeError(f"size must be (width, height), not {size!r}") from None
             if (sw, sh) != (w, h):
-                raise ValueError(f"size {sw}x{sh} does not fit the stored quilt, which is {w}x{h}; "
+                raise InvalidArgumentError(f"size {sw}x{sh} does not fit the stored quilt, which is {w}x{h}; "
                                  "re-run the analysis with that size (dynatex analyze --quilt-size)")
         self.seed = check_seed("seed", seed)
         self.model_info = dict(model.info)
@@ -205,7 +182,7 @@ class EvolvePlayer(Player):
         if gain is not None and gain.shape[2] == 1:
             gain = np.ascontiguousarray(np.repeat(gain, 3, axis=2))
         self._clock = 0.0
-        self._speed, self._end, self._jitter = 1.0, "hold", 0.0
+        self._speed, self._end, self._jitter = (self.controls()[n].param.default for n in ("speed", "end", "jitter"))
         self._rate_raw: np.ndarray | None = None
         self._rate: np.ndarray | None = None
         self._rate_sigma = 0.0
@@ -219,7 +196,45 @@ class EvolvePlayer(Player):
         self._draw(0.0, np.empty(self._shape, np.uint8))
 
     # -- controls ---------------------------------------------------------------------------------
-    speed = FloatControl("speed", *SPEED_RANGE)
+    speed = Control(Range(float, *SPEED_RANGE), 1.0, "Source frames the clock advances per output frame.")
+    end = Control(Choice(*ENDS), "hold", "After the last source frame: hold it, loop to the first, or play back "
+                  "and forth.")
+
+    @end.setter
+    def end(self, value: str) -> None:
+        if value != self._end:
+            self._end = value
+            self._make_warp()
+
+    jitter = Control(Range(float, 0.0, 2**31 - 1), 0.0, "Per-block time jitter e: the largest deviation of a "
+                     "block's time from the true time, frames, at most the clip's frames.")
+
+    @jitter.setter
+    def jitter(self, value: float) -> None:
+        v = check_float("jitter", value, 0.0, float(self.n_frames))
+        if v != self._jitter:
+            self._jitter = v
+            self._make_warp()
+
+    rate_map = Control(NpyFile(), None, "Per-pixel rate of evolution M, (H, W) in [0, 64] (local time t * M); see "
+                       "dynatex.player.ratemap for generators.", flag=None, optional=True, default_doc="uniform 1")
+
+    @rate_map.setter
+    def rate_map(self, value: np.ndarray | None) -> None:
+        self._rate_raw = None if value is None else check_rate_map(value, self._shape[:2])
+        self._update_rate()
+
+    @rate_map.getter
+    def rate_map(self) -> np.ndarray | None:
+        return None if self._rate_raw is None else self._rate_raw.copy()
+
+    rate_sigma = Control(Range(float, 0.0, MAX_SIGMA), 0.0, "Gaussian smoothing of the rate map, output pixels "
+                         "(0: none).")
+
+    @rate_sigma.setter
+    def rate_sigma(self, value: float) -> None:
+        self._rate_sigma = value
+        self._update_rate()
 
     @property
     def time(self) -> float:
@@ -229,29 +244,6 @@ class EvolvePlayer(Player):
     @time.setter
     def time(self, value: float) -> None:
         self._clock = check_float("time", value, -1e7, 1e7)
-
-    @property
-    def end(self) -> str:
-        return self._end
-
-    @end.setter
-    def end(self, value: str) -> None:
-        if value not in ENDS:
-            raise ValueError(f"end must be one of {ENDS}, not {value!r}")
-        if value != self._end:
-            self._end = value
-            self._make_warp()
-
-    @property
-    def jitter(self) -> float:
-        return self._jitter
-
-    @jitter.setter
-    def jitter(self, value: float) -> None:
-        v = check_float("jitter", value, 0.0, float(self.n_frames))
-        if v != self._jitter:
-            self._jitter = v
-            self._make_warp()
 
     def _on_reseed(self) -> None:
         """A new seed draws new jitter warps."""
@@ -269,25 +261,6 @@ class EvolvePlayer(Player):
     def labels(self) -> np.ndarray:
         """Block index of every output pixel ``(H, W)`` (a copy)."""
         return self._labels.copy()
-
-    @property
-    def rate_map(self) -> np.ndarray | None:
-        """The rate map as set (before smoothing), or None for uniform rate 1."""
-        return None if self._rate_raw is None else self._rate_raw.copy()
-
-    @rate_map.setter
-    def rate_map(self, value: np.ndarray | None) -> None:
-        self._rate_raw = None if value is None else check_rate_map(value, self._shape[:2])
-        self._update_rate()
-
-    @property
-    def rate_sigma(self) -> float:
-        return self._rate_sigma
-
-    @rate_sigma.setter
-    def rate_sigma(self, value: float) -> None:
-        self._rate_sigma = check_float("rate_sigma", value, 0.0, MAX_SIGMA)
-        self._update_rate()
 
     @property
     def effective_rate(self) -> np.ndarray:
@@ -359,22 +332,13 @@ class EvolvePlayer(Player):
 
     # -- state --------------------------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:
-        return {"clock": self._clock, "speed": self._speed, "end": self._end, "jitter": self._jitter,
-                "seed": self.seed, "rate_map": self.rate_map, "rate_sigma": self._rate_sigma}
+        return {"clock": self._clock, "seed": self.seed}
 
     def _set_state(self, state: dict[str, Any]) -> None:
         seed = check_seed("state seed", state["seed"])
         clock = check_float("state clock", state["clock"], -1e7, 1e7)
-        speed = check_float("state speed", state["speed"], *SPEED_RANGE)
-        sigma = check_float("state rate_sigma", state["rate_sigma"], 0.0, MAX_SIGMA)
-        rate = None if state["rate_map"] is None else check_rate_map(state["rate_map"], self._shape[:2],
-                                                                     name="state rate_map")
-        end = state["end"]
-        if end not in ENDS:
-            raise ValueError(f"state end must be one of {ENDS}, not {end!r}")
+        if state["rate_map"] is not None:
+            check_rate_map(state["rate_map"], self._shape[:2], name="state rate_map")
         jitter = check_float("state jitter", state["jitter"], 0.0, float(self.n_frames))
-        self._speed, self._rate_sigma, self._rate_raw = speed, sigma, rate
-        self._update_rate()
-        self.seed, self._end, self._jitter = seed, end, jitter
+        self.seed, self._end, self._jitter, self._clock = seed, state["end"], jitter, clock
         self._make_warp()
-        self._clock = clock

@@ -35,8 +35,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..checks import Choice, Either, NpyFile, Numbers, Range, Size, Text, check_float, check_int, check_seed
+from ..errors import InvalidArgumentError
+from ..params import Param
 from ..tiledb import TileDB, TilesModel
-from .base import FloatControl, Player, check_float, check_int, check_seed, rng_from_state
+from .base import Player, rng_from_state
+from .controls import Capabilities, Control
 from .gather import MAX_GAIN, MAX_TIME, gaussian_smooth, open_gather, pack_source
 
 TIME_STEP = 8              # output pixels per time-map sample
@@ -71,7 +75,7 @@ def label_preset(name: str, shape: tuple[int, int], n_classes: int, *, seed: int
         cut = np.quantile(noise, np.linspace(0, 1, n_classes + 1)[1:-1])
         cells = np.searchsorted(cut, noise).astype(np.int32)
         return cells[np.minimum(yy * gh // h, gh - 1), np.minimum(xx * gw // w, gw - 1)]
-    raise ValueError(f"labels preset must be one of {LABEL_PRESETS}, not {name!r}")
+    raise InvalidArgumentError(f"labels preset must be one of {LABEL_PRESETS}, not {name!r}")
 
 
 def _fit_gain(hist: np.ndarray, target: float) -> float:
@@ -95,43 +99,9 @@ def _fit_gain(hist: np.ndarray, target: float) -> float:
 class TilesPlayer(Player):
     """Endless frames of any size from a texture's ``tiles`` group.
 
-    Parameters
-    ----------
-    db : path or TileDB
-    texture : str, optional
-    backend : {"auto", "opencl", "numpy"}
-        See :class:`~dynatex.player.base.Player`.
-    device : str, optional
-    format : {"RGB", "RGBA", "BGRA"}
-        Pixel format of the frames (see :class:`~dynatex.player.base.Player`).
-    seed : int
-        Seed of the arrangement and of the time offsets; the same seed gives the same frames.
-    size : (width, height), optional
-        Output size (default the source clip's); any size up to 16384 x 16384.
-    labels : (gh, gw) int array or str, optional
-        Class of every tile cell (``gh = ceil(H / th)``, ``gw = ceil(W / tw)``), an
-        ``(H, W)`` map sampled at the cell centres, or a :func:`label_preset` name. Classes are indices into
-        ``class_names`` (:attr:`classes`). Default: everything the main texture (class 0).
-    tone : None, str, int or (r, g, b)
-        Colour-tone target: None (off), a class name or index (that texture's mean RGB),
-        ``"consensus"`` (the mean over all classes), or an RGB colour. Each class gets one
-        gain per channel (per-pixel multiplication, as in the seed), solved so that the
-        class's pixels *as arranged* (tile histograms weighted by their output area, with
-        saturation at 255) have the target mean.
-
-    Controls (attributes, changeable between frames)
-    -------------------------------------------------
-    sigma : float >= 0
-        Gaussian smoothing of the time offsets, in output pixels (default half a tile).
-    max_shift : float in [0, loop length]
-        Amplitude of the per-cell time offsets, in frames (default a third of the loop, at
-        most 16: neighbouring cells then differ by a few frames, as the seed advises).
-    epoch : int >= 0
-        Frames over which the offsets drift to a new random field (0: fixed offsets;
-        default twice the loop length).
-    speed : float in [-4, 4]
-        Loop frames per output frame.
-    tone : see above.
+    Each class gets one tone gain per channel (per-pixel multiplication, as in the seed),
+    solved so that the class's pixels *as arranged* (tile histograms weighted by their output
+    area, with saturation at 255) have the target mean.
 
     Examples
     --------
@@ -141,6 +111,15 @@ class TilesPlayer(Player):
     """
 
     mode = "tiles"
+    options = (
+        Param("size", Size(MAX_SIZE), None, "Output size; any size.", optional=True,
+              default_doc="the source clip's"),
+        Param("labels", Either(Choice(*LABEL_PRESETS), NpyFile(), metavar="PRESET|FILE.npy"), None,
+              "Texture class of every tile cell: a (gh, gw) integer map (gh = ceil(H / th), gw = ceil(W / tw)), "
+              "an (H, W) map sampled at the cell centres, or a preset (label_preset). Classes index class_names.",
+              optional=True, default_doc="everything the main texture, class 0"),
+    )
+    capabilities = Capabilities(any_size=True, native_loop=True, inpaint=True)
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
                  backend: str = "auto", device: str | None = None, seed: int = 0,
@@ -164,9 +143,9 @@ class TilesPlayer(Player):
         try:
             w, h = (int(v) for v in size)
         except (TypeError, ValueError):
-            raise ValueError(f"size must be (width, height), not {size!r}") from None
+            raise InvalidArgumentError(f"size must be (width, height), not {size!r}") from None
         if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
-            raise ValueError(f"size must be within 1..{MAX_SIZE} on each side, not {w}x{h}")
+            raise InvalidArgumentError(f"size must be within 1..{MAX_SIZE} on each side, not {w}x{h}")
         self._shape = (h, w, self.format.bytes)
         self.grid_shape = (-(-h // th), -(-w // tw))
         self.ring = int(model.info.get("ring", max(2, min(th, tw) // 5)))
@@ -208,7 +187,7 @@ class TilesPlayer(Player):
             labels = label_preset(labels, self._shape[:2], self.model.n_classes, seed=self.seed)
         lab = np.asarray(labels)
         if lab.dtype.kind not in "iub" or lab.ndim != 2:
-            raise ValueError(f"labels must be a 2-D integer map, not {lab.dtype} {lab.shape}")
+            raise InvalidArgumentError(f"labels must be a 2-D integer map, not {lab.dtype} {lab.shape}")
         h, w = self._shape[:2]
         th, tw = self.tile_size
         if lab.shape == (h, w) and (h, w) != (gh, gw):
@@ -216,11 +195,11 @@ class TilesPlayer(Player):
             cx = np.minimum(np.arange(gw) * tw + tw // 2, w - 1)
             lab = lab[cy][:, cx]
         if lab.shape != (gh, gw):
-            raise ValueError(f"labels must have shape {(gh, gw)} (tile cells) or {(h, w)} (pixels), not {lab.shape}")
+            raise InvalidArgumentError(f"labels must have shape {(gh, gw)} (tile cells) or {(h, w)} (pixels), not {lab.shape}")
         n = self.model.n_classes
         if lab.size and (lab.min() < 0 or lab.max() >= n):
             bad = int(lab.max()) if lab.max() >= n else int(lab.min())
-            raise ValueError(f"labels name texture class {bad}, but the tile set has {n} class(es): "
+            raise InvalidArgumentError(f"labels name texture class {bad}, but the tile set has {n} class(es): "
                              + ", ".join(f"{i}={c}" for i, c in enumerate(self.model.class_names)))
         return lab.astype(np.int32)
 
@@ -317,7 +296,7 @@ class TilesPlayer(Player):
             edge = np.minimum(lab, nb)
             bt = np.where(edge != lab, lut[lab, edge, si], -1)
             if ((edge != lab) & (bt < 0)).any():
-                raise ValueError("the tile set has no border tile for some pair of neighbouring classes; "
+                raise InvalidArgumentError("the tile set has no border tile for some pair of neighbouring classes; "
                                  "re-run the analysis with every texture of the label map mixed in")
             side_tile.append(bt)
         touched = np.any([bt >= 0 for bt in side_tile], axis=0)
@@ -370,7 +349,7 @@ class TilesPlayer(Player):
         """Replace the label map (same rules as the constructor); the arrangement is redrawn."""
         lab = self._check_labels(labels)
         if (len(np.unique(lab)) > 1) != self.mixing:
-            raise ValueError("set_labels cannot switch between a single texture and a mix; open a new player")
+            raise InvalidArgumentError("set_labels cannot switch between a single texture and a mix; open a new player")
         self.labels = lab
         self._arrange()
 
@@ -419,43 +398,45 @@ class TilesPlayer(Player):
                 self.engine.set_time_map(self._field_a, self._field_b)
 
     # -- controls ------------------------------------------------------------------------------------
-    @property
-    def sigma(self) -> float:
-        return self._sigma
+    speed = Control(Range(float, *SPEED_RANGE), 1.0, "Loop frames per output frame.")
+    sigma = Control(Range(float, 0.0, 4096.0), None, "Gaussian smoothing of the per-tile time offsets, output "
+                    "pixels.", default_doc="half a tile")
 
     @sigma.setter
     def sigma(self, value: float) -> None:
-        self._sigma = check_float("sigma", value, 0.0, 4096.0)
+        self._sigma = value
         self._refresh_fields()
 
-    @property
-    def max_shift(self) -> float:
-        return self._max_shift
+    max_shift = Control(Range(float, 0.0, MAX_TIME), None, "Amplitude of the per-tile time offsets, frames, at "
+                        "most the loop.", default_doc="a third of the loop, at most 16")
 
     @max_shift.setter
     def max_shift(self, value: float) -> None:
         self._max_shift = check_float("max_shift", value, 0.0, float(min(self.loop_length, MAX_TIME)))
         self._refresh_fields()
 
-    @property
-    def epoch(self) -> int:
-        return self._epoch
+    epoch = Control(Range(int, 0, 10**7), None, "Frames over which the offsets drift to a new random field "
+                    "(0: fixed offsets).", default_doc="twice the loop")
 
     @epoch.setter
     def epoch(self, value: int) -> None:
-        self._epoch = check_int("epoch", value, 0, 10**7)
+        self._epoch = value
         self._phase = min(self._phase, max(0, self._epoch - 1))
 
-    speed = FloatControl("speed", *SPEED_RANGE)
-
-    @property
-    def tone(self) -> Any:
-        return self._tone_spec
+    tone = Control(Either(Numbers(Range(float, 0.0, 255.0), 3, "R,G,B"), Range(int, 0, None),
+                          Text("TEXTURE|consensus"), metavar="TEXTURE|consensus|R,G,B"), None,
+                   "Colour-tone target: a texture class's name or index (its mean RGB), consensus (the mean "
+                   "over all classes) or an RGB colour; None turns tone fitting off.", optional=True,
+                   default_doc="off")
 
     @tone.setter
     def tone(self, value: Any) -> None:
         self.engine.set_tones(*self._tone_tables(value))
         self._tone_spec = value
+
+    @tone.getter
+    def tone(self) -> Any:
+        return self._tone_spec
 
     def tone_target(self, value: Any) -> np.ndarray | None:
         """The RGB target ``value`` names (see ``tone``), or None when tone fitting is off."""
@@ -467,16 +448,16 @@ class TilesPlayer(Player):
             if value == "consensus":
                 return class_means.mean(axis=0)
             if value not in m.class_names:
-                raise ValueError(f"tone names texture {value!r}, which the tile set lacks "
+                raise InvalidArgumentError(f"tone names texture {value!r}, which the tile set lacks "
                                  f"(it has {', '.join(m.class_names)}, or 'consensus', or an RGB colour)")
             return class_means[m.class_names.index(value)]
         if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
             if not 0 <= value < m.n_classes:
-                raise ValueError(f"tone names texture class {value}, but the tile set has {m.n_classes}")
+                raise InvalidArgumentError(f"tone names texture class {value}, but the tile set has {m.n_classes}")
             return class_means[int(value)]
         rgb = np.asarray(value, dtype=float)
         if rgb.shape != (3,) or not np.isfinite(rgb).all() or rgb.min() < 0 or rgb.max() > 255:
-            raise ValueError(f"tone must be None, a texture name or index, 'consensus' or an RGB colour in "
+            raise InvalidArgumentError(f"tone must be None, a texture name or index, 'consensus' or an RGB colour in "
                              f"0..255, not {value!r}")
         return rgb
 
@@ -574,13 +555,13 @@ class TilesPlayer(Player):
         """
         frame = np.asarray(frame)
         if frame.dtype != np.uint8 or frame.shape != self._shape:
-            raise ValueError(f"frame must be uint8 with shape {self._shape}, not {frame.dtype} {frame.shape}")
+            raise InvalidArgumentError(f"frame must be uint8 with shape {self._shape}, not {frame.dtype} {frame.shape}")
         mask = np.asarray(mask)
         if mask.shape != self._shape[:2]:
-            raise ValueError(f"mask must have shape {self._shape[:2]} (the frame's height and width), "
+            raise InvalidArgumentError(f"mask must have shape {self._shape[:2]} (the frame's height and width), "
                              f"not {mask.shape}")
         if mask.dtype.kind not in "biu":
-            raise ValueError(f"mask must be boolean or integer, not {mask.dtype}")
+            raise InvalidArgumentError(f"mask must be boolean or integer, not {mask.dtype}")
         synth = self.next_frame()
         if out is None:
             out = frame.copy()
@@ -606,9 +587,7 @@ class TilesPlayer(Player):
     def _get_state(self) -> dict[str, Any]:
         return {"t": self._t, "phase": self._phase, "rng": self._rng.bit_generator.state, "seed": self.seed,
                 "cells_a": self._cells_a.copy(), "cells_b": self._cells_b.copy(),
-                "arrangement": self.arrangement.copy(), "labels": self.labels.copy(), "sigma": self._sigma,
-                "max_shift": self._max_shift, "epoch": self._epoch, "speed": self._speed,
-                "tone": self._tone_spec}
+                "arrangement": self.arrangement.copy(), "labels": self.labels.copy()}
 
     def _set_state(self, state: dict[str, Any]) -> None:
         rng = rng_from_state(state["rng"])
@@ -617,30 +596,27 @@ class TilesPlayer(Player):
         arrangement = np.asarray(state["arrangement"], np.int64)
         t = check_float("t", state["t"], 0.0, float(self.loop_length))
         phase = check_int("phase", state["phase"], 0)
-        speed = check_float("speed", state["speed"], *SPEED_RANGE)
-        epoch = check_int("epoch", state["epoch"], 0, 10**7)
-        sigma = check_float("sigma", state["sigma"], 0.0, 4096.0)
         max_shift = check_float("max_shift", state["max_shift"], 0.0, float(min(self.loop_length, MAX_TIME)))
-        tone = state.get("tone")
+        tone = state["tone"]
         self.tone_target(tone)                          # validates it
         seed = check_seed("seed", state.get("seed", self.seed))
         if any(c.shape != self.grid_shape or not np.isfinite(c).all() for c in cells):
-            raise ValueError(f"state offsets must be finite with shape {self.grid_shape}")
+            raise InvalidArgumentError(f"state offsets must be finite with shape {self.grid_shape}")
         if arrangement.shape != self.grid_shape or arrangement.min() < 0 or arrangement.max() >= self.n_tiles:
-            raise ValueError("state arrangement does not fit this tile set")
+            raise InvalidArgumentError("state arrangement does not fit this tile set")
         if not (self.model.tile_class[arrangement] == labels).all():
-            raise ValueError("state arrangement does not match its labels")
+            raise InvalidArgumentError("state arrangement does not match its labels")
         mismatched = self._wang_mismatch(arrangement)
         if mismatched:
-            raise ValueError(f"state arrangement puts {mismatched} Wang edges of different colours together")
+            raise InvalidArgumentError(f"state arrangement puts {mismatched} Wang edges of different colours together")
         mismatched = self._torus_mismatch(arrangement)
         if mismatched:
-            raise ValueError(f"state arrangement puts {mismatched} cells of the quilted torus out of their order")
+            raise InvalidArgumentError(f"state arrangement puts {mismatched} cells of the quilted torus out of their order")
         # everything checked: now change the player
         self._rng, self.labels, self._t, self._phase = rng, labels, t, phase
         self._cells_a, self._cells_b = cells
         self.arrangement = arrangement
-        self.speed, self.epoch, self._sigma, self._max_shift = speed, epoch, sigma, max_shift
+        self._max_shift = max_shift
         self.seed, self._tone_spec = seed, tone
         self._build_source(arrangement)                 # fits the tone to the arrangement too
         self._refresh_fields()

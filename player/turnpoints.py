@@ -22,10 +22,14 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import Choice, Range, check_float, check_int
+from ..errors import InvalidArgumentError
+from ..params import Param
 from ..tiledb import TileDB
 from ..tiledb.turnpoints import TurnPointModel
-from .base import FloatControl, Player, check_float, check_int, rng_from_state
+from .base import Player, rng_from_state
 from .blend import open_blend
+from .controls import Capabilities, Control
 
 PLAYBACKS = ("hybrid", "turns", "jumps")
 SPEED_RANGE = (0.0, 4.0)
@@ -35,35 +39,6 @@ EVENT_NONE, EVENT_TURN, EVENT_JUMP = 0, 1, 2
 
 class TurnPointPlayer(Player):
     """Endless frames from a texture's ``turnpoints`` tables and stored frames.
-
-    Parameters
-    ----------
-    db : path or TileDB
-        The tile database (the texture needs ``turnpoints`` data and stored frames).
-    texture : str, optional
-        Texture name (optional when the database holds one texture).
-    backend : {"auto", "opencl", "numpy"}
-        See :class:`~dynatex.player.base.Player`.
-    device : str, optional
-        OpenCL device (see :func:`dynatex.player.opencl.get_context`).
-    format : {"RGB", "RGBA", "BGRA"}
-        Pixel format of the frames (see :class:`~dynatex.player.base.Player`).
-    seed : int
-        Seed of the random walk; the same seed gives the same frames.
-    playback : {"hybrid", "turns", "jumps"}
-        Turn points and transitions, turn points only (the seed), or transitions only
-        (classic video textures, forward only).
-    start : int
-        Source frame of the first output frame (played forward), default 0.
-
-    Controls (attributes, changeable between any two frames)
-    ---------------------------------------------------------
-    speed : float in [0, 4]
-        Source frames advanced per output frame; fractional speeds blend neighbouring frames.
-    crossfade : int in [0, 16]
-        Frames over which a jump is crossfaded with the path it left (0: cut).
-    increment : float in [0, 1]
-        The eq. 7 step of the reversal probabilities.
 
     Observables: ``source_index`` (the walk's source frame of the last output frame),
     ``last_event`` (0 none, 1 turn, 2 jump, 3 both), ``last_sources`` ((frame, weight/256)
@@ -78,12 +53,18 @@ class TurnPointPlayer(Player):
     """
 
     mode = "turnpoints"
+    options = (
+        Param("playback", Choice(*PLAYBACKS), "hybrid",
+              "Turn points and transitions (hybrid), turn points only (turns, the seed) or transitions only "
+              "(jumps: classic video textures, forward only)."),
+        Param("start", Range(int, 0, 2**31 - 1), 0, "Source frame of the first output frame (played forward)."),
+    )
+    capabilities = Capabilities(needs_frames=True, native_loop=True)
 
     def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
                  backend: str = "auto", device: str | None = None, seed: int = 0,
                  playback: str = "hybrid", start: int = 0, format: str = "RGB") -> None:
-        if playback not in PLAYBACKS:
-            raise ValueError(f"playback must be one of {PLAYBACKS}, not {playback!r}")
+        playback = self.options[0].check(playback)
         super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
             self._setup(self.texture.read("turnpoints"), playback, seed, start)
@@ -104,14 +85,14 @@ class TurnPointPlayer(Player):
         self._is_turn = np.zeros(t, bool)
         self._is_turn[model.turn_points] = True
         if playback == "jumps" and model.src.size == 0:
-            raise ValueError("playback='jumps' needs transitions, and this texture has none; use 'hybrid' or 'turns'")
+            raise InvalidArgumentError("playback='jumps' needs transitions, and this texture has none; use 'hybrid' or 'turns'")
         self._fwd, self._bwd = self._tables(model)
         start = check_int("start", start, 0, t - 1)
         if playback == "jumps" and start > model.exit_frame:
-            raise ValueError(f"start must be at most the exit frame {model.exit_frame} for playback='jumps', not {start}")
+            raise InvalidArgumentError(f"start must be at most the exit frame {model.exit_frame} for playback='jumps', not {start}")
         if playback != "jumps" and start > self._z:
-            raise ValueError(f"start must be at most the last turn point {self._z}, not {start}")
-        self._speed, self._crossfade, self._increment = 1.0, 4, 0.1
+            raise InvalidArgumentError(f"start must be at most the last turn point {self._z}, not {start}")
+        self._init_controls()
         self.reseed(seed)
         self._reset_walk(start)
 
@@ -169,23 +150,11 @@ class TurnPointPlayer(Player):
         """Bytes a frame moves at speed 1 between jumps: one stored frame read, the output written."""
         return self.engine.bytes_per_frame
 
-    speed = FloatControl("speed", *SPEED_RANGE)
-
-    @property
-    def crossfade(self) -> int:
-        return self._crossfade
-
-    @crossfade.setter
-    def crossfade(self, value: int) -> None:
-        self._crossfade = check_int("crossfade", value, 0, MAX_CROSSFADE)
-
-    @property
-    def increment(self) -> float:
-        return self._increment
-
-    @increment.setter
-    def increment(self, value: float) -> None:
-        self._increment = check_float("increment", value, 0.0, 1.0)
+    speed = Control(Range(float, *SPEED_RANGE), 1.0,
+                    "Source frames advanced per output frame; fractional speeds blend neighbouring frames.")
+    crossfade = Control(Range(int, 0, MAX_CROSSFADE), 4,
+                        "Frames over which a jump is crossfaded with the path it left (0: cut).")
+    increment = Control(Range(float, 0.0, 1.0), 0.1, "The eq. 7 step of the adaptive reversal probabilities.")
 
     @property
     def probabilities(self) -> np.ndarray:
@@ -314,27 +283,23 @@ class TurnPointPlayer(Player):
         return {"playback": self.playback, "pos": self._pos, "dir": self._dir, "p": self._p.copy(),
                 "old": None if self._old is None else list(self._old), "phase": self._phase,
                 "disp": [(f, tuple(pairs), e) for f, pairs, e in self._disp], "pending": self._pending,
-                "rng": self._rng.bit_generator.state, "seed": self.seed, "speed": self._speed,
-                "crossfade": self._crossfade, "increment": self._increment}
+                "rng": self._rng.bit_generator.state, "seed": self.seed}
 
     def _set_state(self, state: dict[str, Any]) -> None:
         if state["playback"] != self.playback:
-            raise ValueError(f"state is for playback {state['playback']!r}, not {self.playback!r}")
+            raise InvalidArgumentError(f"state is for playback {state['playback']!r}, not {self.playback!r}")
         t = self.n_frames
         pos = check_int("state pos", state["pos"], 0, t - 1)
         direction = int(state["dir"])
         if direction not in (-1, 1):
-            raise ValueError("state dir must be -1 or 1")
+            raise InvalidArgumentError("state dir must be -1 or 1")
         p = np.asarray(state["p"], dtype=float)
         if p.shape != (t,) or not np.isfinite(p).all() or p.min() < 0 or p.max() > 1:
-            raise ValueError(f"state p must be ({t},) probabilities")
+            raise InvalidArgumentError(f"state p must be ({t},) probabilities")
         disp = [(int(f), tuple((int(a), float(w)) for a, w in pairs), int(e)) for f, pairs, e in state["disp"]]
         if len(disp) != 2 or any(not 0 <= a < t for _, pairs, _ in disp for a, _ in pairs):
-            raise ValueError("state disp is invalid")
+            raise InvalidArgumentError("state disp is invalid")
         rng = rng_from_state(state["rng"])
-        self.speed = state["speed"]
-        self.crossfade = state["crossfade"]
-        self.increment = state["increment"]
         phase = check_float("state phase", state["phase"], 0.0, 1.0)
         old = None if state["old"] is None else [int(v) for v in state["old"]]
         pending = int(state["pending"])

@@ -1,0 +1,152 @@
+"""What a player mode declares about itself: its controls, its options and its capabilities.
+
+A mode class declares each live control once, as a :class:`Control` attribute (name, rule,
+default, doc); the declaration checks assignments, saves and restores the control with
+:meth:`~dynatex.player.base.Player.get_state` / ``set_state``, gives ``dynatex play`` its
+flag and writes the "Controls" section of the class docstring. Constructor options (fixed
+for the player's lifetime) are declared as :class:`~dynatex.params.Param`\\ s in the class's
+``options``, and what the mode can do in its :class:`Capabilities`.
+
+Examples
+--------
+>>> from dynatex.checks import Range
+>>> class Toy:
+...     gain = Control(Range(float, 0, 2), 1.0, "Brightness gain.")
+>>> t = Toy()
+>>> t.gain = 1.5
+>>> t.gain
+1.5
+>>> t.gain = 3
+Traceback (most recent call last):
+...
+dynatex.errors.InvalidArgumentError: gain must be a finite number in [0, 2], not 3
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from ..checks import Kind
+from ..params import Param
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What a mode can do, for the tools that drive every mode alike (CLI, export, evaluate)."""
+
+    #: plays at any output size (``size=`` option); otherwise at the size its model fixes
+    any_size: bool = False
+    #: reads the clip's stored frames (the texture must hold them)
+    needs_frames: bool = False
+    #: its frames repeat after a loop of its own (tiles, turn points): a seamless flipbook needs no blend
+    native_loop: bool = False
+    #: fills a masked region of the caller's frames (``inpaint``)
+    inpaint: bool = False
+    #: ``start_frame`` leaves the OpenCL frame in flight (double buffering)
+    asynchronous: bool = True
+
+
+class Control:
+    """A live control of a player mode: a checked attribute that is part of the player's state.
+
+    ``speed = Control(Range(float, -3, 3), 1.0, "doc")`` in a mode class: assigning checks
+    the value against the rule (a bad value raises and keeps the old one) and stores it in
+    ``self._speed``. A mode whose control has side effects (rebuilding a table) or rules that
+    depend on the loaded model decorates a setter, as with ``property``: it receives the
+    checked value and stores it itself::
+
+        @speed.setter
+        def speed(self, value): ...
+
+    ``flag`` is the ``dynatex play`` option (``""``: ``--speed``; None: not on the command
+    line); ``state=False`` leaves it out of the saved state.
+    """
+
+    def __init__(self, kind: Kind, default: Any, doc: str, *, flag: str | None = "", optional: bool = False,
+                 default_doc: str | None = None, state: bool = True) -> None:
+        self._spec = dict(kind=kind, default=default, doc=doc, flag=flag, optional=optional,
+                          default_doc=default_doc)
+        self.state = state
+        self.param: Param = Param("", **self._spec)
+        self.name = ""
+        self.attr = ""
+        self._fset: Callable[[Any, Any], None] | None = None
+        self._fget: Callable[[Any], Any] | None = None
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name, self.attr = name, "_" + name
+        self.param = Param(name, **self._spec)
+
+    def setter(self, fset: Callable[[Any, Any], None]) -> Control:
+        """Decorate the function that applies a checked value (it stores the value itself)."""
+        self._fset = fset
+        return self
+
+    def getter(self, fget: Callable[[Any], Any]) -> Control:
+        """Decorate the function that reads the value (for example a copy of an array)."""
+        self._fget = fget
+        return self
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        if obj is None:
+            return self
+        if self._fget is not None:
+            return self._fget(obj)
+        return getattr(obj, self.attr, self.param.default)      # a control never set holds its default
+
+    def __set__(self, obj: Any, value: Any) -> None:
+        value = self.param.check(value)
+        if self._fset is None:
+            setattr(obj, self.attr, value)
+        else:
+            self._fset(obj, value)
+
+    def saved(self, obj: Any) -> Any:
+        """The control's value as a state entry (arrays copied)."""
+        value = self.__get__(obj)
+        return value.copy() if isinstance(value, np.ndarray) else value
+
+    def __repr__(self) -> str:
+        return f"Control({self.name!r}, {self.param.kind.describe()})"
+
+
+def controls_of(cls: type) -> dict[str, Control]:
+    """The controls a class declares, its bases' first, in declaration order."""
+    found: dict[str, Control] = {}
+    for klass in reversed(cls.__mro__):
+        for name, value in vars(klass).items():
+            if isinstance(value, Control):
+                found.pop(name, None)
+                found[name] = value
+            elif name in found:
+                del found[name]           # a subclass replaced the control with something else
+    return found
+
+
+def document(cls: type, common: tuple[Param, ...]) -> None:
+    """Write the "Parameters" and "Controls" sections of a mode's docstring from its declarations.
+
+    They go before an "Examples" section if the docstring has one, else at its end.
+    """
+    doc = cls.__doc__ or ""
+    params = (*common, *getattr(cls, "options", ()))
+    sections = ["Parameters\n----------\n" + "\n".join(p.numpydoc() for p in params)]
+    controls = controls_of(cls)
+    if controls:
+        sections.append("Controls (attributes, changeable between any two frames)\n"
+                        "---------------------------------------------------------\n"
+                        + "\n".join(c.param.numpydoc() for c in controls.values()))
+    text = "\n\n".join(sections)
+    indent = "    "
+    text = "\n".join(indent + line if line else line for line in text.splitlines())
+    marker = f"\n{indent}Examples\n"
+    if marker in doc:
+        head, tail = doc.split(marker, 1)
+        cls.__doc__ = f"{head.rstrip()}\n\n{text}\n{marker}{tail}"
+    else:
+        cls.__doc__ = f"{doc.rstrip()}\n\n{text}\n"
+
+
+__all__ = ["Capabilities", "Control", "controls_of", "document"]
