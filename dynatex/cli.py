@@ -18,7 +18,7 @@ import warnings
 from . import __version__
 from .tiledb.errors import DynatexError
 
-#: subcommand -> module in dynatex.commands (each has ``add_parser(subparsers)`` and ``run(args)``)
+#: subcommand -> module in dynatex.commands (each has ``add_parser(subparsers, argv)`` and ``run(args)``)
 COMMANDS = ("analyze", "info", "play", "bench", "evaluate", "demo", "export")
 
 
@@ -49,7 +49,9 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {_one_line(message)} (see `{self.prog} --help`)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The ``dynatex`` parser for the command line ``argv``: a command whose options depend on
+    another option (``play --mode tiles`` offers the tiles controls) reads it from ``argv``."""
     parser = Parser(prog="dynatex", description="Endless, editable dynamic textures.")
     parser.add_argument("--version", action="version", version=f"dynatex {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
@@ -62,7 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
             if exc.name == f"dynatex.commands.{name}":
                 continue  # command not built yet
             raise
-        p = module.add_parser(sub)
+        p = module.add_parser(sub, argv)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks on errors")
         p.set_defaults(_run=module.run, _parser=p)
     return parser
@@ -74,7 +76,8 @@ def _warning_line(message, category, filename, lineno, line=None) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     warnings.formatwarning = _warning_line          # a warning is one line too, not a source location
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
     args, extra = parser.parse_known_args(argv)
     if extra:  # reported by the subcommand's parser, so that the line names the subcommand
         getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(extra)}")

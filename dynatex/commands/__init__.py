@@ -1,1 +1,1 @@
-"""One module per ``dynatex`` subcommand: ``add_parser(subparsers)`` and ``run(args) -> int``."""
+"""One module per ``dynatex`` subcommand: ``add_parser(subparsers, argv)`` and ``run(args) -> int``."""

@@ -33,7 +33,7 @@ from ._common import (
 _N = Number(int, 1, MAX_COUNT)
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
+def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("analyze", help="learn models from clips and write tile databases",
                        description="Read a clip, run the chosen methods and write them into a tile "
                                    "database (other textures already in it are kept). Given several clips "

@@ -10,7 +10,7 @@ from ..player import MODES
 from ._common import UsageError, positive_int, size_arg
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
+def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="benchmark the player (fps, latency, roofline, numpy side by side)",
                        description="Without a database: LDS players (n=50) on synthetic textures at each "
                                    "--sizes, float32 and float16 bases. With a database: the chosen texture "

@@ -95,7 +95,7 @@ DEMO_STEPS: list[DemoStep] = [
 ]
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
+def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="analyze a built-in sample, play every mode, write a video and a contact sheet",
                        description="The embedded default: make a sample clip, analyze it, play it with "
                                    "several edits, write demo.mp4 and contact_sheet.png, print a short benchmark.")

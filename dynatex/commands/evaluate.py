@@ -11,12 +11,13 @@ from typing import Any
 
 import numpy as np
 
+from ..player import MODES
 from ._common import UsageError, load_clip_arg, positive_int, seed, size_arg
 
 DB_SUFFIXES = (".h5", ".hdf5")
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
+def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "evaluate", help="measure the quality of a synthesized texture against its source",
         description="Compare OUTPUT with SOURCE: long-run stability, seam visibility, temporal "
@@ -38,7 +39,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="also write a contact sheet: source frames beside output frames, to look at")
     g = p.add_argument_group("database output (the player)")
     g.add_argument("--texture", help="texture name (optional when the database holds one)")
-    g.add_argument("--mode", default="lds", help="player mode (default lds)")
+    g.add_argument("--mode", default="lds", choices=sorted(MODES), help="player mode (default lds)")
     g.add_argument("--frames", type=positive_int, default=None,
                    help="frames to play from a database (default 300), or to read from a video")
     g.add_argument("--seed", type=seed, default=0, help="player seed, also the patch-sampling seed, %(type)s")
@@ -130,13 +131,10 @@ def _load(path: str, **opts: Any) -> np.ndarray:
 def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any], tuple[int, int] | None]:
     """Frames from the player, the load options that reproduce the texture's source frames,
     and the player's cell lattice ``(th, tw)`` (mode tiles; None for other modes)."""
-    import inspect
-
     from ..player import open_player, player_class
     opts: dict[str, Any] = {"seed": args.seed, "backend": args.backend}
     if args.size is not None:
-        params = inspect.signature(player_class(args.mode).__init__).parameters
-        if "size" not in params and not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        if not any(p.name == "size" for p in player_class(args.mode).options):
             raise UsageError(f"--size is not supported by mode {args.mode} (it plays at the clip's resolution)")
         opts["size"] = args.size
     n = args.frames or 300

@@ -26,27 +26,35 @@ import numpy as np
 
 from ..player import MODES, open_player
 from ..player import tiles as _tiles
-from ._common import Number, UsageError, seed, size_arg
+from ..player.modes import player_class
+from ._common import Number, UsageError, size_arg
+from ._modes import add_mode_arguments, apply_controls, known_mode, mode_from_argv, modes_epilog, player_kwargs
 from ._output import MAX_FPS, MIN_FPS, OutputError
 
 #: Most frames a flipbook holds (a 64x64 grid).
 MAX_FRAMES = 4096
 #: Frames rendered when neither --frames nor a mode's own loop says how many.
 DEFAULT_FRAMES = 64
+DEFAULT_MODE = "tiles"
+#: the parameters every mode shares that ``export`` offers (the atlas is RGB(A) by its own rule)
+COMMON = ("backend", "device", "seed")
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
+def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
+    mode = known_mode(mode_from_argv(argv, DEFAULT_MODE), DEFAULT_MODE)
     p = sub.add_parser("export", help="write a flipbook (atlas, motion vectors, engine sidecar) of a texture",
                        description="Render frames of a texture and write a flipbook for Unity, Unreal or Godot: "
                                    "NAME_COLSxROWS.png (colour atlas, sRGB, frames row-major from the top-left), "
                                    "NAME_COLSxROWS_mv.png (optical-flow motion vectors, RG centred at 128, linear) "
                                    "and NAME.json (grid, frame count, fps, motion-vector scale for Unity VFX Graph "
-                                   "and Unreal, the loop's wrap discontinuity).")
+                                   "and Unreal, the loop's wrap discontinuity).",
+                       epilog=modes_epilog("export"))
     p.add_argument("database")
     p.add_argument("-o", "--output", required=True, metavar="FOLDER", help="folder for the bundle (created)")
     p.add_argument("--texture", help="texture name (optional when the database holds one)")
     p.add_argument("--name", default=None, help="file name stem (default: the texture's name)")
-    p.add_argument("--mode", default="tiles", choices=sorted(MODES), help="player mode (default tiles)")
+    p.add_argument("--mode", default=DEFAULT_MODE, choices=sorted(MODES),
+                   help=f"player mode (default {DEFAULT_MODE}); it decides the options and controls below")
     p.add_argument("--frames", type=Number(int, 1, MAX_FRAMES), default=None,
                    help=f"frames in the flipbook, %(type)s (default {DEFAULT_FRAMES}, or with --loop the mode's "
                         "own loop: tiles' loop length, turnpoints' swing)")
@@ -54,10 +62,6 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--blend", type=Number(int, 1, MAX_FRAMES), default=None,
                    help="lds/mixture/evolve --loop: frames crossfaded across the wrap, %(type)s "
                         "(default a quarter of the frames)")
-    p.add_argument("--size", type=size_arg, default=None, metavar="WxH", help="frame size, for tiles and evolve")
-    p.add_argument("--speed", type=Number(float, -16.0, 16.0), default=None,
-                   help="playback speed without --loop, in %(type)s, narrowed by the mode")
-    p.add_argument("--seed", type=seed, default=0, help="random seed, %(type)s (default 0)")
     p.add_argument("--fps", type=Number(float, MIN_FPS, MAX_FPS), default=None,
                    help="frame rate written to the sidecar, in %(type)s (default: the source's; a tiles or "
                         "turnpoints loop resampled to --frames keeps the source's pace)")
@@ -74,40 +78,31 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--source", default=None, metavar="CLIP",
                    help="the clip the texture was analysed from, the reference of the wrap discontinuity "
                         "(default: the frames the database stores, else the export's own frame step)")
-    p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto")
-    p.add_argument("--device", default=None, help="OpenCL device (index P:D, or a name substring)")
+    add_mode_arguments(p, mode, common=COMMON)
     return p
 
 
 # -- frames ------------------------------------------------------------------------------------------
-def _player_options(args: argparse.Namespace) -> dict:
-    opts = {"backend": args.backend, "device": args.device, "seed": args.seed}
-    if args.size is not None:
-        if args.mode not in ("tiles", "evolve"):
-            raise UsageError(f"--size is not supported by mode {args.mode} (it plays at the clip's resolution)")
-        opts["size"] = args.size
-    return opts
-
-
 def render(args: argparse.Namespace) -> tuple[np.ndarray, str, float, np.ndarray | None]:
     """The flipbook's frames ``(N, H, W, 3)``, a description of the loop, the frame rate and the
     source frames (None when the database stores none)."""
-    if args.blend is not None and not (args.loop and args.mode in ("lds", "mixture", "evolve")):
-        raise UsageError("--blend belongs to --loop with mode lds, mixture or evolve")
-    if args.loop and args.speed is not None:
+    cls = player_class(args.mode)
+    if args.blend is not None and not (args.loop and not cls.capabilities.native_loop):
+        blended = sorted(m for m in MODES if not player_class(m).capabilities.native_loop)
+        raise UsageError(f"--blend belongs to --loop with mode {', '.join(blended)}")
+    if args.loop and getattr(args, "speed", None) is not None:
         raise UsageError("--speed is set by --loop (the loop's length and --frames)")
-    with open_player(args.database, args.texture, mode=args.mode, **_player_options(args)) as player:
+    with open_player(args.database, args.texture, mode=args.mode, **player_kwargs(args, cls, common=COMMON)) as player:
         fps = args.fps if args.fps is not None else player.texture.source.fps
         source = player.texture.frames().read() if player.texture.has_frames else None
         if source is not None and source.shape[-1] == 1:
             source = np.repeat(source, 3, axis=-1)
-        if args.speed is not None:
-            player.speed = args.speed
+        apply_controls(player, args)
         args.texture_name = player.texture.name
         if not args.loop:
             n = args.frames or DEFAULT_FRAMES
             return _play(player, n), "none", fps, source
-        if args.mode in ("tiles", "turnpoints"):
+        if cls.capabilities.native_loop:
             frames, how, pace = (_tiles_loop(player, args.frames) if args.mode == "tiles"
                                  else _swing_loop(player, source, args.frames))
             if args.fps is None:
@@ -226,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
         uv = fb.flow_to_uv(fb.frame_motion(fb.optical_flow(tiles, wrap=args.loop), wrap=args.loop))
         _, strength = fb.encode_vectors(uv)
     src = {"texture": name, "mode": args.mode, "width": int(frames.shape[2]), "height": int(frames.shape[1]),
-           "seed": args.seed}
+           "seed": getattr(args, "seed", 0)}
     doc = fb.sidecar(name, grid, fps=fps, loop=how, strength=strength, source=src, wrap=wrap, layout=args.layout)
     try:
         os.makedirs(out, exist_ok=True)

@@ -9,7 +9,7 @@ import numpy as np
 from ..tiledb import open_db
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
+def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("info", help="describe a tile database", description="List the textures of a tile "
                        "database, their source and the methods stored for each (validating them).")
     p.add_argument("database")

@@ -173,6 +173,9 @@ def test_database_output_lds(files, capsys, tmp_path):
     assert json.loads(out2)["stability"] == rep["stability"]
     rc, _, err = _run(capsys, files / "src.npy", db, "--size", "32x32", "--backend", "numpy")
     assert rc == 2 and "--size is not supported by mode lds" in err
+    with pytest.raises(SystemExit) as exit_:
+        _run(capsys, files / "src.npy", db, "--mode", "nope", "--backend", "numpy")
+    assert exit_.value.code == 2 and "argument --mode: invalid choice: 'nope'" in capsys.readouterr().err
 
 
 def test_tiles_database_reports_lattice_prominence_and_writes_a_sheet(tmp_path, capsys):

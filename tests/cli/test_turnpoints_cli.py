@@ -82,8 +82,9 @@ def test_bad_parameters_leave_existing_database_untouched(tmp_path, clip_npy, ca
 def test_bad_controls(tmp_path, clip_npy, capsys):
     db = tmp_path / "p.h5"
     assert _run(capsys, "analyze", clip_npy, "-o", db, "--methods", "turnpoints", "-q")[0] == 0
-    for extra, message in [(("--speed", "5"), "speed must be"), (("--crossfade", "30"), "--crossfade: expected an integer in 0..16"),
-                           (("--size", "64x64"), "--size is not supported by mode turnpoints"),
+    for extra, message in [(("--speed", "5"), "argument --speed: expected a finite number in [0, 4], not '5'"),
+                           (("--crossfade", "30"), "--crossfade: expected an integer in 0..16"),
+                           (("--size", "64x64"), "unrecognized arguments: --size 64x64"),
                            (("--start", "500"), "start must be")]:
         code, _, err = _run(capsys, "play", db, "--mode", "turnpoints", "-o", tmp_path / "o.mp4", *extra)
         assert code == 2 and message in _one_line_error(err)

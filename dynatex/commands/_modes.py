@@ -1,0 +1,126 @@
+"""Command-line options generated from what a player mode declares (its options and controls).
+
+``dynatex play`` and ``dynatex export`` build one parser per mode: the mode named by
+``--mode`` on the command line (found before parsing, :func:`mode_from_argv`) contributes
+its constructor options and its controls as flags, so a flag of another mode is an
+argparse usage error. A new control declared on a player class appears here, in the saved
+state and in the class docstring without further code.
+"""
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from ..checks import Choice, Flag, Kind
+from ..errors import InvalidArgumentError
+from ..params import Param
+from ..player import MODES
+from ..player.base import COMMON_OPTIONS
+from ..player.modes import player_class
+
+
+def mode_from_argv(argv: list[str] | None, default: str) -> str:
+    """The mode ``--mode M`` (or ``--mode=M``) names in ``argv``, else ``default``.
+
+    An unknown name is returned as it is: the parser's ``choices`` then reports it.
+
+    >>> mode_from_argv(["play", "db.h5", "--mode", "tiles"], "lds"), mode_from_argv(["play", "--mode=evolve"], "lds")
+    ('tiles', 'evolve')
+    """
+    argv = list(argv or [])
+    for i, arg in enumerate(argv):
+        if arg == "--":
+            break
+        if arg == "--mode" and i + 1 < len(argv):
+            return argv[i + 1]
+        if arg.startswith("--mode="):
+            return arg.split("=", 1)[1]
+    return default
+
+
+def known_mode(mode: str, default: str) -> str:
+    """``mode`` if it names a mode, else ``default`` (whose flags the parser then offers)."""
+    return mode if mode in MODES else default
+
+
+class _ArgType:
+    """An argparse type from a kind: parses with the kind, reports argparse's way."""
+
+    def __init__(self, kind: Kind) -> None:
+        self.kind = kind
+        self.__name__ = type(kind).__name__.lower()      # argparse names the type in some messages
+
+    def __call__(self, text: str) -> Any:
+        try:
+            return self.kind.parse(text)
+        except InvalidArgumentError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    def __str__(self) -> str:
+        return str(self.kind)
+
+
+def add_param(group: Any, param: Param) -> None:
+    """Add ``param`` to an argparse parser or group as its flag (nothing when it has none).
+
+    The default is argparse's SUPPRESS: a flag the user did not give leaves the attribute
+    unset, so the player's own default applies.
+    """
+    flag = param.flag_name
+    if flag is None:
+        return
+    help_text = param.help().replace("%", "%%")
+    if isinstance(param.kind, Flag):
+        if param.default:
+            group.add_argument("--no-" + flag[2:], dest=param.name, action="store_false",
+                               default=argparse.SUPPRESS, help=help_text)
+        else:
+            group.add_argument(flag, dest=param.name, action="store_true", default=argparse.SUPPRESS,
+                               help=help_text)
+        return
+    if isinstance(param.kind, Choice):
+        group.add_argument(flag, dest=param.name, type=_ArgType(param.kind),
+                           choices=list(param.kind.choices), default=argparse.SUPPRESS, help=help_text)
+        return
+    group.add_argument(flag, dest=param.name, type=_ArgType(param.kind), metavar=param.kind.metavar,
+                       default=argparse.SUPPRESS, help=help_text)
+
+
+def add_mode_arguments(parser: argparse.ArgumentParser, mode: str, *, common: tuple[str, ...]) -> type:
+    """Add the ``common`` player parameters, then mode ``mode``'s options and controls; return its class."""
+    cls = player_class(mode)
+    for param in COMMON_OPTIONS:
+        if param.name in common:
+            add_param(parser, param)
+    if cls.options:
+        g = parser.add_argument_group(f"{mode} options (fixed for the run)")
+        for param in cls.options:
+            add_param(g, param)
+    controls = [c.param for c in cls.controls().values() if c.param.flag_name]
+    if controls:
+        g = parser.add_argument_group(f"{mode} controls")
+        for param in controls:
+            add_param(g, param)
+    return cls
+
+
+def player_kwargs(args: argparse.Namespace, cls: type, *, common: tuple[str, ...]) -> dict[str, Any]:
+    """The constructor keywords the command line gave for mode ``cls`` (common ones included)."""
+    names = [p.name for p in COMMON_OPTIONS if p.name in common] + [p.name for p in cls.options]
+    return {name: getattr(args, name) for name in names if hasattr(args, name)}
+
+
+def apply_controls(player: Any, args: argparse.Namespace) -> None:
+    """Set every control the command line gave on ``player``."""
+    for name, control in player.controls().items():
+        if control.param.flag_name and hasattr(args, name):
+            setattr(player, name, getattr(args, name))
+
+
+def modes_epilog(command: str) -> str:
+    return (f"Each mode has its own options and controls; this help lists one mode's (--mode). "
+            f"See them with 'dynatex {command} --mode MODE --help' for MODE in: {', '.join(sorted(MODES))}.")
+
+
+__all__ = ["add_mode_arguments", "add_param", "apply_controls", "known_mode", "mode_from_argv", "modes_epilog",
+           "player_kwargs"]
