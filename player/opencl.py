@@ -27,7 +27,9 @@ else:
 
 log = logging.getLogger(__name__)
 
-_FIX = "install an OpenCL platform with `pip install 'pyopencl[pocl]'`, or pass backend='numpy'"
+#: the numpy backend, as the API and the command line spell it
+_NUMPY = "use the numpy backend (backend='numpy'; dynatex --backend numpy)"
+_FIX = f"install an OpenCL platform (./install.sh, or `apt-get install pocl-opencl-icd`), or {_NUMPY}"
 
 
 class OpenCLUnavailableError(DynatexError, RuntimeError):
@@ -178,8 +180,7 @@ def _pick_device(device: str | None) -> DeviceInfo:
         failures.append(f"{info.describe()}: {verdict.reason}")
     raise OpenCLUnavailableError(
         "no OpenCL device here passed the self-test (" + "; ".join(failures) + "). "
-        "Run ./install.sh (it adds the system PoCL, `apt-get install pocl-opencl-icd`), "
-        "or use backend='numpy'")
+        f"Run ./install.sh (it adds the system PoCL, `apt-get install pocl-opencl-icd`), or {_NUMPY}")
 
 
 def variant_verified(device: "cl.Device", variant: str) -> bool:

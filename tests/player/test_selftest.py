@@ -113,6 +113,21 @@ def test_the_player_falls_back_to_numpy_when_no_device_passes(device, inject, mo
         open_player(db, selftest.TEXTURE, mode="tiles")
 
 
+def test_play_without_a_usable_device_exits_2_with_the_fix_in_one_line(device, inject, monkeypatch, tmp_path,
+                                                                        capsys):
+    """No device passes the self-test: ``dynatex play --backend opencl`` is the user's problem
+    with a fix (exit code 2, one line naming the numpy backend), not an internal error."""
+    from dynatex.cli import main
+    inject("crash")
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    out = tmp_path / "o.mp4"
+    assert main(["play", str(selftest._db_path()), "--backend", "opencl", "--frames", "2", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("dynatex: error: no OpenCL device here passed the self-test")
+    assert "apt-get install pocl-opencl-icd" in err and "--backend numpy" in err
+    assert not out.exists()
+
+
 def test_verdicts_are_cached_per_device_and_driver(device, fresh_cache, monkeypatch):
     info = device
     v = selftest.verdict(info)
