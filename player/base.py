@@ -30,7 +30,8 @@ COMMON_OPTIONS: tuple[Param, ...] = (
           "warning; opencl: a verified device or OpenCLUnavailableError; numpy: the reference."),
     Param("device", Text("P:D|NAME"), None, "OpenCL device: index P:D or a name substring "
           "(see dynatex.player.opencl.get_context).", optional=True, default_doc="the first verified device"),
-    Param("format", Choice(*FORMATS), "RGB", "Pixel format of the frames, written by the kernels (alpha 255)."),
+    Param("format", Choice(*FORMATS), "RGB", "Pixel format of the frames, written by the kernels (alpha 255); "
+          "the commands' output files decide their own.", flag=None),
     Param("seed", Range(int, 0, MAX_SEED), 0, "Seed of the mode's random choices; the same seed gives the same "
           "frames."),
 )

@@ -149,4 +149,31 @@ def document(cls: type, common: tuple[Param, ...]) -> None:
         cls.__doc__ = f"{doc.rstrip()}\n\n{text}\n"
 
 
-__all__ = ["Capabilities", "Control", "controls_of", "document"]
+def markdown(classes: list[type], common: tuple[Param, ...]) -> str:
+    """``player/MODES.md``: every mode's options, controls and capabilities as tables, from the declarations."""
+    lines = ["# Player modes", "",
+             "Generated from the modes' declarations (`python tools/write_modes_doc.py`);",
+             "a test keeps it equal to them. Every mode takes the common parameters; the",
+             "command line offers a mode's options and controls as flags (`dynatex play --mode MODE --help`).", ""]
+
+    def table(params: list[Param]) -> list[str]:
+        rows = ["| name | flag | rule | default | what |", "|---|---|---|---|---|"]
+        for p in params:
+            flag = f"`{p.flag_name}`" if p.flag_name else "-"
+            cells = [f"`{p.name}`", flag, p.kind.describe(), p.default_text() or "-", p.doc]
+            rows.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+        return rows
+
+    lines += ["## Common parameters", "", *table(list(common)), ""]
+    for cls in classes:
+        caps = [f.name for f in cls.capabilities.__dataclass_fields__.values() if getattr(cls.capabilities, f.name)]
+        lines += [f"## `{cls.mode}` ({cls.__name__})", "", (cls.__doc__ or "").strip().splitlines()[0], "",
+                  f"Capabilities: {', '.join(caps) or 'none'}.", ""]
+        if cls.options:
+            lines += ["Options (fixed for the player's lifetime):", "", *table(list(cls.options)), ""]
+        lines += ["Controls (attributes, changeable between any two frames; saved by `get_state`):", "",
+                  *table([c.param for c in controls_of(cls).values()]), ""]
+    return "\n".join(lines)
+
+
+__all__ = ["Capabilities", "Control", "controls_of", "document", "markdown"]

@@ -3,7 +3,9 @@ save and restore themselves, and a new control reaches the CLI, the state and th
 its one declaration."""
 from __future__ import annotations
 
+import importlib.util
 import inspect
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -139,3 +141,17 @@ def test_a_new_control_appears_in_the_cli_the_state_and_the_docs(toy_mode, tmp_p
         with pytest.raises(ValueError, match=r"gain must be a finite number in \[0, 2\]"):
             p.set_state(bad)
         assert p.gain == 0.5 and p.speed == 1.0
+
+
+def test_modes_md_is_generated_from_the_declarations():
+    path = Path(__file__).resolve().parents[2] / "tools" / "write_modes_doc.py"
+    spec = importlib.util.spec_from_file_location("write_modes_doc", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    text = module.text()
+    for mode in MODES:
+        cls = player_class(mode)
+        section = text.split(f"## `{mode}` ")[1].split("\n## ")[0]
+        for c in cls.controls().values():
+            assert f"| `{c.name}` |" in section, (mode, c.name)
+    assert module.PATH.read_text(encoding="utf-8") == text, "player/MODES.md is stale: run python tools/write_modes_doc.py"
