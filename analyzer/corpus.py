@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from ..tiledb import DatabaseWriter, TileDB, TileDBError
-from .methods import get_method
+from .methods import Clips, Method, get_method
 from .stream import parse_bytes
 
 #: File suffixes taken as clips when a folder of clips is given.
@@ -180,8 +180,11 @@ def learn_into(writer: DatabaseWriter, texture: str, path: str, methods: Sequenc
 
     With ``max_memory`` the clip is spilled to disk and LDS and the mixture learn out of
     core; other methods read the frames into memory only where they fit the bound.
-    ``progress(stage)`` gives a ``progress(done, total)`` callback per stage ("decode" and
-    each method); ``on_model(method, model, seconds)`` sees each model once it is written.
+    ``params`` holds each method's keyword arguments; a clip-valued parameter (kind
+    :class:`~dynatex.analyzer.methods.Clips`, the tiles' ``mix``) may hold paths, decoded
+    here right after the main clip with its ``load`` options except ``start`` and ``crop``
+    (another video need not have that frame or that region). ``progress(stage)`` gives a
+    ``progress(done, total)`` callback per stage ("decode" and each method); ``on_model(method, model, seconds)`` sees each model once it is written.
     Returns the source description written.
     """
     chosen = [get_method(m) for m in methods]
@@ -198,6 +201,7 @@ def learn_into(writer: DatabaseWriter, texture: str, path: str, methods: Sequenc
         else:
             clip = _load_in_memory(path, isolate, load, bar("decode"))
             source = clip.source_info()
+        params = {m.name: _decode_clip_params(m, params.get(m.name, {}), isolate, load) for m in chosen}
         writer.put_texture(texture, source)
         frames_written = False
         for m in chosen:
@@ -222,6 +226,17 @@ def learn_into(writer: DatabaseWriter, texture: str, path: str, methods: Sequenc
         if disk is not None:
             disk.close()
     return source
+
+
+def _decode_clip_params(method: Method, kwargs: dict, isolate: bool, load: dict) -> dict:
+    """``kwargs`` with the clip paths of ``method``'s :class:`~dynatex.analyzer.methods.Clips` parameters decoded."""
+    kwargs = dict(kwargs)
+    options = {k: v for k, v in load.items() if k not in ("start", "crop")}
+    for p in method.params:
+        if isinstance(p.kind, Clips) and kwargs.get(p.name):
+            kwargs[p.name] = [_load_in_memory(c, isolate, options, None) if isinstance(c, str) else c
+                              for c in kwargs[p.name]]
+    return kwargs
 
 
 def _load_in_memory(path: str, isolate: bool, load: dict, progress):

@@ -12,7 +12,9 @@ import os
 import sys
 from collections.abc import Callable
 
+from ..checks import Kind
 from ..cli import UsageError
+from ..errors import InvalidArgumentError
 
 #: Largest count (frames, steps, dimensions) an option takes: beyond it, array sizes overflow.
 MAX_COUNT = 2**31 - 1
@@ -105,6 +107,31 @@ class Numbers:
         return f"{self.form}, each {self.item.describe()}"
 
 
+class KindArg:
+    """An argparse type from a kind of :mod:`dynatex.checks`: parses with the kind, and a bad value
+    is a usage error carrying the kind's message; ``str()`` is the rule, for ``%(type)s`` in help.
+
+    >>> from dynatex.checks import Range
+    >>> KindArg(Range(int, 1, 8))("3"), str(KindArg(Range(int, 1, 8)))
+    (3, '1..8')
+    """
+
+    def __init__(self, rule: Kind) -> None:
+        self.rule = rule
+
+    def __call__(self, text: str):
+        try:
+            return self.rule.parse(text)
+        except InvalidArgumentError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    def __str__(self) -> str:
+        return str(self.rule)
+
+    def __repr__(self) -> str:
+        return f"KindArg({self.rule!r})"
+
+
 #: Shared declarations.
 positive_int = Number(int, 1, MAX_COUNT)
 count = Number(int, 0, MAX_COUNT)
@@ -154,5 +181,5 @@ def tqdm_progress(desc: str, enabled: bool = True) -> Callable[[int, int | None]
     return update
 
 
-__all__ = ["MAX_COUNT", "MAX_SEED", "MAX_SIDE", "Number", "Numbers", "UsageError", "count", "load_clip_arg",
+__all__ = ["MAX_COUNT", "MAX_SEED", "MAX_SIDE", "KindArg", "Number", "Numbers", "UsageError", "count", "load_clip_arg",
            "positive_int", "seed", "size_arg", "tqdm_progress"]

@@ -11,26 +11,22 @@ import os
 import sys
 import time
 
-from ..analyzer.methods import METHODS, get_method
-from ..analyzer.quilt import DEFAULT_BLOCK as QUILT_BLOCK
+from ..analyzer.methods import METHODS, Method, get_method
+from ..checks import Choice, Either, Flag, Kind, Size
+from ..params import Param
 from ..tiledb import DatabaseWriter
 from ..tiledb.schema import texture_name_from
-from ..tiledb.tiles import CONSTRUCTIONS as TILE_CONSTRUCTIONS
 from ._common import (
     MAX_COUNT,
-    MAX_SIDE,
+    KindArg,
     Number,
     Numbers,
     UsageError,
     count,
-    load_clip_arg,
     positive_int,
-    seed,
     size_arg,
     tqdm_progress,
 )
-
-_N = Number(int, 1, MAX_COUNT)
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
@@ -73,77 +69,9 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     g.add_argument("--crop", type=_crop_arg, default=None, metavar="X,Y,W,H", help="keep this region")
     g.add_argument("--resize", type=size_arg, default=None, metavar="WxH", help="resize frames")
     g.add_argument("--grey", action="store_true", help="analyse in grey levels instead of colour")
-    g = p.add_argument_group("lds")
-    g.add_argument("--n", type=_n_arg, default=50, help=f"state order, {_N.describe()}, or 'auto' (default 50)")
-    g.add_argument("--k", type=positive_int, default=None, help="noise rank (default n)")
-    g.add_argument("--energy", type=Number(float, 0.0, 1.0, low_open=True), default=0.9,
-                   help="variance kept by --n auto, in %(type)s (default 0.9)")
-    g.add_argument("--svd", choices=("auto", "gram", "randomized"), default="auto")
-    g.add_argument("--max-radius", type=Number(float, 0.0, 1.0, low_open=True, high_open=True), default=0.995,
-                   help="largest pole magnitude, in %(type)s (default 0.995)")
-    g = p.add_argument_group("turnpoints")
-    g.add_argument("--tp-n", type=positive_int, default=4, help="mirrored frame pairs of the symmetry test (default 4)")
-    g.add_argument("--tp-s", type=count, default=1, help="binomial smoothness, 0 <= s < n/2 (default 1)")
-    g.add_argument("--tp-r", type=positive_int, default=4, help="turn points are more than R frames apart (default 4)")
-    g.add_argument("--tp-min-symmetry", type=Number(float, 0.0, 1.0, high_open=True), default=0.3,
-                   help="weakest turn point, in %(type)s (default 0.3)")
-    g.add_argument("--tp-max-cost", type=Number(float, 0.0, 1e6, low_open=True), default=2.0,
-                   help="drop transitions costlier than this many median frame steps, in %(type)s (default 2)")
-    g.add_argument("--tp-plot", default=None, metavar="PNG",
-                   help="write a plot of the symmetry curve, turn points and probabilities")
-    g = p.add_argument_group("mixture")
-    g.add_argument("--mix-components", type=positive_int, default=3, help="PPCA components S (default 3)")
-    g.add_argument("--mix-dim", type=positive_int, default=10, help="dimension d of each component (default 10)")
-    g.add_argument("--mix-global-dim", type=positive_int, default=None, help="global coordinates D (default d)")
-    g.add_argument("--mix-pca-dim", type=positive_int, default=50, help="reduced PCA space (default 50)")
-    g.add_argument("--mix-neighbors", type=positive_int, default=12, help="LLE neighbours K (default 12)")
-    g.add_argument("--mix-pmax", type=positive_int, default=None,
-                   help="largest AR order tried (default 5, or less when the clip is short)")
-    g = p.add_argument_group("tiles")
-    g.add_argument("--tile", type=_tile_arg, default=None, metavar="N or WxH",
-                   help="tile size in pixels (default: from the dominant spatial period); with the quilted "
-                        "construction the quilt block size N (default a third of the shorter side)")
-    g.add_argument("--tiles-construction", choices=TILE_CONSTRUCTIONS, default=None,
-                   help="quilted: one large seamless torus quilted from the clip, cut into cells laid out in "
-                        "order, no lattice (default for one texture); ring: tiles share one boundary ring and "
-                        "join in any arrangement (default with --tiles-mix, --tiles-n or --tiles-ring); wang: "
-                        "edge-coloured tiles that join where colours match (one texture only)")
-    g.add_argument("--tiles-period", type=_tile_arg, default=None, metavar="WxH",
-                   help="quilted: period of the torus (default at least 512 and twice the clip per side)")
-    g.add_argument("--tiles-n", type=Number(int, 1, 64), default=None,
-                   help="tiles per texture with the ring construction, %(type)s (default 4)")
-    g.add_argument("--tiles-edge-colours", type=Number(int, 2, 4), default=2,
-                   help="Wang edge colours per direction, %(type)s (default 2: 8 tiles)")
-    g.add_argument("--tiles-min-loop", type=Number(int, 2, MAX_COUNT), default=32,
-                   help="shortest loop in frames (default 32)")
-    g.add_argument("--tiles-max-loop", type=positive_int, default=None, help="longest loop (default: the clip)")
-    g.add_argument("--tiles-transition", type=positive_int, default=8,
-                   help="frames over which the per-pixel temporal transitions spread (default 8)")
-    g.add_argument("--tiles-ring", type=Number(int, 2, MAX_SIDE), default=None,
-                   help="width of the band of the shared ring cuts (default tile/10)")
-    g.add_argument("--tiles-flow-gain", type=Number(float, 0.0, 10.0), default=0.5,
-                   help="extra cut freedom per pixel/frame of optical flow, in %(type)s (default 0.5, 0 = off)")
-    g.add_argument("--tiles-mix", action="append", default=[], metavar="CLIP",
-                   help="another texture to mix with (repeatable): cut to the same tiles, with border tiles")
-    g.add_argument("--tiles-names", default=None, metavar="A,B,...",
-                   help="class names of the main and the --tiles-mix textures (default main,mix1,...)")
-    g = p.add_argument_group("quilt (time-varying textures)")
-    g.add_argument("--quilt-size", type=size_arg, default=None, metavar="WxH",
-                   help="output canvas (default: twice the clip's width and height)")
-    g.add_argument("--quilt-block", type=_tile_arg, default=QUILT_BLOCK, metavar="N or WxH",
-                   help=f"block size; elongated blocks (e.g. 16x64) suit stretching features (default {QUILT_BLOCK})")
-    g.add_argument("--quilt-overlap", type=positive_int, default=None, help="block overlap (default 5/16 of the block)")
-    g.add_argument("--quilt-rank", type=positive_int, default=15, help="SVD rank of the comparisons (default 15)")
-    g.add_argument("--quilt-tolerance", type=Number(float, 0.0, 1e6), default=0.1,
-                   help="pick among candidates within (1 + T) of the best error, T in %(type)s (default 0.1)")
-    g.add_argument("--quilt-feather", type=Number(int, 0, MAX_SIDE), default=None,
-                   help="cross-fade half-width across cuts (default overlap/2, 0 = hard cuts)")
-    g.add_argument("--quilt-lowpass", type=Number(float, 0.0, float(MAX_SIDE), low_open=True), default=None,
-                   metavar="SIGMA", help="low-pass gain normalisation with this Gaussian sigma in pixels, "
-                                         "in %(type)s (default off)")
-    g.add_argument("--quilt-restore-gradient", action="store_true",
-                   help="with --quilt-lowpass: keep the source's low-frequency gradient instead of flattening it")
-    g.add_argument("--quilt-seed", type=seed, default=0, help="seed of the random block choices (default 0)")
+    groups = _add_method_options(p)
+    groups["turnpoints"].add_argument("--tp-plot", default=None, metavar="PNG",
+                                      help="write a plot of the symmetry curve, turn points and probabilities")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
     return p
 
@@ -155,49 +83,61 @@ def _crop_arg(text: str) -> tuple[int, int, int, int]:
     return x, y, w, h
 
 
-def _n_arg(text: str) -> int | str:
-    return "auto" if text.strip().lower() == "auto" else _N(text)
+def _add_method_options(p: argparse.ArgumentParser) -> dict[str, argparse._ArgumentGroup]:
+    """One option group per method, one option per declared parameter (:mod:`dynatex.analyzer.methods`)."""
+    groups = {}
+    for method in METHODS.values():
+        g = groups[method.name] = p.add_argument_group(method.name, method.summary)
+        for param in method.params:
+            if param.flag_name is not None:
+                g.add_argument(param.flag_name, dest=_dest(method, param), help=_help(param), **_parse_options(param))
+    return groups
+
+
+def _dest(method: Method, param: Param) -> str:
+    return f"{method.name}.{param.name}"
+
+
+def _help(param: Param) -> str:
+    """``param``'s help: what it does, the rule as typed on the command line, the default."""
+    if isinstance(param.kind, Flag):
+        return param.doc
+    rule = _typed_rule(param.kind)
+    return f"{param.doc} {rule[0].upper()}{rule[1:]} (default {param.default_text()}).".replace("%", "%%")
+
+
+def _typed_rule(kind: Kind) -> str:
+    """The rule in words, with sizes as typed (``WIDTHxHEIGHT``) rather than as Python holds them."""
+    if isinstance(kind, Size):
+        return str(kind)
+    if isinstance(kind, Either):
+        return " or ".join(_typed_rule(k) for k in kind.kinds)
+    return kind.describe()
+
+
+def _parse_options(param: Param) -> dict:
+    """How argparse reads ``param``: a switch for a flag, repeated for a kind that ``repeat``s, else one value."""
+    if isinstance(param.kind, Flag):
+        return {"action": "store_true"}
+    metavar = param.extra.get("metavar") or param.kind.metavar or param.flag_name.lstrip("-").upper().replace("-", "_")
+    if isinstance(param.kind, Choice):
+        metavar = str(param.kind)
+    if getattr(param.kind, "repeat", False):
+        return {"action": "append", "type": KindArg(param.kind), "default": None, "metavar": metavar}
+    return {"type": KindArg(param.kind), "default": param.default, "metavar": metavar}
 
 
 def method_params(name: str, args: argparse.Namespace) -> dict:
-    """Keyword arguments of method ``name``'s learn function, from the command line."""
-    if name == "lds":
-        return {"n": args.n, "k": args.k, "energy": args.energy, "svd": args.svd, "max_radius": args.max_radius}
-    if name == "mixture":
-        return {"components": args.mix_components, "dim": args.mix_dim, "global_dim": args.mix_global_dim,
-                "pca_dim": args.mix_pca_dim, "neighbors": args.mix_neighbors, "pmax": args.mix_pmax}
-    if name == "turnpoints":
-        return {"n": args.tp_n, "s": args.tp_s, "r": args.tp_r, "min_symmetry": args.tp_min_symmetry,
-                "max_cost": args.tp_max_cost}
-    if name == "tiles":
-        mix = []
-        for path in args.tiles_mix:
-            mix.append(load_clip_arg(path, stop=args.stop, step=args.step, size=args.resize,
-                                     color=not args.grey).frames)
-        names = None if args.tiles_names is None else [n.strip() for n in args.tiles_names.split(",")]
-        return {"tile": args.tile, "construction": args.tiles_construction, "n_tiles": args.tiles_n,
-                "edge_colours": args.tiles_edge_colours, "min_loop": args.tiles_min_loop,
-                "max_loop": args.tiles_max_loop, "transition": args.tiles_transition, "ring": args.tiles_ring,
-                "flow_gain": args.tiles_flow_gain, "mix": mix, "names": names,
-                **({} if args.tiles_period is None else {"period": _pair(args.tiles_period)})}
-    if name == "quilt":
-        return {"size": args.quilt_size, "block": args.quilt_block, "overlap": args.quilt_overlap,
-                "rank": args.quilt_rank, "tolerance": args.quilt_tolerance, "feather": args.quilt_feather,
-                "lowpass": args.quilt_lowpass, "restore_gradient": args.quilt_restore_gradient,
-                "seed": args.quilt_seed}
-    return {}
-
-
-def _pair(v) -> tuple[int, int]:
-    return (v, v) if isinstance(v, int) else v
-
-
-def _tile_arg(text: str):
-    side = Number(int, 1, MAX_SIDE)
-    parts = [side.parse(v) for v in text.lower().split("x")]
-    if len(parts) not in (1, 2) or any(p is None for p in parts):
-        raise argparse.ArgumentTypeError(f"expected N or WxH, each side an integer in {side}, not {text!r}")
-    return parts[0] if len(parts) == 1 else (parts[1], parts[0])    # WxH -> (h, w)
+    """Keyword arguments of method ``name``'s learn function, from the command line (every declared
+    parameter that has an option; clip paths stay paths, :func:`~dynatex.analyzer.corpus.learn_into`
+    decodes them)."""
+    method = get_method(name)
+    params = {}
+    for param in method.params:
+        if param.flag_name is not None:
+            value = getattr(args, _dest(method, param))
+            params[param.name] = param.default if value is None else value
+    return params
 
 
 def run(args: argparse.Namespace) -> int:
@@ -262,7 +202,7 @@ def _run_one(args: argparse.Namespace, clip_path: str, methods, max_memory: int 
 
 def _run_corpus(args: argparse.Namespace, clips: list[str], names: list[str], max_memory: int | None) -> int:
     from ..analyzer.corpus import FAILED, analyze_corpus, format_table
-    for flag, value in (("--name", args.name), ("--tiles-mix", args.tiles_mix), ("--tp-plot", args.tp_plot)):
+    for flag, value in (("--name", args.name), ("--tiles-mix", getattr(args, "tiles.mix")), ("--tp-plot", args.tp_plot)):
         if value:
             raise UsageError(f"{flag} works with one clip only, not a corpus of {len(clips)}")
     if os.path.exists(args.output) and not os.path.isdir(args.output):

@@ -45,11 +45,15 @@ def _subparsers() -> dict[str, argparse.ArgumentParser]:
 
 
 def _numeric_actions():
-    from dynatex.commands._common import Number, Numbers, size_arg
+    """``(command, action, rule)`` of every option that parses numbers: an argparse type of
+    ``_common`` or a kind of :mod:`dynatex.checks` behind a ``KindArg``."""
+    from dynatex import checks
+    from dynatex.commands._common import KindArg, Number, Numbers, size_arg
     for cmd, p in _subparsers().items():
         for action in p._actions:
-            if isinstance(action.type, (Number, Numbers)) or action.type is size_arg:
-                yield cmd, action
+            rule = action.type.rule if isinstance(action.type, KindArg) else action.type
+            if isinstance(rule, (Number, Numbers, checks.Range, checks.Numbers, checks.Size)) or rule is size_arg:
+                yield cmd, action, rule
 
 
 def _outside(n) -> list[str]:
@@ -86,16 +90,17 @@ def test_every_numeric_option_declares_a_range():
 
 
 def test_numeric_options_refuse_values_outside_their_declared_range(capsys):
+    from dynatex import checks
     from dynatex.commands._common import Number, Numbers
     checked = 0
-    for cmd, action in _numeric_actions():
+    for cmd, action, rule in _numeric_actions():
         opt = action.option_strings[-1]
-        if isinstance(action.type, Number):
-            bad = _outside(action.type)
-        elif isinstance(action.type, Numbers):
-            good = _inside(action.type.item)[0]
-            bad = [",".join([good] * (action.type.count - 1) + [v]) for v in _outside(action.type.item)]
-            bad.append(",".join([good] * (action.type.count + 1)))
+        if isinstance(rule, (Number, checks.Range)):
+            bad = _outside(rule)
+        elif isinstance(rule, (Numbers, checks.Numbers)):
+            good = _inside(rule.item)[0]
+            bad = [",".join([good] * (rule.count - 1) + [v]) for v in _outside(rule.item)]
+            bad.append(",".join([good] * (rule.count + 1)))
         else:
             bad = ["0x0", "16385x8", "8x", "nanxnan"]
         for value in bad:
@@ -111,11 +116,12 @@ def test_numeric_options_refuse_values_outside_their_declared_range(capsys):
 
 
 def test_numeric_options_take_the_ends_of_their_range():
+    from dynatex import checks
     from dynatex.commands._common import Number
     parsers = _subparsers()
-    for cmd, action in _numeric_actions():
-        if isinstance(action.type, Number):
-            for value in _inside(action.type):
+    for cmd, action, rule in _numeric_actions():
+        if isinstance(rule, (Number, checks.Range)):
+            for value in _inside(rule):
                 args = parsers[cmd].parse_args([*REQUIRED[cmd], f"{action.option_strings[-1]}={value}"])
                 assert math.isfinite(getattr(args, action.dest))
 
