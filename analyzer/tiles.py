@@ -68,7 +68,12 @@ from typing import Sequence
 
 import numpy as np
 
-from ..tiledb.tiles import CONSTRUCTIONS, TilesModel
+from ..tiledb.tiles import (  # the stationarity warning lives with the model that describes it
+    CONSTRUCTIONS,
+    STATIONARITY_WARN,  # noqa: F401 - re-exported
+    TilesModel,
+    stationarity_warning,  # noqa: F401 - re-exported
+)
 from ._checks import check_int
 from .video import Clip, Progress
 
@@ -803,7 +808,6 @@ def torus_cells(torus: np.ndarray, cell: Sequence[int]) -> np.ndarray:
 
 
 # -- 9. spatial stationarity ---------------------------------------------------------------------
-STATIONARITY_WARN = 0.5     # below this a clip is not one texture all over (grass 0.74, sea 0.65)
 _STAT_OFFSETS = np.array([16.0, 4.0, 1.0])    # grey levels added to each statistic's median
 
 
@@ -853,16 +857,6 @@ def stationarity(frames: np.ndarray, *, grid: int = 4, n_frames: int = 48) -> tu
     names = ("brightness", "contrast", "activity")
     return 1.0 / (1.0 + spread), {"spread": spread, "worst": names[int(np.argmax(per_stat))],
                                   **{f"spread_{n}": float(v) for n, v in zip(names, per_stat)}}
-
-
-def stationarity_warning(info: dict) -> str | None:
-    """The warning for a tiles model whose clip is not spatially stationary (None otherwise)."""
-    figure = info.get("stationarity")
-    if figure is None or float(figure) >= STATIONARITY_WARN:
-        return None
-    return (f"the clip is not one texture all over (stationarity {float(figure):.2f} < {STATIONARITY_WARN}: its "
-            f"{info.get('stationarity_worst', 'statistics')} differs between parts of the frame, as with a single "
-            f"object or a scene); tiles will repeat or misplace its structures")
 
 
 # -- 8. colour statistics --------------------------------------------------------------------------

@@ -1,7 +1,9 @@
 """Which module reads and writes each method group.
 
 A codec module has ``write(group, model)`` and ``read(group, check, source) -> model``;
-``read`` validates everything it returns.
+``read`` validates everything it returns. Its model class describes itself:
+``describe()`` (plain facts, for ``dynatex info``) and ``summary()`` (one line, for
+``dynatex analyze``); see :mod:`dynatex.tiledb._describe`.
 """
 from __future__ import annotations
 

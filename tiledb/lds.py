@@ -12,6 +12,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
+from ._describe import plain_info
 from .source import SourceInfo
 
 #: Largest spectral radius a stored transition matrix may have.
@@ -63,6 +64,17 @@ class LDSModel:
     @property
     def k(self) -> int:
         return int(self.B.shape[1])
+
+    def describe(self) -> dict:
+        """Facts as plain values: the ``info`` attributes, the orders and the basis size."""
+        return {**plain_info(self.info), "n": self.n, "k": self.k, "basis_mb": round(self.basis.nbytes / 2**20, 2)}
+
+    def summary(self) -> str:
+        """One line: orders, energy kept, spectral radius before and after clipping."""
+        info = self.info
+        return (f"n={self.n} k={self.k}, energy {info.get('energy_captured', 0):.3f}, "
+                f"spectral radius {info.get('spectral_radius_raw', 0):.4f} -> {info.get('spectral_radius', 0):.4f} "
+                f"({info.get('poles_clipped', 0)} poles clipped)")
 
 
 def write(group: h5py.Group, model: LDSModel) -> None:

@@ -14,6 +14,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
+from ._describe import plain_info
 from .source import SourceInfo
 
 #: Largest spectral radius the stored AR process's companion matrix may have.
@@ -109,6 +110,17 @@ class MixtureModel:
     @property
     def order(self) -> int:
         return int(self.ar_coefs.shape[0])
+
+    def describe(self) -> dict:
+        """Facts as plain values: the ``info`` attributes."""
+        return plain_info(self.info)
+
+    def summary(self) -> str:
+        """One line: sizes, AR order, reconstruction error against a single PCA."""
+        info = self.info
+        return (f"S={self.components} d={self.dim} D={self.global_dim}, AR({self.order}) by Schwarz, "
+                f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
+                f"{info.get('recon_error_pca_dim', 0):.3f})")
 
 
 _F64 = ("weights", "sigma2", "singular_values", "responsibilities", "local_coords", "coord_map",

@@ -15,6 +15,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
+from ._describe import plain_info
 from .source import SourceInfo
 
 #: Largest output canvas side the codec accepts (matches the CLI's size limit).
@@ -79,6 +80,18 @@ class QuiltModel:
     def block(self) -> tuple[int, int]:
         """``(block_h, block_w)``."""
         return int(self.info["block_h"]), int(self.info["block_w"])
+
+    def describe(self) -> dict:
+        """Facts as plain values: the ``info`` attributes."""
+        return plain_info(self.info)
+
+    def summary(self) -> str:
+        """One line: canvas, blocks, the rank of the comparisons and its error."""
+        info = self.info
+        w, h = self.size
+        return (f"{w}x{h} canvas from {self.n_blocks} blocks of {self.block[1]}x{self.block[0]}, "
+                f"rank-{info.get('rank')} SVD error {100 * info.get('rank_error', 0):.2f}% "
+                f"(comparing {info.get('compare_width')} instead of {info.get('full_width')} values per pixel)")
 
 
 def write(group: h5py.Group, model: QuiltModel) -> None:

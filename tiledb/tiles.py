@@ -17,6 +17,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
+from ._describe import plain_info
 from .source import SourceInfo
 
 MAX_TILES = 4096
@@ -24,6 +25,7 @@ CONSTRUCTIONS = ("quilted", "ring", "wang")   # how tiles join in x and y (attri
 #: How far a stored mean colour may lie from the tiles' (the analyzer averages 16 sampled frames).
 MEAN_RGB_TOLERANCE = 32.0
 MAX_CLASSES = 10           # the player tone table (256 entries) holds blended tones for every pair
+STATIONARITY_WARN = 0.5     # below this a clip is not one texture all over (grass 0.74, sea 0.65)
 
 
 @dataclass
@@ -118,6 +120,57 @@ class TilesModel:
         """Indices of the tiles with interior class ``cls`` and ring class ``ring`` (default ``cls``)."""
         ring = cls if ring is None else ring
         return np.flatnonzero((self.tile_class == cls) & (self.ring_class == ring))
+
+    def describe(self) -> dict:
+        """Facts as plain values: the ``info`` attributes, the tile set per class, its costs and colours,
+        the Wang edges, and a ``warning`` when the clip was not one texture all over."""
+        info = plain_info(self.info)
+        pure = self.ring_class == self.tile_class
+        info.update(n_tiles=self.n_tiles, tile_size=f"{self.tile_size[1]}x{self.tile_size[0]}",
+                    loop_length=self.loop_length, classes=list(self.class_names),
+                    tiles_per_class=[len(self.tiles_of(c)) for c in range(self.n_classes)],
+                    border_tiles=int((~pure).sum()), loop_start=self.class_loop_start.tolist(),
+                    loop_cost=[round(float(v), 4) for v in self.class_loop_cost],
+                    toroid_cut_cost=[[round(float(v), 2) for v in row] for row in self.class_toroid_cost],
+                    ring_seam_cost=[round(float(v), 2) for v in self.seam_cost],
+                    mean_rgb=[[round(float(v), 1) for v in row] for row in self.mean_rgb],
+                    tiles_mb=round(self.tiles.nbytes / 2**20, 2))
+        info.setdefault("construction", "wang" if self.wang else "ring")
+        if self.wang:
+            info["wang_edges_left_right_top_bottom"] = np.asarray(self.edges).tolist()
+        warning = stationarity_warning(self.info)
+        if warning:
+            info["warning"] = warning
+        return info
+
+    def summary(self) -> str:
+        """One line: the construction, tile size and count, the loop and the cut costs."""
+        info = self.info
+        th, tw = self.tile_size
+        if self.torus is not None:
+            return (f"quilted torus {info.get('period_w')}x{info.get('period_h')} of {self.n_tiles} cells of "
+                    f"{tw}x{th} (blocks {info.get('quilt_block')}), loop {self.loop_length} frames from "
+                    f"{self.class_loop_start.tolist()}, cut cost {info.get('quilt_seam_cost', 0):.4g}")
+        kind = (f"Wang set of {info.get('edge_colours')} edge colours" if self.wang
+                else f"ring construction, toroidal cut cost {self.class_toroid_cost.mean():.4g}")
+        seams = self.seam_cost[self.seam_cost > 0]
+        return (f"{self.n_tiles} tiles of {tw}x{th}, loop {self.loop_length} frames from "
+                f"{self.class_loop_start.tolist()}, classes {', '.join(self.class_names)}, {kind}, ring seam cost "
+                f"{seams.mean() if seams.size else 0:.4g}")
+
+
+def stationarity_warning(info: dict) -> str | None:
+    """The warning for a tiles model whose clip is not spatially stationary (None otherwise).
+
+    >>> stationarity_warning({"stationarity": 0.9}) is None
+    True
+    """
+    figure = info.get("stationarity")
+    if figure is None or float(figure) >= STATIONARITY_WARN:
+        return None
+    return (f"the clip is not one texture all over (stationarity {float(figure):.2f} < {STATIONARITY_WARN}: its "
+            f"{info.get('stationarity_worst', 'statistics')} differs between parts of the frame, as with a single "
+            f"object or a scene); tiles will repeat or misplace its structures")
 
 
 def write(group: h5py.Group, model: TilesModel) -> None:

@@ -14,6 +14,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
+from ._describe import plain_info
 from .source import SourceInfo
 
 _PER_FRAME = ("sym_raw", "symmetry", "reduced", "p_max")
@@ -77,6 +78,16 @@ class TurnPointModel:
     @property
     def last_turn(self) -> int:
         return int(self.turn_points[-1])
+
+    def describe(self) -> dict:
+        """Facts as plain values: the ``info`` attributes."""
+        return plain_info(self.info)
+
+    def summary(self) -> str:
+        """One line: turn points (the first twelve), transitions, exit frame."""
+        info = self.info
+        return (f"{info.get('n_turn_points', 0)} turn points {self.turn_points.tolist()[:12]}, "
+                f"{info.get('n_transitions', 0)} transitions, exit frame {self.exit_frame}")
 
 
 def write(group: h5py.Group, model: TurnPointModel) -> None:

@@ -180,12 +180,10 @@ def _run_one(args: argparse.Namespace, clip_path: str, methods, max_memory: int 
             from ..analyzer.turnpoints import plot_turnpoints
             plot_turnpoints(model, args.tp_plot, title=texture)
         if show:
-            print(f"{name}: {_summary(name, model)} ({seconds:.1f} s)", file=sys.stderr)
-        if name == "tiles":
-            from ..analyzer.tiles import stationarity_warning
-            warning = stationarity_warning(model.info)
-            if warning:
-                print(f"dynatex: warning: {texture}: {warning}", file=sys.stderr)
+            print(f"{name}: {model.summary()} ({seconds:.1f} s)", file=sys.stderr)
+        warning = model.describe().get("warning")
+        if warning:
+            print(f"dynatex: warning: {texture}: {warning}", file=sys.stderr)
 
     params = {m.name: method_params(m.name, args) for m in methods}
     # Open (and so validate) an existing database before the long work.
@@ -227,36 +225,3 @@ def _run_corpus(args: argparse.Namespace, clips: list[str], names: list[str], ma
               f"{os.path.basename(failed[0].clip)}: {failed[0].reason})", file=sys.stderr)
         return 2
     return 0
-
-
-def _summary(name: str, model) -> str:
-    info = getattr(model, "info", {}) or {}
-    if name == "lds":
-        return (f"n={model.n} k={model.k}, energy {info.get('energy_captured', 0):.3f}, "
-                f"spectral radius {info.get('spectral_radius_raw', 0):.4f} -> {info.get('spectral_radius', 0):.4f} "
-                f"({info.get('poles_clipped', 0)} poles clipped)")
-    if name == "mixture":
-        return (f"S={model.components} d={model.dim} D={model.global_dim}, AR({model.order}) by Schwarz, "
-                f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
-                f"{info.get('recon_error_pca_dim', 0):.3f})")
-    if name == "tiles":
-        if model.torus is not None:
-            return (f"quilted torus {info.get('period_w')}x{info.get('period_h')} of {model.n_tiles} cells of "
-                    f"{model.tile_size[1]}x{model.tile_size[0]} (blocks {info.get('quilt_block')}), loop "
-                    f"{model.loop_length} frames from {model.class_loop_start.tolist()}, "
-                    f"cut cost {info.get('quilt_seam_cost', 0):.4g}")
-        kind = (f"Wang set of {info.get('edge_colours')} edge colours" if model.wang
-                else f"ring construction, toroidal cut cost {model.class_toroid_cost.mean():.4g}")
-        return (f"{model.n_tiles} tiles of {model.tile_size[1]}x{model.tile_size[0]}, loop {model.loop_length} "
-                f"frames from {model.class_loop_start.tolist()}, classes {', '.join(model.class_names)}, "
-                f"{kind}, ring seam cost "
-                f"{model.seam_cost[model.seam_cost > 0].mean() if (model.seam_cost > 0).any() else 0:.4g}")
-    if name == "quilt":
-        w, h = model.size
-        return (f"{w}x{h} canvas from {model.n_blocks} blocks of {model.block[1]}x{model.block[0]}, "
-                f"rank-{info.get('rank')} SVD error {100 * info.get('rank_error', 0):.2f}% "
-                f"(comparing {info.get('compare_width')} instead of {info.get('full_width')} values per pixel)")
-    if name == "turnpoints":
-        return (f"{info.get('n_turn_points', 0)} turn points {model.turn_points.tolist()[:12]}, "
-                f"{info.get('n_transitions', 0)} transitions, exit frame {model.exit_frame}")
-    return ""
