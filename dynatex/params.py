@@ -11,7 +11,7 @@ import textwrap
 from dataclasses import dataclass, field
 from typing import Any
 
-from .checks import Kind
+from .checks import Flag, Kind
 
 
 @dataclass(frozen=True)
@@ -80,6 +80,8 @@ class Param:
 
     def help(self) -> str:
         """One paragraph for ``--help``: what, the rule for the flag's text, the default."""
+        if isinstance(self.kind, Flag):
+            return f"{self.doc} (default {self.default_text()})"
         rule = self.kind.describe_text()
         return f"{self.doc} {rule[0].upper()}{rule[1:]} (default {self.default_text()})."
 

@@ -11,10 +11,12 @@ import math
 import os
 import sys
 from collections.abc import Callable
+from typing import Any
 
-from ..checks import Kind
+from ..checks import Choice, Flag, Kind
 from ..cli import UsageError
 from ..errors import InvalidArgumentError
+from ..params import Param
 
 #: Largest count (frames, steps, dimensions) an option takes: beyond it, array sizes overflow.
 MAX_COUNT = 2**31 - 1
@@ -132,6 +134,32 @@ class KindArg:
         return f"KindArg({self.rule!r})"
 
 
+def add_param(group: Any, param: Param, *, dest: str | None = None, default: Any = argparse.SUPPRESS) -> None:
+    """Add a declared parameter to an argparse parser or group as its flag (nothing when it has none).
+
+    The parameter's kind parses the text (:class:`KindArg`) and its :meth:`~dynatex.params.Param.help`
+    is the help. A :class:`~dynatex.checks.Flag` is a switch (``--no-NAME`` when it defaults to
+    True); a kind with ``repeat`` may be given several times (None when never given). ``default`` is argparse's SUPPRESS
+    unless given: a flag the user did not give then leaves the attribute unset.
+    """
+    flag = param.flag_name
+    if flag is None:
+        return
+    dest = dest or param.name
+    help_text = param.help().replace("%", "%%")
+    if isinstance(param.kind, Flag):
+        name, action = ("--no-" + flag[2:], "store_false") if param.default else (flag, "store_true")
+        group.add_argument(name, dest=dest, action=action, default=default, help=help_text)
+        return
+    metavar = param.extra.get("metavar") or param.kind.metavar or (
+        str(param.kind) if isinstance(param.kind, Choice) else flag.lstrip("-").upper().replace("-", "_"))
+    action = "append" if getattr(param.kind, "repeat", False) else "store"
+    if action == "append" and default is not argparse.SUPPRESS:
+        default = None                  # argparse would append to the declared default itself
+    group.add_argument(flag, dest=dest, type=KindArg(param.kind), action=action, metavar=metavar, default=default,
+                       help=help_text)
+
+
 #: Shared declarations.
 positive_int = Number(int, 1, MAX_COUNT)
 count = Number(int, 0, MAX_COUNT)
@@ -181,5 +209,5 @@ def tqdm_progress(desc: str, enabled: bool = True) -> Callable[[int, int | None]
     return update
 
 
-__all__ = ["MAX_COUNT", "MAX_SEED", "MAX_SIDE", "KindArg", "Number", "Numbers", "UsageError", "count", "load_clip_arg",
+__all__ = ["MAX_COUNT", "MAX_SEED", "MAX_SIDE", "KindArg", "add_param", "Number", "Numbers", "UsageError", "count", "load_clip_arg",
            "positive_int", "seed", "size_arg", "tqdm_progress"]

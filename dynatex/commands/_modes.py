@@ -11,12 +11,10 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..checks import Choice, Flag, Kind
-from ..errors import InvalidArgumentError
-from ..params import Param
 from ..player import MODES
 from ..player.base import COMMON_OPTIONS
 from ..player.modes import player_class
+from ._common import add_param
 
 
 def mode_from_argv(argv: list[str] | None, default: str) -> str:
@@ -41,49 +39,6 @@ def mode_from_argv(argv: list[str] | None, default: str) -> str:
 def known_mode(mode: str, default: str) -> str:
     """``mode`` if it names a mode, else ``default`` (whose flags the parser then offers)."""
     return mode if mode in MODES else default
-
-
-class _ArgType:
-    """An argparse type from a kind: parses with the kind, reports argparse's way."""
-
-    def __init__(self, kind: Kind) -> None:
-        self.kind = kind
-        self.__name__ = type(kind).__name__.lower()      # argparse names the type in some messages
-
-    def __call__(self, text: str) -> Any:
-        try:
-            return self.kind.parse(text)
-        except InvalidArgumentError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-
-    def __str__(self) -> str:
-        return str(self.kind)
-
-
-def add_param(group: Any, param: Param) -> None:
-    """Add ``param`` to an argparse parser or group as its flag (nothing when it has none).
-
-    The default is argparse's SUPPRESS: a flag the user did not give leaves the attribute
-    unset, so the player's own default applies.
-    """
-    flag = param.flag_name
-    if flag is None:
-        return
-    help_text = param.help().replace("%", "%%")
-    if isinstance(param.kind, Flag):
-        if param.default:
-            group.add_argument("--no-" + flag[2:], dest=param.name, action="store_false",
-                               default=argparse.SUPPRESS, help=help_text)
-        else:
-            group.add_argument(flag, dest=param.name, action="store_true", default=argparse.SUPPRESS,
-                               help=help_text)
-        return
-    if isinstance(param.kind, Choice):
-        group.add_argument(flag, dest=param.name, type=_ArgType(param.kind),
-                           choices=list(param.kind.choices), default=argparse.SUPPRESS, help=help_text)
-        return
-    group.add_argument(flag, dest=param.name, type=_ArgType(param.kind), metavar=param.kind.metavar,
-                       default=argparse.SUPPRESS, help=help_text)
 
 
 def add_mode_arguments(parser: argparse.ArgumentParser, mode: str, *, common: tuple[str, ...]) -> type:
@@ -122,5 +77,5 @@ def modes_epilog(command: str) -> str:
             f"See them with 'dynatex {command} --mode MODE --help' for MODE in: {', '.join(sorted(MODES))}.")
 
 
-__all__ = ["add_mode_arguments", "add_param", "apply_controls", "known_mode", "mode_from_argv", "modes_epilog",
+__all__ = ["add_mode_arguments", "apply_controls", "known_mode", "mode_from_argv", "modes_epilog",
            "player_kwargs"]

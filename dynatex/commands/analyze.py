@@ -12,13 +12,12 @@ import sys
 import time
 
 from ..analyzer.methods import METHODS, Method, get_method
-from ..checks import Choice, Either, Flag, Kind, Size
 from ..params import Param
 from ..tiledb import DatabaseWriter
 from ..tiledb.schema import texture_name_from
 from ._common import (
     MAX_COUNT,
-    KindArg,
+    add_param,
     Number,
     Numbers,
     UsageError,
@@ -89,42 +88,12 @@ def _add_method_options(p: argparse.ArgumentParser) -> dict[str, argparse._Argum
     for method in METHODS.values():
         g = groups[method.name] = p.add_argument_group(method.name, method.summary)
         for param in method.params:
-            if param.flag_name is not None:
-                g.add_argument(param.flag_name, dest=_dest(method, param), help=_help(param), **_parse_options(param))
+            add_param(g, param, dest=_dest(method, param), default=param.default)
     return groups
 
 
 def _dest(method: Method, param: Param) -> str:
     return f"{method.name}.{param.name}"
-
-
-def _help(param: Param) -> str:
-    """``param``'s help: what it does, the rule as typed on the command line, the default."""
-    if isinstance(param.kind, Flag):
-        return param.doc
-    rule = _typed_rule(param.kind)
-    return f"{param.doc} {rule[0].upper()}{rule[1:]} (default {param.default_text()}).".replace("%", "%%")
-
-
-def _typed_rule(kind: Kind) -> str:
-    """The rule in words, with sizes as typed (``WIDTHxHEIGHT``) rather than as Python holds them."""
-    if isinstance(kind, Size):
-        return str(kind)
-    if isinstance(kind, Either):
-        return " or ".join(_typed_rule(k) for k in kind.kinds)
-    return kind.describe()
-
-
-def _parse_options(param: Param) -> dict:
-    """How argparse reads ``param``: a switch for a flag, repeated for a kind that ``repeat``s, else one value."""
-    if isinstance(param.kind, Flag):
-        return {"action": "store_true"}
-    metavar = param.extra.get("metavar") or param.kind.metavar or param.flag_name.lstrip("-").upper().replace("-", "_")
-    if isinstance(param.kind, Choice):
-        metavar = str(param.kind)
-    if getattr(param.kind, "repeat", False):
-        return {"action": "append", "type": KindArg(param.kind), "default": None, "metavar": metavar}
-    return {"type": KindArg(param.kind), "default": param.default, "metavar": metavar}
 
 
 def method_params(name: str, args: argparse.Namespace) -> dict:
