@@ -53,7 +53,7 @@ def databases(folder: Path) -> list[tuple[str, str, dict]]:
     spread = spreading_clip(24, 64, 64)
     quilt = _write(folder / "quilt.h5", spread, "quilt", learn_quilt(spread, size=(512, 512), seed=1))
     return [("lds 1280x720", lds, {"mode": "lds"}),
-            ("tiles 1280x720", tiles, {"mode": "tiles", "size": (1280, 720), "tone": "consensus",
+            ("tiles 1280x720", tiles, {"mode": "tiles", "size": (720, 1280), "tone": "consensus",
                                                 "controls": {"sigma": 64.0}}),
             ("turnpoints 1280x720", turn, {"mode": "turnpoints", "playback": "hybrid"}),
             ("evolve 512x512", quilt, {"mode": "evolve", "jitter": 2.0})]

@@ -66,7 +66,7 @@ def bench_player(path: str, size: tuple[int, int], n: int, *, defaults: bool = F
     """OpenCL end to end and kernel alone in ``rounds`` rounds, each with the copy bandwidth
     measured just before it (the roofline fraction of a round compares numbers taken under the
     same load of this shared machine; the row reports the median over rounds), then numpy."""
-    row: dict = {"size": f"{size[0]}x{size[1]}", "settings": "defaults" if defaults else "sigma 64, consensus tone",
+    row: dict = {"size": f"{size[1]}x{size[0]}", "settings": "defaults" if defaults else "sigma 64, consensus tone",
                  "rounds": []}
 
     def player(backend: str) -> TilesPlayer:
@@ -141,9 +141,9 @@ def main(argv: list[str] | None = None) -> int:
         for construction in args.constructions.split(","):
             paths[construction] = os.path.join(tmp, f"tiles_{construction}.h5")
             write_db(paths[construction], frames, learn_tiles(frames, construction=construction))
-        runs = [(tuple(int(v) for v in text.lower().split("x")), False) for text in args.sizes.split(",")]
+        runs = [(tuple(int(v) for v in text.lower().split("x"))[::-1], False) for text in args.sizes.split(",")]
         if not args.no_defaults:
-            runs.append(((3840, 2160), True))
+            runs.append(((2160, 3840), True))
         for (size, defaults), construction in [(r, c) for r in runs for c in paths]:
             row = bench_player(paths[construction], size, args.frames, defaults=defaults, rounds=args.rounds)
             row["construction"] = construction

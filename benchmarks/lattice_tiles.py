@@ -71,7 +71,7 @@ def measure(name: str, *, n_out: int, backend: str, workdir: str, construction: 
         w.put_texture(name, clip.source_info())
         w.put_method(name, "tiles", model)
     H, W = 2 * frames.shape[1], 2 * frames.shape[2]
-    with TilesPlayer(path, backend=backend, size=(W, H), seed=1) as p:
+    with TilesPlayer(path, backend=backend, size=(H, W), seed=1) as p:
         out = np.stack([p.next_frame() for _ in range(n_out)])
         ch, cw = p.tile_size
     res["output"] = f"{W}x{H}x{n_out}"
@@ -84,7 +84,7 @@ def measure(name: str, *, n_out: int, backend: str, workdir: str, construction: 
     res["wrap_discontinuity"] = float(metrics.temporal_discontinuity(np.concatenate([tile, tile]),
                                                                      [model.loop_length], source=frames)[0])
     target = np.clip(frames.reshape(-1, 3).mean(axis=0) * TONE_FACTORS, 1, 254)
-    with TilesPlayer(path, backend=backend, size=(W, H), seed=1, tone=tuple(target)) as p:
+    with TilesPlayer(path, backend=backend, size=(H, W), seed=1, tone=tuple(target)) as p:
         acc = np.zeros(3)
         for _ in range(n_out):
             acc += p.next_frame().reshape(-1, 3).mean(axis=0)

@@ -88,7 +88,7 @@ def measure(name: str, frames: np.ndarray, *, size: tuple[int, int], n_out: int,
     with DatabaseWriter(path, overwrite=True) as w:
         w.put_texture(name, clip.source_info())
         w.put_method(name, "tiles", model)
-    W, H = size
+    H, W = size
     with TilesPlayer(path, backend=backend, size=size, seed=1) as p:
         out = np.stack([p.next_frame() for _ in range(n_out)])
         arrangement = p.arrangement.copy()
@@ -155,7 +155,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--clips", default="grass,water,generated,grass+water",
                     help="comma-separated subset of grass, water, generated, grass+water (mixing)")
     args = ap.parse_args(argv)
-    size = tuple(int(v) for v in args.size.lower().split("x"))
+    w, h = (int(v) for v in args.size.lower().split("x"))
+    size = (h, w)
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         grass = load_clip(str(CLIPS / "grass_straw_wind_dyntex.avi")).frames

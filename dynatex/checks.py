@@ -302,11 +302,18 @@ class Size(Kind):
         self.max_side = max_side
 
     def check(self, name: str, value: Any) -> tuple[int, int]:
-        side = Range(int, 1, self.max_side)
-        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
             raise ArgumentTypeError(f"{name} must be (height, width), not {value!r}")
-        h, w = (side.check(f"{name} {part}", v) for part, v in zip(("height", "width"), value))
-        return int(h), int(w)
+        if len(value) != 2:
+            raise InvalidArgumentError(f"{name} must be (height, width), two integers, not {len(value)} values "
+                                       f"{value!r}")
+        if any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) for v in value):
+            raise ArgumentTypeError(f"{name} must be (height, width) integers, not {value!r}")
+        h, w = int(value[0]), int(value[1])
+        if not (1 <= h <= self.max_side and 1 <= w <= self.max_side):
+            raise InvalidArgumentError(f"{name} must be (height, width) with each side in 1..{self.max_side}, "
+                                       f"not {value!r}")
+        return h, w
 
     def parse(self, text: str) -> tuple[int, int]:
         parts = text.lower().split("x")

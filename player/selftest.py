@@ -366,7 +366,7 @@ def _copy_check(device: str) -> str | None:
     return None if np.array_equal(out, src) else "the streaming copy lost bytes"
 
 
-_TILES = ("tiles", {"seed": 3, "size": (72, 136), "tone": "consensus"})
+_TILES = ("tiles", {"seed": 3, "size": (136, 72), "tone": "consensus"})
 
 #: name -> check(device) returning None or what failed; run in this order, portable kernels only
 CHECKS: dict[str, Callable[[str], str | None]] = {

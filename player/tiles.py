@@ -35,7 +35,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..checks import Choice, Either, NpyFile, Numbers, Range, Size, Text, check_float, check_int, check_seed
+from ..checks import (Choice, Either, NpyFile, Numbers, Range, Size, Text, check_float, check_int, check_seed,
+                      check_size)
 from ..errors import InvalidArgumentError
 from ..params import Param
 from ..tiledb import TileDB, TilesModel
@@ -105,7 +106,7 @@ class TilesPlayer(Player):
 
     Examples
     --------
-    >>> with TilesPlayer("grass.h5", size=(3840, 2160), seed=2) as p:   # doctest: +SKIP
+    >>> with TilesPlayer("grass.h5", size=(2160, 3840), seed=2) as p:   # doctest: +SKIP
     ...     p.sigma = 48.0
     ...     frame = p.next_frame()                                       # (2160, 3840, 3)
     """
@@ -139,13 +140,8 @@ class TilesPlayer(Player):
         self.loop_length, self.tile_size, self.n_tiles = length, (th, tw), k
         if size is None:
             src = self.texture.source
-            size = (src.width, src.height)
-        try:
-            w, h = (int(v) for v in size)
-        except (TypeError, ValueError):
-            raise InvalidArgumentError(f"size must be (width, height), not {size!r}") from None
-        if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
-            raise InvalidArgumentError(f"size must be within 1..{MAX_SIZE} on each side, not {w}x{h}")
+            size = (src.height, src.width)
+        h, w = check_size("size", size, MAX_SIZE)
         self._shape = (h, w, self.format.bytes)
         self.grid_shape = (-(-h // th), -(-w // tw))
         self.ring = int(model.info.get("ring", max(2, min(th, tw) // 5)))

@@ -15,7 +15,7 @@ from dynatex.player.pixels import FORMATS
 
 RGB = FORMATS["RGB"].defines
 
-MODES = [("lds", {}), ("mixture", {}), ("turnpoints", {"playback": "jumps"}), ("tiles", {"size": (40, 72)}),
+MODES = [("lds", {}), ("mixture", {}), ("turnpoints", {"playback": "jumps"}), ("tiles", {"size": (72, 40)}),
          ("evolve", {"jitter": 2.0})]
 
 

@@ -10,7 +10,7 @@ from dynatex.player.gather import open_gather, pack_source
 from dynatex.player.pixels import FORMATS, pixel_format
 
 MODES = [("lds", {}), ("lds", {"precision": "float16"}), ("mixture", {}), ("turnpoints", {"playback": "jumps"}),
-         ("turnpoints", {"playback": "hybrid"}), ("tiles", {"size": (40, 72)}), ("tiles", {"size": (37, 50)}),
+         ("turnpoints", {"playback": "hybrid"}), ("tiles", {"size": (72, 40)}), ("tiles", {"size": (50, 37)}),
          ("evolve", {"jitter": 2.0})]
 IDS = ["lds", "lds-f16", "mixture", "turnpoints-jumps", "turnpoints-hybrid", "tiles", "tiles-odd", "evolve"]
 

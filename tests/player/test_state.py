@@ -7,7 +7,7 @@ import pytest
 
 from dynatex.player import open_player, selftest
 
-MODES = [("lds", {}), ("mixture", {}), ("turnpoints", {"playback": "jumps"}), ("tiles", {"size": (40, 72)}),
+MODES = [("lds", {}), ("mixture", {}), ("turnpoints", {"playback": "jumps"}), ("tiles", {"size": (72, 40)}),
          ("evolve", {"jitter": 2.0})]
 BAD_VALUES = ["bad", float("nan"), -1]
 

@@ -38,20 +38,20 @@ def _close(a, b):
 
 @pytest.mark.parametrize("labels", [None, "halves", "checker"])
 def test_opencl_matches_numpy(tiles_db, labels, cl_device):
-    kw = dict(size=(70, 45), seed=2, labels=labels, tone="consensus")
+    kw = dict(size=(45, 70), seed=2, labels=labels, tone="consensus")
     _close(_frames(tiles_db, 6, backend="opencl", device=cl_device, **kw), _frames(tiles_db, 6, backend="numpy", **kw))
 
 
 def test_any_size_and_determinism(tiles_db):
-    a = _frames(tiles_db, 3, size=(37, 23), seed=5)
+    a = _frames(tiles_db, 3, size=(23, 37), seed=5)
     assert a.shape == (3, 23, 37, 3)
-    assert np.array_equal(a, _frames(tiles_db, 3, size=(37, 23), seed=5))
-    assert not np.array_equal(a, _frames(tiles_db, 3, size=(37, 23), seed=6))
-    with TilesPlayer(tiles_db, size=(3840, 2160)) as p:
+    assert np.array_equal(a, _frames(tiles_db, 3, size=(23, 37), seed=5))
+    assert not np.array_equal(a, _frames(tiles_db, 3, size=(23, 37), seed=6))
+    with TilesPlayer(tiles_db, size=(2160, 3840)) as p:
         f = p.next_frame()
         assert f.shape == (2160, 3840, 3) and f.std() > 5
     with pytest.raises(ValueError, match="size"):
-        TilesPlayer(tiles_db, size=(0, 10))
+        TilesPlayer(tiles_db, size=(10, 0))
 
 
 def test_open_player_registry(tiles_db):
@@ -60,13 +60,13 @@ def test_open_player_registry(tiles_db):
 
 
 def test_tiles_sit_on_the_lattice_without_seams(tiles_db):
-    out = _frames(tiles_db, 12, size=(96, 80), seed=1, backend="numpy")
+    out = _frames(tiles_db, 12, size=(80, 96), seed=1, backend="numpy")
     seam = metrics.seam_visibility(out, metrics.grid_labels((80, 96), (16, 16))).mean()
     assert seam <= 1.15, seam
 
 
 def test_time_offsets_are_smoothed_and_drift(tiles_db):
-    with TilesPlayer(tiles_db, size=(96, 64), seed=3, backend="numpy") as p:
+    with TilesPlayer(tiles_db, size=(64, 96), seed=3, backend="numpy") as p:
         p.max_shift = 8.0
         p.sigma = 0.0
         sharp = p._time_map().copy()
@@ -86,7 +86,7 @@ def test_time_offsets_are_smoothed_and_drift(tiles_db):
 
 
 def test_output_does_not_repeat_with_the_loop_period(tiles_db):
-    with TilesPlayer(tiles_db, size=(64, 48), seed=1, backend="numpy") as p:
+    with TilesPlayer(tiles_db, size=(48, 64), seed=1, backend="numpy") as p:
         loop = p.loop_length
         out = np.stack([p.next_frame() for _ in range(3 * loop)])
     prof = metrics.repetition_profile(out, max_lag=2 * loop)
@@ -95,7 +95,7 @@ def test_output_does_not_repeat_with_the_loop_period(tiles_db):
 
 def test_tone_fits_a_target_colour(tiles_db):
     target = np.array([160.0, 110.0, 70.0])
-    with TilesPlayer(tiles_db, size=(64, 48), seed=1, tone=tuple(target), backend="numpy") as p:
+    with TilesPlayer(tiles_db, size=(48, 64), seed=1, tone=tuple(target), backend="numpy") as p:
         mean = np.mean([p.next_frame().reshape(-1, 3).mean(axis=0) for _ in range(p.loop_length)], axis=0)
         assert np.all(np.abs(mean - target) / target < 0.02), mean
         p.tone = "wild"
@@ -109,7 +109,7 @@ def test_tone_fits_a_target_colour(tiles_db):
 
 
 def test_mixing_border_is_continuous(tiles_db):
-    with TilesPlayer(tiles_db, size=(96, 64), seed=1, labels="halves", backend="numpy") as p:
+    with TilesPlayer(tiles_db, size=(64, 96), seed=1, labels="halves", backend="numpy") as p:
         out = np.stack([p.next_frame() for _ in range(10)])
         classes = p.source_class_map()
         assert set(np.unique(classes)) == {0, 1}
@@ -129,7 +129,7 @@ def test_real_mix_border_within_1_5x_inside(clips_dir, tmp_path):
         w.put_texture("grass", grass.source_info())
         w.put_method("grass", "tiles", model)
     th, tw = model.tile_size
-    with TilesPlayer(path, size=(320, 192), seed=1, labels="halves", backend="numpy") as p:
+    with TilesPlayer(path, size=(192, 320), seed=1, labels="halves", backend="numpy") as p:
         out = np.stack([p.next_frame() for _ in range(12)])
         cut = p.source_class_map(strict=True)          # the minimum cut itself, before the fade
         dominant = p.source_class_map()                # where the dominant texture changes
@@ -153,7 +153,7 @@ def test_real_ring_cuts_do_not_show(clips_dir, tmp_path, name):
         w.put_texture("x", clip.source_info())
         w.put_method("x", "tiles", model)
     th, tw = model.tile_size
-    with TilesPlayer(path, size=(320, 192), seed=1, backend="numpy") as p:
+    with TilesPlayer(path, size=(192, 320), seed=1, backend="numpy") as p:
         out = np.stack([p.next_frame() for _ in range(12)])
         arr = p.arrangement
     yy, xx = np.mgrid[0:192, 0:320]
@@ -178,7 +178,7 @@ def test_inpaint_fills_only_the_mask(tiles_db):
     frame = np.full((48, 64, 3), 7, np.uint8)
     mask = np.zeros((48, 64), bool)
     mask[10:30, 20:50] = True
-    with TilesPlayer(tiles_db, size=(64, 48), seed=1, backend="numpy") as p:
+    with TilesPlayer(tiles_db, size=(48, 64), seed=1, backend="numpy") as p:
         out = p.inpaint(frame, mask)
         assert (out[~mask] == 7).all() and out[mask].std() > 5
         assert (frame == 7).all()                                      # the caller's frame is untouched
@@ -189,13 +189,13 @@ def test_inpaint_fills_only_the_mask(tiles_db):
 
 
 def test_state_round_trip(tiles_db):
-    with TilesPlayer(tiles_db, size=(48, 40), seed=9, labels="checker", backend="numpy") as p:
+    with TilesPlayer(tiles_db, size=(40, 48), seed=9, labels="checker", backend="numpy") as p:
         p.epoch = 5
         for _ in range(3):
             p.next_frame()
         state = p.get_state()
         expected = np.stack([p.next_frame() for _ in range(7)])
-    with TilesPlayer(tiles_db, size=(48, 40), seed=0, labels="checker", backend="numpy") as q:
+    with TilesPlayer(tiles_db, size=(40, 48), seed=0, labels="checker", backend="numpy") as q:
         q.set_state(state)
         got = np.stack([q.next_frame() for _ in range(7)])
     assert np.array_equal(expected, got)
@@ -215,7 +215,7 @@ def test_controls_are_validated(tiles_db):
 def test_blobs_preset_follows_the_seed(tiles_db):
     maps = {}
     for seed in (1, 2):
-        with TilesPlayer(tiles_db, size=(160, 128), seed=seed, labels="blobs", backend="numpy") as p:
+        with TilesPlayer(tiles_db, size=(128, 160), seed=seed, labels="blobs", backend="numpy") as p:
             maps[seed] = p.labels.copy()
             p.reseed(seed)
             np.testing.assert_array_equal(p.labels, maps[seed])
@@ -239,7 +239,7 @@ def ring_and_wang_dbs(tmp_path_factory):
     return out
 
 
-@pytest.mark.parametrize("seed, size", [(0, (48, 32)), (5, (200, 120)), (9, (1000, 37))])
+@pytest.mark.parametrize("seed, size", [(0, (32, 48)), (5, (120, 200)), (9, (37, 1000))])
 def test_wang_arrangement_matches_every_edge(ring_and_wang_dbs, seed, size):
     with TilesPlayer(ring_and_wang_dbs["wang"], size=size, seed=seed) as p:
         assert p._wang_mismatch(p.arrangement) == 0
@@ -253,13 +253,13 @@ def test_wang_output_repeats_far_less_at_the_tile_period(ring_and_wang_dbs):
     """The ring every ring tile shares shows at every cell; Wang strips differ from edge to edge."""
     lat = {}
     for construction, path in ring_and_wang_dbs.items():
-        out = _frames(path, 20, size=(192, 160), seed=3)
+        out = _frames(path, 20, size=(160, 192), seed=3)
         lat[construction] = max(metrics.lattice_correlation(out, 16))
     assert lat["wang"] < 0.5 * lat["ring"], lat
 
 
 def test_wang_state_with_mismatched_edges_is_refused_and_changes_nothing(ring_and_wang_dbs):
-    with TilesPlayer(ring_and_wang_dbs["wang"], size=(96, 64), seed=1) as p:
+    with TilesPlayer(ring_and_wang_dbs["wang"], size=(64, 96), seed=1) as p:
         state = p.get_state()
         bad = dict(state)
         bad["arrangement"] = np.zeros_like(state["arrangement"]) + 1       # tile 1 beside itself: 0 | 1 edges
@@ -273,7 +273,7 @@ def test_wang_state_with_mismatched_edges_is_refused_and_changes_nothing(ring_an
 
 
 def test_a_state_with_a_bad_seed_changes_nothing(tiles_db):
-    with TilesPlayer(tiles_db, size=(64, 48), seed=2) as p:
+    with TilesPlayer(tiles_db, size=(48, 64), seed=2) as p:
         p.next_frame()
         good = p.get_state()
         p.next_frame()

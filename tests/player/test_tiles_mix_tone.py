@@ -33,7 +33,7 @@ def red_blue(tmp_path_factory):
 
 @pytest.mark.parametrize("tone", [None, "red", "blue", "consensus", (90.0, 160.0, 90.0)])
 def test_border_band_lies_between_the_toned_textures(red_blue, tone):
-    with TilesPlayer(red_blue, size=(96, 64), seed=1, labels="halves", tone=tone, backend="numpy") as p:
+    with TilesPlayer(red_blue, size=(64, 96), seed=1, labels="halves", tone=tone, backend="numpy") as p:
         assert p.tile_size == (16, 16) and (p.labels[:, 3:] == 1).all() and (p.labels[:, :3] == 0).all()
         out = np.stack([p.next_frame() for _ in range(8)]).astype(np.float64)
     left = out[:, :, :32].reshape(-1, 3).mean(axis=0)        # red cells away from the border

@@ -66,7 +66,7 @@ def test_the_player_shows_a_window_of_the_torus(quilted):
     torus = _torus(model)
     ch, cw = model.tile_size
     rows, cols = model.torus
-    with TilesPlayer(path, size=(400, 300), backend="numpy", seed=3) as p:
+    with TilesPlayer(path, size=(300, 400), backend="numpy", seed=3) as p:
         p.max_shift = 0.0
         dy, dx = divmod(int(p.arrangement[0, 0]), cols)
         expect_cells = ((np.arange(p.grid_shape[0])[:, None] + dy) % rows) * cols \
@@ -82,10 +82,10 @@ def test_seeds_shift_the_torus_and_states_keep_its_order(quilted):
     _, _, path = quilted
     firsts = set()
     for seed in range(6):
-        with TilesPlayer(path, size=(160, 120), backend="numpy", seed=seed) as p:
+        with TilesPlayer(path, size=(120, 160), backend="numpy", seed=seed) as p:
             firsts.add(int(p.arrangement[0, 0]))
     assert len(firsts) >= 3
-    with TilesPlayer(path, size=(160, 120), backend="numpy", seed=1) as p:
+    with TilesPlayer(path, size=(120, 160), backend="numpy", seed=1) as p:
         state = p.get_state()
         broken = state["arrangement"].copy()
         broken[0, 0], broken[0, 1] = broken[0, 1], broken[0, 0]
@@ -97,7 +97,7 @@ def test_seeds_shift_the_torus_and_states_keep_its_order(quilted):
 
 def test_output_has_no_lattice_and_no_seams_at_cells(quilted):
     _, _, path = quilted
-    with TilesPlayer(path, size=(288, 216), backend="numpy", seed=2) as p:
+    with TilesPlayer(path, size=(216, 288), backend="numpy", seed=2) as p:
         out = np.stack([p.next_frame() for _ in range(12)])
         ch, cw = p.tile_size
     assert abs(metrics.lattice_prominence(out, (ch, cw))) <= 0.03
@@ -133,7 +133,7 @@ def test_real_clip_has_no_lattice(clips_dir, tmp_path):
     with DatabaseWriter(path) as w:
         w.put_texture("grass", clip.source_info())
         w.put_method("grass", "tiles", model)
-    with TilesPlayer(path, size=(352, 288), seed=1) as p:
+    with TilesPlayer(path, size=(288, 352), seed=1) as p:
         out = np.stack([p.next_frame() for _ in range(24)])
         ch, cw = p.tile_size
     assert metrics.lattice_prominence(out, (ch, cw)) <= 0.03
