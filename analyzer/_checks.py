@@ -1,4 +1,4 @@
-"""Argument checks shared by the analyzer modules: integers and clips of frames."""
+"""Argument checks shared by the analyzer modules: integers, sizes and clips of frames."""
 from __future__ import annotations
 
 from typing import Any
@@ -44,6 +44,29 @@ def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = Non
                 rule = f"an integer in [{lo}, {hi}]"
         raise ValueError(f"{name} must be {rule}, not {v}")
     return v
+
+
+def check_size(name: str, value: Any, max_side: int) -> tuple[int, int]:
+    """``value`` as a ``(height, width)`` pair of integers, each in ``1..max_side``.
+
+    The player's check of the same name, with this module's :class:`ArgumentTypeError` for
+    a value that is not a pair of integers; a ValueError for another length or a side out of range.
+
+    Examples
+    --------
+    >>> check_size("size", (24, np.int64(40)), 100)
+    (24, 40)
+    """
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+        raise ArgumentTypeError(f"{name} must be (height, width), not {value!r}")
+    if len(value) != 2:
+        raise ValueError(f"{name} must be (height, width), two integers, not {len(value)} values {value!r}")
+    if any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) for v in value):
+        raise ArgumentTypeError(f"{name} must be (height, width) integers, not {value!r}")
+    h, w = int(value[0]), int(value[1])
+    if not (1 <= h <= max_side and 1 <= w <= max_side):
+        raise ValueError(f"{name} must be (height, width) with each side in 1..{max_side}, not {value!r}")
+    return h, w
 
 
 def clip_frames(clip: Any) -> np.ndarray:

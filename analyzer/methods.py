@@ -76,22 +76,6 @@ class Names(Kind):
         return "comma-separated names"
 
 
-class _WidthHeight(Size):
-    """A ``(width, height)`` size: ``learn_quilt``'s ``size`` until it takes ``(height, width)``
-    like every other size (then its parameter uses :class:`~dynatex.checks.Size`)."""
-
-    def check(self, name: str, value: Any) -> tuple[int, int]:
-        w, h = super().check(name, value)
-        return h, w
-
-    def parse(self, text: str) -> tuple[int, int]:
-        h, w = super().parse(text)
-        return w, h
-
-    def describe(self) -> str:
-        return f"(width, height), each in 1..{self.max_side}"
-
-
 _COUNT = Range(int, 1, MAX_COUNT)
 _SIDE_OR_SIZE = Either(Range(int, 1, MAX_SIDE), Size(MAX_SIDE), metavar="N or WxH")
 _OPEN_UNIT = Range(float, 0.0, 1.0, low_open=True)
@@ -160,7 +144,7 @@ TILES_PARAMS = (
 )
 
 QUILT_PARAMS = (
-    Param("size", _WidthHeight(MAX_SIDE), None, "Output canvas.", "--quilt-size", optional=True,
+    Param("size", Size(MAX_SIDE), None, "Output canvas.", "--quilt-size", optional=True,
           default_doc="twice the clip's width and height"),
     Param("block", _SIDE_OR_SIZE, 28, "Block size; elongated blocks (e.g. 16x64) suit stretching features.",
           "--quilt-block"),

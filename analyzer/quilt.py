@@ -28,7 +28,7 @@ from typing import Sequence
 import numpy as np
 
 from ..tiledb import QuiltModel
-from ._checks import check_int
+from ._checks import check_int, check_size
 from .video import Clip, Progress
 
 DEFAULT_RANK = 15
@@ -239,8 +239,8 @@ def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
     ----------
     clip : Clip or ndarray
         Frames ``(T, H, W, C)`` uint8.
-    size : (width, height), optional
-        Output canvas (default: four times the source area, ``(2 W, 2 H)``).
+    size : (height, width), optional
+        Output canvas (default: four times the source area, ``(2 H, 2 W)``).
     block : int or (height, width)
         Block size in source pixels (default 28); elongated blocks (e.g. ``(64, 16)``) suit textures whose
         features stretch over time (growing grass). Must fit the source.
@@ -282,7 +282,7 @@ def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
     --------
     >>> rng = np.random.default_rng(0)
     >>> clip = (rng.random((8, 24, 24, 3)) * 255).astype(np.uint8)
-    >>> q = learn_quilt(clip, size=(40, 30), block=8, rank=4)
+    >>> q = learn_quilt(clip, size=(30, 40), block=8, rank=4)
     >>> q.source_map.shape, q.labels.shape
     ((30, 40, 2), (30, 40))
     """
@@ -299,8 +299,8 @@ def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
         if oy > bh // 2 or ox > bw // 2:
             raise ValueError(f"overlap {(oy, ox)} must be at most half the block {(bh, bw)} on each side")
     if size is None:
-        size = (2 * w, 2 * h)
-    out_w, out_h = _pair("size", size, 1, MAX_SIDE)
+        size = (2 * h, 2 * w)
+    out_h, out_w = check_size("size", size, MAX_SIDE)
     tolerance = _float("tolerance", tolerance, 0.0)
     seed = check_int("seed", seed, 0)
     if feather is None:

@@ -27,10 +27,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..checks import Choice, Flag, NpyFile, Range, Size, check_float, check_seed
-from ..errors import ArgumentTypeError, InvalidArgumentError
+from ..checks import Choice, Flag, NpyFile, Range, Size, check_float, check_seed, check_size
+from ..errors import InvalidArgumentError
 from ..params import Param
 from ..tiledb import QuiltModel, TileDB
+from ..tiledb.quilt import MAX_SIDE
 from .base import Player
 from .controls import Capabilities, Control
 from .gather import gaussian_smooth
@@ -123,7 +124,7 @@ class EvolvePlayer(Player):
 
     mode = "evolve"
     options = (
-        Param("size", Size(16384), None, "Output size; must equal the stored quilt's canvas (re-run the analysis "
+        Param("size", Size(MAX_SIDE), None, "Output size; must equal the stored quilt's canvas (re-run the analysis "
               "with another size for another canvas).", optional=True, default_doc="the quilt's"),
         Param("interpolate", Flag(), True, "Blend linearly between source frames at fractional times (otherwise "
               "the earlier frame)."),
@@ -150,15 +151,11 @@ class EvolvePlayer(Player):
 
     # -- setup ---------------------------------------------------------------------------------
     def _setup(self, model: QuiltModel, seed: int, size, interpolate: bool) -> None:
-        w, h = model.size
-        if size is not None:
-            try:
-                sw, sh = (int(v) for v in size)
-            except (TypeError, ValueError):
-                raise ArgumentTypeError(f"size must be (width, height), not {size!r}") from None
-            if (sw, sh) != (w, h):
-                raise InvalidArgumentError(f"size {sw}x{sh} does not fit the stored quilt, which is {w}x{h}; "
-                                 "re-run the analysis with that size (dynatex analyze --quilt-size)")
+        h, w = model.size
+        wanted = None if size is None else check_size("size", size, MAX_SIDE)
+        if wanted is not None and wanted != (h, w):
+            raise InvalidArgumentError(f"size {wanted} does not fit the stored quilt, whose canvas (height, width) is "
+                                       f"{(h, w)}; re-run the analysis with that size (dynatex analyze --quilt-size)")
         self.seed = check_seed("seed", seed)
         self.model_info = dict(model.info)
         self.interpolate = interpolate

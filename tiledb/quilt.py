@@ -69,8 +69,8 @@ class QuiltModel:
 
     @property
     def size(self) -> tuple[int, int]:
-        """``(width, height)`` of the output canvas."""
-        return int(self.labels.shape[1]), int(self.labels.shape[0])
+        """``(height, width)`` of the output canvas (the file stores them as attributes ``width`` and ``height``)."""
+        return int(self.labels.shape[0]), int(self.labels.shape[1])
 
     @property
     def n_blocks(self) -> int:
@@ -88,7 +88,7 @@ class QuiltModel:
     def summary(self) -> str:
         """One line: canvas, blocks, the rank of the comparisons and its error."""
         info = self.info
-        w, h = self.size
+        h, w = self.size
         return (f"{w}x{h} canvas from {self.n_blocks} blocks of {self.block[1]}x{self.block[0]}, "
                 f"rank-{info.get('rank')} SVD error {100 * info.get('rank_error', 0):.2f}% "
                 f"(comparing {info.get('compare_width')} instead of {info.get('full_width')} values per pixel)")

@@ -49,7 +49,7 @@ def main() -> int:
             db.put_method(TEXTURE, "lds", learn_lds(clip, n=6))
             db.put_method(TEXTURE, "turnpoints", learn_turnpoints(clip))
             db.put_method(TEXTURE, "tiles", learn_tiles(clip, tile=16, construction="ring"))
-            db.put_method(TEXTURE, "quilt", learn_quilt(clip, size=(64, 48), block=12))
+            db.put_method(TEXTURE, "quilt", learn_quilt(clip, size=(48, 64), block=12))
             db.put_method(TEXTURE, "mixture", learn_mixture(clip))
         OUT.write_bytes(path.read_bytes())
     print(f"wrote {OUT} ({OUT.stat().st_size / 1e6:.2f} MB)")

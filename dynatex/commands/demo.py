@@ -68,7 +68,7 @@ DEMO_TEXTURES: dict[str, tuple[Callable[[], np.ndarray], dict[str, dict]]] = {
         "tiles": {"tile": 32, "n_tiles": 3, "min_loop": 24, "mix": _grassy_other, "names": ["grassy", "sea"]},
     }),
     "spreading": (_spreading, {
-        "quilt": {"size": (128, 96), "block": 16, "rank": 15},
+        "quilt": {"size": (96, 128), "block": 16, "rank": 15},
     }),
 }
 

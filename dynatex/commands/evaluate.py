@@ -136,7 +136,7 @@ def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any],
     if args.size is not None:
         if not any(p.name == "size" for p in player_class(args.mode).options):
             raise UsageError(f"--size is not supported by mode {args.mode} (it plays at the clip's resolution)")
-        opts["size"] = args.size[::-1] if args.mode == "tiles" else args.size
+        opts["size"] = args.size[::-1]
     n = args.frames or 300
     with open_player(args.output, args.texture, mode=args.mode, **opts) as player:
         src = player.texture.source

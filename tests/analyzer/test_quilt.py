@@ -101,7 +101,8 @@ def spread():
 
 
 def test_quilt_copies_blocks_verbatim_and_covers_canvas(spread):
-    q = learn_quilt(spread, size=(70, 45), block=12, rank=6, feather=0, seed=1)
+    q = learn_quilt(spread, size=(45, 70), block=12, rank=6, feather=0, seed=1)
+    assert q.size == (45, 70)                   # (height, width): 45 rows of 70 pixels
     assert q.source_map.shape == (45, 70, 2) and q.labels.shape == (45, 70)
     assert q.gain is None and q.blend_weight is None
     assert q.source_map[..., 0].max() < 32 and q.source_map[..., 1].max() < 32 and q.source_map.min() >= 0
@@ -143,10 +144,10 @@ def test_feather_band_weights(spread):
 
 
 def test_elongated_blocks_and_any_canvas(spread):
-    q = learn_quilt(spread, size=(33, 71), block=(24, 8), rank=4)
+    q = learn_quilt(spread, size=(71, 33), block=(24, 8), rank=4)
     assert q.block == (24, 8) and q.source_map.shape == (71, 33, 2)
     assert q.info["overlap_y"] > q.info["overlap_x"]
-    tiny = learn_quilt(spread, size=(5, 3), block=8, rank=3)
+    tiny = learn_quilt(spread, size=(3, 5), block=8, rank=3)
     assert tiny.source_map.shape == (3, 5, 2) and tiny.n_blocks == 1
 
 
@@ -168,9 +169,11 @@ def test_lowpass_gain_flattens_a_gradient():
 @pytest.mark.parametrize("kwargs, error, message", [
     (dict(block=40), ValueError, "block 40x40 .* larger than the 32x32 source"),
     (dict(block=(8, 33)), ValueError, "larger than"),
-    (dict(size=(0, 10)), ValueError, "size must be an integer in"),
-    (dict(size=(10, 20000)), ValueError, "size must be an integer in"),
-    (dict(size="big"), TypeError, "size must be"),
+    (dict(size=(0, 10)), ValueError, r"size must be \(height, width\) with each side in 1\.\.16384"),
+    (dict(size=(10, 20000)), ValueError, r"size must be \(height, width\) with each side in 1\.\.16384"),
+    ({"size": (10, 20, 30)}, ValueError, r"size must be \(height, width\), two integers"),
+    ({"size": (10.5, 20)}, TypeError, r"size must be \(height, width\) integers"),
+    (dict(size="big"), TypeError, r"size must be \(height, width\)"),
     (dict(block=8, overlap=5), ValueError, "overlap .* at most half"),
     (dict(rank=0), ValueError, "rank must be an integer in"),
     (dict(tolerance=-1), ValueError, "tolerance"),

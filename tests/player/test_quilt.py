@@ -28,7 +28,7 @@ def write_db(path, frames, model, name="s"):
 @pytest.fixture(scope="module")
 def spread_db(tmp_path_factory):
     frames = spreading_clip(24, 32, 32)
-    q = learn_quilt(frames, size=(72, 56), block=12, rank=6, lowpass=6.0, seed=1)
+    q = learn_quilt(frames, size=(56, 72), block=12, rank=6, lowpass=6.0, seed=1)
     assert q.blend_weight is not None and q.gain is not None
     return write_db(tmp_path_factory.mktemp("evolve") / "s.h5", frames, q), frames, q
 
@@ -262,8 +262,9 @@ def test_bad_controls(spread_db, control, value, error, message):
 
 
 def test_bad_open(spread_db, lds_db):
-    with pytest.raises(ValueError, match="size 100x100 does not fit the stored quilt, which is 72x56"):
-        EvolvePlayer(spread_db[0], size=(100, 100))
+    with pytest.raises(ValueError, match=r"size \(72, 56\) does not fit the stored quilt, whose canvas \(height, "
+                                         r"width\) is \(56, 72\)"):
+        EvolvePlayer(spread_db[0], size=(72, 56))
     with pytest.raises(MethodNotFoundError, match="no 'quilt' data"):
         EvolvePlayer(lds_db)
 

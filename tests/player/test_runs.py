@@ -14,7 +14,7 @@ from dynatex.player.runs import (RATE_STEP, SPILL, RunsOpenCL, RunsReference, bu
 @pytest.fixture(scope="module")
 def quilt():
     frames = spreading_clip(24, 32, 32)
-    q = learn_quilt(frames, size=(72, 56), block=12, rank=6, lowpass=6.0, seed=1)
+    q = learn_quilt(frames, size=(56, 72), block=12, rank=6, lowpass=6.0, seed=1)
     assert q.blend_weight is not None and q.gain is not None
     return frames, q
 

@@ -30,7 +30,18 @@ def test_tiles_frames_are_size_high_and_wide():
         assert p.shape[:2] == (24, 40) and p.next_frame().shape == (24, 40, 3)
 
 
-@pytest.mark.parametrize("mode", ["tiles"])
+def test_evolve_size_is_the_quilts_height_width():
+    db = selftest._db_path()
+    with open_player(db, selftest.TEXTURE, mode="evolve", backend="numpy") as p:
+        h, w = p.texture.read("quilt").size
+        assert h != w and p.shape[:2] == (h, w) and p.next_frame().shape == (h, w, 3)
+    with open_player(db, selftest.TEXTURE, mode="evolve", size=(h, w), backend="numpy") as p:
+        assert p.shape[:2] == (h, w)
+    with pytest.raises(ValueError, match="does not fit the stored quilt"):
+        open_player(db, selftest.TEXTURE, mode="evolve", size=(w, h), backend="numpy")
+
+
+@pytest.mark.parametrize("mode", ["tiles", "evolve"])
 @pytest.mark.parametrize("size, error, message", BAD_SIZES, ids=[repr(s) for s, _, _ in BAD_SIZES])
 def test_a_bad_size_is_the_same_error_in_every_mode(mode, size, error, message):
     with pytest.raises(error, match=message):

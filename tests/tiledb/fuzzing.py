@@ -48,7 +48,7 @@ OUTCOMES = ("rejected", "ok", "garbage", "error", "crash", "hang")
 BAD = ("garbage", "error", "crash", "hang")
 #: frames rendered per backend, and the player options that keep them small
 FRAMES = 4
-MODE_OPTIONS = {"tiles": {"size": (24, 40), "tone": "consensus"}, "evolve": {"size": (24, 32), "jitter": 2.0}}
+MODE_OPTIONS = {"tiles": {"size": (40, 24), "tone": "consensus"}, "evolve": {"size": (32, 24), "jitter": 2.0}}
 #: pixel stores: any byte is a valid pixel, so overwriting them whole gives a faithfully flat texture
 _PIXELS = ("frames", "tiles")
 TEXTURE = "t"
@@ -71,7 +71,7 @@ def build_bases(folder: str | os.PathLike) -> dict[str, Path]:
         "lds": (waves, lambda c: learn_lds(c, n=6), False),
         "mixture": (waves, lambda c: learn_mixture(c, components=2, dim=3), False),
         "quilt": (load_clip(spreading_clip(12, 16, 16)),
-                  lambda c: learn_quilt(c, size=(24, 32), block=8, rank=4, seed=0), True),
+                  lambda c: learn_quilt(c, size=(32, 24), block=8, rank=4, seed=0), True),
         "tiles": (load_clip(_waves(40, 32, 32, seed=1)), lambda c: learn_tiles(c, tile=12, min_loop=12, transition=4), False),
         "turnpoints": (load_clip(pendulum_clip(40, 16)[0]), learn_turnpoints, True),
     }

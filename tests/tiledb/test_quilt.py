@@ -14,7 +14,7 @@ from tests.conftest import wave_clip
 @pytest.fixture(scope="module")
 def quilt_db(tmp_path_factory):
     clip = load_clip(wave_clip(12, 20, 24))
-    model = learn_quilt(clip, size=(40, 30), block=8, rank=5, lowpass=4.0, seed=2)
+    model = learn_quilt(clip, size=(30, 40), block=8, rank=5, lowpass=4.0, seed=2)
     path = tmp_path_factory.mktemp("quilt") / "q.h5"
     with DatabaseWriter(path) as w:
         w.put_texture("w", clip.source_info())
@@ -31,7 +31,7 @@ def test_round_trip(quilt_db):
     for name in ("source_map", "labels", "block_sources", "block_positions", "singular_values", "rank_error",
                  "gain", "blend_map", "blend_labels", "blend_weight"):
         np.testing.assert_array_equal(getattr(got, name), getattr(model, name), err_msg=name)
-    assert got.size == (40, 30) and got.block == (8, 8) and got.n_blocks == model.n_blocks
+    assert got.size == (30, 40) and got.block == (8, 8) and got.n_blocks == model.n_blocks
     assert got.info["rank"] == 5 and got.info["lowpass"] == 4.0
 
 
