@@ -295,7 +295,7 @@ def database_is_complete(task: ClipTask) -> bool:
     if (src.frame_start, src.frame_step, src.crop, src.channels) != (load.get("start", 0), load.get("step", 1),
                                                                      crop, channels):
         return False
-    if size is not None and (src.width, src.height) != size:
+    if size is not None and (src.height, src.width) != size:
         return False
     try:
         return src.sha256 == clip_sha256(task.clip, load.get("start", 0), load.get("stop"), load.get("step", 1))

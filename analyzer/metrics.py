@@ -135,19 +135,19 @@ def _chunks(frames: np.ndarray, start: int = 0, stop: int | None = None):
 
 
 def _grey(frames: np.ndarray, factor: int = 1, size: tuple[int, int] | None = None) -> np.ndarray:
-    """``(T, H', W')`` float32 luma, area-downscaled by ``factor`` (or to ``size`` = (w, h))."""
+    """``(T, H', W')`` float32 luma, area-downscaled by ``factor`` (or to ``size`` = (H', W'))."""
     import cv2
     t, h, w, c = frames.shape
     if size is None:
-        size = (max(1, w // factor), max(1, h // factor))
-    out = np.empty((t, size[1], size[0]), np.float32)
+        size = (max(1, h // factor), max(1, w // factor))
+    out = np.empty((t,) + tuple(size), np.float32)
     for i, chunk in _chunks(frames):
         g = chunk[..., 0] if c == 1 else chunk @ _LUMA
-        if size == (w, h):
+        if size == (h, w):
             out[i:i + len(g)] = g
         else:
             for k in range(len(g)):
-                out[i + k] = cv2.resize(g[k], size, interpolation=cv2.INTER_AREA)
+                out[i + k] = cv2.resize(g[k], (size[1], size[0]), interpolation=cv2.INTER_AREA)   # cv2: (w, h)
     return out
 
 
@@ -160,7 +160,7 @@ def _auto_downscale(source: np.ndarray, downscale: int | None) -> int:
 def _thumb_size(shape: tuple[int, ...]) -> tuple[int, int]:
     h, w = shape[1], shape[2]
     s = min(1.0, _THUMB / max(h, w))
-    return max(1, round(w * s)), max(1, round(h * s))
+    return max(1, round(h * s)), max(1, round(w * s))
 
 
 def _step_rms(frames: np.ndarray) -> np.ndarray:
@@ -1007,7 +1007,7 @@ def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | Non
              lattice: Sequence[int] | None = None) -> dict[str, Any]:
     """Every metric of this module for one output against its source, as a JSON-ready dict.
 
-    Size-bound metrics (stability, frame coverage) are None when the frame sizes differ;
+    ``output_size`` and ``source_size`` are ``[height, width]``. Size-bound metrics (stability, frame coverage) are None when the frame sizes differ;
     when the output holds NaN/inf, only stability is computed. With ``period`` ``(py, px)``
     (a tile lattice) the lattice correlation of the output and of the source (None where
     a frame is not larger than the period) at those lags. With ``lattice`` ``(th, tw)`` (the
@@ -1027,8 +1027,8 @@ def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | Non
     same = output.shape[1:] == source.shape[1:]
     report: dict[str, Any] = {
         "output_frames": int(output.shape[0]), "source_frames": int(source.shape[0]),
-        "output_size": [int(output.shape[2]), int(output.shape[1])],
-        "source_size": [int(source.shape[2]), int(source.shape[1])],
+        "output_size": [int(output.shape[1]), int(output.shape[2])],     # (height, width)
+        "source_size": [int(source.shape[1]), int(source.shape[2])],
     }
     report["stability"] = stability(output, source, window=window).as_dict() if same else None
     if report["stability"] is not None and report["stability"]["nonfinite_frames"]:

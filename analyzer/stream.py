@@ -16,12 +16,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..tiledb import SourceInfo
+from ._checks import check_size
 from .video import (
     IMAGE_SUFFIXES,
+    MAX_SIDE,
     ClipError,
     Progress,
     _crop_resize_color,
-    _size,
     _tuple4,
 )
 
@@ -71,7 +72,7 @@ class DiskClip:
     frame_start: int = 0
     frame_step: int = 1
     crop: tuple[int, ...] = ()
-    source_size: tuple[int, ...] = ()
+    source_size: tuple[int, ...] = ()   # (height, width) of the decoded source frames
     owned: bool = False
 
     @property
@@ -142,7 +143,7 @@ def spill_clip(source: str | os.PathLike, *, folder: str | None = None, start: i
     if not os.path.exists(path):
         raise FileNotFoundError(f"{path}: no such clip file or folder")
     crop_t = _tuple4("crop", crop) if crop is not None else None
-    size_t = _size("size", size) if size is not None else None
+    size_t = check_size("size", size, MAX_SIDE) if size is not None else None
     plain = start == 0 and stop is None and step == 1 and crop_t is None and size_t is None
     if path.endswith(".npy") and os.path.isfile(path):
         direct = _npy_direct(path, color, fps)
@@ -191,7 +192,7 @@ def _npy_direct(path: str, color: bool, fps: float | None) -> DiskClip | None:
             h.update(block)
     return DiskClip(path=os.path.abspath(path), offset=offset, frame_shape=frame_shape, n_frames=n,
                     fps=float(fps or 25.0), filename=os.path.basename(path), sha256=h.hexdigest(),
-                    source_size=(shape[2], shape[1]))
+                    source_size=(shape[1], shape[2]))
 
 
 def _spill(path, out, start, stop, step, crop, size, color, progress):
@@ -203,7 +204,7 @@ def _spill(path, out, start, stop, step, crop, size, color, progress):
         frames, src_fps, digest = _frame_source(path, start, stop, step)
         for frame in frames:
             if shape is None:
-                source_size = (frame.shape[1], frame.shape[0])
+                source_size = frame.shape[:2]
             one = _crop_resize_color(frame[None], crop, size, color, name)[0]
             if shape is None:
                 shape = one.shape

@@ -13,7 +13,10 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..tiledb import DynatexError, SourceInfo
-from ._checks import check_int
+from ._checks import check_int, check_size
+
+#: Largest side of a resized frame (matches the command line's ``WxH`` limit).
+MAX_SIDE = 16384
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
 
@@ -35,7 +38,7 @@ class Clip:
     frame_start: int = 0
     frame_step: int = 1
     crop: tuple[int, ...] = ()
-    source_size: tuple[int, ...] = ()
+    source_size: tuple[int, ...] = ()   # (height, width) of the decoded source frames
 
     @property
     def n_frames(self) -> int:
@@ -66,8 +69,9 @@ def load_clip(source: str | os.PathLike | np.ndarray, *, start: int = 0, stop: i
     start, stop, step : int
         Frame range, as in ``range(start, stop, step)`` over the source frames.
     crop : (x, y, w, h), optional
-        Region kept, in source pixels, applied before ``size``.
-    size : (w, h), optional
+        Region kept, in source pixels, applied before ``size``. A rectangle (corner first, as
+        the command line's ``--crop X,Y,W,H`` and the file's ``crop`` attribute), not a size.
+    size : (height, width), optional
         Resize every frame to this size (area interpolation).
     color : bool
         RGB frames when true, single-channel grey when false.
@@ -82,7 +86,7 @@ def load_clip(source: str | os.PathLike | np.ndarray, *, start: int = 0, stop: i
     Examples
     --------
     >>> import numpy as np
-    >>> clip = load_clip(np.zeros((10, 32, 48, 3), np.uint8), size=(24, 16))
+    >>> clip = load_clip(np.zeros((10, 32, 48, 3), np.uint8), size=(16, 24))
     >>> clip.frames.shape
     (10, 16, 24, 3)
     """
@@ -93,7 +97,7 @@ def load_clip(source: str | os.PathLike | np.ndarray, *, start: int = 0, stop: i
         if stop <= start:
             raise ValueError(f"stop ({stop}) must be greater than start ({start})")
     crop_t = _tuple4("crop", crop) if crop is not None else None
-    size_t = _size("size", size) if size is not None else None
+    size_t = check_size("size", size, MAX_SIDE) if size is not None else None
 
     if isinstance(source, np.ndarray):
         frames = _from_array(source)[start:stop:step]
@@ -114,7 +118,7 @@ def load_clip(source: str | os.PathLike | np.ndarray, *, start: int = 0, stop: i
         raise ClipError(f"{name}: no frames in range start={start} stop={stop} step={step}")
     if frames.shape[0] < 2:
         raise ClipError(f"{name}: only one frame in range; a dynamic texture needs at least 2")
-    source_size = (frames.shape[2], frames.shape[1])
+    source_size = frames.shape[1:3]
     frames = _crop_resize_color(frames, crop_t, size_t, color, name)
     return Clip(frames=frames, fps=float(fps if fps is not None else src_fps), filename=name, sha256=digest,
                 frame_start=start, frame_step=step, crop=crop_t or (), source_size=source_size)
@@ -249,11 +253,11 @@ def _crop_resize_color(frames: np.ndarray, crop, size, color: bool, name: str) -
         if cw < 1 or ch < 1 or x + cw > w or y + ch > h:
             raise ValueError(f"crop {crop} does not fit the {w}x{h} frames of {name}")
         frames = frames[:, y:y + ch, x:x + cw]
-    if size is not None and (frames.shape[2], frames.shape[1]) != tuple(size):
+    if size is not None and frames.shape[1:3] != tuple(size):
         import cv2
-        out = np.empty((t, size[1], size[0], c), np.uint8)
+        out = np.empty((t, size[0], size[1], c), np.uint8)
         for i in range(t):
-            r = cv2.resize(frames[i], tuple(size), interpolation=cv2.INTER_AREA)
+            r = cv2.resize(frames[i], (size[1], size[0]), interpolation=cv2.INTER_AREA)   # cv2 takes (w, h)
             out[i] = r.reshape(out.shape[1:])
         frames = out
     if color and frames.shape[-1] == 1:
@@ -277,11 +281,3 @@ def _tuple4(name: str, v) -> tuple[int, int, int, int]:
     return t  # type: ignore[return-value]
 
 
-def _size(name: str, v) -> tuple[int, int]:
-    try:
-        t = tuple(int(x) for x in v)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be (width, height), not {v!r}") from None
-    if len(t) != 2 or min(t) < 1 or max(t) > 16384:
-        raise ValueError(f"{name} must be (width, height) with each in 1..16384, not {v!r}")
-    return t  # type: ignore[return-value]

@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if Path(args.clip).exists():
         from dynatex.analyzer import load_clip
-        source = load_clip(args.clip, size=(352, 288)).frames
+        source = load_clip(args.clip, size=(288, 352)).frames
         name = Path(args.clip).name
     else:
         source, name = generated(), "generated drifting noise"

@@ -49,7 +49,7 @@ FILES = {
     "fountain": ("fountain_dyntex_6486110.avi", {}),
     "flag": ("flag_wind_dyntex_571c110.avi", {}),
     "steam": ("steam_vapour_pot_128px.avi", {}),
-    "flames": ("fire_flames_720p.mp4", {"size": (320, 180)}),
+    "flames": ("fire_flames_720p.mp4", {"size": (180, 320)}),
 }
 TONE_FACTORS = np.array([1.15, 1.0, 0.85])
 

@@ -24,8 +24,8 @@ class SourceInfo:
     n_frames: int
     frame_start: int = 0
     frame_step: int = 1
-    crop: tuple[int, ...] = ()          # (x, y, w, h) in source pixels, () when uncropped
-    source_size: tuple[int, ...] = ()   # (w, h) of the decoded source frames
+    crop: tuple[int, ...] = ()          # (x, y, w, h) in source pixels, () when uncropped: a rectangle, as --crop X,Y,W,H
+    source_size: tuple[int, ...] = ()   # (height, width) of the decoded source frames; the file stores (w, h)
     extra: dict = field(default_factory=dict, compare=False)
 
     @property
@@ -55,7 +55,7 @@ def write(group: h5py.Group, info: SourceInfo) -> None:
     a["frame_start"] = int(info.frame_start)
     a["frame_step"] = int(info.frame_step)
     a["crop"] = [int(v) for v in info.crop] if info.crop else [-1, -1, -1, -1]
-    a["source_size"] = [int(v) for v in info.source_size] if info.source_size else [-1, -1]
+    a["source_size"] = [int(v) for v in info.source_size[::-1]] if info.source_size else [-1, -1]   # file: (w, h)
 
 
 def read(group: h5py.Group, check: Checker) -> SourceInfo:
@@ -85,5 +85,5 @@ def read(group: h5py.Group, check: Checker) -> SourceInfo:
         filename=att(group, "filename", str), sha256=att(group, "sha256", str), fps=fps,
         width=width, height=height, channels=channels, n_frames=n_frames,
         frame_start=att(group, "frame_start", int, 0), frame_step=att(group, "frame_step", int, 1),
-        crop=() if min(crop) < 0 else crop, source_size=() if min(size) < 0 else size,
+        crop=() if min(crop) < 0 else crop, source_size=() if min(size) < 0 else size[::-1],
     )

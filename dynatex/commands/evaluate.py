@@ -147,7 +147,7 @@ def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any],
     source_opts: dict[str, Any] = {
         "start": int(src.frame_start), "step": int(src.frame_step),
         "stop": int(src.frame_start + src.n_frames * src.frame_step),
-        "size": (int(src.width), int(src.height)), "color": int(src.channels) == 3,
+        "size": (int(src.height), int(src.width)), "color": int(src.channels) == 3,
     }
     if src.crop:
         source_opts["crop"] = tuple(int(v) for v in src.crop)
@@ -168,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
         output = _load(args.output, **({"stop": args.frames} if args.frames else {}))
         source_opts = {}
     if args.source_size is not None:
-        source_opts["size"] = args.source_size
+        source_opts["size"] = args.source_size[::-1]
     source = _load(args.source, **source_opts)
     t, h, w = output.shape[:3]
     if output.shape[-1] != source.shape[-1]:        # grey against colour: compare in colour
@@ -252,9 +252,9 @@ def format_table(report: dict[str, Any]) -> str:
                         for v in (lat["output"], lat["source"]))
             rows.append((f"lattice correlation y/x at {lat['period'][1]}x{lat['period'][0]}", out,
                          f"near the source's ({src})"))
-    head = (f"{report['output']} ({report['output_frames']} frames, {report['output_size'][0]}x"
-            f"{report['output_size'][1]}) against {report['source']} ({report['source_frames']} frames, "
-            f"{report['source_size'][0]}x{report['source_size'][1]})")
+    head = (f"{report['output']} ({report['output_frames']} frames, {report['output_size'][1]}x"
+            f"{report['output_size'][0]}) against {report['source']} ({report['source_frames']} frames, "
+            f"{report['source_size'][1]}x{report['source_size'][0]})")
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
     lines = [head, f"{'metric':<{w0}}  {'value':<{w1}}  good", "-" * (w0 + w1 + 30)]

@@ -123,7 +123,7 @@ def test_degenerate_clips():
 
 @pytest.mark.clips
 def test_real_clip_analysis(clips_dir):
-    clip = load_clip(clips_dir / "water_sea_waves_dyntex.avi", stop=100, size=(176, 144))
+    clip = load_clip(clips_dir / "water_sea_waves_dyntex.avi", stop=100, size=(144, 176))
     m = learn_lds(clip)
     assert m.n == 50 and m.info["spectral_radius"] < 1
     assert m.mean.shape == (176 * 144 * 3,)

@@ -15,12 +15,12 @@ from dynatex.analyzer import metrics as m
 
 # real clips used here, with the load options that keep them small
 REAL = {
-    "water": ("water_sea_waves_dyntex.avi", dict(stop=60, size=(176, 144))),
+    "water": ("water_sea_waves_dyntex.avi", dict(stop=60, size=(144, 176))),
     "steam": ("steam_vapour_pot_128px.avi", dict(stop=64)),
 }
 SEAM_REAL = {
-    "water": ("water_sea_waves_dyntex.avi", dict(stop=10, size=(176, 144))),
-    "grass": ("grass_straw_wind_dyntex.avi", dict(stop=10, size=(176, 144))),
+    "water": ("water_sea_waves_dyntex.avi", dict(stop=10, size=(144, 176))),
+    "grass": ("grass_straw_wind_dyntex.avi", dict(stop=10, size=(144, 176))),
 }
 
 

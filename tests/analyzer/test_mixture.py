@@ -141,7 +141,7 @@ def test_a_component_without_data_is_an_error_not_a_nan_model():
 @pytest.mark.clips
 @pytest.mark.parametrize("name", ["water_sea_waves_dyntex.avi", "flag_wind_dyntex_571c110.avi"])
 def test_mixture_reconstructs_better_than_single_pca_of_same_dimension(clips_dir, name):
-    clip = load_clip(clips_dir / name, stop=120, size=(88, 72))
+    clip = load_clip(clips_dir / name, stop=120, size=(72, 88))
     m = learn_mixture(clip, components=3, dim=8)
     assert m.info["recon_error"] < m.info["recon_error_pca_dim"]
     assert m.info["recon_error_hard"] < m.info["recon_error_pca_dim"]

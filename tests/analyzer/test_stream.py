@@ -55,8 +55,8 @@ def test_video_spill_matches_load_clip_and_is_removed(tmp_path):
     for f in frames:
         out.write(cv2.cvtColor(f, cv2.COLOR_RGB2BGR))
     out.release()
-    ref = load_clip(path, start=2, step=2, size=(20, 16))
-    with spill_clip(path, folder=str(tmp_path), start=2, step=2, size=(20, 16)) as disk:
+    ref = load_clip(path, start=2, step=2, size=(16, 20))
+    with spill_clip(path, folder=str(tmp_path), start=2, step=2, size=(16, 20)) as disk:
         assert disk.owned
         assert np.array_equal(disk.frames(), ref.frames)
         assert disk.source_info() == ref.source_info()

@@ -176,7 +176,7 @@ def test_grey_clip_is_expanded():
 
 @pytest.mark.clips
 def test_real_clip_tiles_are_seamless(clips_dir):
-    clip = load_clip(str(clips_dir / "grass_straw_wind_dyntex.avi"), stop=120, size=(176, 144))
+    clip = load_clip(str(clips_dir / "grass_straw_wind_dyntex.avi"), stop=120, size=(144, 176))
     m = learn_tiles(clip, n_tiles=2, min_loop=40)
     th, tw = m.tile_size
     plane = np.tile(m.tiles[0][:40], (1, 2, 2, 1))

@@ -19,8 +19,9 @@ def _write_video(path, frames, fps=12.0):
 
 def test_array_range_crop_resize_grey():
     frames = wave_clip(t=20, h=16, w=24)
-    clip = load_clip(frames, start=2, stop=12, step=2, crop=(4, 2, 16, 12), size=(8, 6))
-    assert clip.frames.shape == (5, 6, 8, 3)
+    clip = load_clip(frames, start=2, stop=12, step=2, crop=(4, 2, 16, 12), size=(6, 8))
+    assert clip.frames.shape == (5, 6, 8, 3)                    # size is (height, width)
+    assert clip.source_size == (16, 24) and clip.source_info().source_size == (16, 24)
     assert clip.frame_start == 2 and clip.frame_step == 2 and clip.crop == (4, 2, 16, 12)
     grey = load_clip(frames, color=False)
     assert grey.frames.shape == (20, 16, 24, 1)
@@ -93,7 +94,8 @@ def test_empty_folder(tmp_path):
     ({"start": 5, "stop": 5}, "stop .* must be greater than start"),
     ({"crop": (0, 0, 100, 100)}, "crop .* does not fit"),
     ({"crop": (1, 2)}, "crop must be four"),
-    ({"size": (0, 10)}, "size must be"),
+    ({"size": (0, 10)}, r"size must be \(height, width\) with each side in 1\.\.16384"),
+    ({"size": (6.5, 8)}, r"size must be \(height, width\) integers"),
 ])
 def test_bad_options(kwargs, message):
     with pytest.raises(ValueError, match=message):

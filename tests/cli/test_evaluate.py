@@ -52,7 +52,7 @@ def test_json_report_video_against_itself(files, capsys):
                       "--events", "10,20", "--json")
     assert rc == 0
     rep = json.loads(out)
-    assert rep["output_frames"] == 40 and rep["output_size"] == [64, 48]
+    assert rep["output_frames"] == 40 and rep["output_size"] == [48, 64]     # [height, width]
     assert rep["stability"]["stable"] is True
     assert rep["spectrum_distance_db"] == 0.0
     assert rep["frame_coverage"] == 1.0 and rep["repetition_lag"] is None
@@ -163,7 +163,7 @@ def test_database_output_lds(files, capsys, tmp_path):
                         "--json")
     assert rc == 0, err
     rep = json.loads(out)
-    assert rep["output_frames"] == 60 and rep["output_size"] == [64, 48]
+    assert rep["output_frames"] == 60 and rep["output_size"] == [48, 64]     # [height, width]
     assert rep["player"]["mode"] == "lds"
     assert rep["stability"]["nonfinite_frames"] == 0
     assert 0.2 < rep["stability"]["min_ratio"] and rep["stability"]["max_ratio"] < 5

@@ -182,7 +182,7 @@ def _high_band_share(frames: np.ndarray, mean: np.ndarray) -> float:
 
 @pytest.mark.clips
 def test_scale_weights_move_the_spatial_spectrum(clips_dir, tmp_path):
-    clip = load_clip(clips_dir / "water_sea_waves_dyntex.avi", stop=120, size=(176, 144))
+    clip = load_clip(clips_dir / "water_sea_waves_dyntex.avi", stop=120, size=(144, 176))
     path = tmp_path / "w.h5"
     with DatabaseWriter(path) as w:
         w.put_texture("w", clip.source_info())

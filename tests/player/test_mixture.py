@@ -118,7 +118,7 @@ def test_long_run_stays_on_the_manifold(mix_db):
 
 @pytest.mark.clips
 def test_real_clip_long_run_beside_the_lds(clips_dir, tmp_path):
-    clip = load_clip(clips_dir / "water_sea_waves_dyntex.avi", stop=150, size=(88, 72))
+    clip = load_clip(clips_dir / "water_sea_waves_dyntex.avi", stop=150, size=(72, 88))
     m = learn_mixture(clip, components=3, dim=8)
     path = tmp_path / "w.h5"
     with DatabaseWriter(path) as w:

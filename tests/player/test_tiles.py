@@ -121,8 +121,8 @@ def test_mixing_border_is_continuous(tiles_db):
 
 @pytest.mark.clips
 def test_real_mix_border_within_1_5x_inside(clips_dir, tmp_path):
-    grass = load_clip(str(clips_dir / "grass_straw_wind_dyntex.avi"), stop=100, size=(176, 144))
-    water = load_clip(str(clips_dir / "water_sea_waves_dyntex.avi"), stop=100, size=(176, 144)).frames
+    grass = load_clip(str(clips_dir / "grass_straw_wind_dyntex.avi"), stop=100, size=(144, 176))
+    water = load_clip(str(clips_dir / "water_sea_waves_dyntex.avi"), stop=100, size=(144, 176)).frames
     model = learn_tiles(grass, n_tiles=2, min_loop=40, mix=[water])
     path = tmp_path / "mix.h5"
     with DatabaseWriter(path) as w:
@@ -146,7 +146,7 @@ def test_real_mix_border_within_1_5x_inside(clips_dir, tmp_path):
 def test_real_ring_cuts_do_not_show(clips_dir, tmp_path, name):
     """Seams at the lattice *and* at every tile's ring cut (where its mask leaves 255): a hard
     ring cut between two places of the sea showed ~3x the interior gradient here."""
-    clip = load_clip(str(clips_dir / name), stop=100, size=(176, 144))
+    clip = load_clip(str(clips_dir / name), stop=100, size=(144, 176))
     model = learn_tiles(clip, n_tiles=3, min_loop=40)
     path = tmp_path / "t.h5"
     with DatabaseWriter(path) as w:

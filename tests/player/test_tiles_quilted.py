@@ -127,7 +127,7 @@ def test_a_broken_torus_is_a_format_error(quilted, tmp_path):
 
 @pytest.mark.clips
 def test_real_clip_has_no_lattice(clips_dir, tmp_path):
-    clip = load_clip(clips_dir / "grass_straw_wind_dyntex.avi", size=(176, 144), stop=80)
+    clip = load_clip(clips_dir / "grass_straw_wind_dyntex.avi", size=(144, 176), stop=80)
     model = learn_tiles(clip.frames, period=(288, 360))          # the output below fits inside
     path = tmp_path / "g.h5"
     with DatabaseWriter(path) as w:

@@ -47,7 +47,7 @@ def test_valid_source_geometry_still_reads(lds_db):
     _set_attr(lds_db, "textures/waves/source", "source_size", np.array([40, 30]))
     with open_db(lds_db) as db:
         s = db.texture().source
-    assert s.crop == (2, 3, 32, 24) and s.source_size == (40, 30)
+    assert s.crop == (2, 3, 32, 24) and s.source_size == (30, 40)    # the file's (w, h), in Python (h, w)
 
 
 @pytest.mark.parametrize("value", ["1.1", np.array([1.0, np.nan]), np.array([1, 1, 0])])
