@@ -162,11 +162,11 @@ def synthetic_lds_db(path: str | os.PathLike, width: int, height: int, *, n: int
 def bench_lds_sizes(sizes: list[tuple[int, int]], *, n: int = 50, frames: int = 200,
                     precisions: tuple[str, ...] = ("float32", "float16"), log: Callable[[str], None] | None = None,
                     bandwidth: dict | None = None) -> dict:
-    """The LDS benchmark of the README: synthetic textures at each size, both precisions."""
+    """The LDS benchmark of the README: synthetic textures at each ``(height, width)``, both precisions."""
     bw = bandwidth or copy_bandwidth()
     report = {"bandwidth": bw, "results": []}
     with tempfile.TemporaryDirectory(prefix="dynatex-bench-") as tmp:
-        for w, h in sizes:
+        for h, w in sizes:
             path = synthetic_lds_db(os.path.join(tmp, f"lds_{w}x{h}.h5"), w, h, n=n)
             for prec in precisions:
                 r = bench_player(path, mode="lds", frames=frames, bandwidth_gbs=bw["gbs"],

@@ -86,7 +86,7 @@ class Controls:
 def run(args: argparse.Namespace, db: str) -> dict:
     pygame.display.init()               # video only: no audio device needed
     try:
-        screen = pygame.display.set_mode(args.window)
+        screen = pygame.display.set_mode(args.window[::-1])          # pygame sizes are (width, height)
         pygame.display.set_caption("dynatex: Up/Down speed, R reverse, +/- intensity, Left/Right scroll")
         with open_player(db, args.texture, mode=args.mode, backend=args.backend, format="BGRA") as player:
             return _loop(args, screen, player)
@@ -118,8 +118,8 @@ def _loop(args: argparse.Namespace, screen, player) -> dict:
         pending = player.start_frame(buffers[nxt])      # the device renders it while we draw
         offset = (offset + controls.scroll * budget) % w
         surface = surfaces[shown]
-        for y in range(0, args.window[1], h):           # the texture tiled across the window, scrolling
-            for x in range(-int(offset), args.window[0], w):
+        for y in range(0, args.window[0], h):           # the texture tiled across the window, scrolling
+            for x in range(-int(offset), args.window[1], w):
                 screen.blit(surface, (x, y))
         pygame.display.flip()
         work += time.perf_counter() - t0
@@ -140,8 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mode", default="lds")
     ap.add_argument("--backend", default="auto", choices=("auto", "opencl", "numpy"))
     ap.add_argument("--fps", type=float, default=60.0, help="target frame rate (the frame budget is 1/fps)")
-    ap.add_argument("--window", type=lambda s: tuple(int(v) for v in s.split("x")), default=(640, 360),
-                    metavar="WxH")
+    ap.add_argument("--window", type=lambda s: tuple(int(v) for v in s.split("x"))[::-1], default=(360, 640),
+                    metavar="WxH", help="window size (default 640x360)")
     ap.add_argument("--frames", type=int, default=None, help="stop after this many frames and print a summary")
     ap.add_argument("--autopilot", action="store_true", help="press the keys by itself (for tests)")
     args = ap.parse_args(argv)

@@ -167,14 +167,15 @@ seed = Number(int, 0, MAX_SEED)
 
 
 def size_arg(text: str) -> tuple[int, int]:
-    """``WxH`` -> (w, h), each side in 1..MAX_SIDE."""
+    """``WxH`` -> ``(h, w)``, each side in 1..MAX_SIDE: the command line writes width first, Python
+    passes sizes height first like a frame's shape."""
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, not {text!r}") from None
     if not (1 <= w <= MAX_SIDE and 1 <= h <= MAX_SIDE):
         raise argparse.ArgumentTypeError(f"size {text!r} out of range 1..{MAX_SIDE} per side")
-    return w, h
+    return h, w
 
 
 def load_clip_arg(path: str, **options):

@@ -133,7 +133,7 @@ def _parse_bytes_arg(parse, text: str) -> int:
 
 
 def _load_options(args: argparse.Namespace) -> dict:
-    return {"start": args.start, "stop": args.stop, "step": args.step, "crop": args.crop, "size": args.resize and args.resize[::-1],
+    return {"start": args.start, "stop": args.stop, "step": args.step, "crop": args.crop, "size": args.resize,
             "color": not args.grey}
 
 

@@ -136,7 +136,7 @@ def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any],
     if args.size is not None:
         if not any(p.name == "size" for p in player_class(args.mode).options):
             raise UsageError(f"--size is not supported by mode {args.mode} (it plays at the clip's resolution)")
-        opts["size"] = args.size[::-1]
+        opts["size"] = args.size
     n = args.frames or 300
     with open_player(args.output, args.texture, mode=args.mode, **opts) as player:
         src = player.texture.source
@@ -168,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
         output = _load(args.output, **({"stop": args.frames} if args.frames else {}))
         source_opts = {}
     if args.source_size is not None:
-        source_opts["size"] = args.source_size[::-1]
+        source_opts["size"] = args.source_size
     source = _load(args.source, **source_opts)
     t, h, w = output.shape[:3]
     if output.shape[-1] != source.shape[-1]:        # grey against colour: compare in colour

@@ -208,8 +208,8 @@ def run(args: argparse.Namespace) -> int:
     name = args.name if args.name is not None else args.texture_name
     if not name or "/" in name or name in (".", ".."):
         raise UsageError(f"--name {name!r}: a file name stem without '/' is needed")
-    cols, rows = args.grid if args.grid is not None else (None, None)
-    tile = None if args.tile is None else (args.tile[1], args.tile[0])
+    rows, cols = args.grid if args.grid is not None else (None, None)    # COLSxROWS, parsed like WxH
+    tile = args.tile
     try:
         grid = fb.choose_grid(len(frames), frames.shape[1:3], cols=cols, rows=rows, tile=tile, pow2=not args.npot)
     except ValueError as exc:
