@@ -33,7 +33,7 @@ CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 COMPARE = ("pendulum_clock_schoedl.mov", "small_64px/fire_dyntex_64px.avi")
 
 
-def _resize(frames: np.ndarray, w: int, h: int) -> np.ndarray:
+def _resize(frames: np.ndarray, h: int, w: int) -> np.ndarray:
     import cv2
     return np.stack([cv2.resize(f, (w, h), interpolation=cv2.INTER_LINEAR) for f in frames])
 
@@ -52,7 +52,7 @@ def _write_db(path: str, frames: np.ndarray, **kwargs) -> float:
 
 def bench_player(folder: str, frames: int, bandwidth: float) -> dict:
     path = os.path.join(folder, "hd.h5")
-    _write_db(path, _resize(pendulum_clip(48, 96)[0], 1280, 720))
+    _write_db(path, _resize(pendulum_clip(48, 96)[0], 720, 1280))
     out: dict = {"size": "1280x720", "stored_frames": 48}
     for speed in (1.0, 0.5):
         row: dict = {}
@@ -76,7 +76,7 @@ def bench_player(folder: str, frames: int, bandwidth: float) -> dict:
 
 
 def bench_analysis(folder: str, repeats: int = 3) -> dict:
-    frames = _resize(pendulum_clip(300, 88)[0], 640, 352)
+    frames = _resize(pendulum_clip(300, 88)[0], 352, 640)
     times = [_write_db(os.path.join(folder, "a.h5"), frames) for _ in range(repeats)]
     return {"frames": 300, "size": "640x352", "median_s": float(np.median(times)), "max_s": float(np.max(times))}
 
