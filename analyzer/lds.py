@@ -17,9 +17,9 @@ from typing import Callable
 import numpy as np
 
 from ..tiledb import LDSModel
-from ._checks import check_int, clip_frames
+from ..checks import check_int
 from .stream import DiskClip
-from .video import Clip, Progress
+from .video import Clip, Progress, clip_frames
 
 SVD_METHODS = ("auto", "gram", "randomized")
 DEFAULT_N = 50

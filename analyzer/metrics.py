@@ -23,7 +23,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from ._checks import check_int
+from ..checks import Range, check_frames, check_int
 
 __all__ = [
     "StabilityReport", "check_frames", "count_nonfinite", "evaluate", "frame_coverage", "frame_step_ratio",
@@ -38,59 +38,8 @@ _CHUNK = 32          # frames converted to float at a time (bounds memory on lon
 _THUMB = 32          # longer side of the thumbnails used by coverage and repetition
 
 
-# -- input checks -------------------------------------------------------------------------
-def check_frames(frames: Any, *, name: str = "frames", min_frames: int = 1,
-                 allow_nonfinite: bool = False) -> np.ndarray:
-    """Return ``frames`` as a ``(T, H, W, C)`` array, or raise a ValueError/TypeError naming ``name``.
-
-    Parameters
-    ----------
-    frames : array_like
-        ``(T, H, W)`` or ``(T, H, W, C)`` with ``C`` in (1, 3); uint8 or a real dtype (0..255 scale).
-    name : str
-        What to call the array in error messages.
-    min_frames : int
-        Fewest frames accepted.
-    allow_nonfinite : bool
-        Accept NaN/inf values (only :func:`stability` and :func:`count_nonfinite` do).
-
-    Examples
-    --------
-    >>> check_frames(np.zeros((4, 8, 6), np.uint8)).shape
-    (4, 8, 6, 1)
-    """
-    if not isinstance(frames, np.ndarray):
-        if isinstance(frames, (list, tuple)):
-            frames = np.asarray(frames)
-        else:
-            raise TypeError(f"{name} must be a numpy array of frames, not {type(frames).__name__}")
-    if frames.dtype.kind not in "uif" or frames.dtype == np.bool_:
-        raise TypeError(f"{name} must hold numbers (uint8 or float), not {frames.dtype}")
-    if frames.ndim == 3:
-        frames = frames[..., None]
-    if frames.ndim != 4 or frames.shape[-1] not in (1, 3):
-        raise ValueError(f"{name} must be (T, H, W) or (T, H, W, C) with C in (1, 3), not shape {frames.shape}")
-    if frames.shape[0] < min_frames:
-        what = "is empty (no frames)" if frames.shape[0] == 0 else f"has {frames.shape[0]} frame(s)"
-        raise ValueError(f"{name} {what}; at least {min_frames} needed")
-    if frames.shape[1] < 1 or frames.shape[2] < 1:
-        raise ValueError(f"{name} has empty frames ({frames.shape[2]}x{frames.shape[1]} pixels)")
-    if not allow_nonfinite and frames.dtype.kind == "f":
-        bad = count_nonfinite(frames)
-        if bad:
-            raise ValueError(f"{name} holds NaN or inf in {bad} frame(s)")
-    return frames
-
-
-def _check_pos_float(name: str, value: Any) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a number, not {value!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise ValueError(f"{name} must be a positive finite number, not {value!r}")
-    return v
-
+#: a positive finite number (eps, floors, tolerances)
+_POSITIVE = Range(float, 0.0, None, low_open=True)
 
 def _pair(name: str, value: Any, lo: int) -> tuple[int, int]:
     if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
@@ -397,7 +346,7 @@ def seam_visibility(frames: np.ndarray, labels: np.ndarray | None = None, *, wra
     [2500001.0, 2500001.0]
     """
     frames = check_frames(frames, name="frames")
-    eps = _check_pos_float("eps", eps)
+    eps = _POSITIVE.check("eps", eps)
     t, h, w, c = frames.shape
     if labels is None:
         if not wrap:
@@ -615,7 +564,7 @@ def spectrum_distance(output: np.ndarray, source: np.ndarray, *, cuboid: Sequenc
     """
     output = check_frames(output, name="output", min_frames=2)
     source = check_frames(source, name="source", min_frames=2)
-    floor = _check_pos_float("floor", floor)
+    floor = _POSITIVE.check("floor", floor)
     f = _auto_downscale(source, downscale)
     ct, cs = _pair("cuboid", cuboid, 2)
     go, gs = _grey(output, f), _grey(source, f)
@@ -994,7 +943,7 @@ def repetition_lag(output: np.ndarray, *, source: np.ndarray | None = None, tole
     >>> repetition_lag(np.concatenate([clip[:5]] * 6), source=clip), repetition_lag(clip)
     (5, None)
     """
-    tolerance = _check_pos_float("tolerance", tolerance)
+    tolerance = _POSITIVE.check("tolerance", tolerance)
     prof = repetition_profile(output, source=source, max_lag=max_lag)
     hits = np.flatnonzero(prof <= tolerance)
     return int(hits[0]) + 1 if hits.size else None

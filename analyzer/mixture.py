@@ -20,10 +20,10 @@ import numpy as np
 
 from ..tiledb import MixtureModel
 from ..tiledb.mixture import companion_radius
-from ._checks import check_int, clip_frames
+from ..checks import check_int
 from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
 from .stream import DiskClip
-from .video import Clip, Progress
+from .video import Clip, Progress, clip_frames
 
 DEFAULT_COMPONENTS = 3
 DEFAULT_DIM = 10

@@ -28,7 +28,7 @@ from typing import Sequence
 import numpy as np
 
 from ..tiledb import QuiltModel
-from ._checks import check_int, check_size
+from ..checks import check_float, check_frames, check_int, check_size
 from .video import Clip, Progress
 
 DEFAULT_RANK = 15
@@ -49,7 +49,7 @@ def pixel_time_matrix(frames: np.ndarray) -> np.ndarray:
     >>> pixel_time_matrix(np.zeros((5, 4, 6, 3), np.uint8)).shape
     (24, 15)
     """
-    frames = _check_frames(frames)
+    frames = check_frames(frames, name="clip", min_frames=2, uint8=True)
     t, h, w, c = frames.shape
     return np.ascontiguousarray(frames.transpose(1, 2, 0, 3).reshape(h * w, t * c), dtype=np.float32)
 
@@ -286,7 +286,7 @@ def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
     >>> q.source_map.shape, q.labels.shape
     ((30, 40, 2), (30, 40))
     """
-    frames = _check_frames(clip.frames if isinstance(clip, Clip) else clip)
+    frames = check_frames(clip.frames if isinstance(clip, Clip) else clip, name="clip", min_frames=2, uint8=True)
     t, h, w, c = frames.shape
     bh, bw = _pair("block", block, 2)
     if bh > h or bw > w:
@@ -301,13 +301,13 @@ def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
     if size is None:
         size = (2 * h, 2 * w)
     out_h, out_w = check_size("size", size, MAX_SIDE)
-    tolerance = _float("tolerance", tolerance, 0.0)
+    tolerance = check_float("tolerance", tolerance, 0.0)
     seed = check_int("seed", seed, 0)
     if feather is None:
         feather = min(oy, ox) // 2
     feather = check_int("feather", feather, 0, min(oy, ox))
     if lowpass is not None:
-        lowpass = _float("lowpass", lowpass, 0.0)
+        lowpass = check_float("lowpass", lowpass, 0.0)
         if lowpass <= 0:
             raise ValueError(f"lowpass must be a positive sigma in pixels or None, not {lowpass!r}")
     if rank is not None:
@@ -466,7 +466,7 @@ def measure_comparison_speedup(frames: np.ndarray, *, rank: int = DEFAULT_RANK, 
     >>> sorted(r)[:3]
     ['best_agreement', 'full_s', 'full_width']
     """
-    frames = _check_frames(frames)
+    frames = check_frames(frames, name="clip", min_frames=2, uint8=True)
     t, h, w, c = frames.shape
     bh, bw = _pair("block", block, 2)
     if bh > h or bw > w:
@@ -527,25 +527,6 @@ def spreading_clip(t: int = 48, h: int = 48, w: int = 64, *, seed: int = 0) -> n
 
 
 # -- argument checks -------------------------------------------------------------------------
-def _check_frames(frames) -> np.ndarray:
-    frames = np.asarray(frames)
-    if frames.ndim != 4 or frames.dtype != np.uint8 or frames.shape[-1] not in (1, 3):
-        raise ValueError(f"clip must be (T, H, W, C) uint8 frames with C 1 or 3, not {frames.dtype} {frames.shape}")
-    if frames.shape[0] < 2:
-        raise ValueError(f"clip has {frames.shape[0]} frames; a time-varying texture needs at least 2")
-    return frames
-
-
-def _float(name: str, v, lo: float) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a number, not {v!r}") from None
-    if not np.isfinite(f) or f < lo:
-        raise ValueError(f"{name} must be a finite number >= {lo}, not {v!r}")
-    return f
-
-
 def _pair(name: str, v, lo: int, hi: int | None = None) -> tuple[int, int]:
     if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
         v = (v, v)

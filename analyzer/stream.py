@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..tiledb import SourceInfo
-from ._checks import check_size
+from ..checks import check_size
 from .video import (
     IMAGE_SUFFIXES,
     MAX_SIDE,

@@ -74,7 +74,7 @@ from ..tiledb.tiles import (  # the stationarity warning lives with the model th
     TilesModel,
     stationarity_warning,  # noqa: F401 - re-exported
 )
-from ._checks import check_int
+from ..checks import check_int
 from .video import Clip, Progress
 
 DEFAULT_MIN_TILE = 32

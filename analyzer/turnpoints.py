@@ -26,9 +26,9 @@ import math
 import numpy as np
 
 from ..tiledb.turnpoints import TurnPointModel
-from ._checks import check_int, clip_frames
+from ..checks import check_int
 from .lds import _stepper
-from .video import Clip, Progress
+from .video import Clip, Progress, clip_frames
 
 
 def frame_features(frames: np.ndarray, size: int = 64) -> np.ndarray:

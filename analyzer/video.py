@@ -8,12 +8,12 @@ import hashlib
 import os
 import tempfile
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from ..tiledb import DynatexError, SourceInfo
-from ._checks import check_int, check_size
+from ..checks import check_frames, check_int, check_size
 
 #: Largest side of a resized frame (matches the command line's ``WxH`` limit).
 MAX_SIDE = 16384
@@ -281,3 +281,6 @@ def _tuple4(name: str, v) -> tuple[int, int, int, int]:
     return t  # type: ignore[return-value]
 
 
+def clip_frames(clip: Any) -> np.ndarray:
+    """The ``(T, H, W, C)`` uint8 frames of a :class:`Clip` or an array, else an error naming "clip"."""
+    return check_frames(clip.frames if isinstance(clip, Clip) else clip, name="clip", uint8=True)

@@ -96,6 +96,53 @@ def check_out(out: Any, shape: tuple[int, ...]) -> None:
         raise InvalidArgumentError("out must be C-contiguous and writeable")
 
 
+def check_frames(frames: Any, *, name: str = "frames", min_frames: int = 1, uint8: bool = False,
+                 allow_nonfinite: bool = False) -> np.ndarray:
+    """Return ``frames`` as a ``(T, H, W, C)`` array, or raise an error naming ``name``.
+
+    Parameters
+    ----------
+    frames : array_like
+        ``(T, H, W)`` or ``(T, H, W, C)`` with ``C`` in (1, 3); uint8 or a real dtype (0..255 scale).
+    name : str
+        What to call the array in error messages.
+    min_frames : int
+        Fewest frames accepted.
+    uint8 : bool
+        Accept only uint8 frames (a clip to analyse).
+    allow_nonfinite : bool
+        Accept NaN/inf values (only the stability metric does).
+
+    Examples
+    --------
+    >>> check_frames(np.zeros((4, 8, 6), np.uint8)).shape
+    (4, 8, 6, 1)
+    """
+    if not isinstance(frames, np.ndarray):
+        if isinstance(frames, (list, tuple)):
+            frames = np.asarray(frames)
+        else:
+            raise ArgumentTypeError(f"{name} must be a numpy array of frames, not {type(frames).__name__}")
+    if uint8 and frames.dtype != np.uint8:
+        raise ArgumentTypeError(f"{name} must be uint8 frames, not {frames.dtype}")
+    if frames.dtype.kind not in "uif" or frames.dtype == np.bool_:
+        raise ArgumentTypeError(f"{name} must hold numbers (uint8 or float), not {frames.dtype}")
+    if frames.ndim == 3:
+        frames = frames[..., None]
+    if frames.ndim != 4 or frames.shape[-1] not in (1, 3):
+        raise InvalidArgumentError(f"{name} must be (T, H, W) or (T, H, W, C) with C in (1, 3), not shape {frames.shape}")
+    if frames.shape[0] < min_frames:
+        what = "is empty (no frames)" if frames.shape[0] == 0 else f"has {frames.shape[0]} frame(s)"
+        raise InvalidArgumentError(f"{name} {what}; at least {min_frames} needed")
+    if frames.shape[1] < 1 or frames.shape[2] < 1:
+        raise InvalidArgumentError(f"{name} has empty frames ({frames.shape[2]}x{frames.shape[1]} pixels)")
+    if not allow_nonfinite and frames.dtype.kind == "f":
+        bad = int((~np.isfinite(frames.reshape(len(frames), -1))).any(axis=1).sum())
+        if bad:
+            raise InvalidArgumentError(f"{name} holds NaN or inf in {bad} frame(s)")
+    return frames
+
+
 # -- kinds -------------------------------------------------------------------------------------
 class Kind:
     """A rule for one argument: checks Python values, parses command-line text, says itself."""
@@ -446,5 +493,5 @@ class Either(Kind):
         return " or ".join(k.describe_text() for k in self.kinds)
 
 
-__all__ = ["Array", "Choice", "Either", "Flag", "Kind", "NpyFile", "Numbers", "Range", "Size", "Text", "check_choice", "check_float",
+__all__ = ["Array", "Choice", "Either", "Flag", "Kind", "NpyFile", "Numbers", "Range", "Size", "Text", "check_choice", "check_float", "check_frames",
            "check_int", "check_out", "check_seed", "check_size"]

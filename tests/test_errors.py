@@ -6,7 +6,7 @@ from dynatex.tiledb import DynatexError, TileDBError, TileDBFormatError
 
 def test_every_dynatex_error_shares_one_root():
     from dynatex.analyzer import ClipError
-    from dynatex.analyzer._checks import ArgumentTypeError
+    from dynatex.errors import ArgumentTypeError
     from dynatex.cli import UsageError
     from dynatex.player import DeviceNotVerifiedError, KernelBuildError, OpenCLUnavailableError
     for cls in (TileDBError, TileDBFormatError, ClipError, ArgumentTypeError, UsageError, OpenCLUnavailableError,

@@ -7,13 +7,13 @@ and writes the range into the option's help (``%(type)s``).
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 from collections.abc import Callable
 from typing import Any
 
-from ..checks import Choice, Flag, Kind
+from .. import checks
+from ..checks import Choice, Flag, Kind, Range, Size
 from ..cli import UsageError
 from ..errors import InvalidArgumentError
 from ..params import Param
@@ -26,87 +26,32 @@ MAX_SEED = 2**63 - 1
 MAX_SIDE = 16384
 
 
-class Number:
-    """An argparse type: a finite ``int`` or ``float`` in a declared range.
+class Number(Range):
+    """An argparse type: a :class:`~dynatex.checks.Range` read from command-line text.
 
     ``Number(float, 0, 1, low_open=True)`` takes ``(0, 1]``; ``str()`` of it is that range, so a
     help text can say ``in %(type)s``.
     """
 
-    def __init__(self, kind: type, low: float | None = None, high: float | None = None, *,
-                 low_open: bool = False, high_open: bool = False) -> None:
-        if kind not in (int, float):
-            raise TypeError("kind must be int or float")
-        self.kind, self.low, self.high = kind, low, high
-        self.low_open, self.high_open = low_open, high_open
-
     def __call__(self, text: str) -> int | float:
-        value = self.parse(text)
-        if value is None:
-            raise argparse.ArgumentTypeError(f"expected {self.describe()}, not {text!r}")
-        return value
+        return KindArg(self)(text)
 
-    def parse(self, text: str) -> int | float | None:
-        """``text`` as a number in range, or None."""
-        try:
-            v = self.kind(text.strip())
-        except (TypeError, ValueError, OverflowError):
-            return None
-        return v if self.contains(v) else None
-
-    def contains(self, v: float) -> bool:
-        return (math.isfinite(v)
-                and (self.low is None or (v > self.low if self.low_open else v >= self.low))
-                and (self.high is None or (v < self.high if self.high_open else v <= self.high)))
-
-    def check(self, flag: str, text: str) -> int | float:
+    def check_part(self, flag: str, text: str) -> int | float:
         """``text`` (one part of a composite option) as a number in range, else a :class:`UsageError`."""
-        value = self.parse(text)
-        if value is None:
-            raise UsageError(f"{flag}: expected {self.describe()}, not {text!r}")
-        return value
-
-    def describe(self) -> str:
-        what = "an integer" if self.kind is int else "a finite number"
-        rng = str(self)
-        return what if not rng else f"{what} {rng}" if rng[0] in "<>" else f"{what} in {rng}"
-
-    def __str__(self) -> str:
-        lo, hi = self.low, self.high
-        if lo is None and hi is None:
-            return ""
-        if hi is None:
-            return f"{'>' if self.low_open else '>='} {_g(lo)}"
-        if lo is None:
-            return f"{'<' if self.high_open else '<='} {_g(hi)}"
-        if self.kind is int and not (self.low_open or self.high_open):
-            return f"{_g(lo)}..{_g(hi)}"
-        return f"{'(' if self.low_open else '['}{_g(lo)}, {_g(hi)}{')' if self.high_open else ']'}"
+        try:
+            return self.parse(text)
+        except InvalidArgumentError:
+            raise UsageError(f"{flag}: expected {self.describe()}, not {text!r}") from None
 
     def __repr__(self) -> str:
         return f"Number({self.kind.__name__}, {self})"
 
 
-def _g(v: float) -> str:
-    return str(v) if isinstance(v, int) else f"{v:g}"
-
-
-class Numbers:
-    """An argparse type: ``count`` comma-separated :class:`Number` values (``R,G,B``, ``X,Y,W,H``)."""
-
-    def __init__(self, item: Number, count: int, form: str) -> None:
-        self.item, self.count, self.form = item, count, form
+class Numbers(checks.Numbers):
+    """An argparse type: ``count`` comma-separated numbers of one :class:`Number` (``R,G,B``, ``X,Y,W,H``)."""
 
     def __call__(self, text: str) -> tuple:
-        parts = text.split(",")
-        values = [self.item.parse(v) for v in parts]
-        if len(parts) != self.count or any(v is None for v in values):
-            raise argparse.ArgumentTypeError(f"expected {self.form}: {self.count} numbers, each "
-                                             f"{self.item.describe()}, not {text!r}")
-        return tuple(values)
-
-    def __str__(self) -> str:
-        return f"{self.form}, each {self.item.describe()}"
+        return KindArg(self)(text)
 
 
 class KindArg:
@@ -166,16 +111,9 @@ count = Number(int, 0, MAX_COUNT)
 seed = Number(int, 0, MAX_SEED)
 
 
-def size_arg(text: str) -> tuple[int, int]:
-    """``WxH`` -> ``(h, w)``, each side in 1..MAX_SIDE: the command line writes width first, Python
-    passes sizes height first like a frame's shape."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, not {text!r}") from None
-    if not (1 <= w <= MAX_SIDE and 1 <= h <= MAX_SIDE):
-        raise argparse.ArgumentTypeError(f"size {text!r} out of range 1..{MAX_SIDE} per side")
-    return h, w
+#: ``WxH`` -> ``(h, w)``, each side in 1..MAX_SIDE: the command line writes width first, Python
+#: passes sizes height first like a frame's shape (``--grid COLSxROWS`` -> ``(rows, cols)``).
+size_arg = KindArg(Size(MAX_SIDE))
 
 
 def load_clip_arg(path: str, **options):

@@ -77,7 +77,7 @@ def rate_map_arg(spec: str, rate_range: tuple[float, float], shape: tuple[int, i
     from ..player import ratemap
     kind, _, rest = spec.partition(":")
     if kind in ("halves", "light") and rest:
-        vals = [FINITE.check(f"--rate-map {kind}", v) for v in rest.split(",")]
+        vals = [FINITE.check_part(f"--rate-map {kind}", v) for v in rest.split(",")]
         if kind == "halves":
             if len(vals) != 2:
                 raise UsageError(f"--rate-map halves:LEFT,RIGHT needs two rates, not {rest!r}")
