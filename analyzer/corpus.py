@@ -24,6 +24,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from ..errors import InvalidArgumentError
 from ..tiledb import DatabaseWriter, TileDB, TileDBError
 from .methods import Clips, Method, get_method
 from .stream import parse_bytes
@@ -114,7 +115,7 @@ def _expand(spec: str, depth: int) -> list[str]:
         return clips or [spec]
     if spec.lower().endswith(".txt"):
         if depth > 0:
-            raise ValueError(f"{spec}: a clip list may not name another list")
+            raise InvalidArgumentError(f"{spec}: a clip list may not name another list")
         base = os.path.dirname(spec)
         out = []
         with open(spec, encoding="utf-8") as f:
@@ -405,7 +406,7 @@ def analyze_corpus(clips: Iterable[str | os.PathLike], output_dir: str | os.Path
     for path, name in zip(paths, texture_names(paths)):
         chosen = tuple(methods(path) if callable(methods) else methods)
         if not chosen:
-            raise ValueError(f"{path}: no method to run")
+            raise InvalidArgumentError(f"{path}: no method to run")
         for m in chosen:
             get_method(m)
         tasks.append(ClipTask(clip=os.path.abspath(path), texture=name, database=os.path.join(out, f"{name}.h5"),
@@ -466,7 +467,7 @@ def connect(scheduler: str, workers: int | None, n_tasks: int):
                     os.environ[k] = v
         return _OwnedClient(Client(cluster), cluster)
     if not re.match(r"^[a-z+]+://", scheduler):
-        raise ValueError(f"scheduler must be 'none', 'local' or an address like tcp://host:8786, not {scheduler!r}")
+        raise InvalidArgumentError(f"scheduler must be 'none', 'local' or an address like tcp://host:8786, not {scheduler!r}")
     try:
         return _OwnedClient(Client(scheduler, timeout="20s"), None)
     except OSError as exc:

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InvalidArgumentError
+
 #: Farneback optical-flow parameters (pyramid scale, levels, window, iterations, poly_n, poly_sigma).
 FLOW_PARAMS = (0.5, 4, 15, 3, 5, 1.2)
 #: Percentile of the vectors' components that the encoding's strength covers.
@@ -68,7 +70,7 @@ def choose_grid(frames: int, frame_shape: tuple[int, int], *, cols: int | None =
     (1024, 2048)
     """
     if frames < 1:
-        raise ValueError(f"a flipbook needs at least one frame, not {frames}")
+        raise InvalidArgumentError(f"a flipbook needs at least one frame, not {frames}")
     if cols is None and rows is None:
         rows = 1 << (max(0, math.ceil(math.log2(frames))) // 2)
         cols = 1 << math.ceil(math.log2(math.ceil(frames / rows))) if pow2 else math.ceil(frames / rows)
@@ -77,13 +79,13 @@ def choose_grid(frames: int, frame_shape: tuple[int, int], *, cols: int | None =
     elif rows is None:
         rows = math.ceil(frames / cols)
     if cols * rows < frames:
-        raise ValueError(f"a {cols}x{rows} grid holds {cols * rows} frames, fewer than {frames}")
+        raise InvalidArgumentError(f"a {cols}x{rows} grid holds {cols * rows} frames, fewer than {frames}")
     if tile is None:
         h, w = frame_shape
         tile = (_pow2(h), _pow2(w)) if pow2 else (h, w)
     th, tw = int(tile[0]), int(tile[1])
     if rows * th > MAX_ATLAS_SIDE or cols * tw > MAX_ATLAS_SIDE:
-        raise ValueError(f"a {cols}x{rows} atlas of {tw}x{th} tiles is {cols * tw}x{rows * th} pixels, more than "
+        raise InvalidArgumentError(f"a {cols}x{rows} atlas of {tw}x{th} tiles is {cols * tw}x{rows * th} pixels, more than "
                          f"{MAX_ATLAS_SIDE} on a side: use fewer frames or a smaller tile")
     return Grid(int(cols), int(rows), (th, tw), int(frames))
 

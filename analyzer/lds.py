@@ -16,8 +16,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..tiledb import LDSModel
 from ..checks import check_int
+from ..errors import InvalidArgumentError
+from ..tiledb import LDSModel
 from .stream import DiskClip
 from .video import Clip, Progress, clip_frames
 
@@ -83,20 +84,20 @@ def learn_lds(clip: Clip | DiskClip | np.ndarray, *, n: int | str = DEFAULT_N, k
     frames = None if streamed else clip_frames(clip)
     tau = clip.n_frames if streamed else frames.shape[0]
     if tau < 3:
-        raise ValueError(f"clip has {tau} frames; learning an LDS needs at least 3")
+        raise InvalidArgumentError(f"clip has {tau} frames; learning an LDS needs at least 3")
     if svd not in SVD_METHODS:
-        raise ValueError(f"svd must be one of {SVD_METHODS}, not {svd!r}")
+        raise InvalidArgumentError(f"svd must be one of {SVD_METHODS}, not {svd!r}")
     if not 0 < energy <= 1:
-        raise ValueError(f"energy must be in (0, 1], not {energy!r}")
+        raise InvalidArgumentError(f"energy must be in (0, 1], not {energy!r}")
     if not 0 < max_radius < 1:
-        raise ValueError(f"max_radius must be in (0, 1), not {max_radius!r}")
+        raise InvalidArgumentError(f"max_radius must be in (0, 1), not {max_radius!r}")
     auto = isinstance(n, str)
     if auto and n != "auto":
-        raise ValueError(f"n must be a positive integer or 'auto', not {n!r}")
+        raise InvalidArgumentError(f"n must be a positive integer or 'auto', not {n!r}")
     if not auto:
         n = check_int("n", n, 1, rule="a positive integer or 'auto'")
         if n > tau - 1:
-            raise ValueError(f"n={n} is larger than the clip allows: it has {tau} frames, so n <= {tau - 1}")
+            raise InvalidArgumentError(f"n={n} is larger than the clip allows: it has {tau} frames, so n <= {tau - 1}")
     step = _stepper(progress, 5)
     rank_cap = min(tau - 1, DEFAULT_N) if auto else int(n)
     if streamed:
@@ -112,7 +113,7 @@ def learn_lds(clip: Clip | DiskClip | np.ndarray, *, n: int | str = DEFAULT_N, k
     n = int(n)
     keep = sv[:n] > sv[0] * 1e-6
     if not keep.all():
-        raise ValueError(f"n={n} exceeds the clip's rank ({int(keep.sum())} independent components); use a smaller n")
+        raise InvalidArgumentError(f"n={n} exceeds the clip's rank ({int(keep.sum())} independent components); use a smaller n")
     basis = np.ascontiguousarray(basis[:n])
     x = states[:n].astype(np.float64)
     k = n if k is None else k
@@ -133,7 +134,7 @@ def _learn_subspace(frames: np.ndarray, svd: str, auto: bool, rank_cap: int, see
     y -= mean
     total_energy = float(np.einsum("ij,ij->", y, y, dtype=np.float64))
     if total_energy == 0.0:
-        raise ValueError("clip is constant: every frame is the same, there is no dynamics to learn")
+        raise InvalidArgumentError("clip is constant: every frame is the same, there is no dynamics to learn")
     step()
 
     method = svd if svd != "auto" else ("gram" if tau <= 1500 else "randomized")
@@ -155,7 +156,7 @@ def _learn_subspace_streamed(clip: DiskClip, rank_cap: int, energy: float | None
     mean, gram = gram_streamed(clip, width)
     total_energy = float(np.trace(gram))
     if total_energy == 0.0:
-        raise ValueError("clip is constant: every frame is the same, there is no dynamics to learn")
+        raise InvalidArgumentError("clip is constant: every frame is the same, there is no dynamics to learn")
     step()
     sv, v = _eig_gram(gram)
     del gram
@@ -244,7 +245,7 @@ def plan_columns(clip: DiskClip, rows: int, max_memory: int | None) -> int:
     width = (bound - fixed) // per_column
     if width < min(pixels, 1024):
         need = fixed + per_column * min(pixels, 1024)
-        raise ValueError(f"max_memory {bound / 2**30:.2f} GiB is too small for {clip.filename} "
+        raise InvalidArgumentError(f"max_memory {bound / 2**30:.2f} GiB is too small for {clip.filename} "
                          f"({tau} frames of {pixels} values, {rows} components): it needs at least "
                          f"{need / 2**30:.2f} GiB")
     return int(min(width, pixels))

@@ -24,6 +24,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from ..checks import Range, check_frames, check_int
+from ..errors import ArgumentTypeError, InvalidArgumentError
 
 __all__ = [
     "StabilityReport", "check_frames", "count_nonfinite", "evaluate", "frame_coverage", "frame_step_ratio",
@@ -47,13 +48,13 @@ def _pair(name: str, value: Any, lo: int) -> tuple[int, int]:
     try:
         a, b = value
     except (TypeError, ValueError):
-        raise TypeError(f"{name} must be an integer or a pair of integers, not {value!r}") from None
+        raise ArgumentTypeError(f"{name} must be an integer or a pair of integers, not {value!r}") from None
     return check_int(f"{name}[0]", a, lo), check_int(f"{name}[1]", b, lo)
 
 
 def _same_size(a: np.ndarray, b: np.ndarray, what: str) -> None:
     if a.shape[1:3] != b.shape[1:3]:
-        raise ValueError(f"{what} needs output and source of the same frame size; output is "
+        raise InvalidArgumentError(f"{what} needs output and source of the same frame size; output is "
                          f"{a.shape[2]}x{a.shape[1]}, source {b.shape[2]}x{b.shape[1]}")
 
 
@@ -133,7 +134,7 @@ def _median_step(frames: np.ndarray, name: str) -> float:
     steps = _step_rms(frames)
     ref = float(np.median(steps))
     if ref <= 0:
-        raise ValueError(f"{name} does not change from frame to frame (median frame difference is 0)")
+        raise InvalidArgumentError(f"{name} does not change from frame to frame (median frame difference is 0)")
     return ref
 
 
@@ -230,19 +231,19 @@ def stability(output: np.ndarray | Iterable[np.ndarray], source: np.ndarray, *, 
     src_energies = _energies(source, mean)
     src_e = float(np.mean(src_energies))
     if src_e <= 0:
-        raise ValueError("source has no temporal variation (every frame equals the mean frame)")
+        raise InvalidArgumentError("source has no temporal variation (every frame equals the mean frame)")
 
     if isinstance(output, np.ndarray):
         output = check_frames(output, name="output", allow_nonfinite=True)
         if output.shape[1:] != source.shape[1:]:
-            raise ValueError(f"stability needs output frames shaped like the source's {source.shape[1:]}, "
+            raise InvalidArgumentError(f"stability needs output frames shaped like the source's {source.shape[1:]}, "
                              f"not {output.shape[1:]}")
         energies = _energies(output, mean)
     else:
         energies = _energies_iter(output, mean)
     n = energies.size
     if n == 0:
-        raise ValueError("output is empty (no frames)")
+        raise InvalidArgumentError("output is empty (no frames)")
     bad = ~np.isfinite(energies)
     ratios = []
     for i in range(0, n, window):
@@ -270,9 +271,9 @@ def _energies_iter(frames: Iterable[np.ndarray], mean: np.ndarray) -> np.ndarray
         if a.ndim == 2:
             a = a[..., None]
         if a.shape != mean.shape:
-            raise ValueError(f"output frame {k} has shape {a.shape}, not the source's {mean.shape}")
+            raise InvalidArgumentError(f"output frame {k} has shape {a.shape}, not the source's {mean.shape}")
         if a.dtype.kind not in "uif":
-            raise TypeError(f"output frame {k} must hold numbers, not {a.dtype}")
+            raise ArgumentTypeError(f"output frame {k} must hold numbers, not {a.dtype}")
         out.append(float(_energies(a[None], mean)[0]))
     return np.asarray(out, np.float64)
 
@@ -350,13 +351,13 @@ def seam_visibility(frames: np.ndarray, labels: np.ndarray | None = None, *, wra
     t, h, w, c = frames.shape
     if labels is None:
         if not wrap:
-            raise ValueError("labels is None and wrap is False: there is no boundary to measure")
+            raise InvalidArgumentError("labels is None and wrap is False: there is no boundary to measure")
         labels = np.zeros((h, w), np.int32)
     labels = np.asarray(labels)
     if labels.ndim != 2 or labels.dtype.kind not in "uib":
-        raise TypeError(f"labels must be a 2-D integer or boolean map, not {labels.dtype} {labels.shape}")
+        raise ArgumentTypeError(f"labels must be a 2-D integer or boolean map, not {labels.dtype} {labels.shape}")
     if labels.shape != (h, w):
-        raise ValueError(f"labels map is {labels.shape[1]}x{labels.shape[0]} but frames are {w}x{h}")
+        raise InvalidArgumentError(f"labels map is {labels.shape[1]}x{labels.shape[0]} but frames are {w}x{h}")
     if wrap:
         bh = labels != np.roll(labels, -1, axis=1)
         bh[:, -1] = True
@@ -369,9 +370,9 @@ def seam_visibility(frames: np.ndarray, labels: np.ndarray | None = None, *, wra
     nih, niv = bh.size - nbh, bv.size - nbv
     nb = nbh + nbv
     if nb == 0:
-        raise ValueError("boundaries: no boundary lies inside the frame (a single region covers it)")
+        raise InvalidArgumentError("boundaries: no boundary lies inside the frame (a single region covers it)")
     if nih + niv == 0:
-        raise ValueError("boundaries: every pixel edge is a boundary; there is no interior to compare with")
+        raise InvalidArgumentError("boundaries: every pixel edge is a boundary; there is no interior to compare with")
     mh, mv = bh.ravel().astype(np.float32), bv.ravel().astype(np.float32)
     out = np.empty(t, np.float64)
     for i, f in _chunks(frames):
@@ -443,13 +444,13 @@ def _events(events: Any, t: int) -> list[int]:
     try:
         ev = list(events)
     except TypeError:
-        raise TypeError(f"events must be a sequence of frame indices, not {events!r}") from None
+        raise ArgumentTypeError(f"events must be a sequence of frame indices, not {events!r}") from None
     out = []
     for e in ev:
         if isinstance(e, bool) or not isinstance(e, (int, np.integer)):
-            raise TypeError(f"events must be integers, not {e!r}")
+            raise ArgumentTypeError(f"events must be integers, not {e!r}")
         if not 1 <= e <= t - 1:
-            raise ValueError(f"event {int(e)} is outside the output's frames 1..{t - 1} "
+            raise InvalidArgumentError(f"event {int(e)} is outside the output's frames 1..{t - 1} "
                              "(an event is the index of the first frame after a jump)")
         out.append(int(e))
     return out
@@ -505,7 +506,7 @@ def _spectrum(grey: np.ndarray, ct: int, cs: int) -> np.ndarray:
     from numpy.lib.stride_tricks import sliding_window_view
     t, h, w = grey.shape
     if t < ct or h < cs or w < cs:
-        raise ValueError(f"clip ({t} frames of {w}x{h} after downscaling) is smaller than the "
+        raise InvalidArgumentError(f"clip ({t} frames of {w}x{h} after downscaling) is smaller than the "
                          f"spectrum cuboid ({ct} frames of {cs}x{cs})")
     win = (np.hanning(ct + 2)[1:-1, None, None] * np.hanning(cs + 2)[1:-1][None, :, None]
            * np.hanning(cs + 2)[1:-1][None, None, :]).astype(np.float32)
@@ -571,7 +572,7 @@ def spectrum_distance(output: np.ndarray, source: np.ndarray, *, cuboid: Sequenc
     ct = min(ct, go.shape[0], gs.shape[0])
     cs = min(cs, *go.shape[1:], *gs.shape[1:])
     if ct < 4 or cs < 4:
-        raise ValueError(f"clips too small for a power spectrum: need at least 4 frames and 4x4 pixels "
+        raise InvalidArgumentError(f"clips too small for a power spectrum: need at least 4 frames and 4x4 pixels "
                          f"after downscaling by {f}, got {ct} frames and {cs} pixels")
     po, ps = _spectrum(go, ct, cs), _spectrum(gs, ct, cs)
     mask = np.ones(po.shape, bool)
@@ -586,7 +587,7 @@ def _patches(grey: np.ndarray, pt: int, ps: int, st: int, ss: int) -> tuple[np.n
     from numpy.lib.stride_tricks import sliding_window_view
     t, h, w = grey.shape
     if t < pt or h < ps or w < ps:
-        raise ValueError(f"clip ({t} frames of {w}x{h} after downscaling) is smaller than one patch "
+        raise InvalidArgumentError(f"clip ({t} frames of {w}x{h} after downscaling) is smaller than one patch "
                          f"({pt} frames of {ps}x{ps})")
     v = sliding_window_view(grey, (pt, ps, ps))[::st, ::ss, ::ss]
     return v, v.shape[:3]
@@ -719,11 +720,11 @@ def index_coverage(indices: Any, n_source: int) -> float:
     n_source = check_int("n_source", n_source, 1)
     idx = np.asarray(indices)
     if idx.size == 0:
-        raise ValueError("indices is empty")
+        raise InvalidArgumentError("indices is empty")
     if idx.dtype.kind not in "ui":
-        raise TypeError(f"indices must be integers, not {idx.dtype}")
+        raise ArgumentTypeError(f"indices must be integers, not {idx.dtype}")
     if idx.min() < 0 or idx.max() >= n_source:
-        raise ValueError(f"indices must lie in 0..{n_source - 1}, found {int(idx.min())}..{int(idx.max())}")
+        raise InvalidArgumentError(f"indices must lie in 0..{n_source - 1}, found {int(idx.min())}..{int(idx.max())}")
     return float(np.unique(idx).size) / n_source
 
 
@@ -781,7 +782,7 @@ def lattice_correlation(frames: np.ndarray, period: int | Sequence[int]) -> tupl
     py, px = _pair("period", period, 1)
     t, h, w = frames.shape[:3]
     if py >= h or px >= w:
-        raise ValueError(f"period {py}x{px} must be smaller than the {h}x{w} frame")
+        raise InvalidArgumentError(f"period {py}x{px} must be smaller than the {h}x{w} frame")
     acc = np.zeros(2)
     for start, chunk in _chunks(frames):
         for g in _grey(chunk):

@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..checks import check_int
+from ..errors import InvalidArgumentError
 from ..tiledb import MixtureModel
 from ..tiledb.mixture import companion_radius
-from ..checks import check_int
 from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
 from .stream import DiskClip
 from .video import Clip, Progress, clip_frames
@@ -96,26 +97,26 @@ def learn_mixture(clip: Clip | DiskClip | np.ndarray, *, components: int = DEFAU
     seed = check_int("seed", seed, 0)
     global_dim = dim if global_dim is None else check_int("global_dim", global_dim, 1)
     if not 0 < max_radius < 1:
-        raise ValueError(f"max_radius must be in (0, 1), not {max_radius!r}")
+        raise InvalidArgumentError(f"max_radius must be in (0, 1), not {max_radius!r}")
     if not 0 < tol < 1:
-        raise ValueError(f"tol must be in (0, 1), not {tol!r}")
+        raise InvalidArgumentError(f"tol must be in (0, 1), not {tol!r}")
     if tau < 4:
-        raise ValueError(f"clip has {tau} frames; a subspace mixture needs at least 4")
+        raise InvalidArgumentError(f"clip has {tau} frames; a subspace mixture needs at least 4")
     if components * (dim + 1) >= tau:
-        raise ValueError(f"components={components} with dim={dim} needs more than components * (dim + 1) = "
+        raise InvalidArgumentError(f"components={components} with dim={dim} needs more than components * (dim + 1) = "
                          f"{components * (dim + 1)} frames, the clip has {tau}; use fewer components or a smaller dim")
     if dim >= pca_dim:
-        raise ValueError(f"dim={dim} must be smaller than pca_dim={pca_dim}")
+        raise InvalidArgumentError(f"dim={dim} must be smaller than pca_dim={pca_dim}")
     if global_dim > components * (dim + 1) - 1:
-        raise ValueError(f"global_dim={global_dim} exceeds components * (dim + 1) - 1 = {components * (dim + 1) - 1}")
+        raise InvalidArgumentError(f"global_dim={global_dim} exceeds components * (dim + 1) - 1 = {components * (dim + 1) - 1}")
     if neighbors >= tau:
-        raise ValueError(f"neighbors={neighbors} must be smaller than the number of frames ({tau})")
+        raise InvalidArgumentError(f"neighbors={neighbors} must be smaller than the number of frames ({tau})")
     if pmax is None:
         # Largest p with T - p > (p + 1) D + 1, capped at the default.
         pmax = max(1, min(DEFAULT_PMAX, (tau - global_dim - 2) // (global_dim + 1)))
     pmax = check_int("pmax", pmax, 1)
     if not tau - pmax > global_dim * pmax + 1 + global_dim:
-        raise ValueError(f"pmax={pmax} is too large for {tau} frames of {global_dim}-dimensional global "
+        raise InvalidArgumentError(f"pmax={pmax} is too large for {tau} frames of {global_dim}-dimensional global "
                          f"coordinates (needs T - pmax > (pmax + 1) * global_dim + 1); use a smaller pmax")
     step = _stepper(progress, 5)
 
@@ -137,10 +138,10 @@ def learn_mixture(clip: Clip | DiskClip | np.ndarray, *, components: int = DEFAU
             basis, sv, states = _svd_randomized(y, cap, seed)
         del y
     if constant:
-        raise ValueError("clip is constant: every frame is the same, there is no appearance variation to model")
+        raise InvalidArgumentError("clip is constant: every frame is the same, there is no appearance variation to model")
     q = int(min(cap, np.sum(sv > sv[0] * 1e-6)))
     if dim >= q:
-        raise ValueError(f"dim={dim} must be smaller than the clip's rank in the reduced space ({q}); "
+        raise InvalidArgumentError(f"dim={dim} must be smaller than the clip's rank in the reduced space ({q}); "
                          f"use a smaller dim")
     basis = np.ascontiguousarray(basis[:q])
     x = np.ascontiguousarray(states[:q].T)                        # (T, q)
@@ -233,7 +234,7 @@ def _m_step(x: np.ndarray, resp: np.ndarray, dim: int, floor: float) -> dict:
     s_count = resp.shape[1]
     if nk.min() < dim + 1:
         k = int(nk.argmin())
-        raise ValueError(f"component {k} holds only {nk[k]:.1f} frames' worth of data (needs more than "
+        raise InvalidArgumentError(f"component {k} holds only {nk[k]:.1f} frames' worth of data (needs more than "
                          f"dim={dim}); the clip does not support {s_count} components: use fewer components "
                          f"or a smaller dim")
     mu = (resp.T @ x) / nk[:, None]
@@ -427,14 +428,14 @@ def fit_ar(g: np.ndarray, pmax: int, *, max_radius: float = DEFAULT_MAX_RADIUS) 
     n, m = g.shape
     ne = n - pmax
     if ne - (m * pmax + 1) <= 0:
-        raise ValueError(f"pmax={pmax} is too large for {n} samples of dimension {m}")
+        raise InvalidArgumentError(f"pmax={pmax} is too large for {n} samples of dimension {m}")
     sbc = np.empty(pmax)
     for p in range(1, pmax + 1):
         _, _, resid = _ar_lstsq(g, p, start=pmax)
         cov = resid.T @ resid / ne
         sign, logdet = np.linalg.slogdet(cov)
         if sign <= 0:
-            raise ValueError("the global coordinates are degenerate (singular AR residual covariance); "
+            raise InvalidArgumentError("the global coordinates are degenerate (singular AR residual covariance); "
                              "the clip has too little variation for this global_dim")
         sbc[p - 1] = logdet / m + (m * p + 1) * np.log(ne) / ne
     p = int(np.argmin(sbc)) + 1

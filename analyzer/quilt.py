@@ -27,8 +27,9 @@ from typing import Sequence
 
 import numpy as np
 
-from ..tiledb import QuiltModel
 from ..checks import check_float, check_frames, check_int, check_size
+from ..errors import ArgumentTypeError, InvalidArgumentError
+from ..tiledb import QuiltModel
 from .video import Clip, Progress
 
 DEFAULT_RANK = 15
@@ -82,7 +83,7 @@ def time_svd(matrix: np.ndarray, rank: int | None = DEFAULT_RANK) -> tuple[np.nd
     """
     x = np.asarray(matrix, dtype=np.float32)
     if x.ndim != 2 or x.size == 0:
-        raise ValueError(f"matrix must be a non-empty 2-D array, not shape {x.shape}")
+        raise InvalidArgumentError(f"matrix must be a non-empty 2-D array, not shape {x.shape}")
     m, n = x.shape
     r = min(m, n)
     if rank is None:
@@ -205,7 +206,7 @@ def lowpass_reference(frames: np.ndarray, sigma: float, *, reference: str | int 
     elif isinstance(reference, (int, np.integer)) and not isinstance(reference, bool) and 0 <= reference < t:
         rep = frames[int(reference)].astype(np.float32)
     else:
-        raise ValueError(f"reference must be 'mean', 'middle' or a frame index in [0, {t}), not {reference!r}")
+        raise InvalidArgumentError(f"reference must be 'mean', 'middle' or a frame index in [0, {t}), not {reference!r}")
     low = cv2.GaussianBlur(rep, (0, 0), sigmaX=float(sigma), borderType=cv2.BORDER_REFLECT)
     return np.maximum(low.reshape(rep.shape), 1.0)
 
@@ -290,14 +291,14 @@ def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
     t, h, w, c = frames.shape
     bh, bw = _pair("block", block, 2)
     if bh > h or bw > w:
-        raise ValueError(f"block {bw}x{bh} (width x height) is larger than the {w}x{h} source")
+        raise InvalidArgumentError(f"block {bw}x{bh} (width x height) is larger than the {w}x{h} source")
     if overlap is None:
         oy, ox = max(2, round(bh * 5 / 16)), max(2, round(bw * 5 / 16))
         oy, ox = min(oy, bh // 2), min(ox, bw // 2)
     else:
         oy, ox = _pair("overlap", overlap, 1)
         if oy > bh // 2 or ox > bw // 2:
-            raise ValueError(f"overlap {(oy, ox)} must be at most half the block {(bh, bw)} on each side")
+            raise InvalidArgumentError(f"overlap {(oy, ox)} must be at most half the block {(bh, bw)} on each side")
     if size is None:
         size = (2 * h, 2 * w)
     out_h, out_w = check_size("size", size, MAX_SIDE)
@@ -309,7 +310,7 @@ def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
     if lowpass is not None:
         lowpass = check_float("lowpass", lowpass, 0.0)
         if lowpass <= 0:
-            raise ValueError(f"lowpass must be a positive sigma in pixels or None, not {lowpass!r}")
+            raise InvalidArgumentError(f"lowpass must be a positive sigma in pixels or None, not {lowpass!r}")
     if rank is not None:
         rank = check_int("rank", rank, 1, min(h * w, t * c))
     rng = np.random.default_rng(seed)
@@ -470,7 +471,7 @@ def measure_comparison_speedup(frames: np.ndarray, *, rank: int = DEFAULT_RANK, 
     t, h, w, c = frames.shape
     bh, bw = _pair("block", block, 2)
     if bh > h or bw > w:
-        raise ValueError(f"block {bw}x{bh} (width x height) is larger than the {w}x{h} source")
+        raise InvalidArgumentError(f"block {bw}x{bh} (width x height) is larger than the {w}x{h} source")
     o = overlap or max(2, round(min(bh, bw) / 6))
     trials = check_int("trials", trials, 1)
     x = pixel_time_matrix(frames)
@@ -533,5 +534,5 @@ def _pair(name: str, v, lo: int, hi: int | None = None) -> tuple[int, int]:
     try:
         a, b = v
     except (TypeError, ValueError):
-        raise TypeError(f"{name} must be an integer or a pair of integers, not {v!r}") from None
+        raise ArgumentTypeError(f"{name} must be an integer or a pair of integers, not {v!r}") from None
     return check_int(name, a, lo, hi), check_int(name, b, lo, hi)

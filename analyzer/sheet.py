@@ -11,6 +11,8 @@ import os
 
 import numpy as np
 
+from ..errors import InvalidArgumentError
+
 GAP = 8                 # pixels between panels
 LABEL_H = 14            # pixels of the caption above each row
 MAX_WIDTH = 2400        # wider sheets are scaled down as a whole (both panels alike)
@@ -53,11 +55,11 @@ def contact_sheet(source: np.ndarray, output: np.ndarray, path: str | os.PathLik
     """
     from PIL import Image, ImageDraw
     if rows < 1:
-        raise ValueError(f"rows must be at least 1, not {rows}")
+        raise InvalidArgumentError(f"rows must be at least 1, not {rows}")
     source, output = np.asarray(source), np.asarray(output)
     for name, clip in (("source", source), ("output", output)):
         if clip.ndim not in (3, 4) or clip.shape[0] < 1:
-            raise ValueError(f"{name} must be frames (T, H, W[, C]), not shape {clip.shape}")
+            raise InvalidArgumentError(f"{name} must be frames (T, H, W[, C]), not shape {clip.shape}")
     sh, sw = source.shape[1:3]
     oh, ow = output.shape[1:3]
     row_h = max(sh, oh) + LABEL_H

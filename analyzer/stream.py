@@ -15,8 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..tiledb import SourceInfo
 from ..checks import check_size
+from ..errors import InvalidArgumentError
+from ..tiledb import SourceInfo
 from .video import (
     IMAGE_SUFFIXES,
     MAX_SIDE,
@@ -45,13 +46,13 @@ def parse_bytes(text: str | int) -> int:
         num = s.rstrip("KMGTIB")
         unit = s[len(num):]
         if unit not in _UNITS:
-            raise ValueError(f"memory size {text!r} is not a number of bytes with a unit such as 512MB or 2GB")
+            raise InvalidArgumentError(f"memory size {text!r} is not a number of bytes with a unit such as 512MB or 2GB")
         try:
             value = float(num) * _UNITS[unit]
         except ValueError:
-            raise ValueError(f"memory size {text!r} is not a number of bytes with a unit such as 512MB or 2GB") from None
+            raise InvalidArgumentError(f"memory size {text!r} is not a number of bytes with a unit such as 512MB or 2GB") from None
     if not np.isfinite(value) or value < 1:
-        raise ValueError(f"memory size {text!r} must be positive")
+        raise InvalidArgumentError(f"memory size {text!r} must be positive")
     return int(value)
 
 

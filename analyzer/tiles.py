@@ -68,13 +68,14 @@ from typing import Sequence
 
 import numpy as np
 
+from ..checks import check_int
+from ..errors import InvalidArgumentError
 from ..tiledb.tiles import (  # the stationarity warning lives with the model that describes it
     CONSTRUCTIONS,
     STATIONARITY_WARN,  # noqa: F401 - re-exported
     TilesModel,
     stationarity_warning,  # noqa: F401 - re-exported
 )
-from ..checks import check_int
 from .video import Clip, Progress
 
 DEFAULT_MIN_TILE = 32
@@ -164,12 +165,12 @@ def find_loop(frames: np.ndarray, *, min_loop: int, max_loop: int | None = None,
     o = transition
     if length is not None:
         if t < length + o:
-            raise ValueError(f"clip has {t} frames, fewer than the loop length {length} plus the "
+            raise InvalidArgumentError(f"clip has {t} frames, fewer than the loop length {length} plus the "
                              f"transition {o}")
         lengths = [length]
     else:
         if t < min_loop + o:
-            raise ValueError(f"clip has {t} frames, fewer than the shortest loop: min_loop={min_loop} "
+            raise InvalidArgumentError(f"clip has {t} frames, fewer than the shortest loop: min_loop={min_loop} "
                              f"plus transition={o} frames")
         hi = t - o if max_loop is None else min(max_loop, t - o)
         lengths = list(range(min_loop, hi + 1))
@@ -311,7 +312,7 @@ def toroidal_tile(block: np.ndarray, th: int, tw: int, *, flow: np.ndarray | Non
     length, hb, wb = block.shape[:3]
     by, bx = hb - th, wb - tw
     if by < 2 or bx < 2:
-        raise ValueError(f"block must exceed the tile by at least 2 pixels, got {hb}x{wb} for {th}x{tw}")
+        raise InvalidArgumentError(f"block must exceed the tile by at least 2 pixels, got {hb}x{wb} for {th}x{tw}")
     u = _sample(length, _SAMPLE_FRAMES)
     sub = block[u].astype(np.float32)
     flow = np.zeros((hb, wb), np.float32) if flow is None else flow
@@ -371,7 +372,7 @@ def ring_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, *, flow: np.n
     """
     length, th, tw = ring_tile.shape[:3]
     if not 2 <= ring <= min(th, tw) // 2 - 1:
-        raise ValueError(f"ring must be in 2..{min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {ring}")
+        raise InvalidArgumentError(f"ring must be in 2..{min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {ring}")
     u = _sample(length, _SAMPLE_FRAMES)
     flow = np.zeros((th, tw), np.float32) if flow is None else flow
     mask = np.zeros((th, tw), bool)
@@ -465,13 +466,13 @@ def side_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, side: str, *,
     is the share of ``ring_tile`` per pixel, 255 in the strip.
     """
     if side not in SIDES:
-        raise ValueError(f"side must be one of {SIDES}, not {side!r}")
+        raise InvalidArgumentError(f"side must be one of {SIDES}, not {side!r}")
     ax = (1, 2)
     rt = _orient(ring_tile, side, tile_axes=ax)
     it = _orient(inner, side, tile_axes=ax)
     length, n, m = rt.shape[:3]
     if not 2 <= ring <= m // 2 - 1:
-        raise ValueError(f"ring must be in 2..{m // 2 - 1} for this tile, not {ring}")
+        raise InvalidArgumentError(f"ring must be in 2..{m // 2 - 1} for this tile, not {ring}")
     e, move = _cut_cost(rt, it, ring, feather, _sample(length, _SAMPLE_FRAMES))
     fl = np.zeros((n, m), np.float32) if flow is None else _orient(flow, side, tile_axes=(0, 1))
     path, cost = circular_cut(e, _steps(fl[:, :ring].mean(axis=1), flow_gain), move)
@@ -558,7 +559,7 @@ def wang_ring(hstrips: Sequence[np.ndarray], vstrips: Sequence[np.ndarray], edge
     tw = hstrips[0].shape[2]
     d = int(depth)
     if not 1 <= d <= min(th, tw) // 2:
-        raise ValueError(f"depth must be in 1..{min(th, tw) // 2} for a {th}x{tw} tile, not {d}")
+        raise InvalidArgumentError(f"depth must be in 1..{min(th, tw) // 2} for a {th}x{tw} tile, not {d}")
     hc = np.zeros((length, th, tw, 3), np.uint8)
     vc = np.zeros_like(hc)
     hc[:, :d], hc[:, th - d:] = hstrips[n][:, d:], hstrips[s][:, :d]
@@ -608,7 +609,7 @@ def quilt_geometry(h: int, w: int, *, block: int | None = None, period: Sequence
         block = int(np.clip(round(min(h, w) / 3 / 8) * 8, 16, 128))
     block = check_int("block", block, 8)
     if block + 2 > min(h, w):
-        raise ValueError(f"quilt block {block} (plus 2) is larger than the clip frame {h}x{w}")
+        raise InvalidArgumentError(f"quilt block {block} (plus 2) is larger than the clip frame {h}x{w}")
     step = block - block // 4
     cell = step * -(-64 // step)
     if period is None:
@@ -618,9 +619,9 @@ def quilt_geometry(h: int, w: int, *, block: int | None = None, period: Sequence
         try:
             want = tuple(int(v) for v in period)
         except (TypeError, ValueError):
-            raise ValueError(f"period must be (height, width), not {period!r}") from None
+            raise InvalidArgumentError(f"period must be (height, width), not {period!r}") from None
         if len(want) != 2 or min(want) < 2 * cell:
-            raise ValueError(f"period must be two sides of at least {2 * cell} pixels, not {period!r}")
+            raise InvalidArgumentError(f"period must be two sides of at least {2 * cell} pixels, not {period!r}")
     py, px = (cell * -(-v // cell) for v in want)
     return block, step, (cell, cell), (py, px)
 
@@ -978,29 +979,29 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     extra = [_frames(f"mix[{i}]", c) for i, c in enumerate(mix)]
     names = list(names) if names is not None else ["main"] + [f"mix{i + 1}" for i in range(len(extra))]
     if len(names) != 1 + len(extra):
-        raise ValueError(f"names must name {1 + len(extra)} textures, not {len(names)}")
+        raise InvalidArgumentError(f"names must name {1 + len(extra)} textures, not {len(names)}")
     if not (isinstance(flow_gain, (int, float)) and 0 <= flow_gain <= 10):
-        raise ValueError(f"flow_gain must be a number in [0, 10], not {flow_gain!r}")
+        raise InvalidArgumentError(f"flow_gain must be a number in [0, 10], not {flow_gain!r}")
     if construction is None:       # ring options name the ring construction
         construction = "ring" if extra or n_tiles is not None or ring is not None else "quilted"
     if construction not in CONSTRUCTIONS:
-        raise ValueError(f"construction must be one of {CONSTRUCTIONS}, not {construction!r}")
+        raise InvalidArgumentError(f"construction must be one of {CONSTRUCTIONS}, not {construction!r}")
     if construction == "quilted":
         if extra:
-            raise ValueError("construction 'quilted' cannot mix textures: border tiles need every class's "
+            raise InvalidArgumentError("construction 'quilted' cannot mix textures: border tiles need every class's "
                              "shared ring (construction='ring')")
         if n_tiles is not None:
-            raise ValueError("n_tiles applies to construction 'ring' only; the quilted torus has as many "
+            raise InvalidArgumentError("n_tiles applies to construction 'ring' only; the quilted torus has as many "
                              "cells as its period holds")
         return _learn_quilted(main, names, tile=tile, min_loop=min_loop, max_loop=max_loop, transition=transition,
                               period=period, seed=seed, progress=progress)
     if period is not None:
-        raise ValueError(f"period applies to construction 'quilted' only, not {construction!r}")
+        raise InvalidArgumentError(f"period applies to construction 'quilted' only, not {construction!r}")
     if construction == "wang" and extra:
-        raise ValueError("construction 'wang' cannot mix textures: border tiles need every class's shared "
+        raise InvalidArgumentError("construction 'wang' cannot mix textures: border tiles need every class's shared "
                          "ring (construction='ring')")
     if construction == "wang" and n_tiles is not None:
-        raise ValueError(f"n_tiles applies to construction 'ring' only; the Wang set has edge_colours ** 3 "
+        raise InvalidArgumentError(f"n_tiles applies to construction 'ring' only; the Wang set has edge_colours ** 3 "
                          f"= {edge_colours ** 3} tiles")
     n_tiles = check_int("n_tiles", 4 if n_tiles is None else n_tiles, 1, 64)
     edge_colours = check_int("edge_colours", edge_colours, 2, 4)
@@ -1010,9 +1011,9 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     if max_loop is not None:
         max_loop = check_int("max_loop", max_loop, min_loop)
     if transition >= min_loop:
-        raise ValueError(f"transition ({transition}) must be smaller than min_loop ({min_loop})")
+        raise InvalidArgumentError(f"transition ({transition}) must be smaller than min_loop ({min_loop})")
     if not (isinstance(flow_gain, (int, float)) and 0 <= flow_gain <= 10):
-        raise ValueError(f"flow_gain must be a number in [0, 10], not {flow_gain!r}")
+        raise InvalidArgumentError(f"flow_gain must be a number in [0, 10], not {flow_gain!r}")
     min_tile = check_int("min_tile", min_tile, 8)
     max_tile = check_int("max_tile", max_tile, min_tile)
     total = 6 + n_own + len(extra) * (3 + n_tiles) + (len(extra) + 1) * len(extra)
@@ -1033,14 +1034,14 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         try:
             th, tw = (int(tile), int(tile)) if isinstance(tile, (int, np.integer)) else (int(v) for v in tile)
         except (TypeError, ValueError):
-            raise ValueError(f"tile must be an integer or (th, tw), not {tile!r}") from None
+            raise InvalidArgumentError(f"tile must be an integer or (th, tw), not {tile!r}") from None
         if th < 8 or tw < 8:
-            raise ValueError(f"tile must be at least 8x8, not {th}x{tw}")
+            raise InvalidArgumentError(f"tile must be at least 8x8, not {th}x{tw}")
         period, strength = (0.0, 0.0), 0.0          # not measured: the caller chose the size
     step()
     for label, f in [("clip", main)] + [(f"mix[{i}]", e) for i, e in enumerate(extra)]:
         if th + 2 > f.shape[1] or tw + 2 > f.shape[2]:
-            raise ValueError(f"tile {th}x{tw} (plus a 2-pixel overlap) is larger than the {label} frame "
+            raise InvalidArgumentError(f"tile {th}x{tw} (plus a 2-pixel overlap) is larger than the {label} frame "
                              f"{f.shape[1]}x{f.shape[2]}")
 
     start, length, loop_cost = find_loop(main, min_loop=min_loop, max_loop=max_loop, transition=transition)
@@ -1063,7 +1064,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     # a narrow ring: every tile of a class repeats it, so it is the only periodic content
     r = max(2, min(th, tw) // 10) if ring is None else check_int("ring", ring, 2)
     if r > min(th, tw) // 2 - 1:
-        raise ValueError(f"ring must be at most {min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {r}")
+        raise InvalidArgumentError(f"ring must be at most {min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {r}")
     fe = max(r, min(th, tw) // 5) if feather is None else check_int("feather", feather, 0)
     fe = min(fe, min(th, tw) // 2 - 1 - r)
     # border cuts may run deeper than the ring (the strip is the other class's toroidal
@@ -1136,12 +1137,12 @@ def _learn_quilted(main: np.ndarray, names: list[str], *, tile, min_loop: int, m
     transition = check_int("transition", transition, 1)
     max_loop = max(min_loop, QUILT_MAX_LOOP) if max_loop is None else check_int("max_loop", max_loop, min_loop)
     if transition >= min_loop:
-        raise ValueError(f"transition ({transition}) must be smaller than min_loop ({min_loop})")
+        raise InvalidArgumentError(f"transition ({transition}) must be smaller than min_loop ({min_loop})")
     seed = check_int("seed", seed, 0)
     block = None
     if tile is not None:
         if not isinstance(tile, (int, np.integer)) or isinstance(tile, bool):
-            raise ValueError(f"tile must be an integer (the quilt block size of construction 'quilted'), "
+            raise InvalidArgumentError(f"tile must be an integer (the quilt block size of construction 'quilted'), "
                              f"not {tile!r}")
         block = int(tile)
     t, h, w = main.shape[:3]
@@ -1352,7 +1353,7 @@ def _median_step(frames: np.ndarray) -> float:
 def _frames(name: str, clip: Clip | np.ndarray) -> np.ndarray:
     frames = clip.frames if isinstance(clip, Clip) else np.asarray(clip)
     if frames.ndim != 4 or frames.dtype != np.uint8 or frames.shape[3] not in (1, 3):
-        raise ValueError(f"{name} must be (T, H, W, C) uint8 frames with C 1 or 3, not {frames.dtype} {frames.shape}")
+        raise InvalidArgumentError(f"{name} must be (T, H, W, C) uint8 frames with C 1 or 3, not {frames.dtype} {frames.shape}")
     if frames.shape[3] == 1:
         frames = np.repeat(frames, 3, axis=3)
     return frames

@@ -25,8 +25,9 @@ import math
 
 import numpy as np
 
-from ..tiledb.turnpoints import TurnPointModel
 from ..checks import check_int
+from ..errors import ArgumentTypeError, InvalidArgumentError
+from ..tiledb.turnpoints import TurnPointModel
 from .lds import _stepper
 from .video import Clip, Progress, clip_frames
 
@@ -231,13 +232,13 @@ def learn_turnpoints(clip: Clip | np.ndarray, *, n: int = 4, s: int = 1, r: int 
     n = _int("n", n, 1)
     s = _int("s", s, 0)
     if not s < n / 2:
-        raise ValueError(f"s must satisfy 0 <= s < n/2 (the seed's eq. 2), got s={s} with n={n}")
+        raise InvalidArgumentError(f"s must satisfy 0 <= s < n/2 (the seed's eq. 2), got s={s} with n={n}")
     r = _int("r", r, 1)
     min_pairs = _int("min_pairs", min_pairs, 1)
     if min_pairs > n:
-        raise ValueError(f"min_pairs must be in 1..n={n}, not {min_pairs}")
+        raise InvalidArgumentError(f"min_pairs must be in 1..n={n}, not {min_pairs}")
     if t < 2 * n + 1:
-        raise ValueError(f"clip has {t} frames, too short for n={n}: the symmetry test needs at least "
+        raise InvalidArgumentError(f"clip has {t} frames, too short for n={n}: the symmetry test needs at least "
                          f"2n+1 = {2 * n + 1} frames; use a smaller n")
     min_symmetry = _float("min_symmetry", min_symmetry, 0.0, 1.0, hi_open=True)
     feature_size = _int("feature_size", feature_size, 4)
@@ -261,7 +262,7 @@ def learn_turnpoints(clip: Clip | np.ndarray, *, n: int = 4, s: int = 1, r: int 
     reduced[reduced < min_symmetry] = 0.0
     turns = np.flatnonzero(reduced > 0).astype(np.int32)
     if turns.size < 2:
-        raise ValueError(f"found {turns.size} turn point(s) with symmetry >= min_symmetry={min_symmetry}; playback "
+        raise InvalidArgumentError(f"found {turns.size} turn point(s) with symmetry >= min_symmetry={min_symmetry}; playback "
                          f"needs at least 2: lower min_symmetry, r or n, or use a longer clip")
     p_max = reduced / 2.0
     p_max[turns[0]] = p_max[turns[-1]] = 1.0
@@ -430,11 +431,11 @@ def _int(name: str, value, lo: int) -> int:
 
 def _float(name: str, value, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name} must be a number, not {value!r}")
+        raise ArgumentTypeError(f"{name} must be a number, not {value!r}")
     v = float(value)
     bad = (not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi))
     if bad:
-        raise ValueError(f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}, not {value!r}")
+        raise InvalidArgumentError(f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}, not {value!r}")
     return v
 
 

@@ -12,8 +12,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..tiledb import DynatexError, SourceInfo
 from ..checks import check_frames, check_int, check_size
+from ..errors import InvalidArgumentError
+from ..tiledb import DynatexError, SourceInfo
 
 #: Largest side of a resized frame (matches the command line's ``WxH`` limit).
 MAX_SIDE = 16384
@@ -95,7 +96,7 @@ def load_clip(source: str | os.PathLike | np.ndarray, *, start: int = 0, stop: i
     if stop is not None:
         stop = check_int("stop", stop, 0)
         if stop <= start:
-            raise ValueError(f"stop ({stop}) must be greater than start ({start})")
+            raise InvalidArgumentError(f"stop ({stop}) must be greater than start ({start})")
     crop_t = _tuple4("crop", crop) if crop is not None else None
     size_t = check_size("size", size, MAX_SIDE) if size is not None else None
 
@@ -251,7 +252,7 @@ def _crop_resize_color(frames: np.ndarray, crop, size, color: bool, name: str) -
     if crop is not None:
         x, y, cw, ch = crop
         if cw < 1 or ch < 1 or x + cw > w or y + ch > h:
-            raise ValueError(f"crop {crop} does not fit the {w}x{h} frames of {name}")
+            raise InvalidArgumentError(f"crop {crop} does not fit the {w}x{h} frames of {name}")
         frames = frames[:, y:y + ch, x:x + cw]
     if size is not None and frames.shape[1:3] != tuple(size):
         import cv2
@@ -275,9 +276,9 @@ def _tuple4(name: str, v) -> tuple[int, int, int, int]:
     try:
         t = tuple(int(x) for x in v)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be four integers (x, y, w, h), not {v!r}") from None
+        raise InvalidArgumentError(f"{name} must be four integers (x, y, w, h), not {v!r}") from None
     if len(t) != 4 or min(t) < 0:
-        raise ValueError(f"{name} must be four non-negative integers (x, y, w, h), not {v!r}")
+        raise InvalidArgumentError(f"{name} must be four non-negative integers (x, y, w, h), not {v!r}")
     return t  # type: ignore[return-value]
 
 

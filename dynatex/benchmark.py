@@ -9,10 +9,9 @@ from typing import Callable
 
 import numpy as np
 
-from .player import open_player
 from .checks import check_int
+from .player import open_player
 from .tiledb import DatabaseWriter, LDSModel, SourceInfo
-
 
 #: float16 vectors per work-item of the streaming copy (``BLOCKS`` in player/kernels/variants/copy_stream.cl)
 COPY_BLOCKS = 64
@@ -52,6 +51,7 @@ def _opencl_copy_bandwidth(src: np.ndarray, repeats: int) -> dict[str, float]:
     verified it, the streaming copy (player/kernels/variants/copy_stream.cl), and the larger as ``opencl_gbs``;
     each the median of ``repeats`` after one warm-up."""
     import pyopencl as cl
+
     from .player.opencl import build_program, get_context, variant_verified
     ctx = get_context()
     queue = cl.CommandQueue(ctx)

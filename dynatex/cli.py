@@ -1,7 +1,9 @@
 """The ``dynatex`` command: argparse subcommands, one module each in ``dynatex/commands``.
 
-Exit codes: 0 ok, 2 bad usage or bad input (including output the system refuses: a full disk,
-a read-only folder), 1 internal error. Errors print one line (``dynatex: error: ...``) unless
+Exit codes: 0 ok; 2 for every :class:`~dynatex.errors.DynatexError` (bad usage, bad input, a
+bad database, no usable OpenCL device, output the system refuses: a full disk, a read-only
+folder) and for a file the user named that cannot be opened; 1 for anything else, an internal
+error. Errors print one line (``dynatex: error: ...``) unless
 ``--debug`` asks for the traceback. A reader that closes stdout (``| head -1``) ends the
 command quietly with exit 0; a closed stderr drops warnings and progress, the work goes on.
 """
@@ -16,7 +18,7 @@ import traceback
 import warnings
 
 from . import __version__
-from .tiledb.errors import DynatexError
+from .errors import DynatexError
 
 #: subcommand -> module in dynatex.commands (each has ``add_parser(subparsers, argv)`` and ``run(args)``)
 COMMANDS = ("analyze", "info", "play", "bench", "evaluate", "demo", "export")
@@ -26,17 +28,14 @@ class UsageError(DynatexError, ValueError):
     """Bad command-line input detected after parsing (exit code 2)."""
 
 
-class OutputError(OSError):
+class OutputError(DynatexError, OSError):
     """The command's output cannot be written: refused by the codec, the folder or the disk (exit code 2)."""
 
 
 def _input_errors() -> tuple[type[BaseException], ...]:
-    from .player.opencl import OpenCLUnavailableError
-    from .tiledb import TileDBError
-    errors: list[type[BaseException]] = [UsageError, OutputError, TileDBError, OpenCLUnavailableError,
-                                         FileNotFoundError, IsADirectoryError, PermissionError, ValueError,
-                                         TypeError, KeyError]
-    return tuple(errors)
+    """What exit code 2 reports: every error dynatex raises on purpose, and a file the user
+    named that the system refuses to open (missing, a folder, no permission)."""
+    return (DynatexError, FileNotFoundError, IsADirectoryError, PermissionError)
 
 
 class Parser(argparse.ArgumentParser):

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InvalidArgumentError
 from .pixels import pixel_format
 
 VEC = 16
@@ -43,7 +44,7 @@ class Blend:
     def __init__(self, frames: np.ndarray, *, format: str = "RGB") -> None:
         frames = np.asarray(frames)
         if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
-            raise ValueError(f"frames must be uint8 (T, H, W, 3) with T >= 1, not {frames.dtype} {frames.shape}")
+            raise InvalidArgumentError(f"frames must be uint8 (T, H, W, 3) with T >= 1, not {frames.dtype} {frames.shape}")
         self.format = pixel_format(format)
         self.n_frames = int(frames.shape[0])
         self.shape = (int(frames.shape[1]), int(frames.shape[2]), self.format.bytes)
@@ -60,15 +61,15 @@ class Blend:
         """``out`` = the blend of ``sources``; None once it is there, or (``wait=False``) the
         event after which it is."""
         if not 1 <= len(sources) <= MAX_TERMS:
-            raise ValueError(f"a blend takes 1 to {MAX_TERMS} sources, not {len(sources)}")
+            raise InvalidArgumentError(f"a blend takes 1 to {MAX_TERMS} sources, not {len(sources)}")
         total = 0
         for frame, weight in sources:
             if not 0 <= frame < self.n_frames or weight < 0:
-                raise ValueError(f"blend source ({frame}, {weight}) names no frame of {self.n_frames} "
+                raise InvalidArgumentError(f"blend source ({frame}, {weight}) names no frame of {self.n_frames} "
                                  "or a negative weight")
             total += weight
         if total != 256:
-            raise ValueError(f"blend weights must sum to 256, not {total}")
+            raise InvalidArgumentError(f"blend weights must sum to 256, not {total}")
         return self._render(sources, out, wait)
 
     def _render(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, wait: bool):
@@ -103,6 +104,7 @@ class BlendOpenCL(Blend):
     def __init__(self, frames: np.ndarray, *, ctx: Any, queue: Any, format: str = "RGB") -> None:
         super().__init__(frames, format=format)
         import pyopencl as cl
+
         from .engine import FrameOut, Kernel
         from .opencl import build_program
         frames = np.asarray(frames)

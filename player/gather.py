@@ -86,6 +86,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..checks import check_float, check_int, check_out
+from ..errors import ArgumentTypeError, InvalidArgumentError
 from .base import BACKENDS
 from .pixels import FORMATS, pixel_format
 
@@ -120,9 +121,9 @@ def pack_source(index: np.ndarray, tone: np.ndarray | int = 0) -> np.ndarray:
     index = np.asarray(index, np.int64)
     tone = np.asarray(tone, np.int64)
     if index.size and (index.min() < 0 or index.max() >= MAX_FRAME_PIXELS):
-        raise ValueError(f"source index must be in [0, {MAX_FRAME_PIXELS})")
+        raise InvalidArgumentError(f"source index must be in [0, {MAX_FRAME_PIXELS})")
     if tone.size and (tone.min() < 0 or tone.max() >= MAX_TONES):
-        raise ValueError(f"tone must be in [0, {MAX_TONES})")
+        raise InvalidArgumentError(f"tone must be in [0, {MAX_TONES})")
     return ((tone << 24) | index).astype(np.uint32).view(np.int32)
 
 
@@ -145,7 +146,7 @@ def wrap_index(i: np.ndarray, n: int, wrap: str) -> np.ndarray:
         period = 2 * (n - 1)
         m = np.mod(i, period)
         return np.where(m < n, m, period - m)
-    raise ValueError(f"wrap must be one of {WRAPS}, not {wrap!r}")
+    raise InvalidArgumentError(f"wrap must be one of {WRAPS}, not {wrap!r}")
 
 
 def gaussian_weights(sigma: float) -> np.ndarray:
@@ -171,7 +172,7 @@ def gaussian_smooth(field: np.ndarray, sigma: float) -> np.ndarray:
     """
     field = np.asarray(field, np.float32)
     if field.ndim != 2:
-        raise ValueError(f"field must be 2-D, not shape {field.shape}")
+        raise InvalidArgumentError(f"field must be 2-D, not shape {field.shape}")
     w = gaussian_weights(sigma)
     r = (len(w) - 1) // 2
     if r == 0:
@@ -342,22 +343,22 @@ class Gather:
                  wide: bool | None = None, format: str = "RGB") -> None:
         frames = np.asarray(frames)
         if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
-            raise ValueError(f"frames must be uint8 (N, h, w, 3) with N >= 1, not {frames.dtype} {frames.shape}")
+            raise InvalidArgumentError(f"frames must be uint8 (N, h, w, 3) with N >= 1, not {frames.dtype} {frames.shape}")
         if frames.shape[1] * frames.shape[2] > MAX_FRAME_PIXELS:
-            raise ValueError(f"frames hold {frames.shape[1] * frames.shape[2]} pixels each, more than {MAX_FRAME_PIXELS}")
+            raise InvalidArgumentError(f"frames hold {frames.shape[1] * frames.shape[2]} pixels each, more than {MAX_FRAME_PIXELS}")
         if wrap not in WRAPS:
-            raise ValueError(f"wrap must be one of {WRAPS}, not {wrap!r}")
+            raise InvalidArgumentError(f"wrap must be one of {WRAPS}, not {wrap!r}")
         h_out, w_out = _size("out_size", out_size)
         self.time_step = check_int("time_step", time_step, 1, 4096)
         if wide is not None and not isinstance(wide, (bool, np.bool_)):
-            raise TypeError(f"wide must be None, True or False, not {wide!r}")
+            raise ArgumentTypeError(f"wide must be None, True or False, not {wide!r}")
         self._wide_choice = wide
         self.wrap, self.interpolate = wrap, bool(interpolate)
         self.n_frames, self.frame_h, self.frame_w = (int(v) for v in frames.shape[:3])
         self.cell = None if cell is None else _size("cell", cell)
         self.grid = self.cell is not None
         if self.grid and (self.cell[0] > self.frame_h or self.cell[1] > self.frame_w):
-            raise ValueError(f"cell {self.cell[0]}x{self.cell[1]} is larger than the stored "
+            raise InvalidArgumentError(f"cell {self.cell[0]}x{self.cell[1]} is larger than the stored "
                              f"{self.frame_h}x{self.frame_w} frame")
         self.format = pixel_format(format)
         self.out_shape = (h_out, w_out, self.format.bytes)
@@ -403,11 +404,11 @@ class Gather:
     def set_source_map(self, packed: np.ndarray) -> None:
         """Per-pixel source: ``(H, W)`` int32 packed entries (:func:`pack_source`). Needs ``grid=False``."""
         if self.grid:
-            raise ValueError("this Gather was built with a cell grid; use set_source_grid")
+            raise InvalidArgumentError("this Gather was built with a cell grid; use set_source_grid")
         packed = self._check_packed("packed", packed, self.out_shape[:2])
         idx, _ = unpack_source(packed)
         if idx.size and idx.max() >= self.frame_w * self.frame_h:
-            raise ValueError(f"packed holds source pixels outside the {self.frame_h}x{self.frame_w} frame")
+            raise InvalidArgumentError(f"packed holds source pixels outside the {self.frame_h}x{self.frame_w} frame")
         self._store_source(packed, None)
 
     def set_source_grid(self, origins: np.ndarray) -> None:
@@ -417,25 +418,25 @@ class Gather:
         ``y + ch <= h`` and ``x + cw <= w``. Needs ``cell`` at construction.
         """
         if not self.grid:
-            raise ValueError("this Gather was built without a cell; use set_source_map")
+            raise InvalidArgumentError("this Gather was built without a cell; use set_source_map")
         ch, cw = self.cell
         h, w = self.out_shape[:2]
         origins = self._check_packed("origins", origins, (-(-h // ch), -(-w // cw)))
         idx, _ = unpack_source(origins)
         y, x = idx // self.frame_w, idx % self.frame_w
         if idx.size and ((y + ch > self.frame_h).any() or (x + cw > self.frame_w).any()):
-            raise ValueError("origins name cells that reach outside the stored frame")
+            raise InvalidArgumentError("origins name cells that reach outside the stored frame")
         self._store_source(origins, (ch, cw))
 
     def _check_packed(self, name: str, packed: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         packed = np.asarray(packed)
         if packed.dtype != np.int32:
-            raise TypeError(f"{name} must be int32 packed entries (see pack_source), not {packed.dtype}")
+            raise ArgumentTypeError(f"{name} must be int32 packed entries (see pack_source), not {packed.dtype}")
         if packed.shape != tuple(shape):
-            raise ValueError(f"{name} must have shape {tuple(shape)}, not {packed.shape}")
+            raise InvalidArgumentError(f"{name} must have shape {tuple(shape)}, not {packed.shape}")
         _, tone = unpack_source(packed)
         if tone.size and tone.max() >= len(self._tones):
-            raise ValueError(f"{name} names tone {int(tone.max())} but only {len(self._tones)} tones are set")
+            raise InvalidArgumentError(f"{name} names tone {int(tone.max())} but only {len(self._tones)} tones are set")
         return np.array(packed, order="C")
 
     def _store_source(self, packed: np.ndarray, cell: tuple[int, int] | None) -> None:
@@ -459,11 +460,11 @@ class Gather:
     def _check_tmap(self, name: str, tmap: np.ndarray) -> np.ndarray:
         tmap = np.asarray(tmap, np.float32)
         if tmap.shape != self.tmap_shape:
-            raise ValueError(f"{name} must have shape {self.tmap_shape}, not {tmap.shape}")
+            raise InvalidArgumentError(f"{name} must have shape {self.tmap_shape}, not {tmap.shape}")
         if not np.isfinite(tmap).all():
-            raise ValueError(f"{name} must be finite")
+            raise InvalidArgumentError(f"{name} must be finite")
         if tmap.size and np.abs(tmap).max() > MAX_TIME:
-            raise ValueError(f"{name} must lie within +-{MAX_TIME:g} frames, not {float(np.abs(tmap).max()):g}")
+            raise InvalidArgumentError(f"{name} must lie within +-{MAX_TIME:g} frames, not {float(np.abs(tmap).max()):g}")
         return np.array(tmap, np.float32, order="C")   # own copy: device reads land here
 
     @property
@@ -492,17 +493,17 @@ class Gather:
         gain = np.atleast_2d(np.asarray(gain, np.float32))
         offset = np.zeros_like(gain) if offset is None else np.atleast_2d(np.asarray(offset, np.float32))
         if gain.ndim != 2 or gain.shape[1] != 3 or not 1 <= gain.shape[0] <= MAX_TONES:
-            raise ValueError(f"gain must have shape (n, 3) with 1 <= n <= {MAX_TONES}, not {gain.shape}")
+            raise InvalidArgumentError(f"gain must have shape (n, 3) with 1 <= n <= {MAX_TONES}, not {gain.shape}")
         if offset.shape != gain.shape:
-            raise ValueError(f"offset must have shape {gain.shape}, not {offset.shape}")
+            raise InvalidArgumentError(f"offset must have shape {gain.shape}, not {offset.shape}")
         if not np.isfinite(gain).all() or gain.min() < 0 or gain.max() > MAX_GAIN:
-            raise ValueError(f"gain must be finite within [0, {MAX_GAIN:g}]")
+            raise InvalidArgumentError(f"gain must be finite within [0, {MAX_GAIN:g}]")
         if not np.isfinite(offset).all() or np.abs(offset).max() > MAX_OFFSET:
-            raise ValueError(f"offset must be finite within [-{MAX_OFFSET:g}, {MAX_OFFSET:g}]")
+            raise InvalidArgumentError(f"offset must be finite within [-{MAX_OFFSET:g}, {MAX_OFFSET:g}]")
         if self._source is not None:
             _, tone = unpack_source(self._source)
             if tone.size and tone.max() >= len(gain):
-                raise ValueError(f"the source names tone {int(tone.max())} but only {len(gain)} tones are given")
+                raise InvalidArgumentError(f"the source names tone {int(tone.max())} but only {len(gain)} tones are given")
         self._tones = np.ascontiguousarray(np.concatenate([gain, offset], axis=1))
         self._upload_tones()
 
@@ -545,7 +546,7 @@ class Gather:
     def _fold(self, t: float) -> float:
         """Fold the global time into one period so float32 keeps sub-frame precision forever."""
         if not math.isfinite(t):
-            raise ValueError(f"t must be finite, not {t!r}")
+            raise InvalidArgumentError(f"t must be finite, not {t!r}")
         if self.wrap == "loop":
             return math.fmod(t, self.n_frames) if abs(t) >= self.n_frames else t
         if self.wrap == "pingpong" and self.n_frames > 1:
@@ -622,6 +623,7 @@ class GatherOpenCL(Gather):
                  device: str | None = None, **options: Any) -> None:
         super().__init__(frames, out_size, **options)
         import pyopencl as cl
+
         from .engine import FrameOut, Kernel
         from .opencl import OpenCLUnavailableError, build_program, get_context, variant_verified
         self.ctx = get_context(device) if ctx is None else ctx
@@ -775,7 +777,7 @@ def open_gather(frames: np.ndarray, out_size: Sequence[int], *, backend: str = "
     """A gather engine: :class:`GatherOpenCL` (``backend="opencl"``, on ``ctx``/``queue`` or
     ``device``) or :class:`GatherReference` (``"numpy"``); ``options`` as :class:`Gather`'s."""
     if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {BACKENDS}, not {backend!r}")
+        raise InvalidArgumentError(f"backend must be one of {BACKENDS}, not {backend!r}")
     if backend == "numpy":
         return GatherReference(frames, out_size, **options)
     return GatherOpenCL(frames, out_size, ctx=ctx, queue=queue, device=device, **options)
@@ -798,9 +800,9 @@ def _size(name: str, value: Sequence[int]) -> tuple[int, int]:
     try:
         a, b = (int(v) for v in value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be two positive integers, not {value!r}") from None
+        raise InvalidArgumentError(f"{name} must be two positive integers, not {value!r}") from None
     if a < 1 or b < 1:
-        raise ValueError(f"{name} must be two positive integers, not {value!r}")
+        raise InvalidArgumentError(f"{name} must be two positive integers, not {value!r}")
     return a, b
 
 

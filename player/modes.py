@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import importlib
 
+from ..errors import InvalidArgumentError
+
 #: mode name -> "module:Class" inside dynatex.player
 MODES: dict[str, str] = {
     "lds": "lds:LDSPlayer",
@@ -15,6 +17,6 @@ MODES: dict[str, str] = {
 
 def player_class(mode: str):
     if mode not in MODES:
-        raise ValueError(f"mode must be one of {sorted(MODES)}, not {mode!r}")
+        raise InvalidArgumentError(f"mode must be one of {sorted(MODES)}, not {mode!r}")
     module, cls = MODES[mode].split(":")
     return getattr(importlib.import_module(f"dynatex.player.{module}"), cls)

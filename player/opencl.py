@@ -354,6 +354,7 @@ def _main(argv: list[str] | None = None) -> int:
     """``python -m dynatex.player [--check] [--refresh]``: the devices, their self-test verdicts
     and the one the player uses; with --check exit 1 when no device passed."""
     import argparse
+
     from . import selftest
     parser = argparse.ArgumentParser(prog="python -m dynatex.player",
                                      description="List the OpenCL devices and their self-test verdicts.")

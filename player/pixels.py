@@ -8,6 +8,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..errors import InvalidArgumentError
+
 
 class PixelFormat(NamedTuple):
     """How an output pixel lies in memory: its bytes, where red, green and blue go, and
@@ -57,4 +59,4 @@ def pixel_format(name: str | PixelFormat) -> PixelFormat:
     try:
         return FORMATS[name]
     except (KeyError, TypeError):
-        raise ValueError(f"format must be one of {tuple(FORMATS)}, not {name!r}") from None
+        raise InvalidArgumentError(f"format must be one of {tuple(FORMATS)}, not {name!r}") from None

@@ -14,6 +14,7 @@ import os
 import numpy as np
 
 from ..checks import Choice, Range, check_int
+from ..errors import InvalidArgumentError
 from ..params import Param
 from ..tiledb import TileDB
 from .base import Player
@@ -111,7 +112,7 @@ class ProjectionPlayer(Player):
         """Project an arbitrary vector (checked, named ``name`` in errors); the player does not advance."""
         v = np.asarray(v, dtype=float)
         if v.shape != (self._dim,) or not np.isfinite(v).all():
-            raise ValueError(f"{name} must be a finite vector of shape ({self._dim},)")
+            raise InvalidArgumentError(f"{name} must be a finite vector of shape ({self._dim},)")
         if out is None:
             out = np.empty(self._shape, np.uint8)
         self._project(v, out)

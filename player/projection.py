@@ -118,6 +118,7 @@ class ProjectorOpenCL(Projector):
                  ctx: Any, queue: Any, format: str = "RGB") -> None:
         super().__init__(basis, mean, shape=shape, channels=channels, format=format)
         import pyopencl as cl
+
         from .engine import FrameOut, Kernel
         from .opencl import build_program
         self.queue = queue

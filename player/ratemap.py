@@ -12,6 +12,8 @@ from typing import Sequence
 
 import numpy as np
 
+from ..errors import ArgumentTypeError, InvalidArgumentError
+
 #: Largest rate accepted: a pixel 64 times faster than the source.
 MAX_RATE = 64.0
 
@@ -25,17 +27,17 @@ def check_rate_map(rate: object, shape: tuple[int, int], *, name: str = "rate_ma
     dtype('float32')
     """
     if not isinstance(rate, np.ndarray):
-        raise TypeError(f"{name} must be a numpy array of shape {tuple(shape)}, not {type(rate).__name__}")
+        raise ArgumentTypeError(f"{name} must be a numpy array of shape {tuple(shape)}, not {type(rate).__name__}")
     if rate.dtype.kind not in "fiub":
-        raise TypeError(f"{name} must hold numbers, not {rate.dtype}")
+        raise ArgumentTypeError(f"{name} must hold numbers, not {rate.dtype}")
     if rate.shape != tuple(shape):
-        raise ValueError(f"{name} is {_wh(rate.shape)} but the output is {shape[1]}x{shape[0]} (W x H); "
+        raise InvalidArgumentError(f"{name} is {_wh(rate.shape)} but the output is {shape[1]}x{shape[0]} (W x H); "
                          "they must match")
     arr = rate.astype(np.float64)
     if not np.isfinite(arr).all():
-        raise ValueError(f"{name} holds NaN or infinite values")
+        raise InvalidArgumentError(f"{name} holds NaN or infinite values")
     if arr.size and (arr.min() < 0 or arr.max() > MAX_RATE):
-        raise ValueError(f"{name} values must lie in [0, {MAX_RATE:g}], found {arr.min():.4g}..{arr.max():.4g}")
+        raise InvalidArgumentError(f"{name} values must lie in [0, {MAX_RATE:g}], found {arr.min():.4g}..{arr.max():.4g}")
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
@@ -77,12 +79,12 @@ def point_light(shape: Sequence[int], center: Sequence[float], height: float, *,
     try:
         cx, cy = (float(v) for v in center)
     except (TypeError, ValueError):
-        raise TypeError(f"center must be (x, y) in pixels, not {center!r}") from None
+        raise ArgumentTypeError(f"center must be (x, y) in pixels, not {center!r}") from None
     if not (np.isfinite(cx) and np.isfinite(cy)):
-        raise ValueError(f"center must be finite, not {center!r}")
+        raise InvalidArgumentError(f"center must be finite, not {center!r}")
     height = _rate("height", height, hi=1e6)
     if height <= 0:
-        raise ValueError(f"height must be positive, not {height!r}")
+        raise InvalidArgumentError(f"height must be positive, not {height!r}")
     max_rate, min_rate = _rate("max_rate", max_rate), _rate("min_rate", min_rate)
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
     r2 = (xx - cx) ** 2 + (yy - cy) ** 2 + height ** 2
@@ -106,14 +108,14 @@ def from_image(image: np.ndarray, *, low: float = 0.0, high: float = 2.0) -> np.
     if img.ndim == 3 and img.shape[2] in (1, 3, 4):
         img = img[..., :3].mean(axis=2) if img.shape[2] >= 3 else img[..., 0]
     if img.ndim != 2:
-        raise ValueError(f"image must be (H, W) or (H, W, 1|3|4), not shape {np.asarray(image).shape}")
+        raise InvalidArgumentError(f"image must be (H, W) or (H, W, 1|3|4), not shape {np.asarray(image).shape}")
     if img.dtype.kind not in "fiub":
-        raise TypeError(f"image must hold numbers, not {img.dtype}")
+        raise ArgumentTypeError(f"image must hold numbers, not {img.dtype}")
     v = img.astype(np.float64)
     if np.asarray(image).dtype == np.uint8:
         v = v / 255.0
     if not np.isfinite(v).all() or v.min() < 0 or v.max() > 1:
-        raise ValueError("image values must be finite, on 0..255 (uint8) or 0..1 (float)")
+        raise InvalidArgumentError("image values must be finite, on 0..255 (uint8) or 0..1 (float)")
     low, high = _rate("low", low), _rate("high", high)
     return (low + (high - low) * v).astype(np.float32)
 
@@ -122,9 +124,9 @@ def _rate(name: str, v: object, hi: float = MAX_RATE) -> float:
     try:
         f = float(v)  # type: ignore[arg-type]
     except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a number, not {v!r}") from None
+        raise ArgumentTypeError(f"{name} must be a number, not {v!r}") from None
     if not np.isfinite(f) or f < 0 or f > hi:
-        raise ValueError(f"{name} must be a finite number in [0, {hi:g}], not {v!r}")
+        raise InvalidArgumentError(f"{name} must be a finite number in [0, {hi:g}], not {v!r}")
     return f
 
 
@@ -132,9 +134,9 @@ def _shape(shape: Sequence[int]) -> tuple[int, int]:
     try:
         h, w = (int(v) for v in shape)
     except (TypeError, ValueError):
-        raise TypeError(f"shape must be (height, width), not {shape!r}") from None
+        raise ArgumentTypeError(f"shape must be (height, width), not {shape!r}") from None
     if h < 1 or w < 1:
-        raise ValueError(f"shape must be two positive integers (height, width), not {shape!r}")
+        raise InvalidArgumentError(f"shape must be two positive integers (height, width), not {shape!r}")
     return h, w
 
 

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InvalidArgumentError
 from .pixels import pixel_format
 
 SPILL = 16           # bytes a kernel chunk may read past a run
@@ -183,7 +184,7 @@ def check_runs(runs: dict[str, np.ndarray], n_pixels: int, n_blocks: int) -> Non
     bad = (first < 0) | (first + length > n_pixels) | (r[:, 2] >= n_blocks)
     bad |= blend & ((first_b < 0) | (first_b + length > n_pixels) | (runs["runs_b"][:, 1] >= n_blocks))
     if bad.any():
-        raise ValueError(f"the quilt's maps make {int(bad.sum())} run(s) read outside the source frames "
+        raise InvalidArgumentError(f"the quilt's maps make {int(bad.sum())} run(s) read outside the source frames "
                          f"({n_pixels} pixels, {n_blocks} blocks): the database is inconsistent")
 
 
@@ -347,6 +348,7 @@ class RunsOpenCL(Runs):
                  ctx: Any, queue: Any, **options: Any) -> None:
         super().__init__(frames, shape, pix, labels, **options)
         import pyopencl as cl
+
         from .engine import FrameOut, Kernel
         from .opencl import build_program
         h, w = self.shape

@@ -350,6 +350,7 @@ def _gather_check(*, cell, time_step: int, wrap: str, interpolate: bool = True, 
 def _copy_check(device: str) -> str | None:
     """The benchmark's streaming copy (kernels/variants/copy_stream.cl) copies every byte."""
     import pyopencl as cl
+
     from .opencl import build_program, get_context
     ctx = get_context(device)
     queue = cl.CommandQueue(ctx)
@@ -404,6 +405,7 @@ CHECK_VARIANTS: dict[str, dict[str, Callable[[str], str | None]]] = {
 def _inject_check(path: str) -> Callable[[str], str | None]:
     def check(device: str) -> str | None:
         import pyopencl as cl
+
         from .opencl import get_context
         ctx = get_context(device)
         queue = cl.CommandQueue(ctx)
@@ -494,5 +496,5 @@ if __name__ == "__main__":
         print("usage: python -m dynatex.player.selftest DEVICE_JSON  (run by the player, not by hand: "
               "use python -m dynatex.player --check)", file=sys.stderr)
         raise SystemExit(2)
-    from dynatex.player import selftest as _module     # this file runs as __main__: use the module's globals
+    from dynatex.player import selftest as _module  # this file runs as __main__: use the module's globals
     raise SystemExit(_module._child(DeviceInfo(**json.loads(sys.argv[1]))))

@@ -35,8 +35,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..checks import (Choice, Either, NpyFile, Numbers, Range, Size, Text, check_float, check_int, check_seed,
-                      check_size)
+from ..checks import Choice, Either, NpyFile, Numbers, Range, Size, Text, check_float, check_int, check_seed, check_size
 from ..errors import InvalidArgumentError
 from ..params import Param
 from ..tiledb import TileDB, TilesModel

@@ -13,3 +13,38 @@ def test_every_dynatex_error_shares_one_root():
                 DeviceNotVerifiedError, KernelBuildError):
         assert issubclass(cls, DynatexError), cls
     assert issubclass(TileDBFormatError, ValueError) and issubclass(ClipError, ValueError)
+
+
+def test_the_cli_reports_dynatex_errors_as_bad_input_and_anything_else_as_internal(monkeypatch, capsys, tmp_path):
+    """Exit 2 with one line for an error raised on purpose; exit 1 with the --debug hint for a
+    bare builtin error, which is a bug even when it is a ValueError."""
+    import dynatex.commands.info as info
+    from dynatex.cli import main
+    from dynatex.errors import InvalidArgumentError
+
+    def bug(args):
+        raise ValueError("an internal slip")
+
+    def bad_input(args):
+        raise InvalidArgumentError("n must be an integer >= 1, not 0")
+
+    monkeypatch.setattr(info, "run", bug)
+    assert main(["info", str(tmp_path / "x.h5")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == "dynatex: internal error: ValueError: an internal slip (run with --debug for details)"
+    monkeypatch.setattr(info, "run", bad_input)
+    assert main(["info", str(tmp_path / "x.h5")]) == 2
+    assert capsys.readouterr().err.strip() == "dynatex: error: n must be an integer >= 1, not 0"
+
+
+def test_argument_errors_are_dynatex_errors_and_the_builtins_they_refine():
+    import pytest
+
+    from dynatex.checks import check_int
+    from dynatex.errors import ArgumentTypeError, InvalidArgumentError
+    from dynatex.player import player_class
+    assert issubclass(InvalidArgumentError, ValueError) and issubclass(ArgumentTypeError, TypeError)
+    with pytest.raises(InvalidArgumentError, match="mode must be one of"):
+        player_class("nope")
+    with pytest.raises(ArgumentTypeError, match="n must be an integer, not 1.5"):
+        check_int("n", 1.5)

@@ -4,7 +4,8 @@
 """
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version as _version
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _version
 
 try:
     __version__ = _version("dynatex")
@@ -12,12 +13,19 @@ except PackageNotFoundError:  # running from a source tree that was never instal
     __version__ = "unknown"
 
 from .database import Texture, TileDB, open_db
-from .errors import (DynatexError, MethodNotFoundError, TextureNotFoundError, TileDBError, TileDBFormatError,
-                     TileDBNotFoundError, TileDBVersionError)
+from .errors import (
+    DynatexError,
+    MethodNotFoundError,
+    TextureNotFoundError,
+    TileDBError,
+    TileDBFormatError,
+    TileDBNotFoundError,
+    TileDBVersionError,
+)
 from .frames import FrameStore
 from .lds import LDSModel
-from .quilt import QuiltModel
 from .mixture import MixtureModel
+from .quilt import QuiltModel
 from .schema import FORMAT_NAME, FORMAT_VERSION
 from .source import SourceInfo
 from .tiles import TilesModel

@@ -7,14 +7,20 @@ from typing import Any
 
 import h5py
 
+from ..errors import InvalidArgumentError
 from . import frames as _frames
 from . import probe as _probe
 from . import schema
 from . import source as _source
 from ._check import Checker
 from .codecs import CODECS
-from .errors import (MethodNotFoundError, TextureNotFoundError, TileDBFormatError,
-                     TileDBNotFoundError, TileDBVersionError)
+from .errors import (
+    MethodNotFoundError,
+    TextureNotFoundError,
+    TileDBFormatError,
+    TileDBNotFoundError,
+    TileDBVersionError,
+)
 from .frames import FrameStore
 from .source import SourceInfo
 
@@ -47,7 +53,7 @@ class Texture:
     def read(self, method: str) -> Any:
         """Read and validate the model stored for ``method`` (for example ``"lds"``)."""
         if method not in schema.METHODS:
-            raise ValueError(f"method must be one of {', '.join(schema.METHODS)}, not {method!r}")
+            raise InvalidArgumentError(f"method must be one of {', '.join(schema.METHODS)}, not {method!r}")
         if method not in self.methods:
             raise MethodNotFoundError(
                 f"texture {self.name!r} has no {method!r} data (it has: {', '.join(self.methods) or 'none'}); "

@@ -4,6 +4,7 @@ from __future__ import annotations
 import h5py
 import numpy as np
 
+from ..errors import InvalidArgumentError
 from ._check import Checker
 from .source import SourceInfo
 
@@ -12,7 +13,7 @@ def write(parent: h5py.Group, name: str, frames: np.ndarray) -> h5py.Dataset:
     """Store ``(T, H, W, C)`` uint8 frames chunked one frame per chunk, LZF-compressed."""
     frames = np.asarray(frames)
     if frames.dtype != np.uint8 or frames.ndim != 4:
-        raise ValueError(f"frames must be a (T, H, W, C) uint8 array, got {frames.dtype} {frames.shape}")
+        raise InvalidArgumentError(f"frames must be a (T, H, W, C) uint8 array, got {frames.dtype} {frames.shape}")
     return parent.create_dataset(name, data=frames, chunks=(1, *frames.shape[1:]),
                                  compression="lzf", shuffle=False)
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import h5py
 import numpy as np
 
+from ..errors import InvalidArgumentError
 from ._check import Checker
 from ._describe import plain_info
 from .source import SourceInfo
@@ -110,7 +111,7 @@ def write(group: h5py.Group, model: QuiltModel) -> None:
     blend = (model.blend_map, model.blend_labels, model.blend_weight)
     if any(a is not None for a in blend):
         if any(a is None for a in blend):
-            raise ValueError("blend_map, blend_labels and blend_weight go together: give all three or none")
+            raise InvalidArgumentError("blend_map, blend_labels and blend_weight go together: give all three or none")
         group.create_dataset("blend_map", data=np.asarray(model.blend_map, np.int32),
                              chunks=(min(h, 256), w, 2), compression="lzf")
         group.create_dataset("blend_labels", data=np.asarray(model.blend_labels, np.int32),

@@ -22,6 +22,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from ..errors import InvalidArgumentError
 from . import frames as _frames
 from . import probe as _probe
 from . import schema
@@ -101,7 +102,7 @@ class DatabaseWriter:
     def put_method(self, name: str, method: str, model: Any) -> None:
         """Store ``model`` as texture ``name``'s ``method`` group, replacing an earlier one."""
         if method not in CODECS:
-            raise ValueError(f"method must be one of {sorted(CODECS)}, not {method!r}")
+            raise InvalidArgumentError(f"method must be one of {sorted(CODECS)}, not {method!r}")
         g = self._texture_group(name, skip=method)
         if method in g:
             del g[method]
@@ -196,7 +197,7 @@ def _check_name(name: str) -> str:
     name = _nfc(name)
     problem = schema.texture_name_problem(name)
     if problem:
-        raise ValueError(f"texture name {name!r} is invalid: it {problem}; a name is {schema.TEXTURE_NAME_RULE}")
+        raise InvalidArgumentError(f"texture name {name!r} is invalid: it {problem}; a name is {schema.TEXTURE_NAME_RULE}")
     return name
 
 

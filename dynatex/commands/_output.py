@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..cli import OutputError
+from ..errors import InvalidArgumentError
 
 if TYPE_CHECKING:
     from typing_extensions import Self
@@ -231,7 +232,7 @@ class FrameWriter:
         if self._shape is None:
             raise RuntimeError("FrameWriter.open must come before write")
         if frame.shape[:2] != self._shape:
-            raise ValueError(f"frame is {frame.shape[1]}x{frame.shape[0]}, the output was opened for "
+            raise InvalidArgumentError(f"frame is {frame.shape[1]}x{frame.shape[0]}, the output was opened for "
                              f"{self._shape[1]}x{self._shape[0]}")
         if self.kind == "animation":
             if (self.index + 1) * frame[..., :3].nbytes > MAX_ANIMATION_BYTES:

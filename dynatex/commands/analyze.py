@@ -17,10 +17,10 @@ from ..tiledb import DatabaseWriter
 from ..tiledb.schema import texture_name_from
 from ._common import (
     MAX_COUNT,
-    add_param,
     Number,
     Numbers,
     UsageError,
+    add_param,
     count,
     positive_int,
     size_arg,
