@@ -1,18 +1,26 @@
 """The offline analyzer: reads clips, learns models, writes tile databases."""
+
 from __future__ import annotations
 
 from .corpus import ClipResult, analyze_corpus, format_table
 from .metrics import (
-                      frame_coverage,
-                      patch_distances,
-                      repetition_lag,
-                      seam_visibility,
-                      spectrum_distance,
-                      stability,
-                      temporal_discontinuity,
+    frame_coverage,
+    patch_distances,
+    repetition_lag,
+    seam_visibility,
+    spectrum_distance,
+    stability,
+    temporal_discontinuity,
 )
 from .video import Clip, ClipError, load_clip
 
 __all__ = ["Clip", "ClipError", "ClipResult", "analyze_corpus", "format_table", "load_clip"]
-__all__ += ["frame_coverage", "patch_distances", "repetition_lag", "seam_visibility", "spectrum_distance",
-            "stability", "temporal_discontinuity"]
+__all__ += [
+    "frame_coverage",
+    "patch_distances",
+    "repetition_lag",
+    "seam_visibility",
+    "spectrum_distance",
+    "stability",
+    "temporal_discontinuity",
+]

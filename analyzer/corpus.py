@@ -10,6 +10,7 @@ skipped. A clip that fails is reported with a one-line reason and the others go 
 Dask (``dask.distributed``) is optional (``pip install dynatex[dask]``) and imported only
 when a scheduler other than ``"none"`` is asked for.
 """
+
 from __future__ import annotations
 
 import glob
@@ -51,8 +52,8 @@ class ClipTask:
     texture: str
     database: str
     methods: tuple[str, ...]
-    params: dict = field(default_factory=dict)       # method -> keyword arguments of its learn function
-    load: dict = field(default_factory=dict)         # start, stop, step, crop, size, color
+    params: dict = field(default_factory=dict)  # method -> keyword arguments of its learn function
+    load: dict = field(default_factory=dict)  # start, stop, step, crop, size, color
     max_memory: int | None = None
     spill_dir: str | None = None
     skip_complete: bool = True
@@ -67,8 +68,8 @@ class ClipResult:
     database: str
     methods: tuple[str, ...]
     seconds: float
-    status: str                 # "ok", "skipped" or "failed"
-    reason: str = ""            # one line, for a failed clip
+    status: str  # "ok", "skipped" or "failed"
+    reason: str = ""  # one line, for a failed clip
     worker: str = ""
 
     def as_dict(self) -> dict[str, Any]:
@@ -110,8 +111,11 @@ def _expand(spec: str, depth: int) -> list[str]:
     if not os.path.exists(spec):
         raise FileNotFoundError(f"{spec}: no such clip file or folder")
     if os.path.isdir(spec):
-        clips = sorted(os.path.join(spec, n) for n in os.listdir(spec) if n.lower().endswith(CLIP_SUFFIXES)
-                       and os.path.isfile(os.path.join(spec, n)))
+        clips = sorted(
+            os.path.join(spec, n)
+            for n in os.listdir(spec)
+            if n.lower().endswith(CLIP_SUFFIXES) and os.path.isfile(os.path.join(spec, n))
+        )
         return clips or [spec]
     if spec.lower().endswith(".txt"):
         if depth > 0:
@@ -155,28 +159,54 @@ def analyze_clip(task: ClipTask) -> ClipResult:
     try:
         remove_stale_temporaries(task.database)
         if task.skip_complete and database_is_complete(task):
-            return ClipResult(task.clip, task.texture, task.database, task.methods,
-                              time.perf_counter() - t0, SKIPPED, worker=worker)
+            return ClipResult(
+                task.clip, task.texture, task.database, task.methods, time.perf_counter() - t0, SKIPPED, worker=worker
+            )
         _learn_and_write(task)
     except Exception as exc:  # noqa: BLE001 - a failed clip is a row of the summary, not the end of the run
-        return ClipResult(task.clip, task.texture, task.database, task.methods, time.perf_counter() - t0,
-                          FAILED, reason=_reason(exc), worker=worker)
-    return ClipResult(task.clip, task.texture, task.database, task.methods, time.perf_counter() - t0, OK,
-                      worker=worker)
+        return ClipResult(
+            task.clip,
+            task.texture,
+            task.database,
+            task.methods,
+            time.perf_counter() - t0,
+            FAILED,
+            reason=_reason(exc),
+            worker=worker,
+        )
+    return ClipResult(task.clip, task.texture, task.database, task.methods, time.perf_counter() - t0, OK, worker=worker)
 
 
 def _learn_and_write(task: ClipTask) -> None:
-    isolate = not multiprocessing.current_process().daemon     # a daemon process may not start children
+    isolate = not multiprocessing.current_process().daemon  # a daemon process may not start children
     with DatabaseWriter(task.database, overwrite=True) as writer:
-        learn_into(writer, task.texture, task.clip, task.methods, params=task.params, load=task.load,
-                   max_memory=task.max_memory, spill_dir=task.spill_dir, isolate=isolate)
+        learn_into(
+            writer,
+            task.texture,
+            task.clip,
+            task.methods,
+            params=task.params,
+            load=task.load,
+            max_memory=task.max_memory,
+            spill_dir=task.spill_dir,
+            isolate=isolate,
+        )
 
 
-def learn_into(writer: DatabaseWriter, texture: str, path: str, methods: Sequence[str], *,
-               params: dict[str, dict] | None = None, load: dict | None = None, max_memory: int | None = None,
-               spill_dir: str | None = None, isolate: bool = True,
-               progress: Callable[[str], Any] | None = None,
-               on_model: Callable[[str, Any, float], None] | None = None) -> Any:
+def learn_into(
+    writer: DatabaseWriter,
+    texture: str,
+    path: str,
+    methods: Sequence[str],
+    *,
+    params: dict[str, dict] | None = None,
+    load: dict | None = None,
+    max_memory: int | None = None,
+    spill_dir: str | None = None,
+    isolate: bool = True,
+    progress: Callable[[str], Any] | None = None,
+    on_model: Callable[[str, Any, float], None] | None = None,
+) -> Any:
     """Read clip ``path`` and put texture ``texture`` with each of ``methods`` into ``writer``.
 
     With ``max_memory`` the clip is spilled to disk and LDS and the mixture learn out of
@@ -185,7 +215,8 @@ def learn_into(writer: DatabaseWriter, texture: str, path: str, methods: Sequenc
     :class:`~dynatex.analyzer.methods.Clips`, the tiles' ``mix``) may hold paths, decoded
     here right after the main clip with its ``load`` options except ``start`` and ``crop``
     (another video need not have that frame or that region). ``progress(stage)`` gives a
-    ``progress(done, total)`` callback per stage ("decode" and each method); ``on_model(method, model, seconds)`` sees each model once it is written.
+    ``progress(done, total)`` callback per stage ("decode" and each method);
+    ``on_model(method, model, seconds)`` sees each model once it is written.
     Returns the source description written.
     """
     chosen = [get_method(m) for m in methods]
@@ -197,6 +228,7 @@ def learn_into(writer: DatabaseWriter, texture: str, path: str, methods: Sequenc
     try:
         if max_memory is not None:
             from .stream import spill_clip
+
             disk = spill_clip(path, folder=spill_dir, isolate=isolate, progress=bar("decode"), **load)
             source = disk.source_info()
         else:
@@ -235,15 +267,18 @@ def _decode_clip_params(method: Method, kwargs: dict, isolate: bool, load: dict)
     options = {k: v for k, v in load.items() if k not in ("start", "crop")}
     for p in method.params:
         if isinstance(p.kind, Clips) and kwargs.get(p.name):
-            kwargs[p.name] = [_load_in_memory(c, isolate, options, None) if isinstance(c, str) else c
-                              for c in kwargs[p.name]]
+            kwargs[p.name] = [
+                _load_in_memory(c, isolate, options, None) if isinstance(c, str) else c for c in kwargs[p.name]
+            ]
     return kwargs
 
 
 def _load_in_memory(path: str, isolate: bool, load: dict, progress):
     from .video import load_clip
+
     if path.endswith(".npy") and os.path.isfile(path):
         import numpy as np
+
         return load_clip(np.load(path, allow_pickle=False), progress=progress, **load)
     return load_clip(path, isolate=isolate and os.path.isfile(path), progress=progress, **load)
 
@@ -251,14 +286,24 @@ def _load_in_memory(path: str, isolate: bool, load: dict, progress):
 def _from_disk(disk, method: str, max_memory: int):
     """The frames of a spilled clip in memory, for a method that needs them, if they fit the bound."""
     from .video import Clip
-    need = 6 * disk.nbytes          # the uint8 frames and a float32 working copy, with slack
+
+    need = 6 * disk.nbytes  # the uint8 frames and a float32 working copy, with slack
     if need > max_memory:
-        raise MemoryError(f"method {method} needs the clip in memory (about {need / 2**30:.2f} GiB), more than "
-                          f"max_memory {max_memory / 2**30:.2f} GiB; only {', '.join(STREAMED_METHODS)} learn "
-                          f"out of core")
-    return Clip(frames=disk.frames(), fps=disk.fps, filename=disk.filename, sha256=disk.sha256,
-                frame_start=disk.frame_start, frame_step=disk.frame_step, crop=disk.crop,
-                source_size=disk.source_size)
+        raise MemoryError(
+            f"method {method} needs the clip in memory (about {need / 2**30:.2f} GiB), more than "
+            f"max_memory {max_memory / 2**30:.2f} GiB; only {', '.join(STREAMED_METHODS)} learn "
+            f"out of core"
+        )
+    return Clip(
+        frames=disk.frames(),
+        fps=disk.fps,
+        filename=disk.filename,
+        sha256=disk.sha256,
+        frame_start=disk.frame_start,
+        frame_step=disk.frame_step,
+        crop=disk.crop,
+        source_size=disk.source_size,
+    )
 
 
 def remove_stale_temporaries(database: str) -> list[str]:
@@ -293,8 +338,12 @@ def database_is_complete(task: ClipTask) -> bool:
     crop = tuple(load["crop"]) if load.get("crop") else ()
     size = tuple(load["size"]) if load.get("size") else None
     channels = 3 if load.get("color", True) else 1
-    if (src.frame_start, src.frame_step, src.crop, src.channels) != (load.get("start", 0), load.get("step", 1),
-                                                                     crop, channels):
+    if (src.frame_start, src.frame_step, src.crop, src.channels) != (
+        load.get("start", 0),
+        load.get("step", 1),
+        crop,
+        channels,
+    ):
         return False
     if size is not None and (src.height, src.width) != size:
         return False
@@ -307,6 +356,7 @@ def database_is_complete(task: ClipTask) -> bool:
 def clip_sha256(path: str, start: int = 0, stop: int | None = None, step: int = 1) -> str:
     """The content hash :func:`~dynatex.analyzer.load_clip` records for a clip, without decoding it."""
     from .video import IMAGE_SUFFIXES, _file_digest
+
     if os.path.isdir(path):
         names = sorted(n for n in os.listdir(path) if n.lower().endswith(IMAGE_SUFFIXES))[start:stop:step]
         h = hashlib.sha256()
@@ -315,6 +365,7 @@ def clip_sha256(path: str, start: int = 0, stop: int | None = None, step: int = 
         return h.hexdigest()
     if path.endswith(".npy"):
         import numpy as np
+
         with open(path, "rb") as f:
             version = np.lib.format.read_magic(f)
             reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
@@ -341,9 +392,10 @@ def _reason(exc: BaseException) -> str:
 
 
 def _worker_name() -> str:
-    if "distributed" not in sys.modules:      # not on a Dask worker; do not import Dask for nothing
+    if "distributed" not in sys.modules:  # not on a Dask worker; do not import Dask for nothing
         return ""
     from distributed import get_worker
+
     try:
         return str(get_worker().name)
     except ValueError:
@@ -351,12 +403,22 @@ def _worker_name() -> str:
 
 
 # -- the corpus ---------------------------------------------------------------------------
-def analyze_corpus(clips: Iterable[str | os.PathLike], output_dir: str | os.PathLike, *,
-                   methods: Sequence[str] | Callable[[str], Sequence[str]] = ("lds",),
-                   params: dict[str, dict] | None = None, load: dict | None = None,
-                   scheduler: str = "none", workers: int | None = None, merge: str | os.PathLike | None = None,
-                   max_memory: int | str | None = None, spill_dir: str | None = None,
-                   overwrite: bool = False, progress: bool = True, client: Any = None) -> list[ClipResult]:
+def analyze_corpus(
+    clips: Iterable[str | os.PathLike],
+    output_dir: str | os.PathLike,
+    *,
+    methods: Sequence[str] | Callable[[str], Sequence[str]] = ("lds",),
+    params: dict[str, dict] | None = None,
+    load: dict | None = None,
+    scheduler: str = "none",
+    workers: int | None = None,
+    merge: str | os.PathLike | None = None,
+    max_memory: int | str | None = None,
+    spill_dir: str | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+    client: Any = None,
+) -> list[ClipResult]:
     """Analyse many clips, one database per clip in ``output_dir``; return the summary table.
 
     Parameters
@@ -409,9 +471,19 @@ def analyze_corpus(clips: Iterable[str | os.PathLike], output_dir: str | os.Path
             raise InvalidArgumentError(f"{path}: no method to run")
         for m in chosen:
             get_method(m)
-        tasks.append(ClipTask(clip=os.path.abspath(path), texture=name, database=os.path.join(out, f"{name}.h5"),
-                              methods=chosen, params={m: dict((params or {}).get(m, {})) for m in chosen},
-                              load=load, max_memory=bound, spill_dir=spill_dir, skip_complete=not overwrite))
+        tasks.append(
+            ClipTask(
+                clip=os.path.abspath(path),
+                texture=name,
+                database=os.path.join(out, f"{name}.h5"),
+                methods=chosen,
+                params={m: dict((params or {}).get(m, {})) for m in chosen},
+                load=load,
+                max_memory=bound,
+                spill_dir=spill_dir,
+                skip_complete=not overwrite,
+            )
+        )
     if client is not None:
         results = _run_dask(client, tasks, progress)
     elif scheduler == "none":
@@ -467,7 +539,9 @@ def connect(scheduler: str, workers: int | None, n_tasks: int):
                     os.environ[k] = v
         return _OwnedClient(Client(cluster), cluster)
     if not re.match(r"^[a-z+]+://", scheduler):
-        raise InvalidArgumentError(f"scheduler must be 'none', 'local' or an address like tcp://host:8786, not {scheduler!r}")
+        raise InvalidArgumentError(
+            f"scheduler must be 'none', 'local' or an address like tcp://host:8786, not {scheduler!r}"
+        )
     try:
         return _OwnedClient(Client(scheduler, timeout="20s"), None)
     except OSError as exc:
@@ -491,6 +565,7 @@ class _OwnedClient:
 
 def _run_dask(client, tasks: list[ClipTask], progress: bool) -> list[ClipResult]:
     from distributed import as_completed
+
     run = uuid.uuid4().hex[:8]
     futures = client.map(analyze_clip, tasks, pure=False, key=[f"analyze-{t.texture}-{run}" for t in tasks])
     index = {f.key: i for i, f in enumerate(futures)}
@@ -527,6 +602,7 @@ def _bar(total: int, enabled: bool):
     if not enabled or not sys.stderr.isatty():
         return _NoBar()
     from tqdm import tqdm
+
     return tqdm(total=total, desc="clips", unit="clip", file=sys.stderr)
 
 
@@ -560,7 +636,8 @@ def format_table(results: Sequence[ClipResult]) -> str:
     lines = [f"{a:<{widths[0]}}  {b:<{widths[1]}}  {c:>{widths[2]}}  {d}" for a, b, c, d in rows]
     n_fail = sum(r.status == FAILED for r in results)
     n_skip = sum(r.status == SKIPPED for r in results)
-    lines.append(f"{len(results)} clips: {len(results) - n_fail - n_skip} analysed, {n_skip} skipped "
-                 f"(database complete), {n_fail} failed")
+    lines.append(
+        f"{len(results)} clips: {len(results) - n_fail - n_skip} analysed, {n_skip} skipped "
+        f"(database complete), {n_fail} failed"
+    )
     return "\n".join(lines)
-

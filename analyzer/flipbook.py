@@ -13,6 +13,7 @@ Blend" does: frame ``k`` sampled at ``uv - blend * mv_k``, frame ``k + 1`` at
 ways, which is why a cell holds the motion *at* its frame rather than the flow to the next.
 :func:`shader_blend` is that shader in numpy.
 """
+
 from __future__ import annotations
 
 import math
@@ -54,8 +55,15 @@ def _pow2(v: float) -> int:
     return 1 << max(0, round(math.log2(max(v, 1.0))))
 
 
-def choose_grid(frames: int, frame_shape: tuple[int, int], *, cols: int | None = None, rows: int | None = None,
-                tile: tuple[int, int] | None = None, pow2: bool = True) -> Grid:
+def choose_grid(
+    frames: int,
+    frame_shape: tuple[int, int],
+    *,
+    cols: int | None = None,
+    rows: int | None = None,
+    tile: tuple[int, int] | None = None,
+    pow2: bool = True,
+) -> Grid:
     """The grid for ``frames`` frames of ``frame_shape`` (H, W).
 
     By default the grid is the smallest power-of-two one holding the frames (columns >= rows,
@@ -85,14 +93,17 @@ def choose_grid(frames: int, frame_shape: tuple[int, int], *, cols: int | None =
         tile = (_pow2(h), _pow2(w)) if pow2 else (h, w)
     th, tw = int(tile[0]), int(tile[1])
     if rows * th > MAX_ATLAS_SIDE or cols * tw > MAX_ATLAS_SIDE:
-        raise InvalidArgumentError(f"a {cols}x{rows} atlas of {tw}x{th} tiles is {cols * tw}x{rows * th} pixels, more than "
-                         f"{MAX_ATLAS_SIDE} on a side: use fewer frames or a smaller tile")
+        raise InvalidArgumentError(
+            f"a {cols}x{rows} atlas of {tw}x{th} tiles is {cols * tw}x{rows * th} pixels, more than "
+            f"{MAX_ATLAS_SIDE} on a side: use fewer frames or a smaller tile"
+        )
     return Grid(int(cols), int(rows), (th, tw), int(frames))
 
 
 def fit(frame: np.ndarray, tile: tuple[int, int]) -> np.ndarray:
     """``frame`` resized to ``tile`` (H, W): area averaging when shrinking, bilinear when growing."""
     import cv2
+
     th, tw = tile
     if frame.shape[:2] == (th, tw):
         return np.ascontiguousarray(frame)
@@ -113,6 +124,7 @@ def optical_flow(tiles: np.ndarray, *, wrap: bool = True) -> np.ndarray:
     """Farneback flow ``(N, th, tw, 2)`` in pixels (x right, y down) from each tile to the next;
     the last entry is the flow from the last tile to the first (zero unless ``wrap``)."""
     import cv2
+
     grey = [cv2.cvtColor(t, cv2.COLOR_RGB2GRAY) if t.ndim == 3 else t for t in tiles]
     n = len(grey)
     flow = np.zeros(tiles.shape[:3] + (2,), np.float32)
@@ -195,21 +207,23 @@ def _linear_atlas(color: np.ndarray) -> np.ndarray:
 def _sample(atlas: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Bilinear, clamp-to-edge sample of ``atlas`` at UV (v up), as a GPU sampler does."""
     import cv2
+
     h, w = atlas.shape[:2]
     x = (u * w - 0.5).astype(np.float32)
     y = ((1.0 - v) * h - 0.5).astype(np.float32)
     return cv2.remap(atlas, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
-def shader_blend(color: np.ndarray, vectors: np.ndarray, grid: Grid, strength: float, k: int,
-                 blend: float) -> np.ndarray:
+def shader_blend(
+    color: np.ndarray, vectors: np.ndarray, grid: Grid, strength: float, k: int, blend: float
+) -> np.ndarray:
     """Frame ``k + blend`` of a flipbook as the engine shader draws it (linear-light sampling of
     the sRGB atlas, motion-vector blend between frames ``k`` and ``k + 1``, wrapping)."""
     th, tw = grid.tile
     n = grid.frames
     lin = _linear_atlas(color)
     mv = vectors[..., :2].astype(np.float32)
-    ju, jv = np.meshgrid((np.arange(tw) + 0.5) / tw, 1.0 - (np.arange(th) + 0.5) / th)   # tile UV, v up
+    ju, jv = np.meshgrid((np.arange(tw) + 0.5) / tw, 1.0 - (np.arange(th) + 0.5) / th)  # tile UV, v up
 
     def atlas_uv(cell: int, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         r, c = divmod(cell, grid.cols)
@@ -219,7 +233,7 @@ def shader_blend(color: np.ndarray, vectors: np.ndarray, grid: Grid, strength: f
     for cell, sign, weight in ((k % n, -blend, 1.0 - blend), ((k + 1) % n, 1.0 - blend, blend)):
         u, v = atlas_uv(cell, ju, jv)
         d = decode_vectors(_sample(mv, u, v), strength)
-        du, dv = d[..., 0] / grid.cols, d[..., 1] / grid.rows            # tile UV -> atlas UV
+        du, dv = d[..., 0] / grid.cols, d[..., 1] / grid.rows  # tile UV -> atlas UV
         out += weight * _sample(lin, u + sign * du, v + sign * dv)
     return linear_to_srgb(out)
 
@@ -231,24 +245,42 @@ def crossfade(color: np.ndarray, grid: Grid, k: int, blend: float) -> np.ndarray
     return linear_to_srgb((1.0 - blend) * a + blend * b)
 
 
-def sidecar(name: str, grid: Grid, *, fps: float, loop: str, strength: float | None, source: dict,
-            wrap: dict | None = None, layout: str = "atlas") -> dict:
+def sidecar(
+    name: str,
+    grid: Grid,
+    *,
+    fps: float,
+    loop: str,
+    strength: float | None,
+    source: dict,
+    wrap: dict | None = None,
+    layout: str = "atlas",
+) -> dict:
     """The ``NAME.json`` description of an exported flipbook, with the engine settings."""
     th, tw = grid.tile
     files = {"color": f"{name}_{grid.cols}x{grid.rows}.png"}
     if layout == "array":
         files = {"color": f"{name}_array_rgba8.raw"}
     doc = {
-        "name": name, "layout": layout, "cols": grid.cols, "rows": grid.rows, "frames": grid.frames,
-        "tile_width": tw, "tile_height": th,
-        "atlas_width": grid.cols * tw, "atlas_height": grid.rows * th,
+        "name": name,
+        "layout": layout,
+        "cols": grid.cols,
+        "rows": grid.rows,
+        "frames": grid.frames,
+        "tile_width": tw,
+        "tile_height": th,
+        "atlas_width": grid.cols * tw,
+        "atlas_height": grid.rows * th,
         "order": "row-major from the top-left; cells past the last frame are black",
-        "fps": fps, "loop": loop, "color_space": "sRGB",
+        "fps": fps,
+        "loop": loop,
+        "color_space": "sRGB",
         "source": source,
     }
     if strength is not None:
-        files["motion_vectors"] = (f"{name}_array_rg8.raw" if layout == "array"
-                                   else f"{name}_{grid.cols}x{grid.rows}_mv.png")
+        files["motion_vectors"] = (
+            f"{name}_array_rg8.raw" if layout == "array" else f"{name}_{grid.cols}x{grid.rows}_mv.png"
+        )
         doc["motion_vectors"] = {
             "color_space": "linear (import with sRGB off)",
             "encoding": "R = u, G = v (v up), byte = 127.5 + 127.5 * offset / strength; decode rg * 2 - 1",
@@ -260,13 +292,30 @@ def sidecar(name: str, grid: Grid, *, fps: float, loop: str, strength: float | N
             "flow": "OpenCV Farneback on grey tiles, parameters " + ", ".join(map(str, FLOW_PARAMS)),
         }
     if layout == "array":
-        doc["array"] = {"layers": grid.frames, "color": "RGBA8, one layer after another, rows top to bottom",
-                        "motion_vectors": "RG8, same order"}
+        doc["array"] = {
+            "layers": grid.frames,
+            "color": "RGBA8, one layer after another, rows top to bottom",
+            "motion_vectors": "RG8, same order",
+        }
     doc["files"] = files
     if wrap is not None:
         doc["wrap_discontinuity"] = wrap
     return doc
 
 
-__all__ = ["FLOW_PARAMS", "Grid", "choose_grid", "color_atlas", "crossfade", "decode_vectors", "encode_vectors",
-           "fit", "flow_to_uv", "frame_motion", "optical_flow", "shader_blend", "sidecar", "vector_atlas"]
+__all__ = [
+    "FLOW_PARAMS",
+    "Grid",
+    "choose_grid",
+    "color_atlas",
+    "crossfade",
+    "decode_vectors",
+    "encode_vectors",
+    "fit",
+    "flow_to_uv",
+    "frame_motion",
+    "optical_flow",
+    "shader_blend",
+    "sidecar",
+    "vector_atlas",
+]

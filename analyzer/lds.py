@@ -10,9 +10,10 @@ A :class:`~dynatex.analyzer.stream.DiskClip` is learned out of core: the Gram ma
 summed over blocks of pixel columns read from disk and the basis is projected block by
 block, so the float32 clip never exists in memory; ``max_memory`` sizes the blocks.
 """
+
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -31,10 +32,19 @@ DEFAULT_MAX_MEMORY = 2 << 30
 BASE_MEMORY = 320 << 20
 
 
-def learn_lds(clip: Clip | DiskClip | np.ndarray, *, n: int | str = DEFAULT_N, k: int | None = None,
-              energy: float = 0.9, svd: str = "auto", max_radius: float = DEFAULT_MAX_RADIUS,
-              calibrate: bool = True, seed: int = 0, max_memory: int | None = None,
-              progress: Progress | None = None) -> LDSModel:
+def learn_lds(
+    clip: Clip | DiskClip | np.ndarray,
+    *,
+    n: int | str = DEFAULT_N,
+    k: int | None = None,
+    energy: float = 0.9,
+    svd: str = "auto",
+    max_radius: float = DEFAULT_MAX_RADIUS,
+    calibrate: bool = True,
+    seed: int = 0,
+    max_memory: int | None = None,
+    progress: Progress | None = None,
+) -> LDSModel:
     """Learn a linear dynamic texture from a clip.
 
     Parameters
@@ -102,18 +112,21 @@ def learn_lds(clip: Clip | DiskClip | np.ndarray, *, n: int | str = DEFAULT_N, k
     rank_cap = min(tau - 1, DEFAULT_N) if auto else int(n)
     if streamed:
         mean, basis, sv, states, total_energy, blocks = _learn_subspace_streamed(
-            clip, rank_cap, energy if auto else None, max_memory, step)
+            clip, rank_cap, energy if auto else None, max_memory, step
+        )
         method = "gram-streamed"
     else:
         mean, basis, sv, states, total_energy, method = _learn_subspace(frames, svd, auto, rank_cap, seed, step)
         blocks = 0
     if auto:
-        cum = np.cumsum(sv ** 2) / total_energy
+        cum = np.cumsum(sv**2) / total_energy
         n = int(np.clip(np.searchsorted(cum, energy) + 1, 2, rank_cap))
     n = int(n)
     keep = sv[:n] > sv[0] * 1e-6
     if not keep.all():
-        raise InvalidArgumentError(f"n={n} exceeds the clip's rank ({int(keep.sum())} independent components); use a smaller n")
+        raise InvalidArgumentError(
+            f"n={n} exceeds the clip's rank ({int(keep.sum())} independent components); use a smaller n"
+        )
     basis = np.ascontiguousarray(basis[:n])
     x = states[:n].astype(np.float64)
     k = n if k is None else k
@@ -147,8 +160,9 @@ def _learn_subspace(frames: np.ndarray, svd: str, auto: bool, rank_cap: int, see
     return mean, basis, sv, states, total_energy, method
 
 
-def _learn_subspace_streamed(clip: DiskClip, rank_cap: int, energy: float | None, max_memory: int | None, step,
-                             extra_rows: int = 0):
+def _learn_subspace_streamed(
+    clip: DiskClip, rank_cap: int, energy: float | None, max_memory: int | None, step, extra_rows: int = 0
+):
     """Out of core: as :func:`_learn_subspace`, keeping ``rank_cap`` components (or, with
     ``energy``, the fewest that hold it, at least 2); ``extra_rows`` more pixel-sized rows
     (a caller's own basis) are counted in the memory plan."""
@@ -162,7 +176,7 @@ def _learn_subspace_streamed(clip: DiskClip, rank_cap: int, energy: float | None
     del gram
     rows = min(rank_cap, int(np.sum(sv > sv[0] * 1e-7)))
     if energy is not None:
-        cum = np.cumsum(sv ** 2) / total_energy
+        cum = np.cumsum(sv**2) / total_energy
         rows = min(rows, max(2, int(np.searchsorted(cum, energy) + 1)))
     basis = basis_streamed(clip, mean, v[:, :rows], sv[:rows], width)
     states = sv[:rows, None] * v[:, :rows].T
@@ -188,16 +202,29 @@ def _fit_dynamics(mean, basis, sv, x, total_energy, tau, k, max_radius, calibrat
     step()
 
     info = {
-        "svd": method, "n_auto": bool(auto), "energy": float(energy),
+        "svd": method,
+        "n_auto": bool(auto),
+        "energy": float(energy),
         "energy_captured": float(np.sum(sv[:n] ** 2) / total_energy),
         "spectral_radius_raw": float(radius_raw),
         "spectral_radius": float(np.max(np.abs(np.linalg.eigvals(a)))),
-        "max_radius": float(max_radius), "poles_clipped": int(n_clipped),
-        "q_gain": q_gain, "fit_residual": float(np.linalg.norm(resid) / np.linalg.norm(x1)),
+        "max_radius": float(max_radius),
+        "poles_clipped": int(n_clipped),
+        "q_gain": q_gain,
+        "fit_residual": float(np.linalg.norm(resid) / np.linalg.norm(x1)),
         "tau": int(tau),
     }
-    model = LDSModel(mean=mean, basis=basis, singular_values=sv.astype(np.float64), A=a, B=b,
-                     x0=x[:, 0].copy(), states=x, stationary_cov=cov, info=info)
+    model = LDSModel(
+        mean=mean,
+        basis=basis,
+        singular_values=sv.astype(np.float64),
+        A=a,
+        B=b,
+        x0=x[:, 0].copy(),
+        states=x,
+        stationary_cov=cov,
+        info=info,
+    )
     step()
     return model
 
@@ -245,9 +272,11 @@ def plan_columns(clip: DiskClip, rows: int, max_memory: int | None) -> int:
     width = (bound - fixed) // per_column
     if width < min(pixels, 1024):
         need = fixed + per_column * min(pixels, 1024)
-        raise InvalidArgumentError(f"max_memory {bound / 2**30:.2f} GiB is too small for {clip.filename} "
-                         f"({tau} frames of {pixels} values, {rows} components): it needs at least "
-                         f"{need / 2**30:.2f} GiB")
+        raise InvalidArgumentError(
+            f"max_memory {bound / 2**30:.2f} GiB is too small for {clip.filename} "
+            f"({tau} frames of {pixels} values, {rows} components): it needs at least "
+            f"{need / 2**30:.2f} GiB"
+        )
     return int(min(width, pixels))
 
 
@@ -270,7 +299,7 @@ def _column_blocks(clip: DiskClip, width: int):
     block = np.empty((clip.n_frames, width), np.float32)
     for p0 in range(0, clip.pixels, width):
         p1 = min(p0 + width, clip.pixels)
-        b = block[:, :p1 - p0]
+        b = block[:, : p1 - p0]
         np.copyto(b, clip.columns(p0, p1, raw))
         yield p0, p1, b
 
@@ -309,7 +338,7 @@ def _svd_randomized(y: np.ndarray, n: int, seed: int, oversample: int = 10, powe
     q, _ = np.linalg.qr(y.T @ rng.standard_normal((tau, width)).astype(np.float32))
     for _ in range(power):
         q, _ = np.linalg.qr(y.T @ (y @ q))
-    small = (y @ q).T.astype(np.float64)       # width x tau
+    small = (y @ q).T.astype(np.float64)  # width x tau
     ub, s, vt = np.linalg.svd(small, full_matrices=False)
     basis = (q @ ub[:, :n].astype(np.float32)).T
     states = s[:n, None] * vt[:n]

@@ -10,6 +10,7 @@ declarations, so a new parameter is declared here and nowhere else.
 A parameter whose kind is :class:`Clips` takes more clips (the tiles' ``mix``): paths are
 decoded by :func:`~dynatex.analyzer.corpus.learn_into` with the main clip's options.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -87,14 +88,29 @@ def _count(name: str, default: Any, doc: str, flag: str = "", **kw: Any) -> Para
 
 
 LDS_PARAMS = (
-    Param("n", Either(_COUNT, Choice("auto"), metavar="N"), 50,
-          "State order, or 'auto' for the smallest order that keeps --energy of the variance.", "--n"),
+    Param(
+        "n",
+        Either(_COUNT, Choice("auto"), metavar="N"),
+        50,
+        "State order, or 'auto' for the smallest order that keeps --energy of the variance.",
+        "--n",
+    ),
     _count("k", None, "Rank of the driving noise.", "--k", optional=True, default_doc="n"),
     Param("energy", _OPEN_UNIT, 0.9, "Variance kept by --n auto.", "--energy"),
-    Param("svd", Choice("auto", "gram", "randomized"), "auto",
-          "SVD of the frames: gram (exact), randomized (long clips), auto (gram up to 1500 frames).", "--svd"),
-    Param("max_radius", Range(float, 0.0, 1.0, low_open=True, high_open=True), 0.995,
-          "Largest pole magnitude.", "--max-radius"),
+    Param(
+        "svd",
+        Choice("auto", "gram", "randomized"),
+        "auto",
+        "SVD of the frames: gram (exact), randomized (long clips), auto (gram up to 1500 frames).",
+        "--svd",
+    ),
+    Param(
+        "max_radius",
+        Range(float, 0.0, 1.0, low_open=True, high_open=True),
+        0.995,
+        "Largest pole magnitude.",
+        "--max-radius",
+    ),
 )
 
 TURNPOINT_PARAMS = (
@@ -102,8 +118,13 @@ TURNPOINT_PARAMS = (
     Param("s", Range(int, 0, MAX_COUNT), 1, "Binomial smoothness, s < n/2.", "--tp-s"),
     _count("r", 4, "Turn points are more than R frames apart.", "--tp-r"),
     Param("min_symmetry", Range(float, 0.0, 1.0, high_open=True), 0.3, "Weakest turn point.", "--tp-min-symmetry"),
-    Param("max_cost", Range(float, 0.0, 1e6, low_open=True), 2.0,
-          "Drop transitions costlier than this many median frame steps.", "--tp-max-cost"),
+    Param(
+        "max_cost",
+        Range(float, 0.0, 1e6, low_open=True),
+        2.0,
+        "Drop transitions costlier than this many median frame steps.",
+        "--tp-max-cost",
+    ),
 )
 
 MIXTURE_PARAMS = (
@@ -112,54 +133,146 @@ MIXTURE_PARAMS = (
     _count("global_dim", None, "Global coordinates D.", "--mix-global-dim", optional=True, default_doc="d"),
     _count("pca_dim", 50, "Dimension of the reduced PCA space.", "--mix-pca-dim"),
     _count("neighbors", 12, "LLE neighbours K.", "--mix-neighbors"),
-    _count("pmax", None, "Largest AR order tried.", "--mix-pmax", optional=True,
-           default_doc="5, or less when the clip is short"),
+    _count(
+        "pmax",
+        None,
+        "Largest AR order tried.",
+        "--mix-pmax",
+        optional=True,
+        default_doc="5, or less when the clip is short",
+    ),
 )
 
 TILES_PARAMS = (
-    Param("tile", _SIDE_OR_SIZE, None, "Tile size in pixels; with the quilted construction the quilt block size N.",
-          "--tile", optional=True, default_doc="from the dominant spatial period; quilted: a third of the shorter side"),
-    Param("construction", Choice(*TILE_CONSTRUCTIONS), None,
-          "How tiles join. quilted: one large seamless torus quilted from the clip, cut into cells laid out in "
-          "order, no lattice; ring: tiles share one boundary ring and join in any arrangement; wang: "
-          "edge-coloured tiles that join where colours match (one texture only).", "--tiles-construction",
-          optional=True, default_doc="quilted for one texture, ring with --tiles-mix, --tiles-n or --tiles-ring"),
-    Param("period", Size(MAX_SIDE), None, "Quilted: period of the torus.", "--tiles-period", optional=True,
-          default_doc="at least 512 and twice the clip per side"),
-    Param("n_tiles", Range(int, 1, 64), None, "Tiles per texture with the ring construction.", "--tiles-n",
-          optional=True, default_doc="4"),
-    Param("edge_colours", Range(int, 2, 4), 2, "Wang edge colours per direction (2: 8 tiles).",
-          "--tiles-edge-colours"),
+    Param(
+        "tile",
+        _SIDE_OR_SIZE,
+        None,
+        "Tile size in pixels; with the quilted construction the quilt block size N.",
+        "--tile",
+        optional=True,
+        default_doc="from the dominant spatial period; quilted: a third of the shorter side",
+    ),
+    Param(
+        "construction",
+        Choice(*TILE_CONSTRUCTIONS),
+        None,
+        "How tiles join. quilted: one large seamless torus quilted from the clip, cut into cells laid out in "
+        "order, no lattice; ring: tiles share one boundary ring and join in any arrangement; wang: "
+        "edge-coloured tiles that join where colours match (one texture only).",
+        "--tiles-construction",
+        optional=True,
+        default_doc="quilted for one texture, ring with --tiles-mix, --tiles-n or --tiles-ring",
+    ),
+    Param(
+        "period",
+        Size(MAX_SIDE),
+        None,
+        "Quilted: period of the torus.",
+        "--tiles-period",
+        optional=True,
+        default_doc="at least 512 and twice the clip per side",
+    ),
+    Param(
+        "n_tiles",
+        Range(int, 1, 64),
+        None,
+        "Tiles per texture with the ring construction.",
+        "--tiles-n",
+        optional=True,
+        default_doc="4",
+    ),
+    Param("edge_colours", Range(int, 2, 4), 2, "Wang edge colours per direction (2: 8 tiles).", "--tiles-edge-colours"),
     Param("min_loop", Range(int, 2, MAX_COUNT), 32, "Shortest loop in frames.", "--tiles-min-loop"),
     _count("max_loop", None, "Longest loop in frames.", "--tiles-max-loop", optional=True, default_doc="the clip"),
     _count("transition", 8, "Frames over which the per-pixel temporal transitions spread.", "--tiles-transition"),
-    Param("ring", Range(int, 2, MAX_SIDE), None, "Width of the band of the shared ring cuts.", "--tiles-ring",
-          optional=True, default_doc="tile/10"),
-    Param("flow_gain", Range(float, 0.0, 10.0), 0.5, "Extra cut freedom per pixel/frame of optical flow (0 = off).",
-          "--tiles-flow-gain"),
-    Param("mix", Clips(), (), "Another texture to mix with: cut to the same tiles, with border tiles.",
-          "--tiles-mix", default_doc="none"),
-    Param("names", Names(), None, "Class names of the main and the --tiles-mix textures.", "--tiles-names",
-          optional=True, default_doc="main,mix1,..."),
+    Param(
+        "ring",
+        Range(int, 2, MAX_SIDE),
+        None,
+        "Width of the band of the shared ring cuts.",
+        "--tiles-ring",
+        optional=True,
+        default_doc="tile/10",
+    ),
+    Param(
+        "flow_gain",
+        Range(float, 0.0, 10.0),
+        0.5,
+        "Extra cut freedom per pixel/frame of optical flow (0 = off).",
+        "--tiles-flow-gain",
+    ),
+    Param(
+        "mix",
+        Clips(),
+        (),
+        "Another texture to mix with: cut to the same tiles, with border tiles.",
+        "--tiles-mix",
+        default_doc="none",
+    ),
+    Param(
+        "names",
+        Names(),
+        None,
+        "Class names of the main and the --tiles-mix textures.",
+        "--tiles-names",
+        optional=True,
+        default_doc="main,mix1,...",
+    ),
 )
 
 QUILT_PARAMS = (
-    Param("size", Size(MAX_SIDE), None, "Output canvas.", "--quilt-size", optional=True,
-          default_doc="twice the clip's width and height"),
-    Param("block", _SIDE_OR_SIZE, 28, "Block size; elongated blocks (e.g. 16x64) suit stretching features.",
-          "--quilt-block"),
+    Param(
+        "size",
+        Size(MAX_SIDE),
+        None,
+        "Output canvas.",
+        "--quilt-size",
+        optional=True,
+        default_doc="twice the clip's width and height",
+    ),
+    Param(
+        "block",
+        _SIDE_OR_SIZE,
+        28,
+        "Block size; elongated blocks (e.g. 16x64) suit stretching features.",
+        "--quilt-block",
+    ),
     _count("overlap", None, "Block overlap.", "--quilt-overlap", optional=True, default_doc="5/16 of the block"),
     _count("rank", 15, "SVD rank of the block comparisons.", "--quilt-rank"),
-    Param("tolerance", Range(float, 0.0, 1e6), 0.1, "Pick among candidates within (1 + T) of the best error.",
-          "--quilt-tolerance"),
-    Param("feather", Range(int, 0, MAX_SIDE), None, "Cross-fade half-width across cuts (0 = hard cuts).",
-          "--quilt-feather", optional=True, default_doc="overlap/2"),
-    Param("lowpass", Range(float, 0.0, float(MAX_SIDE), low_open=True), None,
-          "Low-pass gain normalisation with this Gaussian sigma in pixels.", "--quilt-lowpass", optional=True,
-          default_doc="off", extra={"metavar": "SIGMA"}),
-    Param("restore_gradient", Flag(), False,
-          "With --quilt-lowpass: keep the source's low-frequency gradient instead of flattening it.",
-          "--quilt-restore-gradient"),
+    Param(
+        "tolerance",
+        Range(float, 0.0, 1e6),
+        0.1,
+        "Pick among candidates within (1 + T) of the best error.",
+        "--quilt-tolerance",
+    ),
+    Param(
+        "feather",
+        Range(int, 0, MAX_SIDE),
+        None,
+        "Cross-fade half-width across cuts (0 = hard cuts).",
+        "--quilt-feather",
+        optional=True,
+        default_doc="overlap/2",
+    ),
+    Param(
+        "lowpass",
+        Range(float, 0.0, float(MAX_SIDE), low_open=True),
+        None,
+        "Low-pass gain normalisation with this Gaussian sigma in pixels.",
+        "--quilt-lowpass",
+        optional=True,
+        default_doc="off",
+        extra={"metavar": "SIGMA"},
+    ),
+    Param(
+        "restore_gradient",
+        Flag(),
+        False,
+        "With --quilt-lowpass: keep the source's low-frequency gradient instead of flattening it.",
+        "--quilt-restore-gradient",
+    ),
     Param("seed", Range(int, 0, MAX_SEED), 0, "Seed of the random block choices.", "--quilt-seed"),
 )
 
@@ -176,8 +289,8 @@ class Method:
     """
 
     name: str
-    target: str              # "module:function" inside dynatex.analyzer, or a full "package.module:function"
-    needs_frames: bool       # store the clip's frames beside the model
+    target: str  # "module:function" inside dynatex.analyzer, or a full "package.module:function"
+    needs_frames: bool  # store the clip's frames beside the model
     summary: str
     params: tuple[Param, ...] = ()
 
@@ -191,20 +304,41 @@ class Method:
         for p in self.params:
             if p.name == name:
                 return p
-        raise InvalidArgumentError(f"method {self.name} has no parameter {name!r} "
-                                   f"(it has {', '.join(p.name for p in self.params) or 'none'})")
+        raise InvalidArgumentError(
+            f"method {self.name} has no parameter {name!r} (it has {', '.join(p.name for p in self.params) or 'none'})"
+        )
 
 
 METHODS: dict[str, Method] = {
     "lds": Method("lds", "lds:learn_lds", False, "linear dynamic texture (Doretto & Soatto)", LDS_PARAMS),
-    "turnpoints": Method("turnpoints", "turnpoints:learn_turnpoints", True,
-                         "video texture with turn points and transitions (Van Haevre; Schoedl)", TURNPOINT_PARAMS),
-    "mixture": Method("mixture", "mixture:learn_mixture", False,
-                      "subspace mixture + global coordination + AR(p) (Liu, Lin & Ahuja)", MIXTURE_PARAMS),
-    "tiles": Method("tiles", "tiles:learn_tiles", False,
-                    "triple toroid-shaped tiles, mixing and tone (Richtr & Haindl)", TILES_PARAMS),
-    "quilt": Method("quilt", "quilt:learn_quilt", True,
-                    "time-varying texture: SVD-accelerated quilting of spatio-temporal cuboids", QUILT_PARAMS),
+    "turnpoints": Method(
+        "turnpoints",
+        "turnpoints:learn_turnpoints",
+        True,
+        "video texture with turn points and transitions (Van Haevre; Schoedl)",
+        TURNPOINT_PARAMS,
+    ),
+    "mixture": Method(
+        "mixture",
+        "mixture:learn_mixture",
+        False,
+        "subspace mixture + global coordination + AR(p) (Liu, Lin & Ahuja)",
+        MIXTURE_PARAMS,
+    ),
+    "tiles": Method(
+        "tiles",
+        "tiles:learn_tiles",
+        False,
+        "triple toroid-shaped tiles, mixing and tone (Richtr & Haindl)",
+        TILES_PARAMS,
+    ),
+    "quilt": Method(
+        "quilt",
+        "quilt:learn_quilt",
+        True,
+        "time-varying texture: SVD-accelerated quilting of spatio-temporal cuboids",
+        QUILT_PARAMS,
+    ),
 }
 
 

@@ -15,11 +15,13 @@ for the definition, units, range and good/bad values of each measure.
   :func:`lattice_correlation`.
 - All of them at once: :func:`evaluate`.
 """
+
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -27,20 +29,37 @@ from ..checks import Range, check_frames, check_int
 from ..errors import ArgumentTypeError, InvalidArgumentError
 
 __all__ = [
-    "StabilityReport", "check_frames", "count_nonfinite", "evaluate", "frame_coverage", "frame_step_ratio",
-    "grid_labels", "index_coverage", "lattice_correlation", "lattice_lags", "lattice_prominence", "patch_coherence", "patch_completeness",
+    "StabilityReport",
+    "check_frames",
+    "count_nonfinite",
+    "evaluate",
+    "frame_coverage",
+    "frame_step_ratio",
+    "grid_labels",
+    "index_coverage",
+    "lattice_correlation",
+    "lattice_lags",
+    "lattice_prominence",
+    "patch_coherence",
+    "patch_completeness",
     "patch_distances",
-    "repetition_lag", "repetition_profile", "seam_visibility", "spectrum_distance", "st_power_spectrum",
-    "stability", "temporal_discontinuity",
+    "repetition_lag",
+    "repetition_profile",
+    "seam_visibility",
+    "spectrum_distance",
+    "st_power_spectrum",
+    "stability",
+    "temporal_discontinuity",
 ]
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
-_CHUNK = 32          # frames converted to float at a time (bounds memory on long clips)
-_THUMB = 32          # longer side of the thumbnails used by coverage and repetition
+_CHUNK = 32  # frames converted to float at a time (bounds memory on long clips)
+_THUMB = 32  # longer side of the thumbnails used by coverage and repetition
 
 
 #: a positive finite number (eps, floors, tolerances)
 _POSITIVE = Range(float, 0.0, None, low_open=True)
+
 
 def _pair(name: str, value: Any, lo: int) -> tuple[int, int]:
     if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
@@ -54,8 +73,10 @@ def _pair(name: str, value: Any, lo: int) -> tuple[int, int]:
 
 def _same_size(a: np.ndarray, b: np.ndarray, what: str) -> None:
     if a.shape[1:3] != b.shape[1:3]:
-        raise InvalidArgumentError(f"{what} needs output and source of the same frame size; output is "
-                         f"{a.shape[2]}x{a.shape[1]}, source {b.shape[2]}x{b.shape[1]}")
+        raise InvalidArgumentError(
+            f"{what} needs output and source of the same frame size; output is "
+            f"{a.shape[2]}x{a.shape[1]}, source {b.shape[2]}x{b.shape[1]}"
+        )
 
 
 def count_nonfinite(frames: Any) -> int:
@@ -72,7 +93,7 @@ def count_nonfinite(frames: Any) -> int:
         return 0
     bad = 0
     for i in range(0, arr.shape[0], _CHUNK):
-        c = arr[i:i + _CHUNK]
+        c = arr[i : i + _CHUNK]
         bad += int((~np.isfinite(c.reshape(c.shape[0], -1))).any(axis=1).sum())
     return bad
 
@@ -81,12 +102,13 @@ def count_nonfinite(frames: Any) -> int:
 def _chunks(frames: np.ndarray, start: int = 0, stop: int | None = None):
     stop = frames.shape[0] if stop is None else stop
     for i in range(start, stop, _CHUNK):
-        yield i, frames[i:min(i + _CHUNK, stop)].astype(np.float32)
+        yield i, frames[i : min(i + _CHUNK, stop)].astype(np.float32)
 
 
 def _grey(frames: np.ndarray, factor: int = 1, size: tuple[int, int] | None = None) -> np.ndarray:
     """``(T, H', W')`` float32 luma, area-downscaled by ``factor`` (or to ``size`` = (H', W'))."""
     import cv2
+
     t, h, w, c = frames.shape
     if size is None:
         size = (max(1, h // factor), max(1, w // factor))
@@ -94,10 +116,10 @@ def _grey(frames: np.ndarray, factor: int = 1, size: tuple[int, int] | None = No
     for i, chunk in _chunks(frames):
         g = chunk[..., 0] if c == 1 else chunk @ _LUMA
         if size == (h, w):
-            out[i:i + len(g)] = g
+            out[i : i + len(g)] = g
         else:
             for k in range(len(g)):
-                out[i + k] = cv2.resize(g[k], (size[1], size[0]), interpolation=cv2.INTER_AREA)   # cv2: (w, h)
+                out[i + k] = cv2.resize(g[k], (size[1], size[0]), interpolation=cv2.INTER_AREA)  # cv2: (w, h)
     return out
 
 
@@ -125,7 +147,7 @@ def _step_rms(frames: np.ndarray) -> np.ndarray:
         else:
             first = i
         d = np.diff(chunk, axis=0).reshape(chunk.shape[0] - 1, -1)
-        out[first:first + len(d)] = np.sqrt(np.einsum("ij,ij->i", d, d, dtype=np.float64) / d.shape[1])
+        out[first : first + len(d)] = np.sqrt(np.einsum("ij,ij->i", d, d, dtype=np.float64) / d.shape[1])
         prev = chunk[-1:]
     return out
 
@@ -179,18 +201,28 @@ class StabilityReport:
     def is_stable(self, *, low: float = 0.5, high: float = 2.0) -> bool:
         """True when every frame is finite and every window's ratio lies in :meth:`bounds`."""
         lo, hi = self.bounds(low=low, high=high)
-        return bool(self.nonfinite_frames == 0 and np.isfinite(self.ratios).all()
-                    and self.ratios.min() >= lo and self.ratios.max() <= hi)
+        return bool(
+            self.nonfinite_frames == 0
+            and np.isfinite(self.ratios).all()
+            and self.ratios.min() >= lo
+            and self.ratios.max() <= hi
+        )
 
     def as_dict(self) -> dict[str, Any]:
         lo, hi = self.bounds()
-        return {"window": self.window, "n_frames": self.n_frames, "nonfinite_frames": self.nonfinite_frames,
-                "min_ratio": _json_float(self.min_ratio), "max_ratio": _json_float(self.max_ratio),
-                "final_ratio": _json_float(self.final_ratio), "stable": self.is_stable(),
-                "source_min_ratio": _json_float(self.source_min_ratio),
-                "source_max_ratio": _json_float(self.source_max_ratio),
-                "bounds": [_json_float(lo), _json_float(hi)],
-                "ratios": [_json_float(v) for v in self.ratios]}
+        return {
+            "window": self.window,
+            "n_frames": self.n_frames,
+            "nonfinite_frames": self.nonfinite_frames,
+            "min_ratio": _json_float(self.min_ratio),
+            "max_ratio": _json_float(self.max_ratio),
+            "final_ratio": _json_float(self.final_ratio),
+            "stable": self.is_stable(),
+            "source_min_ratio": _json_float(self.source_min_ratio),
+            "source_max_ratio": _json_float(self.source_max_ratio),
+            "bounds": [_json_float(lo), _json_float(hi)],
+            "ratios": [_json_float(v) for v in self.ratios],
+        }
 
 
 def stability(output: np.ndarray | Iterable[np.ndarray], source: np.ndarray, *, window: int = 25) -> StabilityReport:
@@ -236,8 +268,9 @@ def stability(output: np.ndarray | Iterable[np.ndarray], source: np.ndarray, *, 
     if isinstance(output, np.ndarray):
         output = check_frames(output, name="output", allow_nonfinite=True)
         if output.shape[1:] != source.shape[1:]:
-            raise InvalidArgumentError(f"stability needs output frames shaped like the source's {source.shape[1:]}, "
-                             f"not {output.shape[1:]}")
+            raise InvalidArgumentError(
+                f"stability needs output frames shaped like the source's {source.shape[1:]}, not {output.shape[1:]}"
+            )
         energies = _energies(output, mean)
     else:
         energies = _energies_iter(output, mean)
@@ -247,11 +280,17 @@ def stability(output: np.ndarray | Iterable[np.ndarray], source: np.ndarray, *, 
     bad = ~np.isfinite(energies)
     ratios = []
     for i in range(0, n, window):
-        e, b = energies[i:i + window], bad[i:i + window]
+        e, b = energies[i : i + window], bad[i : i + window]
         ratios.append(float(e[~b].mean()) / src_e if (~b).any() else float("nan"))
-    own = [float(src_energies[i:i + window].mean()) / src_e for i in range(0, len(src_energies), window)]
-    return StabilityReport(ratios=np.asarray(ratios), window=window, n_frames=n, nonfinite_frames=int(bad.sum()),
-                           source_min_ratio=min(own), source_max_ratio=max(own))
+    own = [float(src_energies[i : i + window].mean()) / src_e for i in range(0, len(src_energies), window)]
+    return StabilityReport(
+        ratios=np.asarray(ratios),
+        window=window,
+        n_frames=n,
+        nonfinite_frames=int(bad.sum()),
+        source_min_ratio=min(own),
+        source_max_ratio=max(own),
+    )
 
 
 def _energies(frames: np.ndarray, mean: np.ndarray) -> np.ndarray:
@@ -260,7 +299,7 @@ def _energies(frames: np.ndarray, mean: np.ndarray) -> np.ndarray:
         d = (chunk - mean).reshape(chunk.shape[0], -1)
         with np.errstate(invalid="ignore", over="ignore"):
             e = np.einsum("ij,ij->i", d, d, dtype=np.float64) / d.shape[1]
-        out[i:i + len(e)] = np.where(np.isfinite(e), e, np.nan)
+        out[i : i + len(e)] = np.where(np.isfinite(e), e, np.nan)
     return out
 
 
@@ -309,8 +348,9 @@ def grid_labels(shape: Sequence[int], tile: int | Sequence[int], *, offset: Sequ
     return (ry[:, None] * (rx[-1] + 1) + rx[None, :]).astype(np.int32)
 
 
-def seam_visibility(frames: np.ndarray, labels: np.ndarray | None = None, *, wrap: bool = False,
-                    eps: float = 1e-3) -> np.ndarray:
+def seam_visibility(
+    frames: np.ndarray, labels: np.ndarray | None = None, *, wrap: bool = False, eps: float = 1e-3
+) -> np.ndarray:
     """Gradient energy across boundaries over gradient energy in the interior, per frame.
 
     Every pair of 4-neighbour pixels is an *edge*. An edge whose two pixels carry different
@@ -393,12 +433,14 @@ def seam_visibility(frames: np.ndarray, labels: np.ndarray | None = None, *, wra
         mean_v = i_v / niv if niv else pooled
         # what the boundary edges would hold if they looked like interior edges of the same direction
         expected = nbh * mean_h + nbv * mean_v
-        out[i:i + n] = (b_h + b_v + eps * nb) / (expected + eps * nb)
+        out[i : i + n] = (b_h + b_v + eps * nb) / (expected + eps * nb)
     return out
 
 
 # -- temporal discontinuity ---------------------------------------------------------------
-def temporal_discontinuity(output: np.ndarray, events: Sequence[int], *, source: np.ndarray | None = None) -> np.ndarray:
+def temporal_discontinuity(
+    output: np.ndarray, events: Sequence[int], *, source: np.ndarray | None = None
+) -> np.ndarray:
     """Frame difference at events (loop wrap, reversal, jump) over the source's median frame difference.
 
     For each event ``e`` (the index of the first frame after the jump), the RMS difference
@@ -429,8 +471,10 @@ def temporal_discontinuity(output: np.ndarray, events: Sequence[int], *, source:
     """
     output = check_frames(output, name="output", min_frames=2)
     ev = _events(events, output.shape[0])
-    ref = _median_step(output if source is None else check_frames(source, name="source", min_frames=2),
-                       "output" if source is None else "source")
+    ref = _median_step(
+        output if source is None else check_frames(source, name="source", min_frames=2),
+        "output" if source is None else "source",
+    )
     out = np.empty(len(ev), np.float64)
     for k, e in enumerate(ev):
         d = output[e].astype(np.float64) - output[e - 1].astype(np.float64)
@@ -450,8 +494,10 @@ def _events(events: Any, t: int) -> list[int]:
         if isinstance(e, bool) or not isinstance(e, (int, np.integer)):
             raise ArgumentTypeError(f"events must be integers, not {e!r}")
         if not 1 <= e <= t - 1:
-            raise InvalidArgumentError(f"event {int(e)} is outside the output's frames 1..{t - 1} "
-                             "(an event is the index of the first frame after a jump)")
+            raise InvalidArgumentError(
+                f"event {int(e)} is outside the output's frames 1..{t - 1} "
+                "(an event is the index of the first frame after a jump)"
+            )
         out.append(int(e))
     return out
 
@@ -504,22 +550,28 @@ def st_power_spectrum(frames: np.ndarray, *, cuboid: Sequence[int] = (16, 32), d
 
 def _spectrum(grey: np.ndarray, ct: int, cs: int) -> np.ndarray:
     from numpy.lib.stride_tricks import sliding_window_view
+
     t, h, w = grey.shape
     if t < ct or h < cs or w < cs:
-        raise InvalidArgumentError(f"clip ({t} frames of {w}x{h} after downscaling) is smaller than the "
-                         f"spectrum cuboid ({ct} frames of {cs}x{cs})")
-    win = (np.hanning(ct + 2)[1:-1, None, None] * np.hanning(cs + 2)[1:-1][None, :, None]
-           * np.hanning(cs + 2)[1:-1][None, None, :]).astype(np.float32)
+        raise InvalidArgumentError(
+            f"clip ({t} frames of {w}x{h} after downscaling) is smaller than the "
+            f"spectrum cuboid ({ct} frames of {cs}x{cs})"
+        )
+    win = (
+        np.hanning(ct + 2)[1:-1, None, None]
+        * np.hanning(cs + 2)[1:-1][None, :, None]
+        * np.hanning(cs + 2)[1:-1][None, None, :]
+    ).astype(np.float32)
     st, ss = max(1, ct // 2), max(1, cs // 2)
     acc = np.zeros((ct, cs, cs // 2 + 1), np.float64)
     count = 0
     for t0 in range(0, t - ct + 1, st):
-        block = grey[t0:t0 + ct]
-        cub = sliding_window_view(block, (cs, cs), axis=(1, 2))[:, ::ss, ::ss]   # (ct, ny, nx, cs, cs)
+        block = grey[t0 : t0 + ct]
+        cub = sliding_window_view(block, (cs, cs), axis=(1, 2))[:, ::ss, ::ss]  # (ct, ny, nx, cs, cs)
         cub = np.moveaxis(cub, 0, 2).reshape(-1, ct, cs, cs)
         cub = cub - cub.mean(axis=(1, 2, 3), keepdims=True)
         spec = np.fft.rfftn(cub * win, axes=(1, 2, 3))
-        acc += (spec.real ** 2 + spec.imag ** 2).sum(axis=0)
+        acc += (spec.real**2 + spec.imag**2).sum(axis=0)
         count += cub.shape[0]
     acc /= count
     ft = np.rint(np.abs(np.fft.fftfreq(ct)) * ct).astype(int)
@@ -528,15 +580,21 @@ def _spectrum(grey: np.ndarray, ct: int, cs: int) -> np.ndarray:
     fr = np.rint(np.sqrt(fy[:, None] ** 2 + fx[None, :] ** 2) * cs).astype(int)
     nt, nr = ct // 2 + 1, cs // 2 + 1
     keep = np.broadcast_to(fr <= nr - 1, acc.shape)
-    idx = (ft[:, None, None] * nr + fr[None, :, :])
+    idx = ft[:, None, None] * nr + fr[None, :, :]
     idx = np.broadcast_to(idx, acc.shape)[keep]
     sums = np.bincount(idx, weights=acc[keep], minlength=nt * nr)
     cnts = np.bincount(idx, minlength=nt * nr)
     return (sums / np.maximum(cnts, 1)).reshape(nt, nr)
 
 
-def spectrum_distance(output: np.ndarray, source: np.ndarray, *, cuboid: Sequence[int] = (16, 32),
-                      downscale: int | None = None, floor: float = 1e-3) -> float:
+def spectrum_distance(
+    output: np.ndarray,
+    source: np.ndarray,
+    *,
+    cuboid: Sequence[int] = (16, 32),
+    downscale: int | None = None,
+    floor: float = 1e-3,
+) -> float:
     """RMS difference, in dB, between the binned spatio-temporal power spectra of output and source.
 
     Both spectra come from :func:`st_power_spectrum` with the same cuboid and downscale
@@ -572,8 +630,10 @@ def spectrum_distance(output: np.ndarray, source: np.ndarray, *, cuboid: Sequenc
     ct = min(ct, go.shape[0], gs.shape[0])
     cs = min(cs, *go.shape[1:], *gs.shape[1:])
     if ct < 4 or cs < 4:
-        raise InvalidArgumentError(f"clips too small for a power spectrum: need at least 4 frames and 4x4 pixels "
-                         f"after downscaling by {f}, got {ct} frames and {cs} pixels")
+        raise InvalidArgumentError(
+            f"clips too small for a power spectrum: need at least 4 frames and 4x4 pixels "
+            f"after downscaling by {f}, got {ct} frames and {cs} pixels"
+        )
     po, ps = _spectrum(go, ct, cs), _spectrum(gs, ct, cs)
     mask = np.ones(po.shape, bool)
     mask[0, 0] = False
@@ -585,10 +645,12 @@ def spectrum_distance(output: np.ndarray, source: np.ndarray, *, cuboid: Sequenc
 # -- likeness: patch coherence and completeness ----------------------------------------------
 def _patches(grey: np.ndarray, pt: int, ps: int, st: int, ss: int) -> tuple[np.ndarray, tuple[int, int, int]]:
     from numpy.lib.stride_tricks import sliding_window_view
+
     t, h, w = grey.shape
     if t < pt or h < ps or w < ps:
-        raise InvalidArgumentError(f"clip ({t} frames of {w}x{h} after downscaling) is smaller than one patch "
-                         f"({pt} frames of {ps}x{ps})")
+        raise InvalidArgumentError(
+            f"clip ({t} frames of {w}x{h} after downscaling) is smaller than one patch ({pt} frames of {ps}x{ps})"
+        )
     v = sliding_window_view(grey, (pt, ps, ps))[::st, ::ss, ::ss]
     return v, v.shape[:3]
 
@@ -601,9 +663,9 @@ def _project(view: np.ndarray, idx: np.ndarray | None, mean: np.ndarray, basis: 
         idx = np.arange(int(np.prod(grid)))
     out = np.empty((len(idx), basis.shape[1]), np.float32)
     for i in range(0, len(idx), 8192):
-        sel = np.unravel_index(idx[i:i + 8192], grid)
+        sel = np.unravel_index(idx[i : i + 8192], grid)
         p = view[sel].reshape(-1, d) - mean
-        out[i:i + len(p)] = p @ basis
+        out[i : i + len(p)] = p @ basis
     return out
 
 
@@ -617,7 +679,7 @@ def _nn_dist(q: np.ndarray, db: np.ndarray) -> np.ndarray:
     arg = np.zeros(len(q), np.int64)
     dbn = np.einsum("ij,ij->i", db, db)
     for j in range(0, len(db), 16384):
-        d2 = dbn[None, j:j + 16384] - 2.0 * (q @ db[j:j + 16384].T)
+        d2 = dbn[None, j : j + 16384] - 2.0 * (q @ db[j : j + 16384].T)
         k = d2.argmin(axis=1)
         v = d2[np.arange(len(q)), k]
         better = v < best
@@ -627,9 +689,17 @@ def _nn_dist(q: np.ndarray, db: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("ij,ij->i", diff, diff))
 
 
-def patch_distances(output: np.ndarray, source: np.ndarray, *, patch: Sequence[int] = (3, 5),
-                    stride: Sequence[int] = (2, 3), n_samples: int = 1000, n_components: int = 16,
-                    downscale: int | None = None, seed: int = 0) -> tuple[float, float]:
+def patch_distances(
+    output: np.ndarray,
+    source: np.ndarray,
+    *,
+    patch: Sequence[int] = (3, 5),
+    stride: Sequence[int] = (2, 3),
+    n_samples: int = 1000,
+    n_components: int = 16,
+    downscale: int | None = None,
+    seed: int = 0,
+) -> tuple[float, float]:
     """Nearest-neighbour spatio-temporal patch coherence and completeness, ``(coherence, completeness)``.
 
     Both clips become luma, area-downscaled by ``downscale``. A patch is ``patch[0]`` frames
@@ -754,7 +824,7 @@ def _nearest_rows(q: np.ndarray, db: np.ndarray) -> np.ndarray:
     dbn = np.einsum("ij,ij->i", db64, db64)
     out = np.empty(len(q), np.int64)
     for i in range(0, len(q), 1024):
-        out[i:i + 1024] = np.argmin(dbn[None, :] - 2.0 * (q64[i:i + 1024] @ db64.T), axis=1)
+        out[i : i + 1024] = np.argmin(dbn[None, :] - 2.0 * (q64[i : i + 1024] @ db64.T), axis=1)
     return out
 
 
@@ -784,7 +854,7 @@ def lattice_correlation(frames: np.ndarray, period: int | Sequence[int]) -> tupl
     if py >= h or px >= w:
         raise InvalidArgumentError(f"period {py}x{px} must be smaller than the {h}x{w} frame")
     acc = np.zeros(2)
-    for start, chunk in _chunks(frames):
+    for _, chunk in _chunks(frames):
         for g in _grey(chunk):
             g = g - g.mean()
             for k, (a, b) in enumerate(((g[:-py], g[py:]), (g[:, :-px], g[:, px:]))):
@@ -817,8 +887,9 @@ def _autocorrelation(g: np.ndarray, max_dy: int, max_dx: int) -> np.ndarray:
     return raw / count / var if var > 0 else np.zeros_like(raw)
 
 
-def lattice_prominence(frames: np.ndarray, tile: int | Sequence[int], *, max_frames: int = 30,
-                       per_lag: bool = False) -> float | None | tuple[float | None, dict]:
+def lattice_prominence(
+    frames: np.ndarray, tile: int | Sequence[int], *, max_frames: int = 30, per_lag: bool = False
+) -> float | None | tuple[float | None, dict]:
     """How much a cell lattice ``(th, tw)`` stands out in the output's autocorrelation.
 
     For each frame (at most ``max_frames``, evenly spread), the normalised autocorrelation of
@@ -853,14 +924,14 @@ def lattice_prominence(frames: np.ndarray, tile: int | Sequence[int], *, max_fra
         return (None, {}) if per_lag else None
     max_dy = max(dy for dy, _ in lags) + ri
     max_dx = max(dx for _, dx in lags) + ri
-    oy, ox = np.mgrid[-ri:ri + 1, -ri:ri + 1]
+    oy, ox = np.mgrid[-ri : ri + 1, -ri : ri + 1]
     dist = np.sqrt(oy * oy + ox * ox)
     ring = (dist >= 3) & (dist <= r)
     ry, rx = oy[ring], ox[ring]
     idx = np.unique(np.linspace(0, t - 1, min(max_frames, t)).round().astype(int))
     values = np.empty((len(idx), len(lags)))
     for fi, k in enumerate(idx):
-        g = _grey(frames[k:k + 1])[0].astype(np.float64)
+        g = _grey(frames[k : k + 1])[0].astype(np.float64)
         g -= g.mean()
         ac = _autocorrelation(g, max_dy, max_dx)
         for li, (dy, dx) in enumerate(lags):
@@ -875,8 +946,9 @@ def lattice_prominence(frames: np.ndarray, tile: int | Sequence[int], *, max_fra
     return prom
 
 
-def repetition_profile(output: np.ndarray, *, source: np.ndarray | None = None,
-                       max_lag: int | None = None) -> np.ndarray:
+def repetition_profile(
+    output: np.ndarray, *, source: np.ndarray | None = None, max_lag: int | None = None
+) -> np.ndarray:
     """Mean frame difference at each lag, over the reference's median consecutive-frame difference.
 
     ``profile[L - 1]`` is the mean over ``t`` of the RMS difference between luma thumbnails
@@ -903,7 +975,7 @@ def repetition_profile(output: np.ndarray, *, source: np.ndarray | None = None,
     t = output.shape[0]
     max_lag = max(1, t // 2) if max_lag is None else check_int("max_lag", max_lag, 1, t - 1)
     to = _grey(output, size=_thumb_size(output.shape)).reshape(t, -1).astype(np.float64)
-    to -= to.mean(axis=0)         # smaller norms: less cancellation in the Gram-matrix distances
+    to -= to.mean(axis=0)  # smaller norms: less cancellation in the Gram-matrix distances
     if source is None:
         ref_thumbs = to
     else:
@@ -912,7 +984,7 @@ def repetition_profile(output: np.ndarray, *, source: np.ndarray | None = None,
     dr = np.diff(ref_thumbs, axis=0)
     ref = float(np.median(np.sqrt(np.mean(dr * dr, axis=1))))
     if ref <= 0:
-        ref = 1e-3   # a frozen reference: any change counts as large
+        ref = 1e-3  # a frozen reference: any change counts as large
     d = to.shape[1]
     norms = np.einsum("ij,ij->i", to, to)
     sums = np.zeros(max_lag + 1)
@@ -927,12 +999,13 @@ def repetition_profile(output: np.ndarray, *, source: np.ndarray | None = None,
         sums += np.bincount(lag[m], weights=rms, minlength=max_lag + 1)
         counts += np.bincount(lag[m], minlength=max_lag + 1)
     prof = sums[1:] / counts[1:] / ref
-    prof[prof < 1e-6] = 0.0       # rounding of the Gram-matrix distances
+    prof[prof < 1e-6] = 0.0  # rounding of the Gram-matrix distances
     return prof
 
 
-def repetition_lag(output: np.ndarray, *, source: np.ndarray | None = None, tolerance: float = 0.25,
-                   max_lag: int | None = None) -> int | None:
+def repetition_lag(
+    output: np.ndarray, *, source: np.ndarray | None = None, tolerance: float = 0.25, max_lag: int | None = None
+) -> int | None:
     """Earliest lag at which the output repeats itself, or None when it does not within ``max_lag``.
 
     The output repeats at lag ``L`` when :func:`repetition_profile` at ``L`` is at most
@@ -951,13 +1024,24 @@ def repetition_lag(output: np.ndarray, *, source: np.ndarray | None = None, tole
 
 
 # -- everything at once ---------------------------------------------------------------------
-def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | None = None, wrap: bool = False,
-             events: Sequence[int] | None = None, window: int = 25, downscale: int | None = None,
-             seed: int = 0, n_samples: int = 1000, period: Sequence[int] | None = None,
-             lattice: Sequence[int] | None = None) -> dict[str, Any]:
+def evaluate(
+    output: np.ndarray,
+    source: np.ndarray,
+    *,
+    labels: np.ndarray | None = None,
+    wrap: bool = False,
+    events: Sequence[int] | None = None,
+    window: int = 25,
+    downscale: int | None = None,
+    seed: int = 0,
+    n_samples: int = 1000,
+    period: Sequence[int] | None = None,
+    lattice: Sequence[int] | None = None,
+) -> dict[str, Any]:
     """Every metric of this module for one output against its source, as a JSON-ready dict.
 
-    ``output_size`` and ``source_size`` are ``[height, width]``. Size-bound metrics (stability, frame coverage) are None when the frame sizes differ;
+    ``output_size`` and ``source_size`` are ``[height, width]``. Size-bound metrics
+    (stability, frame coverage) are None when the frame sizes differ;
     when the output holds NaN/inf, only stability is computed. With ``period`` ``(py, px)``
     (a tile lattice) the lattice correlation of the output and of the source (None where
     a frame is not larger than the period) at those lags. With ``lattice`` ``(th, tw)`` (the
@@ -976,8 +1060,9 @@ def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | Non
     output = check_frames(output, name="output", min_frames=2, allow_nonfinite=True)
     same = output.shape[1:] == source.shape[1:]
     report: dict[str, Any] = {
-        "output_frames": int(output.shape[0]), "source_frames": int(source.shape[0]),
-        "output_size": [int(output.shape[1]), int(output.shape[2])],     # (height, width)
+        "output_frames": int(output.shape[0]),
+        "source_frames": int(source.shape[0]),
+        "output_size": [int(output.shape[1]), int(output.shape[2])],  # (height, width)
         "source_size": [int(source.shape[1]), int(source.shape[2])],
     }
     report["stability"] = stability(output, source, window=window).as_dict() if same else None
@@ -991,8 +1076,11 @@ def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | Non
         report["seam_visibility"] = None
     if events:
         r = temporal_discontinuity(output, events, source=source)
-        report["temporal_discontinuity"] = {"events": [int(e) for e in events], "ratios": r.tolist(),
-                                            "max": float(r.max())}
+        report["temporal_discontinuity"] = {
+            "events": [int(e) for e in events],
+            "ratios": r.tolist(),
+            "max": float(r.max()),
+        }
     else:
         report["temporal_discontinuity"] = None
     report["frame_step_ratio"] = frame_step_ratio(output, source)
@@ -1007,16 +1095,23 @@ def evaluate(output: np.ndarray, source: np.ndarray, *, labels: np.ndarray | Non
 
         def correlation(frames: np.ndarray) -> list[float] | None:
             if frames.shape[1] <= py or frames.shape[2] <= px:
-                return None                     # no lag of the period fits inside the frame
-            return list(lattice_correlation(frames[::max(1, len(frames) // 30)], (py, px)))
+                return None  # no lag of the period fits inside the frame
+            return list(lattice_correlation(frames[:: max(1, len(frames) // 30)], (py, px)))
 
-        report["lattice_correlation"] = {"period": [py, px], "output": correlation(output),
-                                         "source": correlation(source)}
+        report["lattice_correlation"] = {
+            "period": [py, px],
+            "output": correlation(output),
+            "source": correlation(source),
+        }
     if lattice is not None:
         th, tw = _pair("lattice", lattice, 1)
         prom, lags = lattice_prominence(output, (th, tw), per_lag=True)
-        report["lattice_prominence"] = {"tile": [th, tw], "output": prom, "lags": lags,
-                                        "source": lattice_prominence(source, (th, tw))}
+        report["lattice_prominence"] = {
+            "tile": [th, tw],
+            "output": prom,
+            "lags": lags,
+            "source": lattice_prominence(source, (th, tw)),
+        }
     return report
 
 

@@ -14,6 +14,7 @@
    sample (Neumaier & Schneider) and chosen by Schwarz's criterion; an unstable fit is
    pulled back by scaling ``A_i -> c^i A_i``, which scales every pole by ``c``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -35,11 +36,22 @@ DEFAULT_MAX_RADIUS = 0.995
 LLE_REG = 1e-3
 
 
-def learn_mixture(clip: Clip | DiskClip | np.ndarray, *, components: int = DEFAULT_COMPONENTS, dim: int = DEFAULT_DIM,
-                  global_dim: int | None = None, pca_dim: int = DEFAULT_PCA_DIM,
-                  neighbors: int = DEFAULT_NEIGHBORS, pmax: int | None = None,
-                  max_radius: float = DEFAULT_MAX_RADIUS, max_iter: int = 200, tol: float = 1e-6,
-                  seed: int = 0, max_memory: int | None = None, progress: Progress | None = None) -> MixtureModel:
+def learn_mixture(
+    clip: Clip | DiskClip | np.ndarray,
+    *,
+    components: int = DEFAULT_COMPONENTS,
+    dim: int = DEFAULT_DIM,
+    global_dim: int | None = None,
+    pca_dim: int = DEFAULT_PCA_DIM,
+    neighbors: int = DEFAULT_NEIGHBORS,
+    pmax: int | None = None,
+    max_radius: float = DEFAULT_MAX_RADIUS,
+    max_iter: int = 200,
+    tol: float = 1e-6,
+    seed: int = 0,
+    max_memory: int | None = None,
+    progress: Progress | None = None,
+) -> MixtureModel:
     """Learn a subspace-mixture dynamic texture from a clip.
 
     Parameters
@@ -103,12 +115,16 @@ def learn_mixture(clip: Clip | DiskClip | np.ndarray, *, components: int = DEFAU
     if tau < 4:
         raise InvalidArgumentError(f"clip has {tau} frames; a subspace mixture needs at least 4")
     if components * (dim + 1) >= tau:
-        raise InvalidArgumentError(f"components={components} with dim={dim} needs more than components * (dim + 1) = "
-                         f"{components * (dim + 1)} frames, the clip has {tau}; use fewer components or a smaller dim")
+        raise InvalidArgumentError(
+            f"components={components} with dim={dim} needs more than components * (dim + 1) = "
+            f"{components * (dim + 1)} frames, the clip has {tau}; use fewer components or a smaller dim"
+        )
     if dim >= pca_dim:
         raise InvalidArgumentError(f"dim={dim} must be smaller than pca_dim={pca_dim}")
     if global_dim > components * (dim + 1) - 1:
-        raise InvalidArgumentError(f"global_dim={global_dim} exceeds components * (dim + 1) - 1 = {components * (dim + 1) - 1}")
+        raise InvalidArgumentError(
+            f"global_dim={global_dim} exceeds components * (dim + 1) - 1 = {components * (dim + 1) - 1}"
+        )
     if neighbors >= tau:
         raise InvalidArgumentError(f"neighbors={neighbors} must be smaller than the number of frames ({tau})")
     if pmax is None:
@@ -116,15 +132,18 @@ def learn_mixture(clip: Clip | DiskClip | np.ndarray, *, components: int = DEFAU
         pmax = max(1, min(DEFAULT_PMAX, (tau - global_dim - 2) // (global_dim + 1)))
     pmax = check_int("pmax", pmax, 1)
     if not tau - pmax > global_dim * pmax + 1 + global_dim:
-        raise InvalidArgumentError(f"pmax={pmax} is too large for {tau} frames of {global_dim}-dimensional global "
-                         f"coordinates (needs T - pmax > (pmax + 1) * global_dim + 1); use a smaller pmax")
+        raise InvalidArgumentError(
+            f"pmax={pmax} is too large for {tau} frames of {global_dim}-dimensional global "
+            f"coordinates (needs T - pmax > (pmax + 1) * global_dim + 1); use a smaller pmax"
+        )
     step = _stepper(progress, 5)
 
     # 1. Reduced PCA space.
     cap = min(pca_dim, tau - 1)
     if streamed:
-        mean, basis, sv, states, total, _ = _learn_subspace_streamed(clip, cap, None, max_memory, lambda: None,
-                                                               extra_rows=components * (dim + 1))
+        mean, basis, sv, states, total, _ = _learn_subspace_streamed(
+            clip, cap, None, max_memory, lambda: None, extra_rows=components * (dim + 1)
+        )
         constant = total <= 1e-6 * clip.pixels
     else:
         y = frames.reshape(tau, -1).astype(np.float32)
@@ -138,13 +157,16 @@ def learn_mixture(clip: Clip | DiskClip | np.ndarray, *, components: int = DEFAU
             basis, sv, states = _svd_randomized(y, cap, seed)
         del y
     if constant:
-        raise InvalidArgumentError("clip is constant: every frame is the same, there is no appearance variation to model")
+        raise InvalidArgumentError(
+            "clip is constant: every frame is the same, there is no appearance variation to model"
+        )
     q = int(min(cap, np.sum(sv > sv[0] * 1e-6)))
     if dim >= q:
-        raise InvalidArgumentError(f"dim={dim} must be smaller than the clip's rank in the reduced space ({q}); "
-                         f"use a smaller dim")
+        raise InvalidArgumentError(
+            f"dim={dim} must be smaller than the clip's rank in the reduced space ({q}); use a smaller dim"
+        )
     basis = np.ascontiguousarray(basis[:q])
-    x = np.ascontiguousarray(states[:q].T)                        # (T, q)
+    x = np.ascontiguousarray(states[:q].T)  # (T, q)
     step()
 
     # 2. Mixture of PPCA.
@@ -172,35 +194,62 @@ def learn_mixture(clip: Clip | DiskClip | np.ndarray, *, components: int = DEFAU
         rows.append(ppca["mu"][s][None, :])
         rows.append(ppca["U"][s].T)
     stacked = np.concatenate(rows, axis=0).astype(np.float32) @ basis
-    inside = float(np.sum(x ** 2))
+    inside = float(np.sum(x**2))
     err_soft = (total - inside + float(np.sum((x - reconstruct(ppca, r, z)) ** 2))) / total
     hard = np.zeros_like(r)
     hard[np.arange(tau), r.argmax(axis=1)] = 1
     err_hard = (total - inside + float(np.sum((x - reconstruct(ppca, hard, z)) ** 2))) / total
     info = {
-        "pca_dim": q, "neighbors": int(neighbors), "pmax": int(pmax), "seed": int(seed),
-        "max_radius": float(max_radius), "em_iterations": int(ppca["iterations"]),
-        "log_likelihood": float(ppca["loglik"]), "total_energy": total,
-        "energy_pca_space": inside / total, "recon_error": err_soft, "recon_error_hard": err_hard,
+        "pca_dim": q,
+        "neighbors": int(neighbors),
+        "pmax": int(pmax),
+        "seed": int(seed),
+        "max_radius": float(max_radius),
+        "em_iterations": int(ppca["iterations"]),
+        "log_likelihood": float(ppca["loglik"]),
+        "total_energy": total,
+        "energy_pca_space": inside / total,
+        "recon_error": err_soft,
+        "recon_error_hard": err_hard,
         "recon_error_pca_dim": float(1 - np.sum(sv[:dim] ** 2) / total),
         "coordination_cost": float(np.sum(eigvals)),
-        "spectral_radius_raw": float(ar["radius_raw"]), "spectral_radius": float(ar["radius"]),
-        "ar_shrink": float(ar["shrink"]), "tau": int(tau),
+        "spectral_radius_raw": float(ar["radius_raw"]),
+        "spectral_radius": float(ar["radius"]),
+        "ar_shrink": float(ar["shrink"]),
+        "tau": int(tau),
     }
     model = MixtureModel(
-        mean=mean, stacked_basis=np.ascontiguousarray(stacked), weights=ppca["pi"], sigma2=ppca["sigma2"],
-        singular_values=sv.astype(np.float64), responsibilities=r, local_coords=z, coord_map=lmap,
-        global_coords=g, gauss_mean=gm, gauss_cov=gc,
-        decode_offset=dec_off, decode_gain=dec_gain, local_cov=loc_cov, local_radius=loc_rad, ar_coefs=ar["A"], ar_intercept=ar["w"],
-        ar_noise_cov=ar["C"], sbc=ar["sbc"], info=info)
+        mean=mean,
+        stacked_basis=np.ascontiguousarray(stacked),
+        weights=ppca["pi"],
+        sigma2=ppca["sigma2"],
+        singular_values=sv.astype(np.float64),
+        responsibilities=r,
+        local_coords=z,
+        coord_map=lmap,
+        global_coords=g,
+        gauss_mean=gm,
+        gauss_cov=gc,
+        decode_offset=dec_off,
+        decode_gain=dec_gain,
+        local_cov=loc_cov,
+        local_radius=loc_rad,
+        ar_coefs=ar["A"],
+        ar_intercept=ar["w"],
+        ar_noise_cov=ar["C"],
+        sbc=ar["sbc"],
+        info=info,
+    )
     step()
     return model
 
 
 # -- mixture of probabilistic PCA -----------------------------------------------------------
 
-def fit_mppca(x: np.ndarray, components: int, dim: int, *, max_iter: int = 200, tol: float = 1e-6,
-              seed: int = 0) -> dict:
+
+def fit_mppca(
+    x: np.ndarray, components: int, dim: int, *, max_iter: int = 200, tol: float = 1e-6, seed: int = 0
+) -> dict:
     """EM for a mixture of PPCA on rows of ``x`` (N, q).
 
     Returns a dict: ``pi`` (S,), ``mu`` (S, q), ``U`` (S, q, d) orthonormal loadings,
@@ -213,7 +262,7 @@ def fit_mppca(x: np.ndarray, components: int, dim: int, *, max_iter: int = 200, 
     resp = _kmeans_resp(x, components, seed)
     prev = -np.inf
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count of iterations is returned)
         params = _m_step(x, resp, dim, floor)
         logp = _log_gauss(x, params)
         top = logp.max(axis=1, keepdims=True)
@@ -234,16 +283,18 @@ def _m_step(x: np.ndarray, resp: np.ndarray, dim: int, floor: float) -> dict:
     s_count = resp.shape[1]
     if nk.min() < dim + 1:
         k = int(nk.argmin())
-        raise InvalidArgumentError(f"component {k} holds only {nk[k]:.1f} frames' worth of data (needs more than "
-                         f"dim={dim}); the clip does not support {s_count} components: use fewer components "
-                         f"or a smaller dim")
+        raise InvalidArgumentError(
+            f"component {k} holds only {nk[k]:.1f} frames' worth of data (needs more than "
+            f"dim={dim}); the clip does not support {s_count} components: use fewer components "
+            f"or a smaller dim"
+        )
     mu = (resp.T @ x) / nk[:, None]
     us = np.empty((s_count, q, dim))
     lam = np.empty((s_count, dim))
     sigma2 = np.empty(s_count)
     for s in range(s_count):
         e = x - mu[s]
-        cov = (e * resp[:, s:s + 1]).T @ e / nk[s]
+        cov = (e * resp[:, s : s + 1]).T @ e / nk[s]
         ev, vec = np.linalg.eigh(cov)
         ev, vec = ev[::-1], vec[:, ::-1]
         sigma2[s] = max(float(ev[dim:].mean()) if q > dim else floor, floor)
@@ -261,7 +312,7 @@ def _log_gauss(x: np.ndarray, p: dict) -> np.ndarray:
         c = e @ p["U"][s]
         sq = np.einsum("ij,ij->i", e, e)
         cs = np.einsum("ij,ij->i", c, c)
-        maha = (c ** 2 / p["lam"][s]).sum(axis=1) + (sq - cs) / p["sigma2"][s]
+        maha = (c**2 / p["lam"][s]).sum(axis=1) + (sq - cs) / p["sigma2"][s]
         logdet = np.log(p["lam"][s]).sum() + (q - p["lam"].shape[1]) * np.log(p["sigma2"][s])
         out[:, s] = np.log(p["pi"][s]) - 0.5 * (q * np.log(2 * np.pi) + logdet + maha)
     return out
@@ -297,6 +348,7 @@ def reconstruct(ppca: dict, resp: np.ndarray, z: np.ndarray) -> np.ndarray:
 
 # -- global coordination -----------------------------------------------------------------
 
+
 def coefficient_matrix(resp: np.ndarray, z: np.ndarray) -> np.ndarray:
     """``U`` with ``u_nj = r_ns z^i_ns``, ``j = s (d + 1) + i``, ``z^0 = 1``: (N, S (d + 1))."""
     n, s, d = z.shape
@@ -313,8 +365,8 @@ def lle_weights(x: np.ndarray, k: int, reg: float = LLE_REG) -> tuple[np.ndarray
     d2 = sq[:, None] + sq[None, :] - 2 * x @ x.T
     np.fill_diagonal(d2, np.inf)
     idx = np.argsort(d2, axis=1)[:, :k]
-    diff = x[idx] - x[:, None, :]                          # (N, k, q)
-    gram = diff @ diff.transpose(0, 2, 1)                  # (N, k, k)
+    diff = x[idx] - x[:, None, :]  # (N, k, q)
+    gram = diff @ diff.transpose(0, 2, 1)  # (N, k, k)
     tr = np.trace(gram, axis1=1, axis2=2)
     gram += (reg * np.maximum(tr, 1e-12))[:, None, None] * np.eye(k)
     w = np.linalg.solve(gram, np.ones((x.shape[0], k, 1)))[..., 0]
@@ -329,7 +381,7 @@ def coordinate(u: np.ndarray, idx: np.ndarray, w: np.ndarray, out_dim: int) -> t
     Returns ``L`` and its eigenvalues (the LLE cost of each global axis).
     """
     n, j = u.shape
-    resid = u - np.einsum("nk,nkj->nj", w, u[idx])       # (I - W) U
+    resid = u - np.einsum("nk,nkj->nj", w, u[idx])  # (I - W) U
     a = resid.T @ resid
     b = u.T @ u / n
     # Centring: 1^T U v = 0, i.e. v orthogonal to c = U^T 1. Work in c's orthogonal complement.
@@ -364,13 +416,14 @@ def _global_gaussians(g: np.ndarray, resp: np.ndarray) -> tuple[np.ndarray, np.n
     covs = np.empty((resp.shape[1], dg, dg))
     for s in range(resp.shape[1]):
         e = g - means[s]
-        cov = (e * resp[:, s:s + 1]).T @ e / nk[s]
+        cov = (e * resp[:, s : s + 1]).T @ e / nk[s]
         covs[s] = (cov + cov.T) / 2 + 1e-4 * np.eye(dg)
     return means, covs
 
 
-def _decoders(g: np.ndarray, resp: np.ndarray, z: np.ndarray, gm: np.ndarray,
-              gc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _decoders(
+    g: np.ndarray, resp: np.ndarray, z: np.ndarray, gm: np.ndarray, gc: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Per component, the linear regression of ``z_s`` on ``g`` weighted by ``r_s``:
     ``E[z_s | g] = mean_z + Sigma_zg Sigma_gg^{-1} (g - mean_g)`` (bounded gain, unlike inverting ``L_s``)."""
     nk = resp.sum(axis=0)
@@ -379,7 +432,7 @@ def _decoders(g: np.ndarray, resp: np.ndarray, z: np.ndarray, gm: np.ndarray,
     gains = np.empty((s_count, d, g.shape[1]))
     for s in range(s_count):
         offs[s] = resp[:, s] @ z[:, s] / nk[s]
-        czg = ((z[:, s] - offs[s]) * resp[:, s:s + 1]).T @ (g - gm[s]) / nk[s]
+        czg = ((z[:, s] - offs[s]) * resp[:, s : s + 1]).T @ (g - gm[s]) / nk[s]
         gains[s] = np.linalg.solve(gc[s], czg.T).T
     return offs, gains
 
@@ -392,18 +445,19 @@ def _local_extent(resp: np.ndarray, z: np.ndarray, means: np.ndarray) -> tuple[n
     radii = np.empty(s_count)
     for s in range(s_count):
         e = z[:, s] - means[s]
-        cov = (e * resp[:, s:s + 1]).T @ e / resp[:, s].sum()
+        cov = (e * resp[:, s : s + 1]).T @ e / resp[:, s].sum()
         cov = (cov + cov.T) / 2
         cov += 1e-9 * max(np.trace(cov) / d, 1e-12) * np.eye(d)
         covs[s] = cov
         white = np.linalg.solve(np.linalg.cholesky(cov), e.T).T
-        rad = np.sqrt((white ** 2).sum(axis=1))
+        rad = np.sqrt((white**2).sum(axis=1))
         own = resp[:, s] >= min(0.5, resp[:, s].max())
         radii[s] = max(float(rad[own].max()), 1e-6)
     return covs, radii
 
 
 # -- AR(p) by Schwarz's criterion -----------------------------------------------------------
+
 
 def fit_ar(g: np.ndarray, pmax: int, *, max_radius: float = DEFAULT_MAX_RADIUS) -> dict:
     """Fit AR(p) with intercept for ``p = 1..pmax`` and keep the one minimising Schwarz's criterion.
@@ -435,8 +489,10 @@ def fit_ar(g: np.ndarray, pmax: int, *, max_radius: float = DEFAULT_MAX_RADIUS) 
         cov = resid.T @ resid / ne
         sign, logdet = np.linalg.slogdet(cov)
         if sign <= 0:
-            raise InvalidArgumentError("the global coordinates are degenerate (singular AR residual covariance); "
-                             "the clip has too little variation for this global_dim")
+            raise InvalidArgumentError(
+                "the global coordinates are degenerate (singular AR residual covariance); "
+                "the clip has too little variation for this global_dim"
+            )
         sbc[p - 1] = logdet / m + (m * p + 1) * np.log(ne) / ne
     p = int(np.argmin(sbc)) + 1
     a, w, resid = _ar_lstsq(g, p, start=p)
@@ -448,8 +504,16 @@ def fit_ar(g: np.ndarray, pmax: int, *, max_radius: float = DEFAULT_MAX_RADIUS) 
     if radius_raw > max_radius:
         shrink = max_radius / radius_raw
         a = a * (shrink ** np.arange(1, p + 1))[:, None, None]
-    return {"A": a, "w": w, "C": c, "sbc": sbc, "p": p, "radius_raw": radius_raw,
-            "radius": companion_radius(a), "shrink": shrink}
+    return {
+        "A": a,
+        "w": w,
+        "C": c,
+        "sbc": sbc,
+        "p": p,
+        "radius_raw": radius_raw,
+        "radius": companion_radius(a),
+        "shrink": shrink,
+    }
 
 
 def _ar_lstsq(g: np.ndarray, p: int, start: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -461,4 +525,3 @@ def _ar_lstsq(g: np.ndarray, p: int, start: int) -> tuple[np.ndarray, np.ndarray
     w = coef[0]
     a = coef[1:].reshape(p, m, m).transpose(0, 2, 1)
     return np.ascontiguousarray(a), w, resid
-

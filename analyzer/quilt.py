@@ -20,10 +20,11 @@ Image quilting (Efros & Freeman) where a block is a small spatial patch carried 
 Only the comparisons use the SVD; the result copies source pixels exactly: it is a per-pixel
 source map (plus gain) that the player gathers from the stored frames.
 """
+
 from __future__ import annotations
 
 import time
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -102,7 +103,7 @@ def time_svd(matrix: np.ndarray, rank: int | None = DEFAULT_RANK) -> tuple[np.nd
         order = np.argsort(evals)[::-1]
         evals = np.clip(evals[order], 0, None)
         s = np.sqrt(evals[:rank])
-        coef = (evecs[:, order[:rank]] * s).astype(np.float32)   # U_k S_k
+        coef = (evecs[:, order[:rank]] * s).astype(np.float32)  # U_k S_k
     total = float(evals.sum())
     tail = np.concatenate([np.cumsum(evals[::-1])[::-1][1:], [0.0]])
     err = np.sqrt(np.clip(tail, 0, None) / total) if total > 0 else np.zeros(r)
@@ -147,15 +148,19 @@ def block_errors(features: np.ndarray, template: np.ndarray, mask: np.ndarray) -
     [1, 1]
     """
     import cv2
+
     k = features.shape[2]
     m = np.ascontiguousarray(np.repeat(mask[:, :, None].astype(np.float32), k, axis=2))
     out = None
     # OpenCV takes at most 128 channels here; wider features are compared in slices.
     for lo in range(0, k, 128):
         hi = min(k, lo + 128)
-        e = cv2.matchTemplate(np.ascontiguousarray(features[:, :, lo:hi]),
-                              np.ascontiguousarray(template[:, :, lo:hi]), cv2.TM_SQDIFF,
-                              mask=np.ascontiguousarray(m[:, :, lo:hi]))
+        e = cv2.matchTemplate(
+            np.ascontiguousarray(features[:, :, lo:hi]),
+            np.ascontiguousarray(template[:, :, lo:hi]),
+            cv2.TM_SQDIFF,
+            mask=np.ascontiguousarray(m[:, :, lo:hi]),
+        )
         out = e if out is None else out + e
     assert out is not None
     return np.maximum(out, 0)
@@ -198,6 +203,7 @@ def lowpass_reference(frames: np.ndarray, sigma: float, *, reference: str | int 
     ``reference`` is ``"mean"`` (the time average), ``"middle"``, or a frame index.
     """
     import cv2
+
     t = frames.shape[0]
     if reference == "mean":
         rep = frames.mean(axis=0, dtype=np.float64).astype(np.float32)
@@ -206,7 +212,9 @@ def lowpass_reference(frames: np.ndarray, sigma: float, *, reference: str | int 
     elif isinstance(reference, (int, np.integer)) and not isinstance(reference, bool) and 0 <= reference < t:
         rep = frames[int(reference)].astype(np.float32)
     else:
-        raise InvalidArgumentError(f"reference must be 'mean', 'middle' or a frame index in [0, {t}), not {reference!r}")
+        raise InvalidArgumentError(
+            f"reference must be 'mean', 'middle' or a frame index in [0, {t}), not {reference!r}"
+        )
     low = cv2.GaussianBlur(rep, (0, 0), sigmaX=float(sigma), borderType=cv2.BORDER_REFLECT)
     return np.maximum(low.reshape(rep.shape), 1.0)
 
@@ -221,19 +229,30 @@ def frame_weights(frames: np.ndarray) -> np.ndarray:
     [1.333, 0.667]
     """
     f = np.asarray(frames, dtype=np.float32)
-    g = np.sqrt(0.5 * (np.square(np.diff(f, axis=1)).mean(axis=(1, 2, 3))
-                       + np.square(np.diff(f, axis=2)).mean(axis=(1, 2, 3))))
+    g = np.sqrt(
+        0.5 * (np.square(np.diff(f, axis=1)).mean(axis=(1, 2, 3)) + np.square(np.diff(f, axis=2)).mean(axis=(1, 2, 3)))
+    )
     g = np.maximum(g, 1e-3 * max(float(g.max()), 1e-6) + 1e-6)
     wts = 1.0 / g
     return (wts / wts.mean()).astype(np.float32)
 
 
 # -- quilting --------------------------------------------------------------------------------
-def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
-                block: int | Sequence[int] = DEFAULT_BLOCK, overlap: int | Sequence[int] | None = None,
-                rank: int | None = DEFAULT_RANK, tolerance: float = DEFAULT_TOLERANCE,
-                lowpass: float | None = None, restore_gradient: bool = False, balance: bool = False, feather: int | None = None,
-                seed: int = 0, progress: Progress | None = None) -> QuiltModel:
+def learn_quilt(
+    clip: Clip | np.ndarray,
+    *,
+    size: Sequence[int] | None = None,
+    block: int | Sequence[int] = DEFAULT_BLOCK,
+    overlap: int | Sequence[int] | None = None,
+    rank: int | None = DEFAULT_RANK,
+    tolerance: float = DEFAULT_TOLERANCE,
+    lowpass: float | None = None,
+    restore_gradient: bool = False,
+    balance: bool = False,
+    feather: int | None = None,
+    seed: int = 0,
+    progress: Progress | None = None,
+) -> QuiltModel:
     """Quilt a time-varying texture onto a canvas of any size with spatio-temporal cuboids.
 
     Parameters
@@ -385,11 +404,21 @@ def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
                     new &= np.arange(bh)[:, None] >= cut[None, :]
             src_here = np.stack([yy + y0, xx + x0], axis=-1)
             if feather and (i > 0 or j > 0):
-                _feather(new, mask, feather, smap[region], labels[region], src_here, b,
-                         bmap[region], blab[region], bweight[region])
+                _feather(
+                    new,
+                    mask,
+                    feather,
+                    smap[region],
+                    labels[region],
+                    src_here,
+                    b,
+                    bmap[region],
+                    blab[region],
+                    bweight[region],
+                )
             else:
                 bweight[region][new] = 0.0
-            canvas[region][new] = features[y0:y0 + bh, x0:x0 + bw][new]
+            canvas[region][new] = features[y0 : y0 + bh, x0 : x0 + bw][new]
             smap[region][new] = src_here[new]
             labels[region][new] = b
             bsrc[b] = (y0, x0)
@@ -406,43 +435,78 @@ def learn_quilt(clip: Clip | np.ndarray, *, size: Sequence[int] | None = None,
         src_low = low[smap[..., 0], smap[..., 1]]
         if restore_gradient:
             import cv2
+
             target = cv2.resize(low, (out_w, out_h), interpolation=cv2.INTER_LINEAR).reshape(out_h, out_w, c)
         else:
             target = np.broadcast_to(low.mean(axis=(0, 1)), (out_h, out_w, c))
         gain = np.clip(target / src_low, 1.0 / 64, 64.0).astype(np.float32)
     used_rank = rank if rank is not None else min(h * w, t * c)
     info = {
-        "block_h": bh, "block_w": bw, "overlap_y": oy, "overlap_x": ox, "rank": int(used_rank),
-        "compare_width": int(k), "full_width": int(t * c), "tolerance": tolerance, "seed": seed,
-        "lowpass": float(lowpass or 0.0), "feather": feather, "balance": bool(balance), "restore_gradient": bool(restore_gradient),
-        "rank_error": float(err[used_rank - 1]), "blocks_x": nbx, "blocks_y": nby,
+        "block_h": bh,
+        "block_w": bw,
+        "overlap_y": oy,
+        "overlap_x": ox,
+        "rank": int(used_rank),
+        "compare_width": int(k),
+        "full_width": int(t * c),
+        "tolerance": tolerance,
+        "seed": seed,
+        "lowpass": float(lowpass or 0.0),
+        "feather": feather,
+        "balance": bool(balance),
+        "restore_gradient": bool(restore_gradient),
+        "rank_error": float(err[used_rank - 1]),
+        "blocks_x": nbx,
+        "blocks_y": nby,
         **{k_: float(v) for k_, v in timings.items()},
     }
     blend = None
     if feather:
-        blend = (np.ascontiguousarray(bmap[:out_h, :out_w]), np.ascontiguousarray(blab[:out_h, :out_w]),
-                 np.ascontiguousarray(bweight[:out_h, :out_w]))
-    return QuiltModel(source_map=smap, labels=labels, block_sources=bsrc, block_positions=bpos,
-                      singular_values=sv, rank_error=err, gain=gain,
-                      blend_map=None if blend is None else blend[0],
-                      blend_labels=None if blend is None else blend[1],
-                      blend_weight=None if blend is None else blend[2], info=info)
+        blend = (
+            np.ascontiguousarray(bmap[:out_h, :out_w]),
+            np.ascontiguousarray(blab[:out_h, :out_w]),
+            np.ascontiguousarray(bweight[:out_h, :out_w]),
+        )
+    return QuiltModel(
+        source_map=smap,
+        labels=labels,
+        block_sources=bsrc,
+        block_positions=bpos,
+        singular_values=sv,
+        rank_error=err,
+        gain=gain,
+        blend_map=None if blend is None else blend[0],
+        blend_labels=None if blend is None else blend[1],
+        blend_weight=None if blend is None else blend[2],
+        info=info,
+    )
 
 
-def _feather(new: np.ndarray, overlap: np.ndarray, feather: int, old_src: np.ndarray, old_lab: np.ndarray,
-             new_src: np.ndarray, b: int, bmap: np.ndarray, blab: np.ndarray, bweight: np.ndarray) -> None:
+def _feather(
+    new: np.ndarray,
+    overlap: np.ndarray,
+    feather: int,
+    old_src: np.ndarray,
+    old_lab: np.ndarray,
+    new_src: np.ndarray,
+    b: int,
+    bmap: np.ndarray,
+    blab: np.ndarray,
+    bweight: np.ndarray,
+) -> None:
     """Cross-fade ``feather`` pixels either side of the cut inside the overlap (views are updated in place).
 
     A pixel at distance ``d`` from the other side of the cut takes weight
     ``max(0, 1/2 - (d - 1/2) / (2 feather))`` of the other side's source.
     """
     import cv2
-    d_new = cv2.distanceTransform(new.astype(np.uint8), cv2.DIST_L2, 3)       # new px -> nearest old
-    d_old = cv2.distanceTransform((~new).astype(np.uint8), cv2.DIST_L2, 3)    # old px -> nearest new
+
+    d_new = cv2.distanceTransform(new.astype(np.uint8), cv2.DIST_L2, 3)  # new px -> nearest old
+    d_old = cv2.distanceTransform((~new).astype(np.uint8), cv2.DIST_L2, 3)  # old px -> nearest new
     w_other = np.clip(0.5 - (np.where(new, d_new, d_old) - 0.5) / (2.0 * feather), 0.0, 0.5)
     has_old = overlap & (w_other > 0)
-    take_new = new & has_old            # new primary, old source as secondary
-    keep_old = ~new & has_old           # old primary, new source as secondary
+    take_new = new & has_old  # new primary, old source as secondary
+    keep_old = ~new & has_old  # old primary, new source as secondary
     bmap[take_new] = old_src[take_new]
     blab[take_new] = old_lab[take_new]
     bweight[new] = 0.0
@@ -452,8 +516,15 @@ def _feather(new: np.ndarray, overlap: np.ndarray, feather: int, old_src: np.nda
     bweight[keep_old] = w_other[keep_old]
 
 
-def measure_comparison_speedup(frames: np.ndarray, *, rank: int = DEFAULT_RANK, block: int | Sequence[int] = DEFAULT_BLOCK,
-                               overlap: int | None = None, trials: int = 20, seed: int = 0) -> dict:
+def measure_comparison_speedup(
+    frames: np.ndarray,
+    *,
+    rank: int = DEFAULT_RANK,
+    block: int | Sequence[int] = DEFAULT_BLOCK,
+    overlap: int | None = None,
+    trials: int = 20,
+    seed: int = 0,
+) -> dict:
     """Time the block comparison in SVD coefficient space against full time sequences.
 
     Runs the same ``trials`` overlap comparisons (random templates, L-shaped overlaps) on
@@ -488,17 +559,25 @@ def measure_comparison_speedup(frames: np.ndarray, *, rank: int = DEFAULT_RANK, 
     for _ in range(trials):
         y0, x0 = int(rng.integers(0, h - bh + 1)), int(rng.integers(0, w - bw + 1))
         ta = time.perf_counter()
-        es = block_errors(small, small[y0:y0 + bh, x0:x0 + bw], mask)
+        es = block_errors(small, small[y0 : y0 + bh, x0 : x0 + bw], mask)
         times_small.append(time.perf_counter() - ta)
         ta = time.perf_counter()
-        ef = block_errors(full, full[y0:y0 + bh, x0:x0 + bw], mask)
+        ef = block_errors(full, full[y0 : y0 + bh, x0 : x0 + bw], mask)
         times_full.append(time.perf_counter() - ta)
         # the template is a source block, so both should find it (error 0) or a tie
         agree += int(np.argmin(ef) == np.argmin(es) or ef.ravel()[np.argmin(es)] <= ef.min() * 1.01 + 1e-3)
     ms, mf = float(np.median(times_small)), float(np.median(times_full))
-    return {"rank": int(coef.shape[1]), "full_width": int(x.shape[1]), "svd_s": svd_s,
-            "svd_s_per_trial_break_even": svd_s / max(mf - ms, 1e-12), "rank_error": float(err[coef.shape[1] - 1]),
-            "small_s": ms, "full_s": mf, "speedup": mf / ms, "best_agreement": agree / trials}
+    return {
+        "rank": int(coef.shape[1]),
+        "full_width": int(x.shape[1]),
+        "svd_s": svd_s,
+        "svd_s_per_trial_break_even": svd_s / max(mf - ms, 1e-12),
+        "rank_error": float(err[coef.shape[1] - 1]),
+        "small_s": ms,
+        "full_s": mf,
+        "speedup": mf / ms,
+        "best_agreement": agree / trials,
+    }
 
 
 def spreading_clip(t: int = 48, h: int = 48, w: int = 64, *, seed: int = 0) -> np.ndarray:
@@ -517,8 +596,9 @@ def spreading_clip(t: int = 48, h: int = 48, w: int = 64, *, seed: int = 0) -> n
     rng = np.random.default_rng(check_int("seed", seed, 0))
     field = rng.random((h, w))
     for _ in range(2):
-        field = (field + np.roll(field, 1, 0) + np.roll(field, 1, 1) + np.roll(field, -1, 0)
-                 + np.roll(field, -1, 1)) / 5
+        field = (
+            field + np.roll(field, 1, 0) + np.roll(field, 1, 1) + np.roll(field, -1, 0) + np.roll(field, -1, 1)
+        ) / 5
     field = (field - field.min()) / max(float(np.ptp(field)), 1e-12)
     level = np.linspace(0, 1, t)[:, None, None]
     rust = np.clip((level - field) * 6, 0, 1)

@@ -5,6 +5,7 @@ every synthesized output can be written as one PNG: ``rows`` moments of the outp
 beside the source frame of the same index (modulo the source's length), both at the same
 pixel scale so a tile or a structure compares directly with the clip it came from.
 """
+
 from __future__ import annotations
 
 import os
@@ -13,9 +14,9 @@ import numpy as np
 
 from ..errors import InvalidArgumentError
 
-GAP = 8                 # pixels between panels
-LABEL_H = 14            # pixels of the caption above each row
-MAX_WIDTH = 2400        # wider sheets are scaled down as a whole (both panels alike)
+GAP = 8  # pixels between panels
+LABEL_H = 14  # pixels of the caption above each row
+MAX_WIDTH = 2400  # wider sheets are scaled down as a whole (both panels alike)
 
 
 def _rgb(frame: np.ndarray) -> np.ndarray:
@@ -27,8 +28,9 @@ def _rgb(frame: np.ndarray) -> np.ndarray:
     return np.repeat(f, 3, axis=2) if f.shape[2] == 1 else f
 
 
-def contact_sheet(source: np.ndarray, output: np.ndarray, path: str | os.PathLike | None = None, *,
-                  rows: int = 3, title: str = "") -> np.ndarray:
+def contact_sheet(
+    source: np.ndarray, output: np.ndarray, path: str | os.PathLike | None = None, *, rows: int = 3, title: str = ""
+) -> np.ndarray:
     """A sheet of ``rows`` moments: the source frame (left) beside the output frame (right).
 
     Parameters
@@ -54,6 +56,7 @@ def contact_sheet(source: np.ndarray, output: np.ndarray, path: str | os.PathLik
     (68, 38, 3)
     """
     from PIL import Image, ImageDraw
+
     if rows < 1:
         raise InvalidArgumentError(f"rows must be at least 1, not {rows}")
     source, output = np.asarray(source), np.asarray(output)
@@ -69,8 +72,8 @@ def contact_sheet(source: np.ndarray, output: np.ndarray, path: str | os.PathLik
     captions = []
     for r, k in enumerate(idx):
         y = r * (row_h + GAP) + LABEL_H
-        sheet[y:y + sh, :sw] = _rgb(source[k % source.shape[0]])
-        sheet[y:y + oh, sw + GAP:] = _rgb(output[k])
+        sheet[y : y + sh, :sw] = _rgb(source[k % source.shape[0]])
+        sheet[y : y + oh, sw + GAP :] = _rgb(output[k])
         captions.append((r * (row_h + GAP), k))
     img = Image.fromarray(sheet)
     draw = ImageDraw.Draw(img)

@@ -5,6 +5,7 @@ or by pixel columns (every frame's values of a block of pixels), which is what t
 out-of-core SVD of :func:`~dynatex.analyzer.lds.learn_lds` needs: the ``T x T`` Gram
 matrix of the mean-subtracted clip is a sum over pixel blocks.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -27,8 +28,22 @@ from .video import (
     _tuple4,
 )
 
-_UNITS = {"": 1, "B": 1, "K": 1 << 10, "KB": 1 << 10, "M": 1 << 20, "MB": 1 << 20, "G": 1 << 30, "GB": 1 << 30,
-          "T": 1 << 40, "TB": 1 << 40, "KIB": 1 << 10, "MIB": 1 << 20, "GIB": 1 << 30, "TIB": 1 << 40}
+_UNITS = {
+    "": 1,
+    "B": 1,
+    "K": 1 << 10,
+    "KB": 1 << 10,
+    "M": 1 << 20,
+    "MB": 1 << 20,
+    "G": 1 << 30,
+    "GB": 1 << 30,
+    "T": 1 << 40,
+    "TB": 1 << 40,
+    "KIB": 1 << 10,
+    "MIB": 1 << 20,
+    "GIB": 1 << 30,
+    "TIB": 1 << 40,
+}
 
 
 def parse_bytes(text: str | int) -> int:
@@ -44,13 +59,17 @@ def parse_bytes(text: str | int) -> int:
     else:
         s = str(text).strip().upper().replace(" ", "")
         num = s.rstrip("KMGTIB")
-        unit = s[len(num):]
+        unit = s[len(num) :]
         if unit not in _UNITS:
-            raise InvalidArgumentError(f"memory size {text!r} is not a number of bytes with a unit such as 512MB or 2GB")
+            raise InvalidArgumentError(
+                f"memory size {text!r} is not a number of bytes with a unit such as 512MB or 2GB"
+            )
         try:
             value = float(num) * _UNITS[unit]
         except ValueError:
-            raise InvalidArgumentError(f"memory size {text!r} is not a number of bytes with a unit such as 512MB or 2GB") from None
+            raise InvalidArgumentError(
+                f"memory size {text!r} is not a number of bytes with a unit such as 512MB or 2GB"
+            ) from None
     if not np.isfinite(value) or value < 1:
         raise InvalidArgumentError(f"memory size {text!r} must be positive")
     return int(value)
@@ -73,7 +92,7 @@ class DiskClip:
     frame_start: int = 0
     frame_step: int = 1
     crop: tuple[int, ...] = ()
-    source_size: tuple[int, ...] = ()   # (height, width) of the decoded source frames
+    source_size: tuple[int, ...] = ()  # (height, width) of the decoded source frames
     owned: bool = False
 
     @property
@@ -87,9 +106,19 @@ class DiskClip:
 
     def source_info(self) -> SourceInfo:
         h, w, c = self.frame_shape
-        return SourceInfo(filename=self.filename, sha256=self.sha256, fps=self.fps, width=w, height=h, channels=c,
-                          n_frames=self.n_frames, frame_start=self.frame_start, frame_step=self.frame_step,
-                          crop=self.crop, source_size=self.source_size)
+        return SourceInfo(
+            filename=self.filename,
+            sha256=self.sha256,
+            fps=self.fps,
+            width=w,
+            height=h,
+            channels=c,
+            n_frames=self.n_frames,
+            frame_start=self.frame_start,
+            frame_step=self.frame_step,
+            crop=self.crop,
+            source_size=self.source_size,
+        )
 
     def frames(self, t0: int = 0, t1: int | None = None) -> np.ndarray:
         """Frames ``t0:t1`` read into memory, ``(t1 - t0, H, W, C)`` uint8."""
@@ -128,10 +157,20 @@ class DiskClip:
         self.close()
 
 
-def spill_clip(source: str | os.PathLike, *, folder: str | None = None, start: int = 0, stop: int | None = None,
-               step: int = 1, crop: Sequence[int] | None = None, size: Sequence[int] | None = None,
-               color: bool = True, fps: float | None = None, isolate: bool = False,
-               progress: Progress | None = None) -> DiskClip:
+def spill_clip(
+    source: str | os.PathLike,
+    *,
+    folder: str | None = None,
+    start: int = 0,
+    stop: int | None = None,
+    step: int = 1,
+    crop: Sequence[int] | None = None,
+    size: Sequence[int] | None = None,
+    color: bool = True,
+    fps: float | None = None,
+    isolate: bool = False,
+    progress: Progress | None = None,
+) -> DiskClip:
     """Decode a clip frame by frame into a raw file, never holding more than one frame.
 
     Same sources and options as :func:`~dynatex.analyzer.load_clip`, with the same
@@ -161,9 +200,20 @@ def spill_clip(source: str | os.PathLike, *, folder: str | None = None, start: i
         os.unlink(out)
         raise
     shape, n, src_fps, digest, source_size = meta
-    return DiskClip(path=out, offset=0, frame_shape=shape, n_frames=n, fps=float(fps or src_fps),
-                    filename=os.path.basename(os.path.normpath(path)), sha256=digest, frame_start=start,
-                    frame_step=step, crop=crop_t or (), source_size=source_size, owned=True)
+    return DiskClip(
+        path=out,
+        offset=0,
+        frame_shape=shape,
+        n_frames=n,
+        fps=float(fps or src_fps),
+        filename=os.path.basename(os.path.normpath(path)),
+        sha256=digest,
+        frame_start=start,
+        frame_step=step,
+        crop=crop_t or (),
+        source_size=source_size,
+        owned=True,
+    )
 
 
 def _npy_direct(path: str, color: bool, fps: float | None) -> DiskClip | None:
@@ -191,9 +241,16 @@ def _npy_direct(path: str, color: bool, fps: float | None) -> DiskClip | None:
         f.seek(offset)
         for block in iter(lambda: f.read(1 << 22), b""):
             h.update(block)
-    return DiskClip(path=os.path.abspath(path), offset=offset, frame_shape=frame_shape, n_frames=n,
-                    fps=float(fps or 25.0), filename=os.path.basename(path), sha256=h.hexdigest(),
-                    source_size=(shape[1], shape[2]))
+    return DiskClip(
+        path=os.path.abspath(path),
+        offset=offset,
+        frame_shape=frame_shape,
+        n_frames=n,
+        fps=float(fps or 25.0),
+        filename=os.path.basename(path),
+        sha256=h.hexdigest(),
+        source_size=(shape[1], shape[2]),
+    )
 
 
 def _spill(path, out, start, stop, step, crop, size, color, progress):
@@ -216,14 +273,17 @@ def _spill(path, out, start, stop, step, crop, size, color, progress):
             if progress:
                 progress(n, None)
     if n < 2:
-        raise ClipError(f"{name}: {'no frames' if n == 0 else 'only one frame'} in range start={start} "
-                        f"stop={stop} step={step}; a dynamic texture needs at least 2")
+        raise ClipError(
+            f"{name}: {'no frames' if n == 0 else 'only one frame'} in range start={start} "
+            f"stop={stop} step={step}; a dynamic texture needs at least 2"
+        )
     return tuple(shape), n, src_fps, digest(), tuple(source_size)
 
 
 def _frame_source(path: str, start: int, stop: int | None, step: int):
     """(iterator of RGB frames in range, fps, callable giving the sha256 once the iterator is spent)."""
     from .video import _file_digest
+
     if os.path.isdir(path):
         names = sorted(n for n in os.listdir(path) if n.lower().endswith(IMAGE_SUFFIXES))
         if not names:
@@ -234,14 +294,16 @@ def _frame_source(path: str, start: int, stop: int | None, step: int):
     if path.endswith(".npy"):
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
         from .video import _from_array
+
         digest = hashlib.sha256()
 
         def gen() -> Iterator[np.ndarray]:
             for i in range(arr.shape[0]):
                 digest.update(np.ascontiguousarray(arr[i]).data)
             for i in range(start, arr.shape[0] if stop is None else min(stop, arr.shape[0]), step):
-                one = _from_array(np.asarray(arr[i:i + 1]))[0]
+                one = _from_array(np.asarray(arr[i : i + 1]))[0]
                 yield one if one.shape[-1] == 3 else np.repeat(one, 3, axis=-1)
+
         return gen(), 25.0, digest.hexdigest
     if os.path.getsize(path) == 0:
         raise ClipError(f"{path}: file is empty")
@@ -253,6 +315,7 @@ def _images(folder: str, names: list[str], h) -> Iterator[np.ndarray]:
     import cv2
 
     from .video import _file_digest
+
     for n in names:
         full = os.path.join(folder, n)
         img = cv2.imread(full, cv2.IMREAD_COLOR)
@@ -264,6 +327,7 @@ def _images(folder: str, names: list[str], h) -> Iterator[np.ndarray]:
 
 def _video_frames(path: str, start: int, stop: int | None, step: int):
     import cv2
+
     cap = cv2.VideoCapture(path)
     if not cap.isOpened():
         cap.release()
@@ -288,11 +352,13 @@ def _video_frames(path: str, start: int, stop: int | None, step: int):
             cap.release()
         if index == 0:
             raise ClipError(f"{path}: no frame could be decoded")
+
     return gen(), fps
 
 
 def _spill_isolated(path, out, start, stop, step, crop, size, color):
     import multiprocessing as mp
+
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
     proc = ctx.Process(target=_spill_entry, args=(q, path, out, start, stop, step, crop, size, color), daemon=True)
@@ -304,8 +370,10 @@ def _spill_isolated(path, out, start, stop, step, crop, size, color):
     if result is not None and result[0] != "ok":
         kind, msg = result
         raise (FileNotFoundError if kind == "FileNotFoundError" else ClipError)(msg)
-    raise ClipError(f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
-                    "re-encode the clip (for example to FFV1 or H.264) and try again")
+    raise ClipError(
+        f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
+        "re-encode the clip (for example to FFV1 or H.264) and try again"
+    )
 
 
 def _spill_entry(q, *args) -> None:

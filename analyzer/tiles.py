@@ -24,7 +24,8 @@ Pipeline (each step is a public function, so it can be tested and reused):
    of a class is the class's primary toroidal tile ``P`` outside a closed minimum cut and
    the loop at another place of the clip inside it (four DP cuts inside a ring of width
    ``r`` along the edges, costed by what the output holds across them, ``P`` fading into
-   the other place over ``max(2, r // 2)`` pixels past the cut). All tiles of a class therefore carry exactly ``P``'s pixels along
+   the other place over ``max(2, r // 2)`` pixels past the cut). All tiles of a class
+   therefore carry exactly ``P``'s pixels along
    their edges; since ``P`` tiles seamlessly with itself, any two tiles of the class sit
    next to each other, in any arrangement, exactly as ``P`` sits next to ``P``. The price:
    ``P``'s ring shows at every tile, a lattice that calm textures make visible
@@ -62,9 +63,10 @@ Pipeline (each step is a public function, so it can be tested and reused):
    so both sides of the edge show ``c``'s toroidal primary (see :mod:`dynatex.player.tiles`).
 8. Colour statistics per tile (mean RGB and HSV) for tone fitting.
 """
+
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -81,8 +83,8 @@ from .video import Clip, Progress
 DEFAULT_MIN_TILE = 32
 DEFAULT_MAX_TILE = 256
 MAX_STEP = 3
-_SAMPLE_FRAMES = 48       # loop frames summed in the cut errors (evenly spread)
-_PRE_FRAMES = 12          # loop frames used to rank candidate positions
+_SAMPLE_FRAMES = 48  # loop frames summed in the cut errors (evenly spread)
+_PRE_FRAMES = 12  # loop frames used to rank candidate positions
 
 
 # -- 1. tile size ------------------------------------------------------------------------------
@@ -91,8 +93,9 @@ def _grey(frames: np.ndarray) -> np.ndarray:
     return f @ np.array([0.299, 0.587, 0.114], np.float32) if f.shape[-1] == 3 else f[..., 0]
 
 
-def tile_period(frames: np.ndarray, *, min_tile: int = DEFAULT_MIN_TILE, max_tile: int = DEFAULT_MAX_TILE,
-                n_frames: int = 8) -> tuple[tuple[int, int], tuple[float, float], float]:
+def tile_period(
+    frames: np.ndarray, *, min_tile: int = DEFAULT_MIN_TILE, max_tile: int = DEFAULT_MAX_TILE, n_frames: int = 8
+) -> tuple[tuple[int, int], tuple[float, float], float]:
     """Tile size from the dominant spatial periodicity.
 
     Returns ``((th, tw), (period_y, period_x), strength)``: ``strength`` is the peak of the
@@ -131,7 +134,7 @@ def tile_period(frames: np.ndarray, *, min_tile: int = DEFAULT_MIN_TILE, max_til
     default = max(min_tile, min(max_tile, (min(h, w) // 4) // 8 * 8))
 
     def size(period: float, side: int) -> int:
-        hi = max(min_tile, min(max_tile, (2 * side) // 3))          # room for the overlap bands
+        hi = max(min_tile, min(max_tile, (2 * side) // 3))  # room for the overlap bands
         if strength >= 30 and np.isfinite(period) and period >= 2:
             m = int(np.ceil(min_tile / period))
             s = int(round(m * period))
@@ -148,13 +151,20 @@ def _thumbs(frames: np.ndarray, side: int = 48) -> np.ndarray:
     sy, sx = max(1, h // side), max(1, w // side)
     g = np.empty((t, h // sy, w // sx), np.float32)
     for i in range(0, t, 64):
-        gg = _grey(frames[i:i + 64, : (h // sy) * sy, : (w // sx) * sx])
-        g[i:i + 64] = gg.reshape(gg.shape[0], h // sy, sy, w // sx, sx).mean(axis=(2, 4))
+        gg = _grey(frames[i : i + 64, : (h // sy) * sy, : (w // sx) * sx])
+        g[i : i + 64] = gg.reshape(gg.shape[0], h // sy, sy, w // sx, sx).mean(axis=(2, 4))
     return g.reshape(t, -1)
 
 
-def find_loop(frames: np.ndarray, *, min_loop: int, max_loop: int | None = None, transition: int = 8,
-              length: int | None = None, prefer_long: float = 0.5) -> tuple[int, int, float]:
+def find_loop(
+    frames: np.ndarray,
+    *,
+    min_loop: int,
+    max_loop: int | None = None,
+    transition: int = 8,
+    length: int | None = None,
+    prefer_long: float = 0.5,
+) -> tuple[int, int, float]:
     """``(start, length, cost)`` of the best loop.
 
     ``cost`` is the mean RMS thumbnail difference between the frame sets
@@ -165,13 +175,15 @@ def find_loop(frames: np.ndarray, *, min_loop: int, max_loop: int | None = None,
     o = transition
     if length is not None:
         if t < length + o:
-            raise InvalidArgumentError(f"clip has {t} frames, fewer than the loop length {length} plus the "
-                             f"transition {o}")
+            raise InvalidArgumentError(
+                f"clip has {t} frames, fewer than the loop length {length} plus the transition {o}"
+            )
         lengths = [length]
     else:
         if t < min_loop + o:
-            raise InvalidArgumentError(f"clip has {t} frames, fewer than the shortest loop: min_loop={min_loop} "
-                             f"plus transition={o} frames")
+            raise InvalidArgumentError(
+                f"clip has {t} frames, fewer than the shortest loop: min_loop={min_loop} plus transition={o} frames"
+            )
         hi = t - o if max_loop is None else min(max_loop, t - o)
         lengths = list(range(min_loop, hi + 1))
     th = _thumbs(frames)
@@ -182,7 +194,7 @@ def find_loop(frames: np.ndarray, *, min_loop: int, max_loop: int | None = None,
     best = (np.inf, 0, lengths[0], np.inf)
     for ln in lengths:
         n_start = t - ln - o + 1
-        diag = np.diag(d, ln)                       # d[i, i + ln]
+        diag = np.diag(d, ln)  # d[i, i + ln]
         c = np.lib.stride_tricks.sliding_window_view(diag[: n_start + o - 1], o).mean(axis=1)[:n_start] / med
         s = int(np.argmin(c))
         score = float(c[s]) + prefer_long * (lmax - ln) / lmax
@@ -194,6 +206,7 @@ def find_loop(frames: np.ndarray, *, min_loop: int, max_loop: int | None = None,
 def transition_map(frames: np.ndarray, start: int, length: int, transition: int, *, sigma: float = 3.0) -> np.ndarray:
     """Per-pixel transition frame ``tau (H, W)`` in ``[0, transition)`` (see the module docstring)."""
     import cv2
+
     o = transition
     h, w = frames.shape[1:3]
     cost = np.empty((o, h, w), np.float32)
@@ -203,19 +216,28 @@ def transition_map(frames: np.ndarray, start: int, length: int, transition: int,
     return np.argmin(cost, axis=0).astype(np.int32)
 
 
-def looped_block(frames: np.ndarray, start: int, length: int, tau: np.ndarray, y: int, x: int, h: int, w: int,
-                 u: Sequence[int] | None = None) -> np.ndarray:
+def looped_block(
+    frames: np.ndarray,
+    start: int,
+    length: int,
+    tau: np.ndarray,
+    y: int,
+    x: int,
+    h: int,
+    w: int,
+    u: Sequence[int] | None = None,
+) -> np.ndarray:
     """Frames ``u`` (default all ``0..L-1``) of the seamless loop, block ``[y:y+h, x:x+w]``, uint8."""
     u = np.arange(length) if u is None else np.asarray(u)
-    tb = tau[y:y + h, x:x + w]
+    tb = tau[y : y + h, x : x + w]
     out = np.empty((len(u), h, w, frames.shape[3]), np.uint8)
     tmax = int(tb.max()) if tb.size else 0
     for i, uu in enumerate(u):
-        early = frames[start + uu, y:y + h, x:x + w]
-        if uu >= tmax:                      # every pixel has passed its transition
+        early = frames[start + uu, y : y + h, x : x + w]
+        if uu >= tmax:  # every pixel has passed its transition
             out[i] = early
         else:
-            out[i] = np.where((uu < tb)[..., None], frames[start + length + uu, y:y + h, x:x + w], early)
+            out[i] = np.where((uu < tb)[..., None], frames[start + length + uu, y : y + h, x : x + w], early)
     return out
 
 
@@ -223,6 +245,7 @@ def looped_block(frames: np.ndarray, start: int, length: int, tau: np.ndarray, y
 def flow_magnitude(frames: np.ndarray, start: int, length: int, *, pairs: int = 6, max_side: int = 320) -> np.ndarray:
     """Mean Farneback optical-flow magnitude ``(H, W)`` in full-resolution pixels per frame."""
     import cv2
+
     t, h, w = frames.shape[:3]
     scale = min(1.0, max_side / max(h, w))
     size = (max(8, int(round(w * scale))), max(8, int(round(h * scale))))
@@ -242,8 +265,9 @@ def _steps(flow_rows: np.ndarray, flow_gain: float) -> np.ndarray:
 
 
 # -- 5. dynamic-programming cuts ---------------------------------------------------------------
-def _dp(err: np.ndarray, steps: np.ndarray, start: np.ndarray | None,
-        move: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+def _dp(
+    err: np.ndarray, steps: np.ndarray, start: np.ndarray | None, move: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
     """Minimum path through ``err (n, m)`` moving at most ``steps[i]`` columns per row.
 
     ``start``: allowed start columns (None: any). ``move (n,)``: cost per column moved on
@@ -302,8 +326,9 @@ def _sample(length: int, n: int) -> np.ndarray:
     return np.unique(np.linspace(0, length - 1, min(n, length)).round().astype(int))
 
 
-def toroidal_tile(block: np.ndarray, th: int, tw: int, *, flow: np.ndarray | None = None,
-                  flow_gain: float = 0.5) -> tuple[np.ndarray, float, float]:
+def toroidal_tile(
+    block: np.ndarray, th: int, tw: int, *, flow: np.ndarray | None = None, flow_gain: float = 0.5
+) -> tuple[np.ndarray, float, float]:
     """Cut a ``(L, th + b, tw + b, 3)`` looped block into a ``(L, th, tw, 3)`` tile that tiles the plane.
 
     Returns ``(tile, cost_h, cost_v)``: mean squared RGB error per frame along the cuts.
@@ -318,26 +343,26 @@ def toroidal_tile(block: np.ndarray, th: int, tw: int, *, flow: np.ndarray | Non
     flow = np.zeros((hb, wb), np.float32) if flow is None else flow
     # horizontal wrap: column x of the tile is block column x + tw left of the cut (continuing
     # the right edge), block column x from the cut on. Rows y and y + th share one cut.
-    d = sub[:, :, tw:tw + bx] - sub[:, :, :bx]
-    eh = (d * d).sum(axis=(0, 3)) / len(u)                     # (hb, bx)
+    d = sub[:, :, tw : tw + bx] - sub[:, :, :bx]
+    eh = (d * d).sum(axis=(0, 3)) / len(u)  # (hb, bx)
     e_rows = eh[:th].copy()
-    e_rows[:by] += eh[th:th + by]
-    e_rows[:, 0] = 1e30                                          # cut >= 1: column 0 continues column tw - 1
+    e_rows[:by] += eh[th : th + by]
+    e_rows[:, 0] = 1e30  # cut >= 1: column 0 continues column tw - 1
     steps = _steps(flow[:th, :bx].mean(axis=1), flow_gain)
     cut_h, cost_h = circular_cut(e_rows, steps)
     cut_rows = np.concatenate([cut_h, cut_h[:by]])
     xx = np.arange(tw)[None, :]
-    left = xx < cut_rows[:, None]                                # (hb, tw)
+    left = xx < cut_rows[:, None]  # (hb, tw)
     mid = np.where(left[None, :, :, None], _shift_cols(block, tw), block[:, :, :tw])
     # vertical wrap on the x-periodic intermediate (hb, tw): a closed path in x.
     subm = mid[u].astype(np.float32)
-    d = subm[:, th:th + by] - subm[:, :by]
-    ev = (d * d).sum(axis=(0, 3)).T / len(u)                     # (tw, by)
+    d = subm[:, th : th + by] - subm[:, :by]
+    ev = (d * d).sum(axis=(0, 3)).T / len(u)  # (tw, by)
     ev[:, 0] = 1e30
     steps = _steps(flow[:by, :tw].mean(axis=0), flow_gain)
     cut_v, cost_v = circular_cut(ev, steps)
     yy = np.arange(th)[:, None]
-    top = yy < cut_v[None, :]                                    # (th, tw)
+    top = yy < cut_v[None, :]  # (th, tw)
     tile = np.where(top[None, :, :, None], _shift_rows(mid, th), mid[:, :th])
     return np.ascontiguousarray(tile), cost_h, cost_v
 
@@ -358,8 +383,15 @@ def _shift_rows(block: np.ndarray, th: int) -> np.ndarray:
 
 
 # -- 6. ring join -------------------------------------------------------------------------------
-def ring_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, *, flow: np.ndarray | None = None,
-              flow_gain: float = 0.5, feather: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+def ring_join(
+    ring_tile: np.ndarray,
+    inner: np.ndarray,
+    ring: int,
+    *,
+    flow: np.ndarray | None = None,
+    flow_gain: float = 0.5,
+    feather: int = 0,
+) -> tuple[np.ndarray, np.ndarray, float]:
     """``ring_tile`` outside a closed minimum cut, ``inner`` inside it.
 
     The cut runs inside a ring of width ``ring`` along the four edges: four DP paths (left,
@@ -381,8 +413,9 @@ def ring_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, *, flow: np.n
     # per side (oriented as the left edge): path over rows, column c in 1..ring = first pixel
     # past the cut; the cost is what the output holds across the cut (see _cut_cost)
     for side in ("left", "right", "top", "bottom"):
-        e, move = _cut_cost(_orient(ring_tile, side, tile_axes=(1, 2)), _orient(inner, side, tile_axes=(1, 2)),
-                            ring, feather, u)
+        e, move = _cut_cost(
+            _orient(ring_tile, side, tile_axes=(1, 2)), _orient(inner, side, tile_axes=(1, 2)), ring, feather, u
+        )
         fl = _orient(flow, side, tile_axes=(0, 1))
         path, cost = _dp(e, _steps(fl[:, :ring].mean(axis=1), flow_gain), None, move)
         costs.append(cost)
@@ -396,6 +429,7 @@ def ring_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, *, flow: np.n
             mask |= yy >= th - path[None, :]
     if feather > 0:
         import cv2
+
         dist = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, 3)
         alpha = np.clip(1.0 - dist / float(feather + 1), 0.0, 1.0)
         weight = np.rint(255 * alpha).astype(np.uint8)
@@ -446,7 +480,7 @@ def _cut_cost(rt: np.ndarray, it: np.ndarray, ring: int, feather: int, u: np.nda
     k = ring + 1
     rs = rt[u, :, :k].astype(np.float32)
     blend = a1 * rs + (1.0 - a1) * it[u, :, :k].astype(np.float32)
-    d = rs[:, :, :k - 1] - blend[:, :, 1:k]                      # rt at x-1 | blend at x, x = 1..ring
+    d = rs[:, :, : k - 1] - blend[:, :, 1:k]  # rt at x-1 | blend at x, x = 1..ring
     e = np.empty((n, k), np.float32)
     e[:, 0] = 1e30
     e[:, 1:] = (d * d).sum(axis=(0, 3)) / len(u)
@@ -455,8 +489,16 @@ def _cut_cost(rt: np.ndarray, it: np.ndarray, ring: int, feather: int, u: np.nda
     return e, move
 
 
-def side_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, side: str, *, feather: int = 0,
-              flow: np.ndarray | None = None, flow_gain: float = 0.5) -> tuple[np.ndarray, np.ndarray, float]:
+def side_join(
+    ring_tile: np.ndarray,
+    inner: np.ndarray,
+    ring: int,
+    side: str,
+    *,
+    feather: int = 0,
+    flow: np.ndarray | None = None,
+    flow_gain: float = 0.5,
+) -> tuple[np.ndarray, np.ndarray, float]:
     """A border tile: ``inner`` with a strip of ``ring_tile`` along one ``side``.
 
     The strip ends at a closed minimum-error DP path (circular along the edge, so strips of
@@ -477,7 +519,7 @@ def side_join(ring_tile: np.ndarray, inner: np.ndarray, ring: int, side: str, *,
     fl = np.zeros((n, m), np.float32) if flow is None else _orient(flow, side, tile_axes=(0, 1))
     path, cost = circular_cut(e, _steps(fl[:, :ring].mean(axis=1), flow_gain), move)
     xx = np.arange(m)[None, :]
-    beyond = (xx - path[:, None] + 1).astype(np.float32)        # 1 at the first pixel past the strip
+    beyond = (xx - path[:, None] + 1).astype(np.float32)  # 1 at the first pixel past the strip
     alpha = np.where(xx < path[:, None], 1.0, np.clip(1.0 - beyond / float(feather + 1), 0.0, 1.0))
     weight = np.rint(255 * alpha).astype(np.uint8)
     a = (weight.astype(np.float32) / 255)[None, :, :, None]
@@ -529,7 +571,7 @@ def corner_cut(hs: np.ndarray, vs: np.ndarray, band: int) -> np.ndarray:
                 continue
             best = min(acc[i - 1, j] if i else np.inf, acc[i, j - 1] if j else np.inf)
             acc[i, j] = cost[i, j] + best
-    first = np.full(d, d, np.int64)          # per row, the path's first column
+    first = np.full(d, d, np.int64)  # per row, the path's first column
     i, j = d - 1, d - 1
     while True:
         first[i] = min(first[i], j)
@@ -542,8 +584,14 @@ def corner_cut(hs: np.ndarray, vs: np.ndarray, band: int) -> np.ndarray:
     return jj >= first[:, None]
 
 
-def wang_ring(hstrips: Sequence[np.ndarray], vstrips: Sequence[np.ndarray], edges: Sequence[int], depth: int,
-              *, band: int | None = None) -> np.ndarray:
+def wang_ring(
+    hstrips: Sequence[np.ndarray],
+    vstrips: Sequence[np.ndarray],
+    edges: Sequence[int],
+    depth: int,
+    *,
+    band: int | None = None,
+) -> np.ndarray:
     """The boundary of a Wang tile: halves of its four edge strips, joined at the corners.
 
     ``hstrips[c]`` is a horizontal edge strip ``(L, 2 depth, tw, 3)``: its upper half is the
@@ -562,17 +610,21 @@ def wang_ring(hstrips: Sequence[np.ndarray], vstrips: Sequence[np.ndarray], edge
         raise InvalidArgumentError(f"depth must be in 1..{min(th, tw) // 2} for a {th}x{tw} tile, not {d}")
     hc = np.zeros((length, th, tw, 3), np.uint8)
     vc = np.zeros_like(hc)
-    hc[:, :d], hc[:, th - d:] = hstrips[n][:, d:], hstrips[s][:, :d]
-    vc[:, :, :d], vc[:, :, tw - d:] = vstrips[w][:, :, d:], vstrips[e][:, :, :d]
+    hc[:, :d], hc[:, th - d :] = hstrips[n][:, d:], hstrips[s][:, :d]
+    vc[:, :, :d], vc[:, :, tw - d :] = vstrips[w][:, :, d:], vstrips[e][:, :, :d]
     yy, xx = np.arange(th)[:, None], np.arange(tw)[None, :]
     in_h = (yy < d) | (yy >= th - d)
     in_v = (xx < d) | (xx >= tw - d)
     take_h = in_h & ~in_v
     u = _sample(length, _PRE_FRAMES)
     band = max(1, d // 3) if band is None else band
-    for ys, xs in ((slice(0, d), slice(0, d)), (slice(0, d), slice(tw - d, tw)),
-                   (slice(th - d, th), slice(0, d)), (slice(th - d, th), slice(tw - d, tw))):
-        fy, fx = ys.start > 0, xs.start > 0          # flip so the tile's corner is at (0, 0)
+    for ys, xs in (
+        (slice(0, d), slice(0, d)),
+        (slice(0, d), slice(tw - d, tw)),
+        (slice(th - d, th), slice(0, d)),
+        (slice(th - d, th), slice(tw - d, tw)),
+    ):
+        fy, fx = ys.start > 0, xs.start > 0  # flip so the tile's corner is at (0, 0)
         h_sq, v_sq = hc[u][:, ys, xs], vc[u][:, ys, xs]
         if fy:
             h_sq, v_sq = h_sq[:, ::-1], v_sq[:, ::-1]
@@ -585,16 +637,17 @@ def wang_ring(hstrips: Sequence[np.ndarray], vstrips: Sequence[np.ndarray], edge
 
 
 # -- 6c. quilted torus ------------------------------------------------------------------------------
-QUILT_MAX_RUN = 3         # blocks at most taken from one continuous piece of the clip, per direction
-QUILT_MIN_PERIOD = 512    # the torus is at least this large (and twice the clip) in each direction
-QUILT_MAX_PERIOD = 768    # ... but twice the clip only up to this
-QUILT_MAX_LOOP = 64       # default longest loop of the quilted construction (the torus is stored whole)
+QUILT_MAX_RUN = 3  # blocks at most taken from one continuous piece of the clip, per direction
+QUILT_MIN_PERIOD = 512  # the torus is at least this large (and twice the clip) in each direction
+QUILT_MAX_PERIOD = 768  # ... but twice the clip only up to this
+QUILT_MAX_LOOP = 64  # default longest loop of the quilted construction (the torus is stored whole)
 _QUILT_FEATURE_FRAMES = 12
 _QUILT_COMPONENTS = 8
 
 
-def quilt_geometry(h: int, w: int, *, block: int | None = None, period: Sequence[int] | None = None
-                   ) -> tuple[int, int, tuple[int, int], tuple[int, int]]:
+def quilt_geometry(
+    h: int, w: int, *, block: int | None = None, period: Sequence[int] | None = None
+) -> tuple[int, int, tuple[int, int], tuple[int, int]]:
     """``(block, step, cell, period)`` of the quilted torus for an ``h x w`` clip.
 
     Blocks of ``block`` pixels (default a third of the shorter side rounded to 8, in 16..128) overlap
@@ -613,8 +666,10 @@ def quilt_geometry(h: int, w: int, *, block: int | None = None, period: Sequence
     step = block - block // 4
     cell = step * -(-64 // step)
     if period is None:
-        want = (max(min(QUILT_MIN_PERIOD, 4 * h), min(2 * h, QUILT_MAX_PERIOD)),
-                max(min(QUILT_MIN_PERIOD, 4 * w), min(2 * w, QUILT_MAX_PERIOD)))
+        want = (
+            max(min(QUILT_MIN_PERIOD, 4 * h), min(2 * h, QUILT_MAX_PERIOD)),
+            max(min(QUILT_MIN_PERIOD, 4 * w), min(2 * w, QUILT_MAX_PERIOD)),
+        )
     else:
         try:
             want = tuple(int(v) for v in period)
@@ -631,6 +686,7 @@ def _block_cut(err: np.ndarray, side: str, margin: int) -> np.ndarray:
     overlap band along ``side`` (``err``: the band's per-pixel error, across x for left/right).
     The cut keeps ``margin`` pixels from both edges of the band, so its cross-fade stays inside."""
     from .quilt import min_cut_path
+
     b = max(err.shape)
     err = np.array(err, np.float64)
     across = err.shape[1] if side in ("left", "right") else err.shape[0]
@@ -674,9 +730,16 @@ def _reuse_order(i: int, j: int, nby: int, nbx: int) -> list[tuple[int, int]]:
     return out
 
 
-def quilted_torus(tx: _Texture, *, block: int | None = None, period: Sequence[int] | None = None,
-                  feather: int | None = None, tolerance: float = 0.2, seed: int = 0,
-                  step_done=None) -> tuple[np.ndarray, dict]:
+def quilted_torus(
+    tx: _Texture,
+    *,
+    block: int | None = None,
+    period: Sequence[int] | None = None,
+    feather: int | None = None,
+    tolerance: float = 0.2,
+    seed: int = 0,
+    step_done=None,
+) -> tuple[np.ndarray, dict]:
     """A large toroidal texture quilted from spatio-temporal blocks of the looped clip.
 
     Blocks of ``B x B`` pixels carried through the whole loop are placed on a torus
@@ -696,6 +759,7 @@ def quilted_torus(tx: _Texture, *, block: int | None = None, period: Sequence[in
     import cv2
 
     from .quilt import block_errors
+
     f = tx.frames
     h, w = f.shape[1:3]
     b, step, _, (py, px) = quilt_geometry(h, w, block=block, period=period)
@@ -707,7 +771,7 @@ def quilted_torus(tx: _Texture, *, block: int | None = None, period: Sequence[in
     rng = np.random.default_rng(seed)
     u_feat = _sample(length, _QUILT_FEATURE_FRAMES)
     u_cut = _sample(length, 16)
-    loop_feat = tx.block(0, 0, h, w, u_feat).astype(np.float32)               # (n, h, w, 3)
+    loop_feat = tx.block(0, 0, h, w, u_feat).astype(np.float32)  # (n, h, w, 3)
     feat = loop_feat.transpose(1, 2, 0, 3).reshape(h * w, -1)
     # the comparisons run on the leading principal components of the sampled frames (a third
     # of the channels: matchTemplate's time is proportional to them)
@@ -716,7 +780,7 @@ def quilted_torus(tx: _Texture, *, block: int | None = None, period: Sequence[in
     basis = vt[:_QUILT_COMPONENTS].T.astype(np.float32)
     features = np.ascontiguousarray(((feat - mean) @ basis).reshape(h, w, -1))
     torus = np.zeros((length, py, px, 3), np.uint8)
-    src = np.full((nby, nbx, 2), -10**6, np.int64)
+    src = np.full((nby, nbx, 2), -(10**6), np.int64)
     run_x = np.zeros((nby, nbx), np.int64)
     run_y = np.zeros((nby, nbx), np.int64)
     costs = []
@@ -726,12 +790,26 @@ def quilted_torus(tx: _Texture, *, block: int | None = None, period: Sequence[in
         for j in range(nbx):
             rows = (i * step + np.arange(b)) % py
             cols = (j * step + np.arange(b)) % px
-            sides = [s for s, on in (("left", j > 0), ("top", i > 0), ("right", j == nbx - 1 and nbx > 1),
-                                     ("bottom", i == nby - 1 and nby > 1)) if on]
+            sides = [
+                s
+                for s, on in (
+                    ("left", j > 0),
+                    ("top", i > 0),
+                    ("right", j == nbx - 1 and nbx > 1),
+                    ("bottom", i == nby - 1 and nby > 1),
+                )
+                if on
+            ]
             mask = np.zeros((b, b), bool)
             for s in sides:
-                mask[{"left": (slice(None), slice(0, o)), "right": (slice(None), slice(b - o, b)),
-                      "top": (slice(0, o), slice(None)), "bottom": (slice(b - o, b), slice(None))}[s]] = True
+                mask[
+                    {
+                        "left": (slice(None), slice(0, o)),
+                        "right": (slice(None), slice(b - o, b)),
+                        "top": (slice(0, o), slice(None)),
+                        "bottom": (slice(b - o, b), slice(None)),
+                    }[s]
+                ] = True
             if not sides:
                 y0, x0 = int(rng.integers(0, h - b + 1)), int(rng.integers(0, w - b + 1))
                 torus[:, rows[:, None], cols[None, :]] = tx.block(y0, x0, b, b)
@@ -740,8 +818,9 @@ def quilted_torus(tx: _Texture, *, block: int | None = None, period: Sequence[in
                     step_done()
                 continue
             old_feat = torus[u_feat[:, None, None], rows[None, :, None], cols[None, None, :]].astype(np.float32)
-            template = np.ascontiguousarray(((old_feat.transpose(1, 2, 0, 3).reshape(b * b, -1) - mean) @ basis)
-                                            .reshape(b, b, -1))
+            template = np.ascontiguousarray(
+                ((old_feat.transpose(1, 2, 0, 3).reshape(b * b, -1) - mean) @ basis).reshape(b, b, -1)
+            )
             e = block_errors(features, template, mask).astype(np.float64)
             # no piece of clip again within QUILT_REUSE blocks (on the torus), nearest first, as
             # long as a tenth of the places stay open (a motif repeated at a few blocks' lag
@@ -751,7 +830,10 @@ def quilted_torus(tx: _Texture, *, block: int | None = None, period: Sequence[in
                 cy, cx = src[ni, nj]
                 if cy < 0:
                     continue
-                ys, xs = slice(max(0, cy - r_ex), max(0, cy + r_ex + 1)), slice(max(0, cx - r_ex), max(0, cx + r_ex + 1))
+                ys, xs = (
+                    slice(max(0, cy - r_ex), max(0, cy + r_ex + 1)),
+                    slice(max(0, cx - r_ex), max(0, cx + r_ex + 1)),
+                )
                 open_here = int(np.isfinite(e[ys, xs]).sum())
                 if int(np.isfinite(e).sum()) - open_here < keep_open:
                     break
@@ -760,8 +842,8 @@ def quilted_torus(tx: _Texture, *, block: int | None = None, period: Sequence[in
             for (ni, nj), run, (dy, dx) in ((((i, j - 1), run_x, (0, step))), (((i - 1, j), run_y, (step, 0)))):
                 if ni >= 0 and nj >= 0 and run[ni, nj] >= QUILT_MAX_RUN - 1:
                     cy, cx = src[ni, nj] + (dy, dx)
-                    e[max(0, cy - r_ex):max(0, cy + r_ex + 1), max(0, cx - r_ex):max(0, cx + r_ex + 1)] = np.inf
-            if not np.isfinite(e).any():          # a tiny clip: every place is excluded
+                    e[max(0, cy - r_ex) : max(0, cy + r_ex + 1), max(0, cx - r_ex) : max(0, cx + r_ex + 1)] = np.inf
+            if not np.isfinite(e).any():  # a tiny clip: every place is excluded
                 e = block_errors(features, template, mask).astype(np.float64)
             best = float(e.min())
             cand = np.flatnonzero(e.ravel() <= best * (1.0 + tolerance) + 1e-6 * (1.0 + best))
@@ -773,7 +855,7 @@ def quilted_torus(tx: _Texture, *, block: int | None = None, period: Sequence[in
             d = new[u_cut].astype(np.float32) - old[u_cut].astype(np.float32)
             perr = (d * d).sum(axis=(0, 3)) / len(u_cut)
             keep = np.ones((b, b), bool)
-            band = {"left": perr[:, :o], "right": perr[:, b - o:], "top": perr[:o, :], "bottom": perr[b - o:, :]}
+            band = {"left": perr[:, :o], "right": perr[:, b - o :], "top": perr[:o, :], "bottom": perr[b - o :, :]}
             for s in sides:
                 keep &= _block_cut(band[s], s, fe + 1)
             costs.append(float(perr[mask & keep].mean()) if (mask & keep).any() else 0.0)
@@ -794,8 +876,14 @@ def quilted_torus(tx: _Texture, *, block: int | None = None, period: Sequence[in
                 run_y[i, j] = run_y[i - 1, j] + 1
             if step_done:
                 step_done()
-    info = {"quilt_block": b, "quilt_step": step, "quilt_feather": fe, "period_h": py, "period_w": px,
-            "quilt_seam_cost": float(np.mean(costs)) if costs else 0.0}
+    info = {
+        "quilt_block": b,
+        "quilt_step": step,
+        "quilt_feather": fe,
+        "period_h": py,
+        "period_w": px,
+        "quilt_seam_cost": float(np.mean(costs)) if costs else 0.0,
+    }
     return torus, info
 
 
@@ -804,12 +892,13 @@ def torus_cells(torus: np.ndarray, cell: Sequence[int]) -> np.ndarray:
     length, py, px, c = torus.shape
     ch, cw = cell
     m, n = py // ch, px // cw
-    return np.ascontiguousarray(torus.reshape(length, m, ch, n, cw, c).transpose(1, 3, 0, 2, 4, 5)
-                                .reshape(m * n, length, ch, cw, c))
+    return np.ascontiguousarray(
+        torus.reshape(length, m, ch, n, cw, c).transpose(1, 3, 0, 2, 4, 5).reshape(m * n, length, ch, cw, c)
+    )
 
 
 # -- 9. spatial stationarity ---------------------------------------------------------------------
-_STAT_OFFSETS = np.array([16.0, 4.0, 1.0])    # grey levels added to each statistic's median
+_STAT_OFFSETS = np.array([16.0, 4.0, 1.0])  # grey levels added to each statistic's median
 
 
 def stationarity(frames: np.ndarray, *, grid: int = 4, n_frames: int = 48) -> tuple[float, dict]:
@@ -846,24 +935,28 @@ def stationarity(frames: np.ndarray, *, grid: int = 4, n_frames: int = 48) -> tu
     stats = np.empty((grid * grid, 3, len(idx)))
     for i in range(grid):
         for j in range(grid):
-            win = g[:, ys[i]:ys[i + 1], xs[j]:xs[j + 1]]
+            win = g[:, ys[i] : ys[i + 1], xs[j] : xs[j + 1]]
             k = i * grid + j
             stats[k, 0] = win.mean(axis=(1, 2))
             stats[k, 1] = win.std(axis=(1, 2))
-            stats[k, 2] = act[:, ys[i]:ys[i + 1], xs[j]:xs[j + 1]].mean(axis=(1, 2))
+            stats[k, 2] = act[:, ys[i] : ys[i + 1], xs[j] : xs[j + 1]].mean(axis=(1, 2))
     med = np.median(stats, axis=0)
     excess = np.abs(stats - med).max(axis=0) / (med + _STAT_OFFSETS[:, None])
     per_stat = np.median(excess, axis=1)
     spread = float(per_stat.max())
     names = ("brightness", "contrast", "activity")
-    return 1.0 / (1.0 + spread), {"spread": spread, "worst": names[int(np.argmax(per_stat))],
-                                  **{f"spread_{n}": float(v) for n, v in zip(names, per_stat)}}
+    return 1.0 / (1.0 + spread), {
+        "spread": spread,
+        "worst": names[int(np.argmax(per_stat))],
+        **{f"spread_{n}": float(v) for n, v in zip(names, per_stat)},
+    }
 
 
 # -- 8. colour statistics --------------------------------------------------------------------------
 def colour_stats(tile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean RGB (0..255) and mean HSV (hue in degrees by circular mean, S and V in 0..1) of a tile."""
     import cv2
+
     u = _sample(tile.shape[0], 16)
     rgb = tile[u].reshape(-1, 1, 3)
     mean_rgb = rgb.reshape(-1, 3).mean(axis=0, dtype=np.float64)
@@ -901,14 +994,28 @@ class _Texture:
         return self._activity
 
 
-def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = None,
-                construction: str | None = None, n_tiles: int | None = None, edge_colours: int = 2,
-                min_tile: int = DEFAULT_MIN_TILE, max_tile: int = DEFAULT_MAX_TILE, min_loop: int = 32,
-                max_loop: int | None = None, transition: int = 8, overlap: int | None = None,
-                ring: int | None = None, flow_gain: float = 0.5, mix: Sequence[Clip | np.ndarray] = (),
-                names: Sequence[str] | None = None, feather: int | None = None,
-                period: Sequence[int] | None = None, seed: int = 0,
-                progress: Progress | None = None) -> TilesModel:
+def learn_tiles(
+    clip: Clip | np.ndarray,
+    *,
+    tile: int | Sequence[int] | None = None,
+    construction: str | None = None,
+    n_tiles: int | None = None,
+    edge_colours: int = 2,
+    min_tile: int = DEFAULT_MIN_TILE,
+    max_tile: int = DEFAULT_MAX_TILE,
+    min_loop: int = 32,
+    max_loop: int | None = None,
+    transition: int = 8,
+    overlap: int | None = None,
+    ring: int | None = None,
+    flow_gain: float = 0.5,
+    mix: Sequence[Clip | np.ndarray] = (),
+    names: Sequence[str] | None = None,
+    feather: int | None = None,
+    period: Sequence[int] | None = None,
+    seed: int = 0,
+    progress: Progress | None = None,
+) -> TilesModel:
     """Cut triple toroid-shaped tiles from a clip (and, for mixing, from more clips).
 
     Parameters
@@ -919,7 +1026,8 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         Tile size; default from :func:`tile_period` within ``[min_tile, max_tile]``.
     construction : {"quilted", "ring", "wang"}, optional
         How tiles are made to join (module docstring). Default ``"quilted"`` for one
-        texture, ``"ring"`` when mixing or when ``n_tiles`` or ``ring`` is given. ``"quilted"`` (one texture only): a torus of at
+        texture, ``"ring"`` when mixing or when ``n_tiles`` or ``ring`` is given.
+        ``"quilted"`` (one texture only): a torus of at
         least 512 pixels (and twice the clip, up to 768) per side, quilted from blocks of the
         looped clip (:func:`quilted_torus`) and cut into cells that the player lays out in
         their torus order (shifted at random), so no content repeats within the period;
@@ -982,30 +1090,44 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         raise InvalidArgumentError(f"names must name {1 + len(extra)} textures, not {len(names)}")
     if not (isinstance(flow_gain, (int, float)) and 0 <= flow_gain <= 10):
         raise InvalidArgumentError(f"flow_gain must be a number in [0, 10], not {flow_gain!r}")
-    if construction is None:       # ring options name the ring construction
+    if construction is None:  # ring options name the ring construction
         construction = "ring" if extra or n_tiles is not None or ring is not None else "quilted"
     if construction not in CONSTRUCTIONS:
         raise InvalidArgumentError(f"construction must be one of {CONSTRUCTIONS}, not {construction!r}")
     if construction == "quilted":
         if extra:
-            raise InvalidArgumentError("construction 'quilted' cannot mix textures: border tiles need every class's "
-                             "shared ring (construction='ring')")
+            raise InvalidArgumentError(
+                "construction 'quilted' cannot mix textures: border tiles need every class's "
+                "shared ring (construction='ring')"
+            )
         if n_tiles is not None:
-            raise InvalidArgumentError("n_tiles applies to construction 'ring' only; the quilted torus has as many "
-                             "cells as its period holds")
-        return _learn_quilted(main, names, tile=tile, min_loop=min_loop, max_loop=max_loop, transition=transition,
-                              period=period, seed=seed, progress=progress)
+            raise InvalidArgumentError(
+                "n_tiles applies to construction 'ring' only; the quilted torus has as many cells as its period holds"
+            )
+        return _learn_quilted(
+            main,
+            names,
+            tile=tile,
+            min_loop=min_loop,
+            max_loop=max_loop,
+            transition=transition,
+            period=period,
+            seed=seed,
+            progress=progress,
+        )
     if period is not None:
         raise InvalidArgumentError(f"period applies to construction 'quilted' only, not {construction!r}")
     if construction == "wang" and extra:
-        raise InvalidArgumentError("construction 'wang' cannot mix textures: border tiles need every class's shared "
-                         "ring (construction='ring')")
+        raise InvalidArgumentError(
+            "construction 'wang' cannot mix textures: border tiles need every class's shared ring (construction='ring')"
+        )
     if construction == "wang" and n_tiles is not None:
-        raise InvalidArgumentError(f"n_tiles applies to construction 'ring' only; the Wang set has edge_colours ** 3 "
-                         f"= {edge_colours ** 3} tiles")
+        raise InvalidArgumentError(
+            f"n_tiles applies to construction 'ring' only; the Wang set has edge_colours ** 3 = {edge_colours**3} tiles"
+        )
     n_tiles = check_int("n_tiles", 4 if n_tiles is None else n_tiles, 1, 64)
     edge_colours = check_int("edge_colours", edge_colours, 2, 4)
-    n_own = edge_colours ** 3 if construction == "wang" else n_tiles
+    n_own = edge_colours**3 if construction == "wang" else n_tiles
     min_loop = check_int("min_loop", min_loop, 2)
     transition = check_int("transition", transition, 1)
     if max_loop is not None:
@@ -1037,22 +1159,32 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
             raise InvalidArgumentError(f"tile must be an integer or (th, tw), not {tile!r}") from None
         if th < 8 or tw < 8:
             raise InvalidArgumentError(f"tile must be at least 8x8, not {th}x{tw}")
-        period, strength = (0.0, 0.0), 0.0          # not measured: the caller chose the size
+        period, strength = (0.0, 0.0), 0.0  # not measured: the caller chose the size
     step()
     for label, f in [("clip", main)] + [(f"mix[{i}]", e) for i, e in enumerate(extra)]:
         if th + 2 > f.shape[1] or tw + 2 > f.shape[2]:
-            raise InvalidArgumentError(f"tile {th}x{tw} (plus a 2-pixel overlap) is larger than the {label} frame "
-                             f"{f.shape[1]}x{f.shape[2]}")
+            raise InvalidArgumentError(
+                f"tile {th}x{tw} (plus a 2-pixel overlap) is larger than the {label} frame {f.shape[1]}x{f.shape[2]}"
+            )
 
     start, length, loop_cost = find_loop(main, min_loop=min_loop, max_loop=max_loop, transition=transition)
     step()
-    textures = [_Texture(main, start, length, loop_cost, transition_map(main, start, length, transition),
-                         flow_magnitude(main, start, length))]
+    textures = [
+        _Texture(
+            main,
+            start,
+            length,
+            loop_cost,
+            transition_map(main, start, length, transition),
+            flow_magnitude(main, start, length),
+        )
+    ]
     step()
     for f in extra:
         s, _, c = find_loop(f, min_loop=min_loop, transition=transition, length=length)
-        textures.append(_Texture(f, s, length, c, transition_map(f, s, length, transition),
-                                 flow_magnitude(f, s, length)))
+        textures.append(
+            _Texture(f, s, length, c, transition_map(f, s, length, transition), flow_magnitude(f, s, length))
+        )
         step()
     mean_flow = float(np.mean([tx.flow.mean() for tx in textures]))
     if overlap is None:
@@ -1074,7 +1206,7 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     depth = max(r, min(th, tw) // 2 - 1 - fe)
 
     tiles, tcls, rcls, masks, costs = [], [], [], [], []
-    edges = None                       # ring sets: the model's default, no colours
+    edges = None  # ring sets: the model's default, no colours
     if construction == "wang":
         step()
         wang, edges, strip_depth = _wang_tiles(textures[0], th, tw, r, edge_colours, flow_gain, step)
@@ -1088,8 +1220,9 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
         for ci, tx in enumerate(textures):
             tiles.append(tx.primary)
             tcls.append(ci), rcls.append(ci), masks.append(np.full((th, tw), 255, np.uint8)), costs.append(0.0)
-            for tile_k, mask, cost in _interiors(tx, [tx.primary] * (n_tiles - 1), th, tw, r, flow_gain, step,
-                                                 taken=[tx.primary_pos]):
+            for tile_k, mask, cost in _interiors(
+                tx, [tx.primary] * (n_tiles - 1), th, tw, r, flow_gain, step, taken=[tx.primary_pos]
+            ):
                 tiles.append(tile_k), tcls.append(ci), rcls.append(ci), masks.append(mask), costs.append(cost)
     step()
     # border tiles: a strip of class c's primary along one side of class a's primary
@@ -1107,20 +1240,43 @@ def learn_tiles(clip: Clip | np.ndarray, *, tile: int | Sequence[int] | None = N
     step()
     wang_info = {"edge_colours": edge_colours, "strip_depth": strip_depth} if construction == "wang" else {}
     model = TilesModel(
-        tiles=np.stack(tiles), tile_class=np.array(tcls, np.int32), ring_class=np.array(rcls, np.int32),
-        masks=np.stack(masks), border_side=np.array(sides, np.int8), seam_cost=np.array(costs), mean_rgb=np.array([s[0] for s in stats]),
-        mean_hsv=np.array([s[1] for s in stats]), class_names=names,
+        tiles=np.stack(tiles),
+        tile_class=np.array(tcls, np.int32),
+        ring_class=np.array(rcls, np.int32),
+        masks=np.stack(masks),
+        border_side=np.array(sides, np.int8),
+        seam_cost=np.array(costs),
+        mean_rgb=np.array([s[0] for s in stats]),
+        mean_hsv=np.array([s[1] for s in stats]),
+        class_names=names,
         class_loop_start=np.array([tx.start for tx in textures], np.int64),
         class_loop_cost=np.array([tx.cost for tx in textures]),
         class_toroid_cost=np.array([tx.toroid_cost for tx in textures]),
         edges=edges,
-        info={"construction": construction, **wang_info, **_stationarity_info(main),
-              "tile_h": th, "tile_w": tw, "loop_length": length, "transition": transition, "overlap_y": by,
-              "overlap_x": bx, "ring": r, "feather": fe, "border_depth": depth,
-              "ring_feather": _ring_feather(r, th, tw), "period_y": period[0], "period_x": period[1],
-              "periodicity": strength, "mean_flow": mean_flow, "flow_gain": float(flow_gain),
-              "source_frames": t, "n_classes": len(textures),
-              "median_frame_step": _median_step(main)})
+        info={
+            "construction": construction,
+            **wang_info,
+            **_stationarity_info(main),
+            "tile_h": th,
+            "tile_w": tw,
+            "loop_length": length,
+            "transition": transition,
+            "overlap_y": by,
+            "overlap_x": bx,
+            "ring": r,
+            "feather": fe,
+            "border_depth": depth,
+            "ring_feather": _ring_feather(r, th, tw),
+            "period_y": period[0],
+            "period_x": period[1],
+            "periodicity": strength,
+            "mean_flow": mean_flow,
+            "flow_gain": float(flow_gain),
+            "source_frames": t,
+            "n_classes": len(textures),
+            "median_frame_step": _median_step(main),
+        },
+    )
     step(total)
     return model
 
@@ -1130,8 +1286,18 @@ def _stationarity_info(frames: np.ndarray) -> dict:
     return {"stationarity": figure, "stationarity_worst": details["worst"]}
 
 
-def _learn_quilted(main: np.ndarray, names: list[str], *, tile, min_loop: int, max_loop: int | None,
-                   transition: int, period, seed: int, progress: Progress | None) -> TilesModel:
+def _learn_quilted(
+    main: np.ndarray,
+    names: list[str],
+    *,
+    tile,
+    min_loop: int,
+    max_loop: int | None,
+    transition: int,
+    period,
+    seed: int,
+    progress: Progress | None,
+) -> TilesModel:
     """The quilted construction of :func:`learn_tiles` (one texture)."""
     min_loop = check_int("min_loop", min_loop, 2)
     transition = check_int("transition", transition, 1)
@@ -1142,8 +1308,9 @@ def _learn_quilted(main: np.ndarray, names: list[str], *, tile, min_loop: int, m
     block = None
     if tile is not None:
         if not isinstance(tile, (int, np.integer)) or isinstance(tile, bool):
-            raise InvalidArgumentError(f"tile must be an integer (the quilt block size of construction 'quilted'), "
-                             f"not {tile!r}")
+            raise InvalidArgumentError(
+                f"tile must be an integer (the quilt block size of construction 'quilted'), not {tile!r}"
+            )
         block = int(tile)
     t, h, w = main.shape[:3]
     b, step, cell, (py, px) = quilt_geometry(h, w, block=block, period=period)
@@ -1157,8 +1324,14 @@ def _learn_quilted(main: np.ndarray, names: list[str], *, tile, min_loop: int, m
             progress(min(done, total), total)
 
     start, length, loop_cost = find_loop(main, min_loop=min_loop, max_loop=max_loop, transition=transition)
-    tx = _Texture(main, start, length, loop_cost, transition_map(main, start, length, transition),
-                  np.zeros(main.shape[1:3], np.float32))
+    tx = _Texture(
+        main,
+        start,
+        length,
+        loop_cost,
+        transition_map(main, start, length, transition),
+        np.zeros(main.shape[1:3], np.float32),
+    )
     step_done(2)
     torus, qinfo = quilted_torus(tx, block=b, period=(py, px), seed=seed, step_done=step_done)
     # cells start half a step into the blocks, away from the quilt's overlap bands: a cell
@@ -1172,16 +1345,45 @@ def _learn_quilted(main: np.ndarray, names: list[str], *, tile, min_loop: int, m
     step_done()
     ch, cw = cell
     model = TilesModel(
-        tiles=tiles, tile_class=np.zeros(k, np.int32), ring_class=np.zeros(k, np.int32),
-        masks=np.full((k, ch, cw), 255, np.uint8), border_side=np.full(k, -1, np.int8), seam_cost=np.zeros(k),
-        mean_rgb=np.array([st[0] for st in stats]), mean_hsv=np.array([st[1] for st in stats]),
-        class_names=names, class_loop_start=np.array([start], np.int64), class_loop_cost=np.array([loop_cost]),
+        tiles=tiles,
+        tile_class=np.zeros(k, np.int32),
+        ring_class=np.zeros(k, np.int32),
+        masks=np.full((k, ch, cw), 255, np.uint8),
+        border_side=np.full(k, -1, np.int8),
+        seam_cost=np.zeros(k),
+        mean_rgb=np.array([st[0] for st in stats]),
+        mean_hsv=np.array([st[1] for st in stats]),
+        class_names=names,
+        class_loop_start=np.array([start], np.int64),
+        class_loop_cost=np.array([loop_cost]),
         class_toroid_cost=np.zeros((1, 2)),
-        info={"construction": "quilted", **_stationarity_info(main), "torus_rows": py // ch, "torus_cols": px // cw, **qinfo,
-              "quilt_seed": seed, "tile_h": ch, "tile_w": cw, "loop_length": length, "transition": transition,
-              "overlap_y": b - step, "overlap_x": b - step, "ring": 0, "feather": 0, "border_depth": 0,
-              "ring_feather": 0, "period_y": 0.0, "period_x": 0.0, "periodicity": 0.0, "mean_flow": 0.0,
-              "flow_gain": 0.0, "source_frames": t, "n_classes": 1, "median_frame_step": _median_step(main)})
+        info={
+            "construction": "quilted",
+            **_stationarity_info(main),
+            "torus_rows": py // ch,
+            "torus_cols": px // cw,
+            **qinfo,
+            "quilt_seed": seed,
+            "tile_h": ch,
+            "tile_w": cw,
+            "loop_length": length,
+            "transition": transition,
+            "overlap_y": b - step,
+            "overlap_x": b - step,
+            "ring": 0,
+            "feather": 0,
+            "border_depth": 0,
+            "ring_feather": 0,
+            "period_y": 0.0,
+            "period_x": 0.0,
+            "periodicity": 0.0,
+            "mean_flow": 0.0,
+            "flow_gain": 0.0,
+            "source_frames": t,
+            "n_classes": 1,
+            "median_frame_step": _median_step(main),
+        },
+    )
     step_done(total)
     return model
 
@@ -1199,22 +1401,31 @@ def _primary(tx: _Texture, th: int, tw: int, by: int, bx: int, flow_gain: float)
     for y in ys:
         for x in xs:
             blk = tx.block(y, x, hb, wb, u).astype(np.float32)
-            dh = blk[:, :th, tw:tw + bx] - blk[:, :th, :bx]
-            dv = blk[:, th:th + by, :tw] - blk[:, :by, :tw]
+            dh = blk[:, :th, tw : tw + bx] - blk[:, :th, :bx]
+            dv = blk[:, th : th + by, :tw] - blk[:, :by, :tw]
             bound = (dh * dh).sum(axis=(0, 3)).min(axis=1).mean() + (dv * dv).sum(axis=(0, 3)).min(axis=0).mean()
-            ranked.append((float(bound), int(y), int(x), float(act[y:y + hb, x:x + wb].mean())))
+            ranked.append((float(bound), int(y), int(x), float(act[y : y + hb, x : x + wb].mean())))
     ranked = _lively(ranked)
     best = None
     for _, y, x, _ in ranked[:3]:
-        tile, ch, cv = toroidal_tile(tx.block(y, x, hb, wb), th, tw, flow=tx.flow[y:y + hb, x:x + wb],
-                                     flow_gain=flow_gain)
+        tile, ch, cv = toroidal_tile(
+            tx.block(y, x, hb, wb), th, tw, flow=tx.flow[y : y + hb, x : x + wb], flow_gain=flow_gain
+        )
         if best is None or ch + cv < best[2][0] + best[2][1]:
             best = (tile, (y, x), (ch, cv))
     return best
 
 
-def _interiors(tx: _Texture, rings: Sequence[np.ndarray], th: int, tw: int, r: int, flow_gain: float, step,
-               taken: Sequence[tuple[int, int]] = ()):
+def _interiors(
+    tx: _Texture,
+    rings: Sequence[np.ndarray],
+    th: int,
+    tw: int,
+    r: int,
+    flow_gain: float,
+    step,
+    taken: Sequence[tuple[int, int]] = (),
+):
     """One tile per ring tile in ``rings``: the ring joined to the loop at another place.
 
     Places are ranked by how well their edges match the ring (lively places first), and
@@ -1229,7 +1440,7 @@ def _interiors(tx: _Texture, rings: Sequence[np.ndarray], th: int, tw: int, r: i
     h, w = f.shape[1:3]
     u = _sample(tx.length, _PRE_FRAMES)
     ringmask = np.ones((th, tw), bool)
-    ringmask[r:th - r, r:tw - r] = False
+    ringmask[r : th - r, r : tw - r] = False
     stride_y, stride_x = max(4, th // 4), max(4, tw // 4)
     places = [(int(y), int(x)) for y in _starts(h, th, stride_y) for x in _starts(w, tw, stride_x)]
     act = tx.activity
@@ -1243,19 +1454,27 @@ def _interiors(tx: _Texture, rings: Sequence[np.ndarray], th: int, tw: int, r: i
             for y, x in places:
                 d = tx.block(y, x, th, tw, u).astype(np.float32) - ring_u
                 e = (d * d).sum(axis=(0, 3))
-                ranked.append((float(e[ringmask].mean()), y, x, float(act[y:y + th, x:x + tw].mean())))
+                ranked.append((float(e[ringmask].mean()), y, x, float(act[y : y + th, x : x + tw].mean())))
             ranked, ranked_for = _lively(ranked), ring_tile
         pick = None
-        for relax in (0.5, 0.0, -1.0):     # places apart from the chosen ones, then allow overlap
-            pick = next(((y, x) for _, y, x, _ in ranked if (y, x) not in chosen and not any(
-                abs(y - cy) < th * relax and abs(x - cx) < tw * relax for cy, cx in chosen)), None)
+        for relax in (0.5, 0.0, -1.0):  # places apart from the chosen ones, then allow overlap
+            pick = next(
+                (
+                    (y, x)
+                    for _, y, x, _ in ranked
+                    if (y, x) not in chosen
+                    and not any(abs(y - cy) < th * relax and abs(x - cx) < tw * relax for cy, cx in chosen)
+                ),
+                None,
+            )
             if pick is not None:
                 break
-        if pick is None:                   # a tiny clip: every place is taken
+        if pick is None:  # a tiny clip: every place is taken
             pick = ranked[len(out) % len(ranked)][1:3]
         y, x = pick
-        tile, mask, cost = ring_join(ring_tile, tx.block(y, x, th, tw), r, flow=tx.flow[y:y + th, x:x + tw],
-                                     flow_gain=flow_gain, feather=rf)
+        tile, mask, cost = ring_join(
+            ring_tile, tx.block(y, x, th, tw), r, flow=tx.flow[y : y + th, x : x + tw], flow_gain=flow_gain, feather=rf
+        )
         out.append((tile, mask, cost))
         chosen.append((y, x))
         step()
@@ -1281,23 +1500,31 @@ def _wang_tiles(tx: _Texture, th: int, tw: int, r: int, colours: int, flow_gain:
     act = tx.activity
     grad = np.zeros((h, w), np.float32)
     for i in _sample(tx.length, 8) + tx.start:
-        g = _grey(f[i:i + 1])[0]
+        g = _grey(f[i : i + 1])[0]
         grad[:, 1:] += np.diff(g, axis=1) ** 2
         grad[1:] += np.diff(g, axis=0) ** 2
     rng = np.random.default_rng(seed)
 
-    typical: dict[tuple[int, int], list[tuple[int, int]]] = {}    # per strip shape, scored once
+    typical: dict[tuple[int, int], list[tuple[int, int]]] = {}  # per strip shape, scored once
 
     def places(bh: int, bw: int) -> list[tuple[int, int]]:
         """Typical places first: spatial and temporal activity near the clip's median (a strip
         livelier or calmer than the rest would mark every edge it sits on), shuffled."""
         if (bh, bw) not in typical:
             ys, xs = _starts(h, bh, max(2, bh // 4)), _starts(w, bw, max(2, bw // 4))
-            cand = [(int(y), int(x), float(act[y:y + bh, x:x + bw].mean()) + 1e-6,
-                     float(grad[y:y + bh, x:x + bw].mean()) + 1e-6) for y in ys for x in xs]
+            cand = [
+                (
+                    int(y),
+                    int(x),
+                    float(act[y : y + bh, x : x + bw].mean()) + 1e-6,
+                    float(grad[y : y + bh, x : x + bw].mean()) + 1e-6,
+                )
+                for y in ys
+                for x in xs
+            ]
             ma, mg = np.median([c[2] for c in cand]), np.median([c[3] for c in cand])
             score = np.array([abs(np.log(c[2] / ma)) + abs(np.log(c[3] / mg)) for c in cand])
-            best = np.argsort(score, kind="stable")[:max(2 * colours, len(cand) // 4)]
+            best = np.argsort(score, kind="stable")[: max(2 * colours, len(cand) // 4)]
             typical[(bh, bw)] = [cand[i][:2] for i in best]
         best = typical[(bh, bw)]
         return [best[i] for i in rng.permutation(len(best))]
@@ -1308,8 +1535,10 @@ def _wang_tiles(tx: _Texture, th: int, tw: int, r: int, colours: int, flow_gain:
         cands = places(bh, bw)
         for relax in (1.0, 0.5, 0.0):
             for y, x in cands:
-                if all(abs(y - ty) >= relax * (bh + th_) / 2 or abs(x - tx_) >= relax * (bw + tw_) / 2
-                       for ty, tx_, th_, tw_ in taken):
+                if all(
+                    abs(y - ty) >= relax * (bh + th_) / 2 or abs(x - tx_) >= relax * (bw + tw_) / 2
+                    for ty, tx_, th_, tw_ in taken
+                ):
                     taken.append((y, x, bh, bw))
                     return y, x
         y, x = cands[0]
@@ -1353,7 +1582,9 @@ def _median_step(frames: np.ndarray) -> float:
 def _frames(name: str, clip: Clip | np.ndarray) -> np.ndarray:
     frames = clip.frames if isinstance(clip, Clip) else np.asarray(clip)
     if frames.ndim != 4 or frames.dtype != np.uint8 or frames.shape[3] not in (1, 3):
-        raise InvalidArgumentError(f"{name} must be (T, H, W, C) uint8 frames with C 1 or 3, not {frames.dtype} {frames.shape}")
+        raise InvalidArgumentError(
+            f"{name} must be (T, H, W, C) uint8 frames with C 1 or 3, not {frames.dtype} {frames.shape}"
+        )
     if frames.shape[3] == 1:
         frames = np.repeat(frames, 3, axis=3)
     return frames

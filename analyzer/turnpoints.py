@@ -19,6 +19,7 @@ Analysis, all on a ``T x T`` matrix of frame distances computed on reduced frame
    transitions that are local minima of ``F`` and probable enough kept. Forward-only play
    always jumps at ``exit_frame`` so it never runs off the end.
 """
+
 from __future__ import annotations
 
 import math
@@ -49,6 +50,7 @@ def frame_features(frames: np.ndarray, size: int = 64) -> np.ndarray:
     if factor <= 1:
         return frames.reshape(t, -1).astype(np.float32)
     import cv2
+
     nh, nw = max(1, round(h / factor)), max(1, round(w / factor))
     out = np.empty((t, nh * nw * c), np.float32)
     for i in range(t):
@@ -137,7 +139,7 @@ def filtered_distances(d: np.ndarray, taps: int) -> np.ndarray:
         return out
     acc = np.zeros((hi - lo, hi - lo))
     for k, wk in zip(range(-taps, taps), w):
-        acc += wk * d[lo + k:hi + k, lo + k:hi + k]
+        acc += wk * d[lo + k : hi + k, lo + k : hi + k]
     out[lo:hi, lo:hi] = acc
     return out
 
@@ -167,11 +169,25 @@ def future_costs(cost_p: np.ndarray, alpha: float, dead: float, max_iter: int = 
     return cost_p + alpha * m[None, :], m
 
 
-def learn_turnpoints(clip: Clip | np.ndarray, *, n: int = 4, s: int = 1, r: int = 4, min_pairs: int = 2,
-                     min_symmetry: float = 0.3, feature_size: int = 64, taps: int = 2, p: float = 2.0,
-                     alpha: float = 0.999, sigma: float = 0.1, min_gap: int = 6, min_prob: float = 0.02,
-                     max_per_frame: int = 3, max_cost: float = 2.0,
-                     progress: Progress | None = None) -> TurnPointModel:
+def learn_turnpoints(
+    clip: Clip | np.ndarray,
+    *,
+    n: int = 4,
+    s: int = 1,
+    r: int = 4,
+    min_pairs: int = 2,
+    min_symmetry: float = 0.3,
+    feature_size: int = 64,
+    taps: int = 2,
+    p: float = 2.0,
+    alpha: float = 0.999,
+    sigma: float = 0.1,
+    min_gap: int = 6,
+    min_prob: float = 0.02,
+    max_per_frame: int = 3,
+    max_cost: float = 2.0,
+    progress: Progress | None = None,
+) -> TurnPointModel:
     """Find turn points and transitions of a clip (the ``turnpoints`` method).
 
     Parameters
@@ -238,8 +254,10 @@ def learn_turnpoints(clip: Clip | np.ndarray, *, n: int = 4, s: int = 1, r: int 
     if min_pairs > n:
         raise InvalidArgumentError(f"min_pairs must be in 1..n={n}, not {min_pairs}")
     if t < 2 * n + 1:
-        raise InvalidArgumentError(f"clip has {t} frames, too short for n={n}: the symmetry test needs at least "
-                         f"2n+1 = {2 * n + 1} frames; use a smaller n")
+        raise InvalidArgumentError(
+            f"clip has {t} frames, too short for n={n}: the symmetry test needs at least "
+            f"2n+1 = {2 * n + 1} frames; use a smaller n"
+        )
     min_symmetry = _float("min_symmetry", min_symmetry, 0.0, 1.0, hi_open=True)
     feature_size = _int("feature_size", feature_size, 4)
     taps = _int("taps", taps, 1)
@@ -262,33 +280,79 @@ def learn_turnpoints(clip: Clip | np.ndarray, *, n: int = 4, s: int = 1, r: int 
     reduced[reduced < min_symmetry] = 0.0
     turns = np.flatnonzero(reduced > 0).astype(np.int32)
     if turns.size < 2:
-        raise InvalidArgumentError(f"found {turns.size} turn point(s) with symmetry >= min_symmetry={min_symmetry}; playback "
-                         f"needs at least 2: lower min_symmetry, r or n, or use a longer clip")
+        raise InvalidArgumentError(
+            f"found {turns.size} turn point(s) with symmetry >= min_symmetry={min_symmetry}; playback "
+            f"needs at least 2: lower min_symmetry, r or n, or use a longer clip"
+        )
     p_max = reduced / 2.0
     p_max[turns[0]] = p_max[turns[-1]] = 1.0
     step()
 
-    src, dst, cost, fcost, prob, exit_frame = _transitions(d, taps=taps, p=p, alpha=alpha, sigma=sigma,
-                                                           min_gap=min_gap, min_prob=min_prob,
-                                                           max_per_frame=max_per_frame,
-                                                           max_cost=max_cost * float(np.median(np.diag(d, 1))))
+    src, dst, cost, fcost, prob, exit_frame = _transitions(
+        d,
+        taps=taps,
+        p=p,
+        alpha=alpha,
+        sigma=sigma,
+        min_gap=min_gap,
+        min_prob=min_prob,
+        max_per_frame=max_per_frame,
+        max_cost=max_cost * float(np.median(np.diag(d, 1))),
+    )
     step()
     consec = np.diag(d, 1)
-    info = {"n": n, "s": s, "r": r, "min_pairs": min_pairs, "min_symmetry": min_symmetry,
-            "feature_size": feature_size, "feature_values": int(feats.shape[1]), "taps": taps, "p": p,
-            "alpha": alpha, "sigma": sigma, "min_gap": min_gap, "min_prob": min_prob,
-            "max_per_frame": max_per_frame, "max_cost": max_cost, "distance_correlation": corr, "distance_rel_error": rel,
-            "median_step": float(np.median(consec)), "n_turn_points": int(turns.size),
-            "n_transitions": int(src.size)}
-    model = TurnPointModel(sym_raw=sym_raw, symmetry=sym, reduced=reduced, turn_points=turns, p_max=p_max,
-                           src=src, dst=dst, cost=cost, future_cost=fcost, prob=prob,
-                           exit_frame=exit_frame, info=info)
+    info = {
+        "n": n,
+        "s": s,
+        "r": r,
+        "min_pairs": min_pairs,
+        "min_symmetry": min_symmetry,
+        "feature_size": feature_size,
+        "feature_values": int(feats.shape[1]),
+        "taps": taps,
+        "p": p,
+        "alpha": alpha,
+        "sigma": sigma,
+        "min_gap": min_gap,
+        "min_prob": min_prob,
+        "max_per_frame": max_per_frame,
+        "max_cost": max_cost,
+        "distance_correlation": corr,
+        "distance_rel_error": rel,
+        "median_step": float(np.median(consec)),
+        "n_turn_points": int(turns.size),
+        "n_transitions": int(src.size),
+    }
+    model = TurnPointModel(
+        sym_raw=sym_raw,
+        symmetry=sym,
+        reduced=reduced,
+        turn_points=turns,
+        p_max=p_max,
+        src=src,
+        dst=dst,
+        cost=cost,
+        future_cost=fcost,
+        prob=prob,
+        exit_frame=exit_frame,
+        info=info,
+    )
     step()
     return model
 
 
-def _transitions(d: np.ndarray, *, taps: int, p: float, alpha: float, sigma: float, min_gap: int,
-                 min_prob: float, max_per_frame: int, max_cost: float):
+def _transitions(
+    d: np.ndarray,
+    *,
+    taps: int,
+    p: float,
+    alpha: float,
+    sigma: float,
+    min_gap: int,
+    min_prob: float,
+    max_per_frame: int,
+    max_cost: float,
+):
     t = d.shape[0]
     dp = filtered_distances(d, taps)
     # Jump i -> j replaces the successor i+1 by j: its cost compares i+1 with j.
@@ -349,8 +413,14 @@ def _transitions(d: np.ndarray, *, taps: int, p: float, alpha: float, sigma: flo
     prob[exit_frame] = np.where(row, np.exp(-(f[exit_frame] - f[exit_frame][row].min()) / sigma), 0.0)
     prob[exit_frame] /= prob[exit_frame].sum()
     src, dst = np.nonzero(keep)
-    return (src.astype(np.int32), dst.astype(np.int32), cost[src, dst].astype(np.float64),
-            f[src, dst].astype(np.float64), np.clip(prob[src, dst], 0.0, 1.0), exit_frame)
+    return (
+        src.astype(np.int32),
+        dst.astype(np.int32),
+        cost[src, dst].astype(np.float64),
+        f[src, dst].astype(np.float64),
+        np.clip(prob[src, dst], 0.0, 1.0),
+        exit_frame,
+    )
 
 
 def _is_local_min(f: np.ndarray) -> np.ndarray:
@@ -361,7 +431,7 @@ def _is_local_min(f: np.ndarray) -> np.ndarray:
     for di in (-1, 0, 1):
         for dj in (-1, 0, 1):
             if di or dj:
-                out &= f <= pad[1 + di:1 + di + t0, 1 + dj:1 + dj + t1]
+                out &= f <= pad[1 + di : 1 + di + t0, 1 + dj : 1 + dj + t1]
     return out
 
 
@@ -372,19 +442,28 @@ def _distance_agreement(frames: np.ndarray, d: np.ndarray, samples: int = 64) ->
     rng = np.random.default_rng(0)
     pairs = [(i, i + 1) for i in range(0, t - 1, max(1, (t - 1) // samples))]
     pairs += [tuple(sorted(rng.choice(t, 2, replace=False))) for _ in range(samples)]
-    full = np.array([math.sqrt(float(np.sum((frames[i].astype(np.float32) - frames[j]) ** 2, dtype=np.float64)))
-                     for i, j in pairs])
+    full = np.array(
+        [math.sqrt(float(np.sum((frames[i].astype(np.float32) - frames[j]) ** 2, dtype=np.float64))) for i, j in pairs]
+    )
     red = np.array([d[i, j] for i, j in pairs])
     if full.std() == 0 or red.std() == 0:
         return 1.0, 0.0
     corr = float(np.corrcoef(full, red)[0, 1])
     k = float(np.dot(full, red) / np.dot(red, red))  # best scale: reduced frames lose fine detail
-    rel = float(np.sqrt(np.mean((k * red - full) ** 2)) / np.sqrt(np.mean(full ** 2)))
+    rel = float(np.sqrt(np.mean((k * red - full) ** 2)) / np.sqrt(np.mean(full**2)))
     return corr, rel
 
 
-def pendulum_clip(frames: int = 120, size: int = 64, *, period: float = 26.4, phase: float = 3.3,
-                  amplitude: float = 0.6, noise: float = 2.0, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def pendulum_clip(
+    frames: int = 120,
+    size: int = 64,
+    *,
+    period: float = 26.4,
+    phase: float = 3.3,
+    amplitude: float = 0.6,
+    noise: float = 2.0,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
     """A rendered swinging pendulum with known extremes, for tests and demos.
 
     The angle is ``amplitude * cos(2 pi (t - phase) / period)``, so the swing turns at
@@ -433,9 +512,11 @@ def _float(name: str, value, lo: float, hi: float, *, lo_open: bool = False, hi_
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ArgumentTypeError(f"{name} must be a number, not {value!r}")
     v = float(value)
-    bad = (not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi))
+    bad = not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi)
     if bad:
-        raise InvalidArgumentError(f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}, not {value!r}")
+        raise InvalidArgumentError(
+            f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}, not {value!r}"
+        )
     return v
 
 
@@ -451,6 +532,7 @@ def plot_turnpoints(model: TurnPointModel, path: str, *, title: str | None = Non
     '/tmp/tp_doctest.png'
     """
     import matplotlib
+
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 

@@ -2,13 +2,15 @@
 
 Frames come out as ``(T, H, W, C)`` uint8 in RGB order (``C = 3``) or grey (``C = 1``).
 """
+
 from __future__ import annotations
 
 import hashlib
 import os
 import tempfile
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -32,14 +34,14 @@ class ClipError(DynatexError, ValueError):
 class Clip:
     """Decoded frames plus where they came from."""
 
-    frames: np.ndarray          # (T, H, W, C) uint8
+    frames: np.ndarray  # (T, H, W, C) uint8
     fps: float
     filename: str
     sha256: str
     frame_start: int = 0
     frame_step: int = 1
     crop: tuple[int, ...] = ()
-    source_size: tuple[int, ...] = ()   # (height, width) of the decoded source frames
+    source_size: tuple[int, ...] = ()  # (height, width) of the decoded source frames
 
     @property
     def n_frames(self) -> int:
@@ -51,15 +53,34 @@ class Clip:
 
     def source_info(self) -> SourceInfo:
         t, h, w, c = self.frames.shape
-        return SourceInfo(filename=self.filename, sha256=self.sha256, fps=self.fps, width=w, height=h,
-                          channels=c, n_frames=t, frame_start=self.frame_start, frame_step=self.frame_step,
-                          crop=self.crop, source_size=self.source_size)
+        return SourceInfo(
+            filename=self.filename,
+            sha256=self.sha256,
+            fps=self.fps,
+            width=w,
+            height=h,
+            channels=c,
+            n_frames=t,
+            frame_start=self.frame_start,
+            frame_step=self.frame_step,
+            crop=self.crop,
+            source_size=self.source_size,
+        )
 
 
-def load_clip(source: str | os.PathLike | np.ndarray, *, start: int = 0, stop: int | None = None,
-              step: int = 1, crop: Sequence[int] | None = None, size: Sequence[int] | None = None,
-              color: bool = True, fps: float | None = None, isolate: bool = False,
-              progress: Progress | None = None) -> Clip:
+def load_clip(
+    source: str | os.PathLike | np.ndarray,
+    *,
+    start: int = 0,
+    stop: int | None = None,
+    step: int = 1,
+    crop: Sequence[int] | None = None,
+    size: Sequence[int] | None = None,
+    color: bool = True,
+    fps: float | None = None,
+    isolate: bool = False,
+    progress: Progress | None = None,
+) -> Clip:
     """Read a clip and return its frames as a :class:`Clip`.
 
     Parameters
@@ -121,8 +142,16 @@ def load_clip(source: str | os.PathLike | np.ndarray, *, start: int = 0, stop: i
         raise ClipError(f"{name}: only one frame in range; a dynamic texture needs at least 2")
     source_size = frames.shape[1:3]
     frames = _crop_resize_color(frames, crop_t, size_t, color, name)
-    return Clip(frames=frames, fps=float(fps if fps is not None else src_fps), filename=name, sha256=digest,
-                frame_start=start, frame_step=step, crop=crop_t or (), source_size=source_size)
+    return Clip(
+        frames=frames,
+        fps=float(fps if fps is not None else src_fps),
+        filename=name,
+        sha256=digest,
+        frame_start=start,
+        frame_step=step,
+        crop=crop_t or (),
+        source_size=source_size,
+    )
 
 
 # -- sources ----------------------------------------------------------------------
@@ -140,7 +169,7 @@ def _from_array(arr: np.ndarray) -> np.ndarray:
     return np.rint(arr).astype(np.uint8)
 
 
-def _file_digest(path: str, h: "hashlib._Hash | None" = None) -> "hashlib._Hash":
+def _file_digest(path: str, h: hashlib._Hash | None = None) -> hashlib._Hash:
     h = h or hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -150,6 +179,7 @@ def _file_digest(path: str, h: "hashlib._Hash | None" = None) -> "hashlib._Hash"
 
 def _from_folder(path: str, start: int, stop: int | None, step: int, progress: Progress | None):
     import cv2
+
     names = sorted(n for n in os.listdir(path) if n.lower().endswith(IMAGE_SUFFIXES))
     if not names:
         raise ClipError(f"{path}: folder holds no images ({', '.join(IMAGE_SUFFIXES)})")
@@ -162,8 +192,10 @@ def _from_folder(path: str, start: int, stop: int | None, step: int, progress: P
         if img is None:
             raise ClipError(f"{full}: cannot decode image")
         if frames and img.shape != frames[0].shape:
-            raise ClipError(f"{full}: size {img.shape[1]}x{img.shape[0]} differs from the first image's "
-                            f"{frames[0].shape[1]}x{frames[0].shape[0]}")
+            raise ClipError(
+                f"{full}: size {img.shape[1]}x{img.shape[0]} differs from the first image's "
+                f"{frames[0].shape[1]}x{frames[0].shape[0]}"
+            )
         _file_digest(full, h)
         frames.append(cv2.cvtColor(img, cv2.COLOR_BGR2RGB))
         if progress:
@@ -173,6 +205,7 @@ def _from_folder(path: str, start: int, stop: int | None, step: int, progress: P
 
 def _from_video(path: str, start: int, stop: int | None, step: int, progress: Progress | None):
     import cv2
+
     if os.path.getsize(path) == 0:
         raise ClipError(f"{path}: file is empty")
     cap = cv2.VideoCapture(path)
@@ -216,6 +249,7 @@ def _decode_worker(path: str, start: int, stop: int | None, step: int, out_npy: 
 
 def _decode_isolated(path: str, start: int, stop: int | None, step: int):
     import multiprocessing as mp
+
     ctx = mp.get_context("spawn")
     with tempfile.TemporaryDirectory(prefix="dynatex-decode-") as tmp:
         out = os.path.join(tmp, "frames.npy")
@@ -228,8 +262,10 @@ def _decode_isolated(path: str, start: int, stop: int | None, step: int):
             if err is not None:
                 kind, msg = err
                 raise (FileNotFoundError if kind == "FileNotFoundError" else ClipError)(msg)
-            raise ClipError(f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
-                            "re-encode the clip (for example to FFV1 or H.264) and try again")
+            raise ClipError(
+                f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
+                "re-encode the clip (for example to FFV1 or H.264) and try again"
+            )
         frames = np.load(out)
         with open(out + ".meta") as f:
             fps_s, digest = f.read().split("\n")[:2]
@@ -243,7 +279,7 @@ def _isolated_entry(q, path, start, stop, step, out) -> None:
         q.put((type(exc).__name__, str(exc)))
         q.close()
         q.join_thread()
-        raise SystemExit(3)
+        raise SystemExit(3) from None
 
 
 # -- geometry -----------------------------------------------------------------------
@@ -253,18 +289,20 @@ def _crop_resize_color(frames: np.ndarray, crop, size, color: bool, name: str) -
         x, y, cw, ch = crop
         if cw < 1 or ch < 1 or x + cw > w or y + ch > h:
             raise InvalidArgumentError(f"crop {crop} does not fit the {w}x{h} frames of {name}")
-        frames = frames[:, y:y + ch, x:x + cw]
+        frames = frames[:, y : y + ch, x : x + cw]
     if size is not None and frames.shape[1:3] != tuple(size):
         import cv2
+
         out = np.empty((t, size[0], size[1], c), np.uint8)
         for i in range(t):
-            r = cv2.resize(frames[i], (size[1], size[0]), interpolation=cv2.INTER_AREA)   # cv2 takes (w, h)
+            r = cv2.resize(frames[i], (size[1], size[0]), interpolation=cv2.INTER_AREA)  # cv2 takes (w, h)
             out[i] = r.reshape(out.shape[1:])
         frames = out
     if color and frames.shape[-1] == 1:
         frames = np.repeat(frames, 3, axis=-1)
     elif not color and frames.shape[-1] == 3:
         import cv2
+
         grey = np.empty(frames.shape[:3] + (1,), np.uint8)
         for i in range(t):
             grey[i, ..., 0] = cv2.cvtColor(np.ascontiguousarray(frames[i]), cv2.COLOR_RGB2GRAY)

@@ -12,10 +12,12 @@ sequential ones and reports wall times and the peak resident memory of the proce
 (workers included, sampled from /proc).
 
 ``large`` writes a synthetic 1280x720 colour clip of ``--frames`` frames to disk frame by
-frame (a ``.npy`` array, which the analyzer reads where it lies), runs ``dynatex analyze --max-memory`` on it in a child process while sampling
+frame (a ``.npy`` array, which the analyzer reads where it lies), runs
+``dynatex analyze --max-memory`` on it in a child process while sampling
 the tree's resident memory, and compares the learned LDS with in-memory learns of a
 300-frame subsample (subspace angles) and with an out-of-core learn of that subsample.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -114,6 +116,7 @@ def compare_databases(a: str, b: str, texture: str) -> dict[str, dict]:
     are all below 1e-3 (round-off-level arrays such as the mixture's decoder offsets);
     0 = identical, integer arrays count 1 when they differ."""
     from dynatex.tiledb import open_db
+
     out = {}
     with open_db(a) as da, open_db(b) as db:
         da.validate()
@@ -142,6 +145,7 @@ def compare_databases(a: str, b: str, texture: str) -> dict[str, dict]:
 # -- corpus ------------------------------------------------------------------------------------
 def bench_corpus(workdir: str) -> dict:
     from dynatex.analyzer.corpus import analyze_corpus, connect, format_table
+
     clips = [str(CLIPS), str(CLIPS / "small_64px")]
     report: dict = {}
     runs = {}
@@ -150,11 +154,15 @@ def bench_corpus(workdir: str) -> dict:
         out = os.path.join(workdir, label)
         with TreeMemory(me) as mem:
             t = time.perf_counter()
-            runs[label] = analyze_corpus(clips, out, methods=methods_for, params=PARAMS, scheduler=scheduler,
-                                         workers=2, progress=False)
+            runs[label] = analyze_corpus(
+                clips, out, methods=methods_for, params=PARAMS, scheduler=scheduler, workers=2, progress=False
+            )
             wall = time.perf_counter() - t
-        report[label] = {"wall_s": round(wall, 1), "peak_rss_gib": round(mem.peak / 2**30, 2),
-                         "statuses": _count(runs[label])}
+        report[label] = {
+            "wall_s": round(wall, 1),
+            "peak_rss_gib": round(mem.peak / 2**30, 2),
+            "statuses": _count(runs[label]),
+        }
         print(f"== {label}: {wall:.1f} s, peak RSS of the tree {mem.peak / 2**30:.2f} GiB", file=sys.stderr)
         print(format_table(runs[label]), file=sys.stderr)
     report["speedup"] = round(report["sequential"]["wall_s"] / report["local-2"]["wall_s"], 2)
@@ -180,10 +188,14 @@ def bench_corpus(workdir: str) -> dict:
                     for key in keys:
                         texture = str(key).split("-", 1)[1].rsplit("-", 1)[0]
                         if any(n.startswith(f".{texture}.h5.") for n in temps) and addr in pids:
-                            time.sleep(1.0)          # well inside the task
+                            time.sleep(1.0)  # well inside the task
                             os.kill(pids[addr], signal.SIGKILL)
-                            killed.update(worker=addr, pid=pids[addr], texture=texture,
-                                          temp_files=[n for n in temps if n.startswith(f".{texture}.")])
+                            killed.update(
+                                worker=addr,
+                                pid=pids[addr],
+                                texture=texture,
+                                temp_files=[n for n in temps if n.startswith(f".{texture}.")],
+                            )
                             return
                 time.sleep(0.05)
 
@@ -199,10 +211,14 @@ def bench_corpus(workdir: str) -> dict:
         if r.status == "ok":
             compare_databases(r.database, os.path.join(workdir, "sequential", f"{r.texture}.h5"), r.texture)
             valid += 1
-    report["killed"] = {"wall_s": round(wall, 1), "killed": killed, "statuses": _count(results),
-                        "databases_valid": valid, "temporaries_left": leftovers,
-                        "same_statuses_as_sequential": [r.status for r in results]
-                        == [r.status for r in runs["sequential"]]}
+    report["killed"] = {
+        "wall_s": round(wall, 1),
+        "killed": killed,
+        "statuses": _count(results),
+        "databases_valid": valid,
+        "temporaries_left": leftovers,
+        "same_statuses_as_sequential": [r.status for r in results] == [r.status for r in runs["sequential"]],
+    }
     print(f"== killed run: {wall:.1f} s, killed {killed}", file=sys.stderr)
     print(format_table(results), file=sys.stderr)
     return report
@@ -221,6 +237,7 @@ def write_clip(path: str, frames: int, size=(720, 1280), seed: int = 0) -> None:
     small bank, written frame by frame to a ``.npy`` array on disk (never all in memory).
     Each frame costs a few copies, so writing is quick even on a busy machine."""
     import cv2
+
     h, w = size
     rng = np.random.default_rng(seed)
 
@@ -229,15 +246,15 @@ def write_clip(path: str, frames: int, size=(720, 1280), seed: int = 0) -> None:
         field = (field - field.mean()) / field.std()
         return field
 
-    drift = smooth((h, w + frames), 6)                          # moves one pixel per frame to the left
-    rise = smooth((h + frames // 2 + 1, w), 12)                 # moves one pixel every other frame upwards
+    drift = smooth((h, w + frames), 6)  # moves one pixel per frame to the left
+    rise = smooth((h + frames // 2 + 1, w), 12)  # moves one pixel every other frame upwards
     noise = rng.integers(0, 9, (5, h, w, 1), dtype=np.uint8)
     gains = np.array([1.0, 0.8, 0.6], np.float32)
     header = {"descr": "|u1", "fortran_order": False, "shape": (frames, h, w, 3)}
     with open(path, "wb") as f:
         np.lib.format.write_array_header_1_0(f, header)
         for t in range(frames):
-            img = 120 + 40 * drift[:, t:t + w] + 30 * rise[t // 2:t // 2 + h]
+            img = 120 + 40 * drift[:, t : t + w] + 30 * rise[t // 2 : t // 2 + h]
             frame = np.clip(img[..., None] * gains, 0, 246).astype(np.uint8) + noise[t % 5]
             f.write(frame.tobytes())
 
@@ -253,24 +270,50 @@ def bench_large(workdir: str, frames: int, max_memory: str, n: int) -> dict:
     from dynatex.analyzer.lds import learn_lds
     from dynatex.analyzer.stream import spill_clip
     from dynatex.tiledb import open_db
+
     clip = os.path.join(workdir, "big.npy")
     t = time.perf_counter()
     write_clip(clip, frames)
-    report: dict = {"frames": frames, "size": "1280x720", "clip_bytes": os.path.getsize(clip),
-                    "float32_clip_gib": round(frames * 1280 * 720 * 3 * 4 / 2**30, 2),
-                    "write_s": round(time.perf_counter() - t, 1), "max_memory": max_memory, "n": n}
+    report: dict = {
+        "frames": frames,
+        "size": "1280x720",
+        "clip_bytes": os.path.getsize(clip),
+        "float32_clip_gib": round(frames * 1280 * 720 * 3 * 4 / 2**30, 2),
+        "write_s": round(time.perf_counter() - t, 1),
+        "max_memory": max_memory,
+        "n": n,
+    }
     db = os.path.join(workdir, "big.h5")
-    cmd = [sys.executable, "-m", "dynatex", "analyze", clip, "-o", db, "--n", str(n), "--max-memory", max_memory,
-           "--spill-dir", workdir, "-q"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "dynatex",
+        "analyze",
+        clip,
+        "-o",
+        db,
+        "--n",
+        str(n),
+        "--max-memory",
+        max_memory,
+        "--spill-dir",
+        workdir,
+        "-q",
+    ]
     t = time.perf_counter()
     proc = subprocess.Popen(cmd)
     with TreeMemory(proc.pid, every=0.05) as mem:
         code = proc.wait()
-    report.update(exit_code=code, learn_s=round(time.perf_counter() - t, 1),
-                  peak_rss_tree_gib=round(mem.peak / 2**30, 3),
-                  children_maxrss_gib=round(_children_maxrss() / 2**30, 3))
-    print(f"== large: exit {code}, {report['learn_s']} s, peak tree RSS {report['peak_rss_tree_gib']} GiB",
-          file=sys.stderr)
+    report.update(
+        exit_code=code,
+        learn_s=round(time.perf_counter() - t, 1),
+        peak_rss_tree_gib=round(mem.peak / 2**30, 3),
+        children_maxrss_gib=round(_children_maxrss() / 2**30, 3),
+    )
+    print(
+        f"== large: exit {code}, {report['learn_s']} s, peak tree RSS {report['peak_rss_tree_gib']} GiB",
+        file=sys.stderr,
+    )
     if code != 0:
         return report
     with open_db(db) as d:
@@ -299,6 +342,7 @@ def bench_large(workdir: str, frames: int, max_memory: str, n: int) -> dict:
 
 def _children_maxrss() -> int:
     import resource
+
     return resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
 
 
@@ -314,8 +358,9 @@ def main() -> None:
     if args.what == "corpus" and not CLIPS.is_dir():
         sys.exit(f"{CLIPS} is absent: the corpus benchmark needs the shared clips")
     with tempfile.TemporaryDirectory(prefix="dynatex-bench-", dir=args.workdir) as work:
-        report = bench_corpus(work) if args.what == "corpus" else bench_large(work, args.frames, args.max_memory,
-                                                                               args.n)
+        report = (
+            bench_corpus(work) if args.what == "corpus" else bench_large(work, args.frames, args.max_memory, args.n)
+        )
     text = json.dumps(report, indent=2)
     print(text)
     if args.json:

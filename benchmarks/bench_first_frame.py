@@ -11,6 +11,7 @@ self-test verdict, no compiled kernel of PoCL or pyopencl), so the device self-t
 every kernel build happen; "later" runs reuse the folder of a first run. The device is the
 player's default (``PYOPENCL_CTX`` picks another). Target (issue 15): later runs within 1 s.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,8 +40,9 @@ with open_player(selftest._db_path(), selftest.TEXTURE, mode=mode, backend="open
 
 
 def run_once(mode: str, options: dict, env: dict) -> dict:
-    done = subprocess.run([sys.executable, "-c", CHILD, mode, json.dumps(options)], capture_output=True,
-                          text=True, env=env, timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-c", CHILD, mode, json.dumps(options)], capture_output=True, text=True, env=env, timeout=600
+    )
     if done.returncode != 0:
         last = done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"exit status {done.returncode}"
         raise RuntimeError(f"{mode}: {last}")
@@ -57,19 +59,29 @@ def main(argv: list[str] | None = None) -> int:
         first, later, device = [], [], ""
         for _ in range(args.runs):
             with tempfile.TemporaryDirectory() as cache:
-                env = dict(os.environ, XDG_CACHE_HOME=cache, DYNATEX_CACHE_DIR=os.path.join(cache, "dynatex"),
-                           POCL_CACHE_DIR=os.path.join(cache, "pocl"))
+                env = dict(
+                    os.environ,
+                    XDG_CACHE_HOME=cache,
+                    DYNATEX_CACHE_DIR=os.path.join(cache, "dynatex"),
+                    POCL_CACHE_DIR=os.path.join(cache, "pocl"),
+                )
                 r = run_once(mode, options, env)
                 first.append(r["first_frame_s"])
                 device = r["device"]
                 later.append(run_once(mode, options, env)["first_frame_s"])
-        results[mode] = {"first_run_s": float(np.median(first)), "first_run_range": [min(first), max(first)],
-                         "later_run_s": float(np.median(later)), "later_run_range": [min(later), max(later)],
-                         "device": device}
+        results[mode] = {
+            "first_run_s": float(np.median(first)),
+            "first_run_range": [min(first), max(first)],
+            "later_run_s": float(np.median(later)),
+            "later_run_range": [min(later), max(later)],
+            "device": device,
+        }
         if not args.json:
             r = results[mode]
-            print(f"{mode:11s} first run {r['first_run_s']:6.2f} s ({min(first):.2f}-{max(first):.2f})   "
-                  f"later runs {r['later_run_s']:5.2f} s ({min(later):.2f}-{max(later):.2f})   [{device}]")
+            print(
+                f"{mode:11s} first run {r['first_run_s']:6.2f} s ({min(first):.2f}-{max(first):.2f})   "
+                f"later runs {r['later_run_s']:5.2f} s ({min(later):.2f}-{max(later):.2f})   [{device}]"
+            )
     if args.json:
         print(json.dumps(results, indent=1))
     return 0

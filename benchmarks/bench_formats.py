@@ -8,6 +8,7 @@ ratio of each format to ``rgb+numpy``.
 
     python benchmarks/bench_formats.py [--frames 200] [--rounds 5] [--json]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_tiles import CLIPS, generated_clip, write_db as write_tiles_db  # noqa: E402
+from bench_tiles import CLIPS, generated_clip  # noqa: E402
+from bench_tiles import write_db as write_tiles_db
 
 from dynatex.analyzer import load_clip  # noqa: E402
 from dynatex.analyzer.quilt import learn_quilt, spreading_clip  # noqa: E402
@@ -42,9 +44,10 @@ def _write(path: Path, frames: np.ndarray, method: str, model) -> str:
 def databases(folder: Path) -> list[tuple[str, str, dict]]:
     """(label, database, player options) of the benchmarked cases, all 1280x720 but evolve."""
     import cv2
+
     lds = synthetic_lds_db(folder / "lds.h5", 1280, 720)
     tiles = str(folder / "tiles.h5")
-    grass = CLIPS / "grass_straw_wind_dyntex.avi"           # as bench_tiles: the README's tiles figures
+    grass = CLIPS / "grass_straw_wind_dyntex.avi"  # as bench_tiles: the README's tiles figures
     clip = load_clip(str(grass)).frames if grass.exists() else generated_clip(250, 288, 352)
     write_tiles_db(tiles, clip, learn_tiles(clip))
     pend = pendulum_clip(72, 96)[0]
@@ -52,18 +55,25 @@ def databases(folder: Path) -> list[tuple[str, str, dict]]:
     turn = _write(folder / "turn.h5", pend, "turnpoints", learn_turnpoints(load_clip(pend)))
     spread = spreading_clip(24, 64, 64)
     quilt = _write(folder / "quilt.h5", spread, "quilt", learn_quilt(spread, size=(512, 512), seed=1))
-    return [("lds 1280x720", lds, {"mode": "lds"}),
-            ("tiles 1280x720", tiles, {"mode": "tiles", "size": (720, 1280), "tone": "consensus",
-                                                "controls": {"sigma": 64.0}}),
-            ("turnpoints 1280x720", turn, {"mode": "turnpoints", "playback": "hybrid"}),
-            ("evolve 512x512", quilt, {"mode": "evolve", "jitter": 2.0})]
+    return [
+        ("lds 1280x720", lds, {"mode": "lds"}),
+        (
+            "tiles 1280x720",
+            tiles,
+            {"mode": "tiles", "size": (720, 1280), "tone": "consensus", "controls": {"sigma": 64.0}},
+        ),
+        ("turnpoints 1280x720", turn, {"mode": "turnpoints", "playback": "hybrid"}),
+        ("evolve 512x512", quilt, {"mode": "evolve", "jitter": 2.0}),
+    ]
 
 
 def bench(db: str, options: dict, frames: int, rounds: int) -> dict:
     options = dict(options)
     controls = options.pop("controls", {})
-    players = {f: open_player(db, seed=1, format=f.upper() if f != "rgb+numpy" else "RGB", **options)
-               for f in ("rgb", "rgb+numpy", "rgba", "bgra")}
+    players = {
+        f: open_player(db, seed=1, format=f.upper() if f != "rgb+numpy" else "RGB", **options)
+        for f in ("rgb", "rgb+numpy", "rgba", "bgra")
+    }
     try:
         for p in players.values():
             for name, value in controls.items():
@@ -76,17 +86,26 @@ def bench(db: str, options: dict, frames: int, rounds: int) -> dict:
             players["rgb+numpy"].next_frame(out=bufs["rgb+numpy"])
             rgba[..., :3] = bufs["rgb+numpy"]
 
-        calls = {"rgb": lambda: players["rgb"].next_frame(out=bufs["rgb"]), "rgb+numpy": convert,
-                 "rgba": lambda: players["rgba"].next_frame(out=bufs["rgba"]),
-                 "bgra": lambda: players["bgra"].next_frame(out=bufs["bgra"])}
+        calls = {
+            "rgb": lambda: players["rgb"].next_frame(out=bufs["rgb"]),
+            "rgb+numpy": convert,
+            "rgba": lambda: players["rgba"].next_frame(out=bufs["rgba"]),
+            "bgra": lambda: players["bgra"].next_frame(out=bufs["bgra"]),
+        }
         times: dict[str, list] = {f: [] for f in calls}
         for r in range(rounds):
             for f, fn in calls.items():
-                times[f].append(time_calls(fn, frames=max(2, frames // rounds), warmup=3 if r == 0 else 1,
-                                           max_seconds=20.0 / rounds))
+                times[f].append(
+                    time_calls(
+                        fn, frames=max(2, frames // rounds), warmup=3 if r == 0 else 1, max_seconds=20.0 / rounds
+                    )
+                )
         med = {f: float(np.median(np.concatenate(t))) * 1e3 for f, t in times.items()}
-        return {"backend": players["rgb"].backend, "median_ms": med,
-                "vs_rgb_numpy": {f: med[f] / med["rgb+numpy"] for f in ("rgba", "bgra")}}
+        return {
+            "backend": players["rgb"].backend,
+            "median_ms": med,
+            "vs_rgb_numpy": {f: med[f] / med["rgb+numpy"] for f in ("rgba", "bgra")},
+        }
     finally:
         for p in players.values():
             p.close()
@@ -105,9 +124,11 @@ def main() -> None:
             rows.append(row)
             if not args.json:
                 m, v = row["median_ms"], row["vs_rgb_numpy"]
-                print(f"{label} ({row['backend']}): rgb {m['rgb']:.3f} ms, rgb+numpy {m['rgb+numpy']:.3f} ms, "
-                      f"rgba {m['rgba']:.3f} ms ({v['rgba']:.2f}x), bgra {m['bgra']:.3f} ms ({v['bgra']:.2f}x)",
-                      flush=True)
+                print(
+                    f"{label} ({row['backend']}): rgb {m['rgb']:.3f} ms, rgb+numpy {m['rgb+numpy']:.3f} ms, "
+                    f"rgba {m['rgba']:.3f} ms ({v['rgba']:.2f}x), bgra {m['bgra']:.3f} ms ({v['bgra']:.2f}x)",
+                    flush=True,
+                )
     if args.json:
         print(json.dumps(rows, indent=1))
 

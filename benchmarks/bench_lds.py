@@ -6,6 +6,7 @@ Player: synthetic n=50 textures at 352x288 and 1280x720, float32 and float16 bas
 (the cost depends only on sizes). Analysis: learning from a 250-frame 352x288 colour
 clip (the real sea-waves clip when ../shared/data/clips is there, else a generated one).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,8 +35,13 @@ def analysis_time(repeats: int = 3) -> dict:
         t = time.perf_counter()
         learn_lds(clip, n=50)
         times.append(time.perf_counter() - t)
-    return {"clip": name, "frames": clip.n_frames, "size": f"{clip.shape[1]}x{clip.shape[0]}",
-            "median_s": float(np.median(times)), "max_s": float(np.max(times))}
+    return {
+        "clip": name,
+        "frames": clip.n_frames,
+        "size": f"{clip.shape[1]}x{clip.shape[0]}",
+        "median_s": float(np.median(times)),
+        "max_s": float(np.max(times)),
+    }
 
 
 def main() -> int:

@@ -7,6 +7,7 @@ beside the checkout, else a generated drifting-noise clip); the output is 300 fr
 by playing the source forward and back (ping-pong), with a 64x64 tile grid as boundaries
 and the turn points as events. Prints the time of each metric and of the whole report.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,10 +25,11 @@ DEFAULT_CLIP = Path(__file__).resolve().parents[1].parent / "shared" / "data" / 
 
 def generated(t: int = 250, h: int = 288, w: int = 352, seed: int = 0) -> np.ndarray:
     import cv2
+
     rng = np.random.default_rng(seed)
     base = cv2.GaussianBlur(rng.normal(0, 1, (h + 2 * t, w + 2 * t)).astype(np.float32), (0, 0), 4)
     base = (base - base.mean()) / base.std()
-    frames = np.stack([base[2 * i // 3:2 * i // 3 + h, i:i + w] for i in range(t)])
+    frames = np.stack([base[2 * i // 3 : 2 * i // 3 + h, i : i + w] for i in range(t)])
     return np.repeat((128 + 40 * frames).clip(0, 255).astype(np.uint8)[..., None], 3, axis=-1)
 
 
@@ -40,6 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if Path(args.clip).exists():
         from dynatex.analyzer import load_clip
+
         source = load_clip(args.clip, size=(288, 352)).frames
         name = Path(args.clip).name
     else:
@@ -71,14 +74,19 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         report = m.evaluate(output, source, labels=labels, events=events)
         best = min(best, time.perf_counter() - t0)
-    result = {"source": name, "source_frames": t, "output_frames": int(output.shape[0]),
-              "size": f"{output.shape[2]}x{output.shape[1]}", "evaluate_s": round(best, 3),
-              "per_metric_s": timings, "report": {k: v for k, v in report.items() if k != "stability"}}
+    result = {
+        "source": name,
+        "source_frames": t,
+        "output_frames": int(output.shape[0]),
+        "size": f"{output.shape[2]}x{output.shape[1]}",
+        "evaluate_s": round(best, 3),
+        "per_metric_s": timings,
+        "report": {k: v for k, v in report.items() if k != "stability"},
+    }
     if args.json:
         print(json.dumps(result, indent=1))
     else:
-        print(f"{result['output_frames']} frames {result['size']} against {name} ({t} frames): "
-              f"evaluate() {best:.2f} s")
+        print(f"{result['output_frames']} frames {result['size']} against {name} ({t} frames): evaluate() {best:.2f} s")
         for k, v in timings.items():
             print(f"  {k:24s} {v:7.3f} s")
     return 0

@@ -7,6 +7,7 @@ stacked basis (measured in the same run).
 Uses the real sea-waves clip when ../shared/data/clips is there, else a generated clip of
 the same size. Floors (issue 7): analysis within 60 s; player >= 0.7 of the roofline.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -52,10 +53,19 @@ def main() -> int:
         t = time.perf_counter()
         model = learn_mixture(clip)
         times.append(time.perf_counter() - t)
-    report: dict = {"analysis": {"clip": name, "frames": clip.n_frames, "size": f"{clip.shape[1]}x{clip.shape[0]}",
-                                 "median_s": float(np.median(times)), "max_s": float(np.max(times)),
-                                 "floor_s": ANALYSIS_FLOOR_S,
-                                 "components": model.components, "dim": model.dim, "order": model.order}}
+    report: dict = {
+        "analysis": {
+            "clip": name,
+            "frames": clip.n_frames,
+            "size": f"{clip.shape[1]}x{clip.shape[0]}",
+            "median_s": float(np.median(times)),
+            "max_s": float(np.max(times)),
+            "floor_s": ANALYSIS_FLOOR_S,
+            "components": model.components,
+            "dim": model.dim,
+            "order": model.order,
+        }
+    }
     bw = copy_bandwidth()
     report["bandwidth"] = bw
     report["results"] = []
@@ -65,8 +75,9 @@ def main() -> int:
             w.put_texture("t", clip.source_info())
             w.put_method("t", "mixture", model)
         for prec in ("float32", "float16"):
-            r = bench_player(path, mode="mixture", frames=args.frames, bandwidth_gbs=bw["gbs"],
-                             options={"precision": prec})
+            r = bench_player(
+                path, mode="mixture", frames=args.frames, bandwidth_gbs=bw["gbs"], options={"precision": prec}
+            )
             r.update(precision=prec, rows=model.stacked_basis.shape[0], floor=ROOFLINE_FLOOR)
             report["results"].append(r)
             if not args.json:
@@ -77,8 +88,10 @@ def main() -> int:
     else:
         a = report["analysis"]
         print(f"copy bandwidth {bw['gbs']:.1f} GB/s")
-        print(f"analysis of {a['clip']} ({a['frames']} frames {a['size']}, S={a['components']} d={a['dim']}, "
-              f"AR({a['order']})): median {a['median_s']:.2f} s, max {a['max_s']:.2f} s (floor {ANALYSIS_FLOOR_S:.0f} s)")
+        print(
+            f"analysis of {a['clip']} ({a['frames']} frames {a['size']}, S={a['components']} d={a['dim']}, "
+            f"AR({a['order']})): median {a['median_s']:.2f} s, max {a['max_s']:.2f} s (floor {ANALYSIS_FLOOR_S:.0f} s)"
+        )
     return 0
 
 

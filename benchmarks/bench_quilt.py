@@ -18,6 +18,7 @@ melting honey); without them a synthetic 100-frame 128x128 spreading texture.
 - Error per rank (the seed's Figure 5) and seam visibility (metrics.seam_visibility on the
   cut label map) of 512x512 quilts with and without the cross-fade band.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,8 +46,9 @@ ROUNDS = 10
 
 
 def sources() -> dict[str, np.ndarray]:
-    found = {n: load_clip(CLIPS / f"timevarying_{n}.gif").frames for n in NAMES
-             if (CLIPS / f"timevarying_{n}.gif").exists()}
+    found = {
+        n: load_clip(CLIPS / f"timevarying_{n}.gif").frames for n in NAMES if (CLIPS / f"timevarying_{n}.gif").exists()
+    }
     return found or {"synthetic_spreading": spreading_clip(100, 128, 128)}
 
 
@@ -63,27 +65,40 @@ def bench_player(folder: str, frames: np.ndarray, n: int, bandwidth: float) -> d
     write_db(path, frames, learn_quilt(frames, size=(1024, 1024)))
     half = ratemap.halves((1024, 1024), 2.0, 1.0)
     out: dict = {"size": "1024x1024"}
-    for name, controls in (("uniform_jitter4", {"jitter": 4.0}),
-                           ("ratemap_smoothed", {"jitter": 4.0, "rate_map": half, "rate_sigma": 16.0})):
+    for name, controls in (
+        ("uniform_jitter4", {"jitter": 4.0}),
+        ("ratemap_smoothed", {"jitter": 4.0, "rate_map": half, "rate_sigma": 16.0}),
+    ):
         row: dict = {}
         for backend in ("opencl", "numpy"):
             with EvolvePlayer(path, backend=backend, seed=1, **controls) as p:
                 p.speed = 0.37
                 buf = np.empty(p.shape, np.uint8)
                 if backend == "numpy":
-                    row[backend] = summarize(time_calls(lambda: p.next_frame(out=buf), frames=max(5, n // 20)))
+                    row[backend] = summarize(
+                        time_calls(lambda p=p, buf=buf: p.next_frame(out=buf), frames=max(5, n // 20))
+                    )
                     continue
                 row["bytes_per_frame"] = p.bytes_per_frame
                 row["runs"] = p.n_runs
 
-                def kernel_only():    # host tables + launch + wait, no copy to the caller; the clock stands still
+                def kernel_only():  # host tables + launch + wait, no copy to the caller; the clock stands still
                     p.engine.run_on_device(p.time, source_time=p._source_time, loop=p.end == "loop").wait()
+
                 # alternate rounds of both, so that both see the same load on a shared machine
                 e2e, kern = [], []
                 for r in range(ROUNDS):
-                    e2e.append(time_calls(lambda: p.next_frame(out=buf), frames=max(2, n // ROUNDS),
-                                          warmup=3 if r == 0 else 1, max_seconds=20.0 / ROUNDS))
-                    kern.append(time_calls(kernel_only, frames=max(2, n // ROUNDS), warmup=1, max_seconds=20.0 / ROUNDS))
+                    e2e.append(
+                        time_calls(
+                            lambda p=p, buf=buf: p.next_frame(out=buf),
+                            frames=max(2, n // ROUNDS),
+                            warmup=3 if r == 0 else 1,
+                            max_seconds=20.0 / ROUNDS,
+                        )
+                    )
+                    kern.append(
+                        time_calls(kernel_only, frames=max(2, n // ROUNDS), warmup=1, max_seconds=20.0 / ROUNDS)
+                    )
                 row[backend] = summarize(np.concatenate(e2e))
                 row["kernel"] = summarize(np.concatenate(kern))
         roof_ms = row["bytes_per_frame"] / (bandwidth * 1e9) * 1e3
@@ -101,9 +116,15 @@ def bench_analysis(frames: np.ndarray, repeats: int = 2) -> dict:
         q = learn_quilt(frames, size=(512, 512), seed=seed)
         times.append(time.perf_counter() - t)
         info = q.info
-    return {"output": "512x512", "source": "x".join(map(str, frames.shape[:3][::-1][:2])) + f", {frames.shape[0]} frames",
-            "median_s": float(np.median(times)), "max_s": float(np.max(times)), "svd_s": info["svd_s"],
-            "compare_s": info["compare_s"], "blocks": info["blocks_x"] * info["blocks_y"]}
+    return {
+        "output": "512x512",
+        "source": "x".join(map(str, frames.shape[:3][::-1][:2])) + f", {frames.shape[0]} frames",
+        "median_s": float(np.median(times)),
+        "max_s": float(np.max(times)),
+        "svd_s": info["svd_s"],
+        "compare_s": info["compare_s"],
+        "blocks": info["blocks_x"] * info["blocks_y"],
+    }
 
 
 def bench_speedup(frames: np.ndarray) -> dict:
@@ -114,9 +135,14 @@ def bench_speedup(frames: np.ndarray) -> dict:
     t = time.perf_counter()
     slow = learn_quilt(frames, size=(256, 256), rank=None, seed=0)
     t_slow = time.perf_counter() - t
-    r.update({"quilt256_rank15_s": t_fast, "quilt256_full_s": t_slow,
-              "quilt256_compare_speedup": slow.info["compare_s"] / fast.info["compare_s"],
-              "quilt256_total_speedup": t_slow / t_fast})
+    r.update(
+        {
+            "quilt256_rank15_s": t_fast,
+            "quilt256_full_s": t_slow,
+            "quilt256_compare_speedup": slow.info["compare_s"] / fast.info["compare_s"],
+            "quilt256_total_speedup": t_slow / t_fast,
+        }
+    )
     return r
 
 
@@ -159,31 +185,42 @@ def main() -> int:
         print()
         return 0
     p = report["player"]
-    print(f"copy bandwidth {bw['gbs']:.1f} GB/s; clip {next(iter(src))}; load average {os.getloadavg()[0]:.2f} "
-          f"on {os.cpu_count()} CPUs")
+    print(
+        f"copy bandwidth {bw['gbs']:.1f} GB/s; clip {next(iter(src))}; load average {os.getloadavg()[0]:.2f} "
+        f"on {os.cpu_count()} CPUs"
+    )
     for key in ("uniform_jitter4", "ratemap_smoothed"):
         r = p[key]
-        print(f"  player {p['size']} {key}: OpenCL {r['opencl']['fps']:.0f} fps end to end (median "
-              f"{r['opencl']['median_ms']:.2f} ms, p99 {r['opencl']['p99_ms']:.2f} ms; kernel alone "
-              f"{r['kernel']['median_ms']:.2f} ms), {r['roofline_fraction']:.2f} of roofline "
-              f"{r['roofline_ms']:.2f} ms ({r['bytes_per_frame'] / 1e6:.1f} MB/frame, {r['runs']} runs); "
-              f"numpy {r['numpy']['fps']:.1f} fps -> {r['speedup_vs_numpy']:.1f}x  [floor 500 fps]")
+        print(
+            f"  player {p['size']} {key}: OpenCL {r['opencl']['fps']:.0f} fps end to end (median "
+            f"{r['opencl']['median_ms']:.2f} ms, p99 {r['opencl']['p99_ms']:.2f} ms; kernel alone "
+            f"{r['kernel']['median_ms']:.2f} ms), {r['roofline_fraction']:.2f} of roofline "
+            f"{r['roofline_ms']:.2f} ms ({r['bytes_per_frame'] / 1e6:.1f} MB/frame, {r['runs']} runs); "
+            f"numpy {r['numpy']['fps']:.1f} fps -> {r['speedup_vs_numpy']:.1f}x  [floor 500 fps]"
+        )
     if args.player_only:
         return 0
     a = report["analysis"]
-    print(f"  quilting {a['output']} from {a['source']}: median {a['median_s']:.2f} s, max {a['max_s']:.2f} s "
-          f"(SVD {a['svd_s']:.2f} s, comparisons {a['compare_s']:.2f} s, {a['blocks']} blocks)  [floor 30 s]")
+    print(
+        f"  quilting {a['output']} from {a['source']}: median {a['median_s']:.2f} s, max {a['max_s']:.2f} s "
+        f"(SVD {a['svd_s']:.2f} s, comparisons {a['compare_s']:.2f} s, {a['blocks']} blocks)  [floor 30 s]"
+    )
     s = report["svd_speedup"]
-    print(f"  comparisons on rank {s['rank']} vs full sequences ({s['full_width']} values): {s['small_s'] * 1e3:.2f} ms vs "
-          f"{s['full_s'] * 1e3:.2f} ms per block -> {s['speedup']:.1f}x (best match agrees {s['best_agreement']:.0%}); "
-          f"whole 256x256 quilt: comparisons {s['quilt256_compare_speedup']:.1f}x, total "
-          f"{s['quilt256_full_s']:.1f} s -> {s['quilt256_rank15_s']:.1f} s ({s['quilt256_total_speedup']:.1f}x)")
+    print(
+        f"  comparisons on rank {s['rank']} vs full sequences ({s['full_width']} values): "
+        f"{s['small_s'] * 1e3:.2f} ms vs "
+        f"{s['full_s'] * 1e3:.2f} ms per block -> {s['speedup']:.1f}x (best match agrees {s['best_agreement']:.0%}); "
+        f"whole 256x256 quilt: comparisons {s['quilt256_compare_speedup']:.1f}x, total "
+        f"{s['quilt256_full_s']:.1f} s -> {s['quilt256_rank15_s']:.1f} s ({s['quilt256_total_speedup']:.1f}x)"
+    )
     for name, qd in report.get("quality", {}).items():
         errs = ", ".join(f"k={k}: {v:.2f}%" for k, v in qd["rank_error_pct"].items())
         print(f"\n{name}: relative RMS error per rank: {errs}")
-        print(f"  seam visibility 512x512 (median of seeds 0-2, frames every 5): cross-fade "
-              f"{qd['seam_feathered']['median']:.3f} {np.round(qd['seam_feathered']['seeds'], 3).tolist()}, "
-              f"hard cuts {qd['seam_hard_cuts']['median']:.3f}  [<= 1.2]")
+        print(
+            f"  seam visibility 512x512 (median of seeds 0-2, frames every 5): cross-fade "
+            f"{qd['seam_feathered']['median']:.3f} {np.round(qd['seam_feathered']['seeds'], 3).tolist()}, "
+            f"hard cuts {qd['seam_hard_cuts']['median']:.3f}  [<= 1.2]"
+        )
     return 0
 
 

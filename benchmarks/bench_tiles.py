@@ -21,6 +21,7 @@
   ``../shared/data/clips`` (floor: 2 minutes) and a generated 260-frame 1280x720 clip
   (floor: 10 minutes).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,7 +49,7 @@ def generated_clip(t: int, h: int, w: int, seed: int = 0) -> np.ndarray:
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     out = np.empty((t, h, w, 3), np.uint8)
     for i in range(t):
-        g = (np.sin(2 * np.pi * i / 23 + 0.05 * xx + 0.02 * yy) + np.sin(2 * np.pi * i / 37 - 0.03 * xx + 0.04 * yy))
+        g = np.sin(2 * np.pi * i / 23 + 0.05 * xx + 0.02 * yy) + np.sin(2 * np.pi * i / 37 - 0.03 * xx + 0.04 * yy)
         g = 128 + 50 * g + rng.normal(0, 5, (h, w)).astype(np.float32)
         g = np.clip(g, 0, 255).astype(np.uint8)
         out[i, ..., 0], out[i, ..., 1], out[i, ..., 2] = g, (g * 0.7 + 40).astype(np.uint8), 255 - g
@@ -66,8 +67,11 @@ def bench_player(path: str, size: tuple[int, int], n: int, *, defaults: bool = F
     """OpenCL end to end and kernel alone in ``rounds`` rounds, each with the copy bandwidth
     measured just before it (the roofline fraction of a round compares numbers taken under the
     same load of this shared machine; the row reports the median over rounds), then numpy."""
-    row: dict = {"size": f"{size[1]}x{size[0]}", "settings": "defaults" if defaults else "sigma 64, consensus tone",
-                 "rounds": []}
+    row: dict = {
+        "size": f"{size[1]}x{size[0]}",
+        "settings": "defaults" if defaults else "sigma 64, consensus tone",
+        "rounds": [],
+    }
 
     def player(backend: str) -> TilesPlayer:
         p = TilesPlayer(path, backend=backend, size=size, seed=1, tone=None if defaults else "consensus")
@@ -84,9 +88,15 @@ def bench_player(path: str, size: tuple[int, int], n: int, *, defaults: bool = F
             times = time_calls(lambda: p.next_frame(out=buf), frames=max(10, n // rounds))
             ktimes = time_calls(lambda: g.render_on_device(1.5), frames=max(10, n // rounds))
             roof_ms = p.bytes_per_frame / (gbs * 1e9) * 1e3
-            row["rounds"].append({"gbs": gbs, "median_ms": float(np.median(times)) * 1e3,
-                                  "kernel_ms": float(np.median(ktimes)) * 1e3, "roofline_ms": roof_ms,
-                                  "roofline_fraction": roof_ms / (float(np.median(times)) * 1e3)})
+            row["rounds"].append(
+                {
+                    "gbs": gbs,
+                    "median_ms": float(np.median(times)) * 1e3,
+                    "kernel_ms": float(np.median(ktimes)) * 1e3,
+                    "roofline_ms": roof_ms,
+                    "roofline_fraction": roof_ms / (float(np.median(times)) * 1e3),
+                }
+            )
             e2e.append(times)
             kernel.append(ktimes)
         row["opencl"] = summarize(np.concatenate(e2e))
@@ -112,13 +122,29 @@ def bench_analysis() -> list[dict]:
         frames = load_clip(str(grass)).frames
         t0 = time.perf_counter()
         m = learn_tiles(frames)
-        out.append({"clip": "grass 352x288", "frames": int(frames.shape[0]), "seconds": time.perf_counter() - t0,
-                    "floor_s": 120, "tile": list(m.tile_size), "loop": m.loop_length})
+        out.append(
+            {
+                "clip": "grass 352x288",
+                "frames": int(frames.shape[0]),
+                "seconds": time.perf_counter() - t0,
+                "floor_s": 120,
+                "tile": list(m.tile_size),
+                "loop": m.loop_length,
+            }
+        )
     frames = generated_clip(260, 720, 1280)
     t0 = time.perf_counter()
     m = learn_tiles(frames)
-    out.append({"clip": "generated 1280x720", "frames": 260, "seconds": time.perf_counter() - t0, "floor_s": 600,
-                "tile": list(m.tile_size), "loop": m.loop_length})
+    out.append(
+        {
+            "clip": "generated 1280x720",
+            "frames": 260,
+            "seconds": time.perf_counter() - t0,
+            "floor_s": 600,
+            "tile": list(m.tile_size),
+            "loop": m.loop_length,
+        }
+    )
     return out
 
 
@@ -129,9 +155,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true", help="print the results as JSON")
     ap.add_argument("--no-analysis", action="store_true")
     ap.add_argument("--no-defaults", action="store_true", help="skip the 3840x2160 run with the player's defaults")
-    ap.add_argument("--rounds", type=int, default=5, help="rounds per size, each with its own copy-bandwidth measurement")
-    ap.add_argument("--constructions", default="quilted,ring",
-                    help="tile constructions to play, one database each, in one run (default quilted,ring)")
+    ap.add_argument(
+        "--rounds", type=int, default=5, help="rounds per size, each with its own copy-bandwidth measurement"
+    )
+    ap.add_argument(
+        "--constructions",
+        default="quilted,ring",
+        help="tile constructions to play, one database each, in one run (default quilted,ring)",
+    )
     args = ap.parse_args(argv)
     result: dict = {"player": [], "analysis": []}
     with tempfile.TemporaryDirectory() as tmp:
@@ -151,18 +182,24 @@ def main(argv: list[str] | None = None) -> int:
             tr = row["traffic"]
             lo, hi = row["roofline_fraction_range"]
             gbs = [r["gbs"] for r in row["rounds"]]
-            print(f"{row['construction']} {row['size']} ({row['settings']}): OpenCL {row['opencl']['fps']:.0f} frames/s (median {row['opencl']['median_ms']:.2f} ms, "
-                  f"p99 {row['opencl']['p99_ms']:.2f} ms; kernel alone {row['opencl_kernel']['median_ms']:.2f} ms), "
-                  f"numpy {row['numpy']['fps']:.1f} frames/s, "
-                  f"x{row['speedup_vs_numpy']:.1f} vs numpy, {row['roofline_fraction']:.2f} of the roofline "
-                  f"(median of {len(row['rounds'])} rounds, {lo:.2f}-{hi:.2f}; roofline {row['roofline_ms']:.2f} ms at "
-                  f"{min(gbs):.1f}-{max(gbs):.1f} GB/s for {row['bytes_per_frame'] / 1e6:.1f} MB: "
-                  f"{tr['output'] / 1e6:.1f} MB output + {tr['stored'] / 1e6:.1f} MB distinct tile data)", file=sys.stderr)
+            print(
+                f"{row['construction']} {row['size']} ({row['settings']}): "
+                f"OpenCL {row['opencl']['fps']:.0f} frames/s (median {row['opencl']['median_ms']:.2f} ms, "
+                f"p99 {row['opencl']['p99_ms']:.2f} ms; kernel alone {row['opencl_kernel']['median_ms']:.2f} ms), "
+                f"numpy {row['numpy']['fps']:.1f} frames/s, "
+                f"x{row['speedup_vs_numpy']:.1f} vs numpy, {row['roofline_fraction']:.2f} of the roofline "
+                f"(median of {len(row['rounds'])} rounds, {lo:.2f}-{hi:.2f}; roofline {row['roofline_ms']:.2f} ms at "
+                f"{min(gbs):.1f}-{max(gbs):.1f} GB/s for {row['bytes_per_frame'] / 1e6:.1f} MB: "
+                f"{tr['output'] / 1e6:.1f} MB output + {tr['stored'] / 1e6:.1f} MB distinct tile data)",
+                file=sys.stderr,
+            )
     if not args.no_analysis:
         result["analysis"] = bench_analysis()
         for a in result["analysis"]:
-            print(f"analysis {a['clip']} ({a['frames']} frames): {a['seconds']:.1f} s (floor {a['floor_s']} s)",
-                  file=sys.stderr)
+            print(
+                f"analysis {a['clip']} ({a['frames']} frames): {a['seconds']:.1f} s (floor {a['floor_s']} s)",
+                file=sys.stderr,
+            )
     if args.json:
         print(json.dumps(result, indent=2))
     return 0

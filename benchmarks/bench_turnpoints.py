@@ -10,6 +10,7 @@ Analysis: 300 frames at 640x352 (a rendered pendulum), floor <= 10 s.
 Comparison: turn points only, transitions only and hybrid playback of the real pendulum and
 candle-flame clips (when ../shared/data/clips is there) with the quality metrics.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,6 +36,7 @@ COMPARE = ("pendulum_clock_schoedl.mov", "small_64px/fire_dyntex_64px.avi")
 
 def _resize(frames: np.ndarray, h: int, w: int) -> np.ndarray:
     import cv2
+
     return np.stack([cv2.resize(f, (w, h), interpolation=cv2.INTER_LINEAR) for f in frames])
 
 
@@ -61,7 +63,7 @@ def bench_player(folder: str, frames: int, bandwidth: float) -> dict:
                 p.speed = speed
                 buf = np.empty(p.shape, np.uint8)
                 n = frames if backend == "opencl" else max(20, frames // 3)
-                row[backend] = summarize(time_calls(lambda: p.next_frame(out=buf), frames=n))
+                row[backend] = summarize(time_calls(lambda p=p, buf=buf: p.next_frame(out=buf), frames=n))
                 out["memory_mb"] = p.memory_bytes / 2**20 if backend == "opencl" else out.get("memory_mb")
                 out["bytes_per_frame"] = p.bytes_per_frame
         # speed 1: one stored frame read and the output written; speed 0.5: two frames read,
@@ -81,8 +83,16 @@ def bench_analysis(folder: str, repeats: int = 3) -> dict:
     return {"frames": 300, "size": "640x352", "median_s": float(np.median(times)), "max_s": float(np.max(times))}
 
 
-def play_and_measure(path: str, source: np.ndarray, playback: str, *, frames: int = 10000, crossfade: int = 4,
-                     seed: int = 1, keep: int = 300) -> dict:
+def play_and_measure(
+    path: str,
+    source: np.ndarray,
+    playback: str,
+    *,
+    frames: int = 10000,
+    crossfade: int = 4,
+    seed: int = 1,
+    keep: int = 300,
+) -> dict:
     """Play ``frames`` frames; measure coverage, events and their frame differences, and the
     likeness of the first ``keep`` output frames to the source."""
     with TurnPointPlayer(path, backend="numpy", playback=playback, seed=seed) as p:
@@ -100,18 +110,25 @@ def play_and_measure(path: str, source: np.ndarray, playback: str, *, frames: in
                 kept.append(cur.copy())
             prev, cur = cur, prev
         dead = p.dead_ends
-    ratios = [temporal_discontinuity(np.concatenate(pairs[b:b + 256]),
-                                     list(range(1, 2 * len(pairs[b:b + 256]), 2)), source=source)
-              for b in range(0, len(pairs), 256)]
+    ratios = [
+        temporal_discontinuity(
+            np.concatenate(pairs[b : b + 256]), list(range(1, 2 * len(pairs[b : b + 256]), 2)), source=source
+        )
+        for b in range(0, len(pairs), 256)
+    ]
     r = np.concatenate(ratios) if ratios else np.zeros(0)
     ev_arr = np.array(ev)
     out = np.stack(kept)
-    return {"coverage": index_coverage(np.array(idx), source.shape[0]), "dead_ends": dead,
-            "turns": int(np.count_nonzero(ev_arr & 1)), "jumps": int(np.count_nonzero(ev_arr & 2)),
-            "event_ratio_mean": float(r.mean()) if r.size else None,
-            "event_ratio_max": float(r.max()) if r.size else None,
-            "step_ratio": frame_step_ratio(out, source),
-            "spectrum_db": spectrum_distance(out, source)}
+    return {
+        "coverage": index_coverage(np.array(idx), source.shape[0]),
+        "dead_ends": dead,
+        "turns": int(np.count_nonzero(ev_arr & 1)),
+        "jumps": int(np.count_nonzero(ev_arr & 2)),
+        "event_ratio_mean": float(r.mean()) if r.size else None,
+        "event_ratio_max": float(r.max()) if r.size else None,
+        "step_ratio": frame_step_ratio(out, source),
+        "spectrum_db": spectrum_distance(out, source),
+    }
 
 
 def compare(folder: str, frames: int = 10000) -> dict:
@@ -140,8 +157,11 @@ def main() -> int:
     args = ap.parse_args()
     bw = copy_bandwidth(mbytes=128, repeats=3)
     with tempfile.TemporaryDirectory() as folder:
-        report = {"bandwidth": bw, "player": bench_player(folder, args.frames, bw["gbs"]),
-                  "analysis": bench_analysis(folder)}
+        report = {
+            "bandwidth": bw,
+            "player": bench_player(folder, args.frames, bw["gbs"]),
+            "analysis": bench_analysis(folder),
+        }
         if not args.no_compare:
             report["compare"] = compare(folder)
     if args.json:
@@ -149,26 +169,36 @@ def main() -> int:
         print()
         return 0
     p = report["player"]
-    print(f"copy bandwidth {bw['gbs']:.1f} GB/s; frames on the device: {p['memory_mb']:.0f} MB "
-          f"({p['stored_frames']} frames {p['size']})")
+    print(
+        f"copy bandwidth {bw['gbs']:.1f} GB/s; frames on the device: {p['memory_mb']:.0f} MB "
+        f"({p['stored_frames']} frames {p['size']})"
+    )
     for key in ("speed_1", "speed_0.5"):
         r = p[key]
-        print(f"  {key}: OpenCL {r['opencl']['fps']:.0f} fps (median {r['opencl']['median_ms']:.3f} ms, "
-              f"p99 {r['opencl']['p99_ms']:.3f} ms, {r['roofline_fraction']:.2f} of roofline); "
-              f"numpy {r['numpy']['fps']:.0f} fps -> {r['speedup_vs_numpy']:.2f}x  [floor 1000 fps]")
+        print(
+            f"  {key}: OpenCL {r['opencl']['fps']:.0f} fps (median {r['opencl']['median_ms']:.3f} ms, "
+            f"p99 {r['opencl']['p99_ms']:.3f} ms, {r['roofline_fraction']:.2f} of roofline); "
+            f"numpy {r['numpy']['fps']:.0f} fps -> {r['speedup_vs_numpy']:.2f}x  [floor 1000 fps]"
+        )
     a = report["analysis"]
-    print(f"analysis of {a['frames']} frames {a['size']}: median {a['median_s']:.2f} s, max {a['max_s']:.2f} s "
-          f"[floor 10 s]")
+    print(
+        f"analysis of {a['frames']} frames {a['size']}: median {a['median_s']:.2f} s, max {a['max_s']:.2f} s "
+        f"[floor 10 s]"
+    )
     for name, rows in report.get("compare", {}).items():
         print(f"\n{name} (10,000 frames, seed 1)")
-        print("| playback | coverage | turns | jumps | event diff / median step (crossfade 4) | max | "
-              "without crossfade | step ratio | spectrum dist (dB) | dead ends |")
+        print(
+            "| playback | coverage | turns | jumps | event diff / median step (crossfade 4) | max | "
+            "without crossfade | step ratio | spectrum dist (dB) | dead ends |"
+        )
         print("|---|---|---|---|---|---|---|---|---|---|")
         for pb, r in rows.items():
             nc = r.get("event_ratio_mean_no_crossfade")
-            print(f"| {pb} | {r['coverage']:.1%} | {r['turns']} | {r['jumps']} | {r['event_ratio_mean']:.2f} | "
-                  f"{r['event_ratio_max']:.2f} | {'-' if nc is None else f'{nc:.2f}'} | {r['step_ratio']:.2f} | "
-                  f"{r['spectrum_db']:.2f} | {r['dead_ends']} |")
+            print(
+                f"| {pb} | {r['coverage']:.1%} | {r['turns']} | {r['jumps']} | {r['event_ratio_mean']:.2f} | "
+                f"{r['event_ratio_max']:.2f} | {'-' if nc is None else f'{nc:.2f}'} | {r['step_ratio']:.2f} | "
+                f"{r['spectrum_db']:.2f} | {r['dead_ends']} |"
+            )
     return 0
 
 

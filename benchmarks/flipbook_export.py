@@ -11,6 +11,7 @@ motion-vector blend against a plain crossfade.
    by the numpy model of the engine shader (:func:`dynatex.analyzer.flipbook.shader_blend`) and
    by a crossfade, each compared (RMS, grey levels) with the true odd frame between them.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,11 +46,18 @@ def check_layout(atlas: np.ndarray, doc: dict, expected: np.ndarray) -> dict:
     """Size, frame count and order of ``atlas`` against the sidecar and the ``expected`` frames."""
     grid = fb.Grid(doc["cols"], doc["rows"], (doc["tile_height"], doc["tile_width"]), doc["frames"])
     size_ok = atlas.shape[:2] == (doc["atlas_height"], doc["atlas_width"]) == grid.atlas_shape
-    worst = max(int(np.abs(atlas[grid.cell(k)].astype(int) - fb.fit(f, grid.tile).astype(int)).max())
-                for k, f in enumerate(expected))
+    worst = max(
+        int(np.abs(atlas[grid.cell(k)].astype(int) - fb.fit(f, grid.tile).astype(int)).max())
+        for k, f in enumerate(expected)
+    )
     empty = all(not atlas[grid.cell(k)].any() for k in range(len(expected), grid.cols * grid.rows))
-    return {"size_matches": bool(size_ok), "frames": doc["frames"], "expected_frames": len(expected),
-            "max_cell_difference": worst, "empty_cells_black": empty}
+    return {
+        "size_matches": bool(size_ok),
+        "frames": doc["frames"],
+        "expected_frames": len(expected),
+        "max_cell_difference": worst,
+        "empty_cells_black": empty,
+    }
 
 
 def export_case(db: Path, out: Path, mode: str, extra: list[str], expected) -> dict:
@@ -57,10 +65,17 @@ def export_case(db: Path, out: Path, mode: str, extra: list[str], expected) -> d
     dynatex("export", str(db), "-o", str(out), "--mode", mode, "--loop", *extra)
     seconds = time.perf_counter() - t0
     doc = json.loads(next(out.glob("*.json")).read_text())
-    row = {"mode": mode, "options": " ".join(extra), "grid": f"{doc['cols']}x{doc['rows']}",
-           "tile": f"{doc['tile_width']}x{doc['tile_height']}", "loop": doc["loop"], "fps": round(doc["fps"], 3),
-           "wrap_discontinuity": doc["wrap_discontinuity"], "seconds": round(seconds, 1),
-           "mv_strength_tile_uv": doc.get("motion_vectors", {}).get("strength_tile_uv")}
+    row = {
+        "mode": mode,
+        "options": " ".join(extra),
+        "grid": f"{doc['cols']}x{doc['rows']}",
+        "tile": f"{doc['tile_width']}x{doc['tile_height']}",
+        "loop": doc["loop"],
+        "fps": round(doc["fps"], 3),
+        "wrap_discontinuity": doc["wrap_discontinuity"],
+        "seconds": round(seconds, 1),
+        "mv_strength_tile_uv": doc.get("motion_vectors", {}).get("strength_tile_uv"),
+    }
     row.update(check_layout(read_atlas(out, doc), doc, expected(doc)))
     return row
 
@@ -71,6 +86,7 @@ def tiles_frames(db: Path):
             p.epoch = 0
             p.speed = p.loop_length / doc["frames"]
             return np.stack([p.next_frame().copy() for _ in range(doc["frames"])])
+
     return frames
 
 
@@ -81,6 +97,7 @@ def swing_frames(db: Path):
             src = p.texture.frames().read()
         path = list(range(a, b + 1)) + list(range(b - 1, a, -1))
         return src[path]
+
     return frames
 
 
@@ -103,9 +120,14 @@ def motion_check(clip: np.ndarray, *, step: int = 2, count: int = 64) -> dict:
         mv.append(rms(fb.shader_blend(color, vectors, grid, strength, k, 0.5), truth))
         xf.append(rms(fb.crossfade(color, grid, k, 0.5), truth))
     mv_a, xf_a = np.array(mv), np.array(xf)
-    return {"pairs": n - 1, "step": step, "motion_blend_rms": round(float(mv_a.mean()), 3),
-            "crossfade_rms": round(float(xf_a.mean()), 3), "motion_blend_better_share": round(float(np.mean(mv_a < xf_a)), 3),
-            "strength_tile_uv": round(strength, 5)}
+    return {
+        "pairs": n - 1,
+        "step": step,
+        "motion_blend_rms": round(float(mv_a.mean()), 3),
+        "crossfade_rms": round(float(xf_a.mean()), 3),
+        "motion_blend_better_share": round(float(np.mean(mv_a < xf_a)), 3),
+        "strength_tile_uv": round(strength, 5),
+    }
 
 
 def main() -> None:
@@ -122,14 +144,21 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp_path = Path(tmp)
         dynatex("analyze", str(grass), "-o", str(tmp_path / "grass.h5"), "--name", "grass", "--methods", "tiles", "-q")
-        dynatex("analyze", str(clock), "-o", str(tmp_path / "clock.h5"), "--name", "clock", "--methods", "turnpoints",
-                "-q")
-        for i, (db, mode, extra, expected) in enumerate([
-            (tmp_path / "grass.h5", "tiles", ["--source", str(grass)], tiles_frames(tmp_path / "grass.h5")),
-            (tmp_path / "grass.h5", "tiles", ["--source", str(grass), "--frames", "64"],
-             tiles_frames(tmp_path / "grass.h5")),
-            (tmp_path / "clock.h5", "turnpoints", [], swing_frames(tmp_path / "clock.h5")),
-        ]):
+        dynatex(
+            "analyze", str(clock), "-o", str(tmp_path / "clock.h5"), "--name", "clock", "--methods", "turnpoints", "-q"
+        )
+        for i, (db, mode, extra, expected) in enumerate(
+            [
+                (tmp_path / "grass.h5", "tiles", ["--source", str(grass)], tiles_frames(tmp_path / "grass.h5")),
+                (
+                    tmp_path / "grass.h5",
+                    "tiles",
+                    ["--source", str(grass), "--frames", "64"],
+                    tiles_frames(tmp_path / "grass.h5"),
+                ),
+                (tmp_path / "clock.h5", "turnpoints", [], swing_frames(tmp_path / "clock.h5")),
+            ]
+        ):
             row = export_case(db, tmp_path / f"out{i}", mode, extra, expected)
             results["export"].append(row)
             if not args.json:

@@ -24,6 +24,7 @@ Usage::
     python benchmarks/lattice_tiles.py [--clips grass,sea] [--construction ring] \\
         [--sheets /tmp/sheets --prefix before] [--json out.json]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,6 +36,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 from dynatex.analyzer import load_clip, metrics
 from dynatex.analyzer.sheet import contact_sheet
 from dynatex.analyzer.tiles import learn_tiles
@@ -54,8 +56,9 @@ FILES = {
 TONE_FACTORS = np.array([1.15, 1.0, 0.85])
 
 
-def measure(name: str, *, n_out: int, backend: str, workdir: str, construction: str | None,
-            sheets: str | None, prefix: str) -> dict:
+def measure(
+    name: str, *, n_out: int, backend: str, workdir: str, construction: str | None, sheets: str | None, prefix: str
+) -> dict:
     file, opts = FILES[name]
     clip = load_clip(str(CLIPS / file), **opts)
     frames = clip.frames
@@ -81,8 +84,9 @@ def measure(name: str, *, n_out: int, backend: str, workdir: str, construction: 
     res["lattice_prominence_source"] = metrics.lattice_prominence(frames, (ch, cw))
     res["seam_grid"] = float(metrics.seam_visibility(out, metrics.grid_labels((H, W), (ch, cw))).mean())
     tile = model.tiles[0]
-    res["wrap_discontinuity"] = float(metrics.temporal_discontinuity(np.concatenate([tile, tile]),
-                                                                     [model.loop_length], source=frames)[0])
+    res["wrap_discontinuity"] = float(
+        metrics.temporal_discontinuity(np.concatenate([tile, tile]), [model.loop_length], source=frames)[0]
+    )
     target = np.clip(frames.reshape(-1, 3).mean(axis=0) * TONE_FACTORS, 1, 254)
     with TilesPlayer(path, backend=backend, size=(H, W), seed=1, tone=tuple(target)) as p:
         acc = np.zeros(3)
@@ -94,8 +98,12 @@ def measure(name: str, *, n_out: int, backend: str, workdir: str, construction: 
     res["tone_max_rel_error"] = float(np.max(np.abs(mean - target) / target))
     if sheets:
         os.makedirs(sheets, exist_ok=True)
-        contact_sheet(frames, out, os.path.join(sheets, f"{prefix}_{name}.png"),
-                      title=f"tiles ({res['construction']}, cells {cw}x{ch})")
+        contact_sheet(
+            frames,
+            out,
+            os.path.join(sheets, f"{prefix}_{name}.png"),
+            title=f"tiles ({res['construction']}, cells {cw}x{ch})",
+        )
     return res
 
 
@@ -104,8 +112,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=120)
     ap.add_argument("--clips", default=",".join(FILES), help=f"comma-separated subset of {', '.join(FILES)}")
     ap.add_argument("--backend", default="auto", choices=("auto", "opencl", "numpy"))
-    ap.add_argument("--construction", default=None, choices=CONSTRUCTIONS,
-                    help="tile construction (default: the analyzer's)")
+    ap.add_argument(
+        "--construction", default=None, choices=CONSTRUCTIONS, help="tile construction (default: the analyzer's)"
+    )
     ap.add_argument("--sheets", default=None, help="folder for contact sheets")
     ap.add_argument("--prefix", default="sheet", help="file name prefix of the contact sheets")
     ap.add_argument("--json", default=None)
@@ -113,19 +122,31 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.clips.split(","):
-            r = measure(name, n_out=args.frames, backend=args.backend, workdir=tmp, construction=args.construction,
-                        sheets=args.sheets, prefix=args.prefix)
+            r = measure(
+                name,
+                n_out=args.frames,
+                backend=args.backend,
+                workdir=tmp,
+                construction=args.construction,
+                sheets=args.sheets,
+                prefix=args.prefix,
+            )
             results.append(r)
             print(json.dumps(r), file=sys.stderr, flush=True)
-    print("| clip | construction | cells | loop | tiles | lattice prominence (source) | grid seam | wrap | "
-          "tone error | analysis s |")
+    print(
+        "| clip | construction | cells | loop | tiles | lattice prominence (source) | grid seam | wrap | "
+        "tone error | analysis s |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
-        lp, ls = (("n/a" if v is None else f"{v:.3f}") for v in (r["lattice_prominence"],
-                                                                   r["lattice_prominence_source"]))
-        print(f"| {r['clip']} | {r['construction']} | {r['tile']} | {r['loop']} | {r['n_tiles']} | "
-              f"{lp} ({ls}) | {r['seam_grid']:.3f} | {r['wrap_discontinuity']:.2f} | "
-              f"{100 * r['tone_max_rel_error']:.2f}% | {r['analysis_s']} |")
+        lp, ls = (
+            ("n/a" if v is None else f"{v:.3f}") for v in (r["lattice_prominence"], r["lattice_prominence_source"])
+        )
+        print(
+            f"| {r['clip']} | {r['construction']} | {r['tile']} | {r['loop']} | {r['n_tiles']} | "
+            f"{lp} ({ls}) | {r['seam_grid']:.3f} | {r['wrap_discontinuity']:.2f} | "
+            f"{100 * r['tone_max_rel_error']:.2f}% | {r['analysis_s']} |"
+        )
     if args.json:
         with open(args.json, "w") as f:
             json.dump(results, f, indent=2)

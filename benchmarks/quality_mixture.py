@@ -18,6 +18,7 @@
    computed exactly from the coefficients (frames are linear in them); a few frames are
    also rendered with OpenCL to check.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -36,8 +37,12 @@ from dynatex.player.mixture import MixturePlayer, nearest_distance
 from dynatex.tiledb import DatabaseWriter
 
 CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
-NAMES = ("water_sea_waves_dyntex.avi", "flag_wind_dyntex_571c110.avi", "fountain_dyntex_6486110.avi",
-         "grass_straw_wind_dyntex.avi")
+NAMES = (
+    "water_sea_waves_dyntex.avi",
+    "flag_wind_dyntex_571c110.avi",
+    "fountain_dyntex_6486110.avi",
+    "grass_straw_wind_dyntex.avi",
+)
 
 
 def _blocks(e: np.ndarray, size: int = 1000) -> tuple[float, float]:
@@ -50,13 +55,22 @@ def evaluate(path: Path, frames: int, tmp: str) -> dict:
     t = clip.n_frames
     m = learn_mixture(clip)
     s, d = m.components, m.dim
-    sv2 = m.singular_values ** 2
+    sv2 = m.singular_values**2
     total = m.info["total_energy"]
     big = s * (d + 1) - 1
-    row = {"clip": path.name, "frames": t, "S": s, "d": d, "D": m.global_dim, "p": m.order,
-           "mixture": m.info["recon_error"], "mixture_hard": m.info["recon_error_hard"],
-           "pca_d": float(1 - sv2[:d].sum() / total), "pca_stacked": float(1 - sv2[:big].sum() / total),
-           "stacked_dim": big}
+    row = {
+        "clip": path.name,
+        "frames": t,
+        "S": s,
+        "d": d,
+        "D": m.global_dim,
+        "p": m.order,
+        "mixture": m.info["recon_error"],
+        "mixture_hard": m.info["recon_error_hard"],
+        "pca_d": float(1 - sv2[:d].sum() / total),
+        "pca_stacked": float(1 - sv2[:big].sum() / total),
+        "stacked_dim": big,
+    }
     lds = learn_lds(clip, n=50)
     db = Path(tmp) / f"{path.stem}.h5"
     with DatabaseWriter(db) as w:
@@ -64,7 +78,7 @@ def evaluate(path: Path, frames: int, tmp: str) -> dict:
         w.put_method("t", "mixture", m)
         w.put_method("t", "lds", lds)
     yc = clip.frames.reshape(t, -1).astype(np.float64) - m.mean
-    ynorm = (yc ** 2).sum(axis=1)
+    ynorm = (yc**2).sum(axis=1)
     src = float(ynorm.mean())
     scale = np.sqrt(src)
     basis = m.stacked_basis.astype(np.float64)
@@ -83,35 +97,46 @@ def evaluate(path: Path, frames: int, tmp: str) -> dict:
     yd = ynorm[:, None] - 2 * yc @ yc.T + ynorm[None]
     np.fill_diagonal(yd, np.inf)
     from dynatex.analyzer.mixture import coefficient_matrix
+
     row["mix_own"] = float(frame_stats(coefficient_matrix(m.responsibilities, m.local_coords))[1].mean())
     row["lds_own"] = float(lds.info["energy_captured"])
     row["train_frame_nn"] = float(np.median(np.sqrt(np.maximum(yd.min(axis=1), 0)))) / scale
     row["train_coord_nn_median"], row["train_coord_nn_max"] = float(np.median(loo)), float(loo.max())
-    row["train_coord_rms"] = float(np.sqrt((g0 ** 2).sum(axis=1).mean()))
+    row["train_coord_rms"] = float(np.sqrt((g0**2).sum(axis=1).mean()))
     for draws in (16, 1):
         with MixturePlayer(db, backend="numpy", seed=0, draws=draws) as p:
             g = p.advance(frames, record=True)
             u = p.decoder.coefficients(g)
         gd = nearest_distance(g0, g)
         fd, e = frame_stats(u)
-        row[f"mix{draws}"] = {"coord_dist_median": float(np.median(gd)), "coord_dist_p99": float(np.percentile(gd, 99)),
-                              "coord_dist_max": float(gd.max()), "frame_dist_median": float(np.median(fd)),
-                              "frame_dist_max": float(fd.max()), "energy": float(e.mean()),
-                              "energy_blocks": _blocks(e), "finite": bool(np.isfinite(g).all())}
-    with MixturePlayer(db, seed=0) as p:      # OpenCL: rendered frames carry the predicted energy
+        row[f"mix{draws}"] = {
+            "coord_dist_median": float(np.median(gd)),
+            "coord_dist_p99": float(np.percentile(gd, 99)),
+            "coord_dist_max": float(gd.max()),
+            "frame_dist_median": float(np.median(fd)),
+            "frame_dist_max": float(fd.max()),
+            "energy": float(e.mean()),
+            "energy_blocks": _blocks(e),
+            "finite": bool(np.isfinite(g).all()),
+        }
+    with MixturePlayer(db, seed=0) as p:  # OpenCL: rendered frames carry the predicted energy
         p.advance(frames)
         u = p.decoder.coefficients(np.stack([p.global_coord]))
         f = p.next_frame().reshape(-1).astype(np.float64) - m.mean
-        row["rendered_energy_check"] = (float((f ** 2).sum() / src), float(frame_stats(u)[1][0]))
+        row["rendered_energy_check"] = (float((f**2).sum() / src), float(frame_stats(u)[1][0]))
     with LDSPlayer(db, backend="numpy", seed=0) as p:
         x = p.advance(frames, record=True)
     lb = lds.basis.astype(np.float64)
-    e = (x ** 2).sum(axis=1)        # orthonormal basis
+    e = (x**2).sum(axis=1)  # orthonormal basis
     d2 = e[:, None] - 2 * x @ (lb @ yc.T) + ynorm[None]
     fd = np.sqrt(np.maximum(d2.min(axis=1), 0)) / scale
-    row["lds"] = {"frame_dist_median": float(np.median(fd)), "frame_dist_max": float(fd.max()),
-                  "energy": float(e.mean() / src), "energy_blocks": tuple(v / src for v in _blocks(e)),
-                  "finite": bool(np.isfinite(x).all())}
+    row["lds"] = {
+        "frame_dist_median": float(np.median(fd)),
+        "frame_dist_max": float(fd.max()),
+        "energy": float(e.mean() / src),
+        "energy_blocks": tuple(v / src for v in _blocks(e)),
+        "finite": bool(np.isfinite(x).all()),
+    }
     return row
 
 
@@ -132,31 +157,44 @@ def main() -> int:
     print("| clip | S x d | mixture (soft) | mixture (hard) | PCA, d | PCA, S(d+1)-1 |")
     print("|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['clip']} | {r['S']} x {r['d']} | {r['mixture']:.4f} | {r['mixture_hard']:.4f} | "
-              f"{r['pca_d']:.4f} | {r['pca_stacked']:.4f} ({r['stacked_dim']}) |")
+        print(
+            f"| {r['clip']} | {r['S']} x {r['d']} | {r['mixture']:.4f} | {r['mixture_hard']:.4f} | "
+            f"{r['pca_d']:.4f} | {r['pca_stacked']:.4f} ({r['stacked_dim']}) |"
+        )
     print()
-    print(f"{args.frames} synthesized frames. coord: distance of g to the nearest training g "
-          "(median / p99 / max); frame: distance to the nearest training frame / RMS frame (median / max); "
-          "energy: mean ratio to the source [min, max of 1000-frame blocks]")
-    print("| clip | train coord NN (med/max) | mixture draws=16 coord | frame | energy | draws=1 coord | frame | energy "
-          "| LDS n=50 frame | energy | training frame NN |")
+    print(
+        f"{args.frames} synthesized frames. coord: distance of g to the nearest training g "
+        "(median / p99 / max); frame: distance to the nearest training frame / RMS frame (median / max); "
+        "energy: mean ratio to the source [min, max of 1000-frame blocks]"
+    )
+    print(
+        "| clip | train coord NN (med/max) | mixture draws=16 coord | frame | energy | draws=1 coord | frame | energy "
+        "| LDS n=50 frame | energy | training frame NN |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         a, b, c = r["mix16"], r["mix1"], r["lds"]
-        print(f"| {r['clip']} | {r['train_coord_nn_median']:.2f} / {r['train_coord_nn_max']:.2f} "
-              f"| {a['coord_dist_median']:.2f} / {a['coord_dist_p99']:.2f} / {a['coord_dist_max']:.2f} "
-              f"| {a['frame_dist_median']:.2f} / {a['frame_dist_max']:.2f} "
-              f"| {a['energy']:.2f} ({a['energy'] / r['mix_own']:.2f}) [{a['energy_blocks'][0]:.2f}, {a['energy_blocks'][1]:.2f}] "
-              f"| {b['coord_dist_median']:.2f} / {b['coord_dist_p99']:.2f} / {b['coord_dist_max']:.2f} "
-              f"| {b['frame_dist_median']:.2f} / {b['frame_dist_max']:.2f} "
-              f"| {b['energy']:.2f} ({b['energy'] / r['mix_own']:.2f}) [{b['energy_blocks'][0]:.2f}, {b['energy_blocks'][1]:.2f}] "
-              f"| {c['frame_dist_median']:.2f} / {c['frame_dist_max']:.2f} "
-              f"| {c['energy']:.2f} ({c['energy'] / r['lds_own']:.2f}) [{c['energy_blocks'][0]:.2f}, {c['energy_blocks'][1]:.2f}] "
-              f"| {r['train_frame_nn']:.2f} |")
+        print(
+            f"| {r['clip']} | {r['train_coord_nn_median']:.2f} / {r['train_coord_nn_max']:.2f} "
+            f"| {a['coord_dist_median']:.2f} / {a['coord_dist_p99']:.2f} / {a['coord_dist_max']:.2f} "
+            f"| {a['frame_dist_median']:.2f} / {a['frame_dist_max']:.2f} "
+            f"| {a['energy']:.2f} ({a['energy'] / r['mix_own']:.2f}) "
+            f"[{a['energy_blocks'][0]:.2f}, {a['energy_blocks'][1]:.2f}] "
+            f"| {b['coord_dist_median']:.2f} / {b['coord_dist_p99']:.2f} / {b['coord_dist_max']:.2f} "
+            f"| {b['frame_dist_median']:.2f} / {b['frame_dist_max']:.2f} "
+            f"| {b['energy']:.2f} ({b['energy'] / r['mix_own']:.2f}) "
+            f"[{b['energy_blocks'][0]:.2f}, {b['energy_blocks'][1]:.2f}] "
+            f"| {c['frame_dist_median']:.2f} / {c['frame_dist_max']:.2f} "
+            f"| {c['energy']:.2f} ({c['energy'] / r['lds_own']:.2f}) "
+            f"[{c['energy_blocks'][0]:.2f}, {c['energy_blocks'][1]:.2f}] "
+            f"| {r['train_frame_nn']:.2f} |"
+        )
     for r in rows:
-        print(f"{r['clip']}: rendered-frame energy {r['rendered_energy_check'][0]:.3f} vs from coefficients "
-              f"{r['rendered_energy_check'][1]:.3f}; AR order {r['p']}; all finite: "
-              f"{r['mix16']['finite'] and r['mix1']['finite'] and r['lds']['finite']}")
+        print(
+            f"{r['clip']}: rendered-frame energy {r['rendered_energy_check'][0]:.3f} vs from coefficients "
+            f"{r['rendered_energy_check'][1]:.3f}; AR order {r['p']}; all finite: "
+            f"{r['mix16']['finite'] and r['mix1']['finite'] and r['lds']['finite']}"
+        )
     return 0
 
 

@@ -22,6 +22,7 @@ Usage::
 
     python benchmarks/quality_tiles.py [--frames 300] [--size 1280x720] [--json out.json]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,8 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynatex.analyzer import load_clip
-from dynatex.analyzer import metrics
+from dynatex.analyzer import load_clip, metrics
 from dynatex.analyzer.tiles import learn_tiles
 from dynatex.player.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter
@@ -53,10 +53,14 @@ def generated_clip(t: int = 250, h: int = 288, w: int = 352, seed: int = 0) -> n
         img += np.sin(2 * np.pi * tt / period + kx * xx + ky * yy).astype(np.float32)
     img = 128 + 35 * img / 3 + rng.normal(0, 6, img.shape).astype(np.float32)
     g = np.clip(img, 0, 255).astype(np.uint8)
-    return np.stack([g, np.clip(g * 0.7 + 40, 0, 255).astype(np.uint8), np.clip(255 - g * 0.8, 0, 255).astype(np.uint8)], axis=3)
+    return np.stack(
+        [g, np.clip(g * 0.7 + 40, 0, 255).astype(np.uint8), np.clip(255 - g * 0.8, 0, 255).astype(np.uint8)], axis=3
+    )
 
 
-def uncut_blocks(frames: np.ndarray, shape: tuple[int, int], tile: tuple[int, int], n_out: int, seed: int = 0) -> np.ndarray:
+def uncut_blocks(
+    frames: np.ndarray, shape: tuple[int, int], tile: tuple[int, int], n_out: int, seed: int = 0
+) -> np.ndarray:
     """Output of the same lattice filled with uncut blocks from random places and start times."""
     rng = np.random.default_rng(seed)
     t, h, w = frames.shape[:3]
@@ -69,16 +73,28 @@ def uncut_blocks(frames: np.ndarray, shape: tuple[int, int], tile: tuple[int, in
             y, x = rng.integers(0, h - th + 1), rng.integers(0, w - tw + 1)
             s = rng.integers(0, t)
             idx = (s + np.arange(n_out)) % t
-            out[:, i * th:(i + 1) * th, j * tw:(j + 1) * tw] = frames[idx, y:y + th, x:x + tw]
+            out[:, i * th : (i + 1) * th, j * tw : (j + 1) * tw] = frames[idx, y : y + th, x : x + tw]
     return out[:, :H, :W]
 
 
-def measure(name: str, frames: np.ndarray, *, size: tuple[int, int], n_out: int, backend: str, workdir: str,
-            mix: np.ndarray | None = None, construction: str | None = None) -> dict:
+def measure(
+    name: str,
+    frames: np.ndarray,
+    *,
+    size: tuple[int, int],
+    n_out: int,
+    backend: str,
+    workdir: str,
+    mix: np.ndarray | None = None,
+    construction: str | None = None,
+) -> dict:
     res: dict = {"clip": name, "source": list(frames.shape)}
     t0 = time.perf_counter()
-    model = learn_tiles(frames, mix=[mix] if mix is not None else (),
-                        construction=construction if construction and mix is None else "ring")
+    model = learn_tiles(
+        frames,
+        mix=[mix] if mix is not None else (),
+        construction=construction if construction and mix is None else "ring",
+    )
     res["construction"] = model.info["construction"]
     res["analysis_s"] = round(time.perf_counter() - t0, 2)
     th, tw = model.tile_size
@@ -122,9 +138,9 @@ def measure(name: str, frames: np.ndarray, *, size: tuple[int, int], n_out: int,
         for tone in (None, "consensus"):
             with TilesPlayer(path, backend=backend, size=size, seed=1, labels="halves", tone=tone) as p:
                 mixed = np.stack([p.next_frame() for _ in range(min(n_out, 60))])
-                border = p.source_class_map()                      # where the dominant texture changes
-                cut = p.source_class_map(strict=True)              # the minimum cut, before feathering
-                xb = int(np.argmax(p.labels[0] == 1)) * tw         # first cell of the second texture
+                border = p.source_class_map()  # where the dominant texture changes
+                cut = p.source_class_map(strict=True)  # the minimum cut, before feathering
+                xb = int(np.argmax(p.labels[0] == 1)) * tw  # first cell of the second texture
             inside = metrics.grid_labels((H, xb), (th, tw))
             key = "" if tone is None else "_tone"
             res["mix_seam_texture_border" + key] = float(metrics.seam_visibility(mixed, border).mean())
@@ -150,10 +166,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--backend", default="opencl", choices=("opencl", "numpy"))
     ap.add_argument("--json", default=None)
-    ap.add_argument("--construction", default=None, choices=CONSTRUCTIONS,
-                    help="tile construction of the single-texture runs (default: the analyzer's, ring)")
-    ap.add_argument("--clips", default="grass,water,generated,grass+water",
-                    help="comma-separated subset of grass, water, generated, grass+water (mixing)")
+    ap.add_argument(
+        "--construction",
+        default=None,
+        choices=CONSTRUCTIONS,
+        help="tile construction of the single-texture runs (default: the analyzer's, ring)",
+    )
+    ap.add_argument(
+        "--clips",
+        default="grass,water,generated,grass+water",
+        help="comma-separated subset of grass, water, generated, grass+water (mixing)",
+    )
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.lower().split("x"))
     size = (h, w)
@@ -161,27 +184,49 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         grass = load_clip(str(CLIPS / "grass_straw_wind_dyntex.avi")).frames
         water = load_clip(str(CLIPS / "water_sea_waves_dyntex.avi")).frames
-        runs = {"grass": (grass, None), "water": (water, None), "generated": (generated_clip(), None),
-                "grass+water": (grass, water)}
+        runs = {
+            "grass": (grass, None),
+            "water": (water, None),
+            "generated": (generated_clip(), None),
+            "grass+water": (grass, water),
+        }
         for name in args.clips.split(","):
             frames, mix = runs[name]
-            r = measure(name.replace("+", "_"), frames, size=size, n_out=args.frames, backend=args.backend,
-                        workdir=tmp, mix=mix, construction=args.construction)
+            r = measure(
+                name.replace("+", "_"),
+                frames,
+                size=size,
+                n_out=args.frames,
+                backend=args.backend,
+                workdir=tmp,
+                mix=mix,
+                construction=args.construction,
+            )
             results.append(r)
             print(json.dumps(r), file=sys.stderr)
-    print("| clip | construction | tile | loop | seam (tiles; with ring cuts) | seam (uncut blocks) | wrap disc. | "
-          "worst transition | repetition lag (min profile) | lattice corr. y/x (source) | "
-          "mix border/inside (at cut, in fade) | tone error | analysis s |")
+    print(
+        "| clip | construction | tile | loop | seam (tiles; with ring cuts) | seam (uncut blocks) | wrap disc. | "
+        "worst transition | repetition lag (min profile) | lattice corr. y/x (source) | "
+        "mix border/inside (at cut, in fade) | tone error | analysis s |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in results:
-        mixr = (f"cut {r['mix_ratio_at_cut']:.2f} ({r['mix_ratio_at_cut_tone']:.2f} toned), fade "
-                f"{r['mix_ratio']:.2f} ({r['mix_ratio_tone']:.2f} toned)") if "mix_ratio" in r else "-"
+        mixr = (
+            (
+                f"cut {r['mix_ratio_at_cut']:.2f} ({r['mix_ratio_at_cut_tone']:.2f} toned), fade "
+                f"{r['mix_ratio']:.2f} ({r['mix_ratio_tone']:.2f} toned)"
+            )
+            if "mix_ratio" in r
+            else "-"
+        )
         lat, lsrc = r["lattice_correlation"], r["lattice_correlation_source"]
-        print(f"| {r['clip']} | {r['construction']} | {r['tile']} | {r['loop']} | {r['seam_tiles']:.3f}; "
-              f"{r['seam_tiles_and_ring_cuts']:.3f} | {r['seam_uncut_blocks']:.2f} | "
-              f"{r['wrap_discontinuity']:.2f} | {r['transition_discontinuity_max']:.2f} | {r['repetition_lag']} "
-              f"({r['repetition_min_profile']:.2f}) | {lat[0]:.2f}/{lat[1]:.2f} ({lsrc[0]:.2f}/{lsrc[1]:.2f}) | "
-              f"{mixr} | {100 * r['tone_max_rel_error']:.2f}% | {r['analysis_s']} |")
+        print(
+            f"| {r['clip']} | {r['construction']} | {r['tile']} | {r['loop']} | {r['seam_tiles']:.3f}; "
+            f"{r['seam_tiles_and_ring_cuts']:.3f} | {r['seam_uncut_blocks']:.2f} | "
+            f"{r['wrap_discontinuity']:.2f} | {r['transition_discontinuity_max']:.2f} | {r['repetition_lag']} "
+            f"({r['repetition_min_profile']:.2f}) | {lat[0]:.2f}/{lat[1]:.2f} ({lsrc[0]:.2f}/{lsrc[1]:.2f}) | "
+            f"{mixr} | {100 * r['tone_max_rel_error']:.2f}% | {r['analysis_s']} |"
+        )
     if args.json:
         with open(args.json, "w") as f:
             json.dump(results, f, indent=2)

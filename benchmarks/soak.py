@@ -11,6 +11,7 @@ one player on a small generated texture (frames 32x24 for ``lds``, a 64x64 canva
 sample at the end of the warm-up (the first ``--warmup`` frames: allocators and driver
 caches settle there). Target: less than 1 MB of growth after the warm-up.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -74,11 +75,22 @@ def soak(path: str, mode: str, backend: str, frames: int, sample: int, warmup: i
     base = after[0][1]
     growth = samples[-1][1] - base
     peak = max(r for _, r in after) - base
-    return {"mode": mode, "backend": backend, "played_on": used, "frames": frames, "shape": list(out.shape),
-            "seconds": seconds, "fps": frames / seconds, "rss_start_mb": samples[0][1] / 2**20,
-            "rss_after_warmup_mb": base / 2**20, "rss_end_mb": samples[-1][1] / 2**20,
-            "growth_mb": growth / 2**20, "peak_growth_mb": peak / 2**20, "ok": growth < TARGET_MB * 2**20,
-            "samples": samples}
+    return {
+        "mode": mode,
+        "backend": backend,
+        "played_on": used,
+        "frames": frames,
+        "shape": list(out.shape),
+        "seconds": seconds,
+        "fps": frames / seconds,
+        "rss_start_mb": samples[0][1] / 2**20,
+        "rss_after_warmup_mb": base / 2**20,
+        "rss_end_mb": samples[-1][1] / 2**20,
+        "growth_mb": growth / 2**20,
+        "peak_growth_mb": peak / 2**20,
+        "ok": growth < TARGET_MB * 2**20,
+        "samples": samples,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -87,8 +99,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--modes", default="lds,tiles")
     ap.add_argument("--backends", default="auto,numpy")
     ap.add_argument("--sample", type=int, default=10_000, help="frames between RSS samples")
-    ap.add_argument("--warmup", type=int, default=None, help="frames before the baseline sample "
-                    "(default: 5%% of --frames, at least one sample)")
+    ap.add_argument(
+        "--warmup",
+        type=int,
+        default=None,
+        help="frames before the baseline sample (default: 5%% of --frames, at least one sample)",
+    )
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     warmup = args.warmup if args.warmup is not None else max(args.sample, args.frames // 20)
@@ -101,11 +117,14 @@ def main(argv: list[str] | None = None) -> int:
                 row = soak(path, mode, backend, args.frames, args.sample, warmup)
                 rows.append(row)
                 if not args.json:
-                    print(f"{mode:6s} {backend:5s} ({row['played_on']:6s}) {row['frames']} frames "
-                          f"{tuple(row['shape'][:2])} in {row['seconds']:.0f} s = {row['fps']:.0f} fps; RSS "
-                          f"{row['rss_start_mb']:.1f} -> {row['rss_after_warmup_mb']:.1f} MB after warm-up -> "
-                          f"{row['rss_end_mb']:.1f} MB: growth {row['growth_mb']:+.3f} MB "
-                          f"(peak {row['peak_growth_mb']:+.3f}) {'ok' if row['ok'] else 'OVER 1 MB'}", flush=True)
+                    print(
+                        f"{mode:6s} {backend:5s} ({row['played_on']:6s}) {row['frames']} frames "
+                        f"{tuple(row['shape'][:2])} in {row['seconds']:.0f} s = {row['fps']:.0f} fps; RSS "
+                        f"{row['rss_start_mb']:.1f} -> {row['rss_after_warmup_mb']:.1f} MB after warm-up -> "
+                        f"{row['rss_end_mb']:.1f} MB: growth {row['growth_mb']:+.3f} MB "
+                        f"(peak {row['peak_growth_mb']:+.3f}) {'ok' if row['ok'] else 'OVER 1 MB'}",
+                        flush=True,
+                    )
     if args.json:
         print(json.dumps(rows, indent=1))
     return 0 if all(r["ok"] for r in rows) else 1

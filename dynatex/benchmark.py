@@ -1,11 +1,12 @@
 """Measuring players: frames per second, latency percentiles, the numpy reference side by
 side, and the fraction of the memory-bandwidth roofline (measured in the same run)."""
+
 from __future__ import annotations
 
 import os
 import tempfile
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -53,6 +54,7 @@ def _opencl_copy_bandwidth(src: np.ndarray, repeats: int) -> dict[str, float]:
     import pyopencl as cl
 
     from .player.opencl import build_program, get_context, variant_verified
+
     ctx = get_context()
     queue = cl.CommandQueue(ctx)
     mf = cl.mem_flags
@@ -60,8 +62,13 @@ def _opencl_copy_bandwidth(src: np.ndarray, repeats: int) -> dict[str, float]:
     b = cl.Buffer(ctx, mf.WRITE_ONLY, src.nbytes)
     copies = [("plain", build_program(ctx, "copy.cl"), src.size // 16)]
     if variant_verified(ctx.devices[0], "copy_stream"):
-        copies.append(("stream", build_program(ctx, "variants/copy_stream.cl", {"BLOCKS": COPY_BLOCKS}),
-                       src.size // (16 * COPY_BLOCKS)))
+        copies.append(
+            (
+                "stream",
+                build_program(ctx, "variants/copy_stream.cl", {"BLOCKS": COPY_BLOCKS}),
+                src.size // (16 * COPY_BLOCKS),
+            )
+        )
     out = {}
     for name, prog, size in copies:
         copy = prog.kernel(f"copy_{name}")
@@ -94,13 +101,25 @@ def time_calls(fn: Callable[[], object], *, frames: int, warmup: int = 3, max_se
 
 def summarize(times: np.ndarray) -> dict[str, float]:
     med = float(np.median(times))
-    return {"frames": int(times.size), "median_ms": med * 1e3, "p99_ms": float(np.percentile(times, 99)) * 1e3,
-            "fps": 1.0 / med}
+    return {
+        "frames": int(times.size),
+        "median_ms": med * 1e3,
+        "p99_ms": float(np.percentile(times, 99)) * 1e3,
+        "fps": 1.0 / med,
+    }
 
 
-def bench_player(db: str | os.PathLike, texture: str | None = None, *, mode: str = "lds", frames: int = 200,
-                 bandwidth_gbs: float | None = None, numpy_frames: int | None = None,
-                 options: dict | None = None, rounds: int = 5) -> dict:
+def bench_player(
+    db: str | os.PathLike,
+    texture: str | None = None,
+    *,
+    mode: str = "lds",
+    frames: int = 200,
+    bandwidth_gbs: float | None = None,
+    numpy_frames: int | None = None,
+    options: dict | None = None,
+    rounds: int = 5,
+) -> dict:
     """Time ``next_frame(out=...)`` end to end on OpenCL and on the numpy reference.
 
     The two backends run in alternating rounds, so that both see the same machine load.
@@ -109,14 +128,22 @@ def bench_player(db: str | os.PathLike, texture: str | None = None, *, mode: str
     result: dict = {"mode": mode}
     n_frames = {"opencl": frames, "numpy": numpy_frames or max(10, frames // 4)}
     times: dict[str, list[np.ndarray]] = {"opencl": [], "numpy": []}
-    with open_player(db, texture, mode=mode, backend="opencl", **options) as pc, \
-            open_player(db, texture, mode=mode, backend="numpy", **options) as pn:
+    with (
+        open_player(db, texture, mode=mode, backend="opencl", **options) as pc,
+        open_player(db, texture, mode=mode, backend="numpy", **options) as pn,
+    ):
         out = np.empty(pc.shape, np.uint8)
         for r in range(rounds):
             for backend, p in (("opencl", pc), ("numpy", pn)):
                 per_round = max(2, n_frames[backend] // rounds)
-                times[backend].append(time_calls(lambda: p.next_frame(out=out), frames=per_round,
-                                                 warmup=3 if r == 0 else 1, max_seconds=20.0 / rounds))
+                times[backend].append(
+                    time_calls(
+                        lambda p=p, out=out: p.next_frame(out=out),
+                        frames=per_round,
+                        warmup=3 if r == 0 else 1,
+                        max_seconds=20.0 / rounds,
+                    )
+                )
         result["size"] = f"{pc.shape[1]}x{pc.shape[0]}"
         result["bytes_per_frame"] = pc.bytes_per_frame
     for backend in times:
@@ -143,25 +170,39 @@ def synthetic_lds_db(path: str | os.PathLike, width: int, height: int, *, n: int
     a = np.zeros((n, n))
     for i in range(0, n - 1, 2):
         t = rng.uniform(0.05, 1.0)
-        a[i:i + 2, i:i + 2] = 0.97 * np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+        a[i : i + 2, i : i + 2] = 0.97 * np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
     if n % 2:
         a[-1, -1] = 0.9
     b = np.eye(n) * 30
     from .analyzer.lds import stationary_covariance
-    model = LDSModel(mean=np.full(p, 128, np.float32), basis=basis, singular_values=np.ones(n), A=a, B=b,
-                     x0=np.zeros(n), states=np.zeros((n, 2)), stationary_cov=stationary_covariance(a, b @ b.T),
-                     info={"synthetic": True})
-    info = SourceInfo(filename="<synthetic>", sha256="", fps=25.0, width=width, height=height, channels=3,
-                      n_frames=2)
+
+    model = LDSModel(
+        mean=np.full(p, 128, np.float32),
+        basis=basis,
+        singular_values=np.ones(n),
+        A=a,
+        B=b,
+        x0=np.zeros(n),
+        states=np.zeros((n, 2)),
+        stationary_cov=stationary_covariance(a, b @ b.T),
+        info={"synthetic": True},
+    )
+    info = SourceInfo(filename="<synthetic>", sha256="", fps=25.0, width=width, height=height, channels=3, n_frames=2)
     with DatabaseWriter(path, overwrite=True) as w:
         w.put_texture("synthetic", info)
         w.put_method("synthetic", "lds", model)
     return os.fspath(path)
 
 
-def bench_lds_sizes(sizes: list[tuple[int, int]], *, n: int = 50, frames: int = 200,
-                    precisions: tuple[str, ...] = ("float32", "float16"), log: Callable[[str], None] | None = None,
-                    bandwidth: dict | None = None) -> dict:
+def bench_lds_sizes(
+    sizes: list[tuple[int, int]],
+    *,
+    n: int = 50,
+    frames: int = 200,
+    precisions: tuple[str, ...] = ("float32", "float16"),
+    log: Callable[[str], None] | None = None,
+    bandwidth: dict | None = None,
+) -> dict:
     """The LDS benchmark of the README: synthetic textures at each ``(height, width)``, both precisions."""
     bw = bandwidth or copy_bandwidth()
     report = {"bandwidth": bw, "results": []}
@@ -169,8 +210,7 @@ def bench_lds_sizes(sizes: list[tuple[int, int]], *, n: int = 50, frames: int = 
         for h, w in sizes:
             path = synthetic_lds_db(os.path.join(tmp, f"lds_{w}x{h}.h5"), w, h, n=n)
             for prec in precisions:
-                r = bench_player(path, mode="lds", frames=frames, bandwidth_gbs=bw["gbs"],
-                                 options={"precision": prec})
+                r = bench_player(path, mode="lds", frames=frames, bandwidth_gbs=bw["gbs"], options={"precision": prec})
                 r.update(precision=prec, n=n)
                 report["results"].append(r)
                 if log:
@@ -181,6 +221,9 @@ def bench_lds_sizes(sizes: list[tuple[int, int]], *, n: int = 50, frames: int = 
 def format_result(r: dict) -> str:
     roof = f", {r['roofline_fraction']:.2f} of roofline" if "roofline_fraction" in r else ""
     extra = f" {r['precision']}" if "precision" in r else ""
-    return (f"{r['mode']} {r['size']}{extra}: OpenCL {r['opencl']['fps']:.0f} fps (median {r['opencl']['median_ms']:.2f} ms, "
-            f"p99 {r['opencl']['p99_ms']:.2f} ms{roof}); numpy {r['numpy']['fps']:.0f} fps "
-            f"-> {r['speedup_vs_numpy']:.2f}x")
+    return (
+        f"{r['mode']} {r['size']}{extra}: OpenCL {r['opencl']['fps']:.0f} fps "
+        f"(median {r['opencl']['median_ms']:.2f} ms, "
+        f"p99 {r['opencl']['p99_ms']:.2f} ms{roof}); numpy {r['numpy']['fps']:.0f} fps "
+        f"-> {r['speedup_vs_numpy']:.2f}x"
+    )

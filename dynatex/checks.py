@@ -12,10 +12,12 @@ rule in words for help and docs (:meth:`~Range.describe`, ``str()``). Declaratio
 parameters and player controls (:mod:`dynatex.params`) are built from kinds, so a range is
 written once. This module imports only numpy and :mod:`dynatex.errors`.
 """
+
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -23,8 +25,7 @@ from .errors import ArgumentTypeError, InvalidArgumentError
 
 
 # -- check functions ---------------------------------------------------------------------------
-def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None, *,
-              rule: str | None = None) -> int:
+def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None, *, rule: str | None = None) -> int:
     """``value`` as an int in ``[lo, hi]`` (either bound may be None).
 
     Bools and floats are refused with an :class:`ArgumentTypeError`; a value out of range
@@ -96,8 +97,9 @@ def check_out(out: Any, shape: tuple[int, ...]) -> None:
         raise InvalidArgumentError("out must be C-contiguous and writeable")
 
 
-def check_frames(frames: Any, *, name: str = "frames", min_frames: int = 1, uint8: bool = False,
-                 allow_nonfinite: bool = False) -> np.ndarray:
+def check_frames(
+    frames: Any, *, name: str = "frames", min_frames: int = 1, uint8: bool = False, allow_nonfinite: bool = False
+) -> np.ndarray:
     """Return ``frames`` as a ``(T, H, W, C)`` array, or raise an error naming ``name``.
 
     Parameters
@@ -130,7 +132,9 @@ def check_frames(frames: Any, *, name: str = "frames", min_frames: int = 1, uint
     if frames.ndim == 3:
         frames = frames[..., None]
     if frames.ndim != 4 or frames.shape[-1] not in (1, 3):
-        raise InvalidArgumentError(f"{name} must be (T, H, W) or (T, H, W, C) with C in (1, 3), not shape {frames.shape}")
+        raise InvalidArgumentError(
+            f"{name} must be (T, H, W) or (T, H, W, C) with C in (1, 3), not shape {frames.shape}"
+        )
     if frames.shape[0] < min_frames:
         what = "is empty (no frames)" if frames.shape[0] == 0 else f"has {frames.shape[0]} frame(s)"
         raise InvalidArgumentError(f"{name} {what}; at least {min_frames} needed")
@@ -182,17 +186,26 @@ class Range(Kind):
     'a finite number in (0, 1]'
     """
 
-    def __init__(self, kind: type, low: float | None = None, high: float | None = None, *,
-                 low_open: bool = False, high_open: bool = False) -> None:
+    def __init__(
+        self,
+        kind: type,
+        low: float | None = None,
+        high: float | None = None,
+        *,
+        low_open: bool = False,
+        high_open: bool = False,
+    ) -> None:
         if kind not in (int, float):
             raise TypeError("kind must be int or float")
         self.kind, self.low, self.high = kind, low, high
         self.low_open, self.high_open = low_open, high_open
 
     def contains(self, v: float) -> bool:
-        return (math.isfinite(v)
-                and (self.low is None or (v > self.low if self.low_open else v >= self.low))
-                and (self.high is None or (v < self.high if self.high_open else v <= self.high)))
+        return (
+            math.isfinite(v)
+            and (self.low is None or (v > self.low if self.low_open else v >= self.low))
+            and (self.high is None or (v < self.high if self.high_open else v <= self.high))
+        )
 
     def check(self, name: str, value: Any) -> int | float:
         if self.kind is int:
@@ -352,14 +365,16 @@ class Size(Kind):
         if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
             raise ArgumentTypeError(f"{name} must be (height, width), not {value!r}")
         if len(value) != 2:
-            raise InvalidArgumentError(f"{name} must be (height, width), two integers, not {len(value)} values "
-                                       f"{value!r}")
+            raise InvalidArgumentError(
+                f"{name} must be (height, width), two integers, not {len(value)} values {value!r}"
+            )
         if any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) for v in value):
             raise ArgumentTypeError(f"{name} must be (height, width) integers, not {value!r}")
         h, w = int(value[0]), int(value[1])
         if not (1 <= h <= self.max_side and 1 <= w <= self.max_side):
-            raise InvalidArgumentError(f"{name} must be (height, width) with each side in 1..{self.max_side}, "
-                                       f"not {value!r}")
+            raise InvalidArgumentError(
+                f"{name} must be (height, width) with each side in 1..{self.max_side}, not {value!r}"
+            )
         return h, w
 
     def parse(self, text: str) -> tuple[int, int]:
@@ -401,8 +416,9 @@ class Array(Kind):
             raise ArgumentTypeError(f"{name} must be {self.describe()}, not {type(value).__name__}") from None
         if self.ndim is not None and arr.ndim != self.ndim:
             raise InvalidArgumentError(f"{name} must be {self.describe()}, not of shape {arr.shape}")
-        if arr.size and not (np.isfinite(arr).all() and self.range.contains(float(arr.min()))
-                             and self.range.contains(float(arr.max()))):
+        if arr.size and not (
+            np.isfinite(arr).all() and self.range.contains(float(arr.min())) and self.range.contains(float(arr.max()))
+        ):
             raise InvalidArgumentError(f"{name} must be {self.describe()}")
         return arr
 
@@ -493,5 +509,22 @@ class Either(Kind):
         return " or ".join(k.describe_text() for k in self.kinds)
 
 
-__all__ = ["Array", "Choice", "Either", "Flag", "Kind", "NpyFile", "Numbers", "Range", "Size", "Text", "check_choice", "check_float", "check_frames",
-           "check_int", "check_out", "check_seed", "check_size"]
+__all__ = [
+    "Array",
+    "Choice",
+    "Either",
+    "Flag",
+    "Kind",
+    "NpyFile",
+    "Numbers",
+    "Range",
+    "Size",
+    "Text",
+    "check_choice",
+    "check_float",
+    "check_frames",
+    "check_int",
+    "check_out",
+    "check_seed",
+    "check_size",
+]

@@ -7,6 +7,7 @@ error. Errors print one line (``dynatex: error: ...``) unless
 ``--debug`` asks for the traceback. A reader that closes stdout (``| head -1``) ends the
 command quietly with exit 0; a closed stderr drops warnings and progress, the work goes on.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -74,7 +75,7 @@ def _warning_line(message, category, filename, lineno, line=None) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    warnings.formatwarning = _warning_line          # a warning is one line too, not a source location
+    warnings.formatwarning = _warning_line  # a warning is one line too, not a source location
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
     args, extra = parser.parse_known_args(argv)
@@ -84,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     stderr, sys.stderr = sys.stderr, _Diagnostics(sys.stderr)
     try:
         code = int(args._run(args) or 0)
-        sys.stdout.flush()          # a closed pipe shows here when the output was short
+        sys.stdout.flush()  # a closed pipe shows here when the output was short
         return code
     except KeyboardInterrupt:
         print("dynatex: interrupted", file=sys.stderr)
@@ -132,7 +133,7 @@ class _Diagnostics:
         self._gone = True
         try:
             null = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(null, self._stream.fileno())    # the last buffered bytes must not fail at exit
+            os.dup2(null, self._stream.fileno())  # the last buffered bytes must not fail at exit
             os.close(null)
         except (OSError, ValueError, AttributeError):
             pass
@@ -142,8 +143,20 @@ class _Diagnostics:
 
 
 #: What the system refuses for a reason outside dynatex (a full disk, a read-only folder): bad input, exit 2.
-REFUSED_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM,
-                            errno.ENAMETOOLONG, errno.ENOTDIR, errno.EISDIR, errno.ENOENT, errno.EFBIG})
+REFUSED_ERRNOS = frozenset(
+    {
+        errno.ENOSPC,
+        errno.EDQUOT,
+        errno.EROFS,
+        errno.EACCES,
+        errno.EPERM,
+        errno.ENAMETOOLONG,
+        errno.ENOTDIR,
+        errno.EISDIR,
+        errno.ENOENT,
+        errno.EFBIG,
+    }
+)
 
 #: Exit code when the reader of our output went away (``dynatex info DB | head -1``): the reader chose
 #: to stop, which is not an error of ours. Not 141 (128 + SIGPIPE, a death by the signal), because
@@ -174,8 +187,10 @@ def _report(exc: BaseException, debug: bool, code: int) -> int:
         if code == 2:
             print(f"dynatex: error: {_one_line(exc)}", file=sys.stderr)
         else:
-            print(f"dynatex: internal error: {type(exc).__name__}: {_one_line(exc)} (run with --debug for details)",
-                  file=sys.stderr)
+            print(
+                f"dynatex: internal error: {type(exc).__name__}: {_one_line(exc)} (run with --debug for details)",
+                file=sys.stderr,
+            )
         sys.stderr.flush()
     except BrokenPipeError:
         return _reader_gone()

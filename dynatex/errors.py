@@ -5,6 +5,7 @@ analyzer and the player above it, the CLI on top) may derive its errors from it.
 also derives from the builtin it refines, so ``except ValueError`` keeps working; the CLI
 turns a :class:`DynatexError` into one line and exit code 2, anything else into exit code 1.
 """
+
 from __future__ import annotations
 
 

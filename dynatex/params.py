@@ -5,6 +5,7 @@ default and what it does. Analysis methods (:mod:`dynatex.analyzer.methods`) and
 (:mod:`dynatex.player.controls`) declare theirs; the command line, the saved state and the
 docs are generated from those declarations, so adding a parameter touches one place.
 """
+
 from __future__ import annotations
 
 import textwrap
@@ -89,8 +90,9 @@ class Param:
         """The parameter as a numpydoc entry (``name : rule`` and the indented description)."""
         default = self.default_text()
         text = self.doc + (f" Default {default}." if default else "")
-        return f"{self.name} : {self.kind.describe()}\n" + textwrap.fill(text, 88, initial_indent="    ",
-                                                                          subsequent_indent="    ")
+        return f"{self.name} : {self.kind.describe()}\n" + textwrap.fill(
+            text, 88, initial_indent="    ", subsequent_indent="    "
+        )
 
 
 __all__ = ["Param"]

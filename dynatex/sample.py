@@ -1,4 +1,5 @@
 """Built-in sample clips, made procedurally so that ``dynatex demo`` needs no files."""
+
 from __future__ import annotations
 
 import numpy as np

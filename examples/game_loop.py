@@ -14,6 +14,7 @@ JSON summary (frames drawn, mean time of the loop's own work against the frame b
 ``--autopilot`` presses the keys by itself: that is how the test suite runs it headless
 (``SDL_VIDEODRIVER=dummy``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,6 +41,7 @@ def sample_database(folder: str) -> str:
     from dynatex.analyzer.lds import learn_lds
     from dynatex.sample import ripples
     from dynatex.tiledb import DatabaseWriter
+
     clip = load_clip(ripples(120, 96, 128))
     path = os.path.join(folder, "ripples.h5")
     with DatabaseWriter(path) as w:
@@ -55,7 +57,7 @@ class Controls:
         self.player = player
         self.speed = 1.0
         self.direction = 1.0
-        self.scroll = 60.0              # pixels per second
+        self.scroll = 60.0  # pixels per second
 
     def key(self, key: int) -> None:
         p = self.player
@@ -75,18 +77,17 @@ class Controls:
             self.scroll -= 30.0
         try:
             p.speed = self.speed * self.direction
-        except ValueError:              # a mode that only plays forward
+        except ValueError:  # a mode that only plays forward
             p.speed = self.speed
 
     def state(self) -> dict:
-        return {"speed": self.player.speed, "intensity": getattr(self.player, "intensity", None),
-                "scroll": self.scroll}
+        return {"speed": self.player.speed, "intensity": getattr(self.player, "intensity", None), "scroll": self.scroll}
 
 
 def run(args: argparse.Namespace, db: str) -> dict:
-    pygame.display.init()               # video only: no audio device needed
+    pygame.display.init()  # video only: no audio device needed
     try:
-        screen = pygame.display.set_mode(args.window[::-1])          # pygame sizes are (width, height)
+        screen = pygame.display.set_mode(args.window[::-1])  # pygame sizes are (width, height)
         pygame.display.set_caption("dynatex: Up/Down speed, R reverse, +/- intensity, Left/Right scroll")
         with open_player(db, args.texture, mode=args.mode, backend=args.backend, format="BGRA") as player:
             return _loop(args, screen, player)
@@ -97,7 +98,7 @@ def run(args: argparse.Namespace, db: str) -> dict:
 def _loop(args: argparse.Namespace, screen, player) -> dict:
     h, w = player.shape[:2]
     buffers = [np.empty(player.shape, np.uint8) for _ in range(2)]
-    surfaces = [pygame.image.frombuffer(b, (w, h), "BGRA") for b in buffers]   # views of the buffers
+    surfaces = [pygame.image.frombuffer(b, (w, h), "BGRA") for b in buffers]  # views of the buffers
     controls = Controls(player)
     clock = pygame.time.Clock()
     budget = 1.0 / args.fps
@@ -113,12 +114,12 @@ def _loop(args: argparse.Namespace, screen, player) -> dict:
                 controls.key(event.key)
         if args.autopilot and frames in AUTOPILOT:
             controls.key(AUTOPILOT[frames])
-        pending.wait()                                  # frame `shown` is complete
+        pending.wait()  # frame `shown` is complete
         nxt = 1 - shown
-        pending = player.start_frame(buffers[nxt])      # the device renders it while we draw
+        pending = player.start_frame(buffers[nxt])  # the device renders it while we draw
         offset = (offset + controls.scroll * budget) % w
         surface = surfaces[shown]
-        for y in range(0, args.window[0], h):           # the texture tiled across the window, scrolling
+        for y in range(0, args.window[0], h):  # the texture tiled across the window, scrolling
             for x in range(-int(offset), args.window[1], w):
                 screen.blit(surface, (x, y))
         pygame.display.flip()
@@ -128,9 +129,15 @@ def _loop(args: argparse.Namespace, screen, player) -> dict:
         clock.tick(args.fps)
     pending.wait()
     shot = pygame.surfarray.array3d(screen)
-    return {"frames": frames, "mean_work_ms": round(1000 * work / max(frames, 1), 3),
-            "budget_ms": round(1000 * budget, 3), "backend": player.backend, "texture": f"{w}x{h}",
-            "window_std": round(float(shot.std()), 2), **controls.state()}
+    return {
+        "frames": frames,
+        "mean_work_ms": round(1000 * work / max(frames, 1), 3),
+        "budget_ms": round(1000 * budget, 3),
+        "backend": player.backend,
+        "texture": f"{w}x{h}",
+        "window_std": round(float(shot.std()), 2),
+        **controls.state(),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -140,8 +147,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mode", default="lds")
     ap.add_argument("--backend", default="auto", choices=("auto", "opencl", "numpy"))
     ap.add_argument("--fps", type=float, default=60.0, help="target frame rate (the frame budget is 1/fps)")
-    ap.add_argument("--window", type=lambda s: tuple(int(v) for v in s.split("x"))[::-1], default=(360, 640),
-                    metavar="WxH", help="window size (default 640x360)")
+    ap.add_argument(
+        "--window",
+        type=lambda s: tuple(int(v) for v in s.split("x"))[::-1],
+        default=(360, 640),
+        metavar="WxH",
+        help="window size (default 640x360)",
+    )
     ap.add_argument("--frames", type=int, default=None, help="stop after this many frames and print a summary")
     ap.add_argument("--autopilot", action="store_true", help="press the keys by itself (for tests)")
     args = ap.parse_args(argv)

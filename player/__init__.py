@@ -8,6 +8,7 @@ Examples
 >>> with open_player("water.h5", mode="lds", seed=1) as p:     # doctest: +SKIP
 ...     frame = p.next_frame()                                 # (H, W, 3) uint8
 """
+
 from __future__ import annotations
 
 import os
@@ -22,5 +23,15 @@ def open_player(db: str | os.PathLike, texture: str | None = None, *, mode: str 
     return player_class(mode)(db, texture, **options)
 
 
-__all__ = ["BACKENDS", "DeviceNotVerifiedError", "KernelBuildError", "MODES", "OpenCLUnavailableError", "Player",
-           "devices", "list_devices", "open_player", "player_class"]
+__all__ = [
+    "BACKENDS",
+    "DeviceNotVerifiedError",
+    "KernelBuildError",
+    "MODES",
+    "OpenCLUnavailableError",
+    "Player",
+    "devices",
+    "list_devices",
+    "open_player",
+    "player_class",
+]

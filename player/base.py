@@ -1,8 +1,10 @@
 """What every player mode shares: opening a texture, the frame contract, state, backends."""
+
 from __future__ import annotations
 
 import os
-from typing import Any, ClassVar, Iterator
+from collections.abc import Iterator
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -21,19 +23,35 @@ MAX_SEED = 2**63 - 1
 
 #: the parameters every mode takes, in the order of its docstring
 COMMON_OPTIONS: tuple[Param, ...] = (
-    Param("db", Text("path or TileDB"), None, "The tile database (a path or an open TileDB).", flag=None,
-          default_doc=""),
-    Param("texture", Text("NAME"), None, "Texture name.", optional=True,
-          default_doc="the database's only texture"),
-    Param("backend", Choice(*BACKEND_CHOICES), "auto",
-          "auto: OpenCL on the first device that passed the self-test, else the numpy reference with one "
-          "warning; opencl: a verified device or OpenCLUnavailableError; numpy: the reference."),
-    Param("device", Text("P:D|NAME"), None, "OpenCL device: index P:D or a name substring "
-          "(see dynatex.player.opencl.get_context).", optional=True, default_doc="the first verified device"),
-    Param("format", Choice(*FORMATS), "RGB", "Pixel format of the frames, written by the kernels (alpha 255); "
-          "the commands' output files decide their own.", flag=None),
-    Param("seed", Range(int, 0, MAX_SEED), 0, "Seed of the mode's random choices; the same seed gives the same "
-          "frames."),
+    Param(
+        "db", Text("path or TileDB"), None, "The tile database (a path or an open TileDB).", flag=None, default_doc=""
+    ),
+    Param("texture", Text("NAME"), None, "Texture name.", optional=True, default_doc="the database's only texture"),
+    Param(
+        "backend",
+        Choice(*BACKEND_CHOICES),
+        "auto",
+        "auto: OpenCL on the first device that passed the self-test, else the numpy reference with one "
+        "warning; opencl: a verified device or OpenCLUnavailableError; numpy: the reference.",
+    ),
+    Param(
+        "device",
+        Text("P:D|NAME"),
+        None,
+        "OpenCL device: index P:D or a name substring (see dynatex.player.opencl.get_context).",
+        optional=True,
+        default_doc="the first verified device",
+    ),
+    Param(
+        "format",
+        Choice(*FORMATS),
+        "RGB",
+        "Pixel format of the frames, written by the kernels (alpha 255); the commands' output files decide their own.",
+        flag=None,
+    ),
+    Param(
+        "seed", Range(int, 0, MAX_SEED), 0, "Seed of the mode's random choices; the same seed gives the same frames."
+    ),
 )
 
 _fallback_warned = False
@@ -86,8 +104,15 @@ class Player:
             if c.param.default is not None:
                 setattr(self, name, c.param.default)
 
-    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "auto", device: str | None = None, format: str = "RGB") -> None:
+    def __init__(
+        self,
+        db: str | os.PathLike | TileDB,
+        texture: str | None = None,
+        *,
+        backend: str = "auto",
+        device: str | None = None,
+        format: str = "RGB",
+    ) -> None:
         backend = Choice(*BACKEND_CHOICES).check("backend", backend)
         #: the frames' pixel format (:data:`dynatex.player.pixels.FORMATS`)
         self.format = pixel_format(format)
@@ -113,6 +138,7 @@ class Player:
             self.backend = "numpy"
         else:
             import pyopencl as cl
+
             self.backend = "opencl"
             self.queue = cl.CommandQueue(self.ctx)
         self.frame_index = 0
@@ -197,7 +223,7 @@ class Player:
         try:
             self._apply_state(state)
         except BaseException as exc:
-            self._apply_state(before)        # all or nothing: a bad entry leaves the player as it was
+            self._apply_state(before)  # all or nothing: a bad entry leaves the player as it was
             if isinstance(exc, KeyError):
                 raise InvalidArgumentError(f"state lacks {exc.args[0]!r}") from None
             raise
@@ -251,6 +277,7 @@ class PendingFrame:
         if self._event is None:
             return True
         import pyopencl as cl
+
         return self._event.command_execution_status == cl.command_execution_status.COMPLETE
 
     def wait(self) -> np.ndarray:
@@ -274,6 +301,7 @@ def _context(backend: str, device: str | None):
     or ``PYOPENCL_CTX`` is never silently replaced."""
     global _fallback_warned
     from . import opencl
+
     try:
         return opencl.get_context(device)
     except opencl.OpenCLUnavailableError as exc:
@@ -282,5 +310,6 @@ def _context(backend: str, device: str | None):
         if not _fallback_warned:
             _fallback_warned = True
             import warnings
+
             warnings.warn(f"the player uses the numpy backend (slower): {exc}", RuntimeWarning, stacklevel=4)
         return None

@@ -15,6 +15,7 @@ Examples
 >>> int(out[0, 0, 0])
 150
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -25,7 +26,7 @@ from ..errors import InvalidArgumentError
 from .pixels import pixel_format
 
 VEC = 16
-ITEMS = 4          # uchar16 per work-item of the blend kernels
+ITEMS = 4  # uchar16 per work-item of the blend kernels
 MAX_TERMS = 4
 
 
@@ -44,7 +45,9 @@ class Blend:
     def __init__(self, frames: np.ndarray, *, format: str = "RGB") -> None:
         frames = np.asarray(frames)
         if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
-            raise InvalidArgumentError(f"frames must be uint8 (T, H, W, 3) with T >= 1, not {frames.dtype} {frames.shape}")
+            raise InvalidArgumentError(
+                f"frames must be uint8 (T, H, W, 3) with T >= 1, not {frames.dtype} {frames.shape}"
+            )
         self.format = pixel_format(format)
         self.n_frames = int(frames.shape[0])
         self.shape = (int(frames.shape[1]), int(frames.shape[2]), self.format.bytes)
@@ -65,8 +68,9 @@ class Blend:
         total = 0
         for frame, weight in sources:
             if not 0 <= frame < self.n_frames or weight < 0:
-                raise InvalidArgumentError(f"blend source ({frame}, {weight}) names no frame of {self.n_frames} "
-                                 "or a negative weight")
+                raise InvalidArgumentError(
+                    f"blend source ({frame}, {weight}) names no frame of {self.n_frames} or a negative weight"
+                )
             total += weight
         if total != 256:
             raise InvalidArgumentError(f"blend weights must sum to 256, not {total}")
@@ -107,11 +111,12 @@ class BlendOpenCL(Blend):
 
         from .engine import FrameOut, Kernel
         from .opencl import build_program
+
         frames = np.asarray(frames)
         self._vecs = -(-self.frame_bytes // (VEC * ITEMS)) * ITEMS
         self.memory_bytes = self.n_frames * self._vecs * VEC
-        padded = np.zeros((self.n_frames, self._vecs * VEC), np.uint8)   # every frame padded to whole work-items
-        padded[:, :self.frame_bytes] = self.format.from_rgb(frames).reshape(self.n_frames, -1)
+        padded = np.zeros((self.n_frames, self._vecs * VEC), np.uint8)  # every frame padded to whole work-items
+        padded[:, : self.frame_bytes] = self.format.from_rgb(frames).reshape(self.n_frames, -1)
         mf = cl.mem_flags
         self._d_frames = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
         del padded
@@ -129,9 +134,10 @@ class BlendOpenCL(Blend):
 
     def _render(self, sources, out, wait):
         import pyopencl as cl
+
         if len(sources) == 1:
             return self._outs[2].copy_from(self._d_frames, out, offset=sources[0][0] * self._vecs * VEC, wait=wait)
-        params = np.zeros(2 * MAX_TERMS, np.int32)        # a new array per frame: the last upload may still wait
+        params = np.zeros(2 * MAX_TERMS, np.int32)  # a new array per frame: the last upload may still wait
         for k, (frame, w) in enumerate(sources):
             params[k], params[MAX_TERMS + k] = frame, w
         # the event is kept: dropping it would wait for the copy (and the frame queued before it)

@@ -21,10 +21,12 @@ Traceback (most recent call last):
 ...
 dynatex.errors.InvalidArgumentError: gain must be a finite number in [0, 2], not 3
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -64,10 +66,18 @@ class Control:
     line); ``state=False`` leaves it out of the saved state.
     """
 
-    def __init__(self, kind: Kind, default: Any, doc: str, *, flag: str | None = "", optional: bool = False,
-                 default_doc: str | None = None, state: bool = True) -> None:
-        self._spec = dict(kind=kind, default=default, doc=doc, flag=flag, optional=optional,
-                          default_doc=default_doc)
+    def __init__(
+        self,
+        kind: Kind,
+        default: Any,
+        doc: str,
+        *,
+        flag: str | None = "",
+        optional: bool = False,
+        default_doc: str | None = None,
+        state: bool = True,
+    ) -> None:
+        self._spec = dict(kind=kind, default=default, doc=doc, flag=flag, optional=optional, default_doc=default_doc)
         self.state = state
         self.param: Param = Param("", **self._spec)
         self.name = ""
@@ -94,7 +104,7 @@ class Control:
             return self
         if self._fget is not None:
             return self._fget(obj)
-        return getattr(obj, self.attr, self.param.default)      # a control never set holds its default
+        return getattr(obj, self.attr, self.param.default)  # a control never set holds its default
 
     def __set__(self, obj: Any, value: Any) -> None:
         value = self.param.check(value)
@@ -121,7 +131,7 @@ def controls_of(cls: type) -> dict[str, Control]:
                 found.pop(name, None)
                 found[name] = value
             elif name in found:
-                del found[name]           # a subclass replaced the control with something else
+                del found[name]  # a subclass replaced the control with something else
     return found
 
 
@@ -135,9 +145,11 @@ def document(cls: type, common: tuple[Param, ...]) -> None:
     sections = ["Parameters\n----------\n" + "\n".join(p.numpydoc() for p in params)]
     controls = controls_of(cls)
     if controls:
-        sections.append("Controls (attributes, changeable between any two frames)\n"
-                        "---------------------------------------------------------\n"
-                        + "\n".join(c.param.numpydoc() for c in controls.values()))
+        sections.append(
+            "Controls (attributes, changeable between any two frames)\n"
+            "---------------------------------------------------------\n"
+            + "\n".join(c.param.numpydoc() for c in controls.values())
+        )
     text = "\n\n".join(sections)
     indent = "    "
     text = "\n".join(indent + line if line else line for line in text.splitlines())
@@ -151,10 +163,14 @@ def document(cls: type, common: tuple[Param, ...]) -> None:
 
 def markdown(classes: list[type], common: tuple[Param, ...]) -> str:
     """``player/MODES.md``: every mode's options, controls and capabilities as tables, from the declarations."""
-    lines = ["# Player modes", "",
-             "Generated from the modes' declarations (`python tools/write_modes_doc.py`);",
-             "a test keeps it equal to them. Every mode takes the common parameters; the",
-             "command line offers a mode's options and controls as flags (`dynatex play --mode MODE --help`).", ""]
+    lines = [
+        "# Player modes",
+        "",
+        "Generated from the modes' declarations (`python tools/write_modes_doc.py`);",
+        "a test keeps it equal to them. Every mode takes the common parameters; the",
+        "command line offers a mode's options and controls as flags (`dynatex play --mode MODE --help`).",
+        "",
+    ]
 
     def table(params: list[Param]) -> list[str]:
         rows = ["| name | flag | rule | default | what |", "|---|---|---|---|---|"]
@@ -167,12 +183,22 @@ def markdown(classes: list[type], common: tuple[Param, ...]) -> str:
     lines += ["## Common parameters", "", *table(list(common)), ""]
     for cls in classes:
         caps = [f.name for f in cls.capabilities.__dataclass_fields__.values() if getattr(cls.capabilities, f.name)]
-        lines += [f"## `{cls.mode}` ({cls.__name__})", "", (cls.__doc__ or "").strip().splitlines()[0], "",
-                  f"Capabilities: {', '.join(caps) or 'none'}.", ""]
+        lines += [
+            f"## `{cls.mode}` ({cls.__name__})",
+            "",
+            (cls.__doc__ or "").strip().splitlines()[0],
+            "",
+            f"Capabilities: {', '.join(caps) or 'none'}.",
+            "",
+        ]
         if cls.options:
             lines += ["Options (fixed for the player's lifetime):", "", *table(list(cls.options)), ""]
-        lines += ["Controls (attributes, changeable between any two frames; saved by `get_state`):", "",
-                  *table([c.param for c in controls_of(cls).values()]), ""]
+        lines += [
+            "Controls (attributes, changeable between any two frames; saved by `get_state`):",
+            "",
+            *table([c.param for c in controls_of(cls).values()]),
+            "",
+        ]
     return "\n".join(lines)
 
 

@@ -27,6 +27,7 @@ device, probed once per context) the kernel writes straight into the caller's ar
 otherwise into a device buffer copied into it; either way the frame may be left in flight
 and its event returned, which is what :meth:`Player.start_frame` hands to the caller.
 """
+
 from __future__ import annotations
 
 from collections import OrderedDict
@@ -52,8 +53,10 @@ class Kernel:
         self.kernel = program.kernel(name)
         self.args = program.arg_names.get(name, ())
         if len(self.args) != self.kernel.num_args:
-            raise KernelBuildError(f"kernel {name!r}: {len(self.args)} argument names read from "
-                                   f"{program.filename}, but the kernel takes {self.kernel.num_args}")
+            raise KernelBuildError(
+                f"kernel {name!r}: {len(self.args)} argument names read from "
+                f"{program.filename}, but the kernel takes {self.kernel.num_args}"
+            )
         self._index = {arg: i for i, arg in enumerate(self.args)}
 
     def set(self, **values: Any) -> None:
@@ -62,13 +65,15 @@ class Kernel:
             try:
                 index = self._index[arg]
             except KeyError:
-                raise TypeError(f"kernel {self.name!r} has no argument {arg!r} "
-                                f"(it has {', '.join(self.args)})") from None
+                raise TypeError(
+                    f"kernel {self.name!r} has no argument {arg!r} (it has {', '.join(self.args)})"
+                ) from None
             self.kernel.set_arg(index, value)
 
     def launch(self, queue, global_size: tuple[int, ...], local_size: tuple[int, ...] | None = None):
         """Enqueue the kernel with its current arguments; returns the event."""
         import pyopencl as cl
+
         return cl.enqueue_nd_range_kernel(queue, self.kernel, global_size, local_size)
 
 
@@ -83,6 +88,7 @@ class FrameOut:
 
     def __init__(self, ctx, queue, kernel: Kernel, arg: str, nbytes: int, *, direct: bool | None = None) -> None:
         import pyopencl as cl
+
         self.ctx, self.queue, self.kernel, self.arg = ctx, queue, kernel, arg
         self.direct = writes_through(ctx) if direct is None else bool(direct)
         self.buffer = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, nbytes)
@@ -98,6 +104,7 @@ class FrameOut:
     def _host_buffer(self, out: np.ndarray):
         """The buffer wrapping ``out`` (kept, with ``out`` itself, for the last few arrays)."""
         import pyopencl as cl
+
         key = id(out)
         held = self._held.get(key)
         if held is not None and held[0] is out:
@@ -109,13 +116,20 @@ class FrameOut:
             self._held.popitem(last=False)
         return buf
 
-    def launch(self, out: np.ndarray, global_size: tuple[int, ...], local_size: tuple[int, ...] | None = None,
-               *, wait: bool = True):
+    def launch(
+        self,
+        out: np.ndarray,
+        global_size: tuple[int, ...],
+        local_size: tuple[int, ...] | None = None,
+        *,
+        wait: bool = True,
+    ):
         """Run the kernel for a frame that ends in ``out`` (C-contiguous uint8).
 
         Returns None once ``out`` holds the frame (``wait=True``), else the event after which it does.
         """
         import pyopencl as cl
+
         if self.direct:
             self._bind(self._host_buffer(out))
             event = self.kernel.launch(self.queue, global_size, local_size)
@@ -133,6 +147,7 @@ class FrameOut:
     def copy_from(self, src, out: np.ndarray, *, offset: int = 0, wait: bool = True):
         """Copy a frame that already lies in device buffer ``src`` at byte ``offset`` into ``out``."""
         import pyopencl as cl
+
         event = cl.enqueue_copy(self.queue, out.reshape(-1), src, src_offset=offset, is_blocking=False)
         return finish(event, wait)
 

@@ -5,13 +5,14 @@ Mode ``tiles`` (and any mode that copies stored pixels at per-pixel times) draws
 a gather engine (:func:`open_gather`). The OpenCL engine owns the device buffers of one
 frame stack and of the maps that say where and when every output pixel reads, builds
 ``kernels/gather.cl`` once at construction, and renders a frame with one kernel launch
-into the caller's array (or a device buffer copied into it). Every device path has a numpy reference (the ``numpy`` backend runs exactly those
-functions), and tests compare the two.
+into the caller's array (or a device buffer copied into it). Every device path has a numpy
+reference (the ``numpy`` backend runs exactly those functions), and tests compare the two.
 
 The pieces
 ----------
 frame stack
-    ``(N, h, w, 3)`` uint8: ``N`` stored frames (tiles side by side, ...). A source pixel is the linear index ``y * w + x`` inside one frame.
+    ``(N, h, w, 3)`` uint8: ``N`` stored frames (tiles side by side, ...). A source pixel is
+    the linear index ``y * w + x`` inside one frame.
 source
     Either a per-pixel map (:meth:`Gather.set_source_map`, ``(H, W)`` packed int32) or,
     when the Gather is built with ``cell=(ch, cw)``, a grid of cells
@@ -77,11 +78,13 @@ Examples
 >>> bool((g.render(3.0) == stack[3]).all())
 True
 """
+
 from __future__ import annotations
 
 import logging
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -94,19 +97,20 @@ log = logging.getLogger(__name__)
 WRAPS = ("loop", "clamp", "pingpong")
 MAX_FRAME_PIXELS = 1 << 24
 MAX_TONES = 256
-MAX_GAIN, MAX_OFFSET = 63.0, 255.0   # the fixed-point tone's range (every intermediate fits 16 bits)
-MAX_TIME = 2048.0     # |time map| in frames: the integer time (4080ths, x 256) fits 32 bits
-RUN = 32              # output pixels per work-item of the per-pixel kernel (time steps other than 8)
-STACK_PAD = 256       # bytes of padding around the device copy of the frame stack (a run's 192 bytes fit)
-BANDS = 8             # wide variant: a work-item renders one run of 64 pixels on BANDS bands of 8 rows
-TONE_STRIDE = 384     # int16 per device tone row: 192 gains then 192 offsets, per byte of a 64-pixel run
+MAX_GAIN, MAX_OFFSET = 63.0, 255.0  # the fixed-point tone's range (every intermediate fits 16 bits)
+MAX_TIME = 2048.0  # |time map| in frames: the integer time (4080ths, x 256) fits 32 bits
+RUN = 32  # output pixels per work-item of the per-pixel kernel (time steps other than 8)
+STACK_PAD = 256  # bytes of padding around the device copy of the frame stack (a run's 192 bytes fit)
+BANDS = 8  # wide variant: a work-item renders one run of 64 pixels on BANDS bands of 8 rows
+TONE_STRIDE = 384  # int16 per device tone row: 192 gains then 192 offsets, per byte of a 64-pixel run
 TONE_OB = 192
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
 #: the bytes of a 64-pixel run in the order of the wide kernel's 16-bit lanes: per 64-byte
 #: chunk, the low then the high half of the x86 byte interleave (bytes 0-7 of each 16-byte
 #: lane, then 8-15)
-_CHUNK_BYTES = np.array([64 * c + 16 * lane + half + i for c in range(3) for half in (0, 8)
-                         for lane in range(4) for i in range(8)])
+_CHUNK_BYTES = np.array(
+    [64 * c + 16 * lane + half + i for c in range(3) for half in (0, 8) for lane in range(4) for i in range(8)]
+)
 
 
 # -- numpy references ------------------------------------------------------------------------
@@ -188,9 +192,16 @@ def gaussian_smooth(field: np.ndarray, sigma: float) -> np.ndarray:
     return out
 
 
-def time_units(tmap: np.ndarray, t: float, shape: tuple[int, int], step: int, *,
-               target: np.ndarray | None = None, fade: float = 0.0,
-               rows: range | None = None) -> tuple[np.ndarray, np.ndarray]:
+def time_units(
+    tmap: np.ndarray,
+    t: float,
+    shape: tuple[int, int],
+    step: int,
+    *,
+    target: np.ndarray | None = None,
+    fade: float = 0.0,
+    rows: range | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Per-pixel ``(frame, weight)`` int64 ``(H, W)`` (only the output rows ``rows`` when
     given): the frame ``floor(time)`` and the weight of the next frame in 255ths, for time
     ``t`` plus the time map ``tmap`` at lattice ``step`` (faded toward ``target`` by
@@ -212,7 +223,7 @@ def time_units(tmap: np.ndarray, t: float, shape: tuple[int, int], step: int, *,
     h, w = shape
     rows = range(h) if rows is None else rows
     if step == 1:
-        u = (q[rows.start:rows.stop] + 8) // 16
+        u = (q[rows.start : rows.stop] + 8) // 16
     else:
         th, tw = q.shape
         ny = 2 * np.arange(rows.start, rows.stop) + 1 - step
@@ -222,21 +233,24 @@ def time_units(tmap: np.ndarray, t: float, shape: tuple[int, int], step: int, *,
         xi = nx // (2 * step)
         kx = (nx - 2 * step * xi)[None, :]
         c0, c1 = np.clip(xi, 0, tw - 1), np.clip(xi + 1, 0, tw - 1)
-        h_rows = [(q[r][:, c0] * (2 * step - kx) + q[r][:, c1] * kx + 16 * step) // (32 * step)
-                  for r in (np.clip(yi, 0, th - 1), np.clip(yi + 1, 0, th - 1))]
+        h_rows = [
+            (q[r][:, c0] * (2 * step - kx) + q[r][:, c1] * kx + 16 * step) // (32 * step)
+            for r in (np.clip(yi, 0, th - 1), np.clip(yi + 1, 0, th - 1))
+        ]
         u = (h_rows[0] * (2 * step - ky) + h_rows[1] * ky + step) // (2 * step)
     frame = u // 255
     return int(base) + frame, u - 255 * frame
 
 
-def source_indices(source: np.ndarray, shape: tuple[int, int], frame_w: int,
-                   cell: tuple[int, int] | None, rows: range | None = None) -> tuple[np.ndarray, np.ndarray]:
+def source_indices(
+    source: np.ndarray, shape: tuple[int, int], frame_w: int, cell: tuple[int, int] | None, rows: range | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Per-pixel ``(pixel index, tone)`` of a per-pixel map (``cell=None``) or a cell grid
     (only the output rows ``rows`` when given)."""
     h, w = shape
     rows = range(h) if rows is None else rows
     if cell is None:
-        return unpack_source(source[rows.start:rows.stop])
+        return unpack_source(source[rows.start : rows.stop])
     idx, tone = unpack_source(source)
     ch, cw = cell
     yy, xx = np.arange(rows.start, rows.stop), np.arange(w)
@@ -257,9 +271,18 @@ def fixed_tones(tones: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return g.astype(np.int32), o.astype(np.int32)
 
 
-def gather_reference(stack: np.ndarray, pix: np.ndarray, tone: np.ndarray, frames: np.ndarray,
-                     weights: np.ndarray, tones: np.ndarray, *, wrap: str = "loop", interpolate: bool = True,
-                     out: np.ndarray | None = None) -> np.ndarray:
+def gather_reference(
+    stack: np.ndarray,
+    pix: np.ndarray,
+    tone: np.ndarray,
+    frames: np.ndarray,
+    weights: np.ndarray,
+    tones: np.ndarray,
+    *,
+    wrap: str = "loop",
+    interpolate: bool = True,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
     """Reference of kernel ``gather``: ``stack`` (N, h, w, 3) uint8, per-pixel ``pix``/``tone``
     (H, W) ints, per-pixel ``frames`` (any integers, folded by ``wrap``) and ``weights`` of
     the next frame in 255ths (:func:`time_units`), ``tones`` (n, 6) float32 (gain rgb,
@@ -338,14 +361,27 @@ class Gather:
 
     backend = ""
 
-    def __init__(self, frames: np.ndarray, out_size: Sequence[int], *, wrap: str = "loop",
-                 interpolate: bool = True, time_step: int = 1, cell: Sequence[int] | None = None,
-                 wide: bool | None = None, format: str = "RGB") -> None:
+    def __init__(
+        self,
+        frames: np.ndarray,
+        out_size: Sequence[int],
+        *,
+        wrap: str = "loop",
+        interpolate: bool = True,
+        time_step: int = 1,
+        cell: Sequence[int] | None = None,
+        wide: bool | None = None,
+        format: str = "RGB",
+    ) -> None:
         frames = np.asarray(frames)
         if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[3] != 3 or frames.shape[0] < 1:
-            raise InvalidArgumentError(f"frames must be uint8 (N, h, w, 3) with N >= 1, not {frames.dtype} {frames.shape}")
+            raise InvalidArgumentError(
+                f"frames must be uint8 (N, h, w, 3) with N >= 1, not {frames.dtype} {frames.shape}"
+            )
         if frames.shape[1] * frames.shape[2] > MAX_FRAME_PIXELS:
-            raise InvalidArgumentError(f"frames hold {frames.shape[1] * frames.shape[2]} pixels each, more than {MAX_FRAME_PIXELS}")
+            raise InvalidArgumentError(
+                f"frames hold {frames.shape[1] * frames.shape[2]} pixels each, more than {MAX_FRAME_PIXELS}"
+            )
         if wrap not in WRAPS:
             raise InvalidArgumentError(f"wrap must be one of {WRAPS}, not {wrap!r}")
         h_out, w_out = _size("out_size", out_size)
@@ -358,8 +394,9 @@ class Gather:
         self.cell = None if cell is None else _size("cell", cell)
         self.grid = self.cell is not None
         if self.grid and (self.cell[0] > self.frame_h or self.cell[1] > self.frame_w):
-            raise InvalidArgumentError(f"cell {self.cell[0]}x{self.cell[1]} is larger than the stored "
-                             f"{self.frame_h}x{self.frame_w} frame")
+            raise InvalidArgumentError(
+                f"cell {self.cell[0]}x{self.cell[1]} is larger than the stored {self.frame_h}x{self.frame_w} frame"
+            )
         self.format = pixel_format(format)
         self.out_shape = (h_out, w_out, self.format.bytes)
         self.tmap_shape = (-(-h_out // self.time_step), -(-w_out // self.time_step))
@@ -367,11 +404,11 @@ class Gather:
         self._source: np.ndarray | None = None
         self._cell: tuple[int, int] | None = None
         self._tmap = np.zeros(self.tmap_shape, np.float32)
-        self._target: np.ndarray | None = None      # the map the time map fades toward (set_time_map)
+        self._target: np.ndarray | None = None  # the map the time map fades toward (set_time_map)
         self._tones = np.zeros((1, 6), np.float32)
         self._tones[0, :3] = 1.0
-        self.direct = False       # frames written straight into the caller's array (OpenCL, set at open)
-        self.wide = False         # the x86 variant renders (OpenCL, time step 8, verified on the device)
+        self.direct = False  # frames written straight into the caller's array (OpenCL, set at open)
+        self.wide = False  # the x86 variant renders (OpenCL, time step 8, verified on the device)
         self._last_t, self._last_fade = 0.0, 0.0
 
     # -- what an engine implements --------------------------------------------------------------
@@ -398,7 +435,6 @@ class Gather:
 
     def close(self) -> None:
         """Release what the engine holds on a device (nothing for the reference)."""
-
 
     # -- inputs --------------------------------------------------------------------------------
     def set_source_map(self, packed: np.ndarray) -> None:
@@ -464,8 +500,10 @@ class Gather:
         if not np.isfinite(tmap).all():
             raise InvalidArgumentError(f"{name} must be finite")
         if tmap.size and np.abs(tmap).max() > MAX_TIME:
-            raise InvalidArgumentError(f"{name} must lie within +-{MAX_TIME:g} frames, not {float(np.abs(tmap).max()):g}")
-        return np.array(tmap, np.float32, order="C")   # own copy: device reads land here
+            raise InvalidArgumentError(
+                f"{name} must lie within +-{MAX_TIME:g} frames, not {float(np.abs(tmap).max()):g}"
+            )
+        return np.array(tmap, np.float32, order="C")  # own copy: device reads land here
 
     @property
     def time_map(self) -> np.ndarray:
@@ -503,7 +541,9 @@ class Gather:
         if self._source is not None:
             _, tone = unpack_source(self._source)
             if tone.size and tone.max() >= len(gain):
-                raise InvalidArgumentError(f"the source names tone {int(tone.max())} but only {len(gain)} tones are given")
+                raise InvalidArgumentError(
+                    f"the source names tone {int(tone.max())} but only {len(gain)} tones are given"
+                )
         self._tones = np.ascontiguousarray(np.concatenate([gain, offset], axis=1))
         self._upload_tones()
 
@@ -539,8 +579,9 @@ class Gather:
         pix, tone = source_indices(self._source, (h, w), self.frame_w, self._cell)
         tmap, target = self._maps()
         frames, weights = time_units(tmap, self._fold(float(t)), (h, w), self.time_step, target=target, fade=fade)
-        rgb = gather_reference(self._stack, pix, tone, frames, weights, self._tones,
-                               wrap=self.wrap, interpolate=self.interpolate)
+        rgb = gather_reference(
+            self._stack, pix, tone, frames, weights, self._tones, wrap=self.wrap, interpolate=self.interpolate
+        )
         return self.format.from_rgb(rgb, out)
 
     def _fold(self, t: float) -> float:
@@ -577,7 +618,7 @@ class Gather:
         tmap, target = self._maps()
         fp = self.frame_h * self.frame_w
         seen = np.zeros(self.n_frames * fp, bool)
-        for r0 in range(0, h, 256):                     # in blocks of rows: bounded memory
+        for r0 in range(0, h, 256):  # in blocks of rows: bounded memory
             rows = range(r0, min(r0 + 256, h))
             pix, _ = source_indices(self._source, (h, w), self.frame_w, self._cell, rows)
             i0, _ = time_units(tmap, t, (h, w), self.time_step, target=target, fade=self._last_fade, rows=rows)
@@ -619,13 +660,22 @@ class GatherOpenCL(Gather):
 
     backend = "opencl"
 
-    def __init__(self, frames: np.ndarray, out_size: Sequence[int], *, ctx: Any = None, queue: Any = None,
-                 device: str | None = None, **options: Any) -> None:
+    def __init__(
+        self,
+        frames: np.ndarray,
+        out_size: Sequence[int],
+        *,
+        ctx: Any = None,
+        queue: Any = None,
+        device: str | None = None,
+        **options: Any,
+    ) -> None:
         super().__init__(frames, out_size, **options)
         import pyopencl as cl
 
         from .engine import FrameOut, Kernel
         from .opencl import OpenCLUnavailableError, build_program, get_context, variant_verified
+
         self.ctx = get_context(device) if ctx is None else ctx
         self.queue = cl.CommandQueue(self.ctx) if queue is None else queue
         mf = cl.mem_flags
@@ -636,7 +686,8 @@ class GatherOpenCL(Gather):
         if wanted and self._wide_choice and not self.wide:
             raise OpenCLUnavailableError(
                 f"wide=True: the gather_wide variant is not verified on {self.ctx.devices[0].name} "
-                "(its self-test did not pass there); use wide=None or False")
+                "(its self-test did not pass there); use wide=None or False"
+            )
         # 16 floats of padding: the time step 8 kernel reads the maps 16 floats at a time
         self._d_tmap = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
         self._d_target = cl.Buffer(self.ctx, mf.READ_WRITE, self._tmap.nbytes + 64)
@@ -645,31 +696,49 @@ class GatherOpenCL(Gather):
         self._d_source: Any = None
         self._source_capacity = 0
         self._tmap_events: list[Any] = []
-        defines = {"FRAME_W": self.frame_w, "FRAME_PIXELS": self.frame_w * self.frame_h,
-                   "NFRAMES": self.n_frames, "GRID": self.grid, "WRAP": _WRAP_CODE[self.wrap],
-                   "CELL_H": (self.cell or (1, 1))[0], "CELL_W": (self.cell or (1, 1))[1],
-                   "INTERP": self.interpolate, "TSTEP": self.time_step, "RUN": RUN,
-                   "STACK_PAD": STACK_PAD, "TONE_STRIDE": TONE_STRIDE,
-                   "TONE_OB": TONE_OB}
+        defines = {
+            "FRAME_W": self.frame_w,
+            "FRAME_PIXELS": self.frame_w * self.frame_h,
+            "NFRAMES": self.n_frames,
+            "GRID": self.grid,
+            "WRAP": _WRAP_CODE[self.wrap],
+            "CELL_H": (self.cell or (1, 1))[0],
+            "CELL_W": (self.cell or (1, 1))[1],
+            "INTERP": self.interpolate,
+            "TSTEP": self.time_step,
+            "RUN": RUN,
+            "STACK_PAD": STACK_PAD,
+            "TONE_STRIDE": TONE_STRIDE,
+            "TONE_OB": TONE_OB,
+        }
         # the variant writes RGB (kernel place then puts it in the format): so does its program
         defines.update((FORMATS["RGB"] if self.wide else self.format).defines)
         if self.wide:
-            prog = build_program(self.ctx, ("gather.cl", "variants/gather_wide.cl"),
-                                 {**defines, "STACK_SIGNED": True, "BANDS": BANDS})
+            prog = build_program(
+                self.ctx, ("gather.cl", "variants/gather_wide.cl"), {**defines, "STACK_SIGNED": True, "BANDS": BANDS}
+            )
         else:
             prog = build_program(self.ctx, "gather.cl", {**defines, "STACK_SIGNED": False})
         # STACK_PAD bytes on both sides: vector loads of a run may read a few bytes past the
         # frame stack's ends (lanes that a bytewise merge then drops). The wide variant
         # reads bytes value ^ 0x80: value - 128 as a signed byte, what its blend multiplies.
         padded = np.zeros(self._stack.nbytes + 2 * STACK_PAD, np.uint8)
-        padded[STACK_PAD:STACK_PAD + self._stack.nbytes] = self._stack.reshape(-1)
+        padded[STACK_PAD : STACK_PAD + self._stack.nbytes] = self._stack.reshape(-1)
         if self.wide:
             padded ^= 0x80
         self._d_stack = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
         self._k_gather = Kernel(prog, "gather_wide" if self.wide else "gather")
-        self._k_gather.set(stack=self._d_stack, tmap=self._d_tmap, tones=self._d_tones, width=np.int32(w),
-                           height=np.int32(h), tmap_w=np.int32(self.tmap_shape[1]),
-                           tmap_h=np.int32(self.tmap_shape[0]), t0=np.float32(0), fade=np.float32(0))
+        self._k_gather.set(
+            stack=self._d_stack,
+            tmap=self._d_tmap,
+            tones=self._d_tones,
+            width=np.int32(w),
+            height=np.int32(h),
+            tmap_w=np.int32(self.tmap_shape[1]),
+            tmap_h=np.int32(self.tmap_shape[0]),
+            t0=np.float32(0),
+            fade=np.float32(0),
+        )
         self._place = None
         if self.wide and self.format.name != "RGB":
             # the variant writes RGB into a device buffer; kernel place puts it in the format
@@ -694,9 +763,9 @@ class GatherOpenCL(Gather):
         self._upload_tmap()
         self._upload_tones()
 
-
     def _upload_source(self) -> None:
         import pyopencl as cl
+
         packed = self._source
         if self._d_source is None or self._source_capacity < packed.nbytes:
             self._d_source = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY, max(packed.nbytes, 4))
@@ -706,6 +775,7 @@ class GatherOpenCL(Gather):
 
     def _upload_tmap(self) -> None:
         import pyopencl as cl
+
         # not blocking: the queue runs in order, and the events (kept until the next upload:
         # dropping one would wait for the copy) hold the arrays until the copies are done
         # (set_time_map replaces the arrays rather than writing into them)
@@ -717,11 +787,13 @@ class GatherOpenCL(Gather):
 
     def _upload_tones(self) -> None:
         import pyopencl as cl
+
         cl.enqueue_copy(self.queue, self._d_tones, _expand_tones(self._tones), is_blocking=True)
 
     def _maps(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The maps as the device holds them (smoothed there), read back."""
         import pyopencl as cl
+
         maps = []
         for host, device in ((self._tmap, self._d_tmap), (self._target, self._d_target)):
             if host is None:
@@ -734,6 +806,7 @@ class GatherOpenCL(Gather):
 
     def _smooth(self, sigma: float, weights: np.ndarray) -> None:
         import pyopencl as cl
+
         r = (len(weights) - 1) // 2
         d_w = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=weights)
         th, tw = self.tmap_shape
@@ -772,8 +845,16 @@ class GatherOpenCL(Gather):
                 buf.release()
 
 
-def open_gather(frames: np.ndarray, out_size: Sequence[int], *, backend: str = "opencl", ctx: Any = None,
-                queue: Any = None, device: str | None = None, **options: Any) -> Gather:
+def open_gather(
+    frames: np.ndarray,
+    out_size: Sequence[int],
+    *,
+    backend: str = "opencl",
+    ctx: Any = None,
+    queue: Any = None,
+    device: str | None = None,
+    **options: Any,
+) -> Gather:
     """A gather engine: :class:`GatherOpenCL` (``backend="opencl"``, on ``ctx``/``queue`` or
     ``device``) or :class:`GatherReference` (``"numpy"``); ``options`` as :class:`Gather`'s."""
     if backend not in BACKENDS:

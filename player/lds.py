@@ -5,6 +5,7 @@ microseconds) and one OpenCL kernel projects it, ``frame = basis^T (w * x) + mea
 straight to uint8: the only per-frame cost that grows with the frame size, memory-bound
 on the basis.
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -91,16 +92,24 @@ class LDSPlayer(ProjectionPlayer):
             poles = edited_poles(self._poles, value)
             self._A_edit = np.ascontiguousarray(((self._vecs * poles) @ self._vecs_inv).real)
 
-    scales = Control(Numbers(Range(float, 0.0, MAX_WEIGHT), 3, "C,M,F"), (1.0, 1.0, 1.0),
-                     "Weights of the coarse, medium and fine groups of components.")
+    scales = Control(
+        Numbers(Range(float, 0.0, MAX_WEIGHT), 3, "C,M,F"),
+        (1.0, 1.0, 1.0),
+        "Weights of the coarse, medium and fine groups of components.",
+    )
 
     @scales.setter
     def scales(self, value: tuple[float, float, float]) -> None:
         self._scales = value
         self._update_w()
 
-    weights = Control(Array(0.0, MAX_WEIGHT, ndim=1), None, "Per-component weights, multiplied with scales.",
-                      flag=None, default_doc="all 1")
+    weights = Control(
+        Array(0.0, MAX_WEIGHT, ndim=1),
+        None,
+        "Per-component weights, multiplied with scales.",
+        flag=None,
+        default_doc="all 1",
+    )
 
     @weights.setter
     def weights(self, value: np.ndarray) -> None:

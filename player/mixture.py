@@ -8,6 +8,7 @@ projection of ``u = (r_s, r_s z_s)`` onto the stacked basis (component means and
 with the LDS mode's ``project`` kernel (:mod:`.projection`): one launch per frame,
 memory-bound on the stacked basis.
 """
+
 from __future__ import annotations
 
 import os
@@ -39,15 +40,16 @@ class GlobalDecoder:
     def __init__(self, model: MixtureModel) -> None:
         s, d, dg = model.components, model.dim, model.global_dim
         self.s, self.d, self.dg = s, d, dg
-        self.offset = model.decode_offset.copy()                          # (S, d)
-        self.gain = model.decode_gain.copy()                              # (S, d, D)
-        self.local_whiten = np.linalg.inv(np.linalg.cholesky(model.local_cov))   # (S, d, d)
+        self.offset = model.decode_offset.copy()  # (S, d)
+        self.gain = model.decode_gain.copy()  # (S, d, D)
+        self.local_whiten = np.linalg.inv(np.linalg.cholesky(model.local_cov))  # (S, d, d)
         self.radius = model.local_radius.copy()
-        chol = np.linalg.cholesky(model.gauss_cov)                       # (S, D, D)
+        chol = np.linalg.cholesky(model.gauss_cov)  # (S, D, D)
         self.whiten = np.linalg.inv(chol)
         self.centre = model.gauss_mean.copy()
-        self.lognorm = np.log(np.maximum(model.weights, 1e-300)) - np.log(
-            np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
+        self.lognorm = np.log(np.maximum(model.weights, 1e-300)) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(
+            axis=1
+        )
 
     def responsibilities(self, g: np.ndarray) -> np.ndarray:
         """``(N, D)`` -> ``(N, S)``."""
@@ -64,7 +66,7 @@ class GlobalDecoder:
         g2 = g[None] if single else g
         r = self.responsibilities(g2)
         dz = np.einsum("sij,nsj->nsi", self.gain, g2[:, None, :] - self.centre[None])
-        rad = np.sqrt((np.einsum("sij,nsj->nsi", self.local_whiten, dz) ** 2).sum(axis=2))     # (N, S)
+        rad = np.sqrt((np.einsum("sij,nsj->nsi", self.local_whiten, dz) ** 2).sum(axis=2))  # (N, S)
         dz *= np.minimum(1.0, self.radius[None] / np.maximum(rad, 1e-300))[:, :, None]
         z = self.offset[None] + dz
         u = np.concatenate([np.ones(z.shape[:2] + (1,)), z], axis=2) * r[:, :, None]
@@ -91,33 +93,47 @@ class MixturePlayer(ProjectionPlayer):
     mode = "mixture"
     basis_name = "stacked_basis"
 
-    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "auto", device: str | None = None, seed: int = 0,
-                 precision: str = "float32", draws: int = DEFAULT_DRAWS, format: str = "RGB") -> None:
+    def __init__(
+        self,
+        db: str | os.PathLike | TileDB,
+        texture: str | None = None,
+        *,
+        backend: str = "auto",
+        device: str | None = None,
+        seed: int = 0,
+        precision: str = "float32",
+        draws: int = DEFAULT_DRAWS,
+        format: str = "RGB",
+    ) -> None:
         self.draws = draws
-        super().__init__(db, texture, backend=backend, device=device, seed=seed, precision=precision,
-                         format=format)
+        super().__init__(db, texture, backend=backend, device=device, seed=seed, precision=precision, format=format)
 
     def _setup(self, model: MixtureModel) -> None:
         src = self.texture.source
-        self.components, self.dim, self.global_dim, self.order = (model.components, model.dim,
-                                                                  model.global_dim, model.order)
+        self.components, self.dim, self.global_dim, self.order = (
+            model.components,
+            model.dim,
+            model.global_dim,
+            model.order,
+        )
         self._dim = self.global_dim
         self._shape = (src.height, src.width, self.format.bytes)
         self.decoder = GlobalDecoder(model)
         self.train_coords = np.ascontiguousarray(model.global_coords)
-        self._train_sq = (self.train_coords ** 2).sum(axis=1)
+        self._train_sq = (self.train_coords**2).sum(axis=1)
         self._A = np.ascontiguousarray(model.ar_coefs)
         self._w = model.ar_intercept.copy()
         self._noise = np.linalg.cholesky(model.ar_noise_cov)
         p = self.order
-        self._hist0 = self.train_coords[p - 1::-1].copy()           # hist[i] = g_{t-i}
+        self._hist0 = self.train_coords[p - 1 :: -1].copy()  # hist[i] = g_{t-i}
         self._hist = self._hist0.copy()
 
     # -- controls ----------------------------------------------------------------
-    draws = Control(Range(int, 1, MAX_DRAWS), DEFAULT_DRAWS,
-                    "Noise draws per step; the candidate nearest the learned manifold is kept (1: the plain AR "
-                    "process).")
+    draws = Control(
+        Range(int, 1, MAX_DRAWS),
+        DEFAULT_DRAWS,
+        "Noise draws per step; the candidate nearest the learned manifold is kept (1: the plain AR process).",
+    )
 
     # -- synthesis -----------------------------------------------------------------
     @property

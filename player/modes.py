@@ -1,4 +1,5 @@
 """The player modes by name; each entry is imported only when used."""
+
 from __future__ import annotations
 
 import importlib

@@ -2,6 +2,7 @@
 self-test, :mod:`dynatex.player.selftest`), one context per device, programs built once
 from ``player/kernels/*.cl`` and kernels fetched once.
 """
+
 from __future__ import annotations
 
 import logging
@@ -9,9 +10,9 @@ import os
 import re
 import threading
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib import resources
-from typing import Mapping
 
 import numpy as np
 
@@ -41,9 +42,9 @@ class KernelBuildError(DynatexError, RuntimeError):
 
 
 _lock = threading.Lock()
-_contexts: dict[str, "cl.Context"] = {}
-_programs: dict[tuple, "Program"] = {}
-_infos: dict[int, "DeviceInfo"] = {}          # device handle -> its DeviceInfo, for get_context's devices
+_contexts: dict[str, cl.Context] = {}
+_programs: dict[tuple, Program] = {}
+_infos: dict[int, DeviceInfo] = {}  # device handle -> its DeviceInfo, for get_context's devices
 _kernel_fetches = 0
 
 
@@ -86,9 +87,17 @@ def devices() -> list[DeviceInfo]:
         except cl.Error:
             continue
         for j, d in enumerate(devs):
-            out.append(DeviceInfo(f"{i}:{j}", p.name.strip(), p.version.strip(), d.name.strip(),
-                                  d.vendor.strip(), d.driver_version.strip(),
-                                  bool(d.type & cl.device_type.CPU)))
+            out.append(
+                DeviceInfo(
+                    f"{i}:{j}",
+                    p.name.strip(),
+                    p.version.strip(),
+                    d.name.strip(),
+                    d.vendor.strip(),
+                    d.driver_version.strip(),
+                    bool(d.type & cl.device_type.CPU),
+                )
+            )
     return out
 
 
@@ -97,7 +106,7 @@ def list_devices() -> list[tuple[str, str]]:
     return [(d.platform, d.name) for d in devices()]
 
 
-def device_info(device: "cl.Device") -> DeviceInfo:
+def device_info(device: cl.Device) -> DeviceInfo:
     """The :class:`DeviceInfo` of a pyopencl device (known for the devices of
     :func:`get_context`'s contexts, else found among :func:`devices`)."""
     info = _infos.get(device.int_ptr)
@@ -105,22 +114,27 @@ def device_info(device: "cl.Device") -> DeviceInfo:
         return info
     for info in devices():
         if (info.platform, info.platform_version, info.name, info.driver_version) == (
-                device.platform.name.strip(), device.platform.version.strip(), device.name.strip(),
-                device.driver_version.strip()):
+            device.platform.name.strip(),
+            device.platform.version.strip(),
+            device.name.strip(),
+            device.driver_version.strip(),
+        ):
             return info
     raise OpenCLUnavailableError(f"device {device.name!r} is not among this process's OpenCL devices")
 
 
 def preference_order(infos: list[DeviceInfo]) -> list[DeviceInfo]:
     """The order devices are tried in: PoCL first (newest version first), then the others as listed."""
+
     def pocl_version(info: DeviceInfo) -> tuple[int, ...]:
         m = re.search(r"PoCL (\d+)\.(\d+)", info.platform_version)
         return tuple(int(v) for v in m.groups()) if m else (0, 0)
+
     pocl = sorted((d for d in infos if d.is_pocl), key=pocl_version, reverse=True)
     return pocl + [d for d in infos if not d.is_pocl]
 
 
-def get_context(device: str | None = None) -> "cl.Context":
+def get_context(device: str | None = None) -> cl.Context:
     """The shared context for a verified ``device``.
 
     ``device`` is ``None`` (``PYOPENCL_CTX`` if set, else the first device that passes the
@@ -148,20 +162,21 @@ def get_context(device: str | None = None) -> "cl.Context":
         return ctx
 
 
-def _cl_device(info: DeviceInfo) -> "cl.Device":
+def _cl_device(info: DeviceInfo) -> cl.Device:
     p, d = (int(v) for v in info.index.split(":"))
     return cl.get_platforms()[p].get_devices()[d]
 
 
 def _pick_device(device: str | None) -> DeviceInfo:
     from . import selftest
+
     infos = devices()
     if not infos:
         raise OpenCLUnavailableError(f"no OpenCL device found; {_FIX}")
     spec, what = device, "device"
     if spec is None and os.environ.get("PYOPENCL_CTX"):
         spec, what = os.environ["PYOPENCL_CTX"], "PYOPENCL_CTX"
-    if selftest.ALLOWED_VARIANTS is not None:         # the self-test's own child process
+    if selftest.ALLOWED_VARIANTS is not None:  # the self-test's own child process
         if device is None:
             raise OpenCLUnavailableError("inside the self-test every context names its device")
         return _match(infos, device, "device")
@@ -169,8 +184,7 @@ def _pick_device(device: str | None) -> DeviceInfo:
         info = _match(infos, spec, what)
         verdict = selftest.verdict(info)
         if not verdict.ok:
-            raise DeviceNotVerifiedError(f"{what}={spec!r}: {info.describe()} failed the self-test: "
-                                         f"{verdict.reason}")
+            raise DeviceNotVerifiedError(f"{what}={spec!r}: {info.describe()} failed the self-test: {verdict.reason}")
         return info
     failures = []
     for info in preference_order(infos):
@@ -180,14 +194,16 @@ def _pick_device(device: str | None) -> DeviceInfo:
         failures.append(f"{info.describe()}: {verdict.reason}")
     raise OpenCLUnavailableError(
         "no OpenCL device here passed the self-test (" + "; ".join(failures) + "). "
-        f"Run ./install.sh (it adds the system PoCL, `apt-get install pocl-opencl-icd`), or {_NUMPY}")
+        f"Run ./install.sh (it adds the system PoCL, `apt-get install pocl-opencl-icd`), or {_NUMPY}"
+    )
 
 
-def variant_verified(device: "cl.Device", variant: str) -> bool:
+def variant_verified(device: cl.Device, variant: str) -> bool:
     """Whether kernel ``variant`` (a file of ``kernels/variants/``) passed the self-test on
     ``device``: its cached verdict says so (no verdict, no variant; nothing is run here)."""
     from . import selftest
-    if selftest.ALLOWED_VARIANTS is not None:      # inside the self-test itself
+
+    if selftest.ALLOWED_VARIANTS is not None:  # inside the self-test itself
         return variant in selftest.ALLOWED_VARIANTS
     try:
         verdict = selftest.cached_verdict(device_info(device))
@@ -205,8 +221,9 @@ def _match(infos: list[DeviceInfo], spec: str, what: str) -> DeviceInfo:
         for info in infos:
             if info.index == index:
                 return info
-        raise OpenCLUnavailableError(f"{what}={spec!r}: no such OpenCL platform/device index "
-                                     f"(available: {', '.join(d.index for d in infos)})")
+        raise OpenCLUnavailableError(
+            f"{what}={spec!r}: no such OpenCL platform/device index (available: {', '.join(d.index for d in infos)})"
+        )
     matches = [d for d in infos if low in d.name.lower() or low in d.platform.lower()]
     if matches:
         return preference_order(matches)[0]
@@ -219,12 +236,13 @@ def _require_pyopencl() -> None:
         raise OpenCLUnavailableError(f"pyopencl cannot be imported ({_IMPORT_ERROR}); {_FIX}")
 
 
-_PROBE_WRITE = ("__kernel void probe_write(__global uchar *o) "
-                "{ size_t i = get_global_id(0); o[i] = (uchar)(i * 7 + 3); }")
+_PROBE_WRITE = (
+    "__kernel void probe_write(__global uchar *o) { size_t i = get_global_id(0); o[i] = (uchar)(i * 7 + 3); }"
+)
 _writes_through: dict[int, bool] = {}
 
 
-def writes_through(ctx: "cl.Context") -> bool:
+def writes_through(ctx: cl.Context) -> bool:
     """Whether kernel writes into a ``USE_HOST_PTR`` buffer land in the host array itself,
     with no map or copy (true of CPU devices such as PoCL's). Probed once per context on an
     odd-aligned array, so players can write frames straight into the caller's buffer."""
@@ -234,7 +252,7 @@ def writes_through(ctx: "cl.Context") -> bool:
     return _writes_through[key]
 
 
-def _probe_writes_through(ctx: "cl.Context") -> bool:
+def _probe_writes_through(ctx: cl.Context) -> bool:
     if not device_shares_host_memory(ctx):
         return False
     try:
@@ -253,7 +271,7 @@ def _probe_writes_through(ctx: "cl.Context") -> bool:
     return bool((host == ((np.arange(host.size) * 7 + 3) & 255).astype(np.uint8)).all())
 
 
-def device_shares_host_memory(ctx: "cl.Context") -> bool:
+def device_shares_host_memory(ctx: cl.Context) -> bool:
     dev = ctx.devices[0]
     try:
         return bool(dev.host_unified_memory)
@@ -289,7 +307,7 @@ def kernel_arg_names(source: str) -> dict[str, tuple[str, ...]]:
 class Program:
     """``.cl`` files built once per context and set of defines (see :func:`build_program`)."""
 
-    def __init__(self, ctx: "cl.Context", filename: str | tuple[str, ...], defines: Mapping[str, object]) -> None:
+    def __init__(self, ctx: cl.Context, filename: str | tuple[str, ...], defines: Mapping[str, object]) -> None:
         self.filename = filename if isinstance(filename, str) else " + ".join(filename)
         # -w: a compiler that prints its warnings to the process's stderr (PoCL's clang does, on
         # the x86 variant's wide vectors) must not write into a game's console
@@ -304,12 +322,12 @@ class Program:
             except cl.RuntimeError as exc:
                 logtext = str(exc).strip()
                 raise KernelBuildError(
-                    f"building player/kernels/{self.filename} with {' '.join(self.options)} failed:\n"
-                    f"{logtext}") from None
+                    f"building player/kernels/{self.filename} with {' '.join(self.options)} failed:\n{logtext}"
+                ) from None
         for w in caught:
             log.debug("OpenCL compiler output for %s: %s", filename, w.message)
 
-    def kernel(self, name: str) -> "cl.Kernel":
+    def kernel(self, name: str) -> cl.Kernel:
         """A new kernel object for ``name``, with its own arguments.
 
         Fetch it once per owner (a player, at open) and reuse it for every launch: kernel
@@ -324,8 +342,9 @@ class Program:
         return k
 
 
-def build_program(ctx: "cl.Context", filename: str | tuple[str, ...],
-                  defines: Mapping[str, object] | None = None) -> Program:
+def build_program(
+    ctx: cl.Context, filename: str | tuple[str, ...], defines: Mapping[str, object] | None = None
+) -> Program:
     """The program ``filename`` (or several files, in order) built for ``ctx`` with ``defines``;
     built only the first time."""
     defines = dict(defines or {})
@@ -356,10 +375,13 @@ def _main(argv: list[str] | None = None) -> int:
     import argparse
 
     from . import selftest
-    parser = argparse.ArgumentParser(prog="python -m dynatex.player",
-                                     description="List the OpenCL devices and their self-test verdicts.")
-    parser.add_argument("--check", action="store_true",
-                        help="self-test every device (cached) and exit 1 unless one passed")
+
+    parser = argparse.ArgumentParser(
+        prog="python -m dynatex.player", description="List the OpenCL devices and their self-test verdicts."
+    )
+    parser.add_argument(
+        "--check", action="store_true", help="self-test every device (cached) and exit 1 unless one passed"
+    )
     parser.add_argument("--refresh", action="store_true", help="run the self-tests again, ignoring cached verdicts")
     args = parser.parse_args(argv)
     try:

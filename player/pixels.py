@@ -2,6 +2,7 @@
 upload as textures without a conversion. Every engine writes each format straight from its
 kernel; :meth:`PixelFormat.from_rgb` is the numpy reference of that placement.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -23,8 +24,13 @@ class PixelFormat(NamedTuple):
     @property
     def defines(self) -> dict[str, int]:
         """The kernel defines that place a pixel's bytes (``PIXEL_BYTES``, ``R_AT``, ...)."""
-        return {"PIXEL_BYTES": self.bytes, "R_AT": self.rgb[0], "G_AT": self.rgb[1], "B_AT": self.rgb[2],
-                "A_AT": -1 if self.alpha is None else self.alpha}
+        return {
+            "PIXEL_BYTES": self.bytes,
+            "R_AT": self.rgb[0],
+            "G_AT": self.rgb[1],
+            "B_AT": self.rgb[2],
+            "A_AT": -1 if self.alpha is None else self.alpha,
+        }
 
     def from_rgb(self, rgb: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """``rgb`` (..., 3) uint8 in this format, (..., bytes), into ``out`` when given.
@@ -47,9 +53,11 @@ class PixelFormat(NamedTuple):
 
 #: the pixel formats a player writes: RGB (default), or RGBA / BGRA with alpha 255, which game
 #: engines upload as textures without a conversion
-FORMATS = {"RGB": PixelFormat("RGB", 3, (0, 1, 2), None),
-           "RGBA": PixelFormat("RGBA", 4, (0, 1, 2), 3),
-           "BGRA": PixelFormat("BGRA", 4, (2, 1, 0), 3)}
+FORMATS = {
+    "RGB": PixelFormat("RGB", 3, (0, 1, 2), None),
+    "RGBA": PixelFormat("RGBA", 4, (0, 1, 2), 3),
+    "BGRA": PixelFormat("BGRA", 4, (2, 1, 0), 3),
+}
 
 
 def pixel_format(name: str | PixelFormat) -> PixelFormat:

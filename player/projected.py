@@ -7,6 +7,7 @@ projection coefficients (``_coefficients``). The base opens the projection engin
 warms it, and provides ``precision``, the ``intensity`` control, ``bytes_per_frame``,
 ``advance`` and the frame paths.
 """
+
 from __future__ import annotations
 
 import os
@@ -35,13 +36,27 @@ class ProjectionPlayer(Player):
     """
 
     basis_name = "basis"
-    options = (Param("precision", Choice(*PRECISIONS), "float32",
-                     "Storage of the basis on the device; float16 halves the bytes each frame reads (faster, "
-                     "memory-bound) at PSNR above 45 dB against float32."),)
+    options = (
+        Param(
+            "precision",
+            Choice(*PRECISIONS),
+            "float32",
+            "Storage of the basis on the device; float16 halves the bytes each frame reads (faster, "
+            "memory-bound) at PSNR above 45 dB against float32.",
+        ),
+    )
 
-    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "auto", device: str | None = None, seed: int = 0,
-                 precision: str = "float32", format: str = "RGB") -> None:
+    def __init__(
+        self,
+        db: str | os.PathLike | TileDB,
+        texture: str | None = None,
+        *,
+        backend: str = "auto",
+        device: str | None = None,
+        seed: int = 0,
+        precision: str = "float32",
+        format: str = "RGB",
+    ) -> None:
         precision = self.options[0].check(precision)
         super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
@@ -53,12 +68,18 @@ class ProjectionPlayer(Player):
             basis = getattr(model, self.basis_name)
             if precision == "float16":
                 basis = basis.astype(np.float16)
-            self.engine = open_projector(basis, model.mean, shape=self._shape,
-                                         channels=self.texture.source.channels, ctx=self.ctx, queue=self.queue,
-                                         format=self.format)
+            self.engine = open_projector(
+                basis,
+                model.mean,
+                shape=self._shape,
+                channels=self.texture.source.channels,
+                ctx=self.ctx,
+                queue=self.queue,
+                format=self.format,
+            )
             self.basis_bytes = self.engine.basis_bytes
             self.reseed(seed)
-            self._project(self._vector(), np.empty(self._shape, np.uint8))     # warm the kernel
+            self._project(self._vector(), np.empty(self._shape, np.uint8))  # warm the kernel
         except BaseException:
             self.close()
             raise
@@ -84,8 +105,11 @@ class ProjectionPlayer(Player):
         """The basis and mean read, plus the uint8 frame written."""
         return self.engine.bytes_per_frame
 
-    intensity = Control(Range(float, 0.0, MAX_INTENSITY), 1.0,
-                        "Scale of the driving noise's covariance (0 follows the deterministic prediction).")
+    intensity = Control(
+        Range(float, 0.0, MAX_INTENSITY),
+        1.0,
+        "Scale of the driving noise's covariance (0 follows the deterministic prediction).",
+    )
 
     # -- synthesis -----------------------------------------------------------------
     def advance(self, steps: int = 1, *, record: bool = False) -> np.ndarray | None:

@@ -7,6 +7,7 @@ contiguous), built once and with its arguments set once; per frame one small upl
 coefficients and one launch into the caller's array (or a device buffer copied into it).
 numpy: :class:`ProjectorReference`. :func:`open_projector` picks one.
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -29,7 +30,7 @@ def blocked_basis(basis: np.ndarray, block: int = BLOCK) -> np.ndarray:
     full = p // block
     out[:full] = basis[:, : full * block].reshape(n, full, block).transpose(1, 0, 2)
     if blocks != full:
-        out[full, :, : p - full * block] = basis[:, full * block:]
+        out[full, :, : p - full * block] = basis[:, full * block :]
     return out
 
 
@@ -56,8 +57,9 @@ class Projector:
 
     backend = ""
 
-    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
-                 format: str = "RGB") -> None:
+    def __init__(
+        self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int, format: str = "RGB"
+    ) -> None:
         self.format = pixel_format(format)
         self.n, self.values = basis.shape
         self.shape = tuple(shape)
@@ -88,8 +90,9 @@ class ProjectorReference(Projector):
 
     backend = "numpy"
 
-    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
-                 format: str = "RGB") -> None:
+    def __init__(
+        self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int, format: str = "RGB"
+    ) -> None:
         super().__init__(basis, mean, shape=shape, channels=channels, format=format)
         self._basis = basis.astype(np.float32) if self.half else basis
         self._mean = mean
@@ -114,13 +117,23 @@ class ProjectorOpenCL(Projector):
 
     backend = "opencl"
 
-    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
-                 ctx: Any, queue: Any, format: str = "RGB") -> None:
+    def __init__(
+        self,
+        basis: np.ndarray,
+        mean: np.ndarray,
+        *,
+        shape: tuple[int, int, int],
+        channels: int,
+        ctx: Any,
+        queue: Any,
+        format: str = "RGB",
+    ) -> None:
         super().__init__(basis, mean, shape=shape, channels=channels, format=format)
         import pyopencl as cl
 
         from .engine import FrameOut, Kernel
         from .opencl import build_program
+
         self.queue = queue
         blocked = blocked_basis(basis)
         blocks = blocked.shape[0]
@@ -132,11 +145,13 @@ class ProjectorOpenCL(Projector):
         del blocked
         self._d_mean = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p)
         self._d_coef = cl.Buffer(ctx, mf.READ_ONLY, self.coef.nbytes)
-        prog = build_program(ctx, "lds.cl", {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels,
-                                             **self.format.defines})
+        prog = build_program(
+            ctx, "lds.cl", {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels, **self.format.defines}
+        )
         self._kernel = Kernel(prog, "project")
-        self._kernel.set(basis=self._d_basis, mean=self._d_mean, coef=self._d_coef,
-                         n=np.int32(self.n), values=np.int32(self.values))
+        self._kernel.set(
+            basis=self._d_basis, mean=self._d_mean, coef=self._d_coef, n=np.int32(self.n), values=np.int32(self.values)
+        )
         #: the kernel's frame destination (writes straight into callers' arrays where the device shares host memory)
         pixels = self.values // channels
         self.out = FrameOut(ctx, queue, self._kernel, "out", max(padded * (3 // channels), pixels * self.format.bytes))
@@ -150,6 +165,7 @@ class ProjectorOpenCL(Projector):
 
     def run(self, out: np.ndarray, *, wait: bool = True):
         import pyopencl as cl
+
         cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=not wait)
         return self.out.launch(out, self._gsize, self._lsize, wait=wait)
 
@@ -161,8 +177,16 @@ class ProjectorOpenCL(Projector):
                 buf.release()
 
 
-def open_projector(basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int,
-                   ctx: Any = None, queue: Any = None, format: str = "RGB") -> Projector:
+def open_projector(
+    basis: np.ndarray,
+    mean: np.ndarray,
+    *,
+    shape: tuple[int, int, int],
+    channels: int,
+    ctx: Any = None,
+    queue: Any = None,
+    format: str = "RGB",
+) -> Projector:
     """The OpenCL projection engine on ``ctx``/``queue``, or the numpy reference when ``ctx`` is None."""
     if ctx is None:
         return ProjectorReference(basis, mean, shape=shape, channels=channels, format=format)

@@ -20,10 +20,12 @@ The player is the time model (clock, controls, the functions below); the runs en
 (:mod:`.runs`: OpenCL kernel ``kernels/quilt.cl`` or its numpy reference) draws the frames
 from the quilt's maps at the source times the model gives it.
 """
+
 from __future__ import annotations
 
 import os
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -75,8 +77,8 @@ def jitter_warp(n_blocks: int, n_frames: int, jitter: float, *, end: str = "hold
     for i in range(1, n_frames + 1):
         if jitter > 0:
             step = dev + d[i - 1]
-            dev = np.where(np.abs(step) <= bound[i], step, dev)     # the seed: d = 0 if it would leave the band
-            dev = np.clip(dev, -bound[i], bound[i])                 # the taper pulls back by at most 1 a step
+            dev = np.where(np.abs(step) <= bound[i], step, dev)  # the seed: d = 0 if it would leave the band
+            dev = np.clip(dev, -bound[i], bound[i])  # the taper pulls back by at most 1 a step
         out[:, i] = k[i] + dev
     return np.clip(out, 0.0, last).astype(np.float32)
 
@@ -124,18 +126,41 @@ class EvolvePlayer(Player):
 
     mode = "evolve"
     options = (
-        Param("size", Size(MAX_SIDE), None, "Output size; must equal the stored quilt's canvas (re-run the analysis "
-              "with another size for another canvas).", optional=True, default_doc="the quilt's"),
-        Param("interpolate", Flag(), True, "Blend linearly between source frames at fractional times (otherwise "
-              "the earlier frame)."),
+        Param(
+            "size",
+            Size(MAX_SIDE),
+            None,
+            "Output size; must equal the stored quilt's canvas (re-run the analysis "
+            "with another size for another canvas).",
+            optional=True,
+            default_doc="the quilt's",
+        ),
+        Param(
+            "interpolate",
+            Flag(),
+            True,
+            "Blend linearly between source frames at fractional times (otherwise the earlier frame).",
+        ),
     )
     capabilities = Capabilities(needs_frames=True)
 
-    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "auto", device: str | None = None, seed: int = 0,
-                 size: Sequence[int] | None = None, interpolate: bool = True, jitter: float = 0.0,
-                 end: str = "hold", speed: float = 1.0, rate_map: np.ndarray | None = None,
-                 rate_sigma: float = 0.0, format: str = "RGB") -> None:
+    def __init__(
+        self,
+        db: str | os.PathLike | TileDB,
+        texture: str | None = None,
+        *,
+        backend: str = "auto",
+        device: str | None = None,
+        seed: int = 0,
+        size: Sequence[int] | None = None,
+        interpolate: bool = True,
+        jitter: float = 0.0,
+        end: str = "hold",
+        speed: float = 1.0,
+        rate_map: np.ndarray | None = None,
+        rate_sigma: float = 0.0,
+        format: str = "RGB",
+    ) -> None:
         super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
             self._setup(self.texture.read("quilt"), seed, size, bool(interpolate))
@@ -154,8 +179,10 @@ class EvolvePlayer(Player):
         h, w = model.size
         wanted = None if size is None else check_size("size", size, MAX_SIDE)
         if wanted is not None and wanted != (h, w):
-            raise InvalidArgumentError(f"size {wanted} does not fit the stored quilt, whose canvas (height, width) is "
-                                       f"{(h, w)}; re-run the analysis with that size (dynatex analyze --quilt-size)")
+            raise InvalidArgumentError(
+                f"size {wanted} does not fit the stored quilt, whose canvas (height, width) is "
+                f"{(h, w)}; re-run the analysis with that size (dynatex analyze --quilt-size)"
+            )
         self.seed = check_seed("seed", seed)
         self.model_info = dict(model.info)
         self.interpolate = interpolate
@@ -172,9 +199,11 @@ class EvolvePlayer(Player):
         self._labels = np.ascontiguousarray(model.labels, np.int64)
         blend = None
         if model.blend_weight is not None:
-            blend = (np.rint(model.blend_weight.astype(np.float64) * 256).astype(np.int64),
-                     model.blend_map[..., 0].astype(np.int64) * sw + model.blend_map[..., 1],
-                     np.ascontiguousarray(model.blend_labels, np.int64))
+            blend = (
+                np.rint(model.blend_weight.astype(np.float64) * 256).astype(np.int64),
+                model.blend_map[..., 0].astype(np.int64) * sw + model.blend_map[..., 1],
+                np.ascontiguousarray(model.blend_labels, np.int64),
+            )
         gain = None if model.gain is None else np.ascontiguousarray(model.gain, np.float32)
         if gain is not None and gain.shape[2] == 1:
             gain = np.ascontiguousarray(np.repeat(gain, 3, axis=2))
@@ -184,9 +213,19 @@ class EvolvePlayer(Player):
         self._rate: np.ndarray | None = None
         self._rate_sigma = 0.0
         self._warp = jitter_warp(self.n_blocks, self.n_frames, 0.0, seed=self.seed)
-        self.engine = open_runs(flat, (h, w), pix, self._labels, n_blocks=self.n_blocks, blend=blend,
-                                gain=gain, interpolate=interpolate, ctx=self.ctx, queue=self.queue,
-                                format=self.format)
+        self.engine = open_runs(
+            flat,
+            (h, w),
+            pix,
+            self._labels,
+            n_blocks=self.n_blocks,
+            blend=blend,
+            gain=gain,
+            interpolate=interpolate,
+            ctx=self.ctx,
+            queue=self.queue,
+            format=self.format,
+        )
         self._reference = None
 
     def _warm(self) -> None:
@@ -194,8 +233,9 @@ class EvolvePlayer(Player):
 
     # -- controls ---------------------------------------------------------------------------------
     speed = Control(Range(float, *SPEED_RANGE), 1.0, "Source frames the clock advances per output frame.")
-    end = Control(Choice(*ENDS), "hold", "After the last source frame: hold it, loop to the first, or play back "
-                  "and forth.")
+    end = Control(
+        Choice(*ENDS), "hold", "After the last source frame: hold it, loop to the first, or play back and forth."
+    )
 
     @end.setter
     def end(self, value: str) -> None:
@@ -203,8 +243,12 @@ class EvolvePlayer(Player):
             self._end = value
             self._make_warp()
 
-    jitter = Control(Range(float, 0.0, 2**31 - 1), 0.0, "Per-block time jitter e: the largest deviation of a "
-                     "block's time from the true time, frames, at most the clip's frames.")
+    jitter = Control(
+        Range(float, 0.0, 2**31 - 1),
+        0.0,
+        "Per-block time jitter e: the largest deviation of a "
+        "block's time from the true time, frames, at most the clip's frames.",
+    )
 
     @jitter.setter
     def jitter(self, value: float) -> None:
@@ -213,8 +257,15 @@ class EvolvePlayer(Player):
             self._jitter = v
             self._make_warp()
 
-    rate_map = Control(NpyFile(), None, "Per-pixel rate of evolution M, (H, W) in [0, 64] (local time t * M); see "
-                       "dynatex.player.ratemap for generators.", flag=None, optional=True, default_doc="uniform 1")
+    rate_map = Control(
+        NpyFile(),
+        None,
+        "Per-pixel rate of evolution M, (H, W) in [0, 64] (local time t * M); see "
+        "dynatex.player.ratemap for generators.",
+        flag=None,
+        optional=True,
+        default_doc="uniform 1",
+    )
 
     @rate_map.setter
     def rate_map(self, value: np.ndarray | None) -> None:
@@ -225,8 +276,9 @@ class EvolvePlayer(Player):
     def rate_map(self) -> np.ndarray | None:
         return None if self._rate_raw is None else self._rate_raw.copy()
 
-    rate_sigma = Control(Range(float, 0.0, MAX_SIGMA), 0.0, "Gaussian smoothing of the rate map, output pixels "
-                         "(0: none).")
+    rate_sigma = Control(
+        Range(float, 0.0, MAX_SIGMA), 0.0, "Gaussian smoothing of the rate map, output pixels (0: none)."
+    )
 
     @rate_sigma.setter
     def rate_sigma(self, value: float) -> None:
@@ -305,12 +357,23 @@ class EvolvePlayer(Player):
         """The numpy reference of a frame at clock ``t`` (works with either backend)."""
         if self._reference is None:
             e = self.engine
-            self._reference = open_runs(e.flat, e.shape, e.pix, e.labels, n_blocks=e.n_blocks, blend=e.blend,
-                                        gain=e.gain, interpolate=e.interpolate, format=e.format)
+            self._reference = open_runs(
+                e.flat,
+                e.shape,
+                e.pix,
+                e.labels,
+                n_blocks=e.n_blocks,
+                blend=e.blend,
+                gain=e.gain,
+                interpolate=e.interpolate,
+                format=e.format,
+            )
             self._reference.set_rate(self._rate)
         if out is None:
             out = np.empty(self._shape, np.uint8)
-        self._reference.start(check_float("t", t, -1e7, 1e7), out, source_time=self._source_time, loop=self._end == "loop")
+        self._reference.start(
+            check_float("t", t, -1e7, 1e7), out, source_time=self._source_time, loop=self._end == "loop"
+        )
         return out
 
     def _draw(self, t: float, out: np.ndarray, *, wait: bool = True):

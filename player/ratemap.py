@@ -6,9 +6,10 @@ Generators for the seed's phenomenological controls (light fall-off from a point
 a painted mask, any grey image), plus :func:`check_rate_map`, the validation every rate
 map goes through. All numpy; images are passed in as arrays (the CLI decodes files).
 """
+
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -31,13 +32,16 @@ def check_rate_map(rate: object, shape: tuple[int, int], *, name: str = "rate_ma
     if rate.dtype.kind not in "fiub":
         raise ArgumentTypeError(f"{name} must hold numbers, not {rate.dtype}")
     if rate.shape != tuple(shape):
-        raise InvalidArgumentError(f"{name} is {_wh(rate.shape)} but the output is {shape[1]}x{shape[0]} (W x H); "
-                         "they must match")
+        raise InvalidArgumentError(
+            f"{name} is {_wh(rate.shape)} but the output is {shape[1]}x{shape[0]} (W x H); they must match"
+        )
     arr = rate.astype(np.float64)
     if not np.isfinite(arr).all():
         raise InvalidArgumentError(f"{name} holds NaN or infinite values")
     if arr.size and (arr.min() < 0 or arr.max() > MAX_RATE):
-        raise InvalidArgumentError(f"{name} values must lie in [0, {MAX_RATE:g}], found {arr.min():.4g}..{arr.max():.4g}")
+        raise InvalidArgumentError(
+            f"{name} values must lie in [0, {MAX_RATE:g}], found {arr.min():.4g}..{arr.max():.4g}"
+        )
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
@@ -61,8 +65,9 @@ def halves(shape: Sequence[int], left: float = 2.0, right: float = 1.0) -> np.nd
     return m
 
 
-def point_light(shape: Sequence[int], center: Sequence[float], height: float, *,
-                max_rate: float = 2.0, min_rate: float = 0.0) -> np.ndarray:
+def point_light(
+    shape: Sequence[int], center: Sequence[float], height: float, *, max_rate: float = 2.0, min_rate: float = 0.0
+) -> np.ndarray:
     """Rate from the light a point source casts on the plane (the seed's eq. 9).
 
     Irradiance at pixel ``p`` from a light at ``(cx, cy)`` raised ``height`` pixels above the
@@ -87,7 +92,7 @@ def point_light(shape: Sequence[int], center: Sequence[float], height: float, *,
         raise InvalidArgumentError(f"height must be positive, not {height!r}")
     max_rate, min_rate = _rate("max_rate", max_rate), _rate("min_rate", min_rate)
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
-    r2 = (xx - cx) ** 2 + (yy - cy) ** 2 + height ** 2
+    r2 = (xx - cx) ** 2 + (yy - cy) ** 2 + height**2
     cos = height / np.sqrt(r2)
     light = (cos / r2) ** 2
     light /= light.max()

@@ -14,6 +14,7 @@ source frames) for clock ``t`` of pixels or slots of the given blocks, at the gi
 (an array of the same shape, or None for rate 1). Rates must be multiples of
 :data:`RATE_STEP` (:func:`quantize_rate`): the OpenCL engine cuts its runs where the rate changes.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -24,7 +25,7 @@ import numpy as np
 from ..errors import InvalidArgumentError
 from .pixels import pixel_format
 
-SPILL = 16           # bytes a kernel chunk may read past a run
+SPILL = 16  # bytes a kernel chunk may read past a run
 RATE_STEP = 1.0 / 512  # rate maps are quantized to this step (see quantize_rate)
 
 #: ``(rate or None, blocks, t) -> float32`` source times (module docstring)
@@ -75,11 +76,17 @@ def _merge_plain(key_a, key_b, swap, key_p, span: int, n_pixels: int | None):
     prev = np.arange(n) - 1
     nxt = np.arange(n) + 1
     ok_prev = plain & (prev >= 0)
-    ok_prev[ok_prev] &= (row[prev[ok_prev]] == row[ok_prev]) & (kb[prev[ok_prev]] >= 0) & \
-        ((ka[prev[ok_prev]] == ka[ok_prev]) | (kb[prev[ok_prev]] == ka[ok_prev]))
+    ok_prev[ok_prev] &= (
+        (row[prev[ok_prev]] == row[ok_prev])
+        & (kb[prev[ok_prev]] >= 0)
+        & ((ka[prev[ok_prev]] == ka[ok_prev]) | (kb[prev[ok_prev]] == ka[ok_prev]))
+    )
     ok_next = plain & ~ok_prev & (nxt < n)
-    ok_next[ok_next] &= (row[nxt[ok_next]] == row[ok_next]) & (kb[nxt[ok_next]] >= 0) & \
-        ((ka[nxt[ok_next]] == ka[ok_next]) | (kb[nxt[ok_next]] == ka[ok_next]))
+    ok_next[ok_next] &= (
+        (row[nxt[ok_next]] == row[ok_next])
+        & (kb[nxt[ok_next]] >= 0)
+        & ((ka[nxt[ok_next]] == ka[ok_next]) | (kb[nxt[ok_next]] == ka[ok_next]))
+    )
     target = np.where(ok_prev, prev, np.where(ok_next, nxt, -1))
     run_of = np.repeat(np.arange(n), lengths)
     tgt = target[run_of].reshape(h, w)
@@ -101,9 +108,17 @@ def _merge_plain(key_a, key_b, swap, key_p, span: int, n_pixels: int | None):
     return key_a, key_b, swap
 
 
-def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None,
-               pix2: np.ndarray | None = None, labels2: np.ndarray | None = None, *,
-               merge: bool = True, n_pixels: int | None = None, pixel_bytes: int = 3) -> dict[str, np.ndarray]:
+def build_runs(
+    pix: np.ndarray,
+    labels: np.ndarray,
+    wq: np.ndarray | None = None,
+    pix2: np.ndarray | None = None,
+    labels2: np.ndarray | None = None,
+    *,
+    merge: bool = True,
+    n_pixels: int | None = None,
+    pixel_bytes: int = 3,
+) -> dict[str, np.ndarray]:
     """Cut the quilt's rows into runs, the unit of work of kernel ``evolve``.
 
     A *stream* is one block's source at a constant offset along a row (source pixel =
@@ -161,16 +176,20 @@ def build_runs(pix: np.ndarray, labels: np.ndarray, wq: np.ndarray | None = None
     runs[:, 1] = ka % span - w + col
     runs[:, 2] = ka // span
     pb = pixel_bytes
-    may_spill = col * pb + -(-lengths * pb // SPILL) * SPILL <= w * pb    # the last chunk stays in the row
+    may_spill = col * pb + -(-lengths * pb // SPILL) * SPILL <= w * pb  # the last chunk stays in the row
     runs[:, 3] = lengths | (is_blend.astype(np.int64) << 31) | (may_spill.astype(np.int64) << 30)
     runs_b = np.stack([kb % span - w + col, kb // span], axis=1)
     code = swap.astype(np.uint16) << 9
     if blend.any():
         code[blend] |= np.asarray(wq)[blend].astype(np.uint16)
-    return {"starts": starts, "lengths": lengths,
-            "runs": runs.astype(np.uint32).view(np.int32), "runs_b": runs_b.astype(np.int32),
-            "row_start": np.searchsorted(starts, np.arange(h + 1) * w).astype(np.int32),
-            "code": np.repeat(code.ravel(), pixel_bytes)}
+    return {
+        "starts": starts,
+        "lengths": lengths,
+        "runs": runs.astype(np.uint32).view(np.int32),
+        "runs_b": runs_b.astype(np.int32),
+        "row_start": np.searchsorted(starts, np.arange(h + 1) * w).astype(np.int32),
+        "code": np.repeat(code.ravel(), pixel_bytes),
+    }
 
 
 def check_runs(runs: dict[str, np.ndarray], n_pixels: int, n_blocks: int) -> None:
@@ -184,12 +203,15 @@ def check_runs(runs: dict[str, np.ndarray], n_pixels: int, n_blocks: int) -> Non
     bad = (first < 0) | (first + length > n_pixels) | (r[:, 2] >= n_blocks)
     bad |= blend & ((first_b < 0) | (first_b + length > n_pixels) | (runs["runs_b"][:, 1] >= n_blocks))
     if bad.any():
-        raise InvalidArgumentError(f"the quilt's maps make {int(bad.sum())} run(s) read outside the source frames "
-                         f"({n_pixels} pixels, {n_blocks} blocks): the database is inconsistent")
+        raise InvalidArgumentError(
+            f"the quilt's maps make {int(bad.sum())} run(s) read outside the source frames "
+            f"({n_pixels} pixels, {n_blocks} blocks): the database is inconsistent"
+        )
 
 
-def cut_runs(base: dict[str, np.ndarray], rate: np.ndarray | None, shape: tuple[int, int], n_blocks: int, *,
-             pixel_bytes: int = 3):
+def cut_runs(
+    base: dict[str, np.ndarray], rate: np.ndarray | None, shape: tuple[int, int], n_blocks: int, *, pixel_bytes: int = 3
+):
     """The run tables of :func:`build_runs`'s runs ``base`` for a rate map (None: uniform rate 1):
     the runs cut where the quantized rate changes along a row, and their time slots.
 
@@ -268,9 +290,19 @@ class Runs:
 
     backend = ""
 
-    def __init__(self, frames: np.ndarray, shape: tuple[int, int], pix: np.ndarray, labels: np.ndarray, *,
-                 n_blocks: int, blend: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                 gain: np.ndarray | None = None, interpolate: bool = True, format: str = "RGB") -> None:
+    def __init__(
+        self,
+        frames: np.ndarray,
+        shape: tuple[int, int],
+        pix: np.ndarray,
+        labels: np.ndarray,
+        *,
+        n_blocks: int,
+        blend: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        gain: np.ndarray | None = None,
+        interpolate: bool = True,
+        format: str = "RGB",
+    ) -> None:
         self.format = pixel_format(format)
         self.flat = frames
         self.n_frames, self.n_pixels = int(frames.shape[0]), int(frames.shape[1])
@@ -309,8 +341,9 @@ class RunsReference(Runs):
 
     def start(self, t: float, out: np.ndarray, *, source_time: SourceTime, loop: bool, wait: bool = False):
         t32 = np.float32(t)
-        v = sample(self.flat, self.pix, source_time(self.rate, self.labels, t32), loop=loop,
-                   interpolate=self.interpolate)
+        v = sample(
+            self.flat, self.pix, source_time(self.rate, self.labels, t32), loop=loop, interpolate=self.interpolate
+        )
         if self.blend is not None:
             wq, pix2, labels2 = self.blend
             sel = wq > 0
@@ -344,13 +377,23 @@ class RunsOpenCL(Runs):
 
     backend = "opencl"
 
-    def __init__(self, frames: np.ndarray, shape: tuple[int, int], pix: np.ndarray, labels: np.ndarray, *,
-                 ctx: Any, queue: Any, **options: Any) -> None:
+    def __init__(
+        self,
+        frames: np.ndarray,
+        shape: tuple[int, int],
+        pix: np.ndarray,
+        labels: np.ndarray,
+        *,
+        ctx: Any,
+        queue: Any,
+        **options: Any,
+    ) -> None:
         super().__init__(frames, shape, pix, labels, **options)
         import pyopencl as cl
 
         from .engine import FrameOut, Kernel
         from .opencl import build_program
+
         h, w = self.shape
         pb = self.format.bytes
         if self.blend is not None:
@@ -364,7 +407,7 @@ class RunsOpenCL(Runs):
         self._base = runs
         mf = cl.mem_flags
         ro = mf.READ_ONLY | mf.COPY_HOST_PTR
-        pad = np.zeros(SPILL, np.uint8)   # a spilling chunk may read past the ends (values unused)
+        pad = np.zeros(SPILL, np.uint8)  # a spilling chunk may read past the ends (values unused)
         # the stack, codes and gains hold output pixels (alpha 255, gain 1): the kernel moves bytes
         stack = self.format.from_rgb(frames)
         self._d_stack = cl.Buffer(ctx, ro, hostbuf=np.concatenate([stack.reshape(-1), pad]))
@@ -387,9 +430,11 @@ class RunsOpenCL(Runs):
         the distinct (rate, block) pairs the runs' streams read, whose frames the host computes
         each frame. With a uniform rate the slots are the blocks."""
         import pyopencl as cl
+
         super().set_rate(rate)
         runs, runs_b, row_start, pair, self._slot_block, self._slot_rate = cut_runs(
-            self._base, rate, self.shape, self.n_blocks, pixel_bytes=self.format.bytes)
+            self._base, rate, self.shape, self.n_blocks, pixel_bytes=self.format.bytes
+        )
         self.n_runs = len(runs)
         self._bframe = np.zeros((len(self._slot_block), 4), np.int32)
         ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
@@ -398,13 +443,26 @@ class RunsOpenCL(Runs):
         self._d_row_start = cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(row_start))
         self._d_pair = cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(pair))
         self._d_bframe = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY, self._bframe.nbytes)
-        self._kernel.set(runs=self._d_runs, runs_b=self._d_runs_b, row_start=self._d_row_start,
-                         run_pair=self._d_pair, bframe=self._d_bframe)
+        self._kernel.set(
+            runs=self._d_runs,
+            runs_b=self._d_runs_b,
+            row_start=self._d_row_start,
+            run_pair=self._d_pair,
+            bframe=self._d_bframe,
+        )
         h, w = self.shape
         #: bytes the engine keeps on the device
-        self.device_bytes = int(self._stack_bytes + self._base["code"].nbytes + h * w * self.format.bytes
-                                + (self.gain.nbytes * self.format.bytes // 3 if self.gain is not None else 0)
-                                + runs.nbytes + runs_b.nbytes + row_start.nbytes + pair.nbytes + self._bframe.nbytes)
+        self.device_bytes = int(
+            self._stack_bytes
+            + self._base["code"].nbytes
+            + h * w * self.format.bytes
+            + (self.gain.nbytes * self.format.bytes // 3 if self.gain is not None else 0)
+            + runs.nbytes
+            + runs_b.nbytes
+            + row_start.nbytes
+            + pair.nbytes
+            + self._bframe.nbytes
+        )
 
     def slot_frames(self, t: float, source_time: SourceTime, loop: bool) -> np.ndarray:
         """Per time slot, what the kernel reads for clock ``t``: the byte offsets of the two
@@ -426,10 +484,12 @@ class RunsOpenCL(Runs):
 
     def _upload(self, t: float, source_time: SourceTime, loop: bool) -> None:
         import pyopencl as cl
+
         # a copy, since the previous frame's upload may still wait in the queue; the event is
         # kept because dropping it would wait for the copy (and the frame before it)
-        self._bframe_upload = cl.enqueue_copy(self.queue, self._d_bframe,
-                                              self.slot_frames(t, source_time, loop).copy(), is_blocking=False)
+        self._bframe_upload = cl.enqueue_copy(
+            self.queue, self._d_bframe, self.slot_frames(t, source_time, loop).copy(), is_blocking=False
+        )
 
     def start(self, t: float, out: np.ndarray, *, source_time: SourceTime, loop: bool, wait: bool = False):
         self._upload(t, source_time, loop)
@@ -462,8 +522,7 @@ class RunsOpenCL(Runs):
     def close(self) -> None:
         if self._bframe_upload is not None:
             self._bframe_upload.wait()
-        for name in ("_d_stack", "_d_code", "_d_gain", "_d_runs", "_d_runs_b", "_d_row_start", "_d_pair",
-                     "_d_bframe"):
+        for name in ("_d_stack", "_d_code", "_d_gain", "_d_runs", "_d_runs_b", "_d_row_start", "_d_pair", "_d_bframe"):
             buf = self.__dict__.pop(name, None)
             if buf is not None:
                 buf.release()
@@ -477,8 +536,16 @@ def _gain_bytes(gain: np.ndarray, fmt) -> np.ndarray:
     return out
 
 
-def open_runs(frames: np.ndarray, shape: tuple[int, int], pix: np.ndarray, labels: np.ndarray, *,
-              ctx: Any = None, queue: Any = None, **options: Any) -> Runs:
+def open_runs(
+    frames: np.ndarray,
+    shape: tuple[int, int],
+    pix: np.ndarray,
+    labels: np.ndarray,
+    *,
+    ctx: Any = None,
+    queue: Any = None,
+    **options: Any,
+) -> Runs:
     """The OpenCL runs engine on ``ctx``/``queue``, or the numpy reference when ``ctx`` is None."""
     if ctx is None:
         return RunsReference(frames, shape, pix, labels, **options)

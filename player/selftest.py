@@ -26,6 +26,7 @@ Examples
 default 180), ``DYNATEX_PYTHON`` (the interpreter for the child where ``sys.executable`` is
 an application embedding Python rather than Python itself).
 """
+
 from __future__ import annotations
 
 import functools
@@ -37,10 +38,10 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -59,7 +60,7 @@ ALLOWED_VARIANTS: frozenset[str] | None = None
 
 _lock = threading.Lock()
 _run_lock = threading.Lock()
-_verdicts: dict[str, "Verdict"] = {}
+_verdicts: dict[str, Verdict] = {}
 
 
 @dataclass
@@ -67,12 +68,12 @@ class Verdict:
     """The self-test's finding for one device."""
 
     ok: bool
-    reason: str = ""                       # what failed, one line ("" when ok)
+    reason: str = ""  # what failed, one line ("" when ok)
     variants: dict[str, bool] = field(default_factory=dict)
     variant_reasons: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0
     device: str = ""
-    tested: bool = True                    # False: the child never reached a check (not the device's fault)
+    tested: bool = True  # False: the child never reached a check (not the device's fault)
 
 
 # -- cache ---------------------------------------------------------------------------------
@@ -80,6 +81,7 @@ def cache_path() -> Path:
     """Where verdicts are kept: ``devices.json`` in dynatex's cache folder (``$DYNATEX_CACHE_DIR``,
     else the platform's user cache folder; :func:`dynatex.tiledb.probe.cache_dir`)."""
     from ..tiledb.probe import cache_dir
+
     return cache_dir() / "devices.json"
 
 
@@ -104,6 +106,7 @@ def _walk(folder):
 
 def _version() -> str:
     from .. import __version__
+
     return __version__
 
 
@@ -112,8 +115,16 @@ def cache_key(info: DeviceInfo) -> str:
     inject = os.environ.get(INJECT_ENV, "")
     if inject:
         inject = hashlib.sha256(Path(inject).read_bytes()).hexdigest()[:16] if Path(inject).is_file() else inject
-    parts = [info.platform, info.platform_version, info.name, info.vendor, info.driver_version,
-             _version(), _sources_hash(), inject]
+    parts = [
+        info.platform,
+        info.platform_version,
+        info.name,
+        info.vendor,
+        info.driver_version,
+        _version(),
+        _sources_hash(),
+        inject,
+    ]
     return hashlib.sha256("\x1f".join(parts).encode()).hexdigest()[:24]
 
 
@@ -138,6 +149,7 @@ def _write_cache(key: str, verdict: Verdict) -> None:
         os.replace(tmp, path)
     except OSError as exc:
         from .opencl import log
+
         log.warning("cannot cache the OpenCL self-test verdict in %s: %s", path, exc)
 
 
@@ -191,15 +203,27 @@ def run_child(info: DeviceInfo, *, timeout: float | None = None) -> Verdict:
     python = os.environ.get("DYNATEX_PYTHON") or sys.executable
     if not python or "python" not in Path(python).name.lower():
         # embedded in an application whose executable is not Python: running it could start the app
-        return Verdict(False, f"cannot run the self-test: {python!r} is not a Python interpreter "
-                              "(set DYNATEX_PYTHON to one)", device=info.describe(), tested=False)
+        return Verdict(
+            False,
+            f"cannot run the self-test: {python!r} is not a Python interpreter (set DYNATEX_PYTHON to one)",
+            device=info.describe(),
+            tested=False,
+        )
     cmd = [python, "-m", "dynatex.player.selftest", json.dumps(asdict(info))]
     env = dict(os.environ)
-    env.pop("PYTHONFAULTHANDLER", None)        # any value turns it on: its dump is not our protocol
+    env.pop("PYTHONFAULTHANDLER", None)  # any value turns it on: its dump is not our protocol
     start = time.perf_counter()
     try:
-        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                text=True, errors="replace", env=env, start_new_session=os.name == "posix")
+        proc = subprocess.Popen(
+            cmd,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            errors="replace",
+            env=env,
+            start_new_session=os.name == "posix",
+        )
     except OSError as exc:
         return Verdict(False, f"cannot start the self-test: {exc}", device=info.describe(), tested=False)
     hung = False
@@ -210,7 +234,7 @@ def run_child(info: DeviceInfo, *, timeout: float | None = None) -> Verdict:
         _kill(proc)
         try:
             out, err = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:   # something else still holds the pipes: give up on them
+        except subprocess.TimeoutExpired:  # something else still holds the pipes: give up on them
             out, err = "", ""
     seconds = time.perf_counter() - start
     try:
@@ -223,6 +247,7 @@ def _kill(proc: subprocess.Popen) -> None:
     """Kill the child and whatever it started (a compiler), so nothing keeps the pipes open."""
     if os.name == "posix":
         import signal
+
         try:
             os.killpg(proc.pid, signal.SIGKILL)
         except OSError:
@@ -231,8 +256,9 @@ def _kill(proc: subprocess.Popen) -> None:
         proc.kill()
 
 
-def _parse(out: str, code: int | None, hung: bool, timeout: float, seconds: float, info: DeviceInfo,
-           err: str = "") -> Verdict:
+def _parse(
+    out: str, code: int | None, hung: bool, timeout: float, seconds: float, info: DeviceInfo, err: str = ""
+) -> Verdict:
     """The verdict from the child's lines (tab-separated: check NAME, pass NAME, fail NAME WHY,
     verdict JSON) and how it ended (``code`` None: killed after ``timeout``)."""
     passed, current, failures, final, started = [], None, {}, None, False
@@ -255,8 +281,9 @@ def _parse(out: str, code: int | None, hung: bool, timeout: float, seconds: floa
         return v
     if not started and not hung and (code is None or code >= 0):
         last = err.strip().splitlines()[-1] if err.strip() else f"exit status {code}"
-        return Verdict(False, f"the self-test could not run: {last[:300]}", seconds=seconds,
-                       device=info.describe(), tested=False)
+        return Verdict(
+            False, f"the self-test could not run: {last[:300]}", seconds=seconds, device=info.describe(), tested=False
+        )
     if hung:
         what = f"hung (no verdict after {timeout:.0f} s)"
     elif code is not None and code < 0:
@@ -289,19 +316,32 @@ def _compare(name: str, got: np.ndarray, want: np.ndarray, max_abs: int, max_sha
     d = np.abs(got.astype(np.int16) - want.astype(np.int16))
     share = float((d > 0).mean()) if d.size else 0.0
     if int(d.max(initial=0)) > max_abs or share > max_share:
-        return (f"{name}: {share:.1%} of values differ from the numpy reference, by up to {int(d.max())} "
-                f"(allowed {max_abs}, {max_share:.0%})")
+        return (
+            f"{name}: {share:.1%} of values differ from the numpy reference, by up to {int(d.max())} "
+            f"(allowed {max_abs}, {max_share:.0%})"
+        )
     return None
 
 
-def _mode_check(mode: str, options: dict, *, frames: int = 4, max_abs: int = 1, max_share: float = 0.01,
-                controls: dict | None = None) -> Callable[[str], str | None]:
+def _mode_check(
+    mode: str,
+    options: dict,
+    *,
+    frames: int = 4,
+    max_abs: int = 1,
+    max_share: float = 0.01,
+    controls: dict | None = None,
+) -> Callable[[str], str | None]:
     """Mode ``mode`` opened with ``options`` (and ``controls`` set) on the device and on numpy:
     ``frames`` frames compared."""
+
     def check(device: str) -> str | None:
         from . import open_player
-        with open_player(_db_path(), TEXTURE, mode=mode, backend="opencl", device=device, **options) as pc, \
-                open_player(_db_path(), TEXTURE, mode=mode, backend="numpy", **options) as pn:
+
+        with (
+            open_player(_db_path(), TEXTURE, mode=mode, backend="opencl", device=device, **options) as pc,
+            open_player(_db_path(), TEXTURE, mode=mode, backend="numpy", **options) as pn,
+        ):
             for name, value in (controls or {}).items():
                 setattr(pc, name, value)
                 setattr(pn, name, value)
@@ -312,18 +352,31 @@ def _mode_check(mode: str, options: dict, *, frames: int = 4, max_abs: int = 1, 
                 if problem:
                     return problem
         return None
+
     return check
 
 
-def _gather_check(*, cell, time_step: int, wrap: str, interpolate: bool = True, size=(40, 136),
-                  wide: bool | None = False) -> Callable[[str], str | None]:
+def _gather_check(
+    *, cell, time_step: int, wrap: str, interpolate: bool = True, size=(40, 136), wide: bool | None = False
+) -> Callable[[str], str | None]:
     """The gather engine against its reference, exactly, on random maps and tones."""
+
     def check(device: str) -> str | None:
         from .gather import open_gather, pack_source
+
         rng = np.random.default_rng(7)
         stack = rng.integers(0, 256, (6, 20, 36, 3), dtype=np.uint8)
-        g = open_gather(stack, size, backend="opencl", device=device, wrap=wrap, interpolate=interpolate,
-                        time_step=time_step, cell=cell, wide=wide)
+        g = open_gather(
+            stack,
+            size,
+            backend="opencl",
+            device=device,
+            wrap=wrap,
+            interpolate=interpolate,
+            time_step=time_step,
+            cell=cell,
+            wide=wide,
+        )
         g.set_tones(rng.uniform(0.5, 1.5, (3, 3)).astype(np.float32), rng.uniform(-20, 20, (3, 3)).astype(np.float32))
         h, w = size
         if cell is None:
@@ -335,8 +388,9 @@ def _gather_check(*, cell, time_step: int, wrap: str, interpolate: bool = True, 
             oy = rng.integers(0, 20 - cell[0] + 1, (gh, gw))
             ox = rng.integers(0, 36 - cell[1] + 1, (gh, gw))
             g.set_source_grid(pack_source(oy * 36 + ox, rng.integers(0, 3, (gh, gw))))
-        g.set_time_map(rng.uniform(-3, 9, g.tmap_shape).astype(np.float32),
-                       rng.uniform(0, 4, g.tmap_shape).astype(np.float32))
+        g.set_time_map(
+            rng.uniform(-3, 9, g.tmap_shape).astype(np.float32), rng.uniform(0, 4, g.tmap_shape).astype(np.float32)
+        )
         out = np.empty((h, w, 3), np.uint8)
         for t, fade in ((0.0, 0.0), (2.3, 0.5), (-7.75, 1.0)):
             g.render(t, out, fade=fade)
@@ -344,6 +398,7 @@ def _gather_check(*, cell, time_step: int, wrap: str, interpolate: bool = True, 
             if problem:
                 return problem
         return None
+
     return check
 
 
@@ -352,6 +407,7 @@ def _copy_check(device: str) -> str | None:
     import pyopencl as cl
 
     from .opencl import build_program, get_context
+
     ctx = get_context(device)
     queue = cl.CommandQueue(ctx)
     src = np.random.default_rng(1).random(16 * 4 * 8, dtype=np.float32)
@@ -374,21 +430,30 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
     "gather: per-pixel source, time step 1, loop": _gather_check(cell=None, time_step=1, wrap="loop"),
     "gather: cell grid, time step 8, clamp": _gather_check(cell=(8, 12), time_step=8, wrap="clamp"),
     "gather: per-pixel source, time step 8, ping-pong, nearest": _gather_check(
-        cell=None, time_step=8, wrap="pingpong", interpolate=False),
+        cell=None, time_step=8, wrap="pingpong", interpolate=False
+    ),
     "gather: cell grid, time step 3": _gather_check(cell=(5, 7), time_step=3, wrap="loop"),
     "mode lds, float32": _mode_check("lds", {"seed": 3}),
     "mode lds, float16": _mode_check("lds", {"seed": 3, "precision": "float16"}),
     "mode mixture, float32": _mode_check("mixture", {"seed": 3}),
     "mode mixture, float16": _mode_check("mixture", {"seed": 3, "precision": "float16"}),
     "mode turnpoints": _mode_check("turnpoints", {"seed": 3}, frames=8, max_abs=0, max_share=0.0),
-    "mode turnpoints, slow, crossfades": _mode_check("turnpoints", {"seed": 3, "playback": "jumps"}, frames=24,
-                                                     max_abs=0, max_share=0.0,
-                                                     controls={"speed": 0.37, "crossfade": 4}),
+    "mode turnpoints, slow, crossfades": _mode_check(
+        "turnpoints",
+        {"seed": 3, "playback": "jumps"},
+        frames=24,
+        max_abs=0,
+        max_share=0.0,
+        controls={"speed": 0.37, "crossfade": 4},
+    ),
     "mode tiles": _mode_check(*_TILES),
     "mode evolve": _mode_check("evolve", {"seed": 3, "jitter": 2.0}, frames=6, max_share=1.0),
-    "mode evolve, rate map": _mode_check("evolve", {"seed": 3, "rate_sigma": 4.0,
-                                                    "rate_map": np.linspace(0.5, 2, 48 * 64).reshape(48, 64)},
-                                         frames=6, max_share=1.0),
+    "mode evolve, rate map": _mode_check(
+        "evolve",
+        {"seed": 3, "rate_sigma": 4.0, "rate_map": np.linspace(0.5, 2, 48 * 64).reshape(48, 64)},
+        frames=6,
+        max_share=1.0,
+    ),
 }
 
 #: kernel variant -> the checks that must pass before a device uses it (run after CHECKS)
@@ -407,6 +472,7 @@ def _inject_check(path: str) -> Callable[[str], str | None]:
         import pyopencl as cl
 
         from .opencl import get_context
+
         ctx = get_context(device)
         queue = cl.CommandQueue(ctx)
         src = np.arange(4096, dtype=np.uint32).astype(np.uint8)
@@ -419,6 +485,7 @@ def _inject_check(path: str) -> Callable[[str], str | None]:
         cl.enqueue_copy(queue, dst, b)
         queue.finish()
         return _compare("injected kernel", dst, src, 0, 0.0)
+
     return check
 
 
@@ -426,7 +493,8 @@ def _child(expected: DeviceInfo) -> int:
     """Run every check on device ``expected`` and print progress lines and the verdict (JSON)."""
     global ALLOWED_VARIANTS
     import warnings
-    warnings.simplefilter("ignore")                  # compiler chatter is not a verdict
+
+    warnings.simplefilter("ignore")  # compiler chatter is not a verdict
     index = expected.index
     info = next((d for d in devices() if d.index == index), None)
     if info != expected:
@@ -451,7 +519,7 @@ def _child(expected: DeviceInfo) -> int:
                 v.variants[variant] = False
                 v.variant_reasons[variant] = "CPU devices only"
                 continue
-            problem = _run_one(f"variant {variant}", lambda d: _all(vchecks, d), index)
+            problem = _run_one(f"variant {variant}", lambda d, vchecks=vchecks: _all(vchecks, d), index)
             v.variants[variant] = problem is None
             if problem:
                 v.variant_reasons[variant] = problem
@@ -482,7 +550,7 @@ def _run_one(name: str, check: Callable[[str], str | None], device: str) -> str 
     print(f"check\t{name}", flush=True)
     try:
         problem = check(device)
-    except Exception as exc:                           # any failure is the device's verdict
+    except Exception as exc:  # any failure is the device's verdict
         problem = _one_line(exc)
     if problem:
         print(f"fail\t{name}\t{problem}", flush=True)
@@ -493,8 +561,12 @@ def _run_one(name: str, check: Callable[[str], str | None], device: str) -> str 
 
 if __name__ == "__main__":
     if len(sys.argv) != 2:
-        print("usage: python -m dynatex.player.selftest DEVICE_JSON  (run by the player, not by hand: "
-              "use python -m dynatex.player --check)", file=sys.stderr)
+        print(
+            "usage: python -m dynatex.player.selftest DEVICE_JSON  (run by the player, not by hand: "
+            "use python -m dynatex.player --check)",
+            file=sys.stderr,
+        )
         raise SystemExit(2)
     from dynatex.player import selftest as _module  # this file runs as __main__: use the module's globals
+
     raise SystemExit(_module._child(DeviceInfo(**json.loads(sys.argv[1]))))

@@ -28,10 +28,12 @@ for one texture) is the cells of one large torus: they are laid out in the torus
 shifted by a random number of cells per seed (:meth:`TilesPlayer._torus_arrangement`), so the
 output is a window onto a seamless texture that repeats only with the torus's period.
 """
+
 from __future__ import annotations
 
 import os
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -43,7 +45,7 @@ from .base import Player, rng_from_state
 from .controls import Capabilities, Control
 from .gather import MAX_GAIN, MAX_TIME, gaussian_smooth, open_gather, pack_source
 
-TIME_STEP = 8              # output pixels per time-map sample
+TIME_STEP = 8  # output pixels per time-map sample
 MAX_SIZE = 16384
 SPEED_RANGE = (-4.0, 4.0)
 LABEL_PRESETS = ("halves", "stripes", "checker", "blobs")
@@ -112,19 +114,32 @@ class TilesPlayer(Player):
 
     mode = "tiles"
     options = (
-        Param("size", Size(MAX_SIZE), None, "Output size; any size.", optional=True,
-              default_doc="the source clip's"),
-        Param("labels", Either(Choice(*LABEL_PRESETS), NpyFile(), metavar="PRESET|FILE.npy"), None,
-              "Texture class of every tile cell: a (gh, gw) integer map (gh = ceil(H / th), gw = ceil(W / tw)), "
-              "an (H, W) map sampled at the cell centres, or a preset (label_preset). Classes index class_names.",
-              optional=True, default_doc="everything the main texture, class 0"),
+        Param("size", Size(MAX_SIZE), None, "Output size; any size.", optional=True, default_doc="the source clip's"),
+        Param(
+            "labels",
+            Either(Choice(*LABEL_PRESETS), NpyFile(), metavar="PRESET|FILE.npy"),
+            None,
+            "Texture class of every tile cell: a (gh, gw) integer map (gh = ceil(H / th), gw = ceil(W / tw)), "
+            "an (H, W) map sampled at the cell centres, or a preset (label_preset). Classes index class_names.",
+            optional=True,
+            default_doc="everything the main texture, class 0",
+        ),
     )
     capabilities = Capabilities(any_size=True, native_loop=True, inpaint=True)
 
-    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "auto", device: str | None = None, seed: int = 0,
-                 size: Sequence[int] | None = None, labels: np.ndarray | None = None,
-                 tone: Any = None, format: str = "RGB") -> None:
+    def __init__(
+        self,
+        db: str | os.PathLike | TileDB,
+        texture: str | None = None,
+        *,
+        backend: str = "auto",
+        device: str | None = None,
+        seed: int = 0,
+        size: Sequence[int] | None = None,
+        labels: np.ndarray | None = None,
+        tone: Any = None,
+        format: str = "RGB",
+    ) -> None:
         super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
             self._setup(self.texture.read("tiles"), seed, size, labels, tone)
@@ -150,8 +165,16 @@ class TilesPlayer(Player):
         # tiles stacked vertically in each stored frame: one tile's frame is contiguous, so a
         # cell's rows are read as one forward stream (hardware prefetch follows it)
         stack = np.ascontiguousarray(model.tiles.transpose(1, 0, 2, 3, 4).reshape(length, k * th, tw, 3))
-        self.engine = open_gather(stack, (h, w), backend=self.backend, ctx=self.ctx, queue=self.queue,
-                                  time_step=TIME_STEP, cell=None if mixing else (th, tw), format=self.format)
+        self.engine = open_gather(
+            stack,
+            (h, w),
+            backend=self.backend,
+            ctx=self.ctx,
+            queue=self.queue,
+            time_step=TIME_STEP,
+            cell=None if mixing else (th, tw),
+            format=self.format,
+        )
         self.mixing = mixing
         c = model.n_classes
         #: quantization levels of a feathered pixel's tone share (tone table <= 256 entries)
@@ -163,7 +186,7 @@ class TilesPlayer(Player):
         self._speed = 1.0
         self._t = 0.0
         self._phase = 0
-        self.tone_target(tone)            # checked here, fitted once the arrangement exists (_retone)
+        self.tone_target(tone)  # checked here, fitted once the arrangement exists (_retone)
         self._tone_spec = tone
         self.reseed(seed)
         self._warm()
@@ -190,12 +213,16 @@ class TilesPlayer(Player):
             cx = np.minimum(np.arange(gw) * tw + tw // 2, w - 1)
             lab = lab[cy][:, cx]
         if lab.shape != (gh, gw):
-            raise InvalidArgumentError(f"labels must have shape {(gh, gw)} (tile cells) or {(h, w)} (pixels), not {lab.shape}")
+            raise InvalidArgumentError(
+                f"labels must have shape {(gh, gw)} (tile cells) or {(h, w)} (pixels), not {lab.shape}"
+            )
         n = self.model.n_classes
         if lab.size and (lab.min() < 0 or lab.max() >= n):
             bad = int(lab.max()) if lab.max() >= n else int(lab.min())
-            raise InvalidArgumentError(f"labels name texture class {bad}, but the tile set has {n} class(es): "
-                             + ", ".join(f"{i}={c}" for i, c in enumerate(self.model.class_names)))
+            raise InvalidArgumentError(
+                f"labels name texture class {bad}, but the tile set has {n} class(es): "
+                + ", ".join(f"{i}={c}" for i, c in enumerate(self.model.class_names))
+            )
         return lab.astype(np.int32)
 
     def _arrange(self) -> None:
@@ -270,8 +297,9 @@ class TilesPlayer(Player):
             self._tile_pixels = np.bincount(choice.ravel(), weights=area.ravel(), minlength=self.n_tiles)
             # cells cut by the output's right or bottom edge show only their top-left part
             partial = (vis_h[:, None] < th) | (vis_w[None, :] < tw)
-            self._partial_cells = [(int(choice[i, j]), int(vis_h[i]), int(vis_w[j]))
-                                   for i, j in zip(*np.nonzero(partial))]
+            self._partial_cells = [
+                (int(choice[i, j]), int(vis_h[i]), int(vis_w[j])) for i, j in zip(*np.nonzero(partial))
+            ]
             self.engine.set_source_grid(pack_source(choice * (th * tw), m.tile_class[choice]))
             self._retone()
             return
@@ -280,8 +308,8 @@ class TilesPlayer(Player):
         ci, cj = yy // th, xx // tw
         ly, lx = yy - ci * th, xx - cj * tw
         lab = self.labels
-        pad = np.pad(lab, 1, mode="edge")                          # outside the output: own class
-        neighbours = (pad[1:-1, :-2], pad[1:-1, 2:], pad[:-2, 1:-1], pad[2:, 1:-1])   # left right top bottom
+        pad = np.pad(lab, 1, mode="edge")  # outside the output: own class
+        neighbours = (pad[1:-1, :-2], pad[1:-1, 2:], pad[:-2, 1:-1], pad[2:, 1:-1])  # left right top bottom
         lut = np.full((m.n_classes, m.n_classes, 4), -1, np.int64)
         for kk in np.flatnonzero(m.border_side >= 0):
             lut[m.tile_class[kk], m.ring_class[kk], m.border_side[kk]] = kk
@@ -291,8 +319,10 @@ class TilesPlayer(Player):
             edge = np.minimum(lab, nb)
             bt = np.where(edge != lab, lut[lab, edge, si], -1)
             if ((edge != lab) & (bt < 0)).any():
-                raise InvalidArgumentError("the tile set has no border tile for some pair of neighbouring classes; "
-                                 "re-run the analysis with every texture of the label map mixed in")
+                raise InvalidArgumentError(
+                    "the tile set has no border tile for some pair of neighbouring classes; "
+                    "re-run the analysis with every texture of the label map mixed in"
+                )
             side_tile.append(bt)
         touched = np.any([bt >= 0 for bt in side_tile], axis=0)
         for c in np.unique(lab[touched]):
@@ -394,35 +424,55 @@ class TilesPlayer(Player):
 
     # -- controls ------------------------------------------------------------------------------------
     speed = Control(Range(float, *SPEED_RANGE), 1.0, "Loop frames per output frame.")
-    sigma = Control(Range(float, 0.0, 4096.0), None, "Gaussian smoothing of the per-tile time offsets, output "
-                    "pixels.", default_doc="half a tile")
+    sigma = Control(
+        Range(float, 0.0, 4096.0),
+        None,
+        "Gaussian smoothing of the per-tile time offsets, output pixels.",
+        default_doc="half a tile",
+    )
 
     @sigma.setter
     def sigma(self, value: float) -> None:
         self._sigma = value
         self._refresh_fields()
 
-    max_shift = Control(Range(float, 0.0, MAX_TIME), None, "Amplitude of the per-tile time offsets, frames, at "
-                        "most the loop.", default_doc="a third of the loop, at most 16")
+    max_shift = Control(
+        Range(float, 0.0, MAX_TIME),
+        None,
+        "Amplitude of the per-tile time offsets, frames, at most the loop.",
+        default_doc="a third of the loop, at most 16",
+    )
 
     @max_shift.setter
     def max_shift(self, value: float) -> None:
         self._max_shift = check_float("max_shift", value, 0.0, float(min(self.loop_length, MAX_TIME)))
         self._refresh_fields()
 
-    epoch = Control(Range(int, 0, 10**7), None, "Frames over which the offsets drift to a new random field "
-                    "(0: fixed offsets).", default_doc="twice the loop")
+    epoch = Control(
+        Range(int, 0, 10**7),
+        None,
+        "Frames over which the offsets drift to a new random field (0: fixed offsets).",
+        default_doc="twice the loop",
+    )
 
     @epoch.setter
     def epoch(self, value: int) -> None:
         self._epoch = value
         self._phase = min(self._phase, max(0, self._epoch - 1))
 
-    tone = Control(Either(Numbers(Range(float, 0.0, 255.0), 3, "R,G,B"), Range(int, 0, None),
-                          Text("TEXTURE|consensus"), metavar="TEXTURE|consensus|R,G,B"), None,
-                   "Colour-tone target: a texture class's name or index (its mean RGB), consensus (the mean "
-                   "over all classes) or an RGB colour; None turns tone fitting off.", optional=True,
-                   default_doc="off")
+    tone = Control(
+        Either(
+            Numbers(Range(float, 0.0, 255.0), 3, "R,G,B"),
+            Range(int, 0, None),
+            Text("TEXTURE|consensus"),
+            metavar="TEXTURE|consensus|R,G,B",
+        ),
+        None,
+        "Colour-tone target: a texture class's name or index (its mean RGB), consensus (the mean "
+        "over all classes) or an RGB colour; None turns tone fitting off.",
+        optional=True,
+        default_doc="off",
+    )
 
     @tone.setter
     def tone(self, value: Any) -> None:
@@ -443,8 +493,10 @@ class TilesPlayer(Player):
             if value == "consensus":
                 return class_means.mean(axis=0)
             if value not in m.class_names:
-                raise InvalidArgumentError(f"tone names texture {value!r}, which the tile set lacks "
-                                 f"(it has {', '.join(m.class_names)}, or 'consensus', or an RGB colour)")
+                raise InvalidArgumentError(
+                    f"tone names texture {value!r}, which the tile set lacks "
+                    f"(it has {', '.join(m.class_names)}, or 'consensus', or an RGB colour)"
+                )
             return class_means[m.class_names.index(value)]
         if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
             if not 0 <= value < m.n_classes:
@@ -452,8 +504,9 @@ class TilesPlayer(Player):
             return class_means[int(value)]
         rgb = np.asarray(value, dtype=float)
         if rgb.shape != (3,) or not np.isfinite(rgb).all() or rgb.min() < 0 or rgb.max() > 255:
-            raise InvalidArgumentError(f"tone must be None, a texture name or index, 'consensus' or an RGB colour in "
-                             f"0..255, not {value!r}")
+            raise InvalidArgumentError(
+                f"tone must be None, a texture name or index, 'consensus' or an RGB colour in 0..255, not {value!r}"
+            )
         return rgb
 
     def _class_histograms(self) -> np.ndarray:
@@ -477,7 +530,7 @@ class TilesPlayer(Player):
             counts, partial = np.ones(self.n_tiles), []
         counts = np.array(counts, np.float64)
         extra = np.zeros((m.n_classes, 3, 256), np.float64)
-        for k, rows, cols in partial:          # replace the full tile's share by the part shown
+        for k, rows, cols in partial:  # replace the full tile's share by the part shown
             counts[k] -= rows * cols
             extra[m.tile_class[k]] += rows * cols * histogram(k, rows, cols)
         counts = np.maximum(counts, 0.0)
@@ -520,8 +573,11 @@ class TilesPlayer(Player):
                     mu[ci, ch] = max(1.0, float((hist[ci, ch] * v).sum() / max(hist[ci, ch].sum(), 1e-12)))
         # blended entries for feathered border pixels: index c + (a * C + ring) * levels + q
         share = np.linspace(0.0, 1.0, self._tone_levels)[:, None]
-        blend = [((1 - share) * gain[a] * mu[a] + share * gain[r] * mu[r]) / ((1 - share) * mu[a] + share * mu[r])
-                 for a in range(c) for r in range(c)]
+        blend = [
+            ((1 - share) * gain[a] * mu[a] + share * gain[r] * mu[r]) / ((1 - share) * mu[a] + share * mu[r])
+            for a in range(c)
+            for r in range(c)
+        ]
         table = np.clip(np.concatenate([gain] + blend), 0.0, MAX_GAIN).astype(np.float32)
         return table, np.zeros_like(table)
 
@@ -553,8 +609,9 @@ class TilesPlayer(Player):
             raise InvalidArgumentError(f"frame must be uint8 with shape {self._shape}, not {frame.dtype} {frame.shape}")
         mask = np.asarray(mask)
         if mask.shape != self._shape[:2]:
-            raise InvalidArgumentError(f"mask must have shape {self._shape[:2]} (the frame's height and width), "
-                             f"not {mask.shape}")
+            raise InvalidArgumentError(
+                f"mask must have shape {self._shape[:2]} (the frame's height and width), not {mask.shape}"
+            )
         if mask.dtype.kind not in "biu":
             raise InvalidArgumentError(f"mask must be boolean or integer, not {mask.dtype}")
         synth = self.next_frame()
@@ -580,9 +637,16 @@ class TilesPlayer(Player):
 
     # -- state --------------------------------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:
-        return {"t": self._t, "phase": self._phase, "rng": self._rng.bit_generator.state, "seed": self.seed,
-                "cells_a": self._cells_a.copy(), "cells_b": self._cells_b.copy(),
-                "arrangement": self.arrangement.copy(), "labels": self.labels.copy()}
+        return {
+            "t": self._t,
+            "phase": self._phase,
+            "rng": self._rng.bit_generator.state,
+            "seed": self.seed,
+            "cells_a": self._cells_a.copy(),
+            "cells_b": self._cells_b.copy(),
+            "arrangement": self.arrangement.copy(),
+            "labels": self.labels.copy(),
+        }
 
     def _set_state(self, state: dict[str, Any]) -> None:
         rng = rng_from_state(state["rng"])
@@ -593,7 +657,7 @@ class TilesPlayer(Player):
         phase = check_int("phase", state["phase"], 0)
         max_shift = check_float("max_shift", state["max_shift"], 0.0, float(min(self.loop_length, MAX_TIME)))
         tone = state["tone"]
-        self.tone_target(tone)                          # validates it
+        self.tone_target(tone)  # validates it
         seed = check_seed("seed", state.get("seed", self.seed))
         if any(c.shape != self.grid_shape or not np.isfinite(c).all() for c in cells):
             raise InvalidArgumentError(f"state offsets must be finite with shape {self.grid_shape}")
@@ -606,12 +670,14 @@ class TilesPlayer(Player):
             raise InvalidArgumentError(f"state arrangement puts {mismatched} Wang edges of different colours together")
         mismatched = self._torus_mismatch(arrangement)
         if mismatched:
-            raise InvalidArgumentError(f"state arrangement puts {mismatched} cells of the quilted torus out of their order")
+            raise InvalidArgumentError(
+                f"state arrangement puts {mismatched} cells of the quilted torus out of their order"
+            )
         # everything checked: now change the player
         self._rng, self.labels, self._t, self._phase = rng, labels, t, phase
         self._cells_a, self._cells_b = cells
         self.arrangement = arrangement
         self._max_shift = max_shift
         self.seed, self._tone_spec = seed, tone
-        self._build_source(arrangement)                 # fits the tone to the arrangement too
+        self._build_source(arrangement)  # fits the tone to the arrangement too
         self._refresh_fields()

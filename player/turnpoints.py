@@ -15,6 +15,7 @@ straight into the caller's buffer; a crossfade (after a jump) or a fractional sp
 blends two (or up to four) frames with one kernel launch in exact integer arithmetic,
 so the numpy reference gives identical bytes.
 """
+
 from __future__ import annotations
 
 import os
@@ -54,16 +55,29 @@ class TurnPointPlayer(Player):
 
     mode = "turnpoints"
     options = (
-        Param("playback", Choice(*PLAYBACKS), "hybrid",
-              "Turn points and transitions (hybrid), turn points only (turns, the seed) or transitions only "
-              "(jumps: classic video textures, forward only)."),
+        Param(
+            "playback",
+            Choice(*PLAYBACKS),
+            "hybrid",
+            "Turn points and transitions (hybrid), turn points only (turns, the seed) or transitions only "
+            "(jumps: classic video textures, forward only).",
+        ),
         Param("start", Range(int, 0, 2**31 - 1), 0, "Source frame of the first output frame (played forward)."),
     )
     capabilities = Capabilities(needs_frames=True, native_loop=True)
 
-    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, *,
-                 backend: str = "auto", device: str | None = None, seed: int = 0,
-                 playback: str = "hybrid", start: int = 0, format: str = "RGB") -> None:
+    def __init__(
+        self,
+        db: str | os.PathLike | TileDB,
+        texture: str | None = None,
+        *,
+        backend: str = "auto",
+        device: str | None = None,
+        seed: int = 0,
+        playback: str = "hybrid",
+        start: int = 0,
+        format: str = "RGB",
+    ) -> None:
         playback = self.options[0].check(playback)
         super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
@@ -85,11 +99,15 @@ class TurnPointPlayer(Player):
         self._is_turn = np.zeros(t, bool)
         self._is_turn[model.turn_points] = True
         if playback == "jumps" and model.src.size == 0:
-            raise InvalidArgumentError("playback='jumps' needs transitions, and this texture has none; use 'hybrid' or 'turns'")
+            raise InvalidArgumentError(
+                "playback='jumps' needs transitions, and this texture has none; use 'hybrid' or 'turns'"
+            )
         self._fwd, self._bwd = self._tables(model)
         start = check_int("start", start, 0, t - 1)
         if playback == "jumps" and start > model.exit_frame:
-            raise InvalidArgumentError(f"start must be at most the exit frame {model.exit_frame} for playback='jumps', not {start}")
+            raise InvalidArgumentError(
+                f"start must be at most the exit frame {model.exit_frame} for playback='jumps', not {start}"
+            )
         if playback != "jumps" and start > self._z:
             raise InvalidArgumentError(f"start must be at most the last turn point {self._z}, not {start}")
         self._init_controls()
@@ -116,9 +134,9 @@ class TurnPointPlayer(Player):
             return fwd, bwd
         s, d, p = model.src.astype(np.int64), model.dst.astype(np.int64), model.prob
         if self.playback == "hybrid":
-            ok = d <= self._z                       # heading forward beyond the last turn: dead end
+            ok = d <= self._z  # heading forward beyond the last turn: dead end
             fs, fd, fp = s[ok], d[ok], p[ok]
-            bs, bd = d + 1, s + 1                   # the mirror of i -> j played backward
+            bs, bd = d + 1, s + 1  # the mirror of i -> j played backward
             ok = (bd >= self._a) & (bs < t)
             bs, bd, bp = bs[ok], bd[ok], p[ok]
         else:
@@ -133,7 +151,7 @@ class TurnPointPlayer(Player):
                     probs = probs / total
                 cum = np.cumsum(probs)
                 if self.playback == "jumps" and i == model.exit_frame:
-                    cum[-1] = np.inf                # always jump at the exit frame
+                    cum[-1] = np.inf  # always jump at the exit frame
                 table[int(i)] = (dd[sel].astype(np.int64), cum)
         return fwd, bwd
 
@@ -150,10 +168,14 @@ class TurnPointPlayer(Player):
         """Bytes a frame moves at speed 1 between jumps: one stored frame read, the output written."""
         return self.engine.bytes_per_frame
 
-    speed = Control(Range(float, *SPEED_RANGE), 1.0,
-                    "Source frames advanced per output frame; fractional speeds blend neighbouring frames.")
-    crossfade = Control(Range(int, 0, MAX_CROSSFADE), 4,
-                        "Frames over which a jump is crossfaded with the path it left (0: cut).")
+    speed = Control(
+        Range(float, *SPEED_RANGE),
+        1.0,
+        "Source frames advanced per output frame; fractional speeds blend neighbouring frames.",
+    )
+    crossfade = Control(
+        Range(int, 0, MAX_CROSSFADE), 4, "Frames over which a jump is crossfaded with the path it left (0: cut)."
+    )
     increment = Control(Range(float, 0.0, 1.0), 0.1, "The eq. 7 step of the adaptive reversal probabilities.")
 
     @property
@@ -164,9 +186,9 @@ class TurnPointPlayer(Player):
     # -- the walk ------------------------------------------------------------------------
     def _reset_walk(self, start: int) -> None:
         self._pos, self._dir = int(start), 1
-        self._p = self._p_max / 2.0                     # eq. 6
+        self._p = self._p_max / 2.0  # eq. 6
         self._p[[self._a, self._z]] = 1.0
-        self._old: list[int] | None = None               # crossfade: [old frame, old direction, k]
+        self._old: list[int] | None = None  # crossfade: [old frame, old direction, k]
         self.dead_ends = 0
         self._phase = 0.0
         first = (self._pos, ((self._pos, 1.0),), EVENT_NONE)
@@ -183,12 +205,12 @@ class TurnPointPlayer(Player):
         nxt = None
         if self.playback != "jumps" and self._is_turn[i]:
             if (i == self._a and d < 0) or (i == self._z and d > 0):
-                turn = True                              # outermost turn heading outward: always
+                turn = True  # outermost turn heading outward: always
             elif (i == self._a and d > 0) or (i == self._z and d < 0):
-                turn = False                             # turning here would head outward
+                turn = False  # turning here would head outward
             else:
                 turn = bool(self._rng.random() < self._p[i])
-                inc = self._increment                    # eq. 7
+                inc = self._increment  # eq. 7
                 self._p[i] = max(self._p[i] - inc, 0.0) if turn else min(self._p[i] + inc, self._p_max[i])
             if turn:
                 d = -d
@@ -204,7 +226,7 @@ class TurnPointPlayer(Player):
                     self._old = [i + d, d, 1]
         if nxt is None:
             nxt = i + d
-        if not 0 <= nxt < self.n_frames:                 # never happens with valid tables
+        if not 0 <= nxt < self.n_frames:  # never happens with valid tables
             self.dead_ends += 1
             d = -d
             nxt = i + d
@@ -280,10 +302,18 @@ class TurnPointPlayer(Player):
 
     # -- state ---------------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:
-        return {"playback": self.playback, "pos": self._pos, "dir": self._dir, "p": self._p.copy(),
-                "old": None if self._old is None else list(self._old), "phase": self._phase,
-                "disp": [(f, tuple(pairs), e) for f, pairs, e in self._disp], "pending": self._pending,
-                "rng": self._rng.bit_generator.state, "seed": self.seed}
+        return {
+            "playback": self.playback,
+            "pos": self._pos,
+            "dir": self._dir,
+            "p": self._p.copy(),
+            "old": None if self._old is None else list(self._old),
+            "phase": self._phase,
+            "disp": [(f, tuple(pairs), e) for f, pairs, e in self._disp],
+            "pending": self._pending,
+            "rng": self._rng.bit_generator.state,
+            "seed": self.seed,
+        }
 
     def _set_state(self, state: dict[str, Any]) -> None:
         if state["playback"] != self.playback:

@@ -8,6 +8,7 @@ Intel's CPU OpenCL runtime, makes it visible beside the system's OpenCL platform
 ICD file names a path that does not exist), so that the kernels are compared with their
 references on two independent compilers. Set ``OCL_ICD_VENDORS`` yourself to choose the platforms instead.
 """
+
 from __future__ import annotations
 
 import atexit
@@ -50,6 +51,7 @@ _add_intel_runtime()
 def verified_devices() -> list:
     """The OpenCL devices that passed the self-test here, in the player's order of preference."""
     from dynatex.player import opencl, selftest
+
     try:
         infos = opencl.preference_order(opencl.devices())
     except opencl.OpenCLUnavailableError:
@@ -62,9 +64,13 @@ def pytest_generate_tests(metafunc):
     if "cl_device" in metafunc.fixturenames:
         devices = verified_devices()
         ids = [f"{d.index}-{d.platform.split()[0]}" for d in devices]
-        metafunc.parametrize("cl_device", [d.index for d in devices] or
-                             [pytest.param(None, marks=pytest.mark.skip(reason="no verified OpenCL device"))],
-                             ids=ids or None, scope="session")
+        metafunc.parametrize(
+            "cl_device",
+            [d.index for d in devices]
+            or [pytest.param(None, marks=pytest.mark.skip(reason="no verified OpenCL device"))],
+            ids=ids or None,
+            scope="session",
+        )
 
 
 @pytest.fixture(scope="session")
@@ -79,11 +85,19 @@ def clips_dir() -> Path:
 def cl_context(cl_device):
     """The shared OpenCL context of device ``cl_device`` (one verified device per parameter)."""
     from dynatex.player.opencl import get_context
+
     return get_context(cl_device)
 
 
-def wave_clip(t: int = 60, h: int = 24, w: int = 32, *, channels: int = 3, seed: int = 0,
-              periods: tuple[float, ...] = (17.0, 11.0)) -> np.ndarray:
+def wave_clip(
+    t: int = 60,
+    h: int = 24,
+    w: int = 32,
+    *,
+    channels: int = 3,
+    seed: int = 0,
+    periods: tuple[float, ...] = (17.0, 11.0),
+) -> np.ndarray:
     """A small synthetic dynamic texture: travelling sine waves plus a little noise, uint8."""
     rng = np.random.default_rng(seed)
     tt = np.arange(t)[:, None, None]
@@ -96,8 +110,7 @@ def wave_clip(t: int = 60, h: int = 24, w: int = 32, *, channels: int = 3, seed:
     img = 128 + 50 * img / len(periods) + rng.normal(0, 2, img.shape)
     frames = np.clip(img, 0, 255).astype(np.uint8)[..., None]
     if channels == 3:
-        frames = np.concatenate([frames, np.clip(frames * 0.8 + 20, 0, 255).astype(np.uint8),
-                                 255 - frames], axis=3)
+        frames = np.concatenate([frames, np.clip(frames * 0.8 + 20, 0, 255).astype(np.uint8), 255 - frames], axis=3)
     return frames
 
 
@@ -112,6 +125,7 @@ def lds_db(tmp_path, synthetic_clip):
     from dynatex.analyzer import load_clip
     from dynatex.analyzer.lds import learn_lds
     from dynatex.tiledb import DatabaseWriter
+
     clip = load_clip(synthetic_clip)
     path = tmp_path / "waves.h5"
     with DatabaseWriter(path) as w:

@@ -1,4 +1,5 @@
 """dynatex.benchmark: the copy bandwidth behind every roofline figure."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,11 +14,16 @@ def test_copy_kernels_copy_every_byte(cl_context):
     """Both copies (plain and streaming stores) reproduce the source exactly: a bandwidth
     is only meaningful if the kernel really moved the bytes."""
     queue = cl.CommandQueue(cl_context)
-    src = np.random.default_rng(0).random(16 * COPY_BLOCKS * 8, dtype=np.float32)   # 8 streaming work-items
+    src = np.random.default_rng(0).random(16 * COPY_BLOCKS * 8, dtype=np.float32)  # 8 streaming work-items
     copies = [("plain", build_program(cl_context, "copy.cl"), src.size // 16)]
     if variant_verified(cl_context.devices[0], "copy_stream"):
-        copies.append(("stream", build_program(cl_context, "variants/copy_stream.cl", {"BLOCKS": COPY_BLOCKS}),
-                       src.size // (16 * COPY_BLOCKS)))
+        copies.append(
+            (
+                "stream",
+                build_program(cl_context, "variants/copy_stream.cl", {"BLOCKS": COPY_BLOCKS}),
+                src.size // (16 * COPY_BLOCKS),
+            )
+        )
     for name, prog, size in copies:
         a = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=src)
         b = cl.Buffer(cl_context, cl.mem_flags.WRITE_ONLY, src.nbytes)

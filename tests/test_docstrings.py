@@ -4,6 +4,7 @@ Collected here rather than by ``pytest --doctest-modules``, which imports files 
 cannot place ``player/``, ``analyzer/`` and ``tiledb/`` (top-level folders installed as
 ``dynatex.player`` and so on) in their package.
 """
+
 from __future__ import annotations
 
 import doctest

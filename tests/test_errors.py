@@ -1,4 +1,5 @@
 """One root for every error dynatex raises on purpose."""
+
 from __future__ import annotations
 
 from dynatex.tiledb import DynatexError, TileDBError, TileDBFormatError
@@ -6,11 +7,20 @@ from dynatex.tiledb import DynatexError, TileDBError, TileDBFormatError
 
 def test_every_dynatex_error_shares_one_root():
     from dynatex.analyzer import ClipError
-    from dynatex.errors import ArgumentTypeError
     from dynatex.cli import UsageError
+    from dynatex.errors import ArgumentTypeError
     from dynatex.player import DeviceNotVerifiedError, KernelBuildError, OpenCLUnavailableError
-    for cls in (TileDBError, TileDBFormatError, ClipError, ArgumentTypeError, UsageError, OpenCLUnavailableError,
-                DeviceNotVerifiedError, KernelBuildError):
+
+    for cls in (
+        TileDBError,
+        TileDBFormatError,
+        ClipError,
+        ArgumentTypeError,
+        UsageError,
+        OpenCLUnavailableError,
+        DeviceNotVerifiedError,
+        KernelBuildError,
+    ):
         assert issubclass(cls, DynatexError), cls
     assert issubclass(TileDBFormatError, ValueError) and issubclass(ClipError, ValueError)
 
@@ -43,6 +53,7 @@ def test_argument_errors_are_dynatex_errors_and_the_builtins_they_refine():
     from dynatex.checks import check_int
     from dynatex.errors import ArgumentTypeError, InvalidArgumentError
     from dynatex.player import player_class
+
     assert issubclass(InvalidArgumentError, ValueError) and issubclass(ArgumentTypeError, TypeError)
     with pytest.raises(InvalidArgumentError, match="mode must be one of"):
         player_class("nope")

@@ -1,4 +1,5 @@
 """The dependency rule: the player ships without OpenCV, SciPy, matplotlib, PyAV, Pillow, Dask or the analyzer."""
+
 from __future__ import annotations
 
 import subprocess
@@ -64,8 +65,9 @@ def test_analyzer_runs_a_corpus_in_process_without_dask(tmp_path):
         from dynatex.analyzer import analyze_corpus
         t = np.arange(20)[:, None, None, None]
         x = np.arange(12)[None, None, :, None]
-        np.save({str(np_path)!r}, np.repeat((128 + 60 * np.sin(0.3 * t + 0.5 * x + 0 * np.arange(8)[None, :, None, None])
-                                             ).astype(np.uint8), 3, axis=3))
+        y = np.arange(8)[None, :, None, None]
+        wave = 128 + 60 * np.sin(0.3 * t + 0.5 * x + 0 * y)
+        np.save({str(np_path)!r}, np.repeat(wave.astype(np.uint8), 3, axis=3))
         r = analyze_corpus([{str(np_path)!r}], {str(tmp_path / "out")!r}, params={{"lds": {{"n": 3}}}}, progress=False)
         assert [row.status for row in r] == ["ok"], r
         try:

@@ -2,6 +2,7 @@
 
 ``FORMAT.md`` beside this module documents the layout. This package alone knows it.
 """
+
 from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError
@@ -33,8 +34,24 @@ from .turnpoints import TurnPointModel
 from .writer import DatabaseWriter
 
 __all__ = [
-    "DatabaseWriter", "DynatexError", "FORMAT_NAME", "FORMAT_VERSION", "FrameStore", "LDSModel", "MethodNotFoundError", "MixtureModel",
+    "DatabaseWriter",
+    "DynatexError",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "FrameStore",
+    "LDSModel",
+    "MethodNotFoundError",
+    "MixtureModel",
     "QuiltModel",
-    "SourceInfo", "Texture", "TextureNotFoundError", "TileDB", "TileDBError", "TileDBFormatError",
-    "TileDBNotFoundError", "TileDBVersionError", "TilesModel", "TurnPointModel", "open_db",
+    "SourceInfo",
+    "Texture",
+    "TextureNotFoundError",
+    "TileDB",
+    "TileDBError",
+    "TileDBFormatError",
+    "TileDBNotFoundError",
+    "TileDBVersionError",
+    "TilesModel",
+    "TurnPointModel",
+    "open_db",
 ]

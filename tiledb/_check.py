@@ -1,7 +1,9 @@
 """Validation helpers shared by the readers: every failure names the file and object."""
+
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import h5py
 import numpy as np
@@ -9,8 +11,7 @@ import numpy as np
 from .errors import TileDBFormatError
 from .schema import MAX_ELEMENTS
 
-_KINDS = {"f": "floating point", "i": "signed integer", "u": "unsigned integer",
-          "iu": "integer", "S": "string"}
+_KINDS = {"f": "floating point", "i": "signed integer", "u": "unsigned integer", "iu": "integer", "S": "string"}
 #: the dtypes a dataset of each kind may have: float16 has too little range and precision for
 #: a model (and linear algebra refuses it), longer floats and complex numbers are not ours
 _ALLOWED = {"f": {"f4", "f8"}, "i": {"i1", "i2", "i4", "i8"}, "u": {"u1", "u2", "u4", "u8"}}
@@ -37,8 +38,16 @@ class Checker:
             self.fail(path, "expected a group")
         return obj
 
-    def dataset(self, parent: h5py.Group, name: str, *, kind: str, shape: Sequence[int | None],
-                finite: bool = True, read: bool = True) -> Any:
+    def dataset(
+        self,
+        parent: h5py.Group,
+        name: str,
+        *,
+        kind: str,
+        shape: Sequence[int | None],
+        finite: bool = True,
+        read: bool = True,
+    ) -> Any:
         """Check dtype kind and shape (``None`` = any length), then read the array.
 
         With ``read=False`` the h5py dataset itself is returned (for lazy, chunked access).
@@ -58,8 +67,9 @@ class Checker:
         except Exception as exc:
             self.fail(path, f"cannot be read ({exc})")
         if dt.kind not in kind or (dt.kind in _ALLOWED and f"{dt.kind}{dt.itemsize}" not in _ALLOWED[dt.kind]):
-            self.fail(path, f"dtype {dt} is not {_KINDS.get(kind, kind)}"
-                            + (" of 32 or 64 bits" if kind == "f" else ""))
+            self.fail(
+                path, f"dtype {dt} is not {_KINDS.get(kind, kind)}" + (" of 32 or 64 bits" if kind == "f" else "")
+            )
         if dshape is None or len(dshape) != len(shape):
             self.fail(path, f"has shape {dshape}, expected {len(shape)} dimensions")
         for got, want in zip(dshape, shape):
@@ -116,8 +126,13 @@ class Checker:
             self.fail(path, f"has an invalid value ({exc})")
         raise TypeError(f"unsupported attribute kind {kind!r}")
 
-    def ints(self, obj: h5py.HLObject, name: str, length: int, default: tuple[int, ...] | None = None,
-             ) -> tuple[int, ...]:
+    def ints(
+        self,
+        obj: h5py.HLObject,
+        name: str,
+        length: int,
+        default: tuple[int, ...] | None = None,
+    ) -> tuple[int, ...]:
         """Attribute ``name`` as ``length`` integers (an integer array of that length)."""
         path = f"{obj.name}@{name}"
         try:
@@ -130,8 +145,9 @@ class Checker:
                 self.fail(path, "missing attribute")
             return default
         if value.dtype.kind not in "iu" or value.shape != (length,):
-            self.fail(path, f"has an invalid value (expected {length} integers, got {value.dtype} "
-                            f"of shape {value.shape})")
+            self.fail(
+                path, f"has an invalid value (expected {length} integers, got {value.dtype} of shape {value.shape})"
+            )
         return tuple(int(v) for v in value)
 
     def info(self, group: h5py.Group, skip: Sequence[str] = ()) -> dict[str, Any]:

@@ -5,6 +5,7 @@ numbers, strings, lists, nothing numpy) and ``summary() -> str`` (one line, what
 analyze`` prints once the model is learned). A ``"warning"`` entry of ``describe()`` is a
 caveat about the model that the analyzer also prints.
 """
+
 from __future__ import annotations
 
 from typing import Any

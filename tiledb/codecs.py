@@ -5,6 +5,7 @@ A codec module has ``write(group, model)`` and ``read(group, check, source) -> m
 ``describe()`` (plain facts, for ``dynatex info``) and ``summary()`` (one line, for
 ``dynatex analyze``); see :mod:`dynatex.tiledb._describe`.
 """
+
 from __future__ import annotations
 
 from types import ModuleType

@@ -1,4 +1,5 @@
 """Reading a tile database: :func:`open_db` validates on open and hands out textures."""
+
 from __future__ import annotations
 
 import os
@@ -36,12 +37,14 @@ class Texture:
         self.source: SourceInfo = _source.read(check.group(group, schema.SOURCE), check)
         self.methods: tuple[str, ...] = tuple(m for m in CODECS if m in group)
         if self.has_frames:
-            self.frames()       # the frame store's structure (dtype, shape, count); its data is read lazily
+            self.frames()  # the frame store's structure (dtype, shape, count); its data is read lazily
 
     def __repr__(self) -> str:
         s = self.source
-        return (f"<Texture {self.name!r} {s.width}x{s.height}x{s.channels} "
-                f"{s.n_frames} frames, methods={list(self.methods)}>")
+        return (
+            f"<Texture {self.name!r} {s.width}x{s.height}x{s.channels} "
+            f"{s.n_frames} frames, methods={list(self.methods)}>"
+        )
 
     @property
     def objpath(self) -> str:
@@ -58,7 +61,9 @@ class Texture:
             raise MethodNotFoundError(
                 f"texture {self.name!r} has no {method!r} data (it has: {', '.join(self.methods) or 'none'}); "
                 f"run `dynatex analyze --methods {method}`",
-                filename=self._db.filename, objpath=self._group.name)
+                filename=self._db.filename,
+                objpath=self._group.name,
+            )
         check = self._db._check
         return CODECS[method].read(check.group(self._group, method), check, self.source)
 
@@ -69,8 +74,9 @@ class Texture:
     def frames(self) -> FrameStore:
         """The stored source frames, read lazily."""
         if not self.has_frames:
-            raise MethodNotFoundError(f"texture {self.name!r} stores no frames",
-                                      filename=self._db.filename, objpath=self._group.name)
+            raise MethodNotFoundError(
+                f"texture {self.name!r} stores no frames", filename=self._db.filename, objpath=self._group.name
+            )
         return _frames.read(self._group, schema.FRAMES, self._db._check, self.source)
 
 
@@ -100,8 +106,9 @@ class TileDB:
         try:
             self._file = h5py.File(self.filename, "r")
         except OSError as exc:
-            raise TileDBFormatError(f"not a readable HDF5 file, it may be truncated or corrupt ({_short(exc)})",
-                                    filename=self.filename) from None
+            raise TileDBFormatError(
+                f"not a readable HDF5 file, it may be truncated or corrupt ({_short(exc)})", filename=self.filename
+            ) from None
         try:
             self._validate_root()
             self._textures: dict[str, Texture] = {}
@@ -123,15 +130,18 @@ class TileDB:
         f = self._file
         fmt = self._check.attr(f, schema.ATTR_FORMAT, str, None)
         if fmt != schema.FORMAT_NAME:
-            raise TileDBFormatError(f"not a dynatex tile database (format attribute is {fmt!r})",
-                                    filename=self.filename, objpath="/")
+            raise TileDBFormatError(
+                f"not a dynatex tile database (format attribute is {fmt!r})", filename=self.filename, objpath="/"
+            )
         major, minor = self._check.ints(f, schema.ATTR_VERSION, 2)
         self.version = (major, minor)
         if self.version[0] != schema.FORMAT_VERSION[0]:
             raise TileDBVersionError(
                 f"format version {self.version[0]}.{self.version[1]} is not supported by this dynatex "
                 f"(it reads major version {schema.FORMAT_VERSION[0]}); upgrade dynatex or re-run the analysis",
-                filename=self.filename, objpath="/")
+                filename=self.filename,
+                objpath="/",
+            )
 
     # -- mapping-like access -------------------------------------------------
     @property
@@ -154,14 +164,17 @@ class TileDB:
                 return next(iter(self._textures.values()))
             if not self._textures:
                 raise TextureNotFoundError("holds no textures", filename=self.filename)
-            raise TextureNotFoundError(f"holds several textures ({', '.join(self._textures)}); name one",
-                                       filename=self.filename)
+            raise TextureNotFoundError(
+                f"holds several textures ({', '.join(self._textures)}); name one", filename=self.filename
+            )
         try:
             return self._textures[unicodedata.normalize("NFC", name) if isinstance(name, str) else name]
         except KeyError:
             raise TextureNotFoundError(
                 f"no texture named {name!r} (available: {', '.join(self._textures) or 'none'})",
-                filename=self.filename, objpath=f"/{schema.TEXTURES}/{name}") from None
+                filename=self.filename,
+                objpath=f"/{schema.TEXTURES}/{name}",
+            ) from None
 
     def validate(self, *, every_frame: bool = False) -> None:
         """Read and validate every method and frame store of every texture (open checks only the
@@ -194,4 +207,3 @@ def open_db(path: str | os.PathLike) -> TileDB:
 
 def _short(exc: BaseException) -> str:
     return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-

@@ -6,6 +6,7 @@ Callers catch :class:`TileDBError`; each subclass also derives from the builtin 
 refines, so ``except FileNotFoundError`` or ``except KeyError`` work as expected.
 Messages read ``FILE: OBJECT-PATH: problem``.
 """
+
 from __future__ import annotations
 
 import os
@@ -16,8 +17,7 @@ from ..errors import DynatexError
 class TileDBError(DynatexError):
     """Base class of every tile database error."""
 
-    def __init__(self, problem: str, *, filename: str | os.PathLike | None = None,
-                 objpath: str | None = None) -> None:
+    def __init__(self, problem: str, *, filename: str | os.PathLike | None = None, objpath: str | None = None) -> None:
         self.problem = problem
         self.filename = os.fspath(filename) if filename is not None else None
         self.objpath = objpath

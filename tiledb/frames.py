@@ -1,4 +1,5 @@
 """Stored source frames (the ``frames`` dataset) that the gather-based modes play from."""
+
 from __future__ import annotations
 
 import h5py
@@ -14,8 +15,7 @@ def write(parent: h5py.Group, name: str, frames: np.ndarray) -> h5py.Dataset:
     frames = np.asarray(frames)
     if frames.dtype != np.uint8 or frames.ndim != 4:
         raise InvalidArgumentError(f"frames must be a (T, H, W, C) uint8 array, got {frames.dtype} {frames.shape}")
-    return parent.create_dataset(name, data=frames, chunks=(1, *frames.shape[1:]),
-                                 compression="lzf", shuffle=False)
+    return parent.create_dataset(name, data=frames, chunks=(1, *frames.shape[1:]), compression="lzf", shuffle=False)
 
 
 class FrameStore:
@@ -46,8 +46,14 @@ class FrameStore:
         return self[()]
 
 
-def read(parent: h5py.Group, name: str, check: Checker, source: SourceInfo,
-         *, frame_shape: tuple[int, int, int] | None = None) -> FrameStore:
+def read(
+    parent: h5py.Group,
+    name: str,
+    check: Checker,
+    source: SourceInfo,
+    *,
+    frame_shape: tuple[int, int, int] | None = None,
+) -> FrameStore:
     """Open ``parent/name`` as a :class:`FrameStore` of the source's ``n_frames`` frames of
     ``frame_shape`` (default: the source's); the methods index them by the source's count."""
     shape = frame_shape or source.frame_shape

@@ -4,6 +4,7 @@ Model: ``x(t+1) = A x(t) + B v(t)``, ``v ~ N(0, I_k)``; ``frame = basis.T @ x + 
 Everything the player needs is stored ready to use: opening a player costs at most
 ``n x n`` work (an eigendecomposition of ``A``), never a decomposition of the frames.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -72,16 +73,17 @@ class LDSModel:
     def summary(self) -> str:
         """One line: orders, energy kept, spectral radius before and after clipping."""
         info = self.info
-        return (f"n={self.n} k={self.k}, energy {info.get('energy_captured', 0):.3f}, "
-                f"spectral radius {info.get('spectral_radius_raw', 0):.4f} -> {info.get('spectral_radius', 0):.4f} "
-                f"({info.get('poles_clipped', 0)} poles clipped)")
+        return (
+            f"n={self.n} k={self.k}, energy {info.get('energy_captured', 0):.3f}, "
+            f"spectral radius {info.get('spectral_radius_raw', 0):.4f} -> {info.get('spectral_radius', 0):.4f} "
+            f"({info.get('poles_clipped', 0)} poles clipped)"
+        )
 
 
 def write(group: h5py.Group, model: LDSModel) -> None:
     n = model.n
     group.create_dataset("mean", data=np.asarray(model.mean, np.float32))
-    group.create_dataset("basis", data=np.asarray(model.basis, np.float32),
-                         chunks=(1, model.basis.shape[1]))
+    group.create_dataset("basis", data=np.asarray(model.basis, np.float32), chunks=(1, model.basis.shape[1]))
     for name in ("singular_values", "A", "B", "x0", "states", "stationary_cov"):
         group.create_dataset(name, data=np.asarray(getattr(model, name), np.float64))
     group.attrs["n"] = n
@@ -130,7 +132,7 @@ def _check_dynamics(path: str, model: LDSModel, check: Checker, pixels: int) -> 
     ``trace(P)`` must respect that bound; beyond it the state only saturates pixels, and far
     beyond it (an ``x0`` of 1e308) it overflows to a black screen.
     """
-    with np.errstate(all="ignore"):         # huge values overflow to inf, which every test below refuses
+    with np.errstate(all="ignore"):  # huge values overflow to inf, which every test below refuses
         _check_basis(path, model, check)
         _check_poles(path, model, check)
         _check_noise(path, model, check, 256.0 * np.sqrt(pixels))
@@ -140,8 +142,10 @@ def _check_dynamics(path: str, model: LDSModel, check: Checker, pixels: int) -> 
 def _check_basis(path: str, model: LDSModel, check: Checker) -> None:
     norms = np.sqrt(np.einsum("ij,ij->i", model.basis, model.basis, dtype=np.float64))
     if not np.abs(norms - 1).max() <= 1e-3:
-        check.fail(path + "/basis", f"rows are not of unit length (norms {norms.min():.3g}..{norms.max():.3g}): "
-                                    "the basis must be orthonormal")
+        check.fail(
+            path + "/basis",
+            f"rows are not of unit length (norms {norms.min():.3g}..{norms.max():.3g}): the basis must be orthonormal",
+        )
 
 
 def _check_poles(path: str, model: LDSModel, check: Checker) -> None:
@@ -151,8 +155,11 @@ def _check_poles(path: str, model: LDSModel, check: Checker) -> None:
         check.fail(path + "/A", f"is not stable (spectral radius {rho:.6g} >= 1)")
     cond = float(np.linalg.cond(vecs))
     if not cond < MAX_EIGVEC_CONDITION:
-        check.fail(path + "/A", f"is not diagonalisable (eigenvector condition number {cond:.3g}); the player's "
-                                "speed edit rotates its poles")
+        check.fail(
+            path + "/A",
+            f"is not diagonalisable (eigenvector condition number {cond:.3g}); the player's "
+            "speed edit rotates its poles",
+        )
 
 
 def _check_noise(path: str, model: LDSModel, check: Checker, bound: float) -> None:
@@ -163,19 +170,22 @@ def _check_noise(path: str, model: LDSModel, check: Checker, bound: float) -> No
     scale = np.abs(cov).max()
     if not (np.abs(cov - cov.T).max() <= 1e-9 * scale and np.linalg.eigvalsh(cov).min() >= -1e-9 * np.trace(cov)):
         check.fail(path + "/stationary_cov", "is not symmetric positive semi-definite")
-    if not np.trace(cov) <= bound ** 2:
-        check.fail(path + "/stationary_cov", f"spread sqrt(trace) {np.sqrt(np.trace(cov)):.3g} exceeds the pixel "
-                                             f"range's {bound:.3g}")
+    if not np.trace(cov) <= bound**2:
+        check.fail(
+            path + "/stationary_cov",
+            f"spread sqrt(trace) {np.sqrt(np.trace(cov)):.3g} exceeds the pixel range's {bound:.3g}",
+        )
     resid = cov - model.A @ cov @ model.A.T - q
     if not np.abs(resid).max() <= 1e-6 * max(scale, np.abs(q).max()):
         check.fail(path + "/stationary_cov", "does not solve P = A P A^T + B B^T")
 
 
 def _check_states(path: str, model: LDSModel, check: Checker, bound: float) -> None:
-    norms = np.sqrt((model.states ** 2).sum(axis=0))
+    norms = np.sqrt((model.states**2).sum(axis=0))
     if norms.size and not norms.max() <= bound:
-        check.fail(path + "/states", f"a state of norm {norms.max():.3g} lies outside the pixel range (norm <= "
-                                     f"{bound:.3g})")
+        check.fail(
+            path + "/states", f"a state of norm {norms.max():.3g} lies outside the pixel range (norm <= {bound:.3g})"
+        )
     x = model.x0.copy()
     for t in range(max(64, 4 * model.n)):
         size = float(np.sqrt(x @ x))

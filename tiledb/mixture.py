@@ -6,6 +6,7 @@ linear map ``L``. Dynamics: an AR(p) process on the global coordinates. A frame 
 ``mean + sum_j u_j stacked_basis[j]`` with ``u = (r_s, r_s z_s)`` per component, so the
 player decodes a global coordinate to ``u`` and projects it like an LDS state.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -118,13 +119,32 @@ class MixtureModel:
     def summary(self) -> str:
         """One line: sizes, AR order, reconstruction error against a single PCA."""
         info = self.info
-        return (f"S={self.components} d={self.dim} D={self.global_dim}, AR({self.order}) by Schwarz, "
-                f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
-                f"{info.get('recon_error_pca_dim', 0):.3f})")
+        return (
+            f"S={self.components} d={self.dim} D={self.global_dim}, AR({self.order}) by Schwarz, "
+            f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
+            f"{info.get('recon_error_pca_dim', 0):.3f})"
+        )
 
 
-_F64 = ("weights", "sigma2", "singular_values", "responsibilities", "local_coords", "coord_map",
-        "global_coords", "gauss_mean", "gauss_cov", "decode_offset", "decode_gain", "local_cov", "local_radius", "ar_coefs", "ar_intercept", "ar_noise_cov", "sbc")
+_F64 = (
+    "weights",
+    "sigma2",
+    "singular_values",
+    "responsibilities",
+    "local_coords",
+    "coord_map",
+    "global_coords",
+    "gauss_mean",
+    "gauss_cov",
+    "decode_offset",
+    "decode_gain",
+    "local_cov",
+    "local_radius",
+    "ar_coefs",
+    "ar_intercept",
+    "ar_noise_cov",
+    "sbc",
+)
 _SIZES = ("components", "dim", "global_dim", "order")
 
 
@@ -139,8 +159,9 @@ def companion_radius(ar_coefs: np.ndarray) -> float:
 
 def write(group: h5py.Group, model: MixtureModel) -> None:
     group.create_dataset("mean", data=np.asarray(model.mean, np.float32))
-    group.create_dataset("stacked_basis", data=np.asarray(model.stacked_basis, np.float32),
-                         chunks=(1, model.stacked_basis.shape[1]))
+    group.create_dataset(
+        "stacked_basis", data=np.asarray(model.stacked_basis, np.float32), chunks=(1, model.stacked_basis.shape[1])
+    )
     for name in _F64:
         group.create_dataset(name, data=np.asarray(getattr(model, name), np.float64))
     for name in _SIZES:
@@ -157,8 +178,12 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
     d = check.attr(group, "dim", int)
     dg = check.attr(group, "global_dim", int)
     order = check.attr(group, "order", int)
-    for name, v, hi in (("components", s, MAX_COMPONENTS), ("dim", d, MAX_DIM),
-                        ("global_dim", dg, MAX_DIM), ("order", order, MAX_ORDER)):
+    for name, v, hi in (
+        ("components", s, MAX_COMPONENTS),
+        ("dim", d, MAX_DIM),
+        ("global_dim", dg, MAX_DIM),
+        ("order", order, MAX_ORDER),
+    ):
         if not 1 <= v <= hi:
             check.fail(f"{path}@{name}", f"{v} out of range 1..{hi}")
     j = s * (d + 1)
@@ -215,7 +240,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         check.fail(path + "/ar_coefs", f"the AR process is not stable (spectral radius {rho:.6g} >= 1)")
     if model.mean.min() < -1 or model.mean.max() > 256:
         check.fail(path + "/mean", "values outside the 0..255 pixel range")
-    with np.errstate(all="ignore"):         # huge values overflow to inf, which every test below refuses
+    with np.errstate(all="ignore"):  # huge values overflow to inf, which every test below refuses
         _check_extent(path, model, check, 256.0 * np.sqrt(p))
     return model
 
@@ -227,7 +252,8 @@ def _check_extent(path: str, model: MixtureModel, check: Checker, bound: float) 
     means, noise and Gaussians far outside that cloud.
 
     Loadings are orthonormal vectors of the reduced PCA space mapped into pixels by its
-    orthonormal basis (rows past the clip's rank are zero), so they never lengthen; a frame's deviation from the mean, hence each
+    orthonormal basis (rows past the clip's rank are zero), so they never lengthen; a frame's
+    deviation from the mean, hence each
     component's offset and decoded local coordinate, is at most ``256 sqrt(P)``; the decoded
     coordinates are pulled back into each component's ellipsoid, whose semi-axes may exceed its
     frames' extent but not that bound by more than ``ELLIPSOID_SLACK``. ``T`` centred points of
@@ -238,34 +264,47 @@ def _check_extent(path: str, model: MixtureModel, check: Checker, bound: float) 
     rows = model.stacked_basis.reshape(s, d + 1, -1)
     norms = np.sqrt(np.einsum("sjp,sjp->sj", rows, rows, dtype=np.float64))
     if not norms[:, 1:].max() <= 1 + 1e-3:
-        check.fail(path + "/stacked_basis", f"a loading row has norm {norms[:, 1:].max():.3g}: loadings are "
-                                            "orthonormal in the reduced space, so at most 1 in pixels")
+        check.fail(
+            path + "/stacked_basis",
+            f"a loading row has norm {norms[:, 1:].max():.3g}: loadings are "
+            "orthonormal in the reduced space, so at most 1 in pixels",
+        )
     if not norms[:, 1:].max() >= 0.5:
         check.fail(path + "/stacked_basis", "every loading is (nearly) zero: the mixture has no appearance to vary")
     if not norms[:, 0].max() <= bound:
-        check.fail(path + "/stacked_basis", f"a component's mean offset has norm {norms[:, 0].max():.3g}, outside "
-                                            f"the pixel range (<= {bound:.3g})")
-    offsets = np.sqrt((model.decode_offset ** 2).sum(axis=1))
+        check.fail(
+            path + "/stacked_basis",
+            f"a component's mean offset has norm {norms[:, 0].max():.3g}, outside the pixel range (<= {bound:.3g})",
+        )
+    offsets = np.sqrt((model.decode_offset**2).sum(axis=1))
     if not offsets.max() <= bound:
         check.fail(path + "/decode_offset", f"norm {offsets.max():.3g} lies outside the pixel range (<= {bound:.3g})")
     axes = model.local_radius * np.sqrt(np.linalg.eigvalsh(model.local_cov).max(axis=1))
     if not axes.max() <= ELLIPSOID_SLACK * bound:
-        check.fail(path + "/local_radius", f"the ellipsoid of decoded coordinates reaches {axes.max():.3g}, past "
-                                           f"{ELLIPSOID_SLACK:g} x the pixel range ({bound:.3g})")
+        check.fail(
+            path + "/local_radius",
+            f"the ellipsoid of decoded coordinates reaches {axes.max():.3g}, past "
+            f"{ELLIPSOID_SLACK:g} x the pixel range ({bound:.3g})",
+        )
     g = model.global_coords
     t, dg = g.shape
     if not (np.abs(g.mean(axis=0)).max() <= 1e-6 and np.abs(g.T @ g / t - np.eye(dg)).max() <= 1e-6):
         check.fail(path + "/global_coords", "are not centred with unit covariance")
     cloud = np.sqrt(t * dg)
     ar_mean = np.linalg.solve(np.eye(dg) - model.ar_coefs.sum(axis=0), model.ar_intercept)
-    for name, size in (("gauss_mean", np.sqrt((model.gauss_mean ** 2).sum(axis=1)).max()),
-                       ("ar_intercept", np.sqrt(ar_mean @ ar_mean))):
+    for name, size in (
+        ("gauss_mean", np.sqrt((model.gauss_mean**2).sum(axis=1)).max()),
+        ("ar_intercept", np.sqrt(ar_mean @ ar_mean)),
+    ):
         if not size <= cloud:
-            check.fail(f"{path}/{name}", f"a mean of norm {size:.3g} lies outside the training coordinates "
-                                         f"(<= {cloud:.3g})")
+            check.fail(
+                f"{path}/{name}", f"a mean of norm {size:.3g} lies outside the training coordinates (<= {cloud:.3g})"
+            )
     if not np.trace(model.ar_noise_cov) <= t * dg:
-        check.fail(path + "/ar_noise_cov", f"trace {np.trace(model.ar_noise_cov):.3g} exceeds the training "
-                                           f"coordinates' total variance {t * dg}")
+        check.fail(
+            path + "/ar_noise_cov",
+            f"trace {np.trace(model.ar_noise_cov):.3g} exceeds the training coordinates' total variance {t * dg}",
+        )
 
 
 def _positive_definite(m: np.ndarray) -> bool:

@@ -21,6 +21,7 @@ remembered without a probe (:func:`remember`). Where no Python interpreter can b
 embedded in an application whose executable is not Python, and ``DYNATEX_PYTHON`` unset)
 the probe is skipped.
 """
+
 from __future__ import annotations
 
 import json
@@ -40,7 +41,7 @@ PROBE_BYTES_PER_S = 20 * 2**20
 MAX_REMEMBERED = 512
 
 _lock = threading.Lock()
-_known: dict[str, str | None] = {}        # identity -> the problem found (None: safe)
+_known: dict[str, str | None] = {}  # identity -> the problem found (None: safe)
 
 
 def cache_dir() -> Path:
@@ -82,23 +83,30 @@ def remember(filename: str) -> None:
 def _identity(filename: str) -> str:
     """What a verdict is kept under: the file's path, device, inode, size, modification time and dynatex's version."""
     from .. import __version__
+
     st = os.stat(filename)
-    return "|".join(str(v) for v in (os.path.realpath(filename), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns,
-                                     __version__))
+    return "|".join(
+        str(v) for v in (os.path.realpath(filename), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, __version__)
+    )
 
 
 def _run_child(filename: str, size: int) -> str | None:
     """The problem a child reading ``filename`` ran into (a crash or a hang), else None."""
     python = os.environ.get("DYNATEX_PYTHON") or sys.executable
     if not python or "python" not in Path(python).name.lower():
-        return None            # no interpreter to run the child with: read here unprobed
+        return None  # no interpreter to run the child with: read here unprobed
     timeout = PROBE_TIMEOUT_S + size / PROBE_BYTES_PER_S
     env = dict(os.environ)
     env.pop("PYTHONFAULTHANDLER", None)
     try:
-        proc = subprocess.Popen([python, "-m", "dynatex.tiledb.probe", os.path.abspath(filename)],
-                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                env=env, start_new_session=os.name == "posix")
+        proc = subprocess.Popen(
+            [python, "-m", "dynatex.tiledb.probe", os.path.abspath(filename)],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=env,
+            start_new_session=os.name == "posix",
+        )
     except OSError:
         return None
     try:
@@ -151,6 +159,7 @@ def _remember(key: str) -> None:
 def _main(argv: list[str]) -> int:
     """The child: open ``argv[0]`` and read all of it; 0 when that worked, 1 on an ordinary error."""
     from .database import TileDB
+
     try:
         with TileDB(argv[0], probe=False) as db:
             db.validate(every_frame=True)

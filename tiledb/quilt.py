@@ -7,6 +7,7 @@ jitters time per block) and an optional per-pixel gain (low-pass normalisation).
 player plays it from the stored source frames: ``out[t](y, x) = gain(y, x) *
 frames[f(t, y, x)][source_map(y, x)]``.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -48,7 +49,8 @@ class QuiltModel:
         approximation, for ``k = 1 .. r`` (non-increasing, in [0, 1]).
     gain : (H_out, W_out, C) float32 or None
         Per-pixel multiplier applied after the gather (low-pass gain normalisation).
-    blend_map, blend_labels, blend_weight : (H_out, W_out, 2) int32, (H_out, W_out) int32, (H_out, W_out) float32, or None
+    blend_map, blend_labels, blend_weight : arrays or None
+        ``(H_out, W_out, 2)`` int32, ``(H_out, W_out)`` int32 and ``(H_out, W_out)`` float32.
         Cross-fade across the cuts: a second source pixel and its block per output pixel,
         and its weight in [0, 0.5] (0 outside the feathered bands). All three or none.
     info : dict
@@ -90,34 +92,43 @@ class QuiltModel:
         """One line: canvas, blocks, the rank of the comparisons and its error."""
         info = self.info
         h, w = self.size
-        return (f"{w}x{h} canvas from {self.n_blocks} blocks of {self.block[1]}x{self.block[0]}, "
-                f"rank-{info.get('rank')} SVD error {100 * info.get('rank_error', 0):.2f}% "
-                f"(comparing {info.get('compare_width')} instead of {info.get('full_width')} values per pixel)")
+        return (
+            f"{w}x{h} canvas from {self.n_blocks} blocks of {self.block[1]}x{self.block[0]}, "
+            f"rank-{info.get('rank')} SVD error {100 * info.get('rank_error', 0):.2f}% "
+            f"(comparing {info.get('compare_width')} instead of {info.get('full_width')} values per pixel)"
+        )
 
 
 def write(group: h5py.Group, model: QuiltModel) -> None:
     h, w = model.labels.shape
-    group.create_dataset("source_map", data=np.asarray(model.source_map, np.int32),
-                         chunks=(min(h, 256), w, 2), compression="lzf")
-    group.create_dataset("labels", data=np.asarray(model.labels, np.int32),
-                         chunks=(min(h, 256), w), compression="lzf")
+    group.create_dataset(
+        "source_map", data=np.asarray(model.source_map, np.int32), chunks=(min(h, 256), w, 2), compression="lzf"
+    )
+    group.create_dataset("labels", data=np.asarray(model.labels, np.int32), chunks=(min(h, 256), w), compression="lzf")
     group.create_dataset("block_sources", data=np.asarray(model.block_sources, np.int32))
     group.create_dataset("block_positions", data=np.asarray(model.block_positions, np.int32))
     group.create_dataset("singular_values", data=np.asarray(model.singular_values, np.float64))
     group.create_dataset("rank_error", data=np.asarray(model.rank_error, np.float64))
     if model.gain is not None:
-        group.create_dataset("gain", data=np.asarray(model.gain, np.float32),
-                             chunks=(min(h, 256), w, model.gain.shape[2]), compression="lzf")
+        group.create_dataset(
+            "gain",
+            data=np.asarray(model.gain, np.float32),
+            chunks=(min(h, 256), w, model.gain.shape[2]),
+            compression="lzf",
+        )
     blend = (model.blend_map, model.blend_labels, model.blend_weight)
     if any(a is not None for a in blend):
         if any(a is None for a in blend):
             raise InvalidArgumentError("blend_map, blend_labels and blend_weight go together: give all three or none")
-        group.create_dataset("blend_map", data=np.asarray(model.blend_map, np.int32),
-                             chunks=(min(h, 256), w, 2), compression="lzf")
-        group.create_dataset("blend_labels", data=np.asarray(model.blend_labels, np.int32),
-                             chunks=(min(h, 256), w), compression="lzf")
-        group.create_dataset("blend_weight", data=np.asarray(model.blend_weight, np.float32),
-                             chunks=(min(h, 256), w), compression="lzf")
+        group.create_dataset(
+            "blend_map", data=np.asarray(model.blend_map, np.int32), chunks=(min(h, 256), w, 2), compression="lzf"
+        )
+        group.create_dataset(
+            "blend_labels", data=np.asarray(model.blend_labels, np.int32), chunks=(min(h, 256), w), compression="lzf"
+        )
+        group.create_dataset(
+            "blend_weight", data=np.asarray(model.blend_weight, np.float32), chunks=(min(h, 256), w), compression="lzf"
+        )
     group.attrs["width"] = int(w)
     group.attrs["height"] = int(h)
     group.attrs["n_blocks"] = model.n_blocks
@@ -175,13 +186,22 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> QuiltModel:
         check.index_range(path + "/blend_labels", blab, nb)
         if bwt.size and (bwt.min() < 0 or bwt.max() > 0.5):
             check.fail(path + "/blend_weight", "values must lie in [0, 0.5]")
-        blend = [bmap.astype(np.int32, copy=False), blab.astype(np.int32, copy=False),
-                 bwt.astype(np.float32, copy=False)]
+        blend = [
+            bmap.astype(np.int32, copy=False),
+            blab.astype(np.int32, copy=False),
+            bwt.astype(np.float32, copy=False),
+        ]
     info = check.info(group)
-    return QuiltModel(source_map=smap.astype(np.int32, copy=False), labels=labels.astype(np.int32, copy=False),
-                      block_sources=bsrc.astype(np.int32, copy=False),
-                      block_positions=bpos.astype(np.int32, copy=False),
-                      singular_values=sv.astype(np.float64, copy=False),
-                      rank_error=err.astype(np.float64, copy=False),
-                      gain=None if gain is None else gain.astype(np.float32, copy=False),
-                      blend_map=blend[0], blend_labels=blend[1], blend_weight=blend[2], info=info)
+    return QuiltModel(
+        source_map=smap.astype(np.int32, copy=False),
+        labels=labels.astype(np.int32, copy=False),
+        block_sources=bsrc.astype(np.int32, copy=False),
+        block_positions=bpos.astype(np.int32, copy=False),
+        singular_values=sv.astype(np.float64, copy=False),
+        rank_error=err.astype(np.float64, copy=False),
+        gain=None if gain is None else gain.astype(np.float32, copy=False),
+        blend_map=blend[0],
+        blend_labels=blend[1],
+        blend_weight=blend[2],
+        info=info,
+    )

@@ -3,6 +3,7 @@
 Only the :mod:`dynatex.tiledb` package uses these; every other part of dynatex goes
 through its API. ``FORMAT.md`` beside this file documents what they mean.
 """
+
 from __future__ import annotations
 
 import unicodedata
@@ -32,8 +33,10 @@ METHODS = (METHOD_LDS, METHOD_TURNPOINTS, METHOD_TILES, METHOD_QUILT, METHOD_MIX
 #: Longest texture name, in characters.
 MAX_TEXTURE_NAME = 64
 #: What a texture name is, for messages.
-TEXTURE_NAME_RULE = (f"1-{MAX_TEXTURE_NAME} characters in Unicode NFC, no '/', no control characters or line "
-                     "breaks, not starting with '.' and without spaces at either end")
+TEXTURE_NAME_RULE = (
+    f"1-{MAX_TEXTURE_NAME} characters in Unicode NFC, no '/', no control characters or line "
+    "breaks, not starting with '.' and without spaces at either end"
+)
 
 
 def texture_name_problem(name: object) -> str | None:
@@ -67,11 +70,14 @@ def texture_name_from(text: str) -> str:
     a name cannot hold replaced by ``_``, leading dots and end spaces dropped, at most
     :data:`MAX_TEXTURE_NAME` characters; ``"texture"`` when nothing is left."""
     text = unicodedata.normalize("NFC", text)
-    text = "".join("_" if ch == "/" or unicodedata.category(ch)[0] == "C" or unicodedata.category(ch) in ("Zl", "Zp")
-                   else ch for ch in text)
+    text = "".join(
+        "_" if ch == "/" or unicodedata.category(ch)[0] == "C" or unicodedata.category(ch) in ("Zl", "Zp") else ch
+        for ch in text
+    )
     text = text.strip().lstrip(".").strip()[:MAX_TEXTURE_NAME].rstrip()
-    text = unicodedata.normalize("NFC", text)    # cutting may split a character from its combining marks
+    text = unicodedata.normalize("NFC", text)  # cutting may split a character from its combining marks
     return text if texture_name_problem(text) is None else "texture"
+
 
 #: Largest dimension any stored array may declare; guards hostile files.
 MAX_ELEMENTS = 2**34

@@ -1,4 +1,5 @@
 """Description of the clip a texture was learned from (the ``source`` group)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -24,8 +25,8 @@ class SourceInfo:
     n_frames: int
     frame_start: int = 0
     frame_step: int = 1
-    crop: tuple[int, ...] = ()          # (x, y, w, h) in source pixels, () when uncropped: a rectangle, as --crop X,Y,W,H
-    source_size: tuple[int, ...] = ()   # (height, width) of the decoded source frames; the file stores (w, h)
+    crop: tuple[int, ...] = ()  # (x, y, w, h) in source pixels, () when uncropped: a rectangle, as --crop X,Y,W,H
+    source_size: tuple[int, ...] = ()  # (height, width) of the decoded source frames; the file stores (w, h)
     extra: dict = field(default_factory=dict, compare=False)
 
     @property
@@ -55,7 +56,7 @@ def write(group: h5py.Group, info: SourceInfo) -> None:
     a["frame_start"] = int(info.frame_start)
     a["frame_step"] = int(info.frame_step)
     a["crop"] = [int(v) for v in info.crop] if info.crop else [-1, -1, -1, -1]
-    a["source_size"] = [int(v) for v in info.source_size[::-1]] if info.source_size else [-1, -1]   # file: (w, h)
+    a["source_size"] = [int(v) for v in info.source_size[::-1]] if info.source_size else [-1, -1]  # file: (w, h)
 
 
 def read(group: h5py.Group, check: Checker) -> SourceInfo:
@@ -77,13 +78,21 @@ def read(group: h5py.Group, check: Checker) -> SourceInfo:
     crop = check.ints(group, "crop", 4, (-1, -1, -1, -1))
     size = check.ints(group, "source_size", 2, (-1, -1))
     if min(crop) < 0 and max(crop) != -1 or min(crop) >= 0 and (crop[2] < 1 or crop[3] < 1):
-        check.fail(group.name + "@crop", f"{crop} is neither (x, y, w, h) with x, y >= 0 and w, h >= 1 "
-                                         "nor (-1, -1, -1, -1)")
+        check.fail(
+            group.name + "@crop", f"{crop} is neither (x, y, w, h) with x, y >= 0 and w, h >= 1 nor (-1, -1, -1, -1)"
+        )
     if min(size) < 0 and max(size) != -1 or min(size) == 0:
         check.fail(group.name + "@source_size", f"{size} is neither (w, h) with w, h >= 1 nor (-1, -1)")
     return SourceInfo(
-        filename=att(group, "filename", str), sha256=att(group, "sha256", str), fps=fps,
-        width=width, height=height, channels=channels, n_frames=n_frames,
-        frame_start=att(group, "frame_start", int, 0), frame_step=att(group, "frame_step", int, 1),
-        crop=() if min(crop) < 0 else crop, source_size=() if min(size) < 0 else size[::-1],
+        filename=att(group, "filename", str),
+        sha256=att(group, "sha256", str),
+        fps=fps,
+        width=width,
+        height=height,
+        channels=channels,
+        n_frames=n_frames,
+        frame_start=att(group, "frame_start", int, 0),
+        frame_step=att(group, "frame_step", int, 1),
+        crop=() if min(crop) < 0 else crop,
+        source_size=() if min(size) < 0 else size[::-1],
     )

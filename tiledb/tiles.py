@@ -9,6 +9,7 @@ colours, and tiles join where the colours of their shared edge match (``edges``)
 (one class): the tiles are the cells of one large torus quilted from the clip
 (``torus_rows`` x ``torus_cols`` cells, row-major), laid out in that order.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -21,11 +22,11 @@ from ._describe import plain_info
 from .source import SourceInfo
 
 MAX_TILES = 4096
-CONSTRUCTIONS = ("quilted", "ring", "wang")   # how tiles join in x and y (attribute ``construction``)
+CONSTRUCTIONS = ("quilted", "ring", "wang")  # how tiles join in x and y (attribute ``construction``)
 #: How far a stored mean colour may lie from the tiles' (the analyzer averages 16 sampled frames).
 MEAN_RGB_TOLERANCE = 32.0
-MAX_CLASSES = 10           # the player tone table (256 entries) holds blended tones for every pair
-STATIONARITY_WARN = 0.5     # below this a clip is not one texture all over (grass 0.74, sea 0.65)
+MAX_CLASSES = 10  # the player tone table (256 entries) holds blended tones for every pair
+STATIONARITY_WARN = 0.5  # below this a clip is not one texture all over (grass 0.74, sea 0.65)
 
 
 @dataclass
@@ -126,15 +127,20 @@ class TilesModel:
         the Wang edges, and a ``warning`` when the clip was not one texture all over."""
         info = plain_info(self.info)
         pure = self.ring_class == self.tile_class
-        info.update(n_tiles=self.n_tiles, tile_size=f"{self.tile_size[1]}x{self.tile_size[0]}",
-                    loop_length=self.loop_length, classes=list(self.class_names),
-                    tiles_per_class=[len(self.tiles_of(c)) for c in range(self.n_classes)],
-                    border_tiles=int((~pure).sum()), loop_start=self.class_loop_start.tolist(),
-                    loop_cost=[round(float(v), 4) for v in self.class_loop_cost],
-                    toroid_cut_cost=[[round(float(v), 2) for v in row] for row in self.class_toroid_cost],
-                    ring_seam_cost=[round(float(v), 2) for v in self.seam_cost],
-                    mean_rgb=[[round(float(v), 1) for v in row] for row in self.mean_rgb],
-                    tiles_mb=round(self.tiles.nbytes / 2**20, 2))
+        info.update(
+            n_tiles=self.n_tiles,
+            tile_size=f"{self.tile_size[1]}x{self.tile_size[0]}",
+            loop_length=self.loop_length,
+            classes=list(self.class_names),
+            tiles_per_class=[len(self.tiles_of(c)) for c in range(self.n_classes)],
+            border_tiles=int((~pure).sum()),
+            loop_start=self.class_loop_start.tolist(),
+            loop_cost=[round(float(v), 4) for v in self.class_loop_cost],
+            toroid_cut_cost=[[round(float(v), 2) for v in row] for row in self.class_toroid_cost],
+            ring_seam_cost=[round(float(v), 2) for v in self.seam_cost],
+            mean_rgb=[[round(float(v), 1) for v in row] for row in self.mean_rgb],
+            tiles_mb=round(self.tiles.nbytes / 2**20, 2),
+        )
         info.setdefault("construction", "wang" if self.wang else "ring")
         if self.wang:
             info["wang_edges_left_right_top_bottom"] = np.asarray(self.edges).tolist()
@@ -148,15 +154,22 @@ class TilesModel:
         info = self.info
         th, tw = self.tile_size
         if self.torus is not None:
-            return (f"quilted torus {info.get('period_w')}x{info.get('period_h')} of {self.n_tiles} cells of "
-                    f"{tw}x{th} (blocks {info.get('quilt_block')}), loop {self.loop_length} frames from "
-                    f"{self.class_loop_start.tolist()}, cut cost {info.get('quilt_seam_cost', 0):.4g}")
-        kind = (f"Wang set of {info.get('edge_colours')} edge colours" if self.wang
-                else f"ring construction, toroidal cut cost {self.class_toroid_cost.mean():.4g}")
+            return (
+                f"quilted torus {info.get('period_w')}x{info.get('period_h')} of {self.n_tiles} cells of "
+                f"{tw}x{th} (blocks {info.get('quilt_block')}), loop {self.loop_length} frames from "
+                f"{self.class_loop_start.tolist()}, cut cost {info.get('quilt_seam_cost', 0):.4g}"
+            )
+        kind = (
+            f"Wang set of {info.get('edge_colours')} edge colours"
+            if self.wang
+            else f"ring construction, toroidal cut cost {self.class_toroid_cost.mean():.4g}"
+        )
         seams = self.seam_cost[self.seam_cost > 0]
-        return (f"{self.n_tiles} tiles of {tw}x{th}, loop {self.loop_length} frames from "
-                f"{self.class_loop_start.tolist()}, classes {', '.join(self.class_names)}, {kind}, ring seam cost "
-                f"{seams.mean() if seams.size else 0:.4g}")
+        return (
+            f"{self.n_tiles} tiles of {tw}x{th}, loop {self.loop_length} frames from "
+            f"{self.class_loop_start.tolist()}, classes {', '.join(self.class_names)}, {kind}, ring seam cost "
+            f"{seams.mean() if seams.size else 0:.4g}"
+        )
 
 
 def stationarity_warning(info: dict) -> str | None:
@@ -168,15 +181,16 @@ def stationarity_warning(info: dict) -> str | None:
     figure = info.get("stationarity")
     if figure is None or float(figure) >= STATIONARITY_WARN:
         return None
-    return (f"the clip is not one texture all over (stationarity {float(figure):.2f} < {STATIONARITY_WARN}: its "
-            f"{info.get('stationarity_worst', 'statistics')} differs between parts of the frame, as with a single "
-            f"object or a scene); tiles will repeat or misplace its structures")
+    return (
+        f"the clip is not one texture all over (stationarity {float(figure):.2f} < {STATIONARITY_WARN}: its "
+        f"{info.get('stationarity_worst', 'statistics')} differs between parts of the frame, as with a single "
+        f"object or a scene); tiles will repeat or misplace its structures"
+    )
 
 
 def write(group: h5py.Group, model: TilesModel) -> None:
     k, length, th, tw, _ = model.tiles.shape
-    group.create_dataset("tiles", data=np.asarray(model.tiles, np.uint8), chunks=(1, 1, th, tw, 3),
-                         compression="lzf")
+    group.create_dataset("tiles", data=np.asarray(model.tiles, np.uint8), chunks=(1, 1, th, tw, 3), compression="lzf")
     group.create_dataset("tile_class", data=np.asarray(model.tile_class, np.int32))
     group.create_dataset("ring_class", data=np.asarray(model.ring_class, np.int32))
     group.create_dataset("masks", data=np.asarray(model.masks, np.uint8), compression="lzf")
@@ -242,16 +256,22 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
         if model.tiles_of(cls).size == 0:
             check.fail(group.name + "/tile_class", f"class {cls} ({names[cls]!r}) has no tile of its own")
     border = model.ring_class != model.tile_class
-    if ((model.border_side < -1) | (model.border_side > 3)).any() or (model.border_side[border] < 0).any() \
-            or (model.border_side[~border] != -1).any():
+    if (
+        ((model.border_side < -1) | (model.border_side > 3)).any()
+        or (model.border_side[border] < 0).any()
+        or (model.border_side[~border] != -1).any()
+    ):
         check.fail(group.name + "/border_side", "must be 0..3 for border tiles and -1 for the others")
     if (model.mean_rgb < 0).any() or (model.mean_rgb > 255).any():
         check.fail(group.name + "/mean_rgb", "values outside 0..255")
     actual = model.tiles.reshape(k, -1, 3).mean(axis=1, dtype=np.float64)
     worst = float(np.abs(model.mean_rgb - actual).max())
     if worst > MEAN_RGB_TOLERANCE:
-        check.fail(group.name + "/mean_rgb", f"differs from the tiles' own mean colour by {worst:.0f} levels "
-                                             f"(more than {MEAN_RGB_TOLERANCE:g}); the player fits colour tone to it")
+        check.fail(
+            group.name + "/mean_rgb",
+            f"differs from the tiles' own mean colour by {worst:.0f} levels "
+            f"(more than {MEAN_RGB_TOLERANCE:g}); the player fits colour tone to it",
+        )
     _check_edges(group.name + "/edges", model, check)
     _check_torus(group.name, model, check)
     return model
@@ -269,8 +289,10 @@ def _check_torus(where: str, model: TilesModel, check: Checker) -> None:
     except (TypeError, ValueError):
         check.fail(where + "@torus_rows", "torus_rows and torus_cols must be integers")
     if rows < 1 or cols < 1 or rows * cols != model.n_tiles:
-        check.fail(where + "@torus_rows", f"a {rows}x{cols} torus of cells needs {max(0, rows * cols)} tiles, "
-                                          f"not {model.n_tiles}")
+        check.fail(
+            where + "@torus_rows",
+            f"a {rows}x{cols} torus of cells needs {max(0, rows * cols)} tiles, not {model.n_tiles}",
+        )
     if model.n_classes != 1 or (model.ring_class != model.tile_class).any():
         check.fail(where + "/tile_class", "a quilted set is one class without border tiles")
 
@@ -331,5 +353,8 @@ def _check_edges(where: str, model: TilesModel, check: Checker) -> None:
     want = {(a, (a + b + c) % k, b, c) for a in range(k) for b in range(k) for c in range(k)}
     have = {tuple(int(v) for v in row) for row in e}
     if len(e) != len(want) or have != want:
-        check.fail(where, f"a Wang set of {k} colours must hold one tile per (left, top, bottom) with right = "
-                          "(left + top + bottom) mod colours")
+        check.fail(
+            where,
+            f"a Wang set of {k} colours must hold one tile per (left, top, bottom) with right = "
+            "(left + top + bottom) mod colours",
+        )

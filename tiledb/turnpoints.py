@@ -6,6 +6,7 @@ video-texture transitions. Everything it needs is stored here ready to use; the 
 frame-distance matrix is not (it is ``T x T``), only the symmetry curve and the kept,
 sparse transitions.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -86,8 +87,10 @@ class TurnPointModel:
     def summary(self) -> str:
         """One line: turn points (the first twelve), transitions, exit frame."""
         info = self.info
-        return (f"{info.get('n_turn_points', 0)} turn points {self.turn_points.tolist()[:12]}, "
-                f"{info.get('n_transitions', 0)} transitions, exit frame {self.exit_frame}")
+        return (
+            f"{info.get('n_turn_points', 0)} turn points {self.turn_points.tolist()[:12]}, "
+            f"{info.get('n_transitions', 0)} transitions, exit frame {self.exit_frame}"
+        )
 
 
 def write(group: h5py.Group, model: TurnPointModel) -> None:
@@ -144,5 +147,12 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TurnPointMode
     if m and np.any((src.astype(np.int64) > exit_frame) | (dst.astype(np.int64) > exit_frame)):
         check.fail(f"{base}/src", "a transition lies beyond the exit frame")
     info = check.info(group)
-    return TurnPointModel(turn_points=turns.astype(np.int32), src=src.astype(np.int32), dst=dst.astype(np.int32),
-                          exit_frame=exit_frame, info=info, **arrays, **per_tr)
+    return TurnPointModel(
+        turn_points=turns.astype(np.int32),
+        src=src.astype(np.int32),
+        dst=dst.astype(np.int32),
+        exit_frame=exit_frame,
+        info=info,
+        **arrays,
+        **per_tr,
+    )

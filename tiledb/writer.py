@@ -10,6 +10,7 @@ machines but lapse when the writer's HDF5 handle closes; a writer that starts in
 can take the file, and the first writer's commit then fails (the database stays as it was).
 Where there is no ``fcntl`` (Windows) nothing is locked or removed.
 """
+
 from __future__ import annotations
 
 import os
@@ -77,6 +78,7 @@ class DatabaseWriter:
         self._file.attrs[schema.ATTR_FORMAT] = schema.FORMAT_NAME
         self._file.attrs[schema.ATTR_VERSION] = np.asarray(schema.FORMAT_VERSION, np.int32)
         from . import __version__
+
         self._file.attrs[schema.ATTR_CREATED_BY] = f"dynatex {__version__}"
         self._textures = self._file.create_group(schema.TEXTURES)
         self._removed: set[str] = set()
@@ -117,6 +119,7 @@ class DatabaseWriter:
 
     def source(self, name: str) -> SourceInfo:
         from ._check import Checker
+
         g = self._texture_group(name)
         return _source.read(g[schema.SOURCE], Checker(self._tmp))
 
@@ -145,14 +148,14 @@ class DatabaseWriter:
                         self._texture_group(name)
             self._file.close()
             self._file = None
-            with TileDB(self._tmp, probe=False) as db:     # written here, just now
+            with TileDB(self._tmp, probe=False) as db:  # written here, just now
                 db.validate()
             if self._old is not None:
                 self._old.close()
                 self._old = None
             _keep_mode(self._tmp, self.path)
             os.replace(self._tmp, self.path)
-            _probe.remember(self.path)       # read back above: no probe needed to open it
+            _probe.remember(self.path)  # read back above: no probe needed to open it
         except BaseException:
             self.abort()
             raise
@@ -174,7 +177,7 @@ class DatabaseWriter:
 
     def _release(self) -> None:
         if self._lock is not None:
-            os.close(self._lock)        # drops the flock
+            os.close(self._lock)  # drops the flock
             self._lock = None
 
     def __enter__(self) -> DatabaseWriter:
@@ -197,7 +200,9 @@ def _check_name(name: str) -> str:
     name = _nfc(name)
     problem = schema.texture_name_problem(name)
     if problem:
-        raise InvalidArgumentError(f"texture name {name!r} is invalid: it {problem}; a name is {schema.TEXTURE_NAME_RULE}")
+        raise InvalidArgumentError(
+            f"texture name {name!r} is invalid: it {problem}; a name is {schema.TEXTURE_NAME_RULE}"
+        )
     return name
 
 
@@ -237,7 +242,7 @@ def remove_stale_temp_files(path: str | os.PathLike) -> list[str]:
             if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
                 os.unlink(entry.path)
                 removed.append(entry.path)
-        except OSError:         # held by a live writer (BlockingIOError), gone, or not ours to remove
+        except OSError:  # held by a live writer (BlockingIOError), gone, or not ours to remove
             pass
         finally:
             os.close(fd)
@@ -261,7 +266,7 @@ def _create_temp(path: str) -> tuple[str, int | None]:
         fcntl.flock(fd, fcntl.LOCK_SH)
         if os.fstat(fd).st_nlink > 0:
             return tmp, fd
-        os.close(fd)            # a cleaner took it between creation and lock: try another name
+        os.close(fd)  # a cleaner took it between creation and lock: try another name
     raise FileExistsError(f"{path}: cannot create a temporary file in {folder}")
 
 

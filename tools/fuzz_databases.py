@@ -11,6 +11,7 @@ prints the outcome table per method and mutation kind, then the mutants that wen
 when any did. The test suite runs a bounded number of the same mutants
 (``tests/tiledb/test_fuzz.py``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,13 +41,24 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="dynatex-fuzz-") as tmp:
         bases = fuzzing.build_bases(tmp)
         devices = [None] if args.no_opencl else fuzzing.verified_device()
-        print(f"bases built in {time.perf_counter() - t0:.0f} s; backends: "
-              f"{', '.join('numpy' if d is None else 'opencl ' + d for d in devices)}", flush=True)
+        print(
+            f"bases built in {time.perf_counter() - t0:.0f} s; backends: "
+            f"{', '.join('numpy' if d is None else 'opencl ' + d for d in devices)}",
+            flush=True,
+        )
         t0 = time.perf_counter()
         results = []
         out = open(args.json, "w") if args.json else None
-        for r in fuzzing.fuzz(bases, tmp, seed=args.seed, count=args.count, start=args.start,
-                              timeout=args.timeout, workers=args.workers, devices=devices):
+        for r in fuzzing.fuzz(
+            bases,
+            tmp,
+            seed=args.seed,
+            count=args.count,
+            start=args.start,
+            timeout=args.timeout,
+            workers=args.workers,
+            devices=devices,
+        ):
             results.append(r)
             if out:
                 out.write(json.dumps({"spec": r.spec, "outcome": r.outcome, "steps": r.steps}) + "\n")
@@ -55,8 +67,10 @@ def main(argv: list[str] | None = None) -> int:
         if out:
             out.close()
     seconds = time.perf_counter() - t0
-    print(f"\n{len(results)} mutants of seed {args.seed} (from {args.start}) in {seconds:.0f} s "
-          f"({len(results) / seconds:.1f} per second, {args.workers} workers)\n")
+    print(
+        f"\n{len(results)} mutants of seed {args.seed} (from {args.start}) in {seconds:.0f} s "
+        f"({len(results) / seconds:.1f} per second, {args.workers} workers)\n"
+    )
     print(fuzzing.table(results))
     bad = [r for r in results if r.outcome in fuzzing.BAD]
     for r in bad[: args.show_bad]:

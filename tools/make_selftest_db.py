@@ -7,6 +7,7 @@ sideways (a period of 16 frames, so turn points exist), small enough to ship (~0
 and to check a device in seconds. Run it after a format change; the self-test's cached
 verdicts follow the file's content.
 """
+
 from __future__ import annotations
 
 import sys
@@ -32,10 +33,10 @@ def swinging_clip(t: int = 48, h: int = 24, w: int = 32, seed: int = 0) -> np.nd
     rng = np.random.default_rng(seed)
     noise = rng.normal(size=(h, 2 * w, 3))
     fy, fx = np.fft.fftfreq(h)[:, None], np.fft.fftfreq(2 * w)[None, :]
-    low = np.exp(-(fy ** 2 + fx ** 2) * 300)
+    low = np.exp(-(fy**2 + fx**2) * 300)
     tex = np.stack([np.real(np.fft.ifft2(np.fft.fft2(noise[..., c]) * low)) for c in range(3)], -1)
     tex = (tex - tex.mean()) / tex.std() * 40 + 128
-    frames = [tex[:, int(round(16 + 12 * np.sin(2 * np.pi * k / 16))):][:, :w] for k in range(t)]
+    frames = [tex[:, int(round(16 + 12 * np.sin(2 * np.pi * k / 16))) :][:, :w] for k in range(t)]
     return np.clip(np.array(frames), 0, 255).astype(np.uint8)
 
 

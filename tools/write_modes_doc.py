@@ -1,4 +1,5 @@
 """Write ``player/MODES.md`` from the player modes' declarations (tests/player/test_controls.py checks it)."""
+
 from __future__ import annotations
 
 import pathlib

@@ -4,6 +4,7 @@ Every numeric option is parsed by a :class:`Number` (or a type built on one) tha
 its range once: the same object checks the value (finite, in range, before any work starts)
 and writes the range into the option's help (``%(type)s``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -96,13 +97,17 @@ def add_param(group: Any, param: Param, *, dest: str | None = None, default: Any
         name, action = ("--no-" + flag[2:], "store_false") if param.default else (flag, "store_true")
         group.add_argument(name, dest=dest, action=action, default=default, help=help_text)
         return
-    metavar = param.extra.get("metavar") or param.kind.metavar or (
-        str(param.kind) if isinstance(param.kind, Choice) else flag.lstrip("-").upper().replace("-", "_"))
+    metavar = (
+        param.extra.get("metavar")
+        or param.kind.metavar
+        or (str(param.kind) if isinstance(param.kind, Choice) else flag.lstrip("-").upper().replace("-", "_"))
+    )
     action = "append" if getattr(param.kind, "repeat", False) else "store"
     if action == "append" and default is not argparse.SUPPRESS:
-        default = None                  # argparse would append to the declared default itself
-    group.add_argument(flag, dest=dest, type=KindArg(param.kind), action=action, metavar=metavar, default=default,
-                       help=help_text)
+        default = None  # argparse would append to the declared default itself
+    group.add_argument(
+        flag, dest=dest, type=KindArg(param.kind), action=action, metavar=metavar, default=default, help=help_text
+    )
 
 
 #: Shared declarations.
@@ -120,8 +125,10 @@ def load_clip_arg(path: str, **options):
     """:func:`~dynatex.analyzer.video.load_clip` of a command-line clip: a ``.npy`` file is read
     as an array (no pickles), a video file is decoded in a child process (``isolate``)."""
     from ..analyzer.video import load_clip
+
     if path.endswith(".npy") and os.path.isfile(path):
         import numpy as np
+
         return load_clip(np.load(path, allow_pickle=False), **options)
     return load_clip(path, isolate=os.path.isfile(path), **options)
 
@@ -131,13 +138,13 @@ def tqdm_progress(desc: str, enabled: bool = True) -> Callable[[int, int | None]
     if not enabled:
         return None
     from tqdm import tqdm
+
     bar = None
 
     def update(done: int, total: int | None) -> None:
         nonlocal bar
         if bar is None:
-            bar = tqdm(total=total, desc=desc, unit="it", file=sys.stderr, leave=False,
-                       disable=not sys.stderr.isatty())
+            bar = tqdm(total=total, desc=desc, unit="it", file=sys.stderr, leave=False, disable=not sys.stderr.isatty())
         if total is not None and bar.total != total:
             bar.total = total
         bar.n = done
@@ -148,5 +155,19 @@ def tqdm_progress(desc: str, enabled: bool = True) -> Callable[[int, int | None]
     return update
 
 
-__all__ = ["MAX_COUNT", "MAX_SEED", "MAX_SIDE", "KindArg", "add_param", "Number", "Numbers", "UsageError", "count", "load_clip_arg",
-           "positive_int", "seed", "size_arg", "tqdm_progress"]
+__all__ = [
+    "MAX_COUNT",
+    "MAX_SEED",
+    "MAX_SIDE",
+    "KindArg",
+    "add_param",
+    "Number",
+    "Numbers",
+    "UsageError",
+    "count",
+    "load_clip_arg",
+    "positive_int",
+    "seed",
+    "size_arg",
+    "tqdm_progress",
+]

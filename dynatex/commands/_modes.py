@@ -6,6 +6,7 @@ its constructor options and its controls as flags, so a flag of another mode is 
 argparse usage error. A new control declared on a player class appears here, in the saved
 state and in the class docstring without further code.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -73,9 +74,10 @@ def apply_controls(player: Any, args: argparse.Namespace) -> None:
 
 
 def modes_epilog(command: str) -> str:
-    return (f"Each mode has its own options and controls; this help lists one mode's (--mode). "
-            f"See them with 'dynatex {command} --mode MODE --help' for MODE in: {', '.join(sorted(MODES))}.")
+    return (
+        f"Each mode has its own options and controls; this help lists one mode's (--mode). "
+        f"See them with 'dynatex {command} --mode MODE --help' for MODE in: {', '.join(sorted(MODES))}."
+    )
 
 
-__all__ = ["add_mode_arguments", "apply_controls", "known_mode", "mode_from_argv", "modes_epilog",
-           "player_kwargs"]
+__all__ = ["add_mode_arguments", "apply_controls", "known_mode", "mode_from_argv", "modes_epilog", "player_kwargs"]

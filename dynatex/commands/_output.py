@@ -8,6 +8,7 @@ terminal and the last of them becomes the reason, and a video or animation that 
 read back whole after closing (disk full, a device instead of a file) is an error, not a
 silent loss.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -42,9 +43,9 @@ MAX_ANIMATION_BYTES = 2**30
 
 @dataclass(frozen=True)
 class VideoCodec:
-    fourcc: str         # OpenCV's fourcc, or the FFmpeg encoder when ``library`` is "pyav"
+    fourcc: str  # OpenCV's fourcc, or the FFmpeg encoder when ``library`` is "pyav"
     label: str
-    min_side: int       # width and height the encoder accepts
+    min_side: int  # width and height the encoder accepts
     max_side: int
     library: str = "opencv"
 
@@ -61,12 +62,12 @@ VIDEO_CODECS = {
 class Animation:
     """An animated image format Pillow writes: frame delays are whole ``tick`` seconds."""
 
-    pillow: str         # Pillow's format name
+    pillow: str  # Pillow's format name
     label: str
     max_side: int
-    tick: float         # seconds per unit of the format's frame delay
-    min_delay: int      # shortest delay (ticks) players honour
-    max_delay: int      # longest delay (ticks) the format stores
+    tick: float  # seconds per unit of the format's frame delay
+    min_delay: int  # shortest delay (ticks) players honour
+    max_delay: int  # longest delay (ticks) the format stores
 
     def fps_range(self) -> tuple[float, float]:
         return max(MIN_FPS, 1 / (self.max_delay * self.tick)), min(MAX_FPS, 1 / (self.min_delay * self.tick))
@@ -92,8 +93,9 @@ def check_fps(fps: float, what: str = "frame rate") -> float:
     except (TypeError, ValueError):
         raise OutputError(f"{what} must be a number, not {fps!r}") from None
     if not (math.isfinite(v) and MIN_FPS <= v <= MAX_FPS):
-        raise OutputError(f"{what} must be a finite number in [{MIN_FPS:g}, {MAX_FPS:g}] frames per second, "
-                          f"not {fps!r}")
+        raise OutputError(
+            f"{what} must be a finite number in [{MIN_FPS:g}, {MAX_FPS:g}] frames per second, not {fps!r}"
+        )
     return v
 
 
@@ -131,8 +133,9 @@ class FrameWriter:
             self.kind = "animation"
             self._animation = ANIMATIONS[ext]
         else:
-            raise OutputError(f"output {output!r}: use {', '.join([*VIDEO_CODECS, *ANIMATIONS])}, "
-                              f"a .png pattern or a folder")
+            raise OutputError(
+                f"output {output!r}: use {', '.join([*VIDEO_CODECS, *ANIMATIONS])}, a .png pattern or a folder"
+            )
         if self.kind == "png":
             try:
                 self.pattern % 0
@@ -162,18 +165,24 @@ class FrameWriter:
         codec = self._codec
         assert codec is not None
         if not (codec.min_side <= w <= codec.max_side and codec.min_side <= h <= codec.max_side):
-            fits = [f"{ext} ({c.label})" for ext, c in VIDEO_CODECS.items()
-                    if c.min_side <= min(w, h) and max(w, h) <= c.max_side]
-            raise OutputError(f"cannot write {w}x{h} frames to {self.output}: {codec.label} takes widths and "
-                              f"heights {codec.min_side}..{codec.max_side}; use {' or '.join(fits + ['PNG frames'])}")
+            fits = [
+                f"{ext} ({c.label})"
+                for ext, c in VIDEO_CODECS.items()
+                if c.min_side <= min(w, h) and max(w, h) <= c.max_side
+            ]
+            raise OutputError(
+                f"cannot write {w}x{h} frames to {self.output}: {codec.label} takes widths and "
+                f"heights {codec.min_side}..{codec.max_side}; use {' or '.join(fits + ['PNG frames'])}"
+            )
         existed = self._touch()
         self._log = tempfile.TemporaryFile()  # noqa: SIM115 (kept open until close(): FFmpeg's log)
         with self._quiet("cannot open"):
-            self._video = self._open_pyav(codec, h, w, fps) if codec.library == "pyav" else \
-                self._open_opencv(codec, h, w, fps)
+            self._video = (
+                self._open_pyav(codec, h, w, fps) if codec.library == "pyav" else self._open_opencv(codec, h, w, fps)
+            )
         if self._video is None:
             if not existed and os.path.isfile(self.output) and os.path.getsize(self.output) == 0:
-                os.unlink(self.output)                  # OpenCV leaves an empty file behind
+                os.unlink(self.output)  # OpenCV leaves an empty file behind
             library = "PyAV" if codec.library == "pyav" else "OpenCV"
             raise OutputError(f"cannot write video {self.output}: {self._reason(f'{library} refused to open it')}")
 
@@ -182,7 +191,7 @@ class FrameWriter:
         existed = os.path.lexists(self.output)
         if os.path.exists(self.output) and not os.path.isfile(self.output):
             raise OutputError(f"cannot write {self.output}: it exists and is not a regular file")
-        try:        # the OS's reason, which the encoders would swallow
+        try:  # the OS's reason, which the encoders would swallow
             os.close(os.open(self.output, os.O_WRONLY | os.O_CREAT | getattr(os, "O_NONBLOCK", 0), 0o666))
         except OSError as exc:
             raise OutputError(f"cannot write {self.output}: {exc.strerror or exc}") from None
@@ -192,20 +201,26 @@ class FrameWriter:
         anim = self._animation
         assert anim is not None
         if not (1 <= w <= anim.max_side and 1 <= h <= anim.max_side):
-            raise OutputError(f"cannot write {w}x{h} frames to {self.output}: {anim.label} takes widths and "
-                              f"heights 1..{anim.max_side}; use .mp4 or PNG frames")
+            raise OutputError(
+                f"cannot write {w}x{h} frames to {self.output}: {anim.label} takes widths and "
+                f"heights 1..{anim.max_side}; use .mp4 or PNG frames"
+            )
         lo, hi = anim.fps_range()
         if not lo <= fps <= hi:
-            raise OutputError(f"cannot write {self.output} at {fps:g} frames per second: {anim.label} frame "
-                              f"delays take [{lo:.4g}, {hi:.4g}] frames per second; use .mp4 or another --fps")
+            raise OutputError(
+                f"cannot write {self.output} at {fps:g} frames per second: {anim.label} frame "
+                f"delays take [{lo:.4g}, {hi:.4g}] frames per second; use .mp4 or another --fps"
+            )
 
     def _open_opencv(self, codec: VideoCodec, h: int, w: int, fps: float):
         import cv2
+
         video = cv2.VideoWriter(self.output, cv2.VideoWriter_fourcc(*codec.fourcc), fps, (w, h))
         return video if video.isOpened() else None
 
     def _open_pyav(self, codec: VideoCodec, h: int, w: int, fps: float):
         import av
+
         try:
             container = av.open(self.output, "w", format="mp4", options={"movflags": "+faststart"})
         except (av.FFmpegError, OSError) as exc:
@@ -232,15 +247,20 @@ class FrameWriter:
         if self._shape is None:
             raise RuntimeError("FrameWriter.open must come before write")
         if frame.shape[:2] != self._shape:
-            raise InvalidArgumentError(f"frame is {frame.shape[1]}x{frame.shape[0]}, the output was opened for "
-                             f"{self._shape[1]}x{self._shape[0]}")
+            raise InvalidArgumentError(
+                f"frame is {frame.shape[1]}x{frame.shape[0]}, the output was opened for "
+                f"{self._shape[1]}x{self._shape[0]}"
+            )
         if self.kind == "animation":
             if (self.index + 1) * frame[..., :3].nbytes > MAX_ANIMATION_BYTES:
-                raise OutputError(f"cannot write {self.output}: animated images are encoded from memory, at most "
-                                  f"{MAX_ANIMATION_BYTES >> 20} MiB of frames; use .mp4 or fewer frames")
+                raise OutputError(
+                    f"cannot write {self.output}: animated images are encoded from memory, at most "
+                    f"{MAX_ANIMATION_BYTES >> 20} MiB of frames; use .mp4 or fewer frames"
+                )
             self._frames.append(np.array(frame[..., :3], np.uint8))
         elif self.kind == "png":
             import cv2
+
             path = self.pattern % self.index
             ok, data = cv2.imencode(".png", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
             if not ok:
@@ -256,12 +276,14 @@ class FrameWriter:
             self._write_pyav(frame)
         else:
             import cv2
+
             with self._quiet("cannot write"):
                 self._video.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
         self.index += 1
 
     def _write_pyav(self, frame: np.ndarray) -> None:
         import av
+
         container, stream = self._video
         h, w = self._shape
         rgb = np.ascontiguousarray(frame[..., :3])
@@ -282,7 +304,7 @@ class FrameWriter:
             if self._frames:
                 self._close_animation()
             elif self._shape is not None and os.path.isfile(self.output) and os.path.getsize(self.output) == 0:
-                os.unlink(self.output)          # opened, no frame written: no empty file left behind
+                os.unlink(self.output)  # opened, no frame written: no empty file left behind
             return
         if self._video is None:
             return
@@ -291,8 +313,10 @@ class FrameWriter:
             with self._quiet("cannot finish"):
                 count = self._close_pyav(video) if isinstance(video, tuple) else self._close_opencv(video)
             if count < self.index:
-                raise OutputError(f"video {self.output} is incomplete: {count} of {self.index} frames read back "
-                                  f"(disk full, or not a regular file?)")
+                raise OutputError(
+                    f"video {self.output} is incomplete: {count} of {self.index} frames read back "
+                    f"(disk full, or not a regular file?)"
+                )
         finally:
             if self._log is not None:
                 self._log.close()
@@ -300,6 +324,7 @@ class FrameWriter:
 
     def _close_opencv(self, video) -> int:
         import cv2
+
         video.release()
         cap = cv2.VideoCapture(self.output)
         count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
@@ -308,6 +333,7 @@ class FrameWriter:
 
     def _close_pyav(self, video) -> int:
         import av
+
         container, stream = video
         try:
             container.mux(stream.encode(None))
@@ -322,6 +348,7 @@ class FrameWriter:
 
     def _close_animation(self) -> None:
         from PIL import Image
+
         anim = self._animation
         assert anim is not None
         frames, self._frames = self._frames, []
@@ -330,15 +357,17 @@ class FrameWriter:
         images = [Image.fromarray(f, "RGB") for f in frames]
         extra = {"lossless": False, "quality": 90, "method": 4} if anim.pillow == "WEBP" else {}
         try:
-            images[0].save(self.output, format=anim.pillow, save_all=True, append_images=images[1:],
-                           duration=ms, loop=0, **extra)
+            images[0].save(
+                self.output, format=anim.pillow, save_all=True, append_images=images[1:], duration=ms, loop=0, **extra
+            )
         except (OSError, ValueError) as exc:
             raise OutputError(f"cannot write {self.output}: {getattr(exc, 'strerror', None) or exc}") from None
         total = read_animation(self.output)[1] if os.path.isfile(self.output) else None
         if total is None or abs(sum(ms) - sum(total)) > len(frames):
             got = "nothing" if total is None else f"{sum(total)} ms of {sum(ms)} ms"
-            raise OutputError(f"{anim.label} {self.output} is incomplete: {got} read back "
-                              f"(disk full, or not a regular file?)")
+            raise OutputError(
+                f"{anim.label} {self.output} is incomplete: {got} read back (disk full, or not a regular file?)"
+            )
 
     def __enter__(self) -> Self:
         return self
@@ -361,7 +390,7 @@ class FrameWriter:
             if sys.stderr is not None:
                 sys.stderr.flush()
             saved = os.dup(2)
-        except (OSError, ValueError):   # no stderr to protect (closed, or a closed pipe)
+        except (OSError, ValueError):  # no stderr to protect (closed, or a closed pipe)
             yield
             return
         try:
@@ -395,13 +424,14 @@ def read_animation(path: str) -> tuple[int, list[int]] | None:
     count, say whether every frame is there.
     """
     from PIL import Image
+
     try:
         with Image.open(path) as im:
             n = getattr(im, "n_frames", 1)
             delays = []
             for i in range(n):
                 im.seek(i)
-                im.load()           # WebP sets a frame's duration when it decodes it
+                im.load()  # WebP sets a frame's duration when it decodes it
                 delays.append(int(im.info.get("duration", 0)))
             return n, delays
     except (OSError, ValueError, EOFError):

@@ -4,6 +4,7 @@ One clip goes into ``DB.h5`` (other textures in it are kept). Several clips (pat
 folders of clips, ``.txt`` lists) make one database per clip in the folder ``-o``, on
 Dask with ``--scheduler``, optionally merged into one database with ``--merge``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,38 +30,75 @@ from ._common import (
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
-    p = sub.add_parser("analyze", help="learn models from clips and write tile databases",
-                       description="Read a clip, run the chosen methods and write them into a tile "
-                                   "database (other textures already in it are kept). Given several clips "
-                                   "(or a glob, a folder of clips, a .txt list), write one database per clip "
-                                   "into the folder -o, skipping clips whose database is already complete, "
-                                   "and print a summary; the exit code is 2 when some clips failed.")
-    p.add_argument("clip", nargs="+",
-                   help="video file, folder of images, or .npy array (T, H, W[, C]) uint8; several clips, "
-                        "globs, folders of clips or .txt files listing clips analyse a corpus")
-    p.add_argument("-o", "--output", required=True,
-                   help="tile database to create or update (.h5); with several clips, the folder of their databases")
-    p.add_argument("--name", help="texture name: any letters, up to 64 characters, no '/' (default: the clip's file "
-                                  "name without extension; one clip only)")
-    p.add_argument("--methods", default="lds",
-                   help=f"comma-separated methods to run: {', '.join(METHODS)} (default: lds)")
-    p.add_argument("--overwrite", action="store_true",
-                   help="start a new database instead of updating one; with several clips, analyse every clip "
-                        "again (even those whose database is complete) and start --merge afresh")
+    p = sub.add_parser(
+        "analyze",
+        help="learn models from clips and write tile databases",
+        description="Read a clip, run the chosen methods and write them into a tile "
+        "database (other textures already in it are kept). Given several clips "
+        "(or a glob, a folder of clips, a .txt list), write one database per clip "
+        "into the folder -o, skipping clips whose database is already complete, "
+        "and print a summary; the exit code is 2 when some clips failed.",
+    )
+    p.add_argument(
+        "clip",
+        nargs="+",
+        help="video file, folder of images, or .npy array (T, H, W[, C]) uint8; several clips, "
+        "globs, folders of clips or .txt files listing clips analyse a corpus",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="tile database to create or update (.h5); with several clips, the folder of their databases",
+    )
+    p.add_argument(
+        "--name",
+        help="texture name: any letters, up to 64 characters, no '/' (default: the clip's file "
+        "name without extension; one clip only)",
+    )
+    p.add_argument(
+        "--methods", default="lds", help=f"comma-separated methods to run: {', '.join(METHODS)} (default: lds)"
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="start a new database instead of updating one; with several clips, analyse every clip "
+        "again (even those whose database is complete) and start --merge afresh",
+    )
     g = p.add_argument_group("corpus and scale")
-    g.add_argument("--scheduler", default="none", metavar="none|local|tcp://HOST:PORT",
-                   help="where clips run: none (in this process, default), local (a Dask LocalCluster on this "
-                        "machine) or the address of a running Dask scheduler; needs dynatex[dask]")
-    g.add_argument("--workers", type=positive_int, default=None,
-                   help="workers of --scheduler local (default: CPU cores, at most one per clip); BLAS threads "
-                        "are split between them")
-    g.add_argument("--merge", default=None, metavar="OUT.h5",
-                   help="afterwards, gather every clip's texture into this database (atomically)")
-    g.add_argument("--max-memory", default=None, metavar="SIZE",
-                   help="bound per clip, e.g. 2GB: the clip is spilled to disk and lds and mixture learn out of "
-                        "core; other methods need the frames to fit")
-    g.add_argument("--spill-dir", default=None, metavar="DIR",
-                   help="folder of the clip copies --max-memory spills (default: the system's temporary folder)")
+    g.add_argument(
+        "--scheduler",
+        default="none",
+        metavar="none|local|tcp://HOST:PORT",
+        help="where clips run: none (in this process, default), local (a Dask LocalCluster on this "
+        "machine) or the address of a running Dask scheduler; needs dynatex[dask]",
+    )
+    g.add_argument(
+        "--workers",
+        type=positive_int,
+        default=None,
+        help="workers of --scheduler local (default: CPU cores, at most one per clip); BLAS threads "
+        "are split between them",
+    )
+    g.add_argument(
+        "--merge",
+        default=None,
+        metavar="OUT.h5",
+        help="afterwards, gather every clip's texture into this database (atomically)",
+    )
+    g.add_argument(
+        "--max-memory",
+        default=None,
+        metavar="SIZE",
+        help="bound per clip, e.g. 2GB: the clip is spilled to disk and lds and mixture learn out of "
+        "core; other methods need the frames to fit",
+    )
+    g.add_argument(
+        "--spill-dir",
+        default=None,
+        metavar="DIR",
+        help="folder of the clip copies --max-memory spills (default: the system's temporary folder)",
+    )
     g = p.add_argument_group("clip input")
     g.add_argument("--start", type=count, default=0, help="first frame (default 0)")
     g.add_argument("--stop", type=positive_int, default=None, help="stop before this frame")
@@ -69,8 +107,12 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     g.add_argument("--resize", type=size_arg, default=None, metavar="WxH", help="resize frames")
     g.add_argument("--grey", action="store_true", help="analyse in grey levels instead of colour")
     groups = _add_method_options(p)
-    groups["turnpoints"].add_argument("--tp-plot", default=None, metavar="PNG",
-                                      help="write a plot of the symmetry curve, turn points and probabilities")
+    groups["turnpoints"].add_argument(
+        "--tp-plot",
+        default=None,
+        metavar="PNG",
+        help="write a plot of the symmetry curve, turn points and probabilities",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or summary")
     return p
 
@@ -112,14 +154,20 @@ def method_params(name: str, args: argparse.Namespace) -> dict:
 def run(args: argparse.Namespace) -> int:
     from ..analyzer.corpus import find_clips
     from ..analyzer.stream import parse_bytes
+
     names = [m.strip() for m in args.methods.split(",") if m.strip()]
     if not names:
         raise UsageError("--methods names no method")
     methods = [get_method(m) for m in names]
     max_memory = None if args.max_memory is None else _parse_bytes_arg(parse_bytes, args.max_memory)
     clips = find_clips(args.clip)
-    corpus = (len(clips) > 1 or len(args.clip) > 1 or args.scheduler != "none" or args.merge is not None
-              or os.path.isdir(args.output))
+    corpus = (
+        len(clips) > 1
+        or len(args.clip) > 1
+        or args.scheduler != "none"
+        or args.merge is not None
+        or os.path.isdir(args.output)
+    )
     if corpus:
         return _run_corpus(args, clips, names, max_memory)
     return _run_one(args, clips[0], methods, max_memory)
@@ -133,12 +181,19 @@ def _parse_bytes_arg(parse, text: str) -> int:
 
 
 def _load_options(args: argparse.Namespace) -> dict:
-    return {"start": args.start, "stop": args.stop, "step": args.step, "crop": args.crop, "size": args.resize,
-            "color": not args.grey}
+    return {
+        "start": args.start,
+        "stop": args.stop,
+        "step": args.step,
+        "crop": args.crop,
+        "size": args.resize,
+        "color": not args.grey,
+    }
 
 
 def _run_one(args: argparse.Namespace, clip_path: str, methods, max_memory: int | None) -> int:
     from ..analyzer.corpus import learn_into
+
     stem = os.path.splitext(os.path.basename(os.path.normpath(clip_path)))[0]
     texture = args.name or texture_name_from(stem)
     show = not args.quiet
@@ -147,6 +202,7 @@ def _run_one(args: argparse.Namespace, clip_path: str, methods, max_memory: int 
     def report(name: str, model, seconds: float) -> None:
         if name == "turnpoints" and args.tp_plot:
             from ..analyzer.turnpoints import plot_turnpoints
+
             plot_turnpoints(model, args.tp_plot, title=texture)
         if show:
             print(f"{name}: {model.summary()} ({seconds:.1f} s)", file=sys.stderr)
@@ -157,40 +213,71 @@ def _run_one(args: argparse.Namespace, clip_path: str, methods, max_memory: int 
     params = {m.name: method_params(m.name, args) for m in methods}
     # Open (and so validate) an existing database before the long work.
     with DatabaseWriter(args.output, overwrite=args.overwrite) as writer:
-        source = learn_into(writer, texture, clip_path, [m.name for m in methods], params=params,
-                            load=_load_options(args), max_memory=max_memory, spill_dir=args.spill_dir,
-                            isolate=True, progress=lambda stage: tqdm_progress(stage, show), on_model=report)
+        source = learn_into(
+            writer,
+            texture,
+            clip_path,
+            [m.name for m in methods],
+            params=params,
+            load=_load_options(args),
+            max_memory=max_memory,
+            spill_dir=args.spill_dir,
+            isolate=True,
+            progress=lambda stage: tqdm_progress(stage, show),
+            on_model=report,
+        )
     if show:
         s = source
-        print(f"wrote texture {texture!r} ({s.width}x{s.height}x{s.channels}, {s.n_frames} frames, methods "
-              f"{', '.join(m.name for m in methods)}) to {args.output} in {time.perf_counter() - t0:.1f} s")
+        print(
+            f"wrote texture {texture!r} ({s.width}x{s.height}x{s.channels}, {s.n_frames} frames, methods "
+            f"{', '.join(m.name for m in methods)}) to {args.output} in {time.perf_counter() - t0:.1f} s"
+        )
     return 0
 
 
 def _run_corpus(args: argparse.Namespace, clips: list[str], names: list[str], max_memory: int | None) -> int:
     from ..analyzer.corpus import FAILED, analyze_corpus, format_table
-    for flag, value in (("--name", args.name), ("--tiles-mix", getattr(args, "tiles.mix")), ("--tp-plot", args.tp_plot)):
+
+    for flag, value in (
+        ("--name", args.name),
+        ("--tiles-mix", getattr(args, "tiles.mix")),
+        ("--tp-plot", args.tp_plot),
+    ):
         if value:
             raise UsageError(f"{flag} works with one clip only, not a corpus of {len(clips)}")
     if os.path.exists(args.output) and not os.path.isdir(args.output):
-        raise UsageError(f"-o {args.output}: with several clips -o names a folder for their databases, "
-                         f"and this is a file")
+        raise UsageError(
+            f"-o {args.output}: with several clips -o names a folder for their databases, and this is a file"
+        )
     if args.merge is not None and os.path.isdir(args.merge):
         raise UsageError(f"--merge {args.merge}: is a folder, not a database file")
     if args.merge is not None and not os.path.isdir(os.path.dirname(os.path.abspath(args.merge))):
         raise UsageError(f"--merge {args.merge}: folder {os.path.dirname(os.path.abspath(args.merge))} does not exist")
     params = {name: method_params(name, args) for name in names}
-    results = analyze_corpus(clips, args.output, methods=names, params=params, load=_load_options(args),
-                             scheduler=args.scheduler, workers=args.workers, merge=args.merge,
-                             max_memory=max_memory, spill_dir=args.spill_dir, overwrite=args.overwrite,
-                             progress=not args.quiet)
+    results = analyze_corpus(
+        clips,
+        args.output,
+        methods=names,
+        params=params,
+        load=_load_options(args),
+        scheduler=args.scheduler,
+        workers=args.workers,
+        merge=args.merge,
+        max_memory=max_memory,
+        spill_dir=args.spill_dir,
+        overwrite=args.overwrite,
+        progress=not args.quiet,
+    )
     failed = [r for r in results if r.status == FAILED]
     if not args.quiet:
         print(format_table(results))
         if args.merge is not None:
             print(f"merged {len(results) - len(failed)} textures into {args.merge}")
     if failed:
-        print(f"dynatex: error: {len(failed)} of {len(results)} clips failed (first: "
-              f"{os.path.basename(failed[0].clip)}: {failed[0].reason})", file=sys.stderr)
+        print(
+            f"dynatex: error: {len(failed)} of {len(results)} clips failed (first: "
+            f"{os.path.basename(failed[0].clip)}: {failed[0].reason})",
+            file=sys.stderr,
+        )
         return 2
     return 0

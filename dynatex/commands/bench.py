@@ -1,4 +1,5 @@
 """``dynatex bench``: frames per second, latency percentiles, numpy reference and roofline."""
+
 from __future__ import annotations
 
 import argparse
@@ -11,10 +12,13 @@ from ._common import UsageError, positive_int, size_arg
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
-    p = sub.add_parser("bench", help="benchmark the player (fps, latency, roofline, numpy side by side)",
-                       description="Without a database: LDS players (n=50) on synthetic textures at each "
-                                   "--sizes, float32 and float16 bases. With a database: the chosen texture "
-                                   "and mode. Copy bandwidth is measured in the same run for the roofline.")
+    p = sub.add_parser(
+        "bench",
+        help="benchmark the player (fps, latency, roofline, numpy side by side)",
+        description="Without a database: LDS players (n=50) on synthetic textures at each "
+        "--sizes, float32 and float16 bases. With a database: the chosen texture "
+        "and mode. Copy bandwidth is measured in the same run for the roofline.",
+    )
     p.add_argument("database", nargs="?", help="tile database to benchmark (default: synthetic LDS textures)")
     p.add_argument("--texture")
     p.add_argument("--mode", default="lds", choices=sorted(MODES))

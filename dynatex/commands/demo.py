@@ -5,14 +5,15 @@ video and a contact sheet, and prints a short benchmark. To show a new mode, add
 analysis method to a texture of ``DEMO_TEXTURES`` (or a new sample) and its steps to
 ``DEMO_STEPS``.
 """
+
 from __future__ import annotations
 
 import argparse
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -28,24 +29,27 @@ from ._common import seed
 class DemoStep:
     title: str
     mode: str
-    controls: dict = field(default_factory=dict)   # player attributes set before playing
-    options: dict = field(default_factory=dict)    # player constructor options
+    controls: dict = field(default_factory=dict)  # player attributes set before playing
+    options: dict = field(default_factory=dict)  # player constructor options
     frames: int = 48
     texture: str = "ripples"
 
 
 def _pendulum() -> np.ndarray:
     from ..analyzer.turnpoints import pendulum_clip
+
     return pendulum_clip(120, 96)[0]
 
 
 def _spreading() -> np.ndarray:
     from ..analyzer.quilt import spreading_clip
+
     return spreading_clip(48, 48, 64)
 
 
 def _left_fast() -> np.ndarray:
     from ..player.ratemap import halves
+
     return halves((96, 128), 2.0, 1.0)
 
 
@@ -57,19 +61,31 @@ def _grassy_other() -> list[np.ndarray]:
 #: An option given as a callable is made when the demo runs, not when this module is imported
 #: (every ``dynatex`` command imports it to build its parser).
 DEMO_TEXTURES: dict[str, tuple[Callable[[], np.ndarray], dict[str, dict]]] = {
-    "ripples": (ripples, {
-        "lds": {"n": 40},
-        "mixture": {"components": 3, "dim": 8},
-    }),
-    "pendulum": (_pendulum, {
-        "turnpoints": {},
-    }),
-    "grassy": (ripples, {
-        "tiles": {"tile": 32, "n_tiles": 3, "min_loop": 24, "mix": _grassy_other, "names": ["grassy", "sea"]},
-    }),
-    "spreading": (_spreading, {
-        "quilt": {"size": (96, 128), "block": 16, "rank": 15},
-    }),
+    "ripples": (
+        ripples,
+        {
+            "lds": {"n": 40},
+            "mixture": {"components": 3, "dim": 8},
+        },
+    ),
+    "pendulum": (
+        _pendulum,
+        {
+            "turnpoints": {},
+        },
+    ),
+    "grassy": (
+        ripples,
+        {
+            "tiles": {"tile": 32, "n_tiles": 3, "min_loop": 24, "mix": _grassy_other, "names": ["grassy", "sea"]},
+        },
+    ),
+    "spreading": (
+        _spreading,
+        {
+            "quilt": {"size": (96, 128), "block": 16, "rank": 15},
+        },
+    ),
 }
 
 #: What the demo plays, in order.
@@ -83,25 +99,41 @@ DEMO_STEPS: list[DemoStep] = [
     DemoStep("mixture: 16 draws", "mixture"),
     DemoStep("mixture: plain AR, calm", "mixture", {"draws": 1, "intensity": 0.5}),
     DemoStep("turnpoints: turns + jumps", "turnpoints", texture="pendulum"),
-    DemoStep("turnpoints: jumps, speed 1.5", "turnpoints", {"speed": 1.5}, {"playback": "jumps"},
-             texture="pendulum"),
-    DemoStep("tiles: random arrangement, smoothed offsets", "tiles", {"sigma": 16.0},
-             {"size": (96, 128)}, texture="grassy"),
-    DemoStep("tiles: two textures mixed, consensus tone", "tiles", {},
-             {"size": (96, 128), "labels": "halves", "tone": "consensus"}, texture="grassy"),
+    DemoStep("turnpoints: jumps, speed 1.5", "turnpoints", {"speed": 1.5}, {"playback": "jumps"}, texture="pendulum"),
+    DemoStep(
+        "tiles: random arrangement, smoothed offsets", "tiles", {"sigma": 16.0}, {"size": (96, 128)}, texture="grassy"
+    ),
+    DemoStep(
+        "tiles: two textures mixed, consensus tone",
+        "tiles",
+        {},
+        {"size": (96, 128), "labels": "halves", "tone": "consensus"},
+        texture="grassy",
+    ),
     DemoStep("evolve: quilted 2x, jitter 3", "evolve", {"jitter": 3.0}, texture="spreading"),
-    DemoStep("evolve: left half 2x faster, smoothed", "evolve", {"rate_map": _left_fast(), "rate_sigma": 8.0},
-             texture="spreading"),
+    DemoStep(
+        "evolve: left half 2x faster, smoothed",
+        "evolve",
+        {"rate_map": _left_fast(), "rate_sigma": 8.0},
+        texture="spreading",
+    ),
 ]
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
-    p = sub.add_parser("demo", help="analyze a built-in sample, play every mode, write a video and a contact sheet",
-                       description="The embedded default: make a sample clip, analyze it, play it with "
-                                   "several edits, write demo.mp4 and contact_sheet.png, print a short benchmark.")
+    p = sub.add_parser(
+        "demo",
+        help="analyze a built-in sample, play every mode, write a video and a contact sheet",
+        description="The embedded default: make a sample clip, analyze it, play it with "
+        "several edits, write demo.mp4 and contact_sheet.png, print a short benchmark.",
+    )
     p.add_argument("-o", "--output", default="dynatex-demo", help="output folder (default ./dynatex-demo)")
-    p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto",
-                   help="auto (default): OpenCL on a device that passed the self-test, else numpy")
+    p.add_argument(
+        "--backend",
+        choices=("auto", "opencl", "numpy"),
+        default="auto",
+        help="auto (default): OpenCL on a device that passed the self-test, else numpy",
+    )
     p.add_argument("--seed", type=seed, default=0, help="random seed of the players, %(type)s (default 0)")
     return p
 
@@ -129,14 +161,14 @@ def run(args: argparse.Namespace) -> int:
     fps = 25.0
 
     from ._output import FrameWriter
+
     video = FrameWriter(os.path.join(args.output, "demo.mp4"))
     video.open(video_hw, fps)
     rows = []
     backend = args.backend
     for step in DEMO_STEPS:
-        with open_player(db, step.texture, mode=step.mode, backend=backend, seed=args.seed,
-                         **step.options) as p:
-            if backend == "auto":                  # the first player decided: keep it for the rest
+        with open_player(db, step.texture, mode=step.mode, backend=backend, seed=args.seed, **step.options) as p:
+            if backend == "auto":  # the first player decided: keep it for the rest
                 backend = p.backend
                 print(f"player backend: {_backend_line(p)}")
             for key, value in step.controls.items():
@@ -168,17 +200,19 @@ def _fit(frame: np.ndarray, hw: tuple[int, int]) -> np.ndarray:
     if frame.shape[:2] == tuple(hw):
         return frame
     import cv2
+
     scale = min(hw[0] / frame.shape[0], hw[1] / frame.shape[1])
     size = (max(1, round(frame.shape[1] * scale)), max(1, round(frame.shape[0] * scale)))
     small = cv2.resize(frame, size, interpolation=cv2.INTER_AREA)
     out = np.zeros((*hw, 3), np.uint8)
     y, x = (hw[0] - size[1]) // 2, (hw[1] - size[0]) // 2
-    out[y:y + size[1], x:x + size[0]] = small
+    out[y : y + size[1], x : x + size[0]] = small
     return out
 
 
 def _contact_sheet(rows: list[tuple[str, list[np.ndarray]]], path: str, thumb_h: int = 96) -> None:
     import cv2
+
     label_w = 220
     lines = []
     for title, frames in rows:
@@ -195,6 +229,7 @@ def _contact_sheet(rows: list[tuple[str, list[np.ndarray]]], path: str, thumb_h:
 
 def _short_benchmark(db: str, backend: str) -> None:
     from ..benchmark import bench_player, copy_bandwidth, format_result
+
     if backend != "opencl":
         print("benchmark skipped: it compares the OpenCL player with the numpy reference")
         return
@@ -209,6 +244,6 @@ def _short_benchmark(db: str, backend: str) -> None:
         r = bench_player(db, step.texture, mode=step.mode, frames=100, bandwidth_gbs=bw["gbs"], options=step.options)
         print("  " + format_result(r) + (f" [{step.options}]" if step.options else ""))
     from ..benchmark import bench_lds_sizes
-    bench_lds_sizes([(352, 288)], frames=60, precisions=("float32",), log=lambda line: print("  " + line),
-                    bandwidth=bw)
+
+    bench_lds_sizes([(352, 288)], frames=60, precisions=("float32",), log=lambda line: print("  " + line), bandwidth=bw)
     sys.stdout.flush()

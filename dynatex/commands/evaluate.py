@@ -1,4 +1,5 @@
 """``dynatex evaluate SOURCE OUTPUT``: quality metrics of a synthesized texture against its source."""
+
 from __future__ import annotations
 
 import argparse
@@ -19,40 +20,72 @@ DB_SUFFIXES = (".h5", ".hdf5")
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
-        "evaluate", help="measure the quality of a synthesized texture against its source",
+        "evaluate",
+        help="measure the quality of a synthesized texture against its source",
         description="Compare OUTPUT with SOURCE: long-run stability, seam visibility, temporal "
-                    "discontinuity at events, spectrum and patch likeness, coverage and repetition "
-                    "(see analyzer/METRICS.md). OUTPUT is a video, a folder of images or a .npy array, "
-                    "or a tile database (.h5) played with --texture/--mode/--frames/--seed/--size.")
+        "discontinuity at events, spectrum and patch likeness, coverage and repetition "
+        "(see analyzer/METRICS.md). OUTPUT is a video, a folder of images or a .npy array, "
+        "or a tile database (.h5) played with --texture/--mode/--frames/--seed/--size.",
+    )
     p.add_argument("source", help="source clip: video file, folder of images, or .npy (T, H, W[, C]) uint8")
     p.add_argument("output", help="synthesized clip (video, folder, .npy) or a tile database (.h5)")
-    p.add_argument("--boundaries", default=None, metavar="SPEC",
-                   help="seams to measure: grid:WxH[+X+Y] (a tile grid of W x H pixels, shifted by X,Y), "
-                        "border (the wrap-around border of a tileable texture), or an image whose distinct "
-                        "colours label regions (a seam lies wherever neighbouring labels differ)")
+    p.add_argument(
+        "--boundaries",
+        default=None,
+        metavar="SPEC",
+        help="seams to measure: grid:WxH[+X+Y] (a tile grid of W x H pixels, shifted by X,Y), "
+        "border (the wrap-around border of a tileable texture), or an image whose distinct "
+        "colours label regions (a seam lies wherever neighbouring labels differ)",
+    )
     p.add_argument("--wrap", action="store_true", help="also count the wrap-around border as a seam")
-    p.add_argument("--events", default=None, metavar="LIST",
-                   help="frames that follow a jump (loop wrap, reversal): comma-separated indices, "
-                        "or every:N for every N-th frame")
+    p.add_argument(
+        "--events",
+        default=None,
+        metavar="LIST",
+        help="frames that follow a jump (loop wrap, reversal): comma-separated indices, "
+        "or every:N for every N-th frame",
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.add_argument("--sheet", default=None, metavar="PNG",
-                   help="also write a contact sheet: source frames beside output frames, to look at")
+    p.add_argument(
+        "--sheet",
+        default=None,
+        metavar="PNG",
+        help="also write a contact sheet: source frames beside output frames, to look at",
+    )
     g = p.add_argument_group("database output (the player)")
     g.add_argument("--texture", help="texture name (optional when the database holds one)")
     g.add_argument("--mode", default="lds", choices=sorted(MODES), help="player mode (default lds)")
-    g.add_argument("--frames", type=positive_int, default=None,
-                   help="frames to play from a database (default 300), or to read from a video")
+    g.add_argument(
+        "--frames",
+        type=positive_int,
+        default=None,
+        help="frames to play from a database (default 300), or to read from a video",
+    )
     g.add_argument("--seed", type=seed, default=0, help="player seed, also the patch-sampling seed, %(type)s")
-    g.add_argument("--size", type=size_arg, default=None, metavar="WxH",
-                   help="output size, for modes that synthesize any size")
-    g.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto",
-                   help="auto (default): OpenCL on a device that passed the self-test, else numpy")
+    g.add_argument(
+        "--size", type=size_arg, default=None, metavar="WxH", help="output size, for modes that synthesize any size"
+    )
+    g.add_argument(
+        "--backend",
+        choices=("auto", "opencl", "numpy"),
+        default="auto",
+        help="auto (default): OpenCL on a device that passed the self-test, else numpy",
+    )
     g = p.add_argument_group("source and metrics")
-    g.add_argument("--source-size", type=size_arg, default=None, metavar="WxH",
-                   help="resize the source frames (default: as stored, or as the database recorded)")
+    g.add_argument(
+        "--source-size",
+        type=size_arg,
+        default=None,
+        metavar="WxH",
+        help="resize the source frames (default: as stored, or as the database recorded)",
+    )
     g.add_argument("--window", type=positive_int, default=25, help="frames per stability window (default 25)")
-    g.add_argument("--downscale", type=positive_int, default=None,
-                   help="downscale factor for spectrum and patches (default min(H, W) // 128, at least 1)")
+    g.add_argument(
+        "--downscale",
+        type=positive_int,
+        default=None,
+        help="downscale factor for spectrum and patches (default min(H, W) // 128, at least 1)",
+    )
     g.add_argument("--samples", type=positive_int, default=1000, help="patches sampled per direction (default 1000)")
     return p
 
@@ -91,6 +124,7 @@ def parse_boundaries(spec: str, shape: tuple[int, int]) -> tuple[np.ndarray | No
     """``--boundaries`` -> (label map or None, wrap, the grid's period (H, W) or None) for frames
     of ``shape`` = (H, W)."""
     from ..analyzer.metrics import grid_labels
+
     h, w = shape
     if spec.lower() == "border":
         return None, True, None
@@ -109,12 +143,14 @@ def parse_boundaries(spec: str, shape: tuple[int, int]) -> tuple[np.ndarray | No
     if not os.path.isfile(spec):
         raise UsageError(f"--boundaries {spec!r} is neither grid:WxH, border, nor an existing image file")
     import cv2
+
     img = cv2.imread(spec, cv2.IMREAD_UNCHANGED)
     if img is None:
         raise UsageError(f"--boundaries {spec}: cannot read it as an image")
     if img.shape[:2] != (h, w):
-        raise UsageError(f"--boundaries {spec}: mask is {img.shape[1]}x{img.shape[0]} but the output frames "
-                         f"are {w}x{h}")
+        raise UsageError(
+            f"--boundaries {spec}: mask is {img.shape[1]}x{img.shape[0]} but the output frames are {w}x{h}"
+        )
     if img.ndim == 2:
         labels = img.astype(np.int64)
     else:
@@ -132,6 +168,7 @@ def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any],
     """Frames from the player, the load options that reproduce the texture's source frames,
     and the player's cell lattice ``(th, tw)`` (mode tiles; None for other modes)."""
     from ..player import open_player, player_class
+
     opts: dict[str, Any] = {"seed": args.seed, "backend": args.backend}
     if args.size is not None:
         if not any(p.name == "size" for p in player_class(args.mode).options):
@@ -145,9 +182,11 @@ def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any],
         for i in range(n):
             player.next_frame(out=frames[i])
     source_opts: dict[str, Any] = {
-        "start": int(src.frame_start), "step": int(src.frame_step),
+        "start": int(src.frame_start),
+        "step": int(src.frame_step),
         "stop": int(src.frame_start + src.n_frames * src.frame_step),
-        "size": (int(src.height), int(src.width)), "color": int(src.channels) == 3,
+        "size": (int(src.height), int(src.width)),
+        "color": int(src.channels) == 3,
     }
     if src.crop:
         source_opts["crop"] = tuple(int(v) for v in src.crop)
@@ -156,6 +195,7 @@ def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any],
 
 def run(args: argparse.Namespace) -> int:
     from ..analyzer import metrics
+
     is_db = args.output.lower().endswith(DB_SUFFIXES)
     if not is_db:
         for flag, val in (("--texture", args.texture), ("--size", args.size)):
@@ -171,16 +211,27 @@ def run(args: argparse.Namespace) -> int:
         source_opts["size"] = args.source_size
     source = _load(args.source, **source_opts)
     t, h, w = output.shape[:3]
-    if output.shape[-1] != source.shape[-1]:        # grey against colour: compare in colour
+    if output.shape[-1] != source.shape[-1]:  # grey against colour: compare in colour
         output, source = (np.repeat(a, 3, axis=-1) if a.shape[-1] == 1 else a for a in (output, source))
     labels, wrap, period = (None, False, None) if args.boundaries is None else parse_boundaries(args.boundaries, (h, w))
     wrap = wrap or args.wrap
     events = parse_events(args.events, t) if args.events else None
-    report = metrics.evaluate(output, source, labels=labels, wrap=wrap, events=events, window=args.window,
-                              downscale=args.downscale, seed=args.seed, n_samples=args.samples,
-                              period=period, lattice=tile if tile is not None else period)
+    report = metrics.evaluate(
+        output,
+        source,
+        labels=labels,
+        wrap=wrap,
+        events=events,
+        window=args.window,
+        downscale=args.downscale,
+        seed=args.seed,
+        n_samples=args.samples,
+        period=period,
+        lattice=tile if tile is not None else period,
+    )
     if args.sheet:
         from ..analyzer.sheet import contact_sheet
+
         title = f"{args.mode} {os.path.basename(args.output)}" if is_db else os.path.basename(args.output)
         try:
             contact_sheet(source, output, args.sheet, title=title)
@@ -190,8 +241,13 @@ def run(args: argparse.Namespace) -> int:
     report["source"] = args.source
     report["output"] = args.output
     if is_db:
-        report["player"] = {"texture": args.texture, "mode": args.mode, "seed": args.seed,
-                            "frames": int(t), "backend": args.backend}
+        report["player"] = {
+            "texture": args.texture,
+            "mode": args.mode,
+            "seed": args.seed,
+            "frames": int(t),
+            "backend": args.backend,
+        }
     if args.json:
         print(json.dumps(report, indent=2, allow_nan=False))
     else:
@@ -217,9 +273,13 @@ def format_table(report: dict[str, Any]) -> str:
         rows.append(("stability energy ratio", same, ""))
     else:
         lo, hi = st["bounds"]
-        rows.append(("stability energy ratio min/max",
-                     f"{_fmt(st['min_ratio'])} / {_fmt(st['max_ratio'])}",
-                     f"{_fmt(lo, 2)}..{_fmt(hi, 2)} (0.5..2 or the source's own range; decay -> 0, blow-up >> 1)"))
+        rows.append(
+            (
+                "stability energy ratio min/max",
+                f"{_fmt(st['min_ratio'])} / {_fmt(st['max_ratio'])}",
+                f"{_fmt(lo, 2)}..{_fmt(hi, 2)} (0.5..2 or the source's own range; decay -> 0, blow-up >> 1)",
+            )
+        )
         rows.append(("stability final window", _fmt(st["final_ratio"]), "about 1"))
         rows.append(("non-finite frames", str(st["nonfinite_frames"]), "0"))
         if st["nonfinite_frames"]:
@@ -227,17 +287,32 @@ def format_table(report: dict[str, Any]) -> str:
     if "frame_step_ratio" in report:
         lp = report.get("lattice_prominence")
         if lp is not None:
-            out, src = ("n/a: frame too small for the lags" if v is None else _fmt(v) for v in (lp["output"], lp["source"]))
-            rows.append((f"lattice prominence at {lp['tile'][1]}x{lp['tile'][0]} cells", out,
-                         f"<= 0.03, near the source's ({src}); a visible grid 0.1..1"))
+            out, src = (
+                "n/a: frame too small for the lags" if v is None else _fmt(v) for v in (lp["output"], lp["source"])
+            )
+            rows.append(
+                (
+                    f"lattice prominence at {lp['tile'][1]}x{lp['tile'][0]} cells",
+                    out,
+                    f"<= 0.03, near the source's ({src}); a visible grid 0.1..1",
+                )
+            )
         sv = report["seam_visibility"]
-        rows.append(("seam visibility mean/max",
-                     "n/a (no --boundaries)" if sv is None else f"{_fmt(sv['mean'])} / {_fmt(sv['max'])}",
-                     "about 1 (> 1.5 visible)"))
+        rows.append(
+            (
+                "seam visibility mean/max",
+                "n/a (no --boundaries)" if sv is None else f"{_fmt(sv['mean'])} / {_fmt(sv['max'])}",
+                "about 1 (> 1.5 visible)",
+            )
+        )
         td = report["temporal_discontinuity"]
-        rows.append(("temporal discontinuity max",
-                     "n/a (no --events)" if td is None else f"{_fmt(td['max'])} over {len(td['events'])} events",
-                     "about 1 (> 2 a visible jump)"))
+        rows.append(
+            (
+                "temporal discontinuity max",
+                "n/a (no --events)" if td is None else f"{_fmt(td['max'])} over {len(td['events'])} events",
+                "about 1 (> 2 a visible jump)",
+            )
+        )
         rows.append(("frame step ratio", _fmt(report["frame_step_ratio"]), "about 1 (0 frozen, >> 1 jumpy)"))
         rows.append(("spectrum distance (dB)", _fmt(report["spectrum_distance_db"], 2), "< 1 good, > 3 unlike"))
         rows.append(("patch coherence (grey levels)", _fmt(report["patch_coherence"], 2), "low (0 = copies)"))
@@ -248,13 +323,18 @@ def format_table(report: dict[str, Any]) -> str:
         rows.append(("repetition lag (frames)", "none found" if lag is None else str(lag), "none, or long"))
         lat = report.get("lattice_correlation")
         if lat is not None:
-            out, src = ("n/a: frame not larger than the grid" if v is None else " / ".join(_fmt(x, 2) for x in v)
-                        for v in (lat["output"], lat["source"]))
-            rows.append((f"lattice correlation y/x at {lat['period'][1]}x{lat['period'][0]}", out,
-                         f"near the source's ({src})"))
-    head = (f"{report['output']} ({report['output_frames']} frames, {report['output_size'][1]}x"
-            f"{report['output_size'][0]}) against {report['source']} ({report['source_frames']} frames, "
-            f"{report['source_size'][1]}x{report['source_size'][0]})")
+            out, src = (
+                "n/a: frame not larger than the grid" if v is None else " / ".join(_fmt(x, 2) for x in v)
+                for v in (lat["output"], lat["source"])
+            )
+            rows.append(
+                (f"lattice correlation y/x at {lat['period'][1]}x{lat['period'][0]}", out, f"near the source's ({src})")
+            )
+    head = (
+        f"{report['output']} ({report['output_frames']} frames, {report['output_size'][1]}x"
+        f"{report['output_size'][0]}) against {report['source']} ({report['source_frames']} frames, "
+        f"{report['source_size'][1]}x{report['source_size'][0]})"
+    )
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows)
     lines = [head, f"{'metric':<{w0}}  {'value':<{w1}}  good", "-" * (w0 + w1 + 30)]
@@ -264,4 +344,5 @@ def format_table(report: dict[str, Any]) -> str:
 
 if __name__ == "__main__":  # pragma: no cover
     from ..cli import main
+
     sys.exit(main(["evaluate", *sys.argv[1:]]))

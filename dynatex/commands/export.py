@@ -14,6 +14,7 @@ with ``--layout array`` one raw layer per frame. ``--loop`` makes the frames a c
 The wrap (last frame -> first) is measured with
 :func:`dynatex.analyzer.metrics.temporal_discontinuity` against the source's median frame step.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,42 +43,81 @@ COMMON = ("backend", "device", "seed")
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     mode = known_mode(mode_from_argv(argv, DEFAULT_MODE), DEFAULT_MODE)
-    p = sub.add_parser("export", help="write a flipbook (atlas, motion vectors, engine sidecar) of a texture",
-                       description="Render frames of a texture and write a flipbook for Unity, Unreal or Godot: "
-                                   "NAME_COLSxROWS.png (colour atlas, sRGB, frames row-major from the top-left), "
-                                   "NAME_COLSxROWS_mv.png (optical-flow motion vectors, RG centred at 128, linear) "
-                                   "and NAME.json (grid, frame count, fps, motion-vector scale for Unity VFX Graph "
-                                   "and Unreal, the loop's wrap discontinuity).",
-                       epilog=modes_epilog("export"))
+    p = sub.add_parser(
+        "export",
+        help="write a flipbook (atlas, motion vectors, engine sidecar) of a texture",
+        description="Render frames of a texture and write a flipbook for Unity, Unreal or Godot: "
+        "NAME_COLSxROWS.png (colour atlas, sRGB, frames row-major from the top-left), "
+        "NAME_COLSxROWS_mv.png (optical-flow motion vectors, RG centred at 128, linear) "
+        "and NAME.json (grid, frame count, fps, motion-vector scale for Unity VFX Graph "
+        "and Unreal, the loop's wrap discontinuity).",
+        epilog=modes_epilog("export"),
+    )
     p.add_argument("database")
     p.add_argument("-o", "--output", required=True, metavar="FOLDER", help="folder for the bundle (created)")
     p.add_argument("--texture", help="texture name (optional when the database holds one)")
     p.add_argument("--name", default=None, help="file name stem (default: the texture's name)")
-    p.add_argument("--mode", default=DEFAULT_MODE, choices=sorted(MODES),
-                   help=f"player mode (default {DEFAULT_MODE}); it decides the options and controls below")
-    p.add_argument("--frames", type=Number(int, 1, MAX_FRAMES), default=None,
-                   help=f"frames in the flipbook, %(type)s (default {DEFAULT_FRAMES}, or with --loop the mode's "
-                        "own loop: tiles' loop length, turnpoints' swing)")
+    p.add_argument(
+        "--mode",
+        default=DEFAULT_MODE,
+        choices=sorted(MODES),
+        help=f"player mode (default {DEFAULT_MODE}); it decides the options and controls below",
+    )
+    p.add_argument(
+        "--frames",
+        type=Number(int, 1, MAX_FRAMES),
+        default=None,
+        help=f"frames in the flipbook, %(type)s (default {DEFAULT_FRAMES}, or with --loop the mode's "
+        "own loop: tiles' loop length, turnpoints' swing)",
+    )
     p.add_argument("--loop", action="store_true", help="a seamless closed loop (method per mode: see the README)")
-    p.add_argument("--blend", type=Number(int, 1, MAX_FRAMES), default=None,
-                   help="lds/mixture/evolve --loop: frames crossfaded across the wrap, %(type)s "
-                        "(default a quarter of the frames)")
-    p.add_argument("--fps", type=Number(float, MIN_FPS, MAX_FPS), default=None,
-                   help="frame rate written to the sidecar, in %(type)s (default: the source's; a tiles or "
-                        "turnpoints loop resampled to --frames keeps the source's pace)")
-    p.add_argument("--grid", type=size_arg, default=None, metavar="COLSxROWS",
-                   help="grid (default: the smallest power-of-two grid holding the frames)")
-    p.add_argument("--tile", type=size_arg, default=None, metavar="WxH",
-                   help="size of one frame in the atlas (default: each side the power of two nearest the frame's)")
-    p.add_argument("--npot", action="store_true", help="keep the frame size and use the smallest grid holding the frames "
-                        "(the atlas need not be a power of two)")
+    p.add_argument(
+        "--blend",
+        type=Number(int, 1, MAX_FRAMES),
+        default=None,
+        help="lds/mixture/evolve --loop: frames crossfaded across the wrap, %(type)s (default a quarter of the frames)",
+    )
+    p.add_argument(
+        "--fps",
+        type=Number(float, MIN_FPS, MAX_FPS),
+        default=None,
+        help="frame rate written to the sidecar, in %(type)s (default: the source's; a tiles or "
+        "turnpoints loop resampled to --frames keeps the source's pace)",
+    )
+    p.add_argument(
+        "--grid",
+        type=size_arg,
+        default=None,
+        metavar="COLSxROWS",
+        help="grid (default: the smallest power-of-two grid holding the frames)",
+    )
+    p.add_argument(
+        "--tile",
+        type=size_arg,
+        default=None,
+        metavar="WxH",
+        help="size of one frame in the atlas (default: each side the power of two nearest the frame's)",
+    )
+    p.add_argument(
+        "--npot",
+        action="store_true",
+        help="keep the frame size and use the smallest grid holding the frames (the atlas need not be a power of two)",
+    )
     p.add_argument("--no-motion-vectors", action="store_true", help="write the colour atlas only")
-    p.add_argument("--layout", choices=("atlas", "array"), default="atlas",
-                   help="atlas (default), or array: NAME_array_rgba8.raw, one RGBA8 layer per frame "
-                        "(and NAME_array_rg8.raw), described in NAME.json")
-    p.add_argument("--source", default=None, metavar="CLIP",
-                   help="the clip the texture was analysed from, the reference of the wrap discontinuity "
-                        "(default: the frames the database stores, else the export's own frame step)")
+    p.add_argument(
+        "--layout",
+        choices=("atlas", "array"),
+        default="atlas",
+        help="atlas (default), or array: NAME_array_rgba8.raw, one RGBA8 layer per frame "
+        "(and NAME_array_rg8.raw), described in NAME.json",
+    )
+    p.add_argument(
+        "--source",
+        default=None,
+        metavar="CLIP",
+        help="the clip the texture was analysed from, the reference of the wrap discontinuity "
+        "(default: the frames the database stores, else the export's own frame step)",
+    )
     add_mode_arguments(p, mode, common=COMMON)
     return p
 
@@ -103,8 +143,9 @@ def render(args: argparse.Namespace) -> tuple[np.ndarray, str, float, np.ndarray
             n = args.frames or DEFAULT_FRAMES
             return _play(player, n), "none", fps, source
         if cls.capabilities.native_loop:
-            frames, how, pace = (_tiles_loop(player, args.frames) if args.mode == "tiles"
-                                 else _swing_loop(player, source, args.frames))
+            frames, how, pace = (
+                _tiles_loop(player, args.frames) if args.mode == "tiles" else _swing_loop(player, source, args.frames)
+            )
             if args.fps is None:
                 fps *= pace
             return frames, how, fps, source
@@ -131,9 +172,11 @@ def _tiles_loop(player, n: int | None) -> tuple[np.ndarray, str, float]:
     speed = length / n
     hi = _tiles.SPEED_RANGE[1]
     if not speed <= hi:
-        raise UsageError(f"--frames {n}: a tiles loop of {length} frames needs at least "
-                         f"{math.ceil(length / hi)} frames (speed at most {hi:g})")
-    player.epoch = 0                # fixed time offsets: the output repeats with the tile loop
+        raise UsageError(
+            f"--frames {n}: a tiles loop of {length} frames needs at least "
+            f"{math.ceil(length / hi)} frames (speed at most {hi:g})"
+        )
+    player.epoch = 0  # fixed time offsets: the output repeats with the tile loop
     player.speed = speed
     return _play(player, n), f"tile loop of {length} frames at speed {speed:.4g}", 1 / speed
 
@@ -148,7 +191,7 @@ def _swing_loop(player, source: np.ndarray | None, n: int | None) -> tuple[np.nd
     period = 2 * (b - a)
     n = n or period
     pos = np.arange(n) * (period / n)
-    pos = np.where(pos <= b - a, a + pos, a + period - pos)        # a -> b -> back toward a
+    pos = np.where(pos <= b - a, a + pos, a + period - pos)  # a -> b -> back toward a
     lo = np.floor(pos).astype(int)
     hi = np.minimum(lo + 1, len(source) - 1)
     w = (pos - lo)[:, None, None, None]
@@ -160,7 +203,7 @@ def _crossfade_loop(frames: np.ndarray, n: int, blend: int) -> np.ndarray:
     """``frames[:n]`` with ``frames[n:n + blend]`` faded into its start: frame ``n`` follows frame ``n - 1``."""
     out = frames[:n].copy()
     w = (np.arange(1, blend + 1) / (blend + 1))[:, None, None, None]
-    out[:blend] = np.rint((1 - w) * frames[n:n + blend] + w * frames[:blend]).astype(np.uint8)
+    out[:blend] = np.rint((1 - w) * frames[n : n + blend] + w * frames[:blend]).astype(np.uint8)
     return out
 
 
@@ -168,20 +211,24 @@ def _crossfade_loop(frames: np.ndarray, n: int, blend: int) -> np.ndarray:
 def wrap_report(frames: np.ndarray, source: np.ndarray | None) -> dict:
     """Wrap discontinuity: the last->first frame difference over the median source frame step."""
     from ..analyzer.metrics import temporal_discontinuity
+
     if len(frames) < 2:
         return {"ratio": None, "reference": "one frame: no wrap"}
     seq = np.concatenate([frames, frames[:1]])
     ref = source if source is not None and len(source) >= 2 else frames
     try:
         ratio = float(temporal_discontinuity(seq, [len(frames)], source=ref)[0])
-    except ValueError as exc:          # a reference that never changes
+    except ValueError as exc:  # a reference that never changes
         return {"ratio": None, "reference": str(exc)}
-    return {"ratio": round(ratio, 4),
-            "reference": "median frame step of the source" if ref is source else "median frame step of the export"}
+    return {
+        "ratio": round(ratio, 4),
+        "reference": "median frame step of the source" if ref is source else "median frame step of the export",
+    }
 
 
 def _write_png(path: str, image: np.ndarray) -> None:
     import cv2
+
     ok, data = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
     if not ok:
         raise OutputError(f"cannot encode {path}")
@@ -198,17 +245,19 @@ def _write_bytes(path: str, data: bytes) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..analyzer import flipbook as fb
+
     out = args.output
     if os.path.exists(out) and not os.path.isdir(out):
         raise OutputError(f"output {out} exists and is not a folder")
     frames, how, fps, source = render(args)
     if args.source is not None:
         from ._common import load_clip_arg
+
         source = load_clip_arg(args.source).frames
     name = args.name if args.name is not None else args.texture_name
     if not name or "/" in name or name in (".", ".."):
         raise UsageError(f"--name {name!r}: a file name stem without '/' is needed")
-    rows, cols = args.grid if args.grid is not None else (None, None)    # COLSxROWS, parsed like WxH
+    rows, cols = args.grid if args.grid is not None else (None, None)  # COLSxROWS, parsed like WxH
     tile = args.tile
     try:
         grid = fb.choose_grid(len(frames), frames.shape[1:3], cols=cols, rows=rows, tile=tile, pow2=not args.npot)
@@ -220,8 +269,13 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_motion_vectors:
         uv = fb.flow_to_uv(fb.frame_motion(fb.optical_flow(tiles, wrap=args.loop), wrap=args.loop))
         _, strength = fb.encode_vectors(uv)
-    src = {"texture": name, "mode": args.mode, "width": int(frames.shape[2]), "height": int(frames.shape[1]),
-           "seed": getattr(args, "seed", 0)}
+    src = {
+        "texture": name,
+        "mode": args.mode,
+        "width": int(frames.shape[2]),
+        "height": int(frames.shape[1]),
+        "seed": getattr(args, "seed", 0),
+    }
     doc = fb.sidecar(name, grid, fps=fps, loop=how, strength=strength, source=src, wrap=wrap, layout=args.layout)
     try:
         os.makedirs(out, exist_ok=True)
@@ -239,8 +293,11 @@ def run(args: argparse.Namespace) -> int:
             _write_bytes(os.path.join(out, files["motion_vectors"]), fb.encode_vectors(uv, strength)[0].tobytes())
     _write_bytes(os.path.join(out, f"{name}.json"), (json.dumps(doc, indent=2, ensure_ascii=False) + "\n").encode())
     ratio = wrap.get("ratio")
-    print(f"wrote {grid.frames} frames ({grid.cols}x{grid.rows} grid of {grid.tile[1]}x{grid.tile[0]}) to {out}: "
-          f"{', '.join(files.values())}, {name}.json; loop: {how}; wrap discontinuity "
-          f"{'n/a' if ratio is None else f'{ratio:.2f}'} x the "
-          f"{wrap['reference']}", file=sys.stderr)
+    print(
+        f"wrote {grid.frames} frames ({grid.cols}x{grid.rows} grid of {grid.tile[1]}x{grid.tile[0]}) to {out}: "
+        f"{', '.join(files.values())}, {name}.json; loop: {how}; wrap discontinuity "
+        f"{'n/a' if ratio is None else f'{ratio:.2f}'} x the "
+        f"{wrap['reference']}",
+        file=sys.stderr,
+    )
     return 0

@@ -1,4 +1,5 @@
 """``dynatex play DB.h5``: render frames of a texture to a video or PNG files."""
+
 from __future__ import annotations
 
 import argparse
@@ -24,34 +25,62 @@ DEFAULT_MODE = "lds"
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     mode = known_mode(mode_from_argv(argv, DEFAULT_MODE), DEFAULT_MODE)
-    p = sub.add_parser("play", help="render frames of a texture to a video or PNG frames",
-                       description="Play a texture with the real-time player and write the frames to a "
-                                   "video (.mp4: H.264, browser-playable; .mkv, .avi), an animated image "
-                                   "(.webp, .apng, .gif; looping) or numbered PNG files (an output ending in "
-                                   "'.png' or a folder).",
-                       epilog=modes_epilog("play"))
+    p = sub.add_parser(
+        "play",
+        help="render frames of a texture to a video or PNG frames",
+        description="Play a texture with the real-time player and write the frames to a "
+        "video (.mp4: H.264, browser-playable; .mkv, .avi), an animated image "
+        "(.webp, .apng, .gif; looping) or numbered PNG files (an output ending in "
+        "'.png' or a folder).",
+        epilog=modes_epilog("play"),
+    )
     p.add_argument("database")
     p.add_argument("--texture", help="texture name (optional when the database holds one)")
-    p.add_argument("--mode", default=DEFAULT_MODE, choices=sorted(MODES),
-                   help=f"player mode (default {DEFAULT_MODE}); it decides the options and controls below")
+    p.add_argument(
+        "--mode",
+        default=DEFAULT_MODE,
+        choices=sorted(MODES),
+        help=f"player mode (default {DEFAULT_MODE}); it decides the options and controls below",
+    )
     p.add_argument("--frames", type=positive_int, default=250, help="frames to render, %(type)s (default 250)")
-    p.add_argument("--fps", type=Number(float, MIN_FPS, MAX_FPS), default=None,
-                   help="frame rate of the video, in %(type)s (default: the source's)")
-    p.add_argument("-o", "--output", required=True,
-                   help="out.mp4 / .mkv / .avi / .webp / .apng / .gif, frame_%%04d.png, or a folder")
+    p.add_argument(
+        "--fps",
+        type=Number(float, MIN_FPS, MAX_FPS),
+        default=None,
+        help="frame rate of the video, in %(type)s (default: the source's)",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="out.mp4 / .mkv / .avi / .webp / .apng / .gif, frame_%%04d.png, or a folder",
+    )
     cls = add_mode_arguments(p, mode, common=COMMON)
     if "rate_map" in cls.controls():
         g = p.add_argument_group(f"{mode} rate map")
-        g.add_argument("--rate-map", default=None, metavar="SPEC",
-                       help="per-pixel rate of evolution M: an image (grey, scaled to --rate-range) or .npy of "
-                            "rates the size of the output, halves:LEFT,RIGHT, or light:X,Y,HEIGHT[,MAX[,MIN]] "
-                            "(fall-off from a point light)")
-        g.add_argument("--rate-range", type=Numbers(RATE, 2, "LOW,HIGH"), default=(0.0, 2.0), metavar="LOW,HIGH",
-                       help="rates of black and white in a --rate-map image: %(type)s (default 0,2)")
+        g.add_argument(
+            "--rate-map",
+            default=None,
+            metavar="SPEC",
+            help="per-pixel rate of evolution M: an image (grey, scaled to --rate-range) or .npy of "
+            "rates the size of the output, halves:LEFT,RIGHT, or light:X,Y,HEIGHT[,MAX[,MIN]] "
+            "(fall-off from a point light)",
+        )
+        g.add_argument(
+            "--rate-range",
+            type=Numbers(RATE, 2, "LOW,HIGH"),
+            default=(0.0, 2.0),
+            metavar="LOW,HIGH",
+            help="rates of black and white in a --rate-map image: %(type)s (default 0,2)",
+        )
     if cls.capabilities.inpaint:
         g = p.add_argument_group(f"{mode} inpainting")
-        g.add_argument("--inpaint", default=None, metavar="VIDEO",
-                       help="fill the --mask region of this video's frames with synthesized texture")
+        g.add_argument(
+            "--inpaint",
+            default=None,
+            metavar="VIDEO",
+            help="fill the --mask region of this video's frames with synthesized texture",
+        )
         g.add_argument("--mask", default=None, metavar="MASK.png|.npy", help="inpainting mask, nonzero = fill")
     return p
 
@@ -75,6 +104,7 @@ def _apply(player, args: argparse.Namespace) -> None:
 def rate_map_arg(spec: str, rate_range: tuple[float, float], shape: tuple[int, int]) -> np.ndarray:
     """The rate map ``--rate-map SPEC`` describes, for an output of ``shape`` (H, W)."""
     from ..player import ratemap
+
     kind, _, rest = spec.partition(":")
     if kind in ("halves", "light") and rest:
         vals = [FINITE.check_part(f"--rate-map {kind}", v) for v in rest.split(",")]
@@ -91,6 +121,7 @@ def rate_map_arg(spec: str, rate_range: tuple[float, float], shape: tuple[int, i
     if spec.endswith(".npy"):
         return np.load(spec, allow_pickle=False)
     import cv2
+
     img = cv2.imread(spec, cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise UsageError(f"--rate-map: cannot read image {spec!r}")
@@ -103,6 +134,7 @@ def _inpaint_size(args: argparse.Namespace) -> tuple[int, int]:
     if not args.mask:
         raise UsageError("--inpaint needs --mask")
     import cv2
+
     cap = cv2.VideoCapture(args.inpaint)
     ok, first = cap.read()
     cap.release()
@@ -114,6 +146,7 @@ def _inpaint_size(args: argparse.Namespace) -> tuple[int, int]:
 def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: float | None) -> int:
     """Frames of the --inpaint video with the --mask region synthesized (mode tiles)."""
     import cv2
+
     if args.mask.endswith(".npy"):
         mask = np.load(args.mask, allow_pickle=False)
     else:
@@ -135,8 +168,10 @@ def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: flo
                 n += 1
     finally:
         cap.release()
-    print(f"inpainted {n} frames ({player.shape[1]}x{player.shape[0]}) of {args.inpaint} to {args.output}",
-          file=sys.stderr)
+    print(
+        f"inpainted {n} frames ({player.shape[1]}x{player.shape[0]}) of {args.inpaint} to {args.output}",
+        file=sys.stderr,
+    )
     return 0
 
 
@@ -157,6 +192,8 @@ def run(args: argparse.Namespace) -> int:
                 player.next_frame(out=frame)
                 writer.write(frame)
         dt = time.perf_counter() - t0
-    print(f"wrote {args.frames} frames ({player.shape[1]}x{player.shape[0]}) to {args.output} "
-          f"in {dt:.2f} s", file=sys.stderr)
+    print(
+        f"wrote {args.frames} frames ({player.shape[1]}x{player.shape[0]}) to {args.output} in {dt:.2f} s",
+        file=sys.stderr,
+    )
     return 0

@@ -1,4 +1,5 @@
 """The corpus runner: many clips, one database each, failures kept apart, re-runs skipped, merge."""
+
 from __future__ import annotations
 
 import os
@@ -8,8 +9,14 @@ import numpy as np
 import pytest
 
 from dynatex.analyzer import analyze_corpus, format_table
-from dynatex.analyzer.corpus import (_from_disk, blas_threads, connect, find_clips, remove_stale_temporaries,
-                                     texture_names)
+from dynatex.analyzer.corpus import (
+    _from_disk,
+    blas_threads,
+    connect,
+    find_clips,
+    remove_stale_temporaries,
+    texture_names,
+)
 from dynatex.analyzer.stream import spill_clip
 from dynatex.tiledb import open_db
 
@@ -63,7 +70,7 @@ def test_find_clips_folders_globs_and_lists(tmp_path, corpus):
     assert find_clips([tmp_path / "list.txt"]) == [str(tmp_path / "clips" / "c.avi"), str(tmp_path / "clips" / "b.npy")]
     frames = tmp_path / "frames"
     frames.mkdir()
-    assert find_clips([frames]) == [str(frames)]        # a folder without clips is a folder of images
+    assert find_clips([frames]) == [str(frames)]  # a folder without clips is a folder of images
     with pytest.raises(FileNotFoundError, match="missing.avi: no such clip"):
         find_clips([corpus / "missing.avi"])
     with pytest.raises(FileNotFoundError, match="matches no clip"):
@@ -88,7 +95,7 @@ def test_corpus_in_process_fails_bad_clips_keeps_others_and_skips_on_rerun(tmp_p
         with open_db(out / f"{name}.h5") as db:
             db.validate()
             assert db.textures == (name,) and db.texture(name).read("lds").n == 6
-    assert sorted(os.listdir(out)) == ["a.h5", "b.h5", "c.h5"]       # nothing for the failed clips, no temporaries
+    assert sorted(os.listdir(out)) == ["a.h5", "b.h5", "c.h5"]  # nothing for the failed clips, no temporaries
     table = format_table(results)
     assert "5 clips: 3 analysed, 0 skipped (database complete), 2 failed" in table
     assert "failed: " in table
@@ -98,21 +105,36 @@ def test_corpus_in_process_fails_bad_clips_keeps_others_and_skips_on_rerun(tmp_p
     assert [r.status for r in again] == ["skipped", "skipped", "skipped", "failed", "failed"]
     assert (out / "a.h5").stat().st_mtime_ns == stamp
 
-    np.save(corpus / "a.npy", wave_clip(t=30, h=16, w=24, seed=9))      # new content: a new hash
-    third = _by_name(analyze_corpus([corpus / "a.npy", corpus / "b.npy"], out, methods=("lds",),
-                                    params={"lds": {"n": 6}}, progress=False))
+    np.save(corpus / "a.npy", wave_clip(t=30, h=16, w=24, seed=9))  # new content: a new hash
+    third = _by_name(
+        analyze_corpus(
+            [corpus / "a.npy", corpus / "b.npy"], out, methods=("lds",), params={"lds": {"n": 6}}, progress=False
+        )
+    )
     assert third["a"].status == "ok" and third["b"].status == "skipped"
-    more = _by_name(analyze_corpus([corpus / "b.npy"], out, methods=("lds", "turnpoints"),
-                                   params={"lds": {"n": 6}, "turnpoints": TURNS}, progress=False))
-    assert more["b"].status == "ok"                                        # a method missing: re-analysed
+    more = _by_name(
+        analyze_corpus(
+            [corpus / "b.npy"],
+            out,
+            methods=("lds", "turnpoints"),
+            params={"lds": {"n": 6}, "turnpoints": TURNS},
+            progress=False,
+        )
+    )
+    assert more["b"].status == "ok"  # a method missing: re-analysed
 
 
 def test_merge_gathers_every_good_texture(tmp_path, corpus):
     out = tmp_path / "dbs"
     merged = tmp_path / "all.h5"
-    results = analyze_corpus([corpus / "a.npy", corpus / "c.avi", corpus / "e_notes.avi"], out,
-                             methods=("lds", "turnpoints"), params={"lds": {"n": 4}, "turnpoints": TURNS},
-                             merge=merged, progress=False)
+    results = analyze_corpus(
+        [corpus / "a.npy", corpus / "c.avi", corpus / "e_notes.avi"],
+        out,
+        methods=("lds", "turnpoints"),
+        params={"lds": {"n": 4}, "turnpoints": TURNS},
+        merge=merged,
+        progress=False,
+    )
     assert [r.status for r in results] == ["ok", "ok", "failed"]
     with open_db(merged) as db, open_db(out / "c.h5") as one:
         db.validate()
@@ -136,26 +158,48 @@ def test_stale_temporaries_of_a_killed_writer_are_removed(tmp_path, corpus):
 
 def test_max_memory_streams_lds_and_refuses_in_memory_methods_that_do_not_fit(tmp_path, corpus):
     out = tmp_path / "dbs"
-    ref = analyze_corpus([corpus / "c.avi"], tmp_path / "ref", methods=("lds",), params={"lds": {"n": 5}},
-                         progress=False)
+    ref = analyze_corpus(
+        [corpus / "c.avi"], tmp_path / "ref", methods=("lds",), params={"lds": {"n": 5}}, progress=False
+    )
     assert ref[0].status == "ok"
-    streamed = analyze_corpus([corpus / "c.avi"], out, methods=("lds",), params={"lds": {"n": 5}},
-                              max_memory="1GB", spill_dir=str(tmp_path), progress=False)
+    streamed = analyze_corpus(
+        [corpus / "c.avi"],
+        out,
+        methods=("lds",),
+        params={"lds": {"n": 5}},
+        max_memory="1GB",
+        spill_dir=str(tmp_path),
+        progress=False,
+    )
     assert streamed[0].status == "ok"
     with open_db(out / "c.h5") as db, open_db(tmp_path / "ref" / "c.h5") as one:
         a, b = db.texture("c").read("lds"), one.texture("c").read("lds")
         assert a.info["svd"] == "gram-streamed"
         np.testing.assert_allclose(a.basis, b.basis, atol=1e-4 * np.abs(b.basis).max())
         assert db.texture("c").source == one.texture("c").source
-    assert not [n for n in os.listdir(tmp_path) if n.startswith("dynatex-spill-")]     # spill files removed
-    small = analyze_corpus([corpus / "c.avi"], tmp_path / "small", methods=("lds", "turnpoints"),
-                           params={"lds": {"n": 5}, "turnpoints": TURNS}, max_memory=400 << 20, progress=False)
+    assert not [n for n in os.listdir(tmp_path) if n.startswith("dynatex-spill-")]  # spill files removed
+    small = analyze_corpus(
+        [corpus / "c.avi"],
+        tmp_path / "small",
+        methods=("lds", "turnpoints"),
+        params={"lds": {"n": 5}, "turnpoints": TURNS},
+        max_memory=400 << 20,
+        progress=False,
+    )
     assert small[0].status == "ok"
-    tiny = analyze_corpus([corpus / "c.avi"], tmp_path / "tiny", methods=("lds",), params={"lds": {"n": 5}},
-                          max_memory="64MB", progress=False)
+    tiny = analyze_corpus(
+        [corpus / "c.avi"],
+        tmp_path / "tiny",
+        methods=("lds",),
+        params={"lds": {"n": 5}},
+        max_memory="64MB",
+        progress=False,
+    )
     assert tiny[0].status == "failed" and "max_memory 0.06 GiB is too small for c.avi" in tiny[0].reason
-    with spill_clip(corpus / "c.avi") as disk, pytest.raises(MemoryError, match="method tiles needs the clip in "
-                                                                                 "memory .* only lds, mixture"):
+    with (
+        spill_clip(corpus / "c.avi") as disk,
+        pytest.raises(MemoryError, match="method tiles needs the clip in memory .* only lds, mixture"),
+    ):
         _from_disk(disk, "tiles", disk.nbytes)
 
 
@@ -168,8 +212,9 @@ def test_local_cluster_gives_the_sequential_models(tmp_path, corpus):
     clips = [corpus / "a.npy", corpus / "b.npy", corpus / "c.avi", corpus / "e_notes.avi"]
     seq = analyze_corpus(clips, tmp_path / "seq", methods=("lds",), params={"lds": {"n": 6}}, progress=False)
     with connect("local", 2, len(clips)) as client:
-        par = analyze_corpus(clips, tmp_path / "par", methods=("lds",), params={"lds": {"n": 6}}, client=client,
-                             progress=False)
+        par = analyze_corpus(
+            clips, tmp_path / "par", methods=("lds",), params={"lds": {"n": 6}}, client=client, progress=False
+        )
         threads = client.run(_blas_threads)
     assert sorted(threads.values()) == [str(blas_threads(2))] * 2 == [str(max(1, os.cpu_count() // 2))] * 2
     assert [r.status for r in par] == [r.status for r in seq] == ["ok", "ok", "ok", "failed"]
@@ -177,5 +222,6 @@ def test_local_cluster_gives_the_sequential_models(tmp_path, corpus):
     assert {r.worker for r in par[:3]} <= {0, 1, "0", "1"} and all(r.worker == "" for r in seq)
     for r in par[:3]:
         with open_db(r.database) as db, open_db(tmp_path / "seq" / f"{r.texture}.h5") as one:
-            np.testing.assert_allclose(db.texture(r.texture).read("lds").A, one.texture(r.texture).read("lds").A,
-                                       atol=1e-6)
+            np.testing.assert_allclose(
+                db.texture(r.texture).read("lds").A, one.texture(r.texture).read("lds").A, atol=1e-6
+            )

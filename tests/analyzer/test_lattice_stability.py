@@ -1,9 +1,11 @@
 """Lattice prominence (a cell lattice standing out in the output's autocorrelation) and the
 stability measure's calibration to a clip's own window-to-window energy."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from dynatex.analyzer import load_clip
 from dynatex.analyzer import metrics as m
 
@@ -12,6 +14,7 @@ from .test_metrics_calibration import lds_clip
 
 def _smooth_noise(t: int, h: int, w: int, sigma: float, seed: int = 0) -> np.ndarray:
     import cv2
+
     rng = np.random.default_rng(seed)
     n = rng.normal(0, 1, (t, h, w)).astype(np.float32)
     n = np.stack([cv2.GaussianBlur(f, (0, 0), sigma) for f in n])
@@ -39,7 +42,7 @@ def test_a_smooth_correlation_is_not_a_lattice():
     """Large blobs correlate strongly at short lags; the ring around each lag takes that
     decay out, so only a peak at the lag itself counts."""
     blobs = _smooth_noise(3, 240, 320, 12.0, seed=4)
-    assert m.lattice_correlation(blobs, 16)[1] > 0.3          # the plain correlation is high
+    assert m.lattice_correlation(blobs, 16)[1] > 0.3  # the plain correlation is high
     assert abs(m.lattice_prominence(blobs, 16)) < 0.03
 
 
@@ -67,7 +70,7 @@ def test_stability_accepts_a_clip_whose_energy_varies_against_itself():
     amp = 1.0 + 0.75 * np.sin(np.linspace(0, 2 * np.pi, 200))[:, None, None, None]
     clip = np.clip(128 + amp * base, 0, 255).astype(np.uint8)
     rep = m.stability(clip, clip)
-    assert rep.source_max_ratio > 2.0 and rep.source_min_ratio < 0.5   # outside the plain band
+    assert rep.source_max_ratio > 2.0 and rep.source_min_ratio < 0.5  # outside the plain band
     assert rep.is_stable()
     lo, hi = rep.bounds()
     assert lo < 0.5 and hi > 2.0

@@ -1,4 +1,5 @@
 """LDS learning: the noise normalisation, stability, order choice, SVD paths and memory."""
+
 from __future__ import annotations
 
 import tracemalloc
@@ -19,7 +20,7 @@ def _known_lds(tau=400, n=6, h=16, w=16, seed=0):
     a = np.zeros((n, n))
     for i, t in enumerate(ang):
         r = 0.93
-        a[2 * i:2 * i + 2, 2 * i:2 * i + 2] = r * np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+        a[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = r * np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
     c = np.linalg.qr(rng.standard_normal((h * w, n)))[0]
     x = np.zeros(n)
     xs = []
@@ -36,8 +37,9 @@ def test_noise_normalisation_matches_training_covariance():
     train = m.states @ m.states.T / m.states.shape[1]
     # With the 1/sqrt(tau-1) factor the model's stationary covariance is the training one.
     assert abs(np.trace(m.stationary_cov) / np.trace(train) - 1) < 0.1
-    np.testing.assert_allclose(np.sort(np.abs(np.linalg.eigvals(m.A))),
-                               np.sort(np.abs(np.linalg.eigvals(a_true))), atol=0.03)
+    np.testing.assert_allclose(
+        np.sort(np.abs(np.linalg.eigvals(m.A))), np.sort(np.abs(np.linalg.eigvals(a_true))), atol=0.03
+    )
     assert m.info["q_gain"] == 1.0 and m.info["poles_clipped"] == 0
 
 
@@ -46,7 +48,9 @@ def test_stability_enforced_and_reported():
     assert m.info["spectral_radius"] <= 0.97 + 1e-9
     assert m.info["spectral_radius_raw"] > 0.97
     assert m.info["poles_clipped"] >= 2
-    np.testing.assert_allclose(m.stationary_cov, m.A @ m.stationary_cov @ m.A.T + m.B @ m.B.T, atol=1e-6 * np.abs(m.stationary_cov).max())
+    np.testing.assert_allclose(
+        m.stationary_cov, m.A @ m.stationary_cov @ m.A.T + m.B @ m.B.T, atol=1e-6 * np.abs(m.stationary_cov).max()
+    )
 
 
 def test_stabilize_and_lyapunov_helpers():
@@ -97,15 +101,18 @@ def test_memory_holds_one_float32_copy_of_the_clip():
     assert peak < clip_f32 + 3 * basis + 2**20, (peak, clip_f32)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"n": 60}, "n=60 is larger than the clip allows: it has 40 frames"),
-    ({"n": 0}, "n must be a positive integer"),
-    ({"n": "many"}, "n must be a positive integer or 'auto'"),
-    ({"n": 5, "k": 6}, "k must be an integer in 1..n=5"),
-    ({"svd": "qr"}, "svd must be one of"),
-    ({"energy": 1.5}, "energy must be in"),
-    ({"max_radius": 1.0}, "max_radius must be in"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"n": 60}, "n=60 is larger than the clip allows: it has 40 frames"),
+        ({"n": 0}, "n must be a positive integer"),
+        ({"n": "many"}, "n must be a positive integer or 'auto'"),
+        ({"n": 5, "k": 6}, "k must be an integer in 1..n=5"),
+        ({"svd": "qr"}, "svd must be one of"),
+        ({"energy": 1.5}, "energy must be in"),
+        ({"max_radius": 1.0}, "max_radius must be in"),
+    ],
+)
 def test_bad_parameters(kwargs, message):
     with pytest.raises(ValueError, match=message):
         learn_lds(wave_clip(t=40, h=8, w=8), **kwargs)
@@ -133,10 +140,12 @@ def test_weak_components_have_unit_rows_and_the_database_accepts_them(tmp_path):
     """A clip of nearly rank 2 learned with n = 3: the third row, v.T Y / s summed in float32
     with s 200 times below the first, came out 0.2% too long and the format refused it."""
     from dynatex.tiledb import DatabaseWriter, TileDB
+
     t = np.arange(20)[:, None, None, None]
     x = np.arange(12)[None, None, :, None]
-    clip = np.repeat((128 + 60 * np.sin(0.3 * t + 0.5 * x + 0 * np.arange(8)[None, :, None, None])).astype(np.uint8),
-                     3, axis=3)
+    clip = np.repeat(
+        (128 + 60 * np.sin(0.3 * t + 0.5 * x + 0 * np.arange(8)[None, :, None, None])).astype(np.uint8), 3, axis=3
+    )
     model = learn_lds(load_clip(clip), n=3)
     norms = np.sqrt((model.basis.astype(np.float64) ** 2).sum(axis=1))
     assert np.abs(norms - 1).max() < 1e-5

@@ -1,11 +1,12 @@
 """The method registry describes itself: declared parameters match the learn functions."""
+
 from __future__ import annotations
 
 import inspect
 
 import pytest
-from dynatex.analyzer.methods import METHODS, Method, get_method
 
+from dynatex.analyzer.methods import METHODS, Method, get_method
 from dynatex.checks import Range
 from dynatex.cli import main
 from dynatex.errors import InvalidArgumentError
@@ -23,7 +24,7 @@ def test_declared_parameters_are_keywords_of_the_learn_function_with_its_default
         default = signature[p.name].default
         if default is not inspect.Parameter.empty:
             assert p.default == default, f"{name}.{p.name}: declared {p.default!r}, function {default!r}"
-        assert p.check(p.default) == p.default or p.default == ()     # the declared default follows its rule
+        assert p.check(p.default) == p.default or p.default == ()  # the declared default follows its rule
 
 
 def test_flags_are_distinct_across_methods():
@@ -48,8 +49,13 @@ def toy_learn(clip, *, level: float = 0.25, progress=None):
     return clip
 
 
-TOY = Method("toy", "tests.analyzer.test_methods:toy_learn", False, "a toy method of the test",
-             (Param("level", Range(float, 0.0, 2.0, high_open=True), 0.25, "Toy level.", "--toy-level"),))
+TOY = Method(
+    "toy",
+    "tests.analyzer.test_methods:toy_learn",
+    False,
+    "a toy method of the test",
+    (Param("level", Range(float, 0.0, 2.0, high_open=True), 0.25, "Toy level.", "--toy-level"),),
+)
 
 
 @pytest.fixture
@@ -61,6 +67,7 @@ def toy(monkeypatch):
 def test_a_declared_parameter_is_an_option_with_its_rule_and_reaches_the_learn_function(toy, capsys):
     from dynatex.cli import build_parser
     from dynatex.commands.analyze import method_params
+
     with pytest.raises(SystemExit):
         main(["analyze", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())

@@ -1,4 +1,5 @@
 """Unit tests of dynatex.analyzer.metrics: definitions on tiny arrays, input checks, doctests."""
+
 from __future__ import annotations
 
 import doctest
@@ -26,13 +27,16 @@ def test_check_frames_shapes():
     assert m.check_frames(np.zeros((3, 4, 5, 3), np.float32)).shape == (3, 4, 5, 3)
 
 
-@pytest.mark.parametrize("bad, exc, msg", [
-    (np.zeros((0, 4, 4, 3), np.uint8), ValueError, "empty"),
-    (np.zeros((4, 4), np.uint8), ValueError, "shape"),
-    (np.zeros((2, 4, 4, 2), np.uint8), ValueError, "C in"),
-    (np.zeros((2, 4, 4), bool), TypeError, "numbers"),
-    ("clip.avi", TypeError, "numpy array"),
-])
+@pytest.mark.parametrize(
+    "bad, exc, msg",
+    [
+        (np.zeros((0, 4, 4, 3), np.uint8), ValueError, "empty"),
+        (np.zeros((4, 4), np.uint8), ValueError, "shape"),
+        (np.zeros((2, 4, 4, 2), np.uint8), ValueError, "C in"),
+        (np.zeros((2, 4, 4), bool), TypeError, "numbers"),
+        ("clip.avi", TypeError, "numpy array"),
+    ],
+)
 def test_check_frames_rejects(bad, exc, msg):
     with pytest.raises(exc, match=msg):
         m.check_frames(bad, name="output")
@@ -62,11 +66,11 @@ def test_stability_streams_iterables_and_counts_nonfinite():
     frames = [f for f in src] + [np.full(src.shape[1:], np.nan, np.float32)] * 3
     rep = m.stability(iter(frames), src, window=5)
     assert rep.n_frames == 13 and rep.nonfinite_frames == 3
-    assert np.isnan(rep.ratios[-1])          # the last window holds only NaN frames
+    assert np.isnan(rep.ratios[-1])  # the last window holds only NaN frames
     assert not rep.is_stable()
     d = rep.as_dict()
     assert d["final_ratio"] is None and d["stable"] is False
-    json.dumps(d)                             # JSON-ready
+    json.dumps(d)  # JSON-ready
 
 
 def test_stability_errors():
@@ -87,8 +91,8 @@ def test_stability_errors():
 def test_grid_labels_offset_and_count():
     lab = m.grid_labels((10, 12), (4, 5), offset=(2, 1))
     assert lab.shape == (10, 12)
-    assert lab[0, 0] == 0 and lab[1, 0] == 0 and lab[2, 0] != 0      # row boundary at y=2
-    assert lab[0, 3] == 0 and lab[0, 4] != 0                         # column boundary at x=4
+    assert lab[0, 0] == 0 and lab[1, 0] == 0 and lab[2, 0] != 0  # row boundary at y=2
+    assert lab[0, 3] == 0 and lab[0, 4] != 0  # column boundary at x=4
     with pytest.raises(ValueError, match="tile"):
         m.grid_labels((10, 12), 0)
 
@@ -111,7 +115,7 @@ def test_seam_visibility_wrap_border():
     rng = np.random.default_rng(4)
     spec = np.fft.fft2(rng.normal(0, 1, (96, 96)))
     fy, fx = np.meshgrid(np.fft.fftfreq(96), np.fft.fftfreq(96), indexing="ij")
-    field = np.real(np.fft.ifft2(spec * np.exp(-(fx ** 2 + fy ** 2) / (2 * 0.06 ** 2))))
+    field = np.real(np.fft.ifft2(spec * np.exp(-(fx**2 + fy**2) / (2 * 0.06**2))))
     field = (128 + 40 * field / field.std()).clip(0, 255)
     periodic = np.repeat(field[None], 2, axis=0)
     crop = np.repeat(field[None, :64, :64], 2, axis=0)
@@ -130,7 +134,7 @@ def test_seam_visibility_errors():
         m.seam_visibility(f)
     with pytest.raises(TypeError, match="labels must be"):
         m.seam_visibility(f, np.zeros((16, 16), np.float32))
-    checker = (np.indices((16, 16)).sum(axis=0) % 2)
+    checker = np.indices((16, 16)).sum(axis=0) % 2
     with pytest.raises(ValueError, match="no interior"):
         m.seam_visibility(f, checker)
 
@@ -138,7 +142,7 @@ def test_seam_visibility_errors():
 # -- temporal ---------------------------------------------------------------------------------
 def test_temporal_discontinuity_definition():
     ramp = np.repeat(np.arange(0, 60, 3, dtype=np.uint8), 4).reshape(20, 2, 2)
-    jump = np.concatenate([ramp[:10], ramp[15:]])          # skips 5 steps at frame 10
+    jump = np.concatenate([ramp[:10], ramp[15:]])  # skips 5 steps at frame 10
     assert m.temporal_discontinuity(jump, [10], source=ramp) == pytest.approx([6.0])
     assert m.temporal_discontinuity(jump, [3, 12], source=ramp) == pytest.approx([1.0, 1.0])
     # without a source, the output's own median step is the reference
@@ -174,6 +178,7 @@ def test_spectrum_shape_and_different_sizes():
     assert m.spectrum_distance(a, b, cuboid=(8, 16), downscale=1) < 0.5
     # a smoothed version does not
     import cv2
+
     c = np.stack([cv2.GaussianBlur(f.astype(np.float32), (0, 0), 2) for f in b])
     assert m.spectrum_distance(c, b, cuboid=(8, 16), downscale=1) > 5
 
@@ -254,7 +259,7 @@ def test_evaluate_other_size_and_nonfinite():
     other = _noise(t=40, h=72, w=80, seed=5)
     rep = m.evaluate(other, src, downscale=1)
     assert rep["stability"] is None and rep["frame_coverage"] is None
-    assert rep["spectrum_distance_db"] < 1.0            # same white-noise statistics
+    assert rep["spectrum_distance_db"] < 1.0  # same white-noise statistics
     bad = src[:24].astype(np.float32)
     bad[3, 0, 0, 0] = np.nan
     rep = m.evaluate(bad, src, window=12)

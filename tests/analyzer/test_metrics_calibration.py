@@ -5,6 +5,7 @@ frame, a 10-frame segment looped; uncut pasted blocks versus the same blocks wit
 min-error cut (seams); a decaying noiseless LDS (stability). Each runs on generated clips
 and on real clips from ``../shared/data/clips`` (downscaled, short ranges, to stay fast).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -28,6 +29,7 @@ SEAM_REAL = {
 def drifting_texture(t: int = 48, h: int = 64, w: int = 64, seed: int = 0) -> np.ndarray:
     """Two layers of smooth noise drifting at different velocities, plus a flickering fine layer."""
     import cv2
+
     rng = np.random.default_rng(seed)
     pad = 2 * t
 
@@ -38,31 +40,32 @@ def drifting_texture(t: int = 48, h: int = 64, w: int = 64, seed: int = 0) -> np
     a, b = layer(4.0), layer(2.0)
     frames = np.empty((t, h, w, 3), np.float32)
     for i in range(t):
-        la = a[pad + i:pad + i + h, pad + (2 * i) // 3:pad + (2 * i) // 3 + w]
-        lb = b[pad - i:pad - i + h, pad + i // 2:pad + i // 2 + w]
+        la = a[pad + i : pad + i + h, pad + (2 * i) // 3 : pad + (2 * i) // 3 + w]
+        lb = b[pad - i : pad - i + h, pad + i // 2 : pad + i // 2 + w]
         v = 128 + 35 * la + 20 * lb * np.cos(0.2 * i)
         frames[i] = v[..., None] * np.array([1.0, 0.9, 0.75], np.float32)
     return np.rint(frames).clip(0, 255).astype(np.uint8)
 
 
-def lds_clip(n_frames: int, *, decay: float, noise: bool, x0: np.ndarray | None = None, seed: int = 0,
-             quantize: bool = True):
+def lds_clip(
+    n_frames: int, *, decay: float, noise: bool, x0: np.ndarray | None = None, seed: int = 0, quantize: bool = True
+):
     """A tiny LDS in numpy: ``x <- decay * R x (+ noise)``, frames ``= C x + mean`` (32x32 RGB).
 
     ``R`` is a fixed rotation (20 pole pairs); the noise keeps the state at unit variance
     when ``decay < 1``. Returns (frames, last state).
     """
     n, hw = 40, 32
-    basis_rng = np.random.default_rng(1234)          # the same model for every call
+    basis_rng = np.random.default_rng(1234)  # the same model for every call
     c_mat = np.linalg.qr(basis_rng.normal(size=(hw * hw, n)))[0] * 30.0 * np.sqrt(hw * hw / n)
     mean = 128 + 20 * np.sin(np.linspace(0, 3 * np.pi, hw * hw))
     rot = np.zeros((n, n))
     for k, ang in enumerate(np.linspace(0.05, 1.5, n // 2)):
         cs, sn = np.cos(ang), np.sin(ang)
-        rot[2 * k:2 * k + 2, 2 * k:2 * k + 2] = [[cs, -sn], [sn, cs]]
+        rot[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = [[cs, -sn], [sn, cs]]
     rng = np.random.default_rng(seed)
     x = rng.normal(size=n) if x0 is None else x0.copy()
-    q = np.sqrt(max(0.0, 1 - decay ** 2))
+    q = np.sqrt(max(0.0, 1 - decay**2))
     out = np.empty((n_frames, hw, hw, 3), np.float64)
     for i in range(n_frames):
         x = decay * rot @ x + (q * rng.normal(size=n) if noise else 0.0)
@@ -74,8 +77,12 @@ def lds_clip(n_frames: int, *, decay: float, noise: bool, x0: np.ndarray | None 
 def variants(src: np.ndarray, seed: int = 0) -> dict[str, np.ndarray]:
     t = src.shape[0]
     rng = np.random.default_rng(seed)
-    return {"self": src, "shuffled": src[rng.permutation(t)], "frozen": src[np.full(t, t // 2)],
-            "loop10": src[np.arange(t) % 10]}
+    return {
+        "self": src,
+        "shuffled": src[rng.permutation(t)],
+        "frozen": src[np.full(t, t // 2)],
+        "loop10": src[np.arange(t) % 10],
+    }
 
 
 # -- quilting (for the seam calibration) ----------------------------------------------------------
@@ -92,7 +99,7 @@ def _min_cut_path(err: np.ndarray) -> np.ndarray:
     path[-1] = int(np.argmin(cost[-1]))
     for y in range(h - 2, -1, -1):
         lo = max(0, path[y + 1] - 1)
-        path[y] = lo + int(np.argmin(cost[y, lo:min(w, path[y + 1] + 2)]))
+        path[y] = lo + int(np.argmin(cost[y, lo : min(w, path[y + 1] + 2)]))
     return path
 
 
@@ -116,18 +123,18 @@ def quilt(src: np.ndarray, *, n: int = 4, block: int = 32, overlap: int = 10, ca
     for i in range(n):
         for j in range(n):
             y0, x0 = i * step, j * step
-            region = cut[:, y0:y0 + block, x0:x0 + block]
-            known = cut_lab[y0:y0 + block, x0:x0 + block] >= 0
+            region = cut[:, y0 : y0 + block, x0 : x0 + block]
+            known = cut_lab[y0 : y0 + block, x0 : x0 + block] >= 0
             best = None
             for _ in range(candidates if (i or j) else 1):
                 sy, sx = rng.integers(0, h - block + 1), rng.integers(0, w - block + 1)
-                blk = srcf[:, sy:sy + block, sx:sx + block]
+                blk = srcf[:, sy : sy + block, sx : sx + block]
                 e = float((((blk - region) ** 2).sum(axis=(0, 3)) * known).sum())
                 if best is None or e < best[0]:
                     best = (e, blk)
             blk = best[1]
-            unc[:, y0:y0 + block, x0:x0 + block] = blk
-            unc_lab[y0:y0 + block, x0:x0 + block] = i * n + j
+            unc[:, y0 : y0 + block, x0 : x0 + block] = blk
+            unc_lab[y0 : y0 + block, x0 : x0 + block] = i * n + j
             err = ((blk - region) ** 2).sum(axis=(0, 3))
             take = np.ones((block, block), bool)
             if j:
@@ -135,14 +142,20 @@ def quilt(src: np.ndarray, *, n: int = 4, block: int = 32, overlap: int = 10, ca
             if i:
                 take &= np.arange(block)[:, None] >= _min_cut_path(err[:overlap, :].T)[None, :]
             region[:, take] = blk[:, take]
-            cut_lab[y0:y0 + block, x0:x0 + block][take] = i * n + j
+            cut_lab[y0 : y0 + block, x0 : x0 + block][take] = i * n + j
     q = lambda a: np.rint(a).clip(0, 255).astype(np.uint8)  # noqa: E731
     return q(unc), unc_lab, q(cut), cut_lab
 
 
 # -- fixtures -----------------------------------------------------------------------------------
-@pytest.fixture(scope="module", params=["generated", pytest.param("water", marks=pytest.mark.clips),
-                                        pytest.param("steam", marks=pytest.mark.clips)])
+@pytest.fixture(
+    scope="module",
+    params=[
+        "generated",
+        pytest.param("water", marks=pytest.mark.clips),
+        pytest.param("steam", marks=pytest.mark.clips),
+    ],
+)
 def clip(request) -> np.ndarray:
     if request.param == "generated":
         return drifting_texture()
@@ -238,10 +251,10 @@ def _seam_case(src: np.ndarray, label: str):
     unc_r, cut_r = np.mean(ratios, axis=0)
     grid = m.grid_labels(src.shape[1:3], 22, offset=(3, 3))
     src_r = m.seam_visibility(src, grid).mean()
-    assert 0.75 < src_r < 1.3, label                  # no seam: the source under an arbitrary grid
-    assert unc_r > 1.3 * cut_r, label                 # the cut hides the seams, clearly
+    assert 0.75 < src_r < 1.3, label  # no seam: the source under an arbitrary grid
+    assert unc_r > 1.3 * cut_r, label  # the cut hides the seams, clearly
     assert cut_r > src_r, label
-    for u, c in ratios:                               # and it does for every draw
+    for u, c in ratios:  # and it does for every draw
         assert u > c, label
     return unc_r, cut_r, src_r
 
@@ -290,8 +303,8 @@ def test_stability_real_clip_decay(clips_dir):
     src = load_clip(clips_dir / name, **opts).frames
     mean = src.astype(np.float32).mean(axis=0)
     t = np.arange(src.shape[0], dtype=np.float32)[:, None, None, None]
-    decayed = np.rint(mean + 0.9 ** t * (src - mean)).clip(0, 255).astype(np.uint8)
-    good = m.stability(src[::-1], src, window=20)     # played backwards: same energy
+    decayed = np.rint(mean + 0.9**t * (src - mean)).clip(0, 255).astype(np.uint8)
+    good = m.stability(src[::-1], src, window=20)  # played backwards: same energy
     bad = m.stability(decayed, src, window=20)
     assert good.is_stable() and good.min_ratio > 0.7
     assert bad.final_ratio < 0.05

@@ -1,12 +1,12 @@
 """Subspace-mixture learning: MPPCA, global coordination constraints, Schwarz's criterion, bad input."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from dynatex.analyzer import load_clip
-from dynatex.analyzer.mixture import (coefficient_matrix, coordinate, fit_ar, fit_mppca, learn_mixture,
-                                      lle_weights)
+from dynatex.analyzer.mixture import coefficient_matrix, coordinate, fit_ar, fit_mppca, learn_mixture, lle_weights
 from dynatex.tiledb.mixture import companion_radius
 
 from ..conftest import wave_clip
@@ -14,8 +14,7 @@ from ..conftest import wave_clip
 
 @pytest.fixture(scope="module")
 def model():
-    return learn_mixture(wave_clip(90, periods=(17.0, 11.0, 7.0)), components=3, dim=4, pca_dim=20,
-                         neighbors=8, pmax=4)
+    return learn_mixture(wave_clip(90, periods=(17.0, 11.0, 7.0)), components=3, dim=4, pca_dim=20, neighbors=8, pmax=4)
 
 
 def test_model_shapes_and_invariants(model):
@@ -98,21 +97,31 @@ def test_unstable_ar_is_pulled_inside_the_unit_circle():
 
 def test_progress_is_reported():
     calls = []
-    learn_mixture(wave_clip(40), components=2, dim=2, pca_dim=8, neighbors=5, pmax=2,
-                  progress=lambda done, total: calls.append((done, total)))
+    learn_mixture(
+        wave_clip(40),
+        components=2,
+        dim=2,
+        pca_dim=8,
+        neighbors=5,
+        pmax=2,
+        progress=lambda done, total: calls.append((done, total)),
+    )
     assert calls == [(i, 5) for i in range(1, 6)]
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"components": 8, "dim": 6}, "needs more than components \\* \\(dim \\+ 1\\) = 56 frames, the clip has 40"),
-    ({"components": 0}, "components must be an integer >= 1"),
-    ({"dim": 2.5}, "dim must be an integer"),
-    ({"dim": 8, "pca_dim": 8}, "dim=8 must be smaller than pca_dim=8"),
-    ({"neighbors": 40}, "neighbors=40 must be smaller"),
-    ({"pmax": 12}, "pmax=12 is too large"),
-    ({"max_radius": 1.0}, "max_radius must be in"),
-    ({"components": 2, "dim": 2, "global_dim": 6}, "global_dim=6 exceeds"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"components": 8, "dim": 6}, "needs more than components \\* \\(dim \\+ 1\\) = 56 frames, the clip has 40"),
+        ({"components": 0}, "components must be an integer >= 1"),
+        ({"dim": 2.5}, "dim must be an integer"),
+        ({"dim": 8, "pca_dim": 8}, "dim=8 must be smaller than pca_dim=8"),
+        ({"neighbors": 40}, "neighbors=40 must be smaller"),
+        ({"pmax": 12}, "pmax=12 is too large"),
+        ({"max_radius": 1.0}, "max_radius must be in"),
+        ({"components": 2, "dim": 2, "global_dim": 6}, "global_dim=6 exceeds"),
+    ],
+)
 def test_bad_parameters_give_clear_errors(kwargs, match):
     with pytest.raises(ValueError, match=match):
         learn_mixture(wave_clip(40), **kwargs)
@@ -122,7 +131,9 @@ def test_constant_and_degenerate_clips_are_refused():
     const = np.full((40, 8, 8, 3), 77, np.uint8)
     with pytest.raises(ValueError, match="clip is constant"):
         learn_mixture(const, components=2, dim=2)
-    two = np.where(np.arange(40)[:, None, None, None] % 2 == 0, 10, 200).astype(np.uint8) * np.ones((1, 8, 8, 3), np.uint8)
+    two = np.where(np.arange(40)[:, None, None, None] % 2 == 0, 10, 200).astype(np.uint8) * np.ones(
+        (1, 8, 8, 3), np.uint8
+    )
     with pytest.raises(ValueError, match="rank"):
         learn_mixture(two, components=2, dim=2)
     with pytest.raises(ValueError, match="uint8"):

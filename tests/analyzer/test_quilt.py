@@ -1,6 +1,7 @@
 """Quilting of spatio-temporal cuboids: the SVD and its error per rank, block comparison,
 the DP cut, the quilt itself (verbatim copies, same cut for every frame, any canvas,
 elongated blocks, gain), bad input, and the must-show figures on the real time-lapse clips."""
+
 from __future__ import annotations
 
 import itertools
@@ -10,8 +11,16 @@ import pytest
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import seam_visibility
-from dynatex.analyzer.quilt import (block_errors, learn_quilt, measure_comparison_speedup, min_cut_path,
-                                    pixel_time_matrix, rank_errors, spreading_clip, time_svd)
+from dynatex.analyzer.quilt import (
+    block_errors,
+    learn_quilt,
+    measure_comparison_speedup,
+    min_cut_path,
+    pixel_time_matrix,
+    rank_errors,
+    spreading_clip,
+    time_svd,
+)
 from tests.conftest import wave_clip
 
 
@@ -47,7 +56,7 @@ def test_time_svd_matches_numpy_svd(shape):
         xk = (u[:, :k] * sv[:k]) @ vt[:k]
         np.testing.assert_allclose(err[k - 1], np.linalg.norm(x - xk) / np.linalg.norm(x), atol=1e-5)
     # the coefficients preserve the distances of the rank-k projection
-    proj = (u[:, :4] * sv[:4])
+    proj = u[:, :4] * sv[:4]
     d_ref = np.linalg.norm(proj[0] - proj[5])
     assert abs(np.linalg.norm(coef[0] - coef[5]) - d_ref) < 1e-3 * max(d_ref, 1)
     assert np.all(np.diff(err) <= 1e-12) and err[-1] < 1e-3
@@ -57,7 +66,7 @@ def test_rank_errors_small_for_low_rank_clip():
     t = np.linspace(0, 1, 15)[:, None, None, None]
     f = (50 + 100 * t * np.random.default_rng(1).random((1, 8, 8, 3))).astype(np.uint8)
     err = rank_errors(f)
-    assert err[3] < 0.02 < err[0]      # 50 + 100 t r(x, c): rank 4 (a constant, t per channel) plus rounding
+    assert err[3] < 0.02 < err[0]  # 50 + 100 t r(x, c): rank 4 (a constant, t per channel) plus rounding
 
 
 # -- comparison and cut ---------------------------------------------------------------------------
@@ -69,8 +78,9 @@ def test_block_errors_match_brute_force():
     mask[:, :2] = True
     mask[:1] = True
     e = block_errors(feats, tpl, mask)
-    ref = np.array([[(((feats[y:y + 5, x:x + 4] - tpl) ** 2).sum(-1) * mask).sum() for x in range(9)]
-                    for y in range(10)])
+    ref = np.array(
+        [[(((feats[y : y + 5, x : x + 4] - tpl) ** 2).sum(-1) * mask).sum() for x in range(9)] for y in range(10)]
+    )
     np.testing.assert_allclose(e, ref, rtol=1e-4, atol=1e-4)
 
 
@@ -89,8 +99,11 @@ def test_min_cut_path_is_optimal():
     err = rng.random((5, 4))
     path = min_cut_path(err)
     assert np.all(np.abs(np.diff(path)) <= 1)
-    best = min(sum(err[i, p[i]] for i in range(5))
-               for p in itertools.product(range(4), repeat=5) if np.all(np.abs(np.diff(p)) <= 1))
+    best = min(
+        sum(err[i, p[i]] for i in range(5))
+        for p in itertools.product(range(4), repeat=5)
+        if np.all(np.abs(np.diff(p)) <= 1)
+    )
     assert abs(err[np.arange(5), path].sum() - best) < 1e-12
 
 
@@ -102,7 +115,7 @@ def spread():
 
 def test_quilt_copies_blocks_verbatim_and_covers_canvas(spread):
     q = learn_quilt(spread, size=(45, 70), block=12, rank=6, feather=0, seed=1)
-    assert q.size == (45, 70)                   # (height, width): 45 rows of 70 pixels
+    assert q.size == (45, 70)  # (height, width): 45 rows of 70 pixels
     assert q.source_map.shape == (45, 70, 2) and q.labels.shape == (45, 70)
     assert q.gain is None and q.blend_weight is None
     assert q.source_map[..., 0].max() < 32 and q.source_map[..., 1].max() < 32 and q.source_map.min() >= 0
@@ -160,27 +173,30 @@ def test_lowpass_gain_flattens_a_gradient():
     out = render(frames, q, 3).astype(float).mean(axis=2)
     cols = out.mean(axis=0)
     raw = frames[3].astype(float).mean(axis=(0, 2))
-    assert np.ptp(cols) < 0.35 * np.ptp(raw)   # the source's left-to-right ramp is gone
+    assert np.ptp(cols) < 0.35 * np.ptp(raw)  # the source's left-to-right ramp is gone
     q2 = learn_quilt(frames, size=(96, 96), block=12, rank=4, lowpass=8.0, restore_gradient=True, seed=0)
     cols2 = render(frames, q2, 3).astype(float).mean(axis=(0, 2))
-    assert cols2[-10:].mean() - cols2[:10].mean() > 60     # restore puts the ramp back, stretched
+    assert cols2[-10:].mean() - cols2[:10].mean() > 60  # restore puts the ramp back, stretched
 
 
-@pytest.mark.parametrize("kwargs, error, message", [
-    (dict(block=40), ValueError, "block 40x40 .* larger than the 32x32 source"),
-    (dict(block=(8, 33)), ValueError, "larger than"),
-    (dict(size=(0, 10)), ValueError, r"size must be \(height, width\) with each side in 1\.\.16384"),
-    (dict(size=(10, 20000)), ValueError, r"size must be \(height, width\) with each side in 1\.\.16384"),
-    ({"size": (10, 20, 30)}, ValueError, r"size must be \(height, width\), two integers"),
-    ({"size": (10.5, 20)}, TypeError, r"size must be \(height, width\) integers"),
-    (dict(size="big"), TypeError, r"size must be \(height, width\)"),
-    (dict(block=8, overlap=5), ValueError, "overlap .* at most half"),
-    (dict(rank=0), ValueError, "rank must be an integer in"),
-    (dict(tolerance=-1), ValueError, "tolerance"),
-    (dict(lowpass=0), ValueError, "lowpass"),
-    (dict(block=8, overlap=2, feather=3), ValueError, "feather must be an integer in"),
-    (dict(seed=1.5), TypeError, "seed must be an integer"),
-])
+@pytest.mark.parametrize(
+    "kwargs, error, message",
+    [
+        (dict(block=40), ValueError, "block 40x40 .* larger than the 32x32 source"),
+        (dict(block=(8, 33)), ValueError, "larger than"),
+        (dict(size=(0, 10)), ValueError, r"size must be \(height, width\) with each side in 1\.\.16384"),
+        (dict(size=(10, 20000)), ValueError, r"size must be \(height, width\) with each side in 1\.\.16384"),
+        ({"size": (10, 20, 30)}, ValueError, r"size must be \(height, width\), two integers"),
+        ({"size": (10.5, 20)}, TypeError, r"size must be \(height, width\) integers"),
+        (dict(size="big"), TypeError, r"size must be \(height, width\)"),
+        (dict(block=8, overlap=5), ValueError, "overlap .* at most half"),
+        (dict(rank=0), ValueError, "rank must be an integer in"),
+        (dict(tolerance=-1), ValueError, "tolerance"),
+        (dict(lowpass=0), ValueError, "lowpass"),
+        (dict(block=8, overlap=2, feather=3), ValueError, "feather must be an integer in"),
+        (dict(seed=1.5), TypeError, "seed must be an integer"),
+    ],
+)
 def test_bad_input(spread, kwargs, error, message):
     with pytest.raises(error, match=message):
         learn_quilt(spread, **kwargs)

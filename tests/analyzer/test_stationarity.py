@@ -1,14 +1,15 @@
 """The non-stationary warning: a clip that is not one texture all over (a single moving object)
 gets a stationarity figure below the threshold, and analysis and ``dynatex info`` say so."""
+
 from __future__ import annotations
 
 import json
 
 import numpy as np
 import pytest
+
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.tiles import STATIONARITY_WARN, stationarity, stationarity_warning
-
 from dynatex.cli import main
 
 from .test_tiles import _stochastic
@@ -30,7 +31,8 @@ def test_a_single_object_is_not_stationary_and_a_texture_is():
     tex, _ = stationarity(_stochastic(t=40))
     assert tex > 0.6
     assert stationarity_warning({"stationarity": obj, "stationarity_worst": details["worst"]}).startswith(
-        "the clip is not one texture all over")
+        "the clip is not one texture all over"
+    )
     assert stationarity_warning({"stationarity": tex}) is None
 
 
@@ -44,8 +46,20 @@ def test_grass_and_sea_are_stationary(clips_dir, name):
 def test_analyze_warns_and_info_shows_it(tmp_path, capsys):
     np.save(tmp_path / "obj.npy", moving_object())
     db = tmp_path / "o.h5"
-    code = main(["analyze", str(tmp_path / "obj.npy"), "-o", str(db), "--methods", "tiles", "--tiles-min-loop", "16",
-                 "--tiles-period", "144x144"])
+    code = main(
+        [
+            "analyze",
+            str(tmp_path / "obj.npy"),
+            "-o",
+            str(db),
+            "--methods",
+            "tiles",
+            "--tiles-min-loop",
+            "16",
+            "--tiles-period",
+            "144x144",
+        ]
+    )
     _, err = capsys.readouterr()
     assert code == 0
     warnings = [ln for ln in err.splitlines() if "warning" in ln]
@@ -57,6 +71,18 @@ def test_analyze_warns_and_info_shows_it(tmp_path, capsys):
     assert "not one texture all over" in capsys.readouterr()[0]
     # a texture: no warning
     np.save(tmp_path / "tex.npy", _stochastic(t=40))
-    code = main(["analyze", str(tmp_path / "tex.npy"), "-o", str(tmp_path / "t.h5"), "--methods", "tiles",
-                 "--tiles-min-loop", "16", "--tiles-period", "144x144"])
+    code = main(
+        [
+            "analyze",
+            str(tmp_path / "tex.npy"),
+            "-o",
+            str(tmp_path / "t.h5"),
+            "--methods",
+            "tiles",
+            "--tiles-min-loop",
+            "16",
+            "--tiles-period",
+            "144x144",
+        ]
+    )
     assert code == 0 and "warning" not in capsys.readouterr()[1]

@@ -1,4 +1,5 @@
 """Out-of-core learning: a clip on disk, read by pixel columns, gives the in-memory model."""
+
 from __future__ import annotations
 
 import cv2
@@ -19,9 +20,14 @@ def _waves(t: int = 64, h: int = 48, w: int = 64, seed: int = 0) -> np.ndarray:
     yy = np.arange(h)[None, :, None, None]
     xx = np.arange(w)[None, None, :, None]
     cc = np.arange(3)[None, None, None, :]
-    f = 128 + 50 * np.sin(0.31 * tt + 0.20 * xx + 0.5 * cc) + 25 * np.sin(0.17 * tt - 0.23 * yy) \
-        + 12 * np.cos(0.53 * tt + 0.11 * (xx + yy)) + 6 * np.sin(0.71 * tt + 0.3 * xx - 0.2 * yy) \
+    f = (
+        128
+        + 50 * np.sin(0.31 * tt + 0.20 * xx + 0.5 * cc)
+        + 25 * np.sin(0.17 * tt - 0.23 * yy)
+        + 12 * np.cos(0.53 * tt + 0.11 * (xx + yy))
+        + 6 * np.sin(0.71 * tt + 0.3 * xx - 0.2 * yy)
         + rng.normal(0, 2, (t, h, w, 3))
+    )
     return np.clip(np.rint(f), 0, 255).astype(np.uint8)
 
 

@@ -2,14 +2,25 @@
 
 Quality figures use analyzer/metrics.py (seam_visibility, temporal_discontinuity).
 """
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from dynatex.analyzer import load_clip, metrics
-from dynatex.analyzer.tiles import (circular_cut, corner_cut, find_loop, learn_tiles, looped_block, ring_join,
-                                    side_join, tile_period, transition_map, wang_edges)
+from dynatex.analyzer.tiles import (
+    circular_cut,
+    corner_cut,
+    find_loop,
+    learn_tiles,
+    looped_block,
+    ring_join,
+    side_join,
+    tile_period,
+    transition_map,
+    wang_edges,
+)
 
 from ..conftest import wave_clip
 
@@ -17,9 +28,10 @@ from ..conftest import wave_clip
 def _stochastic(t=70, h=56, w=72, seed=0):
     """Moving smooth noise: a clip where uncut blocks show seams."""
     import cv2
+
     rng = np.random.default_rng(seed)
     big = cv2.GaussianBlur(rng.normal(0, 1, (h + t * 2, w + t)).astype(np.float32), (0, 0), 2.5)
-    frames = np.stack([big[2 * i:2 * i + h, i:i + w] for i in range(t)])
+    frames = np.stack([big[2 * i : 2 * i + h, i : i + w] for i in range(t)])
     g = np.clip(128 + 60 * frames / frames.std(), 0, 255).astype(np.uint8)
     return np.stack([g, 255 - g, np.clip(g * 0.5 + 60, 0, 255).astype(np.uint8)], axis=3)
 
@@ -86,9 +98,9 @@ def test_tiles_are_mutually_compatible_and_share_the_ring(model):
     edge = np.zeros((th, tw), bool)
     edge[0], edge[-1], edge[:, 0], edge[:, -1] = True, True, True, True
     for k in range(1, 4):
-        assert (model.masks[k][edge] == 255).all()                       # the outermost ring is the primary's
+        assert (model.masks[k][edge] == 255).all()  # the outermost ring is the primary's
         assert (model.tiles[k][:, edge] == model.tiles[0][:, edge]).all()
-        assert (model.masks[k] == 0).any()                               # and the interior is not
+        assert (model.masks[k] == 0).any()  # and the interior is not
     # a random arrangement of the four is as seamless as the primary with itself
     rng = np.random.default_rng(0)
     pick = rng.integers(0, 4, (4, 5))
@@ -105,8 +117,8 @@ def test_uncut_blocks_are_clearly_worse():
     blocks = []
     for _ in range(12):
         y, x, s = rng.integers(0, clip.shape[1] - th), rng.integers(0, clip.shape[2] - tw), rng.integers(0, 30)
-        blocks.append(clip[s:s + 30, y:y + th, x:x + tw])
-    plane = np.concatenate([np.concatenate(blocks[r * 4:(r + 1) * 4], axis=2) for r in range(3)], axis=1)
+        blocks.append(clip[s : s + 30, y : y + th, x : x + tw])
+    plane = np.concatenate([np.concatenate(blocks[r * 4 : (r + 1) * 4], axis=2) for r in range(3)], axis=1)
     labels = metrics.grid_labels(plane.shape[1:3], (th, tw))
     uncut = metrics.seam_visibility(plane, labels).mean()
     tiled = np.tile(m.tiles[0][:30], (1, 3, 4, 1))
@@ -149,16 +161,19 @@ def test_progress_reaches_its_total():
     assert calls and calls[-1][0] == calls[-1][1] and all(d <= t for d, t in calls)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"tile": 80}, "larger than the clip frame"),
-    ({"tile": "big"}, "tile must be an integer"),
-    ({"min_loop": 90}, "fewer than the shortest loop"),
-    ({"n_tiles": 0}, "n_tiles"),
-    ({"transition": 30, "min_loop": 20}, "transition"),
-    ({"flow_gain": -1}, "flow_gain"),
-    ({"ring": 20, "tile": 24}, "ring"),
-    ({"names": ["only", "two"]}, "names"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"tile": 80}, "larger than the clip frame"),
+        ({"tile": "big"}, "tile must be an integer"),
+        ({"min_loop": 90}, "fewer than the shortest loop"),
+        ({"n_tiles": 0}, "n_tiles"),
+        ({"transition": 30, "min_loop": 20}, "transition"),
+        ({"flow_gain": -1}, "flow_gain"),
+        ({"ring": 20, "tile": 24}, "ring"),
+        ({"names": ["only", "two"]}, "names"),
+    ],
+)
 def test_bad_input_is_a_clear_error(kwargs, message):
     with pytest.raises(ValueError, match=message):
         learn_tiles(_stochastic(t=50), **kwargs)
@@ -190,8 +205,8 @@ def test_real_clip_tiles_are_seamless(clips_dir):
 def test_wang_edges_hold_one_tile_per_left_top_bottom():
     for k in (2, 3):
         e = wang_edges(k).astype(int)
-        assert e.shape == (k ** 3, 4) and e.min() == 0 and e.max() == k - 1
-        assert len({(a, c, d) for a, _, c, d in e}) == k ** 3
+        assert e.shape == (k**3, 4) and e.min() == 0 and e.max() == k - 1
+        assert len({(a, c, d) for a, _, c, d in e}) == k**3
         assert ((e[:, 0] + e[:, 2] + e[:, 3]) % k == e[:, 1]).all()
 
 
@@ -200,8 +215,8 @@ def test_corner_cut_keeps_each_strip_on_its_own_edge():
     for d, band in ((6, 2), (9, 3), (11, 1)):
         hs, vs = rng.random((4, d, d, 3)), rng.random((4, d, d, 3))
         take_h = corner_cut(hs, vs, band)
-        assert take_h[0].all()                              # the horizontal edge: its strip
-        assert take_h[band + 1:, 0].sum() == 0              # the vertical edge past the band: the other
+        assert take_h[0].all()  # the horizontal edge: its strip
+        assert take_h[band + 1 :, 0].sum() == 0  # the vertical edge past the band: the other
         first = np.argmax(take_h, axis=1)
         assert (np.diff(first) >= 0).all() and (np.abs(first - np.arange(d)) <= band).all()
     # a zero-cost staircase is the path taken
@@ -228,20 +243,23 @@ def test_wang_tiles_join_where_edge_colours_match(wang_model):
     ratios = {True: [], False: []}
     for a in range(8):
         for b in range(8):
-            x = ((t[a, :, d:th - d, -1] - t[b, :, d:th - d, 0]) ** 2).mean() / inner
-            y = ((t[a, :, -1, d:tw - d] - t[b, :, 0, d:tw - d]) ** 2).mean() / inner
+            x = ((t[a, :, d : th - d, -1] - t[b, :, d : th - d, 0]) ** 2).mean() / inner
+            y = ((t[a, :, -1, d : tw - d] - t[b, :, 0, d : tw - d]) ** 2).mean() / inner
             ratios[bool(e[a, 1] == e[b, 0])].append(x)
             ratios[bool(e[a, 3] == e[b, 2])].append(y)
     assert max(ratios[True]) < 1.5, max(ratios[True])
     assert np.mean(ratios[False]) > 2 * np.mean(ratios[True])
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"construction": "hex"}, "construction must be one of"),
-    ({"construction": "wang", "n_tiles": 3}, "n_tiles applies to construction 'ring' only"),
-    ({"construction": "wang", "edge_colours": 5}, "edge_colours must be an integer in"),
-    ({"construction": "wang", "mix": [_stochastic(seed=1)]}, "cannot mix textures"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"construction": "hex"}, "construction must be one of"),
+        ({"construction": "wang", "n_tiles": 3}, "n_tiles applies to construction 'ring' only"),
+        ({"construction": "wang", "edge_colours": 5}, "edge_colours must be an integer in"),
+        ({"construction": "wang", "mix": [_stochastic(seed=1)]}, "cannot mix textures"),
+    ],
+)
 def test_wang_bad_options_are_clear_errors(kwargs, message):
     with pytest.raises(ValueError, match=message):
         learn_tiles(_stochastic(t=40), tile=16, min_loop=12, transition=4, **kwargs)

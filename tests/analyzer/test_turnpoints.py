@@ -1,4 +1,5 @@
 """Turn-point and transition analysis: the seed's equations, known extremes, transitions, bad input."""
+
 from __future__ import annotations
 
 import math
@@ -7,9 +8,17 @@ import numpy as np
 import pytest
 
 from dynatex.analyzer import load_clip
-from dynatex.analyzer.turnpoints import (distance_matrix, filtered_distances, frame_features, learn_turnpoints,
-                                         local_maxima, pendulum_clip, plot_turnpoints, symmetry_scores,
-                                         symmetry_weights)
+from dynatex.analyzer.turnpoints import (
+    distance_matrix,
+    filtered_distances,
+    frame_features,
+    learn_turnpoints,
+    local_maxima,
+    pendulum_clip,
+    plot_turnpoints,
+    symmetry_scores,
+    symmetry_weights,
+)
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +52,7 @@ def test_symmetry_scores_eq2_eq3_by_hand():
 def test_local_maxima_eq4_keeps_one_per_range():
     v = np.array([0.1, 0.5, 0.2, 0.6, 0.1, 0.0, 0.3, 0.3, 0.1])
     out = local_maxima(v, 2)
-    assert np.flatnonzero(out).tolist() == [3, 6]      # 0.5 is within 2 of 0.6; first of tied 0.3s
+    assert np.flatnonzero(out).tolist() == [3, 6]  # 0.5 is within 2 of 0.6; first of tied 0.3s
     assert out[3] == 0.6
 
 
@@ -51,7 +60,9 @@ def test_generated_pendulum_extremes_found_within_one_frame(pendulum):
     frames, extremes = pendulum
     model = learn_turnpoints(frames)
     found = model.turn_points
-    detectable = extremes[(extremes >= model.info["min_pairs"]) & (extremes <= len(frames) - 1 - model.info["min_pairs"])]
+    detectable = extremes[
+        (extremes >= model.info["min_pairs"]) & (extremes <= len(frames) - 1 - model.info["min_pairs"])
+    ]
     assert len(found) == len(detectable)
     assert np.all(np.abs(found - detectable) <= 1.0), (found, detectable)
     # eq. 5 and the outermost rule
@@ -83,14 +94,14 @@ def test_transitions_jump_by_a_period_and_never_dead_end(pendulum):
 
 def test_filtered_distances_average_along_diagonals():
     d = np.arange(100, dtype=float).reshape(10, 10)
-    f = filtered_distances(d, 1)                    # taps -1, 0 with weights 1/2, 1/2
+    f = filtered_distances(d, 1)  # taps -1, 0 with weights 1/2, 1/2
     assert f[4, 6] == pytest.approx((d[3, 5] + d[4, 6]) / 2)
     assert np.isinf(f[0, 5]) and np.isfinite(f[1, 5])
 
 
 def test_reduced_distances_close_to_full_resolution(pendulum):
     frames, _ = pendulum
-    big = np.repeat(np.repeat(frames[:20], 4, axis=1), 4, axis=2)    # 192 x 192
+    big = np.repeat(np.repeat(frames[:20], 4, axis=1), 4, axis=2)  # 192 x 192
     model = learn_turnpoints(big, feature_size=48, n=3, min_symmetry=0.1)
     assert model.info["distance_correlation"] > 0.99
     assert model.info["distance_rel_error"] < 0.05
@@ -115,16 +126,19 @@ def test_plot_writes_png(tmp_path, pendulum):
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"n": 0}, "n must be at least 1"),
-    ({"n": 2.5}, "n must be an integer"),
-    ({"r": 0}, "r must be at least 1"),
-    ({"min_symmetry": 1.0}, r"min_symmetry must be in \[0.0, 1.0\)"),
-    ({"alpha": 1.0}, r"alpha must be in \(0.0, 1.0\)"),
-    ({"sigma": -1}, "sigma must be in"),
-    ({"min_pairs": 9}, "min_pairs must be in 1..n=4"),
-    ({"max_cost": 0}, "max_cost must be in"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"n": 0}, "n must be at least 1"),
+        ({"n": 2.5}, "n must be an integer"),
+        ({"r": 0}, "r must be at least 1"),
+        ({"min_symmetry": 1.0}, r"min_symmetry must be in \[0.0, 1.0\)"),
+        ({"alpha": 1.0}, r"alpha must be in \(0.0, 1.0\)"),
+        ({"sigma": -1}, "sigma must be in"),
+        ({"min_pairs": 9}, "min_pairs must be in 1..n=4"),
+        ({"max_cost": 0}, "max_cost must be in"),
+    ],
+)
 def test_bad_parameters(pendulum, kwargs, match):
     with pytest.raises((ValueError, TypeError), match=match):
         learn_turnpoints(pendulum[0][:40], **kwargs)

@@ -1,4 +1,5 @@
 """Clip input: files, folders, arrays, ranges, geometry, and every kind of bad clip."""
+
 from __future__ import annotations
 
 import cv2
@@ -20,7 +21,7 @@ def _write_video(path, frames, fps=12.0):
 def test_array_range_crop_resize_grey():
     frames = wave_clip(t=20, h=16, w=24)
     clip = load_clip(frames, start=2, stop=12, step=2, crop=(4, 2, 16, 12), size=(6, 8))
-    assert clip.frames.shape == (5, 6, 8, 3)                    # size is (height, width)
+    assert clip.frames.shape == (5, 6, 8, 3)  # size is (height, width)
     assert clip.source_size == (16, 24) and clip.source_info().source_size == (16, 24)
     assert clip.frame_start == 2 and clip.frame_step == 2 and clip.crop == (4, 2, 16, 12)
     grey = load_clip(frames, color=False)
@@ -36,7 +37,7 @@ def test_video_file_round_trip(tmp_path):
     clip = load_clip(path)
     assert clip.frames.shape == (15, 32, 48, 3)
     assert clip.fps == pytest.approx(12.0)
-    assert np.abs(clip.frames.astype(int) - frames).mean() < 8   # MJPG is lossy
+    assert np.abs(clip.frames.astype(int) - frames).mean() < 8  # MJPG is lossy
     assert len(clip.sha256) == 64
     isolated = load_clip(path, isolate=True)
     np.testing.assert_array_equal(isolated.frames, clip.frames)
@@ -88,15 +89,18 @@ def test_empty_folder(tmp_path):
         load_clip(tmp_path)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"step": 0}, "step must be at least 1"),
-    ({"start": -1}, "start must be a non-negative integer"),
-    ({"start": 5, "stop": 5}, "stop .* must be greater than start"),
-    ({"crop": (0, 0, 100, 100)}, "crop .* does not fit"),
-    ({"crop": (1, 2)}, "crop must be four"),
-    ({"size": (0, 10)}, r"size must be \(height, width\) with each side in 1\.\.16384"),
-    ({"size": (6.5, 8)}, r"size must be \(height, width\) integers"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"step": 0}, "step must be at least 1"),
+        ({"start": -1}, "start must be a non-negative integer"),
+        ({"start": 5, "stop": 5}, "stop .* must be greater than start"),
+        ({"crop": (0, 0, 100, 100)}, "crop .* does not fit"),
+        ({"crop": (1, 2)}, "crop must be four"),
+        ({"size": (0, 10)}, r"size must be \(height, width\) with each side in 1\.\.16384"),
+        ({"size": (6.5, 8)}, r"size must be \(height, width\) integers"),
+    ],
+)
 def test_bad_options(kwargs, message):
     with pytest.raises(ValueError, match=message):
         load_clip(wave_clip(t=10, h=16, w=16), **kwargs)

@@ -1,4 +1,5 @@
 """The dynatex command: analyze/info/play end to end, exit codes, one-line errors, no partial files."""
+
 from __future__ import annotations
 
 import json
@@ -69,12 +70,15 @@ def test_second_texture_keeps_the_first(tmp_path, clip_npy, capsys):
         assert sorted(f["textures"]) == ["other", "waves"]
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda d: d / "missing.avi", "no such clip"),
-    (lambda d: _write(d / "empty.avi", b""), "empty"),
-    (lambda d: _write(d / "junk.avi", b"\x00junk" * 500), "junk.avi"),
-    (lambda d: _npy(d / "one.npy", wave_clip(t=1, h=8, w=8)), "only one frame"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda d: d / "missing.avi", "no such clip"),
+        (lambda d: _write(d / "empty.avi", b""), "empty"),
+        (lambda d: _write(d / "junk.avi", b"\x00junk" * 500), "junk.avi"),
+        (lambda d: _npy(d / "one.npy", wave_clip(t=1, h=8, w=8)), "only one frame"),
+    ],
+)
 def test_bad_clips_exit_2_and_leave_no_database(tmp_path, capsys, make, message):
     clip = make(tmp_path)
     before = sorted(os.listdir(tmp_path))
@@ -122,9 +126,11 @@ def test_unknown_texture_and_bad_controls(tmp_path, clip_npy, capsys):
     for extra, message in cases:
         code, _, err = _run(capsys, "play", db, "-o", out, *extra)
         assert code == 2 and message in _one_line_error(err)
-    for extra, message in [(("--intensity", "-1"), "argument --intensity: expected a finite number in [0, 100]"),
-                           (("--speed", "4"), "argument --speed: expected a finite number in [-3, 3], not '4'"),
-                           (("--scales", "1,2"), "argument --scales: expected C,M,F: 3 numbers")]:
+    for extra, message in [
+        (("--intensity", "-1"), "argument --intensity: expected a finite number in [0, 100]"),
+        (("--speed", "4"), "argument --speed: expected a finite number in [-3, 3], not '4'"),
+        (("--scales", "1,2"), "argument --scales: expected C,M,F: 3 numbers"),
+    ]:
         with pytest.raises(SystemExit) as e:
             main(["play", str(db), "-o", str(out), *extra])
         assert e.value.code == 2 and message in capsys.readouterr().err
@@ -139,12 +145,20 @@ def test_usage_errors_exit_2(capsys):
 
 
 def test_console_script_runs_without_traceback(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "dynatex", "info", str(tmp_path / "none.h5")],
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "dynatex", "info", str(tmp_path / "none.h5")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == 2
     assert r.stderr.strip().startswith("dynatex: error:") and "Traceback" not in r.stderr
-    r = subprocess.run([sys.executable, "-m", "dynatex", "--debug", "info", str(tmp_path / "none.h5")],
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "dynatex", "--debug", "info", str(tmp_path / "none.h5")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == 2 and "Traceback" in r.stderr
 
 

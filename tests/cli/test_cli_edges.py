@@ -1,5 +1,6 @@
 """Odd command-line input: every numeric option checked up front, one-line usage errors, the
 output writer's failures and a closed pipe, each run as a real ``dynatex`` process."""
+
 from __future__ import annotations
 
 import argparse
@@ -12,23 +13,36 @@ import sys
 import cv2
 import numpy as np
 import pytest
+
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
-from dynatex.tiledb import DatabaseWriter, open_db
-
 from dynatex.cli import build_parser, main
+from dynatex.tiledb import DatabaseWriter, open_db
 
 from ..conftest import wave_clip
 
 #: Positional and required arguments that let each subcommand's parser reach the option under test.
-REQUIRED = {"analyze": ["clip.npy", "-o", "x.h5"], "info": ["db.h5"], "play": ["db.h5", "-o", "x.mp4"],
-            "bench": [], "evaluate": ["a.npy", "b.npy"], "demo": [], "export": ["db.h5", "-o", "out"]}
+REQUIRED = {
+    "analyze": ["clip.npy", "-o", "x.h5"],
+    "info": ["db.h5"],
+    "play": ["db.h5", "-o", "x.mp4"],
+    "bench": [],
+    "evaluate": ["a.npy", "b.npy"],
+    "demo": [],
+    "export": ["db.h5", "-o", "out"],
+}
 NOISE = ("cap_ffmpeg", "[mpeg4", "VIDEOIO", "Traceback", "usage:")
 
 
 def _dynatex(*argv, timeout: float = 120, **kwargs) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "dynatex", *map(str, argv)], capture_output=True, text=True,
-                          check=False, timeout=timeout, **kwargs)
+    return subprocess.run(
+        [sys.executable, "-m", "dynatex", *map(str, argv)],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=timeout,
+        **kwargs,
+    )
 
 
 def _one_line(stderr: str) -> str:
@@ -49,6 +63,7 @@ def _numeric_actions():
     ``_common`` or a kind of :mod:`dynatex.checks` behind a ``KindArg``."""
     from dynatex import checks
     from dynatex.commands._common import KindArg, Number, Numbers, size_arg
+
     for cmd, p in _subparsers().items():
         for action in p._actions:
             rule = action.type.rule if isinstance(action.type, KindArg) else action.type
@@ -75,16 +90,24 @@ def _inside(n) -> list[str]:
     vals = [v for v, is_open in ((n.low, n.low_open), (n.high, n.high_open)) if v is not None and not is_open]
     if not vals:
         lo, hi = n.low, n.high
-        vals = [(lo + hi) / 2 if lo is not None and hi is not None else lo + 1 if lo is not None
-                else hi - 1 if hi is not None else 1]
+        vals = [
+            (lo + hi) / 2
+            if lo is not None and hi is not None
+            else lo + 1
+            if lo is not None
+            else hi - 1
+            if hi is not None
+            else 1
+        ]
     return [repr(n.kind(v)) for v in vals]
 
 
 # -- every numeric option --------------------------------------------------------------------------
 def test_every_numeric_option_declares_a_range():
     """No option parses numbers with a bare int or float (which take nan, inf and any size)."""
-    bare = [f"{cmd} {a.option_strings}" for cmd, p in _subparsers().items() for a in p._actions
-            if a.type in (int, float)]
+    bare = [
+        f"{cmd} {a.option_strings}" for cmd, p in _subparsers().items() for a in p._actions if a.type in (int, float)
+    ]
     assert bare == []
     assert len(list(_numeric_actions())) >= 50
 
@@ -92,6 +115,7 @@ def test_every_numeric_option_declares_a_range():
 def test_numeric_options_refuse_values_outside_their_declared_range(capsys):
     from dynatex import checks
     from dynatex.commands._common import Number, Numbers
+
     checked = 0
     for cmd, action, rule in _numeric_actions():
         opt = action.option_strings[-1]
@@ -118,6 +142,7 @@ def test_numeric_options_refuse_values_outside_their_declared_range(capsys):
 def test_numeric_options_take_the_ends_of_their_range():
     from dynatex import checks
     from dynatex.commands._common import Number
+
     parsers = _subparsers()
     for cmd, action, rule in _numeric_actions():
         if isinstance(rule, (Number, checks.Range)):
@@ -128,6 +153,7 @@ def test_numeric_options_take_the_ends_of_their_range():
 
 def test_help_states_the_declared_range(capsys):
     from dynatex.commands._output import MAX_FPS, MIN_FPS
+
     with pytest.raises(SystemExit):
         main(["play", "--help"])
     out = capsys.readouterr().out
@@ -135,12 +161,15 @@ def test_help_states_the_declared_range(capsys):
 
 
 # -- one-line usage errors -----------------------------------------------------------------------------
-@pytest.mark.parametrize("argv, command, where", [
-    (("play", "db.h5", "-o", "o.mp4", "--frames", "0"), "play", "--frames"),
-    (("play", "db.h5", "-o", "o.mp4", "--size", "0x0"), "play", "--size"),
-    (("analyze", "c.npy", "-o", "o.h5", "--step", "0"), "analyze", "--step"),
-    (("info", "db.h5", "--bogus"), "info", "--bogus"),
-])
+@pytest.mark.parametrize(
+    "argv, command, where",
+    [
+        (("play", "db.h5", "-o", "o.mp4", "--frames", "0"), "play", "--frames"),
+        (("play", "db.h5", "-o", "o.mp4", "--size", "0x0"), "play", "--size"),
+        (("analyze", "c.npy", "-o", "o.h5", "--step", "0"), "analyze", "--step"),
+        (("info", "db.h5", "--bogus"), "info", "--bogus"),
+    ],
+)
 def test_usage_errors_are_one_line_pointing_to_help(argv, command, where):
     r = _dynatex(*argv)
     line = _one_line(r.stderr)
@@ -149,11 +178,14 @@ def test_usage_errors_are_one_line_pointing_to_help(argv, command, where):
     assert line.endswith(f"(see `dynatex {command} --help`)")
 
 
-@pytest.mark.parametrize("argv, prog, where", [
-    (("play", "db.h5"), "dynatex play", "-o/--output"),
-    (("frob",), "dynatex", "frob"),
-    ((), "dynatex", "COMMAND"),
-])
+@pytest.mark.parametrize(
+    "argv, prog, where",
+    [
+        (("play", "db.h5"), "dynatex play", "-o/--output"),
+        (("frob",), "dynatex", "frob"),
+        ((), "dynatex", "COMMAND"),
+    ],
+)
 def test_more_usage_errors_are_one_line(capsys, argv, prog, where):
     with pytest.raises(SystemExit) as e:
         main(list(argv))
@@ -175,7 +207,7 @@ def test_infinite_fps_is_refused_instead_of_hanging(lds_db, tmp_path, ext):
 def test_bad_fps_exits_2_with_one_line(lds_db, tmp_path, fps):
     out = tmp_path / "o.mp4"
     r = _dynatex("play", lds_db, "-o", out, "--frames", "2", "--fps", fps, "--backend", "numpy")
-    assert r.returncode == 2          # 0 was silently 25 fps, the others exit 1 with FFmpeg's log
+    assert r.returncode == 2  # 0 was silently 25 fps, the others exit 1 with FFmpeg's log
     assert f"not '{fps}'" in _one_line(r.stderr)
     assert not out.exists()
 
@@ -184,6 +216,7 @@ def test_bad_fps_exits_2_with_one_line(lds_db, tmp_path, fps):
 def test_writer_refuses_any_fps_it_cannot_write(tmp_path, fps):
     from dynatex.cli import OutputError
     from dynatex.commands._output import FrameWriter
+
     out = tmp_path / "o.mp4"
     with pytest.raises(OutputError, match="frame rate"):
         FrameWriter(str(out)).open((24, 32, 3), fps)
@@ -208,9 +241,11 @@ def test_writer_writes_every_container_at_the_ends_of_its_fps_range(tmp_path):
         "        while cap.read()[0]:\n"
         "            n += 1\n"
         "        assert n == 3, (path, n)\n"
-        "print('ok')\n")
-    r = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, check=False,
-                       timeout=120)
+        "print('ok')\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, check=False, timeout=120
+    )
     assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr
     assert r.stderr == ""
 
@@ -251,12 +286,16 @@ def _full_png_folder(d):
     return str(d / "frames") + os.sep
 
 
-@pytest.mark.parametrize("make, reason", [
-    (lambda d: d / "missing" / "o.mp4", "does not exist"),
-    (_long_name, "File name too long"),
-    (_device_link, "not a regular file"),
-    (_full_png_folder, "No space left on device"),
-], ids=["missing-folder", "name-too-long", "device", "disk-full-png"])
+@pytest.mark.parametrize(
+    "make, reason",
+    [
+        (lambda d: d / "missing" / "o.mp4", "does not exist"),
+        (_long_name, "File name too long"),
+        (_device_link, "not a regular file"),
+        (_full_png_folder, "No space left on device"),
+    ],
+    ids=["missing-folder", "name-too-long", "device", "disk-full-png"],
+)
 def test_output_writer_failure_exits_2_with_the_reason(lds_db, tmp_path, make, reason):
     if "full" in getattr(make, "__name__", "") and not os.path.exists("/dev/full"):
         pytest.skip("no /dev/full on this system")
@@ -282,12 +321,13 @@ def test_video_that_does_not_read_back_whole_is_an_error(tmp_path):
     """What a full disk does to a video (its index never written) is caught when the writer closes."""
     from dynatex.cli import OutputError
     from dynatex.commands._output import FrameWriter
+
     out = tmp_path / "o.avi"
     w = FrameWriter(str(out))
     w.open((24, 32, 3), 25.0)
     for i in range(3):
         w.write(np.full((24, 32, 3), i, np.uint8))
-    out.unlink()                     # OpenCV keeps writing the unlinked file; the path holds nothing
+    out.unlink()  # OpenCV keeps writing the unlinked file; the path holds nothing
     out.write_bytes(b"")
     with pytest.raises(OutputError, match="incomplete: 0 of 3 frames"):
         w.close()
@@ -295,6 +335,7 @@ def test_video_that_does_not_read_back_whole_is_an_error(tmp_path):
 
 def test_opencv_log_is_kept_off_the_terminal_and_becomes_the_reason(tmp_path, capfd):
     from dynatex.commands._output import FrameWriter
+
     w = FrameWriter(str(tmp_path / "o.mp4"))
     w.open((24, 32, 3), 25.0)
     with w._quiet("test"):
@@ -312,8 +353,9 @@ def test_opencv_log_is_kept_off_the_terminal_and_becomes_the_reason(tmp_path, ca
 def _reader_gone(argv, closed: str) -> tuple[int, bytes]:
     """Run ``dynatex ARGV`` with its ``closed`` pipe ("stdout" or "stderr") closed by the reader before
     the first line, as ``| head -0`` would; the exit code and what came on the other pipe."""
-    with subprocess.Popen([sys.executable, "-m", "dynatex", *map(str, argv)],
-                          stdout=subprocess.PIPE, stderr=subprocess.PIPE) as p:
+    with subprocess.Popen(
+        [sys.executable, "-m", "dynatex", *map(str, argv)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    ) as p:
         getattr(p, closed).close()
         other = (p.stderr if closed == "stdout" else p.stdout).read()
         return p.wait(timeout=120), other
@@ -322,7 +364,7 @@ def _reader_gone(argv, closed: str) -> tuple[int, bytes]:
 @pytest.mark.parametrize("json", [False, True])
 def test_closed_stdout_of_info_ends_quietly(lds_db, json):
     code, err = _reader_gone(["info", lds_db] + (["--json"] if json else []), "stdout")
-    assert code == 0            # exit 1 with "internal error: BrokenPipeError" before
+    assert code == 0  # exit 1 with "internal error: BrokenPipeError" before
     assert err == b""
 
 
@@ -341,7 +383,7 @@ def test_closed_stderr_drops_the_diagnostics_not_the_work(tmp_path):
     clip = tmp_path / "c.npy"
     np.save(clip, wave_clip(t=30, h=16, w=16))
     db = tmp_path / "c.h5"
-    code, out = _reader_gone(["analyze", clip, "-o", db, "--n", "4"], "stderr")   # summaries go to stderr
+    code, out = _reader_gone(["analyze", clip, "-o", db, "--n", "4"], "stderr")  # summaries go to stderr
     assert code == 0
     assert out.decode().startswith("wrote texture 'c'")
     with open_db(db) as d:
@@ -356,8 +398,9 @@ def test_closed_stderr_of_play_ends_quietly(lds_db, tmp_path):
 
 
 # -- default texture names ------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("filename, texture", [("my clip é.avi", "my clip é"), ("水.mp4", "水"),
-                                               (".hidden clip.npy", "hidden clip")])
+@pytest.mark.parametrize(
+    "filename, texture", [("my clip é.avi", "my clip é"), ("水.mp4", "水"), (".hidden clip.npy", "hidden clip")]
+)
 def test_default_texture_name_of_any_clip_name_is_accepted(tmp_path, capsys, filename, texture):
     clip = tmp_path / filename
     frames = wave_clip(t=24, h=16, w=16)
@@ -371,8 +414,23 @@ def test_default_texture_name_of_any_clip_name_is_accepted(tmp_path, capsys, fil
         v.release()
     db = tmp_path / "db.h5"
     r = _dynatex("analyze", clip, "-o", db, "--n", "4", "-q")
-    assert r.returncode == 0, r.stderr                  # exit 2 "texture name ... is invalid" before
+    assert r.returncode == 0, r.stderr  # exit 2 "texture name ... is invalid" before
     assert main(["info", str(db), "--json"]) == 0
     assert list(json.loads(capsys.readouterr().out)["textures"]) == [texture]
-    assert main(["play", str(db), "--texture", texture, "--frames", "2", "-o", str(tmp_path / "o.avi"),
-                 "--backend", "numpy"]) == 0
+    assert (
+        main(
+            [
+                "play",
+                str(db),
+                "--texture",
+                texture,
+                "--frames",
+                "2",
+                "-o",
+                str(tmp_path / "o.avi"),
+                "--backend",
+                "numpy",
+            ]
+        )
+        == 0
+    )

@@ -1,4 +1,5 @@
 """``dynatex analyze`` over several clips: a folder of databases, a summary, exit code 2 on failures."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -26,8 +27,19 @@ def clips(tmp_path):
 
 def test_corpus_summary_merge_and_exit_code(tmp_path, clips, capsys):
     out, merged = tmp_path / "dbs", tmp_path / "all.h5"
-    code, stdout, err = _run(capsys, "analyze", clips / "sea.npy", clips / "fire.npy", clips / "broken.avi",
-                             "-o", out, "--n", "4", "--merge", merged)
+    code, stdout, err = _run(
+        capsys,
+        "analyze",
+        clips / "sea.npy",
+        clips / "fire.npy",
+        clips / "broken.avi",
+        "-o",
+        out,
+        "--n",
+        "4",
+        "--merge",
+        merged,
+    )
     assert code == 2
     lines = stdout.splitlines()
     assert lines[0].split() == ["clip", "methods", "seconds", "status"]
@@ -42,8 +54,19 @@ def test_corpus_summary_merge_and_exit_code(tmp_path, clips, capsys):
     assert code == 0 and stdout == ""
     code, stdout, _ = _run(capsys, "analyze", clips / "sea.npy", clips / "fire.npy", "-o", out, "--n", "4")
     assert code == 0 and "2 clips: 0 analysed, 2 skipped (database complete), 0 failed" in stdout
-    code, stdout, _ = _run(capsys, "analyze", clips / "sea.npy", clips / "fire.npy", "-o", out, "--n", "4",
-                           "--overwrite", "--merge", merged)
+    code, stdout, _ = _run(
+        capsys,
+        "analyze",
+        clips / "sea.npy",
+        clips / "fire.npy",
+        "-o",
+        out,
+        "--n",
+        "4",
+        "--overwrite",
+        "--merge",
+        merged,
+    )
     assert code == 0 and "2 clips: 2 analysed, 0 skipped" in stdout
 
 
@@ -55,12 +78,15 @@ def test_one_clip_with_max_memory_learns_out_of_core(tmp_path, clips, capsys):
         assert d.texture("sea").read("lds").info["svd"] == "gram-streamed"
 
 
-@pytest.mark.parametrize("extra, message", [
-    (["--name", "x"], "--name works with one clip only"),
-    (["--max-memory", "lots"], "--max-memory: memory size 'lots'"),
-    (["--scheduler", "nowhere"], "scheduler must be 'none', 'local' or an address"),
-    (["--merge", "/nonexistent-folder/m.h5"], "folder /nonexistent-folder does not exist"),
-])
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--name", "x"], "--name works with one clip only"),
+        (["--max-memory", "lots"], "--max-memory: memory size 'lots'"),
+        (["--scheduler", "nowhere"], "scheduler must be 'none', 'local' or an address"),
+        (["--merge", "/nonexistent-folder/m.h5"], "folder /nonexistent-folder does not exist"),
+    ],
+)
 def test_corpus_usage_errors_are_one_line(tmp_path, clips, capsys, extra, message):
     code, _, err = _run(capsys, "analyze", clips / "sea.npy", clips / "fire.npy", "-o", tmp_path / "dbs", *extra)
     assert code == 2

@@ -1,4 +1,5 @@
 """`dynatex demo` runs the whole path on the built-in sample and writes what it promises."""
+
 from __future__ import annotations
 
 import cv2

@@ -1,5 +1,6 @@
 """``dynatex export``: flipbook atlases whose grid, order and size match the sidecar, closed loops
 for tiles, turnpoints and lds, and the numpy model of the engine's motion-vector blend."""
+
 from __future__ import annotations
 
 import json
@@ -37,8 +38,9 @@ def tiles_db(tmp_path_factory):
 @pytest.fixture(scope="module")
 def turn_db(tmp_path_factory):
     frames = pendulum_clip(72, 48)[0]
-    return _db(tmp_path_factory.mktemp("turn") / "p.h5", frames, "turnpoints", learn_turnpoints(load_clip(frames)),
-               store=True)
+    return _db(
+        tmp_path_factory.mktemp("turn") / "p.h5", frames, "turnpoints", learn_turnpoints(load_clip(frames)), store=True
+    )
 
 
 def _read(path) -> np.ndarray:
@@ -59,10 +61,11 @@ def test_lds_export_matches_its_sidecar_and_the_played_frames(lds_db, tmp_path, 
     atlas = _read(out / doc["files"]["color"])
     assert atlas.shape == (doc["atlas_height"], doc["atlas_width"], 3) == (4 * 24, 3 * 32, 3)
     from dynatex.player import open_player
+
     with open_player(lds_db, mode="lds", backend="numpy", seed=0) as p:
         played = [p.next_frame().copy() for _ in range(10)]
     grid = fb.Grid(3, 4, (24, 32), 10)
-    for k in range(12):          # row-major from the top-left, then black cells
+    for k in range(12):  # row-major from the top-left, then black cells
         expected = played[k] if k < 10 else np.zeros_like(played[0])
         assert np.array_equal(atlas[grid.cell(k)], expected), k
     mv = _read(out / doc["files"]["motion_vectors"])
@@ -80,12 +83,13 @@ def test_default_atlas_is_a_power_of_two(lds_db, tmp_path, capsys):
 def test_tiles_loop_closes_on_the_tile_loop(tiles_db, tmp_path, capsys):
     doc, _ = _export(capsys, tiles_db, "-o", tmp_path, "--loop", "--npot", "--no-motion-vectors")
     from dynatex.player import open_player
+
     with open_player(tiles_db, mode="tiles", backend="numpy", seed=0) as p:
         p.epoch = 0
         n = p.loop_length
         frames = [p.next_frame().copy() for _ in range(n + 1)]
     assert doc["frames"] == n and "tile loop" in doc["loop"]
-    assert np.array_equal(frames[n], frames[0])            # frame N is frame 0: the loop is closed
+    assert np.array_equal(frames[n], frames[0])  # frame N is frame 0: the loop is closed
     assert doc["wrap_discontinuity"]["ratio"] <= 1.3
     atlas = _read(tmp_path / f"t_{doc['cols']}x{doc['rows']}.png")
     grid = fb.Grid(doc["cols"], doc["rows"], (40, 48), n)
@@ -100,15 +104,27 @@ def test_turnpoints_loop_is_a_swing_there_and_back(turn_db, tmp_path, capsys):
     atlas = _read(tmp_path / f"t_{doc['cols']}x{doc['rows']}.png")
     grid = fb.Grid(doc["cols"], doc["rows"], (48, 48), doc["frames"])
     half = doc["frames"] // 2
-    assert np.array_equal(atlas[grid.cell(1)], atlas[grid.cell(doc["frames"] - 1)])    # the way back mirrors
+    assert np.array_equal(atlas[grid.cell(1)], atlas[grid.cell(doc["frames"] - 1)])  # the way back mirrors
     assert not np.array_equal(atlas[grid.cell(0)], atlas[grid.cell(half)])
 
 
 def test_lds_loop_crossfade_brings_the_wrap_down(lds_db, tmp_path, capsys):
-    plain, _ = _export(capsys, lds_db, "-o", tmp_path / "a", "--mode", "lds", "--frames", "24", "--npot",
-                       "--no-motion-vectors")
-    loop, _ = _export(capsys, lds_db, "-o", tmp_path / "b", "--mode", "lds", "--frames", "24", "--npot", "--loop",
-                      "--no-motion-vectors")
+    plain, _ = _export(
+        capsys, lds_db, "-o", tmp_path / "a", "--mode", "lds", "--frames", "24", "--npot", "--no-motion-vectors"
+    )
+    loop, _ = _export(
+        capsys,
+        lds_db,
+        "-o",
+        tmp_path / "b",
+        "--mode",
+        "lds",
+        "--frames",
+        "24",
+        "--npot",
+        "--loop",
+        "--no-motion-vectors",
+    )
     assert "crossfade of the last 6 of 30 frames" in loop["loop"]
     assert loop["wrap_discontinuity"]["ratio"] <= 1.3 < plain["wrap_discontinuity"]["ratio"]
 
@@ -120,16 +136,19 @@ def test_array_layout_is_raw_layers(lds_db, tmp_path, capsys):
     assert np.fromfile(tmp_path / "waves_array_rg8.raw", np.uint8).size == 5 * 24 * 32 * 2
 
 
-@pytest.mark.parametrize("argv, what", [
-    (["--blend", "3"], "--blend belongs to --loop"),
-    (["--loop", "--blend", "64"], "--blend 64 must be fewer"),
-    (["--size", "64x64"], "unrecognized arguments: --size 64x64"),
-    (["--grid", "2x2", "--frames", "8"], "holds 4 frames"),
-])
+@pytest.mark.parametrize(
+    "argv, what",
+    [
+        (["--blend", "3"], "--blend belongs to --loop"),
+        (["--loop", "--blend", "64"], "--blend 64 must be fewer"),
+        (["--size", "64x64"], "unrecognized arguments: --size 64x64"),
+        (["--grid", "2x2", "--frames", "8"], "holds 4 frames"),
+    ],
+)
 def test_bad_export_options_are_one_line(lds_db, tmp_path, capsys, argv, what):
     try:
         code = main(["export", str(lds_db), "-o", str(tmp_path / "x"), "--mode", "lds", "--backend", "numpy", *argv])
-    except SystemExit as exc:       # refused by argparse
+    except SystemExit as exc:  # refused by argparse
         code = exc.code
     assert code == 2
     err = capsys.readouterr().err.strip()
@@ -142,8 +161,12 @@ def _moving(n: int, step: float) -> np.ndarray:
     rng = np.random.default_rng(1)
     big = cv2.GaussianBlur(rng.integers(0, 256, (160, 400, 3)).astype(np.uint8), (0, 0), 2.5)
     big = cv2.normalize(big, None, 0, 255, cv2.NORM_MINMAX)
-    return np.stack([cv2.warpAffine(big, np.float32([[1, 0, -i * step], [0, 1, -i * step / 3]]), (400, 160))
-                     [40:104, 40:104] for i in range(n)])
+    return np.stack(
+        [
+            cv2.warpAffine(big, np.float32([[1, 0, -i * step], [0, 1, -i * step / 3]]), (400, 160))[40:104, 40:104]
+            for i in range(n)
+        ]
+    )
 
 
 def test_shader_motion_blend_beats_a_crossfade_on_moving_texture():

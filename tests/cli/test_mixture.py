@@ -1,4 +1,5 @@
 """``dynatex analyze --methods mixture`` and ``dynatex play --mode mixture``."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -12,17 +13,50 @@ from ..conftest import wave_clip
 def test_analyze_then_play(tmp_path, capsys):
     np.save(tmp_path / "w.npy", wave_clip(60))
     db = tmp_path / "w.h5"
-    rc = main(["analyze", str(tmp_path / "w.npy"), "-o", str(db), "--methods", "mixture,lds", "--n", "8",
-               "--mix-components", "2", "--mix-dim", "3", "--mix-pca-dim", "12", "--mix-neighbors", "6",
-               "--mix-pmax", "3"])
+    rc = main(
+        [
+            "analyze",
+            str(tmp_path / "w.npy"),
+            "-o",
+            str(db),
+            "--methods",
+            "mixture,lds",
+            "--n",
+            "8",
+            "--mix-components",
+            "2",
+            "--mix-dim",
+            "3",
+            "--mix-pca-dim",
+            "12",
+            "--mix-neighbors",
+            "6",
+            "--mix-pmax",
+            "3",
+        ]
+    )
     assert rc == 0
     err = capsys.readouterr().err
     assert "mixture: S=2 d=3 D=3, AR(" in err
     with TileDB(db) as d:
         assert set(d.texture("w").methods) == {"lds", "mixture"}
     out = tmp_path / "frames"
-    rc = main(["play", str(db), "--mode", "mixture", "--frames", "4", "--draws", "4", "--intensity", "0.5",
-               "-o", str(out) + "/"])
+    rc = main(
+        [
+            "play",
+            str(db),
+            "--mode",
+            "mixture",
+            "--frames",
+            "4",
+            "--draws",
+            "4",
+            "--intensity",
+            "0.5",
+            "-o",
+            str(out) + "/",
+        ]
+    )
     assert rc == 0
     assert len(list(out.glob("*.png"))) == 4
 
@@ -30,8 +64,20 @@ def test_analyze_then_play(tmp_path, capsys):
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     np.save(tmp_path / "w.npy", wave_clip(20))
     db = tmp_path / "w.h5"
-    rc = main(["analyze", str(tmp_path / "w.npy"), "-o", str(db), "--methods", "mixture", "--mix-components", "5",
-               "--mix-dim", "4"])
+    rc = main(
+        [
+            "analyze",
+            str(tmp_path / "w.npy"),
+            "-o",
+            str(db),
+            "--methods",
+            "mixture",
+            "--mix-components",
+            "5",
+            "--mix-dim",
+            "4",
+        ]
+    )
     assert rc == 2
     err = capsys.readouterr().err.strip()
     assert "components=5 with dim=4 needs more than" in err and "\n" not in err

@@ -1,6 +1,7 @@
 """Browser-playable video and animated images: ``dynatex play -o`` chooses the writer by extension;
 each output is read back (PyAV for H.264, Pillow for WebP/APNG/GIF) with its codec, frame count,
 timing and pixels checked."""
+
 from __future__ import annotations
 
 import av
@@ -32,8 +33,10 @@ def _decode(path) -> tuple[str, str, list[np.ndarray]]:
 def _smooth_frames(n: int, h: int, w: int) -> list[np.ndarray]:
     """Distinct frames a texture might look like: moving colour gradients."""
     y, x = np.mgrid[0:h, 0:w]
-    return [np.stack([128 + 100 * np.sin(x / 7 + t / 3 + c) * np.cos(y / 9 - t / 5) for c in range(3)],
-                     -1).astype(np.uint8) for t in range(n)]
+    return [
+        np.stack([128 + 100 * np.sin(x / 7 + t / 3 + c) * np.cos(y / 9 - t / 5) for c in range(3)], -1).astype(np.uint8)
+        for t in range(n)
+    ]
 
 
 def test_play_writes_h264_that_decodes_back_within_psnr(lds_db, tmp_path, capsys):
@@ -59,7 +62,7 @@ def test_odd_sizes_are_padded_to_even_by_repeating_the_edge(tmp_path):
     codec, _, back = _decode(tmp_path / "odd.mp4")
     assert codec == "h264" and len(back) == 6 and back[0].shape == (34, 48, 3)
     assert min(_psnr(b[:33, :47], f) for b, f in zip(back, frames)) >= H264_PSNR_DB
-    assert _psnr(back[0][33, :47], back[0][32, :47]) >= H264_PSNR_DB     # the padding repeats the last row
+    assert _psnr(back[0][33, :47], back[0][32, :47]) >= H264_PSNR_DB  # the padding repeats the last row
 
 
 @pytest.mark.parametrize("ext", sorted(ANIMATIONS))
@@ -75,14 +78,14 @@ def test_animated_images_read_back_with_frame_count_and_timing(tmp_path, ext, fp
     count, delays = read_animation(str(out))
     tick_ms = ANIMATIONS[ext].tick * 1000
     assert count == 9
-    assert all(abs(d - 1000 / fps) <= tick_ms for d in delays), delays        # each delay rounded to a tick
-    assert abs(sum(delays) - 9000 / fps) <= tick_ms / 2 + 1e-9, delays        # and the total does not drift
+    assert all(abs(d - 1000 / fps) <= tick_ms for d in delays), delays  # each delay rounded to a tick
+    assert abs(sum(delays) - 9000 / fps) <= tick_ms / 2 + 1e-9, delays  # and the total does not drift
     with Image.open(out) as im:
-        assert im.info.get("loop") == 0                                       # loops for ever
+        assert im.info.get("loop") == 0  # loops for ever
         im.seek(4)
         back = np.asarray(im.convert("RGB"))
     assert back.shape == (20, 28, 3)
-    assert _psnr(back, frames[4]) >= (20.0 if ext == ".gif" else 30.0)       # GIF: 256 colours a frame
+    assert _psnr(back, frames[4]) >= (20.0 if ext == ".gif" else 30.0)  # GIF: 256 colours a frame
 
 
 def test_play_chooses_the_writer_by_extension(lds_db, tmp_path, capsys):
@@ -111,6 +114,6 @@ def test_animation_opened_without_frames_leaves_no_file(tmp_path):
     out = tmp_path / "o.webp"
     w = FrameWriter(str(out))
     w.open((8, 8, 3), 10.0)
-    assert out.exists()                  # created at open, so that the OS's refusal comes first
+    assert out.exists()  # created at open, so that the OS's refusal comes first
     w.close()
     assert not out.exists()

@@ -1,4 +1,5 @@
 """``dynatex analyze --methods turnpoints`` and ``dynatex play --mode turnpoints`` end to end."""
+
 from __future__ import annotations
 
 import os
@@ -22,7 +23,7 @@ def clip_npy(tmp_path):
 def _run(capsys, *argv):
     try:
         code = main([str(a) for a in argv])
-    except SystemExit as e:             # a usage error argparse reports (exit code 2)
+    except SystemExit as e:  # a usage error argparse reports (exit code 2)
         code = e.code
     out, err = capsys.readouterr()
     return code, out, err
@@ -36,8 +37,9 @@ def _one_line_error(err: str) -> str:
 
 def test_analyze_plot_and_play(tmp_path, clip_npy, capsys):
     db, png = tmp_path / "p.h5", tmp_path / "sym.png"
-    code, _, err = _run(capsys, "analyze", clip_npy, "-o", db, "--methods", "turnpoints", "--tp-n", "3",
-                        "--tp-plot", png)
+    code, _, err = _run(
+        capsys, "analyze", clip_npy, "-o", db, "--methods", "turnpoints", "--tp-n", "3", "--tp-plot", png
+    )
     assert code == 0, err
     assert "turn points" in err and png.stat().st_size > 5000
     with h5py.File(db) as f:
@@ -46,8 +48,23 @@ def test_analyze_plot_and_play(tmp_path, clip_npy, capsys):
         assert g["turnpoints"].attrs["n"] == 3
     for backend in ("numpy", "opencl"):
         out = tmp_path / backend
-        code, _, err = _run(capsys, "play", db, "--mode", "turnpoints", "--frames", "6", "--speed", "0.5",
-                            "--playback", "turns", "--backend", backend, "-o", str(out) + os.sep)
+        code, _, err = _run(
+            capsys,
+            "play",
+            db,
+            "--mode",
+            "turnpoints",
+            "--frames",
+            "6",
+            "--speed",
+            "0.5",
+            "--playback",
+            "turns",
+            "--backend",
+            backend,
+            "-o",
+            str(out) + os.sep,
+        )
         assert code == 0, err
         assert len(os.listdir(out)) == 6
     a = cv2.imread(str(tmp_path / "numpy" / "frame_00005.png"))
@@ -60,7 +77,7 @@ def test_analyze_plot_and_play(tmp_path, clip_npy, capsys):
 
 def test_bad_parameters_leave_existing_database_untouched(tmp_path, clip_npy, capsys):
     db = tmp_path / "p.h5"
-    assert _run(capsys, "analyze", clip_npy, "-o", db, "-q")[0] == 0     # lds only
+    assert _run(capsys, "analyze", clip_npy, "-o", db, "-q")[0] == 0  # lds only
     data = db.read_bytes()
     cases = [
         (("--tp-n", "40"), "too short for n=40"),
@@ -68,8 +85,9 @@ def test_bad_parameters_leave_existing_database_untouched(tmp_path, clip_npy, ca
         (("--tp-min-symmetry", "1.5"), "argument --tp-min-symmetry: expected a finite number in [0, 1)"),
     ]
     for extra, message in cases:
-        code, _, err = _run(capsys, "analyze", clip_npy, "-o", db, "--methods", "turnpoints", "--name", "x",
-                            "-q", *extra)
+        code, _, err = _run(
+            capsys, "analyze", clip_npy, "-o", db, "--methods", "turnpoints", "--name", "x", "-q", *extra
+        )
         assert code == 2 and message in _one_line_error(err)
         assert db.read_bytes() == data
     assert sorted(os.listdir(tmp_path)) == ["p.h5", "pend.npy"]
@@ -82,10 +100,12 @@ def test_bad_parameters_leave_existing_database_untouched(tmp_path, clip_npy, ca
 def test_bad_controls(tmp_path, clip_npy, capsys):
     db = tmp_path / "p.h5"
     assert _run(capsys, "analyze", clip_npy, "-o", db, "--methods", "turnpoints", "-q")[0] == 0
-    for extra, message in [(("--speed", "5"), "argument --speed: expected a finite number in [0, 4], not '5'"),
-                           (("--crossfade", "30"), "--crossfade: expected an integer in 0..16"),
-                           (("--size", "64x64"), "unrecognized arguments: --size 64x64"),
-                           (("--start", "500"), "start must be")]:
+    for extra, message in [
+        (("--speed", "5"), "argument --speed: expected a finite number in [0, 4], not '5'"),
+        (("--crossfade", "30"), "--crossfade: expected an integer in 0..16"),
+        (("--size", "64x64"), "unrecognized arguments: --size 64x64"),
+        (("--start", "500"), "start must be"),
+    ]:
         code, _, err = _run(capsys, "play", db, "--mode", "turnpoints", "-o", tmp_path / "o.mp4", *extra)
         assert code == 2 and message in _one_line_error(err)
     assert not (tmp_path / "o.mp4").exists()

@@ -1,4 +1,5 @@
 """The blend engine (mode turnpoints' device work): OpenCL against its numpy reference, exactly."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -21,10 +22,14 @@ def test_reference_is_the_rounded_weighted_sum():
     assert np.array_equal(blend_reference(f, ((4, 256),), out), f[4])
 
 
-@pytest.mark.parametrize("sources", [((2, 256),), ((0, 200), (4, 56)), ((1, 100), (2, 100), (3, 56)),
-                                     ((0, 64), (1, 64), (2, 64), (3, 64))], ids=["1", "2", "3", "4"])
+@pytest.mark.parametrize(
+    "sources",
+    [((2, 256),), ((0, 200), (4, 56)), ((1, 100), (2, 100), (3, 56)), ((0, 64), (1, 64), (2, 64), (3, 64))],
+    ids=["1", "2", "3", "4"],
+)
 def test_opencl_equals_the_reference(cl_context, sources):
     import pyopencl as cl
+
     f = _frames()
     b = open_blend(f, ctx=cl_context, queue=cl.CommandQueue(cl_context))
     assert isinstance(b, BlendOpenCL)
@@ -55,9 +60,9 @@ def test_bad_inputs_are_clear_errors():
 def test_a_bad_source_never_reaches_the_device(cl_context):
     """An out-of-range frame is refused before the kernel could read past the stack."""
     import pyopencl as cl
+
     b = open_blend(_frames(), ctx=cl_context, queue=cl.CommandQueue(cl_context))
     for sources in (((-1, 256),), ((0, 128), (7, 128)), ((0, 64), (1, 64), (2, 64), (99, 64))):
         with pytest.raises(ValueError, match="names no frame of 5"):
             b.render(sources, np.empty((7, 11, 3), np.uint8))
     b.close()
-

@@ -1,6 +1,7 @@
 """Modes describe themselves: declared options match the constructors, declared controls check,
 save and restore themselves, and a new control reaches the CLI, the state and the docs from
 its one declaration."""
+
 from __future__ import annotations
 
 import importlib.util
@@ -26,7 +27,7 @@ def test_declared_options_are_the_constructor_keywords(mode):
     signature = inspect.signature(cls.__init__).parameters
     keywords = {n for n, p in signature.items() if p.kind is p.KEYWORD_ONLY}
     declared = {p.name for p in (*COMMON_OPTIONS, *cls.options)} - {"db", "texture"}
-    controls_taken = {n for n in keywords if n in cls.controls()}     # initial values of controls
+    controls_taken = {n for n in keywords if n in cls.controls()}  # initial values of controls
     assert keywords - controls_taken == declared, mode
     for p in cls.options:
         default = signature[p.name].default
@@ -70,16 +71,27 @@ def test_play_offers_exactly_the_flags_of_its_mode(mode, capsys):
     for c in cls.controls().values():
         if c.param.flag_name:
             assert c.param.flag_name in text, (mode, c.name)
-    others = {c.param.flag_name for m in MODES if m != mode for c in player_class(m).controls().values()
-              if c.param.flag_name} - {c.param.flag_name for c in cls.controls().values()}
+    others = {
+        c.param.flag_name for m in MODES if m != mode for c in player_class(m).controls().values() if c.param.flag_name
+    } - {c.param.flag_name for c in cls.controls().values()}
     assert not [f for f in others if f + " " in text], (mode, others)
 
 
 def test_a_flag_of_another_mode_is_an_argparse_usage_error(tmp_path, capsys):
     code = None
     try:
-        main(["play", str(tmp_path / "x.h5"), "--mode", "tiles", "--rate-map", "halves:1,2", "-o",
-              str(tmp_path / "x.mp4")])
+        main(
+            [
+                "play",
+                str(tmp_path / "x.h5"),
+                "--mode",
+                "tiles",
+                "--rate-map",
+                "halves:1,2",
+                "-o",
+                str(tmp_path / "x.mp4"),
+            ]
+        )
     except SystemExit as exc:
         code = exc.code
     assert code == 2
@@ -121,8 +133,25 @@ def test_a_new_control_appears_in_the_cli_the_state_and_the_docs(toy_mode, tmp_p
     assert "--gain GAIN" in capsys.readouterr().out
     db = selftest._db_path()
     out = tmp_path / "f.png"
-    assert main(["play", str(db), "--texture", selftest.TEXTURE, "--backend", "numpy", "--frames", "1",
-                 "--gain", "1.5", "-o", str(out)]) == 0
+    assert (
+        main(
+            [
+                "play",
+                str(db),
+                "--texture",
+                selftest.TEXTURE,
+                "--backend",
+                "numpy",
+                "--frames",
+                "1",
+                "--gain",
+                "1.5",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert SET[-1] == 1.5
     with pytest.raises(SystemExit) as exit_:
         main(["play", str(db), "--gain", "3", "-o", str(out)])
@@ -154,4 +183,6 @@ def test_modes_md_is_generated_from_the_declarations():
         section = text.split(f"## `{mode}` ")[1].split("\n## ")[0]
         for c in cls.controls().values():
             assert f"| `{c.name}` |" in section, (mode, c.name)
-    assert module.PATH.read_text(encoding="utf-8") == text, "player/MODES.md is stale: run python tools/write_modes_doc.py"
+    assert module.PATH.read_text(encoding="utf-8") == text, (
+        "player/MODES.md is stale: run python tools/write_modes_doc.py"
+    )

@@ -1,5 +1,6 @@
 """The engines' shared pieces: kernels called by argument name, frames delivered into the
 caller's array (directly or through a copy) and left in flight by every mode."""
+
 from __future__ import annotations
 
 import warnings
@@ -15,8 +16,13 @@ from dynatex.player.pixels import FORMATS
 
 RGB = FORMATS["RGB"].defines
 
-MODES = [("lds", {}), ("mixture", {}), ("turnpoints", {"playback": "jumps"}), ("tiles", {"size": (72, 40)}),
-         ("evolve", {"jitter": 2.0})]
+MODES = [
+    ("lds", {}),
+    ("mixture", {}),
+    ("turnpoints", {"playback": "jumps"}),
+    ("tiles", {"size": (72, 40)}),
+    ("evolve", {"jitter": 2.0}),
+]
 
 
 def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
@@ -26,21 +32,43 @@ def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
         k.set(weights=np.int32(1))
 
 
-PROGRAMS = [("gather.cl", {"FRAME_W": 8, "FRAME_PIXELS": 64, "NFRAMES": 3, "GRID": 0, "WRAP": 0, "CELL_H": 1,
-                           "CELL_W": 1, "INTERP": 1, "TSTEP": 1, "RUN": 32, "STACK_PAD": 256, "STACK_SIGNED": 0,
-                           "TONE_STRIDE": 384, "TONE_OB": 192, **RGB}),
-            ("lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}), ("blend.cl", {"FRAME_VECS": 4, "ITEMS": 4}),
-            ("quilt.cl", {"INTERP": 1, "GAIN": 0, "PIXEL_BYTES": 3}), ("copy.cl", {})]
+PROGRAMS = [
+    (
+        "gather.cl",
+        {
+            "FRAME_W": 8,
+            "FRAME_PIXELS": 64,
+            "NFRAMES": 3,
+            "GRID": 0,
+            "WRAP": 0,
+            "CELL_H": 1,
+            "CELL_W": 1,
+            "INTERP": 1,
+            "TSTEP": 1,
+            "RUN": 32,
+            "STACK_PAD": 256,
+            "STACK_SIGNED": 0,
+            "TONE_STRIDE": 384,
+            "TONE_OB": 192,
+            **RGB,
+        },
+    ),
+    ("lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}),
+    ("blend.cl", {"FRAME_VECS": 4, "ITEMS": 4}),
+    ("quilt.cl", {"INTERP": 1, "GAIN": 0, "PIXEL_BYTES": 3}),
+    ("copy.cl", {}),
+]
 
 
 @pytest.mark.parametrize("filename, defines", PROGRAMS, ids=[f for f, _ in PROGRAMS])
 def test_argument_names_read_from_the_source_are_the_drivers(cl_context, filename, defines):
     """The names engine.Kernel binds by, read from the .cl text, are those the compiler reports."""
     from dynatex.player.opencl import kernel_arg_names, kernel_source
+
     source = kernel_source(filename)
     options = [f"-D{k}={v}" for k, v in defines.items()] + ["-cl-kernel-arg-info"]
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", cl.CompilerWarning)        # compiler chatter, as in opencl.Program
+        warnings.simplefilter("ignore", cl.CompilerWarning)  # compiler chatter, as in opencl.Program
         prog = cl.Program(cl_context, source).build(options=options, cache_dir=False)
     names = kernel_arg_names(source)
     assert names
@@ -54,6 +82,7 @@ def test_frames_reach_the_callers_array_directly_or_by_copy(cl_context, direct):
     """One kernel, both delivery paths, several arrays in turn (double buffering and more):
     each array gets exactly its own frame, left in flight until its event completes."""
     from dynatex.player.opencl import writes_through
+
     if direct and not writes_through(cl_context):
         pytest.skip("this device does not share host memory")
     queue = cl.CommandQueue(cl_context)
@@ -73,7 +102,7 @@ def test_frames_reach_the_callers_array_directly_or_by_copy(cl_context, direct):
         event.wait()
         want = (frames[i % 3].astype(int) * (256 - 40 * i) + frames[(i + 1) % 3].astype(int) * 40 * i + 128) >> 8
         assert np.array_equal(a, want.astype(np.uint8)), i
-    assert out.launch(arrays[0], (1,)) is None          # wait=True: done on return
+    assert out.launch(arrays[0], (1,)) is None  # wait=True: done on return
 
 
 @pytest.mark.parametrize("mode, options", MODES, ids=[m for m, _ in MODES])
@@ -81,8 +110,10 @@ def test_every_mode_leaves_its_frame_in_flight_and_double_buffers(cl_device, mod
     """start_frame returns before the frame is there (an event) on every mode, and two
     alternating buffers give the same frames as next_frame."""
     db = selftest._db_path()
-    with open_player(db, selftest.TEXTURE, mode=mode, device=cl_device, seed=5, **options) as a, \
-            open_player(db, selftest.TEXTURE, mode=mode, device=cl_device, seed=5, **options) as b:
+    with (
+        open_player(db, selftest.TEXTURE, mode=mode, device=cl_device, seed=5, **options) as a,
+        open_player(db, selftest.TEXTURE, mode=mode, device=cl_device, seed=5, **options) as b,
+    ):
         want = [a.next_frame() for _ in range(6)]
         bufs = [np.empty(b.shape, np.uint8) for _ in range(2)]
         pending = b.start_frame(bufs[0])
@@ -134,10 +165,16 @@ def test_kernel_builds_write_nothing_to_stderr(cl_device, tmp_path):
     import os
     import subprocess
     import sys
-    env = dict(os.environ, POCL_CACHE_DIR=str(tmp_path / "pocl"), PYOPENCL_NO_CACHE="1",
-               DYNATEX_CACHE_DIR=str(tmp_path / "dynatex"))
-    done = subprocess.run([sys.executable, "-c", _BUILD_CHILD, cl_device], capture_output=True, text=True,
-                          timeout=240, env=env)
+
+    env = dict(
+        os.environ,
+        POCL_CACHE_DIR=str(tmp_path / "pocl"),
+        PYOPENCL_NO_CACHE="1",
+        DYNATEX_CACHE_DIR=str(tmp_path / "dynatex"),
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", _BUILD_CHILD, cl_device], capture_output=True, text=True, timeout=240, env=env
+    )
     assert done.returncode == 0, done.stderr[-500:]
     assert done.stdout.startswith("built")
     assert "warning" not in done.stderr.lower(), done.stderr[-500:]

@@ -1,16 +1,26 @@
 """The shared gather machinery: OpenCL kernels against their numpy references."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from dynatex.player.gather import (gather_reference, gaussian_smooth, gaussian_weights, open_gather, pack_source,
-                                   time_units, unpack_source, wrap_index)
+from dynatex.player.gather import (
+    gather_reference,
+    gaussian_smooth,
+    gaussian_weights,
+    open_gather,
+    pack_source,
+    time_units,
+    unpack_source,
+    wrap_index,
+)
 
 
 def _need_wide(ctx, wide=True):
     """Skip where the x86 variant is asked for but did not pass this device's self-test."""
     from dynatex.player.opencl import variant_verified
+
     if wide and not variant_verified(ctx.devices[0], "gather_wide"):
         pytest.skip(f"the gather_wide variant is not verified on {ctx.devices[0].name}")
 
@@ -67,7 +77,7 @@ def test_gaussian_smooth_reference_properties():
     m[:, 10:] = 6.0
     s = gaussian_smooth(m, 2.0)
     assert np.allclose(s[:, 0], 0, atol=1e-6) and np.allclose(s[:, -1], 6, atol=1e-5)
-    assert (np.diff(s[4]) >= -1e-6).all() and 2.0 < s[4, 10] < 4.0     # monotone ramp
+    assert (np.diff(s[4]) >= -1e-6).all() and 2.0 < s[4, 10] < 4.0  # monotone ramp
     assert np.allclose(gaussian_smooth(np.full((5, 5), 3.0), 1.5), 3.0, atol=1e-5)  # clamped edges keep constants
 
 
@@ -89,14 +99,23 @@ def test_map_gather_opencl_matches_numpy(cl_context, wrap, interpolate):
     tmap = rng.uniform(-3, 3, (H, W)).astype(np.float32)
     gains = np.array([[1, 1, 1], [1.1, 0.9, 1.2]], np.float32)
     offs = np.array([[0, 0, 0], [5, -3, 0]], np.float32)
-    pairs, _ = _render_both(cl_context, stack, (H, W), (gains, offs), packed, tmap, (0.0, 2.25, 13.5, -4.75),
-                            wrap=wrap, interpolate=interpolate)
+    pairs, _ = _render_both(
+        cl_context,
+        stack,
+        (H, W),
+        (gains, offs),
+        packed,
+        tmap,
+        (0.0, 2.25, 13.5, -4.75),
+        wrap=wrap,
+        interpolate=interpolate,
+    )
     for a, b in pairs:
         _close(a, b)
 
 
 def test_grid_gather_with_coarse_time_opencl_matches_numpy(cl_context):
-    stack = _stack(n=9, h=8, w=24)                      # three 8x8 "tiles" side by side
+    stack = _stack(n=9, h=8, w=24)  # three 8x8 "tiles" side by side
     H, W = 37, 45
     gh, gw = -(-H // 8), -(-W // 8)
     rng = np.random.default_rng(2)
@@ -106,8 +125,9 @@ def test_grid_gather_with_coarse_time_opencl_matches_numpy(cl_context):
     tmap = np.repeat(np.repeat(rng.integers(0, 5, (gh, gw)).astype(np.float32), 2, 0), 2, 1)[:th, :tw]
     out = {}
     for backend in ("opencl", "numpy"):
-        g = open_gather(stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None,
-                        cell=(8, 8), time_step=step)
+        g = open_gather(
+            stack, (H, W), backend=backend, ctx=cl_context if backend == "opencl" else None, cell=(8, 8), time_step=step
+        )
         g.set_tones(np.array([[1, 1, 1], [0.5, 0.5, 0.5], [1.5, 1, 1]], np.float32))
         g.set_source_grid(origins)
         g.set_time_map(tmap)
@@ -131,7 +151,7 @@ def test_time_interpolation_halfway():
     g = open_gather(stack, (1, 1), backend="numpy")
     g.set_source_map(pack_source(np.zeros((1, 1), int)))
     assert int(g.render(0.5)[0, 0, 0]) == 50
-    assert int(g.render(3.5)[0, 0, 0]) == 25          # loop: between frame 3 (50) and frame 0 (0)
+    assert int(g.render(3.5)[0, 0, 0]) == 25  # loop: between frame 3 (50) and frame 0 (0)
     g.set_tones(np.array([2.0, 2.0, 2.0]), np.array([1.0, 0.0, -200.0]))
     px = g.render(1.0)[0, 0]
     assert px.tolist() == [201, 200, 0]
@@ -191,7 +211,7 @@ def test_device_and_reference_agree_exactly(cl_context, wide):
         g.set_tones(np.array([[1.2, 0.8, 1.0]], np.float32), np.array([[4, -6, 0]], np.float32))
         for t, fade in ((0.25, 0.0), (2.5, 0.3), (-4.75, 1.0), (7.1, 0.77)):
             assert np.array_equal(g.render(t, fade=fade), g.render_reference(t, fade=fade)), (step, h, w, t, fade)
-        g.set_tones(np.ones((1, 3), np.float32))            # the identity
+        g.set_tones(np.ones((1, 3), np.float32))  # the identity
         assert np.array_equal(g.render(3.6, fade=0.5), g.render_reference(3.6, fade=0.5)), (step, h, w, "identity")
     # a per-pixel source: rows of consecutive pixels (the wide kernel's linear runs) and scattered ones
     g = open_gather(stack, (24, 192), backend="opencl", ctx=cl_context, time_step=8, wide=wide)
@@ -199,7 +219,9 @@ def test_device_and_reference_agree_exactly(cl_context, wide):
     index[::3] = rng.integers(0, 32 * 64, (8, 192))
     g.set_tones(np.array([[1.0, 1.0, 1.0], [0.7, 1.1, 1.4]], np.float32))
     g.set_source_map(pack_source(index, (np.arange(192)[None, :] // 100).repeat(24, 0)))
-    g.set_time_map(rng.uniform(0, 5, g.tmap_shape).astype(np.float32), rng.uniform(0, 5, g.tmap_shape).astype(np.float32))
+    g.set_time_map(
+        rng.uniform(0, 5, g.tmap_shape).astype(np.float32), rng.uniform(0, 5, g.tmap_shape).astype(np.float32)
+    )
     for t, fade in ((0.5, 0.1), (3.3, 0.9)):
         assert np.array_equal(g.render(t, fade=fade), g.render_reference(t, fade=fade)), ("map", t, fade)
 
@@ -254,15 +276,26 @@ def test_vector_path_time_step_8_grid_matches_numpy(cl_context, cell, wrap):
     H, W = 29, 157
     gh, gw = -(-H // ch), -(-W // cw)
     rng = np.random.default_rng(3)
-    origins = pack_source(rng.integers(0, 2, (gh, gw)) * ch * 3 * cw + cw * rng.integers(0, 3, (gh, gw)),
-                          rng.integers(0, 3, (gh, gw)))
+    origins = pack_source(
+        rng.integers(0, 2, (gh, gw)) * ch * 3 * cw + cw * rng.integers(0, 3, (gh, gw)), rng.integers(0, 3, (gh, gw))
+    )
     th, tw = -(-H // 8), -(-W // 8)
     tmap = (rng.uniform(-2, 2, (th, tw)) + np.linspace(0, 9, tw)[None, :]).astype(np.float32)
-    tmap[:, 7] += 25.0                                   # steep: runs spanning several frames
+    tmap[:, 7] += 25.0  # steep: runs spanning several frames
     gains = np.array([[1, 1, 1], [0.8, 1.3, 0.5], [1.5, 0.7, 1.1]], np.float32)
     offs = np.array([[0, 0, 0], [4, -6, 10], [-3, 2, 0]], np.float32)
-    pairs, _ = _render_both(cl_context, stack, (H, W), (gains, offs), origins, tmap, (0.0, 3.4, 7.999, -5.25),
-                            cell=cell, time_step=8, wrap=wrap)
+    pairs, _ = _render_both(
+        cl_context,
+        stack,
+        (H, W),
+        (gains, offs),
+        origins,
+        tmap,
+        (0.0, 3.4, 7.999, -5.25),
+        cell=cell,
+        time_step=8,
+        wrap=wrap,
+    )
     for a, b in pairs:
         _close(a, b)
 
@@ -280,8 +313,9 @@ def test_time_step_8_kernels_agree_with_numpy_on_a_smooth_map(cl_context, wide):
     th, tw = -(-H // 8), -(-W // 8)
     tmap = gaussian_smooth(rng.uniform(0, 12, (th, tw)).astype(np.float32), 2.0)
     tones = (np.array([[1.1, 0.9, 1.0], [0.7, 1.2, 2.5]]), np.array([[2, -3, 0], [0, 5, -40]]))
-    pairs, g = _render_both(cl_context, stack, (H, W), tones, origins, tmap, (0.0, 2.37, 13.9),
-                            cell=(40, 90), time_step=8, wide=wide)
+    pairs, g = _render_both(
+        cl_context, stack, (H, W), tones, origins, tmap, (0.0, 2.37, 13.9), cell=(40, 90), time_step=8, wide=wide
+    )
     assert g.wide == wide
     for a, b in pairs:
         _close(a, b)
@@ -309,6 +343,7 @@ def test_render_writes_into_the_callers_array(cl_context):
     g = open_gather(stack, (19, 45), backend="opencl", ctx=cl_context, cell=(8, 8), time_step=8)
     g.set_source_grid(pack_source(np.full((3, 6), 8)))
     from dynatex.player.opencl import device_shares_host_memory
+
     assert g.direct == device_shares_host_memory(cl_context)
     fresh = g.render(2.5).copy()
     big = np.zeros((2, 19, 45, 3), np.uint8)
@@ -320,19 +355,19 @@ def test_render_writes_into_the_callers_array(cl_context):
 
 def test_frame_traffic_counts_output_and_distinct_stored_pixels():
     """bytes_per_frame = the output written once + each distinct (frame, pixel) read once."""
-    stack = _stack(n=6, h=8, w=16)                       # two 8x8 cells side by side
+    stack = _stack(n=6, h=8, w=16)  # two 8x8 cells side by side
     g = open_gather(stack, (16, 40), backend="numpy", cell=(8, 8), time_step=8)
-    g.set_source_grid(pack_source(np.zeros((2, 5), int)))   # one cell repeated everywhere
+    g.set_source_grid(pack_source(np.zeros((2, 5), int)))  # one cell repeated everywhere
     g.render(2.0)
-    assert g.frame_traffic() == {"output": 16 * 40 * 3, "stored": 2 * 64 * 3}   # frames 2 and 3
+    assert g.frame_traffic() == {"output": 16 * 40 * 3, "stored": 2 * 64 * 3}  # frames 2 and 3
     tmap = np.zeros(g.tmap_shape, np.float32)
-    tmap[:, 3:] = 2.0                                    # part of the frame two frames later
+    tmap[:, 3:] = 2.0  # part of the frame two frames later
     g.set_time_map(tmap)
-    assert g.frame_traffic(2.0)["stored"] == 4 * 64 * 3   # frames 2..5, each once
+    assert g.frame_traffic(2.0)["stored"] == 4 * 64 * 3  # frames 2..5, each once
     assert g.bytes_per_frame == sum(g.frame_traffic().values())
     m = open_gather(stack, (8, 16), backend="numpy", interpolate=False)
     m.set_source_map(pack_source(np.arange(128).reshape(8, 16)))
-    assert m.frame_traffic(0.0)["stored"] == 128 * 3     # every output pixel its own source
+    assert m.frame_traffic(0.0)["stored"] == 128 * 3  # every output pixel its own source
 
 
 def test_frames_land_in_whichever_array_comes_and_nowhere_else(cl_context):
@@ -359,6 +394,7 @@ def test_a_device_without_the_verified_variant_gets_the_portable_kernel(cl_conte
     """Where the self-test did not verify the x86 variant, time step 8 renders with the portable
     kernel (the same integers), and asking for the variant is an error that says why."""
     import dynatex.player.opencl as ocl
+
     monkeypatch.setattr(ocl, "variant_verified", lambda device, variant: False)
     stack = _stack(n=5, h=16, w=64)
     g = open_gather(stack, (20, 70), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
@@ -402,19 +438,19 @@ def test_frames_land_whatever_the_arrays_alignment(cl_context, offset):
     are 64-byte aligned (non-temporal) for an array 16, 32 or 48 bytes off 64, and stores
     plainly otherwise (3 bytes off). Every pixel must match the reference either way."""
     stack = _stack(n=6, h=16, w=64)
-    h, w = 37, 256                                     # 768-byte rows
+    h, w = 37, 256  # 768-byte rows
     g = open_gather(stack, (h, w), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)
     g.set_source_grid(pack_source((np.arange(3 * 8).reshape(3, 8) % 3) * 16))
     g.set_time_map(np.linspace(0, 3, 5 * 32, dtype=np.float32).reshape(5, 32))
     g.set_tones(np.array([[1.2, 0.8, 1.0]], np.float32), np.array([[4, -6, 0]], np.float32))
     raw = np.zeros(h * w * 3 + 128, np.uint8)
     start = (-raw.ctypes.data) % 64 + offset
-    out = raw[start:start + h * w * 3].reshape(h, w, 3)
+    out = raw[start : start + h * w * 3].reshape(h, w, 3)
     assert out.ctypes.data % 64 == offset
     for t in (0.25, 2.5, 4.75):
         g.render(t, out=out)
         _close(out, g.render_reference(t))
-    assert not raw[:start].any() and not raw[start + h * w * 3:].any()   # nothing outside the array
+    assert not raw[:start].any() and not raw[start + h * w * 3 :].any()  # nothing outside the array
 
 
 def test_the_wide_kernels_plain_vector_code_computes_the_same_integers(cl_context, monkeypatch):
@@ -422,10 +458,12 @@ def test_the_wide_kernels_plain_vector_code_computes_the_same_integers(cl_contex
     with plain vector code instead of x86 builtins; forced here (PORTABLE=1), it must still
     match the reference exactly."""
     import dynatex.player.opencl as ocl
+
     _need_wide(cl_context)
     real = ocl.build_program
-    monkeypatch.setattr(ocl, "build_program",
-                        lambda ctx, name, defines=None: real(ctx, name, {**(defines or {}), "PORTABLE": 1}))
+    monkeypatch.setattr(
+        ocl, "build_program", lambda ctx, name, defines=None: real(ctx, name, {**(defines or {}), "PORTABLE": 1})
+    )
     rng = np.random.default_rng(5)
     stack = _stack(n=7, h=16, w=64)
     g = open_gather(stack, (40, 256), backend="opencl", ctx=cl_context, cell=(16, 32), time_step=8)

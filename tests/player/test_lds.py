@@ -1,4 +1,5 @@
 """The LDS player: backends agree, edits do what they claim (measured on the output), state, errors."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,8 +33,10 @@ def osc_db(tmp_path_factory):
 
 @pytest.mark.parametrize("precision", ["float32", "float16"])
 def test_opencl_matches_numpy_reference(lds_db, precision, cl_device):
-    with open_player(lds_db, seed=4, precision=precision, backend="opencl", device=cl_device) as pc, \
-            open_player(lds_db, seed=4, precision=precision, backend="numpy") as pn:
+    with (
+        open_player(lds_db, seed=4, precision=precision, backend="opencl", device=cl_device) as pc,
+        open_player(lds_db, seed=4, precision=precision, backend="numpy") as pn,
+    ):
         for _ in range(20):
             a, b = pc.next_frame(), pn.next_frame()
             diff = np.abs(a.astype(int) - b)
@@ -60,7 +63,7 @@ def test_float16_basis_psnr_above_45_db(lds_db):
         err = []
         for _ in range(10):
             err.append((p32.next_frame().astype(float) - p16.next_frame()) ** 2)
-    psnr = 10 * np.log10(255 ** 2 / max(np.mean(err), 1e-12))
+    psnr = 10 * np.log10(255**2 / max(np.mean(err), 1e-12))
     assert psnr >= 45
 
 
@@ -93,12 +96,13 @@ def test_deterministic_for_a_seed_and_state_restores(lds_db):
 
 
 def test_edited_poles():
-    poles = np.array([0.9 * np.exp(1j * 0.5), 0.9 * np.exp(-1j * 0.5), 0.8, -0.7,
-                      0.95 * np.exp(1j * 2.0), 0.95 * np.exp(-1j * 2.0)])
+    poles = np.array(
+        [0.9 * np.exp(1j * 0.5), 0.9 * np.exp(-1j * 0.5), 0.8, -0.7, 0.95 * np.exp(1j * 2.0), 0.95 * np.exp(-1j * 2.0)]
+    )
     e = edited_poles(poles, 2.0)
     np.testing.assert_allclose(np.angle(e[:2]), [1.0, -1.0])
     np.testing.assert_allclose(np.abs(e[:3]), [0.9, 0.9, 0.8])
-    assert e[3] == 0 and e[4] == 0 and e[5] == 0       # pushed past pi: annihilated
+    assert e[3] == 0 and e[4] == 0 and e[5] == 0  # pushed past pi: annihilated
     r = edited_poles(poles, -1.0)
     np.testing.assert_allclose(r[:2], np.conj(poles[:2]))
     np.testing.assert_allclose(r[3], -0.7)
@@ -122,11 +126,12 @@ def _dominant_frequency(player: LDSPlayer, frames: int) -> float:
     sig -= sig.mean(axis=0)
     seg = 512
     win = np.hanning(seg)[:, None]
-    power = sum(np.abs(np.fft.rfft(sig[i:i + seg] * win, axis=0)) ** 2
-                for i in range(0, frames - seg + 1, seg // 2)).sum(axis=1)
+    power = sum(
+        np.abs(np.fft.rfft(sig[i : i + seg] * win, axis=0)) ** 2 for i in range(0, frames - seg + 1, seg // 2)
+    ).sum(axis=1)
     power[0] = 0
     k = int(np.argmax(power[1:-1])) + 1
-    a, b, c = np.log(power[k - 1:k + 2] + 1e-30)       # parabolic peak interpolation
+    a, b, c = np.log(power[k - 1 : k + 2] + 1e-30)  # parabolic peak interpolation
     return float((k + 0.5 * (a - c) / (a - 2 * b + c)) / seg)
 
 
@@ -198,11 +203,18 @@ def test_scale_weights_move_the_spatial_spectrum(clips_dir, tmp_path):
     assert shares["coarse"] < 0.8 * shares["neutral"] < 0.8 * shares["fine"]
 
 
-@pytest.mark.parametrize("attr, value, err", [
-    ("speed", 3.5, ValueError), ("speed", float("nan"), ValueError), ("speed", "fast", TypeError),
-    ("intensity", -0.1, ValueError), ("scales", (1, 2), ValueError), ("scales", (1, 2, -1), ValueError),
-    ("weights", np.ones(3), ValueError),
-])
+@pytest.mark.parametrize(
+    "attr, value, err",
+    [
+        ("speed", 3.5, ValueError),
+        ("speed", float("nan"), ValueError),
+        ("speed", "fast", TypeError),
+        ("intensity", -0.1, ValueError),
+        ("scales", (1, 2), ValueError),
+        ("scales", (1, 2, -1), ValueError),
+        ("weights", np.ones(3), ValueError),
+    ],
+)
 def test_out_of_range_controls(lds_db, attr, value, err):
     with open_player(lds_db) as p:
         before = getattr(p, attr)

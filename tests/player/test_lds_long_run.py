@@ -1,4 +1,5 @@
 """20,000 frames from real clips: no NaN, no blow-up, no decay; the state covariance is the learned one."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,5 @@
 """Mode ``mixture``: OpenCL against the numpy reference, determinism, state, controls, long-run stability."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -24,14 +25,23 @@ def _db(path, frames, **kw):
 
 @pytest.fixture(scope="module")
 def mix_db(tmp_path_factory):
-    return _db(tmp_path_factory.mktemp("mixp") / "m.h5", wave_clip(80, h=30, w=37),
-               components=2, dim=4, pca_dim=16, neighbors=8, pmax=3)
+    return _db(
+        tmp_path_factory.mktemp("mixp") / "m.h5",
+        wave_clip(80, h=30, w=37),
+        components=2,
+        dim=4,
+        pca_dim=16,
+        neighbors=8,
+        pmax=3,
+    )
 
 
 @pytest.mark.parametrize("precision", ["float32", "float16"])
 def test_opencl_matches_numpy_reference(mix_db, precision, cl_device):
-    with MixturePlayer(mix_db, seed=5, precision=precision, backend="opencl", device=cl_device) as a, \
-            MixturePlayer(mix_db, seed=5, backend="numpy", precision=precision) as b:
+    with (
+        MixturePlayer(mix_db, seed=5, precision=precision, backend="opencl", device=cl_device) as a,
+        MixturePlayer(mix_db, seed=5, backend="numpy", precision=precision) as b,
+    ):
         for _ in range(15):
             fa, fb = a.next_frame(), b.next_frame()
             diff = np.abs(fa.astype(int) - fb)
@@ -51,8 +61,10 @@ def test_grey_texture_and_output_buffer(tmp_path):
 
 
 def test_seed_determinism_and_state_round_trip(mix_db):
-    with open_player(mix_db, mode="mixture", seed=3, backend="numpy") as p, \
-            MixturePlayer(mix_db, seed=3, backend="numpy") as q:
+    with (
+        open_player(mix_db, mode="mixture", seed=3, backend="numpy") as p,
+        MixturePlayer(mix_db, seed=3, backend="numpy") as q,
+    ):
         a = [p.next_frame() for _ in range(5)]
         assert all(np.array_equal(x, q.next_frame()) for x in a)
         p.draws = 4
@@ -109,7 +121,7 @@ def test_long_run_stays_on_the_manifold(mix_db):
         basis = p.engine._basis.astype(np.float64)
     assert np.isfinite(g).all()
     dist = nearest_distance(train, g)
-    assert dist.max() < 0.5 * np.sqrt((train ** 2).sum(axis=1)).max()
+    assert dist.max() < 0.5 * np.sqrt((train**2).sum(axis=1)).max()
     gram = basis @ basis.T
     energy = np.einsum("ni,ij,nj->n", u, gram, u).mean()
     energy0 = np.einsum("ni,ij,nj->n", u0, gram, u0).mean()
@@ -126,7 +138,7 @@ def test_real_clip_long_run_beside_the_lds(clips_dir, tmp_path):
         w.put_method("w", "mixture", m)
         w.put_method("w", "lds", learn_lds(clip, n=m.info["pca_dim"]))
     src = clip.frames.reshape(150, -1).astype(np.float64) - m.mean
-    src_energy = (src ** 2).sum(axis=1).mean()
+    src_energy = (src**2).sum(axis=1).mean()
     with MixturePlayer(path, backend="numpy", seed=0) as p:
         g = p.advance(5000, record=True)
         u = p.decoder.coefficients(g)

@@ -1,5 +1,6 @@
 """RGBA and BGRA frames: written by every mode's kernels (alpha 255, colours in place), equal to
 the RGB frames placed by the reference, on every verified device and on numpy."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -9,9 +10,16 @@ from dynatex.player import open_player, selftest
 from dynatex.player.gather import open_gather, pack_source
 from dynatex.player.pixels import FORMATS, pixel_format
 
-MODES = [("lds", {}), ("lds", {"precision": "float16"}), ("mixture", {}), ("turnpoints", {"playback": "jumps"}),
-         ("turnpoints", {"playback": "hybrid"}), ("tiles", {"size": (72, 40)}), ("tiles", {"size": (50, 37)}),
-         ("evolve", {"jitter": 2.0})]
+MODES = [
+    ("lds", {}),
+    ("lds", {"precision": "float16"}),
+    ("mixture", {}),
+    ("turnpoints", {"playback": "jumps"}),
+    ("turnpoints", {"playback": "hybrid"}),
+    ("tiles", {"size": (72, 40)}),
+    ("tiles", {"size": (50, 37)}),
+    ("evolve", {"jitter": 2.0}),
+]
 IDS = ["lds", "lds-f16", "mixture", "turnpoints-jumps", "turnpoints-hybrid", "tiles", "tiles-odd", "evolve"]
 
 
@@ -32,9 +40,12 @@ def test_every_mode_writes_each_format(cl_device, mode, options, fmt):
     the reference, on the device and on numpy."""
     db = selftest._db_path()
     for backend, device in (("opencl", cl_device), ("numpy", None)):
-        with open_player(db, selftest.TEXTURE, mode=mode, backend=backend, device=device, seed=5, **options) as rgb, \
-                open_player(db, selftest.TEXTURE, mode=mode, backend=backend, device=device, seed=5, format=fmt,
-                            **options) as p:
+        with (
+            open_player(db, selftest.TEXTURE, mode=mode, backend=backend, device=device, seed=5, **options) as rgb,
+            open_player(
+                db, selftest.TEXTURE, mode=mode, backend=backend, device=device, seed=5, format=fmt, **options
+            ) as p,
+        ):
             assert p.shape == rgb.shape[:2] + (4,) and p.format.name == fmt
             for k in range(4):
                 want = FORMATS[fmt].from_rgb(rgb.next_frame())
@@ -44,8 +55,9 @@ def test_every_mode_writes_each_format(cl_device, mode, options, fmt):
                     got = p.start_frame(np.zeros(p.shape, np.uint8)).wait()
                 assert np.array_equal(got, want), (backend, mode, fmt, k)
         with pytest.raises(ValueError, match=r"out must be uint8 with shape"):
-            open_player(db, selftest.TEXTURE, mode=mode, backend="numpy", seed=5, format=fmt,
-                        **options).next_frame(np.empty(rgb.shape, np.uint8))
+            open_player(db, selftest.TEXTURE, mode=mode, backend="numpy", seed=5, format=fmt, **options).next_frame(
+                np.empty(rgb.shape, np.uint8)
+            )
 
 
 @pytest.mark.parametrize("fmt", ["RGBA", "BGRA"])
@@ -58,8 +70,12 @@ def test_gather_writes_each_format(cl_context, fmt, step, cell):
     gain = rng.uniform(0.5, 1.5, (2, 3)).astype(np.float32)
     offset = rng.uniform(-20, 20, (2, 3)).astype(np.float32)
     idx = rng.integers(0, 16 * 24, size)
-    gs = [open_gather(stack, size, backend=b, ctx=cl_context if b == "opencl" else None, time_step=step, cell=cell,
-                      format=fmt) for b in ("opencl", "numpy")]
+    gs = [
+        open_gather(
+            stack, size, backend=b, ctx=cl_context if b == "opencl" else None, time_step=step, cell=cell, format=fmt
+        )
+        for b in ("opencl", "numpy")
+    ]
     for g in gs:
         assert g.out_shape == (19, 45, 4)
         g.set_tones(gain, offset)
@@ -82,7 +98,8 @@ def test_place_kernel_equals_its_reference(cl_context):
 
     from dynatex.player.engine import FrameOut, Kernel
     from dynatex.player.opencl import build_program
-    rgb = np.random.default_rng(4).integers(0, 256, (7, 11, 3), dtype=np.uint8)   # 77 pixels: 4 items + 13
+
+    rgb = np.random.default_rng(4).integers(0, 256, (7, 11, 3), dtype=np.uint8)  # 77 pixels: 4 items + 13
     queue = cl.CommandQueue(cl_context)
     d_rgb = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=rgb)
     for name in ("RGBA", "BGRA"):

@@ -1,6 +1,7 @@
 """Mode ``evolve``: OpenCL against the numpy reference, the time jitter (monotone, within e,
 copies of one block desynchronised), the rate map (M = 2 reaches the end in half the time,
 a smoothed boundary shows no seam), end modes, state, controls and bad input."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -8,12 +9,11 @@ import pytest
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import seam_visibility
-from dynatex.analyzer.quilt import learn_quilt
+from dynatex.analyzer.quilt import learn_quilt, spreading_clip
 from dynatex.player import open_player, ratemap
 from dynatex.player.quilt import ENDS, EvolvePlayer, fold_time, jitter_warp
 from dynatex.player.runs import RATE_STEP, quantize_rate
 from dynatex.tiledb import DatabaseWriter, MethodNotFoundError, QuiltModel
-from dynatex.analyzer.quilt import spreading_clip
 
 
 def write_db(path, frames, model, name="s"):
@@ -38,14 +38,19 @@ def step_db(tmp_path, t=30, switch=12):
     four copies of that one source block (blocks 0..3) on a 16x16 canvas."""
     frames = np.full((t, 8, 8, 3), 40, np.uint8)
     frames[switch:] = 220
-    frames[:, ::2, ::2] += 10                     # some texture
+    frames[:, ::2, ::2] += 10  # some texture
     yy, xx = np.mgrid[0:16, 0:16]
     smap = np.stack([yy % 8, xx % 8], axis=-1).astype(np.int32)
     labels = ((yy // 8) * 2 + xx // 8).astype(np.int32)
-    model = QuiltModel(source_map=smap, labels=labels, block_sources=np.zeros((4, 2), np.int32),
-                       block_positions=np.array([[0, 0], [0, 8], [8, 0], [8, 8]], np.int32),
-                       singular_values=np.ones(3), rank_error=np.array([0.1, 0.05, 0.0]),
-                       info={"block_h": 8, "block_w": 8})
+    model = QuiltModel(
+        source_map=smap,
+        labels=labels,
+        block_sources=np.zeros((4, 2), np.int32),
+        block_positions=np.array([[0, 0], [0, 8], [8, 0], [8, 8]], np.int32),
+        singular_values=np.ones(3),
+        rank_error=np.array([0.1, 0.05, 0.0]),
+        info={"block_h": 8, "block_w": 8},
+    )
     return write_db(tmp_path / "step.h5", frames, model)
 
 
@@ -55,8 +60,10 @@ def test_opencl_matches_numpy(spread_db, cl_device, end):
     path = spread_db[0]
     rate = ratemap.point_light((56, 72), (10, 40), 20.0, max_rate=3.0, min_rate=0.5)
     opts = dict(jitter=3.0, end=end, seed=4)
-    with EvolvePlayer(path, backend="numpy", **opts) as ref, \
-            EvolvePlayer(path, backend="opencl", device=cl_device, **opts) as cl:
+    with (
+        EvolvePlayer(path, backend="numpy", **opts) as ref,
+        EvolvePlayer(path, backend="opencl", device=cl_device, **opts) as cl,
+    ):
         exact = 0
         for k in range(40):
             if k == 20:
@@ -65,7 +72,7 @@ def test_opencl_matches_numpy(spread_db, cl_device, end):
                 ref.speed = cl.speed = 1.7
             a, b = ref.next_frame(), cl.next_frame()
             diff = np.abs(a.astype(int) - b)
-            assert diff.max() <= 1, k          # float32 on both sides; contracted multiply-adds may round apart
+            assert diff.max() <= 1, k  # float32 on both sides; contracted multiply-adds may round apart
             exact += bool(diff.max() == 0)
         assert exact >= 30
 
@@ -77,11 +84,16 @@ def test_opencl_matches_numpy_rate_classes(spread_db, cl_device, interpolate):
     path = spread_db[0]
     h, w = 56, 72
     stairs = np.repeat(np.linspace(0.5, 3.0, 12, dtype=np.float32), -(-w // 12))[:w]
-    maps = [(ratemap.halves((h, w), 2.0, 1.0), 0.0), (ratemap.halves((h, w), 2.0, 1.0), 3.0),
-            (np.tile(stairs, (h, 1)), 0.0)]
+    maps = [
+        (ratemap.halves((h, w), 2.0, 1.0), 0.0),
+        (ratemap.halves((h, w), 2.0, 1.0), 3.0),
+        (np.tile(stairs, (h, 1)), 0.0),
+    ]
     opts = dict(jitter=2.5, seed=2, interpolate=interpolate, end="pingpong")
-    with EvolvePlayer(path, backend="numpy", **opts) as ref, \
-            EvolvePlayer(path, backend="opencl", device=cl_device, **opts) as cl:
+    with (
+        EvolvePlayer(path, backend="numpy", **opts) as ref,
+        EvolvePlayer(path, backend="opencl", device=cl_device, **opts) as cl,
+    ):
         exact = total = 0
         for rate, sigma in maps:
             ref.rate_map = cl.rate_map = rate
@@ -115,10 +127,10 @@ def test_warp_monotone_within_e(e, end):
     assert w.shape == (50, 41) and w.dtype == np.float32
     assert (np.diff(w, axis=1) >= 0).all()
     assert np.abs(w - np.minimum(k, last)).max() <= e + 1e-5
-    assert (w[:, 0] == 0).all() and np.allclose(w[:, last], last)   # starts and ends on the true frame
+    assert (w[:, 0] == 0).all() and np.allclose(w[:, last], last)  # starts and ends on the true frame
     if e >= 1:
-        assert np.abs(w - np.minimum(k, last)).max() > 0.5 * e      # it does jitter
-        assert len({tuple(r) for r in np.round(w, 4)}) == 50        # every block its own warp
+        assert np.abs(w - np.minimum(k, last)).max() > 0.5 * e  # it does jitter
+        assert len({tuple(r) for r in np.round(w, 4)}) == 50  # every block its own warp
 
 
 def test_jitter_desynchronises_copies_of_one_block(tmp_path):
@@ -141,9 +153,9 @@ def test_jitter_desynchronises_copies_of_one_block(tmp_path):
         return first
 
     plain = switch_frames(0.0)
-    assert set(plain.values()) == {12}                     # without jitter, all copies change together
+    assert set(plain.values()) == {12}  # without jitter, all copies change together
     jittered = switch_frames(e)
-    assert len(set(jittered.values())) >= 3                # with jitter they no longer do
+    assert len(set(jittered.values())) >= 3  # with jitter they no longer do
     assert all(abs(f - 12) <= e + 1 for f in jittered.values())
 
 
@@ -183,7 +195,7 @@ def test_rate_map_semantics(spread_db):
         p.rate_sigma = 3.0
         eff = p.effective_rate
         assert 0 < eff[0, 9] < 0.5 and eff.shape == (h, w)
-        np.testing.assert_array_equal(p.rate_map, m)     # the raw map is kept
+        np.testing.assert_array_equal(p.rate_map, m)  # the raw map is kept
         p.rate_map = None
         assert np.allclose(p.source_times(7.0), 7.0)
 
@@ -203,7 +215,7 @@ def test_end_control_changes_playback_after_the_last_frame(tmp_path):
             p.end = end
             assert bool(p.render_at(21.0)[0, 0, 0] > 130) == expect_light, end
         p.end = "pingpong"
-        assert p.render_at(30.0)[0, 0, 0] < 130          # back below the switch on the way down
+        assert p.render_at(30.0)[0, 0, 0] < 130  # back below the switch on the way down
 
 
 # -- state, controls, bad input ----------------------------------------------------------------------
@@ -223,7 +235,10 @@ def test_state_round_trip(spread_db):
 
 def test_open_player_and_deterministic(spread_db):
     path = spread_db[0]
-    with open_player(path, mode="evolve", jitter=3.0, seed=9) as a, open_player(path, mode="evolve", jitter=3.0, seed=9) as b:
+    with (
+        open_player(path, mode="evolve", jitter=3.0, seed=9) as a,
+        open_player(path, mode="evolve", jitter=3.0, seed=9) as b,
+    ):
         assert isinstance(a, EvolvePlayer)
         for _ in range(4):
             np.testing.assert_array_equal(a.next_frame(), b.next_frame())
@@ -231,6 +246,7 @@ def test_open_player_and_deterministic(spread_db):
 
 def test_kernels_built_once(spread_db, cl_context):
     from dynatex.player.opencl import build_count
+
     path = spread_db[0]
     with EvolvePlayer(path) as p:
         p.rate_map = ratemap.halves(p.shape[:2])
@@ -244,17 +260,20 @@ def test_kernels_built_once(spread_db, cl_context):
         assert build_count() == before
 
 
-@pytest.mark.parametrize("control, value, error, message", [
-    ("rate_map", np.ones((5, 5)), ValueError, "rate_map is 5x5 .* the output is 72x56"),
-    ("rate_map", -np.ones((56, 72)), ValueError, r"rate_map values must lie in \[0, 64\]"),
-    ("rate_map", np.full((56, 72), np.nan), ValueError, "NaN or infinite"),
-    ("rate_map", np.full((56, 72), np.inf), ValueError, "NaN or infinite"),
-    ("rate_map", [[1.0]], TypeError, "rate_map must be a numpy array"),
-    ("rate_sigma", -1, ValueError, "rate_sigma"),
-    ("jitter", 100, ValueError, "jitter"),
-    ("end", "bounce", ValueError, "end must be one of"),
-    ("speed", float("nan"), ValueError, "speed"),
-])
+@pytest.mark.parametrize(
+    "control, value, error, message",
+    [
+        ("rate_map", np.ones((5, 5)), ValueError, "rate_map is 5x5 .* the output is 72x56"),
+        ("rate_map", -np.ones((56, 72)), ValueError, r"rate_map values must lie in \[0, 64\]"),
+        ("rate_map", np.full((56, 72), np.nan), ValueError, "NaN or infinite"),
+        ("rate_map", np.full((56, 72), np.inf), ValueError, "NaN or infinite"),
+        ("rate_map", [[1.0]], TypeError, "rate_map must be a numpy array"),
+        ("rate_sigma", -1, ValueError, "rate_sigma"),
+        ("jitter", 100, ValueError, "jitter"),
+        ("end", "bounce", ValueError, "end must be one of"),
+        ("speed", float("nan"), ValueError, "speed"),
+    ],
+)
 def test_bad_controls(spread_db, control, value, error, message):
     with EvolvePlayer(spread_db[0], backend="numpy") as p:
         with pytest.raises(error, match=message):
@@ -262,8 +281,11 @@ def test_bad_controls(spread_db, control, value, error, message):
 
 
 def test_bad_open(spread_db, lds_db):
-    with pytest.raises(ValueError, match=r"size \(72, 56\) does not fit the stored quilt, whose canvas \(height, "
-                                         r"width\) is \(56, 72\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"size \(72, 56\) does not fit the stored quilt, whose canvas \(height, "
+        r"width\) is \(56, 72\)",
+    ):
         EvolvePlayer(spread_db[0], size=(72, 56))
     with pytest.raises(MethodNotFoundError, match="no 'quilt' data"):
         EvolvePlayer(lds_db)
@@ -305,7 +327,6 @@ def test_rate_map_on_rusting_steel(clips_dir, tmp_path):
         p.rate_sigma = 16.0
         smooth = seam_visibility(np.stack([p.render_at(t) for t in (20.0, 35.0, 50.0)]), left.astype(np.int32))
     assert smooth.mean() <= 1.2 and smooth.mean() < sharp.mean(), (smooth, sharp)
-
 
 
 def test_reseed_draws_new_jitter(spread_db):
@@ -359,6 +380,7 @@ def test_maps_whose_bands_extend_outside_the_frames_render_safely(spread_db, cl_
     import sys
 
     import h5py
+
     path = tmp_path / "mutant.h5"
     shutil.copy(spread_db[0], path)
     with h5py.File(path, "r+") as f:
@@ -369,8 +391,9 @@ def test_maps_whose_bands_extend_outside_the_frames_render_safely(spread_db, cl_
         else:
             w = g["blend_weight"][...]
             del g["blend_weight"]
-            g["blend_weight"] = np.ascontiguousarray(w[::-1, ::-1])   # same values and shape, other pixels
-    done = subprocess.run([sys.executable, "-c", _RENDER_CHILD, str(path), cl_device], capture_output=True,
-                          text=True, timeout=240)
+            g["blend_weight"] = np.ascontiguousarray(w[::-1, ::-1])  # same values and shape, other pixels
+    done = subprocess.run(
+        [sys.executable, "-c", _RENDER_CHILD, str(path), cl_device], capture_output=True, text=True, timeout=240
+    )
     assert done.returncode == 0, (done.returncode, done.stderr[-500:])
     assert int(done.stdout.split()[-1]) <= 1

@@ -1,14 +1,24 @@
 """The runs engine of mode ``evolve``: the run tables say what the quilt says and stay inside
 the frames, and the OpenCL engine draws what the numpy reference draws, frame in flight,
 for any source time function the mode gives it."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from dynatex.analyzer.quilt import learn_quilt, spreading_clip
-from dynatex.player.runs import (RATE_STEP, SPILL, RunsOpenCL, RunsReference, build_runs, check_runs, cut_runs,
-                                 open_runs, quantize_rate)
+from dynatex.player.runs import (
+    RATE_STEP,
+    SPILL,
+    RunsOpenCL,
+    RunsReference,
+    build_runs,
+    check_runs,
+    cut_runs,
+    open_runs,
+    quantize_rate,
+)
 
 
 @pytest.fixture(scope="module")
@@ -23,17 +33,22 @@ def _engine_inputs(frames, q):
     sw = frames.shape[2]
     flat = np.ascontiguousarray(frames.reshape(frames.shape[0], -1, 3))
     pix = q.source_map[..., 0].astype(np.int64) * sw + q.source_map[..., 1]
-    blend = (np.rint(q.blend_weight.astype(np.float64) * 256).astype(np.int64),
-             q.blend_map[..., 0].astype(np.int64) * sw + q.blend_map[..., 1], q.blend_labels.astype(np.int64))
+    blend = (
+        np.rint(q.blend_weight.astype(np.float64) * 256).astype(np.int64),
+        q.blend_map[..., 0].astype(np.int64) * sw + q.blend_map[..., 1],
+        q.blend_labels.astype(np.int64),
+    )
     gain = np.ascontiguousarray(np.repeat(q.gain, 3, axis=2) if q.gain.shape[2] == 1 else q.gain, np.float32)
     return flat, pix, blend, gain
 
 
 def _times(offsets):
     """A source time function: rate times the clock plus a per-block offset, held inside the frames."""
+
     def source_time(rate, blocks, t):
         local = np.full(blocks.shape, t, np.float32) if rate is None else (t * rate).astype(np.float32)
         return np.clip(local + offsets[blocks], np.float32(0), np.float32(23)).astype(np.float32)
+
     return source_time
 
 
@@ -50,8 +65,8 @@ def test_runs_describe_the_quilt(quilt):
     runs = r["runs"].view(np.uint32).astype(np.int64)
     start, length = runs[:, 0], runs[:, 3] & 0x3FFFFFFF
     blend, spill = runs[:, 3] >> 31 == 1, (runs[:, 3] >> 30) & 1 == 1
-    np.testing.assert_array_equal(start, np.cumsum(np.append(0, length[:-1])))       # cover every pixel, in order
-    assert ((start % w) + length <= w).all()                                          # within a row
+    np.testing.assert_array_equal(start, np.cumsum(np.append(0, length[:-1])))  # cover every pixel, in order
+    assert ((start % w) + length <= w).all()  # within a row
     np.testing.assert_array_equal(r["row_start"], np.searchsorted(start, np.arange(h + 1) * w))
     col3 = (start % w) * 3
     assert (col3[spill] + -(-length[spill] * 3 // SPILL) * SPILL <= 3 * w).all()
@@ -72,8 +87,8 @@ def test_runs_describe_the_quilt(quilt):
     np.testing.assert_array_equal(np.where(swap, a_pix, b_pix)[band], pix2.ravel()[band])
     np.testing.assert_array_equal(np.where(swap, a_lab, b_lab)[band], q.blend_labels.ravel()[band])
     assert (blend[k] | ~band).all()
-    assert len(start) < h * w / 4                                                     # runs, not pixels
-    plain = build_runs(pix, q.labels, wq, pix2, q.blend_labels, merge=False)          # bands only
+    assert len(start) < h * w / 4  # runs, not pixels
+    plain = build_runs(pix, q.labels, wq, pix2, q.blend_labels, merge=False)  # bands only
     assert len(plain["starts"]) > len(start) and not (plain["code"].reshape(h, w, 3)[..., 0][~(wq > 0)]).any()
 
 
@@ -83,6 +98,7 @@ def test_opencl_engine_matches_reference(quilt, cl_context, loop):
     most one grey level apart where a device contracts a multiply-add), with and without a
     rate map, the frame left in flight, the reference's pixels exact on most frames."""
     import pyopencl as cl
+
     frames, q = quilt
     flat, pix, blend, gain = _engine_inputs(frames, q)
     h, w = q.labels.shape

@@ -1,5 +1,6 @@
 """The device self-test: a device that crashes, hangs or computes wrong is found out in a child
 process and never used, the caller lives, and verdicts are cached."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -51,10 +52,12 @@ def fresh_cache(tmp_path, monkeypatch):
 @pytest.fixture
 def inject(tmp_path, monkeypatch, fresh_cache):
     """``inject(kind)``: the self-test also runs one of KERNELS first, on every device."""
+
     def use(kind: str) -> None:
         path = tmp_path / f"{kind}.cl"
         path.write_text(KERNELS[kind])
         monkeypatch.setenv(selftest.INJECT_ENV, str(path))
+
     return use
 
 
@@ -101,7 +104,7 @@ def test_the_player_falls_back_to_numpy_when_no_device_passes(device, inject, mo
     db = str(Path(selftest._db_path()))
     with pytest.warns(RuntimeWarning, match="uses the numpy backend.*passed the self-test.*crashed"):
         p = open_player(db, selftest.TEXTURE, mode="lds")
-    with p, open_player(db, selftest.TEXTURE, mode="lds") as q:      # warned once only
+    with p, open_player(db, selftest.TEXTURE, mode="lds") as q:  # warned once only
         assert p.backend == q.backend == "numpy"
         assert p.next_frame().shape == (24, 32, 3)
     with pytest.raises(opencl.OpenCLUnavailableError, match="no OpenCL device here passed the self-test"):
@@ -113,11 +116,11 @@ def test_the_player_falls_back_to_numpy_when_no_device_passes(device, inject, mo
         open_player(db, selftest.TEXTURE, mode="tiles")
 
 
-def test_play_without_a_usable_device_exits_2_with_the_fix_in_one_line(device, inject, monkeypatch, tmp_path,
-                                                                        capsys):
+def test_play_without_a_usable_device_exits_2_with_the_fix_in_one_line(device, inject, monkeypatch, tmp_path, capsys):
     """No device passes the self-test: ``dynatex play --backend opencl`` is the user's problem
     with a fix (exit code 2, one line naming the numpy backend), not an internal error."""
     from dynatex.cli import main
+
     inject("crash")
     monkeypatch.delenv("PYOPENCL_CTX", raising=False)
     out = tmp_path / "o.mp4"
@@ -179,8 +182,9 @@ def test_a_child_that_cannot_run_is_not_the_devices_fault(device, fresh_cache, m
 
 
 def test_check_command_lists_every_device_with_its_verdict(device):
-    done = subprocess.run([sys.executable, "-m", "dynatex.player", "--check"], capture_output=True, text=True,
-                          timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-m", "dynatex.player", "--check"], capture_output=True, text=True, timeout=600
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     lines = [ln for ln in done.stdout.splitlines() if ln[:1].isdigit()]
     assert len(lines) == len(opencl.devices())

@@ -1,10 +1,12 @@
 """Sizes are ``(height, width)`` in every mode, like a frame's shape, and a bad size is the same error everywhere."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from dynatex.player import open_player, selftest
+
 from dynatex.checks import check_size
+from dynatex.player import open_player, selftest
 
 BAD_SIZES = [
     ((0, 10), ValueError, r"size must be \(height, width\) with each side in 1\.\.16384"),

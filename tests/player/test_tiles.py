@@ -1,4 +1,5 @@
 """Mode tiles: OpenCL against the numpy reference, sizes, arrangement, time offsets, tone, mixing, inpainting."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,8 +18,14 @@ from ..conftest import wave_clip
 def tiles_db(tmp_path_factory):
     """Texture 'waves' with two classes (calm, wild), tiles 16x16."""
     clip = load_clip(wave_clip(60, 40, 48))
-    model = learn_tiles(clip, tile=16, n_tiles=3, min_loop=20, mix=[wave_clip(60, 40, 48, seed=4)[..., ::-1].copy()],
-                        names=["calm", "wild"])
+    model = learn_tiles(
+        clip,
+        tile=16,
+        n_tiles=3,
+        min_loop=20,
+        mix=[wave_clip(60, 40, 48, seed=4)[..., ::-1].copy()],
+        names=["calm", "wild"],
+    )
     path = tmp_path_factory.mktemp("tiles") / "tiles.h5"
     with DatabaseWriter(path) as w:
         w.put_texture("waves", clip.source_info())
@@ -131,10 +138,10 @@ def test_real_mix_border_within_1_5x_inside(clips_dir, tmp_path):
     th, tw = model.tile_size
     with TilesPlayer(path, size=(192, 320), seed=1, labels="halves", backend="numpy") as p:
         out = np.stack([p.next_frame() for _ in range(12)])
-        cut = p.source_class_map(strict=True)          # the minimum cut itself, before the fade
-        dominant = p.source_class_map()                # where the dominant texture changes
+        cut = p.source_class_map(strict=True)  # the minimum cut itself, before the fade
+        dominant = p.source_class_map()  # where the dominant texture changes
         xb = int(np.argmax(p.labels[0] == 1)) * tw
-    assert (cut != dominant).any()                     # the two boundaries differ: the fade lies between
+    assert (cut != dominant).any()  # the two boundaries differ: the fade lies between
     at_cut = metrics.seam_visibility(out, cut).mean()
     in_fade = metrics.seam_visibility(out, dominant).mean()
     inside = metrics.seam_visibility(out[:, :, :xb], metrics.grid_labels((192, xb), (th, tw))).mean()
@@ -163,14 +170,16 @@ def test_real_ring_cuts_do_not_show(clips_dir, tmp_path, name):
 
 
 def test_label_map_naming_a_missing_texture_is_a_clear_error(tiles_db):
-    with pytest.raises(ValueError, match=r"labels name texture class 2, but the tile set has 2 class\(es\): 0=calm, 1=wild"):
+    with pytest.raises(
+        ValueError, match=r"labels name texture class 2, but the tile set has 2 class\(es\): 0=calm, 1=wild"
+    ):
         TilesPlayer(tiles_db, size=(32, 32), labels=np.full((2, 2), 2))
     with pytest.raises(ValueError, match="labels must have shape"):
         TilesPlayer(tiles_db, size=(32, 32), labels=np.zeros((3, 3), int))
     with pytest.raises(ValueError, match="preset"):
         TilesPlayer(tiles_db, size=(32, 32), labels="spiral")
     pixel = label_preset("halves", (32, 32), 2)
-    with TilesPlayer(tiles_db, size=(32, 32), labels=pixel) as p:     # a pixel map is sampled per cell
+    with TilesPlayer(tiles_db, size=(32, 32), labels=pixel) as p:  # a pixel map is sampled per cell
         assert p.labels.tolist() == [[0, 1], [0, 1]]
 
 
@@ -181,7 +190,7 @@ def test_inpaint_fills_only_the_mask(tiles_db):
     with TilesPlayer(tiles_db, size=(48, 64), seed=1, backend="numpy") as p:
         out = p.inpaint(frame, mask)
         assert (out[~mask] == 7).all() and out[mask].std() > 5
-        assert (frame == 7).all()                                      # the caller's frame is untouched
+        assert (frame == 7).all()  # the caller's frame is untouched
         with pytest.raises(ValueError, match="mask must have shape"):
             p.inpaint(frame, np.zeros((48, 63), bool))
         with pytest.raises(ValueError, match="frame must be uint8"):
@@ -210,8 +219,6 @@ def test_controls_are_validated(tiles_db):
         assert p.next_frame().shape == (32, 32, 3)
 
 
-
-
 def test_blobs_preset_follows_the_seed(tiles_db):
     maps = {}
     for seed in (1, 2):
@@ -227,6 +234,7 @@ def test_blobs_preset_follows_the_seed(tiles_db):
 def ring_and_wang_dbs(tmp_path_factory):
     """One stochastic clip cut both ways, tiles 16x16."""
     from ..analyzer.test_tiles import _stochastic
+
     frames = _stochastic(t=70, h=56, w=72)
     out = {}
     for construction in ("ring", "wang"):
@@ -246,7 +254,7 @@ def test_wang_arrangement_matches_every_edge(ring_and_wang_dbs, seed, size):
         e = p.model.edges[p.arrangement]
         assert (e[:, :-1, 1] == e[:, 1:, 0]).all() and (e[:-1, :, 3] == e[1:, :, 2]).all()
         if p.arrangement.size >= 200:
-            assert len(np.unique(p.arrangement)) == 8            # the whole set is used
+            assert len(np.unique(p.arrangement)) == 8  # the whole set is used
 
 
 def test_wang_output_repeats_far_less_at_the_tile_period(ring_and_wang_dbs):
@@ -262,7 +270,7 @@ def test_wang_state_with_mismatched_edges_is_refused_and_changes_nothing(ring_an
     with TilesPlayer(ring_and_wang_dbs["wang"], size=(64, 96), seed=1) as p:
         state = p.get_state()
         bad = dict(state)
-        bad["arrangement"] = np.zeros_like(state["arrangement"]) + 1       # tile 1 beside itself: 0 | 1 edges
+        bad["arrangement"] = np.zeros_like(state["arrangement"]) + 1  # tile 1 beside itself: 0 | 1 edges
         before = p.arrangement.copy()
         with pytest.raises(ValueError, match="Wang edges of different colours"):
             p.set_state(bad)

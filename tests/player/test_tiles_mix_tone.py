@@ -1,5 +1,6 @@
 """Mixing two textures by a label map under every tone option: the border band's colour stays
 between the two textures' toned colours (issue 17: a magenta band ran down a red|blue border)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -36,11 +37,11 @@ def test_border_band_lies_between_the_toned_textures(red_blue, tone):
     with TilesPlayer(red_blue, size=(64, 96), seed=1, labels="halves", tone=tone, backend="numpy") as p:
         assert p.tile_size == (16, 16) and (p.labels[:, 3:] == 1).all() and (p.labels[:, :3] == 0).all()
         out = np.stack([p.next_frame() for _ in range(8)]).astype(np.float64)
-    left = out[:, :, :32].reshape(-1, 3).mean(axis=0)        # red cells away from the border
-    right = out[:, :, 80:].reshape(-1, 3).mean(axis=0)       # blue cells away from the border
-    band = out[:, :, 48:64].reshape(-1, 3).mean(axis=0)      # blue cells carrying red's strip, cut and fade
+    left = out[:, :, :32].reshape(-1, 3).mean(axis=0)  # red cells away from the border
+    right = out[:, :, 80:].reshape(-1, 3).mean(axis=0)  # blue cells away from the border
+    band = out[:, :, 48:64].reshape(-1, 3).mean(axis=0)  # blue cells carrying red's strip, cut and fade
     lo, hi = np.minimum(left, right), np.maximum(left, right)
     # (before the fix, consensus gave 86, 48, 95 between 78, 47, 78 and 74, 48, 82: magenta)
     assert np.all(band >= lo - 3) and np.all(band <= hi + 3), (tone, left, band, right)
-    if tone is None:     # untoned, the band is a real mixture, not one side's colour
+    if tone is None:  # untoned, the band is a real mixture, not one side's colour
         assert np.abs(band - left).max() > 20 and np.abs(band - right).max() > 20

@@ -1,10 +1,12 @@
 """The quilted tiles construction: one large seamless torus quilted from the looped clip, cut
 into cells that the player lays out in the torus's order (issue 17: no visible lattice)."""
+
 from __future__ import annotations
 
 import h5py
 import numpy as np
 import pytest
+
 from dynatex.analyzer import load_clip, metrics
 from dynatex.analyzer.tiles import learn_tiles, quilt_geometry
 from dynatex.player.tiles import TilesPlayer
@@ -29,8 +31,11 @@ def quilted(tmp_path_factory):
 def _torus(model) -> np.ndarray:
     rows, cols = model.torus
     _, length, ch, cw, _ = model.tiles.shape
-    return model.tiles.reshape(rows, cols, length, ch, cw, 3).transpose(2, 0, 3, 1, 4, 5).reshape(
-        length, rows * ch, cols * cw, 3)
+    return (
+        model.tiles.reshape(rows, cols, length, ch, cw, 3)
+        .transpose(2, 0, 3, 1, 4, 5)
+        .reshape(length, rows * ch, cols * cw, 3)
+    )
 
 
 def test_geometry_cells_cover_whole_steps_and_the_period():
@@ -55,7 +60,7 @@ def test_the_torus_is_seamless_across_its_own_period(quilted):
     wrap = metrics.seam_visibility(torus, wrap=True).mean()
     assert wrap <= 1.15, wrap
     shifted = np.roll(torus, (py // 2, px // 2), axis=(1, 2))
-    shifted[:, :py // 2, :px // 2] = torus[:, :py // 2, :px // 2][:, ::-1, ::-1]
+    shifted[:, : py // 2, : px // 2] = torus[:, : py // 2, : px // 2][:, ::-1, ::-1]
     assert metrics.seam_visibility(shifted, wrap=True).mean() > 1.5 * wrap
 
 
@@ -69,8 +74,9 @@ def test_the_player_shows_a_window_of_the_torus(quilted):
     with TilesPlayer(path, size=(300, 400), backend="numpy", seed=3) as p:
         p.max_shift = 0.0
         dy, dx = divmod(int(p.arrangement[0, 0]), cols)
-        expect_cells = ((np.arange(p.grid_shape[0])[:, None] + dy) % rows) * cols \
-            + (np.arange(p.grid_shape[1])[None, :] + dx) % cols
+        expect_cells = ((np.arange(p.grid_shape[0])[:, None] + dy) % rows) * cols + (
+            np.arange(p.grid_shape[1])[None, :] + dx
+        ) % cols
         assert (p.arrangement == expect_cells).all()
         got = p.next_frame()
     yy = (np.arange(300) + dy * ch) % torus.shape[1]
@@ -106,11 +112,13 @@ def test_output_has_no_lattice_and_no_seams_at_cells(quilted):
 
 def test_quilted_options_are_clear_errors():
     clip = _stochastic(t=40)
-    for kwargs, message in (({"construction": "quilted", "mix": [clip]}, "cannot mix textures"),
-                            ({"construction": "quilted", "n_tiles": 3}, "n_tiles applies"),
-                            ({"construction": "quilted", "tile": (16, 24)}, "quilt block size"),
-                            ({"construction": "quilted", "flow_gain": -1}, "flow_gain"),
-                            ({"construction": "ring", "period": (200, 200)}, "period applies")):
+    for kwargs, message in (
+        ({"construction": "quilted", "mix": [clip]}, "cannot mix textures"),
+        ({"construction": "quilted", "n_tiles": 3}, "n_tiles applies"),
+        ({"construction": "quilted", "tile": (16, 24)}, "quilt block size"),
+        ({"construction": "quilted", "flow_gain": -1}, "flow_gain"),
+        ({"construction": "ring", "period": (200, 200)}, "period applies"),
+    ):
         with pytest.raises(ValueError, match=message):
             learn_tiles(clip, min_loop=12, transition=4, **kwargs)
 
@@ -128,7 +136,7 @@ def test_a_broken_torus_is_a_format_error(quilted, tmp_path):
 @pytest.mark.clips
 def test_real_clip_has_no_lattice(clips_dir, tmp_path):
     clip = load_clip(clips_dir / "grass_straw_wind_dyntex.avi", size=(144, 176), stop=80)
-    model = learn_tiles(clip.frames, period=(288, 360))          # the output below fits inside
+    model = learn_tiles(clip.frames, period=(288, 360))  # the output below fits inside
     path = tmp_path / "g.h5"
     with DatabaseWriter(path) as w:
         w.put_texture("grass", clip.source_info())

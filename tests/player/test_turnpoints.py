@@ -1,5 +1,6 @@
 """Mode ``turnpoints``: OpenCL against the numpy reference, the walk's rules, state, controls,
 and the must-show long runs on real clips (no dead end, coverage, frame difference at events)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,8 +32,10 @@ def pend_db(tmp_path_factory):
 @pytest.mark.parametrize("playback", PLAYBACKS)
 def test_opencl_matches_numpy_exactly(pend_db, cl_device, playback):
     path = pend_db[0]
-    with TurnPointPlayer(path, backend="numpy", playback=playback, seed=5) as ref, \
-            TurnPointPlayer(path, backend="opencl", device=cl_device, playback=playback, seed=5) as cl:
+    with (
+        TurnPointPlayer(path, backend="numpy", playback=playback, seed=5) as ref,
+        TurnPointPlayer(path, backend="opencl", device=cl_device, playback=playback, seed=5) as cl,
+    ):
         blended, terms = 0, set()
         for k in range(160):
             if k % 40 == 0:
@@ -93,16 +96,16 @@ def test_turns_only_walk_follows_the_seed(pend_db):
         p_max = model.p_max
         start = p.probabilities
         inner = model.turn_points[1:-1]
-        assert np.allclose(start[inner], p_max[inner] / 2)                  # eq. 6
+        assert np.allclose(start[inner], p_max[inner] / 2)  # eq. 6
         assert start[model.first_turn] == start[model.last_turn] == 1.0
         idx, ev = p.advance(5000)
-        assert np.all(np.abs(np.diff(idx)) == 1)                           # only steps and reversals
+        assert np.all(np.abs(np.diff(idx)) == 1)  # only steps and reversals
         turned_at = idx[np.flatnonzero(ev == EVENT_TURN) - 1]
         assert set(turned_at.tolist()) <= set(model.turn_points.tolist())
-        assert idx.min() >= 0 and idx[100:].max() <= model.last_turn       # never beyond the last turn
-        assert (idx[100:].min() >= model.first_turn)
+        assert idx.min() >= 0 and idx[100:].max() <= model.last_turn  # never beyond the last turn
+        assert idx[100:].min() >= model.first_turn
         probs = p.probabilities
-        assert np.all(probs <= p_max + 1e-12) and np.all(probs >= 0)       # eq. 7 bounds
+        assert np.all(probs <= p_max + 1e-12) and np.all(probs >= 0)  # eq. 7 bounds
         # every inner turn point both turned and was passed: the adaptive rule spreads the turns
         for tp in inner:
             visits = np.flatnonzero(idx[:-1] == tp)
@@ -171,7 +174,7 @@ def test_missing_tables_or_frames(tmp_path, pend_db):
     bare = tmp_path / "bare.h5"
     with DatabaseWriter(bare) as w:
         w.put_texture("t", clip.source_info())
-        w.put_method("t", "turnpoints", pend_db[1])       # tables without stored frames
+        w.put_method("t", "turnpoints", pend_db[1])  # tables without stored frames
     with pytest.raises(MethodNotFoundError, match="stores no frames"):
         TurnPointPlayer(bare, backend="numpy")
     lone = tmp_path / "lone.h5"
@@ -201,7 +204,7 @@ def _long_run(path, clip, playback="hybrid", frames=10000, seed=1):
         dead = p.dead_ends
     ratios = []
     for b in range(0, len(pairs), 256):
-        batch = np.concatenate(pairs[b:b + 256])
+        batch = np.concatenate(pairs[b : b + 256])
         ratios.append(temporal_discontinuity(batch, list(range(1, len(batch), 2)), source=clip.frames))
     return np.array(idx), np.concatenate(ratios), dead
 
@@ -212,7 +215,7 @@ def test_real_clip_must_show(tmp_path, clips_dir, name):
     clip = load_clip(clips_dir / name)
     path, model, _ = make_db(tmp_path / "real.h5", clip.frames)
     idx, ratios, dead = _long_run(path, clip)
-    assert dead == 0                                               # 10,000 frames, no dead end
-    assert index_coverage(idx, clip.n_frames) >= 0.9              # >= 90% of the source frames used
-    assert ratios.size > 100                                       # reversals and jumps happened
-    assert ratios.mean() <= 1.5, ratios.mean()                     # events look like ordinary steps
+    assert dead == 0  # 10,000 frames, no dead end
+    assert index_coverage(idx, clip.n_frames) >= 0.9  # >= 90% of the source frames used
+    assert ratios.size > 100  # reversals and jumps happened
+    assert ratios.mean() <= 1.5, ratios.mean()  # events look like ordinary steps

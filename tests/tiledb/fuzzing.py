@@ -23,6 +23,7 @@ Outcomes, per mutant (the worst of its steps):
 
 Run ``python tests/tiledb/fuzzing.py --worker`` only through :class:`Runner`.
 """
+
 from __future__ import annotations
 
 import json
@@ -70,9 +71,16 @@ def build_bases(folder: str | os.PathLike) -> dict[str, Path]:
     learners = {
         "lds": (waves, lambda c: learn_lds(c, n=6), False),
         "mixture": (waves, lambda c: learn_mixture(c, components=2, dim=3), False),
-        "quilt": (load_clip(spreading_clip(12, 16, 16)),
-                  lambda c: learn_quilt(c, size=(32, 24), block=8, rank=4, seed=0), True),
-        "tiles": (load_clip(_waves(40, 32, 32, seed=1)), lambda c: learn_tiles(c, tile=12, min_loop=12, transition=4), False),
+        "quilt": (
+            load_clip(spreading_clip(12, 16, 16)),
+            lambda c: learn_quilt(c, size=(32, 24), block=8, rank=4, seed=0),
+            True,
+        ),
+        "tiles": (
+            load_clip(_waves(40, 32, 32, seed=1)),
+            lambda c: learn_tiles(c, tile=12, min_loop=12, transition=4),
+            False,
+        ),
         "turnpoints": (load_clip(pendulum_clip(40, 16)[0]), learn_turnpoints, True),
     }
     out = {}
@@ -98,22 +106,42 @@ def _waves(t: int, h: int, w: int, seed: int = 0) -> np.ndarray:
 def inventory(path: str | os.PathLike) -> dict[str, Any]:
     """Datasets ``{path: (dtype.str, shape)}`` and attributes ``[(object, name)]`` of a database."""
     import h5py
+
     datasets: dict[str, tuple[str, tuple[int, ...]]] = {}
     attrs: list[tuple[str, str]] = [("/", k) for k in h5py.File(path, "r").attrs]
     with h5py.File(path, "r") as f:
+
         def visit(name: str, obj) -> None:
             if isinstance(obj, h5py.Dataset):
                 datasets["/" + name] = (obj.dtype.str, tuple(obj.shape))
             attrs.extend(("/" + name, k) for k in obj.attrs)
+
         f.visititems(visit)
     return {"datasets": datasets, "attrs": sorted(set(attrs)), "size": os.path.getsize(path)}
 
 
 # -- the mutations ----------------------------------------------------------------------------
 _FLOATS = (np.nan, np.inf, -np.inf, 1e308, -1e308, 1e30, -1.0, 0.0, 1e-300, 255.0, 256.0, -256.0)
-_INTS = (-1, 0, 1, 2**31 - 1, -2**31, 255, 256, 65536)
-_ATTRS: tuple[Any, ...] = (np.nan, np.inf, -np.inf, -1, 0, 2**62, -2**62, 1.5, 1e308, "x", "", b"\xff\xfe",
-                           np.array([1, 2, 3]), np.array([], np.int64), True, np.float16(2.0), "delete")
+_INTS = (-1, 0, 1, 2**31 - 1, -(2**31), 255, 256, 65536)
+_ATTRS: tuple[Any, ...] = (
+    np.nan,
+    np.inf,
+    -np.inf,
+    -1,
+    0,
+    2**62,
+    -(2**62),
+    1.5,
+    1e308,
+    "x",
+    "",
+    b"\xff\xfe",
+    np.array([1, 2, 3]),
+    np.array([], np.int64),
+    True,
+    np.float16(2.0),
+    "delete",
+)
 _DTYPES = ("<f2", "<f4", "<f8", "|i1", "<i2", "<i4", "<i8", "|u1", "<u2", "|b1", "<c8", "|S8")
 
 
@@ -127,8 +155,11 @@ def plan(seed: int, index: int, inventories: dict[str, dict]) -> dict[str, Any]:
     spec: dict[str, Any] = {"index": index, "seed": seed, "method": method, "kind": kind}
     ds = inv["datasets"]
     names = sorted(ds)
-    ints = [n for n in names if ds[n][0][1] in "iu" and not n.endswith("/" + _PIXELS[0])
-            and not n.endswith("/" + _PIXELS[1])]
+    ints = [
+        n
+        for n in names
+        if ds[n][0][1] in "iu" and not n.endswith("/" + _PIXELS[0]) and not n.endswith("/" + _PIXELS[1])
+    ]
     if kind == "byteflip":
         size = inv["size"]
         hi = size if rng.random() < 0.5 else min(size, 4096)
@@ -144,7 +175,7 @@ def plan(seed: int, index: int, inventories: dict[str, dict]) -> dict[str, Any]:
         is_int = ds[target][0][1] in "iub"
         values = _INTS if is_int else _FLOATS
         spec["value"] = _jsonable(values[int(rng.integers(len(values)))])
-        scopes = ["one", "row", "all"] if not target.rsplit("/", 1)[-1] in _PIXELS else ["one", "row"]
+        scopes = ["one", "row", "all"] if target.rsplit("/", 1)[-1] not in _PIXELS else ["one", "row"]
         spec["scope"] = scopes[int(rng.integers(len(scopes)))]
         spec["at"] = int(rng.integers(1 << 30))
     elif kind == "index":
@@ -153,7 +184,7 @@ def plan(seed: int, index: int, inventories: dict[str, dict]) -> dict[str, Any]:
             ops = ("minus_one", "past_end", "int_max", "zero", "reverse", "shuffle", "plus_one", "swap_last")
             spec["op"] = ops[int(rng.integers(len(ops)))]
             spec["at"] = int(rng.integers(1 << 30))
-        else:   # no integer dataset (lds, mixture): the integer sizes in the attributes
+        else:  # no integer dataset (lds, mixture): the integer sizes in the attributes
             spec["kind_detail"] = "size attribute"
             int_attrs = [a for a in inv["attrs"] if a[1] in _SIZE_ATTRS]
             obj, name = int_attrs[int(rng.integers(len(int_attrs)))]
@@ -165,7 +196,7 @@ def plan(seed: int, index: int, inventories: dict[str, dict]) -> dict[str, Any]:
         ops = ("drop_last", "add_one", "transpose", "flatten", "lead_axis", "empty", "scalar", "delete")
         spec["op"] = ops[int(rng.integers(len(ops)))]
         ndim = max(1, len(ds[target][1]))
-        spec["axis"] = 0 if rng.random() < 0.5 else int(rng.integers(ndim))   # counts sit on axis 0
+        spec["axis"] = 0 if rng.random() < 0.5 else int(rng.integers(ndim))  # counts sit on axis 0
     elif kind == "dtype":
         target = names[int(rng.integers(len(names)))]
         spec["target"] = target
@@ -179,8 +210,26 @@ def plan(seed: int, index: int, inventories: dict[str, dict]) -> dict[str, Any]:
     return spec
 
 
-_SIZE_ATTRS = ("n", "k", "components", "dim", "global_dim", "order", "width", "height", "n_frames", "channels",
-               "n_blocks", "n_tiles", "loop_length", "tile_h", "tile_w", "exit_frame", "block_h", "block_w")
+_SIZE_ATTRS = (
+    "n",
+    "k",
+    "components",
+    "dim",
+    "global_dim",
+    "order",
+    "width",
+    "height",
+    "n_frames",
+    "channels",
+    "n_blocks",
+    "n_tiles",
+    "loop_length",
+    "tile_h",
+    "tile_w",
+    "exit_frame",
+    "block_h",
+    "block_w",
+)
 
 
 def _jsonable(v: Any) -> Any:
@@ -216,6 +265,7 @@ def _unjson(v: Any) -> Any:
 def apply(spec: dict[str, Any], base: str | os.PathLike, dest: str | os.PathLike) -> None:
     """Write the mutant ``spec`` describes: a copy of ``base`` at ``dest``, changed."""
     import h5py
+
     shutil.copyfile(base, dest)
     kind = spec["kind"]
     if kind == "byteflip":
@@ -298,8 +348,11 @@ def _new_index(arr: np.ndarray, spec: dict[str, Any]) -> np.ndarray:
     elif op == "plus_one":
         flat[:] = np.minimum(flat.astype(np.int64) + 1, top)
     elif op == "swap_last" and arr.ndim >= 2:
-        arr = np.ascontiguousarray(np.swapaxes(arr, -1, -2)) if arr.shape[-1] == arr.shape[-2] \
+        arr = (
+            np.ascontiguousarray(np.swapaxes(arr, -1, -2))
+            if arr.shape[-1] == arr.shape[-2]
             else np.ascontiguousarray(arr[..., ::-1])
+        )
     return arr
 
 
@@ -313,8 +366,11 @@ def _new_shape(arr: np.ndarray, spec: dict[str, Any]) -> np.ndarray | None:
     if op == "drop_last":
         return np.take(arr, range(arr.shape[axis] - 1), axis=axis)
     if op == "add_one":
-        return np.concatenate([arr, np.take(arr, [-1] if arr.shape[axis] else [], axis=axis)], axis=axis) \
-            if arr.shape[axis] else arr
+        return (
+            np.concatenate([arr, np.take(arr, [-1] if arr.shape[axis] else [], axis=axis)], axis=axis)
+            if arr.shape[axis]
+            else arr
+        )
     if op == "transpose":
         return np.ascontiguousarray(arr.T)
     if op == "flatten":
@@ -346,6 +402,7 @@ def check_frames(frames: list[np.ndarray]) -> dict[str, bool]:
 def run_mutant(path: str, mode: str, devices: list[str | None]) -> dict[str, Any]:
     """``info`` then a short render per backend; every step's outcome (never raises)."""
     from dynatex.commands.info import describe
+
     steps: dict[str, Any] = {"info": _attempt(describe, path)}
     for device in devices:
         key = "numpy" if device is None else f"opencl:{device}"
@@ -355,6 +412,7 @@ def run_mutant(path: str, mode: str, devices: list[str | None]) -> dict[str, Any
 
 def _render(path: str, mode: str, device: str | None) -> dict[str, bool]:
     from dynatex.player import open_player
+
     opts = dict(MODE_OPTIONS.get(mode, {}))
     backend = "numpy" if device is None else "opencl"
     with open_player(path, None, mode=mode, backend=backend, device=device, seed=1, **opts) as p:
@@ -364,34 +422,40 @@ def _render(path: str, mode: str, device: str | None) -> dict[str, bool]:
 def _attempt(fn, *args) -> dict[str, Any]:
     """``fn(*args)``'s outcome: what it returned (a render's frame checks), or what it raised."""
     from dynatex.tiledb import DynatexError
+
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             result = fn(*args)
     except Exception as exc:  # the whole point: classify whatever escapes
         import traceback
+
         tb = traceback.extract_tb(exc.__traceback__)
         where = f"{Path(tb[-1].filename).name}:{tb[-1].lineno}" if tb else "?"
         message = str(exc)
         clean = isinstance(exc, DynatexError) and "\n" not in message and bool(message)
-        return {"outcome": "rejected" if clean else "error", "type": type(exc).__name__,
-                "message": message[:300], "where": where}
+        return {
+            "outcome": "rejected" if clean else "error",
+            "type": type(exc).__name__,
+            "message": message[:300],
+            "where": where,
+        }
     return {"outcome": "ok", "frames": result} if isinstance(result, dict) and "flat" in result else {"outcome": "ok"}
 
 
 def worker_main() -> None:
     """Read ``{"path", "mode", "devices"}`` lines on stdin; answer one JSON line each."""
     proto = os.fdopen(os.dup(1), "w")
-    os.dup2(2, 1)                  # compiler logs and prints go to stderr, never into the protocol
+    os.dup2(2, 1)  # compiler logs and prints go to stderr, never into the protocol
     for line in sys.stdin:
         job = json.loads(line)
-        if job.get("die") == "signal":          # the runner's own test: a worker that crashes...
+        if job.get("die") == "signal":  # the runner's own test: a worker that crashes...
             os.kill(os.getpid(), signal.SIGSEGV)
-        if job.get("die") == "hang":            # ... and one that never answers
+        if job.get("die") == "hang":  # ... and one that never answers
             time.sleep(3600)
         made = _attempt(apply, job["spec"], job["base"], job["path"]) if "spec" in job else {"outcome": "ok"}
         if made["outcome"] != "ok":
-            steps = {"mutate": dict(made, outcome="error")}   # a fault of the mutator: reported, never hidden
+            steps = {"mutate": dict(made, outcome="error")}  # a fault of the mutator: reported, never hidden
         else:
             steps = run_mutant(job["path"], job["mode"], job["devices"])
         proto.write(json.dumps(steps) + "\n")
@@ -413,8 +477,15 @@ class Result:
 class Runner:
     """Runs mutants in worker processes with a per-mutant timeout; see the module docstring."""
 
-    def __init__(self, bases: dict[str, Path], folder: str | os.PathLike, *, devices: list[str | None],
-                 timeout: float = 60.0, workers: int = 1) -> None:
+    def __init__(
+        self,
+        bases: dict[str, Path],
+        folder: str | os.PathLike,
+        *,
+        devices: list[str | None],
+        timeout: float = 60.0,
+        workers: int = 1,
+    ) -> None:
         self.bases = bases
         self.folder = Path(folder)
         self.devices = devices
@@ -427,8 +498,10 @@ class Runner:
     def control(self, method: str) -> dict[str, Any]:
         """Steps of the unmutated database of ``method`` (rendered once, cached)."""
         if method not in self.controls:
-            res = self._run_all([{"path": str(self.bases[method]), "mode": METHOD_MODES[method],
-                                  "devices": self.devices}], [{"method": method, "kind": "control"}])
+            res = self._run_all(
+                [{"path": str(self.bases[method]), "mode": METHOD_MODES[method], "devices": self.devices}],
+                [{"method": method, "kind": "control"}],
+            )
             self.controls[method] = res[0].steps
         return self.controls[method]
 
@@ -436,8 +509,15 @@ class Runner:
         specs = [plan(seed, i, self.inventories) for i in indices]
         for method in {s["method"] for s in specs}:
             self.control(method)
-        jobs = [{"spec": spec, "base": str(self.bases[spec["method"]]), "mode": METHOD_MODES[spec["method"]],
-                 "devices": self.devices} for spec in specs]
+        jobs = [
+            {
+                "spec": spec,
+                "base": str(self.bases[spec["method"]]),
+                "mode": METHOD_MODES[spec["method"]],
+                "devices": self.devices,
+            }
+            for spec in specs
+        ]
         return self._run_all(jobs, specs)
 
     # Each worker writes its mutants to a file of its own (``mutant-wN.h5``).
@@ -463,7 +543,7 @@ class Runner:
                 worker = workers[w]
                 if worker in ready:
                     steps = worker.receive()
-                    if steps is None:       # died
+                    if steps is None:  # died
                         code = worker.close()
                         workers[w] = None
                         results[j] = Result(specs[j], "crash", {"exit": code})
@@ -500,8 +580,14 @@ class Runner:
 class _Worker:
     def __init__(self, log) -> None:
         env = dict(os.environ, PYTHONWARNINGS="ignore")
-        self.proc = subprocess.Popen([sys.executable, __file__, "--worker"], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=log, env=env, start_new_session=True)
+        self.proc = subprocess.Popen(
+            [sys.executable, __file__, "--worker"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=log,
+            env=env,
+            start_new_session=True,
+        )
         self._buf = b""
 
     def fileno(self) -> int:
@@ -515,7 +601,7 @@ class _Worker:
             self.proc.stdin.write((json.dumps(job) + "\n").encode())
             self.proc.stdin.flush()
         except BrokenPipeError:
-            pass           # it died; receive() reports it
+            pass  # it died; receive() reports it
 
     @staticmethod
     def wait(workers: list[_Worker], timeout: float) -> list[_Worker]:
@@ -555,6 +641,7 @@ class _Worker:
 def verified_device() -> list[str | None]:
     """Backends a mutant renders on: numpy, and the first verified OpenCL device if any."""
     from dynatex.player import opencl, selftest
+
     try:
         infos = opencl.preference_order(opencl.devices())
     except opencl.OpenCLUnavailableError:
@@ -569,22 +656,33 @@ def table(results: list[Result]) -> str:
     for r in results:
         row = rows.setdefault((r.spec["method"], r.spec["kind"]), dict.fromkeys(OUTCOMES, 0))
         row[r.outcome] += 1
-    lines = ["| method | mutation | " + " | ".join(OUTCOMES) + " | total |",
-             "|---" * (len(OUTCOMES) + 3) + "|"]
+    lines = ["| method | mutation | " + " | ".join(OUTCOMES) + " | total |", "|---" * (len(OUTCOMES) + 3) + "|"]
     total = dict.fromkeys(OUTCOMES, 0)
     for (method, kind), row in sorted(rows.items()):
-        lines.append(f"| {method} | {kind} | " + " | ".join(str(row[o]) for o in OUTCOMES) + f" | {sum(row.values())} |")
+        lines.append(
+            f"| {method} | {kind} | " + " | ".join(str(row[o]) for o in OUTCOMES) + f" | {sum(row.values())} |"
+        )
         for o in OUTCOMES:
             total[o] += row[o]
     lines.append("| **all** | | " + " | ".join(f"**{total[o]}**" for o in OUTCOMES) + f" | **{sum(total.values())}** |")
     return "\n".join(lines)
 
 
-def fuzz(bases: dict[str, Path], folder: str | os.PathLike, *, seed: int, count: int, start: int = 0,
-         timeout: float = 60.0, workers: int = 1, devices: list[str | None] | None = None) -> Iterator[Result]:
+def fuzz(
+    bases: dict[str, Path],
+    folder: str | os.PathLike,
+    *,
+    seed: int,
+    count: int,
+    start: int = 0,
+    timeout: float = 60.0,
+    workers: int = 1,
+    devices: list[str | None] | None = None,
+) -> Iterator[Result]:
     """Run mutants ``start .. start + count - 1`` of ``seed``; yields results in order."""
-    runner = Runner(bases, folder, devices=verified_device() if devices is None else devices,
-                    timeout=timeout, workers=workers)
+    runner = Runner(
+        bases, folder, devices=verified_device() if devices is None else devices, timeout=timeout, workers=workers
+    )
     try:
         step = 50
         for lo in range(start, start + count, step):
@@ -597,4 +695,3 @@ if __name__ == "__main__" and "--worker" in sys.argv:
     worker_main()
 elif __name__ == "__main__":
     sys.exit("run through tools/fuzz_databases.py or tests/tiledb/test_fuzz.py")
-

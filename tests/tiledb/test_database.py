@@ -1,19 +1,28 @@
 """Opening and validating tile databases, including damaged and hostile files."""
+
 from __future__ import annotations
 
 import h5py
 import numpy as np
 import pytest
 
-from dynatex.tiledb import (FORMAT_VERSION, MethodNotFoundError, TextureNotFoundError, TileDBError, TileDBFormatError,
-                            TileDBNotFoundError, TileDBVersionError, open_db)
+from dynatex.tiledb import (
+    FORMAT_VERSION,
+    MethodNotFoundError,
+    TextureNotFoundError,
+    TileDBError,
+    TileDBFormatError,
+    TileDBNotFoundError,
+    TileDBVersionError,
+    open_db,
+)
 
 
 def test_open_lists_textures_and_reads_lds(lds_db):
     with open_db(lds_db) as db:
         assert db.textures == ("waves",)
         assert db.version == FORMAT_VERSION == (1, 2)
-        tex = db.texture()            # the only one
+        tex = db.texture()  # the only one
         assert tex.methods == ("lds",)
         m = tex.read("lds")
         assert m.basis.shape == (12, 24 * 32 * 3)
@@ -77,12 +86,15 @@ def test_unknown_texture_and_method(lds_db):
             db.texture("waves").read("bogus")
 
 
-@pytest.mark.parametrize("path, value, message", [
-    ("lds/A", lambda a: a * 10, "not stable"),
-    ("lds/mean", lambda a: np.full_like(a, np.nan), "NaN"),
-    ("lds/basis", lambda a: a[:, :-1], "has shape"),
-    ("lds/B", lambda a: a.astype(np.int32), "not floating point"),
-])
+@pytest.mark.parametrize(
+    "path, value, message",
+    [
+        ("lds/A", lambda a: a * 10, "not stable"),
+        ("lds/mean", lambda a: np.full_like(a, np.nan), "NaN"),
+        ("lds/basis", lambda a: a[:, :-1], "has shape"),
+        ("lds/B", lambda a: a.astype(np.int32), "not floating point"),
+    ],
+)
 def test_corrupt_lds_named_precisely(lds_db, path, value, message):
     full = f"textures/waves/{path}"
     with h5py.File(lds_db, "a") as f:

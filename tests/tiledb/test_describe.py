@@ -1,14 +1,15 @@
 """Every method's model describes itself: ``describe()`` gives plain facts (what ``dynatex info``
 prints), ``summary()`` one line (what ``dynatex analyze`` prints)."""
+
 from __future__ import annotations
 
 import json
 
 import pytest
-from dynatex.tiledb import open_db
-from dynatex.tiledb.schema import METHODS
 
 from dynatex.commands.info import describe
+from dynatex.tiledb import open_db
+from dynatex.tiledb.schema import METHODS
 
 from . import fuzzing
 

@@ -1,6 +1,7 @@
 """tiledb/FORMAT.md says what the writer writes: every dataset and attribute a real database
 holds in each method group (and in ``source``) is in that section's tables, with the dtype
 the table gives for datasets."""
+
 from __future__ import annotations
 
 import re
@@ -49,6 +50,7 @@ def written(tmp_path_factory) -> dict[str, h5py.Group]:
     from dynatex.analyzer import load_clip
     from dynatex.analyzer.tiles import learn_tiles
     from dynatex.tiledb import DatabaseWriter
+
     rng = np.random.default_rng(0)
     clip = rng.integers(0, 256, (40, 48, 56, 3), dtype=np.uint8)
     path = tmp_path_factory.mktemp("fmt") / "q.h5"

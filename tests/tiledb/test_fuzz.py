@@ -5,6 +5,7 @@ No mutant may crash a worker, hang, raise anything but a one-line DynatexError, 
 validation and then render flat or frozen frames where the unmutated database does not.
 ``tools/fuzz_databases.py`` runs the same mutants (and more) with an outcome table.
 """
+
 from __future__ import annotations
 
 import pytest
@@ -22,8 +23,9 @@ def bases(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def runner(bases, tmp_path_factory):
-    r = fuzzing.Runner(bases, tmp_path_factory.mktemp("fuzz"), devices=fuzzing.verified_device(), timeout=60.0,
-                       workers=2)
+    r = fuzzing.Runner(
+        bases, tmp_path_factory.mktemp("fuzz"), devices=fuzzing.verified_device(), timeout=60.0, workers=2
+    )
     yield r
     r.close()
 
@@ -40,10 +42,12 @@ def test_controls_render_moving_pictures(runner):
 
 def test_runner_survives_crashes_and_hangs(runner, bases):
     path = str(bases["lds"])
-    jobs = [{"path": path, "mode": "lds", "devices": [None], "die": "signal"},
-            {"path": path, "mode": "lds", "devices": [None]},
-            {"path": path, "mode": "lds", "devices": [None], "die": "hang"},
-            {"path": path, "mode": "lds", "devices": [None]}]
+    jobs = [
+        {"path": path, "mode": "lds", "devices": [None], "die": "signal"},
+        {"path": path, "mode": "lds", "devices": [None]},
+        {"path": path, "mode": "lds", "devices": [None], "die": "hang"},
+        {"path": path, "mode": "lds", "devices": [None]},
+    ]
     specs = [{"method": "lds", "kind": k} for k in ("crash", "after", "hang", "after")]
     old, runner.timeout = runner.timeout, 10.0
     try:
@@ -52,7 +56,7 @@ def test_runner_survives_crashes_and_hangs(runner, bases):
         runner.timeout = old
     assert [r.outcome for r in out][::2] == ["crash", "hang"]
     assert out[0].steps["exit"] == -11
-    assert [r.outcome for r in out][1::2] == ["ok", "ok"]       # a fresh worker took the next mutant
+    assert [r.outcome for r in out][1::2] == ["ok", "ok"]  # a fresh worker took the next mutant
 
 
 def test_mutants_are_reproducible(runner):
@@ -70,7 +74,7 @@ def test_mutated_databases_are_rejected_or_played(runner):
     bad = [r.line() for r in results if r.outcome in fuzzing.BAD]
     assert not bad, f"{len(bad)} bad mutants:\n" + "\n".join(bad[:20]) + "\n" + fuzzing.table(results)
     counts = {o: sum(r.outcome == o for r in results) for o in fuzzing.OUTCOMES}
-    assert counts["rejected"] > COUNT // 4 and counts["ok"] > COUNT // 10, counts   # the mutations bite, not all
+    assert counts["rejected"] > COUNT // 4 and counts["ok"] > COUNT // 10, counts  # the mutations bite, not all
 
 
 def test_files_that_crash_or_hang_the_hdf5_library_are_rejected(runner):

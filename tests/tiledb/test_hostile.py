@@ -1,5 +1,6 @@
 """Hostile values the fuzzer and the issue-16 probe found: every one is a one-line
 :class:`TileDBFormatError` naming the file and the object, never a raw exception or garbage."""
+
 from __future__ import annotations
 
 import h5py
@@ -47,7 +48,7 @@ def test_valid_source_geometry_still_reads(lds_db):
     _set_attr(lds_db, "textures/waves/source", "source_size", np.array([40, 30]))
     with open_db(lds_db) as db:
         s = db.texture().source
-    assert s.crop == (2, 3, 32, 24) and s.source_size == (30, 40)    # the file's (w, h), in Python (h, w)
+    assert s.crop == (2, 3, 32, 24) and s.source_size == (30, 40)  # the file's (w, h), in Python (h, w)
 
 
 @pytest.mark.parametrize("value", ["1.1", np.array([1.0, np.nan]), np.array([1, 1, 0])])
@@ -69,6 +70,7 @@ def mixture_db(tmp_path):
     from dynatex.analyzer import load_clip
     from dynatex.analyzer.mixture import learn_mixture
     from dynatex.tiledb import DatabaseWriter
+
     clip = load_clip(wave_clip(t=40, h=16, w=20))
     path = tmp_path / "mix.h5"
     with DatabaseWriter(path) as w:
@@ -82,16 +84,19 @@ def test_mixture_gauss_cov_float16_is_refused(mixture_db):
     _rejected(mixture_db, "/mixture/gauss_cov", "dtype float16", method="mixture")
 
 
-@pytest.mark.parametrize("dataset, fn, match", [
-    ("decode_offset", lambda a: np.full_like(a, 1e30), "outside the pixel range"),   # froze the frames (fuzzer)
-    ("stacked_basis", lambda a: a * 3, "loading row has norm"),
-    ("stacked_basis", lambda a: np.where(np.arange(len(a))[:, None] % 4 == 0, a, 0), "every loading"),
-    ("local_radius", lambda a: a * 1e9, "ellipsoid"),
-    ("global_coords", lambda a: a * 1e3, "centred with unit covariance"),
-    ("ar_intercept", lambda a: a + 1e30, "outside the training coordinates"),
-    ("gauss_mean", lambda a: a + 1e30, "outside the training coordinates"),
-    ("ar_noise_cov", lambda a: a * 1e12, "total variance"),
-])
+@pytest.mark.parametrize(
+    "dataset, fn, match",
+    [
+        ("decode_offset", lambda a: np.full_like(a, 1e30), "outside the pixel range"),  # froze the frames (fuzzer)
+        ("stacked_basis", lambda a: a * 3, "loading row has norm"),
+        ("stacked_basis", lambda a: np.where(np.arange(len(a))[:, None] % 4 == 0, a, 0), "every loading"),
+        ("local_radius", lambda a: a * 1e9, "ellipsoid"),
+        ("global_coords", lambda a: a * 1e3, "centred with unit covariance"),
+        ("ar_intercept", lambda a: a + 1e30, "outside the training coordinates"),
+        ("gauss_mean", lambda a: a + 1e30, "outside the training coordinates"),
+        ("ar_noise_cov", lambda a: a * 1e12, "total variance"),
+    ],
+)
 def test_mixture_values_outside_the_model_are_refused(mixture_db, dataset, fn, match):
     _replace(mixture_db, f"textures/m/mixture/{dataset}", fn)
     _rejected(mixture_db, f"/mixture/{dataset}", match, method="mixture")
@@ -128,11 +133,14 @@ def test_transient_growth_of_the_expected_state_is_refused(lds_db):
     assert "/lds/A" in text or "/lds/x0" in text
 
 
-@pytest.mark.parametrize("fn, where, match", [
-    (lambda a: np.zeros_like(a), "/lds/basis", "unit length"),
-    (lambda a: np.full_like(a, 1e30), "/lds/basis", "unit length"),
-    (lambda a: a * 0.5, "/lds/basis", "unit length"),
-])
+@pytest.mark.parametrize(
+    "fn, where, match",
+    [
+        (lambda a: np.zeros_like(a), "/lds/basis", "unit length"),
+        (lambda a: np.full_like(a, 1e30), "/lds/basis", "unit length"),
+        (lambda a: a * 0.5, "/lds/basis", "unit length"),
+    ],
+)
 def test_degenerate_basis_is_refused(lds_db, fn, where, match):
     _replace(lds_db, "textures/waves/lds/basis", fn)
     _rejected(lds_db, where, match)
@@ -143,11 +151,14 @@ def test_zero_noise_is_refused(lds_db):
     _rejected(lds_db, "/lds/B", "without driving noise")
 
 
-@pytest.mark.parametrize("fn, match", [
-    (lambda a: a * 3.0, "does not solve P = A P A"),
-    (lambda a: -a, "positive semi-definite"),
-    (lambda a: np.full_like(a, 1e200), "spread|positive semi-definite"),
-])
+@pytest.mark.parametrize(
+    "fn, match",
+    [
+        (lambda a: a * 3.0, "does not solve P = A P A"),
+        (lambda a: -a, "positive semi-definite"),
+        (lambda a: np.full_like(a, 1e200), "spread|positive semi-definite"),
+    ],
+)
 def test_stationary_covariance_must_match_the_model(lds_db, fn, match):
     _replace(lds_db, "textures/waves/lds/stationary_cov", fn)
     _rejected(lds_db, "/lds/stationary_cov", match)
@@ -157,7 +168,7 @@ def test_defective_transition_matrix_is_refused(lds_db):
     with h5py.File(lds_db, "a") as f:
         g = f["textures/waves/lds"]
         n = g["A"].shape[0]
-        a = 0.5 * np.eye(n) + np.eye(n, k=1)      # one Jordan block: eigenvectors all parallel
+        a = 0.5 * np.eye(n) + np.eye(n, k=1)  # one Jordan block: eigenvectors all parallel
         del g["A"]
         g["A"] = a
     _rejected(lds_db, "/lds/A", "not diagonalisable")
@@ -173,6 +184,7 @@ def test_tiles_attributes_the_player_uses_are_checked(tmp_path, value):
     from dynatex.analyzer import load_clip
     from dynatex.analyzer.tiles import learn_tiles
     from dynatex.tiledb import DatabaseWriter
+
     clip = load_clip(wave_clip(t=40, h=32, w=32))
     path = tmp_path / "tiles.h5"
     with DatabaseWriter(path) as w:
@@ -180,7 +192,6 @@ def test_tiles_attributes_the_player_uses_are_checked(tmp_path, value):
         w.put_method("t", "tiles", learn_tiles(clip, tile=12, min_loop=12, transition=4))
     _set_attr(path, "textures/t/tiles", "ring", value)
     _rejected(path, "/tiles@ring", "ring", method="tiles")
-
 
 
 @pytest.mark.parametrize("count", [39, 41, 0])
@@ -191,6 +202,7 @@ def test_frame_store_must_hold_the_source_frames(tmp_path, count):
     from dynatex.analyzer.turnpoints import learn_turnpoints, pendulum_clip
     from dynatex.player import open_player
     from dynatex.tiledb import DatabaseWriter
+
     clip = load_clip(pendulum_clip(40, 16)[0])
     path = tmp_path / "tp.h5"
     with DatabaseWriter(path) as w:
@@ -204,12 +216,15 @@ def test_frame_store_must_hold_the_source_frames(tmp_path, count):
         open_player(path, mode="turnpoints", backend="numpy")
 
 
-@pytest.mark.parametrize("value, code", [(np.complex128(1 + 2j), 2), (np.array([b"a", b"\xff"]), 0),
-                                         (b"\xff\xfe", 0), (np.array([[1, 2], [3, 4]]), 0)])
+@pytest.mark.parametrize(
+    "value, code",
+    [(np.complex128(1 + 2j), 2), (np.array([b"a", b"\xff"]), 0), (b"\xff\xfe", 0), (np.array([[1, 2], [3, 4]]), 0)],
+)
 def test_reported_attributes_are_plain_values(lds_db, capsys, value, code):
     # `dynatex info --json` died on an attribute it only reports ("Object of type complex is not
     # JSON serializable"); such attributes now reach `info` as plain values, or are refused
     import json
+
     _set_attr(lds_db, "textures/waves/lds", "svd", value)
     assert main(["info", "--json", str(lds_db)]) == code
     out, err = capsys.readouterr()
@@ -226,6 +241,7 @@ def test_tile_mean_colours_must_match_the_tiles(tmp_path, value):
     from dynatex.analyzer import load_clip
     from dynatex.analyzer.tiles import learn_tiles
     from dynatex.tiledb import DatabaseWriter
+
     clip = load_clip(wave_clip(t=40, h=32, w=32))
     path = tmp_path / "tiles.h5"
     with DatabaseWriter(path) as w:

@@ -1,4 +1,5 @@
 """The ``mixture`` group: round trip, and damaged or hostile values refused with a clear error."""
+
 from __future__ import annotations
 
 import h5py
@@ -28,8 +29,17 @@ def test_round_trip(db_path):
         tex = db.texture("waves")
         assert "mixture" in tex.methods
         back = tex.read("mixture")
-    for name in ("stacked_basis", "coord_map", "global_coords", "ar_coefs", "ar_noise_cov", "decode_gain",
-                 "local_cov", "local_radius", "sbc"):
+    for name in (
+        "stacked_basis",
+        "coord_map",
+        "global_coords",
+        "ar_coefs",
+        "ar_noise_cov",
+        "decode_gain",
+        "local_cov",
+        "local_radius",
+        "sbc",
+    ):
         assert np.array_equal(getattr(back, name), getattr(model, name).astype(getattr(back, name).dtype)), name
     assert (back.components, back.dim, back.global_dim, back.order) == (2, 3, 3, model.order)
     assert back.info["recon_error"] == model.info["recon_error"]
@@ -48,22 +58,31 @@ def _replace(name, fn):
         data = fn(g[name][()])
         del g[name]
         g.create_dataset(name, data=data)
+
     return edit
 
 
-@pytest.mark.parametrize("edit, match", [
-    (_replace("ar_coefs", lambda a: a * 50), r"/ar_coefs: the AR process is not stable"),
-    (_replace("global_coords", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 3, np.nan, a)),
-     r"/global_coords: contains NaN"),
-    (_replace("weights", lambda a: a * 2), r"/weights: mixing proportions"),
-    (_replace("gauss_cov", lambda a: -a), r"/gauss_cov: covariance of component 0 is not symmetric positive definite"),
-    (_replace("local_cov", lambda a: a[:, :2, :2]), r"/local_cov: has shape"),
-    (_replace("stacked_basis", lambda a: a[:-1]), r"/stacked_basis: has shape"),
-    (_replace("responsibilities", lambda a: a * 3), r"/responsibilities: rows must be probabilities"),
-    (_replace("local_radius", lambda a: -a), r"/local_radius: radii must be > 0"),
-    (lambda g: g.attrs.__setitem__("components", 1000), r"@components: 1000 out of range"),
-    (lambda g: g.attrs.__setitem__("global_dim", 50), r"@global_dim: 50 exceeds"),
-])
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (_replace("ar_coefs", lambda a: a * 50), r"/ar_coefs: the AR process is not stable"),
+        (
+            _replace("global_coords", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 3, np.nan, a)),
+            r"/global_coords: contains NaN",
+        ),
+        (_replace("weights", lambda a: a * 2), r"/weights: mixing proportions"),
+        (
+            _replace("gauss_cov", lambda a: -a),
+            r"/gauss_cov: covariance of component 0 is not symmetric positive definite",
+        ),
+        (_replace("local_cov", lambda a: a[:, :2, :2]), r"/local_cov: has shape"),
+        (_replace("stacked_basis", lambda a: a[:-1]), r"/stacked_basis: has shape"),
+        (_replace("responsibilities", lambda a: a * 3), r"/responsibilities: rows must be probabilities"),
+        (_replace("local_radius", lambda a: -a), r"/local_radius: radii must be > 0"),
+        (lambda g: g.attrs.__setitem__("components", 1000), r"@components: 1000 out of range"),
+        (lambda g: g.attrs.__setitem__("global_dim", 50), r"@global_dim: 50 exceeds"),
+    ],
+)
 def test_damaged_groups_are_refused(db_path, tmp_path, edit, match):
     bad = _damaged(db_path, tmp_path, edit)
     with TileDB(bad) as db:

@@ -1,6 +1,7 @@
 """The database probe: a file the writer wrote is known safe at once; a changed file is read by a
 child process first and then remembered; without an interpreter to run the child, the file is
 opened unprobed rather than refused."""
+
 from __future__ import annotations
 
 import h5py
@@ -25,7 +26,7 @@ def test_written_files_are_known_and_changed_files_are_probed_then_known(tmp_pat
     monkeypatch.setenv("DYNATEX_CACHE_DIR", str(tmp_path / "cache"))
     path = str(_write(tmp_path / "a.h5"))
     assert probe._identity(path) in probe._remembered()
-    with h5py.File(path, "r+") as f:            # any change makes it another file
+    with h5py.File(path, "r+") as f:  # any change makes it another file
         f.attrs["note"] = np.int64(1)
     key = probe._identity(path)
     assert key not in probe._remembered()

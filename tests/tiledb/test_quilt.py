@@ -1,4 +1,5 @@
 """The ``quilt`` group: round trip, and every defect of a stored quilt is a clear TileDBFormatError."""
+
 from __future__ import annotations
 
 import h5py
@@ -28,8 +29,18 @@ def test_round_trip(quilt_db):
     with open_db(path) as db:
         got = db.texture("w").read("quilt")
     assert isinstance(got, QuiltModel)
-    for name in ("source_map", "labels", "block_sources", "block_positions", "singular_values", "rank_error",
-                 "gain", "blend_map", "blend_labels", "blend_weight"):
+    for name in (
+        "source_map",
+        "labels",
+        "block_sources",
+        "block_positions",
+        "singular_values",
+        "rank_error",
+        "gain",
+        "blend_map",
+        "blend_labels",
+        "blend_weight",
+    ):
         np.testing.assert_array_equal(getattr(got, name), getattr(model, name), err_msg=name)
     assert got.size == (30, 40) and got.block == (8, 8) and got.n_blocks == model.n_blocks
     assert got.info["rank"] == 5 and got.info["lowpass"] == 4.0
@@ -49,18 +60,24 @@ def _replace(group, name, data):
     group.create_dataset(name, data=data)
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda g: _replace(g, "source_map", np.full(g["source_map"].shape, 999, np.int32)), "source_map: holds indices"),
-    (lambda g: _replace(g, "labels", g["labels"][()] + 10_000), "labels: holds indices"),
-    (lambda g: _replace(g, "labels", g["labels"][()][:5]), "labels: has shape"),
-    (lambda g: _replace(g, "gain", -g["gain"][()]), "gain: values must lie"),
-    (lambda g: _replace(g, "gain", np.full(g["gain"].shape, np.nan, np.float32)), "gain: contains NaN"),
-    (lambda g: _replace(g, "rank_error", g["rank_error"][()][::-1]), "rank_error: must lie"),
-    (lambda g: _replace(g, "blend_weight", g["blend_weight"][()] + 0.9), "blend_weight: values must lie"),
-    (lambda g: g.__delitem__("blend_labels"), "must all be present or all absent"),
-    (lambda g: g.attrs.__setitem__("block_h", 500), "does not fit"),
-    (lambda g: g.attrs.__setitem__("width", -3), "implausible canvas size"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (
+            lambda g: _replace(g, "source_map", np.full(g["source_map"].shape, 999, np.int32)),
+            "source_map: holds indices",
+        ),
+        (lambda g: _replace(g, "labels", g["labels"][()] + 10_000), "labels: holds indices"),
+        (lambda g: _replace(g, "labels", g["labels"][()][:5]), "labels: has shape"),
+        (lambda g: _replace(g, "gain", -g["gain"][()]), "gain: values must lie"),
+        (lambda g: _replace(g, "gain", np.full(g["gain"].shape, np.nan, np.float32)), "gain: contains NaN"),
+        (lambda g: _replace(g, "rank_error", g["rank_error"][()][::-1]), "rank_error: must lie"),
+        (lambda g: _replace(g, "blend_weight", g["blend_weight"][()] + 0.9), "blend_weight: values must lie"),
+        (lambda g: g.__delitem__("blend_labels"), "must all be present or all absent"),
+        (lambda g: g.attrs.__setitem__("block_h", 500), "does not fit"),
+        (lambda g: g.attrs.__setitem__("width", -3), "implausible canvas size"),
+    ],
+)
 def test_damaged_quilt_is_a_format_error(quilt_db, tmp_path, edit, message):
     bad = _damaged(quilt_db, tmp_path, edit)
     with open_db(bad) as db:

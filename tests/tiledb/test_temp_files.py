@@ -1,6 +1,7 @@
 """What a write leaves on disk: stale temporary files of killed writers are removed by the next
 writer (only ours, only unheld), and a database's permission bits follow the umask or the file
 it replaces."""
+
 from __future__ import annotations
 
 import os
@@ -11,6 +12,7 @@ import time
 
 import numpy as np
 import pytest
+
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.tiledb import DatabaseWriter, open_db
@@ -50,8 +52,13 @@ def _write(db, name: str = "t") -> None:
 
 def _child_writer(db) -> tuple[subprocess.Popen, str]:
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    p = subprocess.Popen([sys.executable, "-c", CHILD_WRITER, str(db)], stdin=subprocess.PIPE,
-                         stdout=subprocess.PIPE, text=True, cwd=root)
+    p = subprocess.Popen(
+        [sys.executable, "-c", CHILD_WRITER, str(db)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=root,
+    )
     return p, p.stdout.readline().strip()
 
 
@@ -59,15 +66,17 @@ def test_kill_9_during_analysis_leaves_a_temp_file_the_next_writer_removes(tmp_p
     clip = tmp_path / "clip.npy"
     np.save(clip, wave_clip(t=120, h=64, w=64))
     db = tmp_path / "clip.h5"
-    with subprocess.Popen([sys.executable, "-m", "dynatex", "analyze", str(clip), "-o", str(db),
-                           "--methods", "lds,mixture", "-q"], stderr=subprocess.DEVNULL) as p:
+    with subprocess.Popen(
+        [sys.executable, "-m", "dynatex", "analyze", str(clip), "-o", str(db), "--methods", "lds,mixture", "-q"],
+        stderr=subprocess.DEVNULL,
+    ) as p:
         deadline = time.monotonic() + 120
         while not _temps(db) and p.poll() is None and time.monotonic() < deadline:
             time.sleep(0.005)
         p.send_signal(signal.SIGKILL)
         assert p.wait(timeout=60) == -signal.SIGKILL
     left = _temps(db)
-    assert len(left) == 1 and not db.exists()       # what the issue saw in 27 of 30 kills
+    assert len(left) == 1 and not db.exists()  # what the issue saw in 27 of 30 kills
     _write(db)
     assert _temps(db) == []
     with open_db(db) as d:
@@ -81,7 +90,7 @@ def test_a_live_writers_temp_file_is_kept_and_a_killed_ones_removed(tmp_path):
     try:
         assert os.path.isfile(live_tmp)
         assert remove_stale_temp_files(db) == []
-        _write(db, "second")                        # another writer meanwhile: commits, leaves the live file
+        _write(db, "second")  # another writer meanwhile: commits, leaves the live file
         assert os.path.isfile(live_tmp)
         killed, killed_tmp = _child_writer(db)
         killed.kill()
@@ -91,21 +100,28 @@ def test_a_live_writers_temp_file_is_kept_and_a_killed_ones_removed(tmp_path):
         assert os.path.isfile(killed_tmp)
         assert remove_stale_temp_files(db) == [killed_tmp]
         assert os.path.isfile(live_tmp)
-        live.stdin.close()                          # the live writer finishes normally
+        live.stdin.close()  # the live writer finishes normally
         assert live.wait(timeout=60) == 0
     finally:
         live.kill()
         live.stdout.close()
     assert _temps(db) == []
     with open_db(db) as d:
-        assert d.textures == ("child", "first")      # the child started from "first", and committed last
+        assert d.textures == ("child", "first")  # the child started from "first", and committed last
 
 
 def test_only_files_named_like_ours_are_removed(tmp_path):
     db = tmp_path / "db.h5"
     ours = tmp_path / ".db.h5.a1b_c2d3.tmp"
-    others = [".db.h5.ABCDEFGH.tmp", ".db.h5.abcdefg.tmp", ".db.h5.abcdefghi.tmp", ".db.h5.abcdefgh.tmp.bak",
-              ".other.h5.abcdefgh.tmp", "db.h5.abcdefgh.tmp", ".db.h5.abcdefgh.tm"]
+    others = [
+        ".db.h5.ABCDEFGH.tmp",
+        ".db.h5.abcdefg.tmp",
+        ".db.h5.abcdefghi.tmp",
+        ".db.h5.abcdefgh.tmp.bak",
+        ".other.h5.abcdefgh.tmp",
+        "db.h5.abcdefgh.tmp",
+        ".db.h5.abcdefgh.tm",
+    ]
     for name in [ours.name, *others]:
         (tmp_path / name).write_bytes(b"x" * 96)
     target = tmp_path / "keep.bin"
@@ -121,7 +137,7 @@ def test_only_files_named_like_ours_are_removed(tmp_path):
 def test_new_database_follows_the_umask(tmp_path, umask, mode):
     old = os.umask(umask)
     try:
-        _write(tmp_path / "db.h5")                  # mkstemp's 0600 before
+        _write(tmp_path / "db.h5")  # mkstemp's 0600 before
     finally:
         os.umask(old)
     assert (tmp_path / "db.h5").stat().st_mode & 0o777 == mode
@@ -134,9 +150,9 @@ def test_updated_database_keeps_the_mode_it_had(tmp_path, mode):
     db.chmod(mode)
     old = os.umask(0o077)
     try:
-        _write(db, "second")                        # adding a texture turned 0644 into 0600 before
+        _write(db, "second")  # adding a texture turned 0644 into 0600 before
         assert db.stat().st_mode & 0o777 == mode
-        with DatabaseWriter(db, overwrite=True) as w:    # a new database in place of the old one
+        with DatabaseWriter(db, overwrite=True) as w:  # a new database in place of the old one
             clip = load_clip(wave_clip(t=20, h=8, w=8))
             w.put_texture("third", clip.source_info())
             w.put_method("third", "lds", learn_lds(clip, n=3))

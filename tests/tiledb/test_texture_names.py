@@ -1,4 +1,5 @@
 """Texture names in any script: what the format takes, refuses, and how names are looked up."""
+
 from __future__ import annotations
 
 import os
@@ -6,6 +7,7 @@ import unicodedata
 
 import h5py
 import pytest
+
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.tiledb import DatabaseWriter, TileDBFormatError, open_db
@@ -14,8 +16,23 @@ from dynatex.tiledb.schema import texture_name_from, texture_name_problem
 from ..conftest import wave_clip
 
 GOOD = ["my clip é", "水", "Wasserfall über Stein", "пламя-2", "a.b_c-d", "x" * 64, "٣ نار"]
-BAD = ["", "a/b", "x" * 65, ".", "..", ".hidden", " lead", "trail ", "a\nb", "a\tb", "nul\x00", "a\u2028b",
-       "bidi\u202eoverride", "private\ue000", "e\u0301" + "x" * 64]
+BAD = [
+    "",
+    "a/b",
+    "x" * 65,
+    ".",
+    "..",
+    ".hidden",
+    " lead",
+    "trail ",
+    "a\nb",
+    "a\tb",
+    "nul\x00",
+    "a\u2028b",
+    "bidi\u202eoverride",
+    "private\ue000",
+    "e\u0301" + "x" * 64,
+]
 
 
 def _put(db, *names):
@@ -33,7 +50,7 @@ def test_names_in_any_script_round_trip(tmp_path):
         assert sorted(d.textures) == sorted(GOOD)
         for name in GOOD:
             assert d.texture(name).read("lds").n == 3
-    with h5py.File(db) as f:                      # plain UTF-8 link names, as h5dump shows them
+    with h5py.File(db) as f:  # plain UTF-8 link names, as h5dump shows them
         assert "水" in f["textures"]
 
 
@@ -51,11 +68,11 @@ def test_names_the_format_refuses(tmp_path, name):
 def test_one_name_however_it_is_spelled(tmp_path):
     db = tmp_path / "db.h5"
     decomposed = unicodedata.normalize("NFD", "café")
-    _put(db, decomposed)                           # stored in NFC
+    _put(db, decomposed)  # stored in NFC
     with open_db(db) as d:
         assert d.textures == ("café",)
         assert d.texture(decomposed) is d.texture("café")
-    with DatabaseWriter(db) as w:                  # the writer's lookups normalise too
+    with DatabaseWriter(db) as w:  # the writer's lookups normalise too
         w.remove_texture(decomposed)
     with open_db(db) as d:
         assert d.textures == ()
@@ -71,11 +88,20 @@ def test_reader_refuses_a_hostile_name(tmp_path, name):
         open_db(db)
 
 
-@pytest.mark.parametrize("stem, name", [
-    ("my clip é", "my clip é"), ("水", "水"), (".hidden", "hidden"), ("...", "texture"), ("", "texture"),
-    ("a\nb", "a_b"), ("  padded  ", "padded"), ("y" * 80, "y" * 64),
-    (unicodedata.normalize("NFD", "été"), "été"),
-])
+@pytest.mark.parametrize(
+    "stem, name",
+    [
+        ("my clip é", "my clip é"),
+        ("水", "水"),
+        (".hidden", "hidden"),
+        ("...", "texture"),
+        ("", "texture"),
+        ("a\nb", "a_b"),
+        ("  padded  ", "padded"),
+        ("y" * 80, "y" * 64),
+        (unicodedata.normalize("NFD", "été"), "été"),
+    ],
+)
 def test_default_names_from_file_names_are_valid(stem, name):
     assert texture_name_from(stem) == name
     assert texture_name_problem(name) is None

@@ -1,4 +1,5 @@
 """The ``tiles`` group: round trip, and damaged or hostile values refused with a clear error."""
+
 from __future__ import annotations
 
 import h5py
@@ -14,8 +15,14 @@ from ..conftest import wave_clip
 
 @pytest.fixture(scope="module")
 def model():
-    return learn_tiles(wave_clip(50, 40, 48), tile=16, n_tiles=2, min_loop=16,
-                       mix=[wave_clip(50, 40, 48, seed=3)], names=["calm", "wild"])
+    return learn_tiles(
+        wave_clip(50, 40, 48),
+        tile=16,
+        n_tiles=2,
+        min_loop=16,
+        mix=[wave_clip(50, 40, 48, seed=3)],
+        names=["calm", "wild"],
+    )
 
 
 @pytest.fixture(scope="module")
@@ -34,8 +41,19 @@ def test_round_trip(db_path, model):
         assert "tiles" in tex.methods
         back = tex.read("tiles")
     assert isinstance(back, TilesModel)
-    for name in ("tiles", "tile_class", "ring_class", "masks", "border_side", "seam_cost", "mean_rgb", "mean_hsv",
-                 "class_loop_start", "class_loop_cost", "class_toroid_cost"):
+    for name in (
+        "tiles",
+        "tile_class",
+        "ring_class",
+        "masks",
+        "border_side",
+        "seam_cost",
+        "mean_rgb",
+        "mean_hsv",
+        "class_loop_start",
+        "class_loop_cost",
+        "class_toroid_cost",
+    ):
         assert np.array_equal(getattr(back, name), getattr(model, name)), name
     assert back.class_names == ["calm", "wild"] and back.tiles.dtype == np.uint8
     assert back.loop_length == model.loop_length and back.tile_size == (16, 16)
@@ -55,30 +73,40 @@ def _replace(name, fn):
         data = fn(g[name][()])
         del g[name]
         g.create_dataset(name, data=data)
+
     return edit
 
 
 def _attr(name, value):
     def edit(g):
         g.attrs[name] = value
+
     return edit
 
 
-@pytest.mark.parametrize("edit, match", [
-    (_replace("tile_class", lambda a: a + 5), r"/tile_class: holds indices outside \[0, 2\)"),
-    (_replace("ring_class", lambda a: np.full_like(a, 1)), r"class 0 \('calm'\) has no tile of its own"),
-    (_replace("tiles", lambda a: a[:, :, :8]), r"/tiles: has shape"),
-    (_replace("tiles", lambda a: a.astype(np.float32)), r"/tiles: dtype float32 is not unsigned integer"),
-    (_replace("mean_rgb", lambda a: a * np.nan), r"/mean_rgb: contains NaN"),
-    (_replace("border_side", lambda a: np.full_like(a, -1)), r"/border_side: must be 0..3 for border tiles"),
-    (_attr("loop_length", 1), r"@loop_length: loop length 1 outside"),
-    (_attr("n_tiles", 10**6), r"@n_tiles"),
-    (lambda g: g.__delitem__("masks"), r"/masks: missing dataset"),
-    (_replace("edges", lambda a: np.full_like(a, 1)), r"/edges: tiles have edge colours but construction is 'ring'"),
-    (lambda g: (_replace("edges", lambda a: np.full_like(a, 1))(g), _attr("construction", "wang")(g)),
-     r"/edges: a Wang set must be every tile of a single class"),
-    (_replace("edges", lambda a: np.full((len(a), 3), -1, np.int8)), r"/edges: has shape"),
-])
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (_replace("tile_class", lambda a: a + 5), r"/tile_class: holds indices outside \[0, 2\)"),
+        (_replace("ring_class", lambda a: np.full_like(a, 1)), r"class 0 \('calm'\) has no tile of its own"),
+        (_replace("tiles", lambda a: a[:, :, :8]), r"/tiles: has shape"),
+        (_replace("tiles", lambda a: a.astype(np.float32)), r"/tiles: dtype float32 is not unsigned integer"),
+        (_replace("mean_rgb", lambda a: a * np.nan), r"/mean_rgb: contains NaN"),
+        (_replace("border_side", lambda a: np.full_like(a, -1)), r"/border_side: must be 0..3 for border tiles"),
+        (_attr("loop_length", 1), r"@loop_length: loop length 1 outside"),
+        (_attr("n_tiles", 10**6), r"@n_tiles"),
+        (lambda g: g.__delitem__("masks"), r"/masks: missing dataset"),
+        (
+            _replace("edges", lambda a: np.full_like(a, 1)),
+            r"/edges: tiles have edge colours but construction is 'ring'",
+        ),
+        (
+            lambda g: (_replace("edges", lambda a: np.full_like(a, 1))(g), _attr("construction", "wang")(g)),
+            r"/edges: a Wang set must be every tile of a single class",
+        ),
+        (_replace("edges", lambda a: np.full((len(a), 3), -1, np.int8)), r"/edges: has shape"),
+    ],
+)
 def test_damaged_group_is_refused(db_path, tmp_path, edit, match):
     path = _damaged(db_path, tmp_path, edit)
     with TileDB(path) as db:
@@ -116,18 +144,26 @@ def test_tile_set_without_edges_reads_as_ring(db_path, tmp_path):
     assert not back.wang and back.edges.shape == (back.n_tiles, 4)
 
 
-@pytest.mark.parametrize("edit, match", [
-    (_replace("edges", lambda a: np.where(np.arange(4) == 0, -1, a).astype(np.int8)), "some edges and -1 on others"),
-    (_replace("edges", lambda a: np.stack([a[:, 0], 1 - a[:, 1], a[:, 2], a[:, 3]], 1)),
-     "one tile per \\(left, top, bottom\\)"),
-    (_replace("edges", lambda a: np.concatenate([a[:1], a[:-1]])), "one tile per \\(left, top, bottom\\)"),
-    (_replace("edges", lambda a: a.astype(np.int32) + 256), "values must be -1 or edge colours 0..7"),
-    (lambda g: g.__delitem__("edges"), "construction is 'wang' but no tile has edge colours"),
-    (_attr("construction", "ring"), "tiles have edge colours but construction is 'ring'"),
-    (_attr("construction", "hex"), "@construction: must be one of"),
-    (_attr("edge_colours", 3), "@edge_colours: says 3 but the edges use 2 colours"),
-    (_attr("strip_depth", 99), "@strip_depth: 99 outside"),
-])
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (
+            _replace("edges", lambda a: np.where(np.arange(4) == 0, -1, a).astype(np.int8)),
+            "some edges and -1 on others",
+        ),
+        (
+            _replace("edges", lambda a: np.stack([a[:, 0], 1 - a[:, 1], a[:, 2], a[:, 3]], 1)),
+            "one tile per \\(left, top, bottom\\)",
+        ),
+        (_replace("edges", lambda a: np.concatenate([a[:1], a[:-1]])), "one tile per \\(left, top, bottom\\)"),
+        (_replace("edges", lambda a: a.astype(np.int32) + 256), "values must be -1 or edge colours 0..7"),
+        (lambda g: g.__delitem__("edges"), "construction is 'wang' but no tile has edge colours"),
+        (_attr("construction", "ring"), "tiles have edge colours but construction is 'ring'"),
+        (_attr("construction", "hex"), "@construction: must be one of"),
+        (_attr("edge_colours", 3), "@edge_colours: says 3 but the edges use 2 colours"),
+        (_attr("strip_depth", 99), "@strip_depth: 99 outside"),
+    ],
+)
 def test_damaged_wang_edges_are_refused(wang_path, tmp_path, edit, match):
     path = _damaged(wang_path[0], tmp_path, edit)
     with TileDB(path) as db:

@@ -1,4 +1,5 @@
 """The ``turnpoints`` group: round trip, validation of damaged or hostile tables, missing tables."""
+
 from __future__ import annotations
 
 import h5py
@@ -65,17 +66,20 @@ def _damage(path, name, value=None, *, attr=False, delete=False):
             g.create_dataset(name, data=value)
 
 
-@pytest.mark.parametrize("name, make, match", [
-    ("turn_points", lambda m: np.array([3, 500], np.int32), r"turn_points: holds indices outside \[0, 80\)"),
-    ("turn_points", lambda m: np.array([7], np.int32), "at least 2"),
-    ("turn_points", lambda m: m.turn_points[::-1].copy(), "strictly increasing"),
-    ("dst", lambda m: np.full(m.dst.shape, -1, np.int32), r"dst: holds indices outside"),
-    ("prob", lambda m: m.prob * 3, "outside \\[0, 1\\]"),
-    ("symmetry", lambda m: np.full(m.symmetry.shape, np.nan), "NaN"),
-    ("p_max", lambda m: m.p_max[:-1], "has shape"),
-    ("src", lambda m: m.src.astype(np.float32), "dtype float32 is not integer"),
-    ("cost", None, "missing dataset"),
-])
+@pytest.mark.parametrize(
+    "name, make, match",
+    [
+        ("turn_points", lambda m: np.array([3, 500], np.int32), r"turn_points: holds indices outside \[0, 80\)"),
+        ("turn_points", lambda m: np.array([7], np.int32), "at least 2"),
+        ("turn_points", lambda m: m.turn_points[::-1].copy(), "strictly increasing"),
+        ("dst", lambda m: np.full(m.dst.shape, -1, np.int32), r"dst: holds indices outside"),
+        ("prob", lambda m: m.prob * 3, "outside \\[0, 1\\]"),
+        ("symmetry", lambda m: np.full(m.symmetry.shape, np.nan), "NaN"),
+        ("p_max", lambda m: m.p_max[:-1], "has shape"),
+        ("src", lambda m: m.src.astype(np.float32), "dtype float32 is not integer"),
+        ("cost", None, "missing dataset"),
+    ],
+)
 def test_damaged_tables_raise_clear_errors(db, model_and_clip, name, make, match):
     model = model_and_clip[0]
     if make is None:
@@ -88,12 +92,15 @@ def test_damaged_tables_raise_clear_errors(db, model_and_clip, name, make, match
     assert str(db) in str(exc.value) and GROUP in str(exc.value)
 
 
-@pytest.mark.parametrize("name, value, match", [
-    ("n_frames", 81, "differs from the source's 80 frames"),
-    ("exit_frame", 80, "out of range"),
-    ("exit_frame", 1, "no backward transition|beyond the exit frame"),
-    ("n_frames", "eighty", "invalid value"),
-])
+@pytest.mark.parametrize(
+    "name, value, match",
+    [
+        ("n_frames", 81, "differs from the source's 80 frames"),
+        ("exit_frame", 80, "out of range"),
+        ("exit_frame", 1, "no backward transition|beyond the exit frame"),
+        ("n_frames", "eighty", "invalid value"),
+    ],
+)
 def test_damaged_attributes(db, name, value, match):
     _damage(db, name, value, attr=True)
     with open_db(db) as d:

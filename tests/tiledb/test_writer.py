@@ -1,4 +1,5 @@
 """Atomic writes: several textures per file, replace one, keep the others, never a partial file."""
+
 from __future__ import annotations
 
 import os
