@@ -50,7 +50,7 @@ def main() -> int:
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     log = None if args.json else print
-    report = bench_lds_sizes([(352, 288), (1280, 720)], frames=args.frames, log=log)
+    report = bench_lds_sizes([(288, 352), (720, 1280)], frames=args.frames, log=log)
     report["analysis"] = analysis_time()
     if args.json:
         json.dump(report, sys.stdout, indent=2, default=float)

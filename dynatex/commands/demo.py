@@ -245,5 +245,5 @@ def _short_benchmark(db: str, backend: str) -> None:
         print("  " + format_result(r) + (f" [{step.options}]" if step.options else ""))
     from ..benchmark import bench_lds_sizes
 
-    bench_lds_sizes([(352, 288)], frames=60, precisions=("float32",), log=lambda line: print("  " + line), bandwidth=bw)
+    bench_lds_sizes([(288, 352)], frames=60, precisions=("float32",), log=lambda line: print("  " + line), bandwidth=bw)
     sys.stdout.flush()

@@ -14,6 +14,7 @@ def test_demo_writes_database_video_and_contact_sheet(tmp_path, capsys):
     assert main(["demo", "-o", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "fps" in printed and "demo finished" in printed
+    assert "lds 352x288 float32: OpenCL" in printed  # CIF, written WxH: the size was passed (height, width)
     with open_db(out / "sample.h5") as db:
         db.validate()
         assert "lds" in db.texture("ripples").methods
