@@ -41,9 +41,7 @@ def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = Non
     ...
     dynatex.errors.InvalidArgumentError: n must be an integer >= 1, not 0
     """
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ArgumentTypeError(f"{name} must be an integer, not {value!r}")
-    v = int(value)
+    v = _number(int, name, value)
     if (lo is not None and v < lo) or (hi is not None and v > hi):
         raise InvalidArgumentError(f"{name} must be {rule or Range(int, lo, hi).describe()}, not {v}")
     return v
@@ -61,7 +59,24 @@ def check_float(name: str, value: Any, lo: float | None = None, hi: float | None
     ...
     dynatex.errors.InvalidArgumentError: speed must be a finite number, not nan
     """
-    return Range(float, lo, hi).check(name, value)
+    v = _number(float, name, value)
+    if not (math.isfinite(v) and (lo is None or v >= lo) and (hi is None or v <= hi)):
+        raise InvalidArgumentError(f"{name} must be {Range(float, lo, hi).describe()}, not {value!r}")
+    return v
+
+
+def _number(kind: type, name: str, value: Any) -> Any:
+    """``value`` as an ``int`` (integers only, bools refused) or a ``float`` (any real number)."""
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise ArgumentTypeError(f"{name} must be an integer, not {value!r}")
+        return int(value)
+    if isinstance(value, (str, bytes)):
+        raise ArgumentTypeError(f"{name} must be a number, not {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ArgumentTypeError(f"{name} must be a number, not {value!r}") from None
 
 
 def check_seed(name: str, value: Any) -> int:
@@ -208,19 +223,9 @@ class Range(Kind):
         )
 
     def check(self, name: str, value: Any) -> int | float:
-        if self.kind is int:
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-                raise ArgumentTypeError(f"{name} must be an integer, not {value!r}")
-            v: int | float = int(value)
-        else:
-            if isinstance(value, (str, bytes)):
-                raise ArgumentTypeError(f"{name} must be a number, not {value!r}")
-            try:
-                v = float(value)
-            except (TypeError, ValueError):
-                raise ArgumentTypeError(f"{name} must be a number, not {value!r}") from None
+        v = _number(self.kind, name, value)
         if not self.contains(v):
-            raise InvalidArgumentError(f"{name} must be {self.describe()}, not {value!r}")
+            raise InvalidArgumentError(f"{name} must be {self.describe()}, not {v if self.kind is int else value!r}")
         return v
 
     def parse(self, text: str) -> int | float:

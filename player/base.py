@@ -84,25 +84,21 @@ class Player:
     """
 
     mode: ClassVar[str] = ""
+    _controls: ClassVar[dict[str, Control]] = {}
     #: constructor options beyond :data:`COMMON_OPTIONS` (fixed for the player's lifetime)
     options: ClassVar[tuple[Param, ...]] = ()
     capabilities: ClassVar[Capabilities] = Capabilities()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
+        cls._controls = controls_of(cls)
         if cls.__dict__.get("mode"):
             document(cls, COMMON_OPTIONS)
 
     @classmethod
     def controls(cls) -> dict[str, Control]:
         """The mode's live controls by name, in declaration order."""
-        return controls_of(cls)
-
-    def _init_controls(self) -> None:
-        """Give every control with a declared default that value (through its setter)."""
-        for name, c in self.controls().items():
-            if c.param.default is not None:
-                setattr(self, name, c.param.default)
+        return cls._controls
 
     def __init__(
         self,
@@ -114,6 +110,8 @@ class Player:
         format: str = "RGB",
     ) -> None:
         backend = Choice(*BACKEND_CHOICES).check("backend", backend)
+        for control in self.controls().values():  # every control starts at its declared default
+            setattr(self, control.attr, control.param.default)
         #: the frames' pixel format (:data:`dynatex.player.pixels.FORMATS`)
         self.format = pixel_format(format)
         self.queue = None
@@ -206,7 +204,7 @@ class Player:
     def get_state(self) -> dict[str, Any]:
         """Everything that decides future frames, as plain Python and numpy values: every
         control, the mode's position and random generator."""
-        state = {name: c.saved(self) for name, c in self.controls().items() if c.state}
+        state = {name: c.saved(self) for name, c in self.controls().items()}
         state.update(self._get_state())
         state["mode"] = self.mode
         state["texture"] = self.texture.name
@@ -230,7 +228,7 @@ class Player:
 
     def _apply_state(self, state: dict[str, Any]) -> None:
         frame_index = check_int("state frame_index", state["frame_index"], 0)
-        controls = {name: c.param.check(state[name]) for name, c in self.controls().items() if c.state}
+        controls = {name: c.param.check(state[name]) for name, c in self.controls().items()}
         self._set_state(state)
         for name, value in controls.items():
             setattr(self, name, value)

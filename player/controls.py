@@ -63,7 +63,8 @@ class Control:
         def speed(self, value): ...
 
     ``flag`` is the ``dynatex play`` option (``""``: ``--speed``; None: not on the command
-    line); ``state=False`` leaves it out of the saved state.
+    line). A player starts every control at its declared default (a mode whose default is
+    computed from the model, ``None`` here, sets it in its setup); ``get_state`` saves every control.
     """
 
     def __init__(
@@ -75,10 +76,8 @@ class Control:
         flag: str | None = "",
         optional: bool = False,
         default_doc: str | None = None,
-        state: bool = True,
     ) -> None:
         self._spec = dict(kind=kind, default=default, doc=doc, flag=flag, optional=optional, default_doc=default_doc)
-        self.state = state
         self.param: Param = Param("", **self._spec)
         self.name = ""
         self.attr = ""
@@ -104,7 +103,7 @@ class Control:
             return self
         if self._fget is not None:
             return self._fget(obj)
-        return getattr(obj, self.attr, self.param.default)  # a control never set holds its default
+        return getattr(obj, self.attr)
 
     def __set__(self, obj: Any, value: Any) -> None:
         value = self.param.check(value)

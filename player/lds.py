@@ -73,8 +73,6 @@ class LDSPlayer(ProjectionPlayer):
         self._poles, self._vecs = np.linalg.eig(self._A)
         self._vecs_inv = np.linalg.inv(self._vecs)
         self._groups = scale_groups(self.n)
-        self._speed = 1.0
-        self._scales = (1.0, 1.0, 1.0)
         self._weights = np.ones(self.n)
         self._A_edit = self._A
         self._w = np.ones(self.n)

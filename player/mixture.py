@@ -105,8 +105,9 @@ class MixturePlayer(ProjectionPlayer):
         draws: int = DEFAULT_DRAWS,
         format: str = "RGB",
     ) -> None:
-        self.draws = draws
+        draws = type(self).draws.param.check(draws)  # refused before the database opens
         super().__init__(db, texture, backend=backend, device=device, seed=seed, precision=precision, format=format)
+        self._draws = draws
 
     def _setup(self, model: MixtureModel) -> None:
         src = self.texture.source

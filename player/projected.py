@@ -63,7 +63,6 @@ class ProjectionPlayer(Player):
             model = self.texture.read(self.mode)
             self.model_info = dict(model.info)
             self.precision = precision
-            self._intensity = self.controls()["intensity"].param.default
             self._setup(model)
             basis = getattr(model, self.basis_name)
             if precision == "float16":

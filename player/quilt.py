@@ -208,7 +208,6 @@ class EvolvePlayer(Player):
         if gain is not None and gain.shape[2] == 1:
             gain = np.ascontiguousarray(np.repeat(gain, 3, axis=2))
         self._clock = 0.0
-        self._speed, self._end, self._jitter = (self.controls()[n].param.default for n in ("speed", "end", "jitter"))
         self._rate_raw: np.ndarray | None = None
         self._rate: np.ndarray | None = None
         self._rate_sigma = 0.0

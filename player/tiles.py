@@ -183,11 +183,10 @@ class TilesPlayer(Player):
         self._sigma = 0.5 * min(th, tw)
         self._max_shift = min(length / 3.0, 16.0)
         self._epoch = 2 * length
-        self._speed = 1.0
         self._t = 0.0
         self._phase = 0
         self.tone_target(tone)  # checked here, fitted once the arrangement exists (_retone)
-        self._tone_spec = tone
+        self._tone = tone
         self.reseed(seed)
         self._warm()
 
@@ -354,7 +353,7 @@ class TilesPlayer(Player):
 
     def _retone(self) -> None:
         """Refit the tone to the current arrangement (the target stays)."""
-        self.engine.set_tones(*self._tone_tables(self._tone_spec))
+        self.engine.set_tones(*self._tone_tables(self._tone))
 
     def source_class_map(self, *, strict: bool = False) -> np.ndarray:
         """``(H, W)`` class (texture) each output pixel mostly comes from: the true texture borders.
@@ -477,11 +476,7 @@ class TilesPlayer(Player):
     @tone.setter
     def tone(self, value: Any) -> None:
         self.engine.set_tones(*self._tone_tables(value))
-        self._tone_spec = value
-
-    @tone.getter
-    def tone(self) -> Any:
-        return self._tone_spec
+        self._tone = value
 
     def tone_target(self, value: Any) -> np.ndarray | None:
         """The RGB target ``value`` names (see ``tone``), or None when tone fitting is off."""
@@ -678,6 +673,6 @@ class TilesPlayer(Player):
         self._cells_a, self._cells_b = cells
         self.arrangement = arrangement
         self._max_shift = max_shift
-        self.seed, self._tone_spec = seed, tone
+        self.seed, self._tone = seed, tone
         self._build_source(arrangement)  # fits the tone to the arrangement too
         self._refresh_fields()

@@ -110,7 +110,6 @@ class TurnPointPlayer(Player):
             )
         if playback != "jumps" and start > self._z:
             raise InvalidArgumentError(f"start must be at most the last turn point {self._z}, not {start}")
-        self._init_controls()
         self.reseed(seed)
         self._reset_walk(start)
 
