@@ -37,13 +37,26 @@ def mode_from_argv(argv: list[str] | None, default: str) -> str:
     return default
 
 
-def known_mode(mode: str, default: str) -> str:
-    """``mode`` if it names a mode, else ``default`` (whose flags the parser then offers)."""
-    return mode if mode in MODES else default
+def add_mode_arguments(
+    parser: argparse.ArgumentParser, argv: list[str] | None, *, default: str, common: tuple[str, ...]
+) -> type:
+    """Add ``--mode`` and, for the mode ``argv`` names (else ``default``), the ``common`` player
+    parameters, the mode's options and its controls; return the mode's class.
 
-
-def add_mode_arguments(parser: argparse.ArgumentParser, mode: str, *, common: tuple[str, ...]) -> type:
-    """Add the ``common`` player parameters, then mode ``mode``'s options and controls; return its class."""
+    An unknown ``--mode`` offers the default mode's flags: the parser's ``choices`` then report it.
+    """
+    mode = mode_from_argv(argv, default)
+    mode = mode if mode in MODES else default
+    parser.add_argument(
+        "--mode",
+        default=default,
+        choices=sorted(MODES),
+        help=f"player mode (default {default}); it decides the options and controls below",
+    )
+    parser.epilog = (
+        f"Each mode has its own options and controls; this help lists one mode's (--mode). "
+        f"See them with '{parser.prog} --mode MODE --help' for MODE in: {', '.join(sorted(MODES))}."
+    )
     cls = player_class(mode)
     for param in COMMON_OPTIONS:
         if param.name in common:
@@ -73,11 +86,4 @@ def apply_controls(player: Any, args: argparse.Namespace) -> None:
             setattr(player, name, getattr(args, name))
 
 
-def modes_epilog(command: str) -> str:
-    return (
-        f"Each mode has its own options and controls; this help lists one mode's (--mode). "
-        f"See them with 'dynatex {command} --mode MODE --help' for MODE in: {', '.join(sorted(MODES))}."
-    )
-
-
-__all__ = ["add_mode_arguments", "apply_controls", "known_mode", "mode_from_argv", "modes_epilog", "player_kwargs"]
+__all__ = ["add_mode_arguments", "apply_controls", "mode_from_argv", "player_kwargs"]

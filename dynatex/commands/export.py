@@ -29,7 +29,7 @@ from ..player import MODES, open_player
 from ..player import tiles as _tiles
 from ..player.modes import player_class
 from ._common import Number, UsageError, size_arg
-from ._modes import add_mode_arguments, apply_controls, known_mode, mode_from_argv, modes_epilog, player_kwargs
+from ._modes import add_mode_arguments, apply_controls, player_kwargs
 from ._output import MAX_FPS, MIN_FPS, OutputError
 
 #: Most frames a flipbook holds (a 64x64 grid).
@@ -42,7 +42,6 @@ COMMON = ("backend", "device", "seed")
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
-    mode = known_mode(mode_from_argv(argv, DEFAULT_MODE), DEFAULT_MODE)
     p = sub.add_parser(
         "export",
         help="write a flipbook (atlas, motion vectors, engine sidecar) of a texture",
@@ -51,18 +50,11 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "NAME_COLSxROWS_mv.png (optical-flow motion vectors, RG centred at 128, linear) "
         "and NAME.json (grid, frame count, fps, motion-vector scale for Unity VFX Graph "
         "and Unreal, the loop's wrap discontinuity).",
-        epilog=modes_epilog("export"),
     )
     p.add_argument("database")
     p.add_argument("-o", "--output", required=True, metavar="FOLDER", help="folder for the bundle (created)")
     p.add_argument("--texture", help="texture name (optional when the database holds one)")
     p.add_argument("--name", default=None, help="file name stem (default: the texture's name)")
-    p.add_argument(
-        "--mode",
-        default=DEFAULT_MODE,
-        choices=sorted(MODES),
-        help=f"player mode (default {DEFAULT_MODE}); it decides the options and controls below",
-    )
     p.add_argument(
         "--frames",
         type=Number(int, 1, MAX_FRAMES),
@@ -118,7 +110,7 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         help="the clip the texture was analysed from, the reference of the wrap discontinuity "
         "(default: the frames the database stores, else the export's own frame step)",
     )
-    add_mode_arguments(p, mode, common=COMMON)
+    add_mode_arguments(p, argv, default=DEFAULT_MODE, common=COMMON)
     return p
 
 

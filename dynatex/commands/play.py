@@ -9,11 +9,11 @@ import time
 
 import numpy as np
 
-from ..player import MODES, open_player
+from ..player import open_player
 from ..player import ratemap as _ratemap
 from ..player.modes import player_class
 from ._common import Number, Numbers, UsageError, positive_int
-from ._modes import add_mode_arguments, apply_controls, known_mode, mode_from_argv, modes_epilog, player_kwargs
+from ._modes import add_mode_arguments, apply_controls, player_kwargs
 from ._output import MAX_FPS, MIN_FPS, FrameWriter
 
 RATE = Number(float, 0.0, _ratemap.MAX_RATE)
@@ -24,7 +24,6 @@ DEFAULT_MODE = "lds"
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
-    mode = known_mode(mode_from_argv(argv, DEFAULT_MODE), DEFAULT_MODE)
     p = sub.add_parser(
         "play",
         help="render frames of a texture to a video or PNG frames",
@@ -32,16 +31,9 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "video (.mp4: H.264, browser-playable; .mkv, .avi), an animated image "
         "(.webp, .apng, .gif; looping) or numbered PNG files (an output ending in "
         "'.png' or a folder).",
-        epilog=modes_epilog("play"),
     )
     p.add_argument("database")
     p.add_argument("--texture", help="texture name (optional when the database holds one)")
-    p.add_argument(
-        "--mode",
-        default=DEFAULT_MODE,
-        choices=sorted(MODES),
-        help=f"player mode (default {DEFAULT_MODE}); it decides the options and controls below",
-    )
     p.add_argument("--frames", type=positive_int, default=250, help="frames to render, %(type)s (default 250)")
     p.add_argument(
         "--fps",
@@ -55,7 +47,8 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         required=True,
         help="out.mp4 / .mkv / .avi / .webp / .apng / .gif, frame_%%04d.png, or a folder",
     )
-    cls = add_mode_arguments(p, mode, common=COMMON)
+    cls = add_mode_arguments(p, argv, default=DEFAULT_MODE, common=COMMON)
+    mode = cls.mode
     if "rate_map" in cls.controls():
         g = p.add_argument_group(f"{mode} rate map")
         g.add_argument(
