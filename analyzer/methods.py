@@ -18,17 +18,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from ..checks import Choice, Either, Flag, Kind, Range, Size, Text
+from ..checks import MAX_COUNT, MAX_SEED, MAX_SIDE, Choice, Either, Flag, Kind, Range, Size, Text
 from ..errors import ArgumentTypeError, InvalidArgumentError
 from ..params import Param
 from ..tiledb.tiles import CONSTRUCTIONS as TILE_CONSTRUCTIONS
-
-#: Largest count (frames, steps, dimensions) a parameter takes: beyond it, array sizes overflow.
-MAX_COUNT = 2**31 - 1
-#: Largest seed (NumPy's generators take any non-negative integer; models store it as int64).
-MAX_SEED = 2**63 - 1
-#: Largest side of a size in pixels.
-MAX_SIDE = 16384
 
 
 class Clips(Kind):
@@ -93,23 +86,20 @@ LDS_PARAMS = (
         Either(_COUNT, Choice("auto"), metavar="N"),
         50,
         "State order, or 'auto' for the smallest order that keeps --energy of the variance.",
-        "--n",
     ),
-    _count("k", None, "Rank of the driving noise.", "--k", optional=True, default_doc="n"),
-    Param("energy", _OPEN_UNIT, 0.9, "Variance kept by --n auto.", "--energy"),
+    _count("k", None, "Rank of the driving noise.", optional=True, default_doc="n"),
+    Param("energy", _OPEN_UNIT, 0.9, "Variance kept by --n auto."),
     Param(
         "svd",
         Choice("auto", "gram", "randomized"),
         "auto",
         "SVD of the frames: gram (exact), randomized (long clips), auto (gram up to 1500 frames).",
-        "--svd",
     ),
     Param(
         "max_radius",
         Range(float, 0.0, 1.0, low_open=True, high_open=True),
         0.995,
         "Largest pole magnitude.",
-        "--max-radius",
     ),
 )
 
@@ -149,7 +139,6 @@ TILES_PARAMS = (
         _SIDE_OR_SIZE,
         None,
         "Tile size in pixels; with the quilted construction the quilt block size N.",
-        "--tile",
         optional=True,
         default_doc="from the dominant spatial period; quilted: a third of the shorter side",
     ),

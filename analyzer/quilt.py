@@ -28,7 +28,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..checks import check_float, check_frames, check_int, check_size
+from ..checks import MAX_SIDE, check_float, check_frames, check_int, check_size
 from ..errors import ArgumentTypeError, InvalidArgumentError
 from ..tiledb import QuiltModel
 from .video import Clip, Progress
@@ -39,7 +39,6 @@ DEFAULT_RANK = 15
 # (24: 1.17 / 0.91; 40: 1.37 on honey): smaller blocks match the honey's slow flicker better.
 DEFAULT_BLOCK = 28
 DEFAULT_TOLERANCE = 0.1
-MAX_SIDE = 16384
 
 
 # -- the pixel-by-time matrix and its SVD ---------------------------------------------------

@@ -14,12 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import check_frames, check_int, check_size
+from ..checks import MAX_SIDE, check_frames, check_int, check_size
 from ..errors import InvalidArgumentError
 from ..tiledb import DynatexError, SourceInfo
-
-#: Largest side of a resized frame (matches the command line's ``WxH`` limit).
-MAX_SIDE = 16384
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
 

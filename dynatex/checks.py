@@ -23,6 +23,13 @@ import numpy as np
 
 from .errors import ArgumentTypeError, InvalidArgumentError
 
+#: Largest count (frames, steps, dimensions, indices) an argument takes: beyond it, array sizes overflow.
+MAX_COUNT = 2**31 - 1
+#: Largest seed (NumPy's generators take any non-negative integer; a seed is stored as int64).
+MAX_SEED = 2**63 - 1
+#: Largest side of a size in pixels (an output, a resized clip, a quilt's canvas, a tile).
+MAX_SIDE = 16384
+
 
 # -- check functions ---------------------------------------------------------------------------
 def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None, *, rule: str | None = None) -> int:
@@ -168,6 +175,8 @@ class Kind:
 
     #: what the command line shows for the value (None: argparse's default)
     metavar: str | None = None
+    #: the command-line option may be given several times (its values make a list)
+    repeat: bool = False
 
     def check(self, name: str, value: Any) -> Any:
         """``value`` normalized, or an :class:`InvalidArgumentError` naming ``name``."""
@@ -515,6 +524,9 @@ class Either(Kind):
 
 
 __all__ = [
+    "MAX_COUNT",
+    "MAX_SEED",
+    "MAX_SIDE",
     "Array",
     "Choice",
     "Either",

@@ -29,6 +29,7 @@ import numpy as np
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 import pygame  # noqa: E402
 
+from dynatex.checks import Size  # noqa: E402
 from dynatex.player import open_player  # noqa: E402
 
 #: Frame -> key the autopilot presses, spread over a short run.
@@ -149,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fps", type=float, default=60.0, help="target frame rate (the frame budget is 1/fps)")
     ap.add_argument(
         "--window",
-        type=lambda s: tuple(int(v) for v in s.split("x"))[::-1],
+        type=Size(4096).parse,  # WxH -> (height, width), each side checked
         default=(360, 640),
         metavar="WxH",
         help="window size (default 640x360)",

@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..checks import Choice, Range, Text, check_int, check_out, check_seed
+from ..checks import MAX_SEED, Choice, Range, Text, check_int, check_out, check_seed
 from ..errors import InvalidArgumentError
 from ..params import Param
 from ..tiledb import Texture, TileDB
@@ -18,8 +18,6 @@ from .pixels import FORMATS, pixel_format
 BACKENDS = ("opencl", "numpy")
 #: what a player's ``backend`` may be: a backend, or "auto" (OpenCL on a verified device, else numpy)
 BACKEND_CHOICES = ("auto", *BACKENDS)
-#: largest seed (NumPy's generators take any non-negative integer; a seed is stored as int64)
-MAX_SEED = 2**63 - 1
 
 #: the parameters every mode takes, in the order of its docstring
 COMMON_OPTIONS: tuple[Param, ...] = (

@@ -29,11 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import Choice, Flag, NpyFile, Range, Size, check_float, check_seed, check_size
+from ..checks import MAX_COUNT, MAX_SIDE, Choice, Flag, NpyFile, Range, Size, check_float, check_seed, check_size
 from ..errors import InvalidArgumentError
 from ..params import Param
 from ..tiledb import QuiltModel, TileDB
-from ..tiledb.quilt import MAX_SIDE
 from .base import Player
 from .controls import Capabilities, Control
 from .gather import gaussian_smooth
@@ -243,7 +242,7 @@ class EvolvePlayer(Player):
             self._make_warp()
 
     jitter = Control(
-        Range(float, 0.0, 2**31 - 1),
+        Range(float, 0.0, MAX_COUNT),
         0.0,
         "Per-block time jitter e: the largest deviation of a "
         "block's time from the true time, frames, at most the clip's frames.",

@@ -37,7 +37,20 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import Choice, Either, NpyFile, Numbers, Range, Size, Text, check_float, check_int, check_seed, check_size
+from ..checks import (
+    MAX_SIDE,
+    Choice,
+    Either,
+    NpyFile,
+    Numbers,
+    Range,
+    Size,
+    Text,
+    check_float,
+    check_int,
+    check_seed,
+    check_size,
+)
 from ..errors import InvalidArgumentError
 from ..params import Param
 from ..tiledb import TileDB, TilesModel
@@ -46,7 +59,6 @@ from .controls import Capabilities, Control
 from .gather import MAX_GAIN, MAX_TIME, gaussian_smooth, open_gather, pack_source
 
 TIME_STEP = 8  # output pixels per time-map sample
-MAX_SIZE = 16384
 SPEED_RANGE = (-4.0, 4.0)
 LABEL_PRESETS = ("halves", "stripes", "checker", "blobs")
 
@@ -114,7 +126,7 @@ class TilesPlayer(Player):
 
     mode = "tiles"
     options = (
-        Param("size", Size(MAX_SIZE), None, "Output size; any size.", optional=True, default_doc="the source clip's"),
+        Param("size", Size(MAX_SIDE), None, "Output size; any size.", optional=True, default_doc="the source clip's"),
         Param(
             "labels",
             Either(Choice(*LABEL_PRESETS), NpyFile(), metavar="PRESET|FILE.npy"),
@@ -155,7 +167,7 @@ class TilesPlayer(Player):
         if size is None:
             src = self.texture.source
             size = (src.height, src.width)
-        h, w = check_size("size", size, MAX_SIZE)
+        h, w = check_size("size", size, MAX_SIDE)
         self._shape = (h, w, self.format.bytes)
         self.grid_shape = (-(-h // th), -(-w // tw))
         self.ring = int(model.info.get("ring", max(2, min(th, tw) // 5)))

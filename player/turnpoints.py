@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import Choice, Range, check_float, check_int
+from ..checks import MAX_COUNT, Choice, Range, check_float, check_int
 from ..errors import InvalidArgumentError
 from ..params import Param
 from ..tiledb import TileDB
@@ -62,7 +62,7 @@ class TurnPointPlayer(Player):
             "Turn points and transitions (hybrid), turn points only (turns, the seed) or transitions only "
             "(jumps: classic video textures, forward only).",
         ),
-        Param("start", Range(int, 0, 2**31 - 1), 0, "Source frame of the first output frame (played forward)."),
+        Param("start", Range(int, 0, MAX_COUNT), 0, "Source frame of the first output frame (played forward)."),
     )
     capabilities = Capabilities(needs_frames=True, native_loop=True)
 

@@ -31,3 +31,14 @@ def plain(value: Any) -> Any:
 def plain_info(info: dict | None) -> dict:
     """A model's ``info`` attributes as plain values, in their order."""
     return {k: plain(v) for k, v in (info or {}).items()}
+
+
+class Described:
+    """Base of the model classes: ``describe()`` is the ``info`` attributes as plain values;
+    a model with more facts extends it."""
+
+    info: dict
+
+    def describe(self) -> dict:
+        """Facts as plain values: the ``info`` attributes."""
+        return plain_info(self.info)

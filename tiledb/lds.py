@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
-from ._describe import plain_info
+from ._describe import Described
 from .source import SourceInfo
 
 #: Largest spectral radius a stored transition matrix may have.
@@ -23,7 +23,7 @@ MAX_EIGVEC_CONDITION = 1e10
 
 
 @dataclass
-class LDSModel:
+class LDSModel(Described):
     """A linear dynamic texture.
 
     Attributes
@@ -68,7 +68,7 @@ class LDSModel:
 
     def describe(self) -> dict:
         """Facts as plain values: the ``info`` attributes, the orders and the basis size."""
-        return {**plain_info(self.info), "n": self.n, "k": self.k, "basis_mb": round(self.basis.nbytes / 2**20, 2)}
+        return {**super().describe(), "n": self.n, "k": self.k, "basis_mb": round(self.basis.nbytes / 2**20, 2)}
 
     def summary(self) -> str:
         """One line: orders, energy kept, spectral radius before and after clipping."""

@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
-from ._describe import plain_info
+from ._describe import Described
 from .source import SourceInfo
 
 #: Largest spectral radius the stored AR process's companion matrix may have.
@@ -29,7 +29,7 @@ ELLIPSOID_SLACK = 4.0
 
 
 @dataclass
-class MixtureModel:
+class MixtureModel(Described):
     """A subspace-mixture dynamic texture.
 
     Attributes
@@ -111,10 +111,6 @@ class MixtureModel:
     @property
     def order(self) -> int:
         return int(self.ar_coefs.shape[0])
-
-    def describe(self) -> dict:
-        """Facts as plain values: the ``info`` attributes."""
-        return plain_info(self.info)
 
     def summary(self) -> str:
         """One line: sizes, AR order, reconstruction error against a single PCA."""

@@ -15,19 +15,18 @@ from dataclasses import dataclass, field
 import h5py
 import numpy as np
 
+from ..checks import MAX_SIDE
 from ..errors import InvalidArgumentError
 from ._check import Checker
-from ._describe import plain_info
+from ._describe import Described
 from .source import SourceInfo
 
-#: Largest output canvas side the codec accepts (matches the CLI's size limit).
-MAX_SIDE = 16384
 #: Gains outside (0, MAX_GAIN] are refused: they would saturate every pixel.
 MAX_GAIN = 64.0
 
 
 @dataclass
-class QuiltModel:
+class QuiltModel(Described):
     """The quilt of one texture.
 
     Attributes
@@ -83,10 +82,6 @@ class QuiltModel:
     def block(self) -> tuple[int, int]:
         """``(block_h, block_w)``."""
         return int(self.info["block_h"]), int(self.info["block_w"])
-
-    def describe(self) -> dict:
-        """Facts as plain values: the ``info`` attributes."""
-        return plain_info(self.info)
 
     def summary(self) -> str:
         """One line: canvas, blocks, the rank of the comparisons and its error."""

@@ -18,7 +18,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
-from ._describe import plain_info
+from ._describe import Described
 from .source import SourceInfo
 
 MAX_TILES = 4096
@@ -30,7 +30,7 @@ STATIONARITY_WARN = 0.5  # below this a clip is not one texture all over (grass 
 
 
 @dataclass
-class TilesModel:
+class TilesModel(Described):
     """A set of triple toroid-shaped tiles.
 
     Attributes
@@ -125,7 +125,7 @@ class TilesModel:
     def describe(self) -> dict:
         """Facts as plain values: the ``info`` attributes, the tile set per class, its costs and colours,
         the Wang edges, and a ``warning`` when the clip was not one texture all over."""
-        info = plain_info(self.info)
+        info = super().describe()
         pure = self.ring_class == self.tile_class
         info.update(
             n_tiles=self.n_tiles,

@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
-from ._describe import plain_info
+from ._describe import Described
 from .source import SourceInfo
 
 _PER_FRAME = ("sym_raw", "symmetry", "reduced", "p_max")
@@ -23,7 +23,7 @@ _PER_TRANSITION = ("cost", "future_cost", "prob")
 
 
 @dataclass
-class TurnPointModel:
+class TurnPointModel(Described):
     """Turn-point and transition tables of one clip of ``T`` frames.
 
     Attributes
@@ -79,10 +79,6 @@ class TurnPointModel:
     @property
     def last_turn(self) -> int:
         return int(self.turn_points[-1])
-
-    def describe(self) -> dict:
-        """Facts as plain values: the ``info`` attributes."""
-        return plain_info(self.info)
 
     def summary(self) -> str:
         """One line: turn points (the first twelve), transitions, exit frame."""

@@ -1,8 +1,9 @@
 """Argument types and helpers shared by the subcommands.
 
-Every numeric option is parsed by a :class:`Number` (or a type built on one) that declares
-its range once: the same object checks the value (finite, in range, before any work starts)
-and writes the range into the option's help (``%(type)s``).
+An option's value is parsed by a kind of :mod:`dynatex.checks` (:class:`KindArg` adapts any
+kind to argparse; :class:`Number` is a range read from text) that declares its rule once: the
+same object checks the value (finite, in range, before any work starts) and says the rule in
+the option's help. :func:`add_param` turns a declared :class:`~dynatex.params.Param` into its option.
 """
 
 from __future__ import annotations
@@ -14,17 +15,10 @@ from collections.abc import Callable
 from typing import Any
 
 from .. import checks
-from ..checks import Choice, Flag, Kind, Range, Size
+from ..checks import MAX_COUNT, MAX_SEED, MAX_SIDE, Choice, Flag, Kind, Range, Size
 from ..cli import UsageError
 from ..errors import InvalidArgumentError
 from ..params import Param
-
-#: Largest count (frames, steps, dimensions) an option takes: beyond it, array sizes overflow.
-MAX_COUNT = 2**31 - 1
-#: Largest seed (NumPy's generators take any non-negative integer; players store it as int64).
-MAX_SEED = 2**63 - 1
-#: Largest side of a ``WxH`` size.
-MAX_SIDE = 16384
 
 
 class Number(Range):
@@ -102,7 +96,7 @@ def add_param(group: Any, param: Param, *, dest: str | None = None, default: Any
         or param.kind.metavar
         or (str(param.kind) if isinstance(param.kind, Choice) else flag.lstrip("-").upper().replace("-", "_"))
     )
-    action = "append" if getattr(param.kind, "repeat", False) else "store"
+    action = "append" if param.kind.repeat else "store"
     if action == "append" and default is not argparse.SUPPRESS:
         default = None  # argparse would append to the declared default itself
     group.add_argument(
