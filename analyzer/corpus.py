@@ -222,6 +222,8 @@ def learn_into(
     chosen = [get_method(m) for m in methods]
     params = params or {}
     load = dict(load or {})
+    from .video import load_clip_path
+
     bar = progress or (lambda stage: None)
     disk = None
     clip = None
@@ -232,7 +234,7 @@ def learn_into(
             disk = spill_clip(path, folder=spill_dir, isolate=isolate, progress=bar("decode"), **load)
             source = disk.source_info()
         else:
-            clip = _load_in_memory(path, isolate, load, bar("decode"))
+            clip = load_clip_path(path, isolate=isolate, progress=bar("decode"), **load)
             source = clip.source_info()
         params = {m.name: _decode_clip_params(m, params.get(m.name, {}), isolate, load) for m in chosen}
         writer.put_texture(texture, source)
@@ -263,24 +265,16 @@ def learn_into(
 
 def _decode_clip_params(method: Method, kwargs: dict, isolate: bool, load: dict) -> dict:
     """``kwargs`` with the clip paths of ``method``'s :class:`~dynatex.analyzer.methods.Clips` parameters decoded."""
+    from .video import load_clip_path
+
     kwargs = dict(kwargs)
     options = {k: v for k, v in load.items() if k not in ("start", "crop")}
     for p in method.params:
         if isinstance(p.kind, Clips) and kwargs.get(p.name):
             kwargs[p.name] = [
-                _load_in_memory(c, isolate, options, None) if isinstance(c, str) else c for c in kwargs[p.name]
+                load_clip_path(c, isolate=isolate, **options) if isinstance(c, str) else c for c in kwargs[p.name]
             ]
     return kwargs
-
-
-def _load_in_memory(path: str, isolate: bool, load: dict, progress):
-    from .video import load_clip
-
-    if path.endswith(".npy") and os.path.isfile(path):
-        import numpy as np
-
-        return load_clip(np.load(path, allow_pickle=False), progress=progress, **load)
-    return load_clip(path, isolate=isolate and os.path.isfile(path), progress=progress, **load)
 
 
 def _from_disk(disk, method: str, max_memory: int):

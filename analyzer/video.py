@@ -320,3 +320,12 @@ def _tuple4(name: str, v) -> tuple[int, int, int, int]:
 def clip_frames(clip: Any) -> np.ndarray:
     """The ``(T, H, W, C)`` uint8 frames of a :class:`Clip` or an array, else an error naming "clip"."""
     return check_frames(clip.frames if isinstance(clip, Clip) else clip, name="clip", uint8=True)
+
+
+def load_clip_path(path: str, *, isolate: bool = True, **options) -> Clip:
+    """:func:`load_clip` of a clip named by a path: a ``.npy`` file is read as an array (no
+    pickles); a video file is decoded in a child process when ``isolate`` (a decoder crash
+    becomes a :class:`ClipError`); a folder of images is read in this process."""
+    if path.endswith(".npy") and os.path.isfile(path):
+        return load_clip(np.load(path, allow_pickle=False), **options)
+    return load_clip(path, isolate=isolate and os.path.isfile(path), **options)

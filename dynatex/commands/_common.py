@@ -9,7 +9,6 @@ the option's help. :func:`add_param` turns a declared :class:`~dynatex.params.Pa
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -116,15 +115,11 @@ size_arg = KindArg(Size(MAX_SIDE))
 
 
 def load_clip_arg(path: str, **options):
-    """:func:`~dynatex.analyzer.video.load_clip` of a command-line clip: a ``.npy`` file is read
-    as an array (no pickles), a video file is decoded in a child process (``isolate``)."""
-    from ..analyzer.video import load_clip
+    """:func:`~dynatex.analyzer.video.load_clip_path` of a command-line clip (imported when used:
+    the parser is built without the analyzer)."""
+    from ..analyzer.video import load_clip_path
 
-    if path.endswith(".npy") and os.path.isfile(path):
-        import numpy as np
-
-        return load_clip(np.load(path, allow_pickle=False), **options)
-    return load_clip(path, isolate=os.path.isfile(path), **options)
+    return load_clip_path(path, **options)
 
 
 def tqdm_progress(desc: str, enabled: bool = True) -> Callable[[int, int | None], None] | None:
