@@ -20,6 +20,7 @@ import numpy as np
 from ..checks import check_int
 from ..errors import InvalidArgumentError
 from ..tiledb import LDSModel
+from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
 from .video import Clip, Progress, clip_frames
 
@@ -193,7 +194,7 @@ def _fit_dynamics(mean, basis, sv, x, total_energy, tau, k, max_radius, calibrat
     a, radius_raw, n_clipped = stabilize(a_raw, max_radius)
     resid = x1 - a @ x0
     u, s, _ = np.linalg.svd(resid, full_matrices=False)
-    b = u[:, :k] * (s[:k] / np.sqrt(tau - 1))
+    b = orient_rows(u[:, :k].T).T * (s[:k] / np.sqrt(tau - 1))
     cov = stationary_covariance(a, b @ b.T)
     train_cov = x @ x.T / tau
     q_gain = float(np.trace(train_cov) / np.trace(cov)) if calibrate else 1.0
@@ -347,12 +348,11 @@ def _svd_randomized(y: np.ndarray, n: int, seed: int, oversample: int = 10, powe
 
 
 def _fix_signs(basis: np.ndarray, states: np.ndarray):
-    """Make each component's largest entry positive, so results do not depend on the solver's
-    signs, and each row of unit length: a weak component's row ``v.T @ Y / s``, summed in
-    float32, comes out a few parts in a thousand too long or short (the format checks 1e-3)."""
-    idx = np.argmax(np.abs(basis), axis=1)
-    sign = np.sign(basis[np.arange(basis.shape[0]), idx])
-    sign[sign == 0] = 1
+    """Turn each component to its canonical sign (:mod:`.signs`), so the stored model does not
+    depend on the solver or machine, and scale each row to unit length: a weak component's row
+    ``v.T @ Y / s``, summed in float32, comes out a few parts in a thousand too long or short
+    (the format checks 1e-3)."""
+    sign = canonical_signs(basis)
     norms = np.sqrt(np.einsum("ij,ij->i", basis, basis, dtype=np.float64))
     scale = sign / np.where(norms > 0, norms, 1.0)
     return basis * scale[:, None].astype(basis.dtype), states * sign[:, None]

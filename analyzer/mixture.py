@@ -24,6 +24,7 @@ from ..errors import InvalidArgumentError
 from ..tiledb import MixtureModel
 from ..tiledb.mixture import companion_radius
 from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
+from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
 from .video import Clip, Progress, clip_frames
 
@@ -299,7 +300,7 @@ def _m_step(x: np.ndarray, resp: np.ndarray, dim: int, floor: float) -> dict:
         ev, vec = ev[::-1], vec[:, ::-1]
         sigma2[s] = max(float(ev[dim:].mean()) if q > dim else floor, floor)
         lam[s] = np.maximum(ev[:dim], sigma2[s] * (1 + 1e-9))
-        us[s] = vec[:, :dim]
+        us[s] = orient_rows(vec[:, :dim].T).T
     return {"pi": nk / n, "mu": mu, "U": us, "lam": lam, "sigma2": sigma2}
 
 
@@ -401,10 +402,8 @@ def coordinate(u: np.ndarray, idx: np.ndarray, w: np.ndarray, out_dim: int) -> t
     # Undo the ridge's tiny effect so that L^T B L = I holds exactly.
     ev_b, vec_b = np.linalg.eigh(lmap.T @ b @ lmap)
     lmap = lmap @ (vec_b / np.sqrt(ev_b)) @ vec_b.T
-    # Fix signs so results do not depend on the eigensolver.
-    g = u @ lmap
-    sign = np.sign(g[np.argmax(np.abs(g), axis=0), np.arange(out_dim)])
-    sign[sign == 0] = 1
+    # Each global axis turned by the analyzer's one sign rule, on its coordinates over the clip.
+    sign = canonical_signs((u @ lmap).T)
     return lmap * sign, ev[:out_dim]
 
 
