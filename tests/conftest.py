@@ -59,6 +59,17 @@ def verified_devices() -> list:
     return [d for d in infos if selftest.verdict(d).ok]
 
 
+def opencl_backends() -> list[str]:
+    """``["numpy", "opencl"]`` where an OpenCL device passed the self-test here, else ``["numpy"]``:
+    a test comparing the backends runs on the broken-driver machines too, on what they have."""
+    return ["numpy", "opencl"] if verified_devices() else ["numpy"]
+
+
+def best_backend() -> str:
+    """``"opencl"`` where a device passed the self-test here, else ``"numpy"`` (no fallback warning)."""
+    return opencl_backends()[-1]
+
+
 def pytest_generate_tests(metafunc):
     """Kernel tests (fixture ``cl_device`` or ``cl_context``) run once on every verified device."""
     if "cl_device" in metafunc.fixturenames:

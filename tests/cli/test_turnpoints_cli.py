@@ -12,6 +12,8 @@ import pytest
 from dynatex.analyzer.turnpoints import pendulum_clip
 from dynatex.cli import main
 
+from ..conftest import opencl_backends
+
 
 @pytest.fixture
 def clip_npy(tmp_path):
@@ -46,7 +48,7 @@ def test_analyze_plot_and_play(tmp_path, clip_npy, capsys):
         g = f["textures/pend"]
         assert "turnpoints" in g and g["frames"].shape == (70, 32, 32, 3)
         assert g["turnpoints"].attrs["n"] == 3
-    for backend in ("numpy", "opencl"):
+    for backend in opencl_backends():
         out = tmp_path / backend
         code, _, err = _run(
             capsys,
@@ -68,8 +70,9 @@ def test_analyze_plot_and_play(tmp_path, clip_npy, capsys):
         assert code == 0, err
         assert len(os.listdir(out)) == 6
     a = cv2.imread(str(tmp_path / "numpy" / "frame_00005.png"))
-    b = cv2.imread(str(tmp_path / "opencl" / "frame_00005.png"))
-    assert a.shape == (32, 32, 3) and np.array_equal(a, b)
+    assert a.shape == (32, 32, 3)
+    if "opencl" in opencl_backends():
+        assert np.array_equal(a, cv2.imread(str(tmp_path / "opencl" / "frame_00005.png")))
     video = tmp_path / "o.mp4"
     code, _, _ = _run(capsys, "play", db, "--mode", "turnpoints", "--frames", "30", "--crossfade", "2", "-o", video)
     assert code == 0 and video.stat().st_size > 0

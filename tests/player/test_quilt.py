@@ -15,6 +15,8 @@ from dynatex.player.quilt import ENDS, EvolvePlayer, fold_time, jitter_warp
 from dynatex.player.runs import RATE_STEP, quantize_rate
 from dynatex.tiledb import DatabaseWriter, MethodNotFoundError, QuiltModel
 
+from ..conftest import best_backend
+
 
 def write_db(path, frames, model, name="s"):
     clip = load_clip(frames)
@@ -315,7 +317,7 @@ def test_rate_map_on_rusting_steel(clips_dir, tmp_path):
     q = learn_quilt(clip, size=(192, 192), seed=0)
     path = write_db(tmp_path / "rust.h5", clip.frames, q)
     n = clip.n_frames
-    with EvolvePlayer(path, backend="opencl") as p:
+    with EvolvePlayer(path, backend=best_backend()) as p:
         h, w = p.shape[:2]
         p.rate_map = ratemap.halves((h, w), 2.0, 1.0)
         frames = np.stack([p.next_frame() for _ in range(n)])
