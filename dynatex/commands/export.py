@@ -29,14 +29,15 @@ from ..player import MODES, open_player
 from ..player import tiles as _tiles
 from ..player.modes import player_class
 from ._common import Number, UsageError, size_arg
-from ._modes import add_mode_arguments, apply_controls, player_kwargs
+from ._modes import add_mode_arguments, apply_controls, player_kwargs, resolve_args_mode
 from ._output import MAX_FPS, MIN_FPS, OutputError
 
 #: Most frames a flipbook holds (a 64x64 grid).
 MAX_FRAMES = 4096
 #: Frames rendered when neither --frames nor a mode's own loop says how many.
 DEFAULT_FRAMES = 64
-DEFAULT_MODE = "tiles"
+#: None: the texture's own mode (the analysis's choice, else the first method it holds in mode order)
+DEFAULT_MODE = None
 #: the parameters every mode shares that ``export`` offers (the atlas is RGB(A) by its own rule)
 COMMON = ("backend", "device", "seed")
 
@@ -118,7 +119,7 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
 def render(args: argparse.Namespace) -> tuple[np.ndarray, str, float, np.ndarray | None]:
     """The flipbook's frames ``(N, H, W, 3)``, a description of the loop, the frame rate and the
     source frames (None when the database stores none)."""
-    cls = player_class(args.mode)
+    cls = player_class(resolve_args_mode(args))
     if args.blend is not None and not (args.loop and not cls.capabilities.native_loop):
         blended = sorted(m for m in MODES if not player_class(m).capabilities.native_loop)
         raise UsageError(f"--blend belongs to --loop with mode {', '.join(blended)}")
