@@ -57,7 +57,28 @@ _LAZY: dict[str, str] = {
     "ClipError": "dynatex.analyzer",
 }
 
-__all__ = ["__version__", *sorted(_LAZY)]
+__all__ = [
+    "__version__",
+    "ArgumentTypeError",
+    "ClipError",
+    "DeviceNotVerifiedError",
+    "DynatexError",
+    "InvalidArgumentError",
+    "KernelBuildError",
+    "MethodNotFoundError",
+    "OpenCLUnavailableError",
+    "TextureNotFoundError",
+    "TileDBError",
+    "TileDBFormatError",
+    "TileDBNotFoundError",
+    "TileDBVersionError",
+    "UnknownControlError",
+    "analyze",
+    "describe",
+    "load_clip",
+    "open_db",
+    "open_player",
+]
 
 if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports on first use
     from ._analyze import analyze

@@ -81,7 +81,7 @@ def _checked_init(init: Callable[..., None]) -> Callable[..., None]:
     return __init__
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _keywords(cls: type) -> list[str]:
     """The keywords mode class ``cls`` takes: the declared options, then any other keyword its
     constructor names (a control's starting value, for example)."""
@@ -113,9 +113,7 @@ def check_options(cls: type, options: dict[str, Any]) -> None:
             hint = f" (did you mean the control {close[0]!r}? set player.{close[0]} after opening)"
         elif close:
             hint = f" (did you mean {close[0]!r}?)"
-    raise ArgumentTypeError(
-        f"mode {cls.mode!r} takes no option {name!r}{hint}; its options: {', '.join(known[1:])}"
-    )
+    raise ArgumentTypeError(f"mode {cls.mode!r} takes no option {name!r}{hint}; its options: {', '.join(known[1:])}")
 
 
 class Player:

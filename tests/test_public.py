@@ -157,3 +157,7 @@ def test_an_option_a_mode_does_not_take_is_the_librarys_argument_error(mode, opt
 def test_a_size_the_evolve_quilt_cannot_produce_is_a_clear_error():
     with pytest.raises(DynatexError, match=r"does not fit the stored quilt"):
         open_player(SELFTEST, mode="evolve", backend="numpy", size=(1080, 1920))
+
+
+def test_every_public_name_is_loaded_lazily_from_one_table():
+    assert set(dynatex.__all__) - {"__version__"} == set(dynatex._LAZY)

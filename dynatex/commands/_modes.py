@@ -22,9 +22,7 @@ from ._common import add_param
 #: the mode whose flags a command offers when it cannot read the texture to choose one
 FALLBACK_MODE = "lds"
 _DEFAULT_HELP = (
-    "the texture's: the mode its analysis chose, else the first of "
-    + ", ".join(MODE_ORDER)
-    + " whose method it holds"
+    "the texture's: the mode its analysis chose, else the first of " + ", ".join(MODE_ORDER) + " whose method it holds"
 )
 
 
