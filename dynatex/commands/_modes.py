@@ -108,7 +108,8 @@ def add_mode_arguments(
         f"Each mode has its own options and controls; this help lists mode {mode}'s. "
         f"See another's with '{parser.prog} --mode MODE --help' for MODE in: {', '.join(sorted(MODES))}."
     )
-    parser.help_command = f"{parser.prog} --mode {mode} --help"  # where a usage error points
+    if named is not None or chosen is not None:  # a usage error points to the page of the mode in use
+        parser.help_command = f"{parser.prog} --mode {mode} --help"
     cls = player_class(mode)
     for param in COMMON_OPTIONS:
         if param.name in common:

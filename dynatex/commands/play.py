@@ -42,7 +42,7 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "--frames",
         type=positive_int,
         default=None,
-        help=f"frames to render, %(type)s (default {DEFAULT_FRAMES}; evolve with --end hold: until the "
+        help=f"frames to render, %(type)s (default {DEFAULT_FRAMES}; evolve holding its last frame: until the "
         "clock reaches the source's last frame at --speed, at most that)",
     )
     p.add_argument(
