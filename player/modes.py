@@ -94,6 +94,18 @@ def describe(db: str | os.PathLike | TileDB) -> dict[str, Any]:
     """What database ``db`` offers a player: per texture its size, methods, the modes that play it
     (the default first) and per mode its options and controls with their rules and defaults.
 
+    Parameters
+    ----------
+    db : str, os.PathLike or TileDB
+        The tile database.
+
+    Returns
+    -------
+    dict
+        ``{"file", "textures": {name: {"size", "frames", "methods", "modes", "default_mode"}},
+        "modes": {mode: {"method", "summary", "options", "controls"}}}``, each option and control
+        as ``{"rule", "default", "doc"}``; plain values, ready for ``json.dumps``.
+
     Examples
     --------
     >>> from importlib import resources

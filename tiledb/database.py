@@ -225,7 +225,32 @@ class TileDB:
 
 
 def open_db(path: str | os.PathLike) -> TileDB:
-    """Open and validate a tile database for reading."""
+    """Open and validate a tile database for reading.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The database file (``dynatex analyze`` writes it).
+
+    Returns
+    -------
+    TileDB
+        The open database: ``textures`` names its textures, ``texture(name)`` gives one
+        (``methods``, ``playable_modes()``, ``default_mode``, ``source``); close it or use ``with``.
+
+    Raises
+    ------
+    TileDBError
+        A missing, corrupt or foreign file (the message names the file, the object and the problem).
+
+    Examples
+    --------
+    >>> from importlib import resources
+    >>> with open_db(resources.files("dynatex.player").joinpath("selftest.h5")) as db:
+    ...     tex = db.texture("selftest")
+    ...     db.textures, tex.methods, tex.playable_modes()[:2]
+    (('selftest',), ('lds', 'turnpoints', 'quilt', 'mixture', 'tiles'), ('lds', 'turnpoints'))
+    """
     return TileDB(path)
 
 
