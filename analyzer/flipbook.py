@@ -63,12 +63,18 @@ def choose_grid(
     rows: int | None = None,
     tile: tuple[int, int] | None = None,
     pow2: bool = True,
+    packed: bool = False,
 ) -> Grid:
     """The grid for ``frames`` frames of ``frame_shape`` (H, W).
 
-    By default the grid is the smallest power-of-two one holding the frames (columns >= rows,
-    a square grid for 4, 16, 64... frames) and each tile side is the power of two nearest the
-    frame's, so the atlas is a power of two on both sides; ``tile`` sets the tile (H, W).
+    ``packed``: the grid with the fewest empty cells (none when ``frames`` has a factor pair)
+    whose atlas is at most 2:1, the most square of those, and cells of the frame's own shape
+    (scaled down, aspect kept, when the atlas would pass :data:`MAX_ATLAS_SIDE`): for engines
+    that take any grid and frame count (Unity's VFX Graph and particle texture sheets, Unreal's
+    SubUV, Godot's particle frames). Otherwise, with ``pow2``, the grid is the smallest
+    power-of-two one holding the frames (columns >= rows, a square grid for 4, 16, 64... frames)
+    and each tile side is the power of two nearest the frame's, so the atlas is a power of two on
+    both sides; without, the same near-square grid of frame-sized tiles. ``tile`` sets the tile (H, W).
 
     Examples
     --------
@@ -76,12 +82,19 @@ def choose_grid(
     Grid(cols=8, rows=8, tile=(256, 256), frames=64)
     >>> choose_grid(22, (240, 240)).atlas_shape
     (1024, 2048)
+    >>> choose_grid(80, (288, 352), packed=True)      # 80 cells, cells of the frame's aspect
+    Grid(cols=8, rows=10, tile=(288, 352), frames=80)
     """
     if frames < 1:
         raise InvalidArgumentError(f"a flipbook needs at least one frame, not {frames}")
+    if packed and tile is None:
+        tile = tuple(frame_shape)
     if cols is None and rows is None:
-        rows = 1 << (max(0, math.ceil(math.log2(frames))) // 2)
-        cols = 1 << math.ceil(math.log2(math.ceil(frames / rows))) if pow2 else math.ceil(frames / rows)
+        if packed:
+            cols, rows = _packed_grid(frames, tile)
+        else:
+            rows = 1 << (max(0, math.ceil(math.log2(frames))) // 2)
+            cols = 1 << math.ceil(math.log2(math.ceil(frames / rows))) if pow2 else math.ceil(frames / rows)
     elif cols is None:
         cols = math.ceil(frames / rows)
     elif rows is None:
@@ -92,12 +105,55 @@ def choose_grid(
         h, w = frame_shape
         tile = (_pow2(h), _pow2(w)) if pow2 else (h, w)
     th, tw = int(tile[0]), int(tile[1])
+    if packed:  # shrink the frame-shaped cells, keeping their aspect, until the atlas fits
+        scale = min(1.0, MAX_ATLAS_SIDE / (rows * th), MAX_ATLAS_SIDE / (cols * tw))
+        th, tw = max(1, math.floor(th * scale)), max(1, math.floor(tw * scale))
     if rows * th > MAX_ATLAS_SIDE or cols * tw > MAX_ATLAS_SIDE:
         raise InvalidArgumentError(
             f"a {cols}x{rows} atlas of {tw}x{th} tiles is {cols * tw}x{rows * th} pixels, more than "
             f"{MAX_ATLAS_SIDE} on a side: use fewer frames or a smaller tile"
         )
     return Grid(int(cols), int(rows), (th, tw), int(frames))
+
+
+def _packed_grid(frames: int, tile: tuple[int, int]) -> tuple[int, int]:
+    """(cols, rows) of :func:`choose_grid`'s packed rule for cells of ``tile`` (H, W)."""
+    th, tw = tile
+    best: tuple[tuple, int, int] | None = None
+    for rows in range(1, frames + 1):
+        cols = math.ceil(frames / rows)
+        if (cols - 1) * rows >= frames:
+            continue  # a column would be empty
+        skew = abs(math.log((cols * tw) / (rows * th)))
+        key = (skew > math.log(2) + 1e-9, cols * rows - frames, skew)
+        if best is None or key < best[0]:
+            best = (key, cols, rows)
+    assert best is not None
+    return best[1], best[2]
+
+
+def packing(grid: Grid, frame_shape: tuple[int, int], rule: str) -> dict:
+    """The sidecar's account of how ``grid`` packs frames of ``frame_shape`` (H, W): empty cells,
+    frame and cell aspect (width / height), whether the atlas is a power of two."""
+    h, w = frame_shape
+    th, tw = grid.tile
+    ah, aw = grid.atlas_shape
+    cells = grid.cols * grid.rows
+
+    def is_pow2(v: int) -> bool:
+        return v & (v - 1) == 0
+
+    return {
+        "rule": rule,
+        "cells": cells,
+        "empty_cells": cells - grid.frames,
+        "empty_share": round((cells - grid.frames) / cells, 4),
+        "frame_aspect": round(w / h, 4),
+        "cell_aspect": round(tw / th, 4),
+        "aspect_change": round((tw / th) / (w / h) - 1, 4),
+        "cell_scale": [round(th / h, 4), round(tw / w, 4)],
+        "power_of_two": is_pow2(ah) and is_pow2(aw),
+    }
 
 
 def fit(frame: np.ndarray, tile: tuple[int, int]) -> np.ndarray:
@@ -255,6 +311,7 @@ def sidecar(
     source: dict,
     wrap: dict | None = None,
     layout: str = "atlas",
+    packed: dict | None = None,
 ) -> dict:
     """The ``NAME.json`` description of an exported flipbook, with the engine settings."""
     th, tw = grid.tile
@@ -297,6 +354,8 @@ def sidecar(
             "color": "RGBA8, one layer after another, rows top to bottom",
             "motion_vectors": "RG8, same order",
         }
+    if packed is not None:
+        doc["packing"] = packed
     doc["files"] = files
     if wrap is not None:
         doc["wrap_discontinuity"] = wrap
@@ -315,6 +374,7 @@ __all__ = [
     "flow_to_uv",
     "frame_motion",
     "optical_flow",
+    "packing",
     "shader_blend",
     "sidecar",
     "vector_atlas",

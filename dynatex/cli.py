@@ -46,7 +46,8 @@ class Parser(argparse.ArgumentParser):
     """
 
     def error(self, message: str):  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {_one_line(message)} (see `{self.prog} --help`)\n")
+        pointer = getattr(self, "help_command", f"{self.prog} --help")  # a mode's page for its flags
+        self.exit(2, f"{self.prog}: error: {_one_line(message)} (see `{pointer}`)\n")
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:

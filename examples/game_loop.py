@@ -1,6 +1,7 @@
 """A live dynamic texture in a pygame game loop: scrolled across the window, steered by keys.
 
-    python examples/game_loop.py [DB.h5 [--texture NAME]] [--mode lds] [--fps 60]
+    pip install -e ".[examples]"        # or ./install.sh examples: pygame, beside the base install
+    python examples/game_loop.py [DB.h5 [--texture NAME]] [--mode MODE] [--fps 60]
 
 Without a database it analyses the built-in ripples clip first (a few seconds). Keys: Up/Down
 playback speed, R reverse, +/- noise intensity, Left/Right scroll speed, Esc quits.
@@ -9,8 +10,10 @@ The loop shows how a game embeds the player: it asks for the next frame with ``s
 *before* drawing the current one, so that the device renders while pygame draws and the
 display flips, and only then ``wait``s for it; two frame buffers take turns. Frames come as
 BGRA, the byte order of pygame's 32-bit display surfaces on little-endian machines, so the
-buffer becomes a surface with no conversion. ``--frames N`` stops after N frames and prints a
-JSON summary (frames drawn, mean time of the loop's own work against the frame budget), and
+buffer becomes a surface with no conversion. Every second it prints the frame rate it reaches
+(on stderr) and it warns once when a frame's work overran the budget. ``--frames N`` stops after
+N frames and prints a JSON summary (frames drawn, frame rate, mean time of the loop's own work
+against the frame budget, frames over budget), and
 ``--autopilot`` presses the keys by itself: that is how the test suite runs it headless
 (``SDL_VIDEODRIVER=dummy``).
 """
@@ -27,7 +30,10 @@ import time
 import numpy as np
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-import pygame  # noqa: E402
+try:
+    import pygame
+except ModuleNotFoundError:  # the base install has no pygame
+    sys.exit('examples/game_loop.py needs pygame: pip install -e ".[examples]" (or ./install.sh examples)')
 
 from dynatex.checks import Size  # noqa: E402
 from dynatex.player import open_player  # noqa: E402
@@ -85,6 +91,35 @@ class Controls:
         return {"speed": self.player.speed, "intensity": getattr(self.player, "intensity", None), "scroll": self.scroll}
 
 
+class RateMeter:
+    """The frame rate the loop reaches, printed every ``every`` seconds, and one warning the first
+    time a frame's work overruns the budget (the count of such frames goes in the summary)."""
+
+    def __init__(self, budget: float, every: float = 1.0, out=sys.stderr) -> None:
+        self.budget, self.every, self.out = budget, every, out
+        self.start = self.mark = time.perf_counter()
+        self.frames = self.marked = self.over = 0
+
+    def frame(self, work: float) -> None:
+        self.frames += 1
+        if work > self.budget:
+            self.over += 1
+            if self.over == 1:
+                print(
+                    f"game_loop: warning: frame {self.frames} took {1000 * work:.1f} ms, over the "
+                    f"{1000 * self.budget:.1f} ms budget (said once; the summary counts them)",
+                    file=self.out,
+                )
+        now = time.perf_counter()
+        if now - self.mark >= self.every:
+            print(f"game_loop: {(self.frames - self.marked) / (now - self.mark):.1f} fps", file=self.out)
+            self.mark, self.marked = now, self.frames
+
+    def fps(self) -> float:
+        """Frames per second over the whole run."""
+        return self.frames / max(time.perf_counter() - self.start, 1e-9)
+
+
 def run(args: argparse.Namespace, db: str) -> dict:
     pygame.display.init()  # video only: no audio device needed
     try:
@@ -105,6 +140,7 @@ def _loop(args: argparse.Namespace, screen, player) -> dict:
     budget = 1.0 / args.fps
     pending = player.start_frame(buffers[0])
     shown, offset, work, frames = 0, 0.0, 0.0, 0
+    meter = RateMeter(budget)
     running = True
     while running and (args.frames is None or frames < args.frames):
         t0 = time.perf_counter()
@@ -124,7 +160,9 @@ def _loop(args: argparse.Namespace, screen, player) -> dict:
             for x in range(-int(offset), args.window[1], w):
                 screen.blit(surface, (x, y))
         pygame.display.flip()
-        work += time.perf_counter() - t0
+        spent = time.perf_counter() - t0
+        work += spent
+        meter.frame(spent)
         shown = nxt
         frames += 1
         clock.tick(args.fps)
@@ -134,6 +172,8 @@ def _loop(args: argparse.Namespace, screen, player) -> dict:
         "frames": frames,
         "mean_work_ms": round(1000 * work / max(frames, 1), 3),
         "budget_ms": round(1000 * budget, 3),
+        "fps": round(meter.fps(), 1),
+        "over_budget": meter.over,
         "backend": player.backend,
         "texture": f"{w}x{h}",
         "window_std": round(float(shot.std()), 2),
@@ -145,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("database", nargs="?", help="tile database (default: analyse the built-in ripples)")
     ap.add_argument("--texture")
-    ap.add_argument("--mode", default="lds")
+    ap.add_argument("--mode", default=None, help="player mode (default: the texture's own)")
     ap.add_argument("--backend", default="auto", choices=("auto", "opencl", "numpy"))
     ap.add_argument("--fps", type=float, default=60.0, help="target frame rate (the frame budget is 1/fps)")
     ap.add_argument(

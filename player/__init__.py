@@ -5,21 +5,68 @@ Imports only numpy, h5py and pyopencl (a game ships the player and a database, n
 Examples
 --------
 >>> from dynatex.player import open_player
->>> with open_player("water.h5", mode="lds", seed=1) as p:     # doctest: +SKIP
-...     frame = p.next_frame()                                 # (H, W, 3) uint8
+>>> with open_player("water.h5", seed=1) as p:     # doctest: +SKIP
+...     frame = p.next_frame()                     # (H, W, 3) uint8
 """
 
 from __future__ import annotations
 
 import os
 
-from .base import BACKENDS, Player
-from .modes import MODES, player_class
+from ..tiledb import TileDB
+from .base import BACKENDS, Player, UnknownControlError
+from .modes import MODE_ALIASES, MODE_METHOD, MODE_ORDER, MODES, default_mode, describe, mode_for, player_class
 from .opencl import DeviceNotVerifiedError, KernelBuildError, OpenCLUnavailableError, devices, list_devices
 
 
-def open_player(db: str | os.PathLike, texture: str | None = None, *, mode: str = "lds", **options) -> Player:
-    """Open a player of ``mode`` for ``texture`` of database ``db``; ``options`` go to the mode's class."""
+def open_player(
+    db: str | os.PathLike | TileDB, texture: str | None = None, *, mode: str | None = None, **options
+) -> Player:
+    """Open a player for one texture of a tile database.
+
+    Parameters
+    ----------
+    db : str, os.PathLike or TileDB
+        The tile database (``dynatex analyze`` writes it).
+    texture : str, optional
+        The texture's name; None picks the database's only texture.
+    mode : str, optional
+        The player mode: ``lds``, ``turnpoints``, ``tiles``, ``evolve`` (alias ``quilt``: it plays
+        a quilt analysis) or ``mixture``. None picks the texture's own: the mode its analysis
+        chose (``default_mode``), else the first of lds, turnpoints, tiles, evolve, mixture
+        whose method the texture holds (:func:`dynatex.player.modes.default_mode`).
+    **options
+        The mode's options (``seed``, ``backend``, ``device``, ``format`` for every mode; see
+        ``player/MODES.md``). Sizes are ``(height, width)``, like a frame's shape:
+        ``size=(1080, 1920)`` is a landscape HD frame.
+
+    Returns
+    -------
+    Player
+        The open player: ``next_frame()`` gives ``(H, W, 3)`` uint8 frames, its controls are
+        attributes (``type(player).controls()``), ``close()`` or a ``with`` block releases it.
+
+    Raises
+    ------
+    dynatex.errors.ArgumentTypeError
+        An option the mode does not take (the message names the mode's options).
+    dynatex.tiledb.MethodNotFoundError
+        The texture lacks the mode's method (the message names the modes it can play).
+
+    Examples
+    --------
+    >>> from importlib import resources
+    >>> db = resources.files("dynatex.player").joinpath("selftest.h5")
+    >>> with open_player(db, mode="tiles", size=(24, 40), backend="numpy") as p:
+    ...     p.next_frame().shape
+    (24, 40, 3)
+    >>> open_player(db, mode="lds", size=(24, 40))
+    Traceback (most recent call last):
+    ...
+    dynatex.errors.ArgumentTypeError: mode 'lds' takes no option 'size' (it plays at the size its model fixes; ...
+    """
+    if mode is None:
+        mode = mode_for(db, texture)
     return player_class(mode)(db, texture, **options)
 
 
@@ -28,10 +75,17 @@ __all__ = [
     "DeviceNotVerifiedError",
     "KernelBuildError",
     "MODES",
+    "MODE_ALIASES",
+    "MODE_METHOD",
+    "MODE_ORDER",
     "OpenCLUnavailableError",
     "Player",
+    "UnknownControlError",
+    "default_mode",
+    "describe",
     "devices",
     "list_devices",
+    "mode_for",
     "open_player",
     "player_class",
 ]

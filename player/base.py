@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import difflib
+import functools
+import inspect
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any, ClassVar
 
 import numpy as np
 
 from ..checks import MAX_SEED, Choice, Range, Text, check_int, check_out, check_seed
-from ..errors import InvalidArgumentError
+from ..errors import ArgumentTypeError, DynatexError, InvalidArgumentError
 from ..params import Param
 from ..tiledb import Texture, TileDB
 from .controls import Capabilities, Control, controls_of, document
@@ -55,6 +58,64 @@ COMMON_OPTIONS: tuple[Param, ...] = (
 _fallback_warned = False
 
 
+class UnknownControlError(DynatexError, AttributeError):
+    """An attribute a player does not have was set (a misspelt control); names the controls it has."""
+
+
+def _checked_init(init: Callable[..., None]) -> Callable[..., None]:
+    """``init`` of a mode class, wrapped: the outermost constructor call checks its keywords against
+    the mode's declarations (the library's argument error, naming the options, rather than Python's
+    TypeError) and, once it returns, seals the player (see :meth:`Player.__setattr__`)."""
+
+    @functools.wraps(init)
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        outer = "_sealed" not in self.__dict__
+        if outer:
+            object.__setattr__(self, "_sealed", False)
+            check_options(type(self), kwargs)
+        init(self, *args, **kwargs)
+        if outer:
+            object.__setattr__(self, "_sealed", True)
+
+    __init__._checked = True  # type: ignore[attr-defined]
+    return __init__
+
+
+@functools.cache
+def _keywords(cls: type) -> list[str]:
+    """The keywords mode class ``cls`` takes: the declared options, then any other keyword its
+    constructor names (a control's starting value, for example)."""
+    known = [p.name for p in (*COMMON_OPTIONS, *cls.options)]
+    for p in inspect.signature(cls.__init__).parameters.values():
+        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name != "self" and p.name not in known:
+            known.append(p.name)
+    return known
+
+
+def check_options(cls: type, options: dict[str, Any]) -> None:
+    """Refuse a keyword that mode class ``cls`` does not take, naming the ones it takes."""
+    known = _keywords(cls)
+    unknown = [name for name in options if name not in known]
+    if not unknown:
+        return
+    name = unknown[0]
+    hint = ""
+    if name == "size" and not cls.capabilities.any_size:
+        from .modes import MODES, player_class
+
+        any_size = [m for m in MODES if player_class(m).capabilities.any_size]
+        hint = f" (it plays at the size its model fixes; modes of any size: {', '.join(any_size)})"
+    elif name in cls.controls():
+        hint = f" ({name} is a control: set player.{name} after opening)"
+    else:
+        close = difflib.get_close_matches(name, [*known, *cls.controls()], 1)
+        if close and close[0] in cls.controls():
+            hint = f" (did you mean the control {close[0]!r}? set player.{close[0]} after opening)"
+        elif close:
+            hint = f" (did you mean {close[0]!r}?)"
+    raise ArgumentTypeError(f"mode {cls.mode!r} takes no option {name!r}{hint}; its options: {', '.join(known[1:])}")
+
+
 class Player:
     """Base class of the player modes.
 
@@ -90,6 +151,9 @@ class Player:
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         cls._controls = controls_of(cls)
+        init = cls.__dict__.get("__init__")
+        if init is not None and not getattr(init, "_checked", False):
+            cls.__init__ = _checked_init(init)
         if cls.__dict__.get("mode"):
             document(cls, COMMON_OPTIONS)
 
@@ -97,6 +161,24 @@ class Player:
     def controls(cls) -> dict[str, Control]:
         """The mode's live controls by name, in declaration order."""
         return cls._controls
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        """Once the player is open, setting an attribute it does not have (``player.sped = 2``)
+        raises :class:`UnknownControlError` naming its controls, instead of doing nothing."""
+        if (
+            name.startswith("_")
+            or not self.__dict__.get("_sealed", False)
+            or name in self.__dict__
+            or hasattr(type(self), name)
+        ):
+            object.__setattr__(self, name, value)
+            return
+        controls = list(self.controls())
+        close = difflib.get_close_matches(name, controls, 1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise UnknownControlError(
+            f"a {self.mode!r} player has no control {name!r}: {hint}its controls are {', '.join(controls) or 'none'}"
+        )
 
     def __init__(
         self,

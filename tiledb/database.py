@@ -25,6 +25,11 @@ from .errors import (
 from .frames import FrameStore
 from .source import SourceInfo
 
+#: the player modes a texture's ``default_mode`` attribute may name (``dynatex.player.MODES``; a test holds them equal)
+PLAYER_MODES = ("lds", "turnpoints", "tiles", "evolve", "mixture")
+#: the analysis method each player mode plays
+MODE_METHOD = {"lds": "lds", "turnpoints": "turnpoints", "tiles": "tiles", "evolve": "quilt", "mixture": "mixture"}
+
 
 class Texture:
     """One named texture of an open database: its source description and method data."""
@@ -36,6 +41,8 @@ class Texture:
         check = db._check
         self.source: SourceInfo = _source.read(check.group(group, schema.SOURCE), check)
         self.methods: tuple[str, ...] = tuple(m for m in CODECS if m in group)
+        #: the mode the analysis chose to play this texture (attribute ``default_mode``), or None
+        self.default_mode: str | None = self._read_default_mode(check)
         if self.has_frames:
             self.frames()  # the frame store's structure (dtype, shape, count); its data is read lazily
 
@@ -46,9 +53,24 @@ class Texture:
             f"{s.n_frames} frames, methods={list(self.methods)}>"
         )
 
+    def _read_default_mode(self, check: Checker) -> str | None:
+        mode = check.attr(self._group, "default_mode", str, None)
+        if mode is None:
+            return None
+        where = f"{self._group.name}@default_mode"
+        if mode not in PLAYER_MODES:
+            check.fail(where, f"{mode!r} is not a player mode (one of {', '.join(PLAYER_MODES)})")
+        if MODE_METHOD[mode] not in self.methods:
+            check.fail(where, f"mode {mode!r} plays {MODE_METHOD[mode]!r} data, which the texture lacks")
+        return mode
+
     @property
     def objpath(self) -> str:
         return self._group.name
+
+    def playable_modes(self) -> tuple[str, ...]:
+        """The player modes whose method this texture holds, in the order :data:`PLAYER_MODES`."""
+        return tuple(m for m in PLAYER_MODES if MODE_METHOD[m] in self.methods)
 
     def has(self, method: str) -> bool:
         return method in self.methods
@@ -58,9 +80,11 @@ class Texture:
         if method not in schema.METHODS:
             raise InvalidArgumentError(f"method must be one of {', '.join(schema.METHODS)}, not {method!r}")
         if method not in self.methods:
+            playable = self.playable_modes()
+            now = f"it plays now as --mode {' or --mode '.join(playable)}" if playable else "it holds no method"
             raise MethodNotFoundError(
-                f"texture {self.name!r} has no {method!r} data (it has: {', '.join(self.methods) or 'none'}); "
-                f"run `dynatex analyze --methods {method}`",
+                f"texture {self.name!r} has no {method!r} data ({now}; it has: {', '.join(self.methods) or 'none'}); "
+                f"to add {method!r}, run `dynatex analyze CLIP -o DB --name {self.name} --methods {method}`",
                 filename=self._db.filename,
                 objpath=self._group.name,
             )
@@ -201,7 +225,32 @@ class TileDB:
 
 
 def open_db(path: str | os.PathLike) -> TileDB:
-    """Open and validate a tile database for reading."""
+    """Open and validate a tile database for reading.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The database file (``dynatex analyze`` writes it).
+
+    Returns
+    -------
+    TileDB
+        The open database: ``textures`` names its textures, ``texture(name)`` gives one
+        (``methods``, ``playable_modes()``, ``default_mode``, ``source``); close it or use ``with``.
+
+    Raises
+    ------
+    TileDBError
+        A missing, corrupt or foreign file (the message names the file, the object and the problem).
+
+    Examples
+    --------
+    >>> from importlib import resources
+    >>> with open_db(resources.files("dynatex.player").joinpath("selftest.h5")) as db:
+    ...     tex = db.texture("selftest")
+    ...     db.textures, tex.methods, tex.playable_modes()[:2]
+    (('selftest',), ('lds', 'turnpoints', 'quilt', 'mixture', 'tiles'), ('lds', 'turnpoints'))
+    """
     return TileDB(path)
 
 

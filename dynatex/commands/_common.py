@@ -88,6 +88,8 @@ def add_param(group: Any, param: Param, *, dest: str | None = None, default: Any
     help_text = param.help().replace("%", "%%")
     if isinstance(param.kind, Flag):
         name, action = ("--no-" + flag[2:], "store_false") if param.default else (flag, "store_true")
+        if param.default:  # the switch turns off what the declaration describes
+            help_text = f"turn off what is on by default: {param.doc}".replace("%", "%%")
         group.add_argument(name, dest=dest, action=action, default=default, help=help_text)
         return
     metavar = (

@@ -10,12 +10,20 @@ state and in the class docstring without further code.
 from __future__ import annotations
 
 import argparse
+import os
 from typing import Any
 
+from ..errors import DynatexError
 from ..player import MODES
 from ..player.base import COMMON_OPTIONS
-from ..player.modes import player_class
+from ..player.modes import MODE_ALIASES, MODE_ORDER, mode_for, player_class
 from ._common import add_param
+
+#: the mode whose flags a command offers when it cannot read the texture to choose one
+FALLBACK_MODE = "lds"
+_DEFAULT_HELP = (
+    "the texture's: the mode its analysis chose, else the first of " + ", ".join(MODE_ORDER) + " whose method it holds"
+)
 
 
 def mode_from_argv(argv: list[str] | None, default: str) -> str:
@@ -37,26 +45,71 @@ def mode_from_argv(argv: list[str] | None, default: str) -> str:
     return default
 
 
-def add_mode_arguments(
-    parser: argparse.ArgumentParser, argv: list[str] | None, *, default: str, common: tuple[str, ...]
-) -> type:
-    """Add ``--mode`` and, for the mode ``argv`` names (else ``default``), the ``common`` player
-    parameters, the mode's options and its controls; return the mode's class.
+def mode_name(text: str) -> str:
+    """``--mode``'s type: a mode's alias becomes the mode (``quilt`` -> ``evolve``); anything else
+    stays as it is, for the parser's ``choices`` to report."""
+    return MODE_ALIASES.get(text, text)
 
-    An unknown ``--mode`` offers the default mode's flags: the parser's ``choices`` then report it.
+
+def guess_mode(argv: list[str] | None, command: str) -> str | None:
+    """The mode that plays the texture the command line names, when ``--mode`` is not given: the
+    first argument after ``command`` that is an HDF5 file is the database, ``--texture`` its
+    texture (see :func:`dynatex.player.modes.default_mode`); None when they cannot be read (the
+    command then reports why)."""
+    argv = list(argv or [])
+    rest = argv[argv.index(command) + 1 :] if command in argv else argv
+    texture = None
+    database = None
+    for i, arg in enumerate(rest):
+        if arg == "--":
+            break
+        if arg == "--texture" and i + 1 < len(rest):
+            texture = rest[i + 1]
+        elif arg.startswith("--texture="):
+            texture = arg.split("=", 1)[1]
+        elif database is None and not arg.startswith("-") and os.path.isfile(arg):
+            import h5py
+
+            if h5py.is_hdf5(arg):
+                database = arg
+    if database is None:
+        return None
+    try:
+        return mode_for(database, texture)
+    except (DynatexError, OSError):
+        return None
+
+
+def add_mode_arguments(
+    parser: argparse.ArgumentParser, argv: list[str] | None, *, default: str | None, common: tuple[str, ...]
+) -> type:
+    """Add ``--mode`` and, for the mode ``argv`` names, the ``common`` player parameters, the
+    mode's options and its controls; return the mode's class.
+
+    Without ``--mode`` the mode is ``default``, or with ``default=None`` the one that plays the
+    texture the command line names (:func:`guess_mode`; ``lds``'s flags when it cannot be read).
+    An unknown ``--mode`` offers lds's flags: the parser's ``choices`` then report it.
     """
-    mode = mode_from_argv(argv, default)
-    mode = mode if mode in MODES else default
+    command = parser.prog.split()[-1]
+    named = mode_from_argv(argv, None)
+    guessed = guess_mode(argv, command) if named is None and default is None else None
+    chosen = default if default is not None else guessed
+    mode = mode_name(named) if named is not None else chosen
+    mode = mode if mode in MODES else FALLBACK_MODE
     parser.add_argument(
         "--mode",
-        default=default,
+        type=mode_name,
+        default=chosen,
         choices=sorted(MODES),
-        help=f"player mode (default {default}); it decides the options and controls below",
+        help=f"player mode (default: {default or _DEFAULT_HELP}); it decides the options and controls below; "
+        f"{', '.join(f'{a} is an alias of {m}' for a, m in MODE_ALIASES.items())}",
     )
     parser.epilog = (
-        f"Each mode has its own options and controls; this help lists one mode's (--mode). "
-        f"See them with '{parser.prog} --mode MODE --help' for MODE in: {', '.join(sorted(MODES))}."
+        f"Each mode has its own options and controls; this help lists mode {mode}'s. "
+        f"See another's with '{parser.prog} --mode MODE --help' for MODE in: {', '.join(sorted(MODES))}."
     )
+    if named is not None or chosen is not None:  # a usage error points to the page of the mode in use
+        parser.help_command = f"{parser.prog} --mode {mode} --help"
     cls = player_class(mode)
     for param in COMMON_OPTIONS:
         if param.name in common:
@@ -73,6 +126,14 @@ def add_mode_arguments(
     return cls
 
 
+def resolve_args_mode(args: argparse.Namespace) -> str:
+    """``args.mode``, or when the command line named none and :func:`guess_mode` could not read the
+    database, the texture's mode (raising the database's own error, which says why)."""
+    if args.mode is None:
+        args.mode = mode_for(args.database, args.texture)
+    return args.mode
+
+
 def player_kwargs(args: argparse.Namespace, cls: type, *, common: tuple[str, ...]) -> dict[str, Any]:
     """The constructor keywords the command line gave for mode ``cls`` (common ones included)."""
     names = [p.name for p in COMMON_OPTIONS if p.name in common] + [p.name for p in cls.options]
@@ -86,4 +147,12 @@ def apply_controls(player: Any, args: argparse.Namespace) -> None:
             setattr(player, name, getattr(args, name))
 
 
-__all__ = ["add_mode_arguments", "apply_controls", "mode_from_argv", "player_kwargs"]
+__all__ = [
+    "add_mode_arguments",
+    "apply_controls",
+    "guess_mode",
+    "mode_from_argv",
+    "mode_name",
+    "player_kwargs",
+    "resolve_args_mode",
+]

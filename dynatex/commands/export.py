@@ -29,14 +29,17 @@ from ..player import MODES, open_player
 from ..player import tiles as _tiles
 from ..player.modes import player_class
 from ._common import Number, UsageError, size_arg
-from ._modes import add_mode_arguments, apply_controls, player_kwargs
+from ._modes import add_mode_arguments, apply_controls, player_kwargs, resolve_args_mode
 from ._output import MAX_FPS, MIN_FPS, OutputError
 
 #: Most frames a flipbook holds (a 64x64 grid).
 MAX_FRAMES = 4096
 #: Frames rendered when neither --frames nor a mode's own loop says how many.
 DEFAULT_FRAMES = 64
-DEFAULT_MODE = "tiles"
+#: None: the texture's own mode (the analysis's choice, else the first method it holds in mode order)
+DEFAULT_MODE = None
+#: the ``--packing`` rules (:func:`dynatex.analyzer.flipbook.choose_grid`)
+PACKINGS = ("packed", "pow2", "square")
 #: the parameters every mode shares that ``export`` offers (the atlas is RGB(A) by its own rule)
 COMMON = ("backend", "device", "seed")
 
@@ -46,7 +49,7 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "export",
         help="write a flipbook (atlas, motion vectors, engine sidecar) of a texture",
         description="Render frames of a texture and write a flipbook for Unity, Unreal or Godot: "
-        "NAME_COLSxROWS.png (colour atlas, sRGB, frames row-major from the top-left), "
+        "NAME_COLSxROWS.png (colour atlas, sRGB, frames row-major from the top-left, packed by --packing), "
         "NAME_COLSxROWS_mv.png (optical-flow motion vectors, RG centred at 128, linear) "
         "and NAME.json (grid, frame count, fps, motion-vector scale for Unity VFX Graph "
         "and Unreal, the loop's wrap discontinuity).",
@@ -77,23 +80,29 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "turnpoints loop resampled to --frames keeps the source's pace)",
     )
     p.add_argument(
+        "--packing",
+        choices=PACKINGS,
+        default="packed",
+        help="packed (default): no empty cell where the frame count allows (else the fewest), an atlas at most "
+        "2:1, cells of the frame's own aspect and size (any grid: Unity VFX Graph and particle sheets, Unreal "
+        "SubUV, Godot); pow2: a power-of-two atlas, each cell side the power of two nearest the frame's "
+        "(engines that need power-of-two textures); square: the near-square grid of frame-sized cells",
+    )
+    p.add_argument("--npot", action="store_const", dest="packing", const="square", help="the same as --packing square")
+    p.add_argument(
         "--grid",
         type=size_arg,
         default=None,
         metavar="COLSxROWS",
-        help="grid (default: the smallest power-of-two grid holding the frames)",
+        help="grid (default: by --packing)",
     )
     p.add_argument(
         "--tile",
         type=size_arg,
         default=None,
         metavar="WxH",
-        help="size of one frame in the atlas (default: each side the power of two nearest the frame's)",
-    )
-    p.add_argument(
-        "--npot",
-        action="store_true",
-        help="keep the frame size and use the smallest grid holding the frames (the atlas need not be a power of two)",
+        help="size of one frame in the atlas (default: the frame's, or with --packing pow2 each side the power "
+        "of two nearest the frame's)",
     )
     p.add_argument("--no-motion-vectors", action="store_true", help="write the colour atlas only")
     p.add_argument(
@@ -118,7 +127,7 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
 def render(args: argparse.Namespace) -> tuple[np.ndarray, str, float, np.ndarray | None]:
     """The flipbook's frames ``(N, H, W, 3)``, a description of the loop, the frame rate and the
     source frames (None when the database stores none)."""
-    cls = player_class(args.mode)
+    cls = player_class(resolve_args_mode(args))
     if args.blend is not None and not (args.loop and not cls.capabilities.native_loop):
         blended = sorted(m for m in MODES if not player_class(m).capabilities.native_loop)
         raise UsageError(f"--blend belongs to --loop with mode {', '.join(blended)}")
@@ -252,7 +261,15 @@ def run(args: argparse.Namespace) -> int:
     rows, cols = args.grid if args.grid is not None else (None, None)  # COLSxROWS, parsed like WxH
     tile = args.tile
     try:
-        grid = fb.choose_grid(len(frames), frames.shape[1:3], cols=cols, rows=rows, tile=tile, pow2=not args.npot)
+        grid = fb.choose_grid(
+            len(frames),
+            frames.shape[1:3],
+            cols=cols,
+            rows=rows,
+            tile=tile,
+            pow2=args.packing == "pow2",
+            packed=args.packing == "packed",
+        )
     except ValueError as exc:
         raise UsageError(f"--grid/--tile: {exc}") from None
     tiles = np.stack([fb.fit(f, grid.tile) for f in frames])
@@ -268,7 +285,10 @@ def run(args: argparse.Namespace) -> int:
         "height": int(frames.shape[1]),
         "seed": getattr(args, "seed", 0),
     }
-    doc = fb.sidecar(name, grid, fps=fps, loop=how, strength=strength, source=src, wrap=wrap, layout=args.layout)
+    packed = fb.packing(grid, frames.shape[1:3], args.packing)
+    doc = fb.sidecar(
+        name, grid, fps=fps, loop=how, strength=strength, source=src, wrap=wrap, layout=args.layout, packed=packed
+    )
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as exc:
@@ -286,7 +306,9 @@ def run(args: argparse.Namespace) -> int:
     _write_bytes(os.path.join(out, f"{name}.json"), (json.dumps(doc, indent=2, ensure_ascii=False) + "\n").encode())
     ratio = wrap.get("ratio")
     print(
-        f"wrote {grid.frames} frames ({grid.cols}x{grid.rows} grid of {grid.tile[1]}x{grid.tile[0]}) to {out}: "
+        f"wrote {grid.frames} frames ({grid.cols}x{grid.rows} grid of {grid.tile[1]}x{grid.tile[0]}, "
+        f"{packed['empty_cells']} empty cells, cell aspect {packed['cell_aspect']:g} for frames of "
+        f"{packed['frame_aspect']:g}) to {out}: "
         f"{', '.join(files.values())}, {name}.json; loop: {how}; wrap discontinuity "
         f"{'n/a' if ratio is None else f'{ratio:.2f}'} x the "
         f"{wrap['reference']}",

@@ -4,16 +4,25 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import Any
 
+import numpy as np
+
+from ..player.modes import describe as describe_modes
 from ..tiledb import open_db
+
+#: lists longer than this print as a summary (``--json`` has them whole)
+LONG_LIST = 8
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "info",
         help="describe a tile database",
-        description="List the textures of a tile "
-        "database, their source and the methods stored for each (validating them).",
+        description="List the textures of a tile database, their source, the methods stored for "
+        "each (validating them) and the player modes that play them, then each mode's options and "
+        "controls with their ranges and defaults. Long per-tile lists print as min/median/max; "
+        "--json gives everything in full.",
     )
     p.add_argument("database")
     p.add_argument("--json", action="store_true", help="machine-readable output")
@@ -42,7 +51,27 @@ def describe(path: str) -> dict:
             for method in tex.methods:
                 entry["methods"][method] = tex.read(method).describe()
             out["textures"][tex.name] = entry
+        offers = describe_modes(db)
+        for name, t in offers["textures"].items():
+            out["textures"][name]["modes"] = t["modes"]
+        out["modes"] = offers["modes"]
         return out
+
+
+def summary(value: Any) -> Any:
+    """A list longer than :data:`LONG_LIST` as its length and min/median/max (numbers) or its first
+    entries; other values as they are (``--json`` prints every value in full)."""
+    if not isinstance(value, list) or len(value) <= LONG_LIST:
+        return value
+    try:
+        nums = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):  # strings, ragged lists
+        nums = None
+    if nums is not None and nums.size:
+        lo, mid, hi = (f"{v:.6g}" for v in (nums.min(), np.median(nums), nums.max()))
+        shape = "x".join(map(str, nums.shape))
+        return f"{shape} values: min {lo}, median {mid}, max {hi} (all of them: --json)"
+    return f"{len(value)} entries: {', '.join(map(str, value[:3]))}, ... (all of them: --json)"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,10 +89,21 @@ def run(args: argparse.Namespace) -> int:
             f"\n[{name}] from {s['filename']} ({s['size'][0]}x{s['size'][1]}x{s['channels']}, "
             f"{s['frames']} frames at {s['fps']:g} fps), frames stored: {'yes' if t['frames_stored'] else 'no'}"
         )
+        modes = t.get("modes") or []
+        if modes:
+            print(f"  plays as: --mode {modes[0]} (default)" + "".join(f", --mode {m}" for m in modes[1:]))
         for method, info in t["methods"].items():
             print(f"  {method}:")
             for key, value in info.items():
+                value = summary(value)
                 if isinstance(value, float):
                     value = f"{value:.6g}"
                 print(f"    {key:24s} {value}")
+    for mode, m in d.get("modes", {}).items():
+        print(f"\nmode {mode} (plays {m['method']}): {m['summary']}")
+        for title, params in (("options", m["options"]), ("controls", m["controls"])):
+            if params:
+                print(f"  {title}:")
+                for name, p in params.items():
+                    print(f"    {name:14s} {p['rule']} (default {p['default']})")
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -13,14 +14,17 @@ from ..player import open_player
 from ..player import ratemap as _ratemap
 from ..player.modes import player_class
 from ._common import Number, Numbers, UsageError, positive_int
-from ._modes import add_mode_arguments, apply_controls, player_kwargs
+from ._modes import add_mode_arguments, apply_controls, player_kwargs, resolve_args_mode
 from ._output import MAX_FPS, MIN_FPS, FrameWriter
 
 RATE = Number(float, 0.0, _ratemap.MAX_RATE)
 FINITE = Number(float)
 #: the parameters every mode shares that ``play`` offers (pixel format: the output file decides)
 COMMON = ("backend", "device", "seed")
-DEFAULT_MODE = "lds"
+#: None: the texture's own mode (the analysis's choice, else the first method it holds in mode order)
+DEFAULT_MODE = None
+#: frames ``play`` renders when --frames is not given
+DEFAULT_FRAMES = 250
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
@@ -34,7 +38,13 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     )
     p.add_argument("database")
     p.add_argument("--texture", help="texture name (optional when the database holds one)")
-    p.add_argument("--frames", type=positive_int, default=250, help="frames to render, %(type)s (default 250)")
+    p.add_argument(
+        "--frames",
+        type=positive_int,
+        default=None,
+        help=f"frames to render, %(type)s (default {DEFAULT_FRAMES}; evolve holding its last frame: until the "
+        "clock reaches the source's last frame at --speed, at most that)",
+    )
     p.add_argument(
         "--fps",
         type=Number(float, MIN_FPS, MAX_FPS),
@@ -136,6 +146,15 @@ def _inpaint_size(args: argparse.Namespace) -> tuple[int, int]:
     return first.shape[0], first.shape[1]
 
 
+def default_frames(player) -> int:
+    """:data:`DEFAULT_FRAMES`, or fewer for a player whose clock stops: an evolve player that holds
+    the last source frame renders until its clock (at its speed, rate map aside) reaches it, plus
+    one frame of the held end, rather than seconds of a still frame."""
+    if player.mode == "evolve" and player.end == "hold" and player.speed > 0:
+        return min(DEFAULT_FRAMES, math.ceil((player.n_frames - 1) / player.speed) + 1)
+    return DEFAULT_FRAMES
+
+
 def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: float | None) -> int:
     """Frames of the --inpaint video with the --mask region synthesized (mode tiles)."""
     import cv2
@@ -152,7 +171,7 @@ def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: flo
         out = np.empty(player.shape, np.uint8)
         n = 0
         with writer:
-            while n < args.frames:
+            while n < (args.frames or DEFAULT_FRAMES):
                 ok, bgr = cap.read()
                 if not ok:
                     break
@@ -169,6 +188,7 @@ def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: flo
 
 
 def run(args: argparse.Namespace) -> int:
+    resolve_args_mode(args)
     writer = FrameWriter(args.output)
     if getattr(args, "inpaint", None):
         with open_player(args.database, args.texture, mode=args.mode, **player_options(args)) as player:
@@ -176,6 +196,8 @@ def run(args: argparse.Namespace) -> int:
             return _run_inpaint(args, player, writer, args.fps)
     with open_player(args.database, args.texture, mode=args.mode, **player_options(args)) as player:
         _apply(player, args)
+        if args.frames is None:
+            args.frames = default_frames(player)
         fps = args.fps if args.fps is not None else player.texture.source.fps
         writer.open(player.shape, fps)
         t0 = time.perf_counter()

@@ -73,9 +73,49 @@ def test_lds_export_matches_its_sidecar_and_the_played_frames(lds_db, tmp_path, 
     assert doc["motion_vectors"]["strength_tile_uv"] > 0 and doc["loop"] == "none"
 
 
-def test_default_atlas_is_a_power_of_two(lds_db, tmp_path, capsys):
-    doc, _ = _export(capsys, lds_db, "-o", tmp_path, "--mode", "lds", "--frames", "64", "--no-motion-vectors")
+def test_default_atlas_has_no_empty_cell_and_keeps_the_frame_aspect(lds_db, tmp_path, capsys):
+    doc, err = _export(capsys, lds_db, "-o", tmp_path, "--mode", "lds", "--frames", "10", "--no-motion-vectors")
+    # 10 frames of 32x24: 2 columns x 5 rows (64x120, within 2:1), not 4x4 with 6 black cells
+    assert (doc["cols"], doc["rows"], doc["tile_width"], doc["tile_height"]) == (2, 5, 32, 24)
+    assert doc["packing"] == {
+        "rule": "packed",
+        "cells": 10,
+        "empty_cells": 0,
+        "empty_share": 0.0,
+        "frame_aspect": round(32 / 24, 4),
+        "cell_aspect": round(32 / 24, 4),
+        "aspect_change": 0.0,
+        "cell_scale": [1.0, 1.0],
+        "power_of_two": False,
+    }
+    assert _read(tmp_path / "waves_2x5.png").shape == (120, 64, 3) and "0 empty cells" in err
+
+
+@pytest.mark.parametrize(
+    ("frames", "shape", "grid", "empty"),
+    [(80, (288, 352), (8, 10), 0), (79, (288, 352), (8, 10), 1), (7, (64, 64), (4, 2), 1), (1, (9, 700), (1, 1), 0)],
+)
+def test_packed_grid_wastes_no_cell_it_can_avoid(frames, shape, grid, empty):
+    g = fb.choose_grid(frames, shape, packed=True)
+    p = fb.packing(g, shape, "packed")
+    assert (g.cols, g.rows) == grid and p["empty_cells"] == empty
+    assert g.tile == shape and p["aspect_change"] == 0.0
+    ah, aw = g.atlas_shape
+    assert frames == 1 or max(ah, aw) <= 2 * min(ah, aw)  # never a strip when a 2:1 grid exists
+
+
+def test_packed_cells_shrink_with_their_aspect_to_fit_the_largest_atlas():
+    g = fb.choose_grid(400, (1080, 1920), packed=True)
+    assert max(g.atlas_shape) <= fb.MAX_ATLAS_SIDE and g.cols * g.rows == 400
+    assert abs(g.tile[1] / g.tile[0] - 1920 / 1080) < 0.01
+
+
+def test_pow2_atlas_is_a_power_of_two(lds_db, tmp_path, capsys):
+    doc, _ = _export(
+        capsys, lds_db, "-o", tmp_path, "--mode", "lds", "--frames", "64", "--packing", "pow2", "--no-motion-vectors"
+    )
     assert (doc["cols"], doc["rows"], doc["tile_width"], doc["tile_height"]) == (8, 8, 32, 32)
+    assert doc["packing"]["power_of_two"] and doc["packing"]["aspect_change"] == round(0.75 - 1, 4)
     assert _read(tmp_path / "waves_8x8.png").shape == (256, 256, 3) and not (tmp_path / "waves_8x8_mv.png").exists()
     assert "motion_vectors" not in doc["files"]
 
