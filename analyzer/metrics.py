@@ -9,6 +9,8 @@ for the definition, units, range and good/bad values of each measure.
 - Temporal discontinuity: :func:`temporal_discontinuity`, :func:`frame_step_ratio`.
 - Likeness to the source: :func:`spectrum_distance` (:func:`st_power_spectrum`),
   :func:`patch_coherence`, :func:`patch_completeness` (both at once: :func:`patch_distances`).
+- Double images (a crossfade showing two objects): :func:`double_image`,
+  :func:`double_image_level` (the source's own level), :func:`crossfade_double_image`.
 - Coverage and repetition: :func:`frame_coverage`, :func:`index_coverage`,
   :func:`repetition_lag` (:func:`repetition_profile`).
 - Repetition in space: :func:`lattice_prominence` (a cell lattice standing out),
@@ -32,6 +34,9 @@ __all__ = [
     "StabilityReport",
     "check_frames",
     "count_nonfinite",
+    "crossfade_double_image",
+    "double_image",
+    "double_image_level",
     "evaluate",
     "frame_coverage",
     "frame_step_ratio",
@@ -55,6 +60,8 @@ __all__ = [
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 _CHUNK = 32  # frames converted to float at a time (bounds memory on long clips)
 _THUMB = 32  # longer side of the thumbnails used by coverage and repetition
+_GHOST_SIDE = 96  # longer side of the luma frames the double-image measure compares
+_GHOST_MOVING = 0.75  # the moving region: pixels whose temporal deviation is above this quantile
 
 
 #: a positive finite number (eps, floors, tolerances)
@@ -517,6 +524,115 @@ def frame_step_ratio(output: np.ndarray, source: np.ndarray) -> float:
     output = check_frames(output, name="output", min_frames=2)
     source = check_frames(source, name="source", min_frames=2)
     return float(np.median(_step_rms(output))) / _median_step(source, "source")
+
+
+# -- double images ------------------------------------------------------------------------------
+def _ghost_setup(source: np.ndarray) -> tuple[tuple[int, int], np.ndarray, np.ndarray, float]:
+    """Thumbnail size, moving-region mask, the source's masked thumbnails ``(T, M)`` and their
+    median consecutive step (RMS over the region)."""
+    h, w = source.shape[1], source.shape[2]
+    s = min(1.0, _GHOST_SIDE / max(h, w))
+    size = max(1, round(h * s)), max(1, round(w * s))
+    g = _grey(source, size=size)
+    dev = g.std(axis=0)
+    moving = dev >= np.quantile(dev, _GHOST_MOVING)
+    rows = g[:, moving].astype(np.float64)
+    step = float(np.median(np.sqrt(np.mean(np.diff(rows, axis=0) ** 2, axis=1))))
+    if step <= 0:
+        raise InvalidArgumentError("source does not change from frame to frame (median frame difference is 0)")
+    return size, moving, rows, step
+
+
+def _ghost_ratios(frames: np.ndarray, size, moving, rows: np.ndarray, step: float) -> np.ndarray:
+    return _nearest_rms(_grey(frames, size=size)[:, moving].astype(np.float64), rows) / step
+
+
+def _nearest_rms(q: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """RMS distance of each row of ``q`` to its nearest row of ``rows``."""
+    rn = np.einsum("ij,ij->i", rows, rows)
+    out = np.empty(len(q))
+    for i in range(0, len(q), 256):
+        c = q[i : i + 256]
+        d2 = np.einsum("ij,ij->i", c, c)[:, None] + rn[None, :] - 2.0 * (c @ rows.T)
+        out[i : i + len(c)] = np.sqrt(np.maximum(d2.min(axis=1), 0.0) / rows.shape[1])
+    return out
+
+
+def double_image(output: np.ndarray, source: np.ndarray) -> np.ndarray:
+    """Per output frame: how far it is from the nearest source frame, in the source's moving
+    region, over the source's median frame step there.
+
+    0 for a frame the source holds; about 0.5 for the mean of two consecutive source frames
+    (the in-between a fractional speed shows, see :func:`double_image_level`); about 1 or more
+    for a crossfade of two frames whose moving parts sit in different places (two
+    half-transparent objects). Luma thumbnails (longer side 96 pixels); the moving region is
+    the quarter of the pixels with the largest temporal standard deviation in the source.
+
+    Examples
+    --------
+    >>> clip = np.zeros((16, 8, 32), np.uint8)
+    >>> for i in range(16):
+    ...     clip[i, :, 4 + i : 12 + i] = 200              # a bar 8 pixels wide moving 1 pixel a frame
+    >>> ghost = (clip[2].astype(float) + clip[10]) / 2    # frames 8 apart, crossfaded
+    >>> round(float(double_image(ghost[None], clip)[0]), 2), double_image(clip[:3], clip).tolist()
+    (1.5, [0.0, 0.0, 0.0])
+    """
+    output = check_frames(output, name="output")
+    source = check_frames(source, name="source", min_frames=2)
+    _same_size(output, source, "double_image")
+    return _ghost_ratios(output, *_ghost_setup(source))
+
+
+def double_image_level(source: np.ndarray, *, quantile: float = 0.9) -> float:
+    """The source's own double-image level: the ``quantile`` of :func:`double_image` over the
+    means of consecutive source frames (what playing the source between two frames shows).
+
+    Examples
+    --------
+    >>> clip = np.zeros((16, 8, 32), np.uint8)
+    >>> for i in range(16):
+    ...     clip[i, :, 4 + i : 12 + i] = 200
+    >>> round(double_image_level(clip), 2)
+    0.5
+    """
+    source = check_frames(source, name="source", min_frames=2)
+    q = Range(float, 0.0, 1.0).check("quantile", quantile)
+    mids = np.empty((source.shape[0] - 1,) + source.shape[1:], np.float32)
+    for i in range(len(mids)):
+        mids[i] = (source[i].astype(np.float32) + source[i + 1]) / 2
+    return float(np.quantile(_ghost_ratios(mids, *_ghost_setup(source)), q))
+
+
+def crossfade_double_image(source: np.ndarray, first: Any, second: Any, weight: Any) -> np.ndarray:
+    """:func:`double_image` of the crossfades ``(1 - weight) * source[first] + weight * source[second]``
+    (index and weight arrays of one shape), computed on the thumbnails without forming the frames.
+
+    Examples
+    --------
+    >>> clip = np.zeros((16, 8, 32), np.uint8)
+    >>> for i in range(16):
+    ...     clip[i, :, 4 + i : 12 + i] = 200
+    >>> crossfade_double_image(clip, [3, 2], [4, 10], [0.5, 0.5]).round(2).tolist()
+    [0.5, 1.5]
+    """
+    source = check_frames(source, name="source", min_frames=2)
+    a, b = np.asarray(first), np.asarray(second)
+    w = np.asarray(weight, np.float64)
+    if a.shape != b.shape or a.shape != w.shape:
+        raise InvalidArgumentError(f"first, second and weight must have one shape, not {a.shape}, {b.shape}, {w.shape}")
+    t = source.shape[0]
+    for name, idx in (("first", a), ("second", b)):
+        if idx.size and (idx.dtype.kind not in "ui" or idx.min() < 0 or idx.max() >= t):
+            raise InvalidArgumentError(f"{name} must be frame indices in 0..{t - 1}")
+    if a.size and (not np.isfinite(w).all() or w.min() < 0 or w.max() > 1):
+        raise InvalidArgumentError("weight must lie in [0, 1]")
+    _, _, rows, step = _ghost_setup(source)
+    return (
+        _nearest_rms(((1 - w.ravel())[:, None] * rows[a.ravel()] + w.ravel()[:, None] * rows[b.ravel()]), rows).reshape(
+            a.shape
+        )
+        / step
+    )
 
 
 # -- likeness: spatio-temporal power spectrum ------------------------------------------------
