@@ -55,7 +55,7 @@ def measure(clip: str, frames: int, tmp: str, seed: int) -> dict:
     name = os.path.basename(clip)
     for extra in ([], LOOSE):  # clips with too few turn points at the defaults: looser turn points
         cmd = [sys.executable, "-m", "dynatex", "analyze", clip, "-o", db, "--methods", "turnpoints", *extra]
-        r = subprocess.run(cmd, capture_output=True, text=True)
+        r = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp)
         if not r.returncode:
             name += "*" if extra else ""
             break

@@ -11,9 +11,12 @@ One method per mode, shared by ``dynatex export --loop``, ``dynatex play --loop`
   ``blend`` are crossfaded into the first ``blend``, so the frame after the last is the
   sequence's own next frame.
 
-With ``keep_pace`` the native loops repeat as many whole times as fit ``count`` frames at
-about the source's pace; without it (a flipbook) ``count`` frames hold one loop, at whatever
-pace that takes.
+With ``keep_pace`` the native loops play at the source's pace (one source frame per output
+frame, no blending) and repeat the whole number of times nearest ``count`` frames, so the
+frame count is that many loops, and the frames start after the cycle's smallest step (a
+rotation of the cycle: a video player that stalls at the wrap does so where least moves);
+without it (a flipbook) ``count`` frames hold one loop, at
+whatever pace that takes.
 """
 
 from __future__ import annotations
@@ -28,7 +31,8 @@ from ..errors import InvalidArgumentError
 def loop_frames(
     player, count: int | None = None, *, blend: int | None = None, keep_pace: bool = False
 ) -> tuple[np.ndarray, str, float]:
-    """``(frames, how, pace)``: ``count`` frames ``(N, H, W, C)`` forming a closed loop, a
+    """``(frames, how, pace)``: frames ``(N, H, W, C)`` forming a closed loop (``count`` of them,
+    or with ``keep_pace`` a native loop's whole loops nearest ``count``), a
     description of the method, and the source frames each output frame advances (1 at the
     source's pace).
 
@@ -42,15 +46,29 @@ def loop_frames(
     if blend is not None and native:
         raise InvalidArgumentError(f"blend belongs to modes without a loop of their own, not {player.mode}")
     if native:
-        if player.mode == "tiles":
-            return _tiles_loop(player, count, keep_pace)
-        return _swing_loop(player, count, keep_pace)
+        loop = _tiles_loop if player.mode == "tiles" else _swing_loop
+        frames, how, pace = loop(player, count, keep_pace)
+        if keep_pace and len(frames) > 2:
+            # a cycle: start the file after its smallest step, where a player's wrap shows least
+            frames = np.roll(frames, -(_smallest_step(frames) + 1), axis=0)
+            how += ", starting after its smallest step"
+        return frames, how, pace
     n = int(count) if count is not None else 64
     blend = blend if blend is not None else max(1, n // 4)
     if not 1 <= blend < n:
         raise InvalidArgumentError(f"blend {blend} must be 1 to fewer than the {n} frames")
     frames = crossfade_loop(render(player, n + blend), n, blend)
     return frames, f"crossfade of the last {blend} of {n + blend} frames into the first {blend}", 1.0
+
+
+def _smallest_step(frames: np.ndarray) -> int:
+    """``k`` whose step to frame ``k + 1`` (the last's to the first) is the smallest."""
+    n = len(frames)
+    steps = np.empty(n)
+    for k in range(n):
+        d = (frames[(k + 1) % n].astype(np.int64) - frames[k]).ravel()
+        steps[k] = float(np.dot(d, d))
+    return int(np.argmin(steps))
 
 
 def render(player, n: int) -> np.ndarray:
@@ -61,11 +79,15 @@ def render(player, n: int) -> np.ndarray:
     return frames
 
 
-def _repeats(length: float, count: int | None, keep_pace: bool) -> tuple[int, int]:
-    """(frames, whole loops in them)."""
+def _repeats(length: int, count: int | None, keep_pace: bool) -> tuple[int, int]:
+    """(frames, whole loops in them): ``count`` frames holding one loop, or with ``keep_pace``
+    the whole loops nearest ``count`` at one source frame per output frame."""
     if count is None:
-        return max(1, round(length)), 1
-    return int(count), max(1, round(count / length)) if keep_pace else 1
+        return length, 1
+    if keep_pace:
+        loops = max(1, round(count / length))
+        return length * loops, loops
+    return int(count), 1
 
 
 def _tiles_loop(player, count: int | None, keep_pace: bool) -> tuple[np.ndarray, str, float]:

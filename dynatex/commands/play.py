@@ -40,8 +40,9 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "--loop",
         action="store_true",
         help="the last frame leads into the first as any other step does (export --loop's method per "
-        "mode, kept at the source's pace: tiles and turnpoints repeat whole loops, other modes crossfade "
-        "a quarter of the frames across the wrap); the wrap discontinuity is reported",
+        "mode, at the source's pace: tiles and turnpoints play the whole number of tile loops or swings "
+        "nearest --frames, other modes crossfade a quarter of the frames across the wrap); the wrap "
+        "discontinuity is reported",
     )
     p.add_argument(
         "--fps",

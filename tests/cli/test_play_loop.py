@@ -61,7 +61,10 @@ def _wrap_and_steps(frames: np.ndarray, source: np.ndarray) -> tuple[float, np.n
 @pytest.mark.parametrize(("texture", "mode", "frames"), [("w", "tiles", 40), ("t", "turnpoints", 60)])
 def test_native_loops_close(db, tmp_path, capsys, texture, mode, frames):
     out, ratio = _play(capsys, db, "--texture", texture, "--mode", mode, "--frames", frames, "--loop", "-o", tmp_path)
-    assert len(out) == frames
+    with open_player(db, texture, mode=mode, backend="numpy") as p:
+        turns = p.model.turn_points if mode == "turnpoints" else None
+        length = p.loop_length if mode == "tiles" else 2 * int(np.diff(turns).max())
+    assert len(out) == length * max(1, round(frames / length))  # whole loops at the source's pace
     with open_player(db, texture, mode=mode, backend="numpy") as p:
         source = p.texture.frames().read()
     wrap, steps = _wrap_and_steps(out, source)
@@ -86,12 +89,14 @@ def test_python_api_loop(db):
     with open_player(db, "w", mode="tiles", backend="numpy", seed=3) as p:
         frames = np.stack(list(p.frames(30, loop=True)))
         length = p.loop_length
+    n = length * max(1, round(30 / length))
+    assert len(frames) == n
     with open_player(db, "w", mode="tiles", backend="numpy", seed=3) as p:
         p.epoch = 0
-        p.speed = length * max(1, round(30 / length)) / 30
-        again = np.stack(list(p.frames(31)))
-    assert np.array_equal(frames, again[:30])
-    assert np.array_equal(again[30], frames[0])  # the frame after the last is the first
+        again = np.stack(list(p.frames(n + 1)))
+    assert np.array_equal(again[n], again[0])  # the tile loop closes
+    start = next(k for k in range(n) if np.array_equal(again[k], frames[0]))
+    assert np.array_equal(frames, np.roll(again[:n], -start, axis=0))  # the same cycle, rotated
 
 
 def test_loop_refuses_speed_with_native_loops_and_inpaint(db, tmp_path, capsys):
