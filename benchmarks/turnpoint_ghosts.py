@@ -7,13 +7,13 @@ output frames in hybrid playback and report:
 - ``level``: the source's own double-image level (:func:`double_image_level`, 90th percentile);
 - ``p99`` and ``max``: :func:`double_image` of the output frames, and ``over``, the share of
   output frames above the level;
-- ``trans``: transitions the database holds; ``jumps``: jumps taken per 100 output frames;
-- ``cover``: share of the source's frames the output shows.
+- ``trans``: transitions the database holds; ``jumps``: jumps taken per 100 output frames
+  and ``cover``, the share of the source's frames shown, both over a ``--walk`` of 5000 frames.
 
 Run it with another installation's Python to measure that version (the measure itself is
 loaded from this checkout when the other version lacks it)::
 
-    python benchmarks/turnpoint_ghosts.py --frames 400
+    python benchmarks/turnpoint_ghosts.py --frames 300
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def _measures():
     return double_image, double_image_level
 
 
-def measure(clip: str, frames: int, tmp: str, seed: int) -> dict:
+def measure(clip: str, frames: int, tmp: str, seed: int, walk: int) -> dict:
     double_image, double_image_level = _measures()
     db = os.path.join(tmp, os.path.basename(clip) + ".h5")
     name = os.path.basename(clip)
@@ -72,9 +72,9 @@ def measure(clip: str, frames: int, tmp: str, seed: int) -> dict:
             done += n
         p.frame_index = 0
         n_trans = int(p.model.src.size)
-    # the walk again (same seed) for the indices and events, without rendering
+    # the walk again (same seed, ``walk`` frames) for the indices and events, without rendering
     with open_player(db, mode="turnpoints", seed=seed, backend="numpy") as p:
-        idx, ev = p.advance(frames)
+        idx, ev = p.advance(walk)
         jumps = int(np.count_nonzero(ev & 2))
     ratios = np.concatenate(ratios)
     level = double_image_level(source)
@@ -85,7 +85,7 @@ def measure(clip: str, frames: int, tmp: str, seed: int) -> dict:
         "max": float(ratios.max()),
         "over": float(np.mean(ratios > level)),
         "trans": n_trans,
-        "jumps": 100.0 * jumps / frames,
+        "jumps": 100.0 * jumps / walk,
         "cover": index_coverage(idx, len(source)),
     }
 
@@ -95,13 +95,14 @@ def main() -> None:
     ap.add_argument("clips", nargs="*")
     ap.add_argument("--frames", type=int, default=400)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--walk", type=int, default=5000, help="frames of the walk counted for jumps and coverage")
     args = ap.parse_args()
     found = glob.glob(os.path.join(CLIPS, "**", "*"), recursive=True)
     clips = args.clips or sorted(f for f in found if f.endswith((".avi", ".mp4", ".mov", ".gif")))
     print(f"{'clip':34} {'level':>6} {'p99':>6} {'max':>6} {'over':>6} {'trans':>5} {'jumps%':>6} {'cover':>6}")
     with tempfile.TemporaryDirectory() as tmp:
         for clip in clips:
-            m = measure(clip, args.frames, tmp, args.seed)
+            m = measure(clip, args.frames, tmp, args.seed, max(args.walk, args.frames))
             if "error" in m:
                 print(f"{m['clip']:34} not analysed: {m['error']}")
                 continue
