@@ -31,6 +31,7 @@ from ..checks import Range, check_frames, check_int
 from ..errors import ArgumentTypeError, InvalidArgumentError
 
 __all__ = [
+    "DoubleImages",
     "StabilityReport",
     "check_frames",
     "count_nonfinite",
@@ -527,35 +528,65 @@ def frame_step_ratio(output: np.ndarray, source: np.ndarray) -> float:
 
 
 # -- double images ------------------------------------------------------------------------------
-def _ghost_setup(source: np.ndarray) -> tuple[tuple[int, int], np.ndarray, np.ndarray, float]:
-    """Thumbnail size, moving-region mask, the source's masked thumbnails ``(T, M)`` and their
-    median consecutive step (RMS over the region)."""
-    h, w = source.shape[1], source.shape[2]
-    s = min(1.0, _GHOST_SIDE / max(h, w))
-    size = max(1, round(h * s)), max(1, round(w * s))
-    g = _grey(source, size=size)
-    dev = g.std(axis=0)
-    moving = dev >= np.quantile(dev, _GHOST_MOVING)
-    rows = g[:, moving].astype(np.float64)
-    step = float(np.median(np.sqrt(np.mean(np.diff(rows, axis=0) ** 2, axis=1))))
-    if step <= 0:
-        raise InvalidArgumentError("source does not change from frame to frame (median frame difference is 0)")
-    return size, moving, rows, step
+class DoubleImages:
+    """The double-image measure against one source, its thumbnails computed once (see
+    :func:`double_image`): ``of(frames)``, ``crossfades(first, second, weight)``, ``level()``."""
 
+    def __init__(self, source: np.ndarray) -> None:
+        source = check_frames(source, name="source", min_frames=2)
+        self.shape = source.shape[1:3]
+        h, w = self.shape
+        s = min(1.0, _GHOST_SIDE / max(h, w))
+        self.size = max(1, round(h * s)), max(1, round(w * s))
+        g = _grey(source, size=self.size)
+        dev = g.std(axis=0)
+        self.moving = dev >= np.quantile(dev, _GHOST_MOVING)
+        #: the source's thumbnails over the moving region, ``(T, M)``
+        self.rows = g[:, self.moving].astype(np.float64)
+        self._norms = np.einsum("ij,ij->i", self.rows, self.rows)
+        self.step = float(np.median(np.sqrt(np.mean(np.diff(self.rows, axis=0) ** 2, axis=1))))
+        if self.step <= 0:
+            raise InvalidArgumentError("source does not change from frame to frame (median frame difference is 0)")
 
-def _ghost_ratios(frames: np.ndarray, size, moving, rows: np.ndarray, step: float) -> np.ndarray:
-    return _nearest_rms(_grey(frames, size=size)[:, moving].astype(np.float64), rows) / step
+    def of(self, frames: np.ndarray) -> np.ndarray:
+        """The measure of each frame of ``frames`` (the source's frame size)."""
+        frames = check_frames(frames, name="output")
+        if frames.shape[1:3] != self.shape:
+            raise InvalidArgumentError(
+                f"double_image needs output and source of one frame size: {frames.shape[1:3]} vs {self.shape}"
+            )
+        return self._ratios(_grey(frames, size=self.size)[:, self.moving].astype(np.float64))
 
+    def crossfades(self, first: Any, second: Any, weight: Any) -> np.ndarray:
+        """The measure of ``(1 - weight) * source[first] + weight * source[second]`` (arrays of one shape)."""
+        a, b = np.asarray(first), np.asarray(second)
+        w = np.asarray(weight, np.float64)
+        if a.shape != b.shape or a.shape != w.shape:
+            raise InvalidArgumentError(
+                f"first, second and weight must have one shape, not {a.shape}, {b.shape}, {w.shape}"
+            )
+        t = len(self.rows)
+        for name, idx in (("first", a), ("second", b)):
+            if idx.size and (idx.dtype.kind not in "ui" or idx.min() < 0 or idx.max() >= t):
+                raise InvalidArgumentError(f"{name} must be frame indices in 0..{t - 1}")
+        if a.size and (not np.isfinite(w).all() or w.min() < 0 or w.max() > 1):
+            raise InvalidArgumentError("weight must lie in [0, 1]")
+        a, b, w = a.ravel(), b.ravel(), w.ravel()[:, None]
+        return self._ratios((1 - w) * self.rows[a] + w * self.rows[b]).reshape(np.shape(first))
 
-def _nearest_rms(q: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """RMS distance of each row of ``q`` to its nearest row of ``rows``."""
-    rn = np.einsum("ij,ij->i", rows, rows)
-    out = np.empty(len(q))
-    for i in range(0, len(q), 256):
-        c = q[i : i + 256]
-        d2 = np.einsum("ij,ij->i", c, c)[:, None] + rn[None, :] - 2.0 * (c @ rows.T)
-        out[i : i + len(c)] = np.sqrt(np.maximum(d2.min(axis=1), 0.0) / rows.shape[1])
-    return out
+    def level(self, quantile: float = 0.9) -> float:
+        """The ``quantile`` of the measure over the means of consecutive source frames."""
+        q = Range(float, 0.0, 1.0).check("quantile", quantile)
+        return float(np.quantile(self._ratios((self.rows[:-1] + self.rows[1:]) / 2), q))
+
+    def _ratios(self, q: np.ndarray) -> np.ndarray:
+        """RMS distance of each row of ``q`` to its nearest source row, over the median step."""
+        out = np.empty(len(q))
+        for i in range(0, len(q), 256):
+            c = q[i : i + 256]
+            d2 = np.einsum("ij,ij->i", c, c)[:, None] + self._norms[None, :] - 2.0 * (c @ self.rows.T)
+            out[i : i + len(c)] = np.sqrt(np.maximum(d2.min(axis=1), 0.0) / self.rows.shape[1])
+        return out / self.step
 
 
 def double_image(output: np.ndarray, source: np.ndarray) -> np.ndarray:
@@ -567,6 +598,7 @@ def double_image(output: np.ndarray, source: np.ndarray) -> np.ndarray:
     for a crossfade of two frames whose moving parts sit in different places (two
     half-transparent objects). Luma thumbnails (longer side 96 pixels); the moving region is
     the quarter of the pixels with the largest temporal standard deviation in the source.
+    :class:`DoubleImages` keeps one source's thumbnails for many calls.
 
     Examples
     --------
@@ -577,10 +609,7 @@ def double_image(output: np.ndarray, source: np.ndarray) -> np.ndarray:
     >>> round(float(double_image(ghost[None], clip)[0]), 2), double_image(clip[:3], clip).tolist()
     (1.5, [0.0, 0.0, 0.0])
     """
-    output = check_frames(output, name="output")
-    source = check_frames(source, name="source", min_frames=2)
-    _same_size(output, source, "double_image")
-    return _ghost_ratios(output, *_ghost_setup(source))
+    return DoubleImages(source).of(output)
 
 
 def double_image_level(source: np.ndarray, *, quantile: float = 0.9) -> float:
@@ -595,12 +624,7 @@ def double_image_level(source: np.ndarray, *, quantile: float = 0.9) -> float:
     >>> round(double_image_level(clip), 2)
     0.5
     """
-    source = check_frames(source, name="source", min_frames=2)
-    q = Range(float, 0.0, 1.0).check("quantile", quantile)
-    mids = np.empty((source.shape[0] - 1,) + source.shape[1:], np.float32)
-    for i in range(len(mids)):
-        mids[i] = (source[i].astype(np.float32) + source[i + 1]) / 2
-    return float(np.quantile(_ghost_ratios(mids, *_ghost_setup(source)), q))
+    return DoubleImages(source).level(quantile)
 
 
 def crossfade_double_image(source: np.ndarray, first: Any, second: Any, weight: Any) -> np.ndarray:
@@ -615,24 +639,7 @@ def crossfade_double_image(source: np.ndarray, first: Any, second: Any, weight: 
     >>> crossfade_double_image(clip, [3, 2], [4, 10], [0.5, 0.5]).round(2).tolist()
     [0.5, 1.5]
     """
-    source = check_frames(source, name="source", min_frames=2)
-    a, b = np.asarray(first), np.asarray(second)
-    w = np.asarray(weight, np.float64)
-    if a.shape != b.shape or a.shape != w.shape:
-        raise InvalidArgumentError(f"first, second and weight must have one shape, not {a.shape}, {b.shape}, {w.shape}")
-    t = source.shape[0]
-    for name, idx in (("first", a), ("second", b)):
-        if idx.size and (idx.dtype.kind not in "ui" or idx.min() < 0 or idx.max() >= t):
-            raise InvalidArgumentError(f"{name} must be frame indices in 0..{t - 1}")
-    if a.size and (not np.isfinite(w).all() or w.min() < 0 or w.max() > 1):
-        raise InvalidArgumentError("weight must lie in [0, 1]")
-    _, _, rows, step = _ghost_setup(source)
-    return (
-        _nearest_rms(((1 - w.ravel())[:, None] * rows[a.ravel()] + w.ravel()[:, None] * rows[b.ravel()]), rows).reshape(
-            a.shape
-        )
-        / step
-    )
+    return DoubleImages(source).crossfades(first, second, weight)
 
 
 # -- likeness: spatio-temporal power spectrum ------------------------------------------------

@@ -34,7 +34,7 @@ from ..checks import check_int
 from ..errors import ArgumentTypeError, InvalidArgumentError
 from ..tiledb.turnpoints import TurnPointModel
 from .lds import _stepper
-from .metrics import crossfade_double_image, double_image_level
+from .metrics import DoubleImages
 from .video import Clip, Progress, clip_frames
 
 #: Frames of the crossfade a jump is checked with (the player's default ``crossfade``).
@@ -307,10 +307,11 @@ def learn_turnpoints(
     allowed = None
     ghost_level = None
     if max_ghost > 0:
-        ghost_level = double_image_level(frames)
+        ghosts = DoubleImages(frames)
+        ghost_level = ghosts.level()
 
         def allowed(i: np.ndarray, j: np.ndarray) -> np.ndarray:
-            return crossfade_ghost(frames, i, j) <= max_ghost * ghost_level
+            return crossfade_ghost(ghosts, i, j) <= max_ghost * ghost_level
 
     src, dst, cost, fcost, prob, exit_frame = _transitions(
         d,
@@ -408,7 +409,11 @@ def _transitions(
         keep = finite & _is_local_min(f)
         if allowed is None:
             break
-        ks, kd = np.nonzero(keep & ~checked)
+        # only the few a frame could keep (the best ``max_per_frame``) are checked
+        f_keep = np.where(keep, f, np.inf)
+        top = np.zeros_like(keep)
+        np.put_along_axis(top, np.argsort(f_keep, axis=1)[:, :max_per_frame], True, axis=1)
+        ks, kd = np.nonzero(top & keep & ~checked)
         checked[ks, kd] = True
         bad = ~allowed(ks, kd)
         finite[ks[bad], kd[bad]] = False
@@ -476,35 +481,44 @@ def _transitions(
     )
 
 
-def _late_exit(keep, prob, f, finite, allowed, min_prob: float, tries: int = 8) -> None:
+def _late_exit(keep, prob, f, finite, allowed, min_prob: float, tries: int = 8, block: int = 16) -> None:
     """Keep the best clean backward jump of the latest frame that has one, when it lies beyond
-    every kept backward jump: refusing double-image jumps must not leave the clip's end unused."""
+    every kept backward jump: refusing double-image jumps must not leave the clip's end unused.
+    Rows are checked from the end in blocks (one ``allowed`` call each)."""
     t = keep.shape[0]
     back = np.flatnonzero((keep & np.tri(t, k=-1, dtype=bool)).any(axis=1))
     first = int(back.max()) + 1 if back.size else 0
-    for i in range(t - 2, first - 1, -1):
-        cands = np.flatnonzero(finite[i, :i])
-        if cands.size == 0:
+    for top in range(t - 2, first - 1, -block):
+        rows, cols = [], []
+        for i in range(top, max(first, top - block + 1) - 1, -1):
+            cands = np.flatnonzero(finite[i, :i])
+            cands = cands[np.argsort(f[i, cands])][:tries]
+            rows += [i] * cands.size
+            cols += cands.tolist()
+        if not rows:
             continue
-        cands = cands[np.argsort(f[i, cands])][:tries]
-        ok = np.flatnonzero(allowed(np.full(cands.size, i), cands))
-        if ok.size:
-            j = int(cands[ok[0]])
+        ok = np.flatnonzero(allowed(np.array(rows), np.array(cols)))
+        if ok.size:  # rows run from the latest down, each row's candidates best first
+            i, j = rows[ok[0]], cols[ok[0]]
             keep[i, j] = True
             prob[i, j] = max(prob[i, j], min_prob)
             return
 
 
-def crossfade_ghost(frames: np.ndarray, i: np.ndarray, j: np.ndarray, crossfade: int = CROSSFADE) -> np.ndarray:
+def crossfade_ghost(
+    frames: np.ndarray | DoubleImages, i: np.ndarray, j: np.ndarray, crossfade: int = CROSSFADE
+) -> np.ndarray:
     """The largest :func:`~dynatex.analyzer.metrics.double_image` of the crossfaded frames of
-    each jump ``i[k] -> j[k]``, played forward and mirrored backward, ``(len(i),)``.
+    each jump ``i[k] -> j[k]`` of ``frames`` (or a :class:`DoubleImages` of them), played
+    forward and mirrored backward, ``(len(i),)``.
 
     Forward, the jump shows ``j + m - 1`` faded in over ``i + m`` for ``m = 1..crossfade``
     (weight ``m / (crossfade + 1)``); backward (hybrid play's mirror ``j + 1 -> i + 1``),
     ``i + 2 - m`` over ``j + 1 - m``. Pairs that leave the clip are not shown by the player.
     """
+    ghosts = frames if isinstance(frames, DoubleImages) else DoubleImages(frames)
     i, j = np.asarray(i, np.int64), np.asarray(j, np.int64)
-    t = frames.shape[0]
+    t = len(ghosts.rows)
     if i.size == 0:
         return np.zeros(0)
     m = np.arange(1, crossfade + 1)
@@ -514,7 +528,7 @@ def crossfade_ghost(frames: np.ndarray, i: np.ndarray, j: np.ndarray, crossfade:
     w = np.concatenate([w, w], axis=1)
     ok = (old >= 0) & (old < t) & (new >= 0) & (new < t)
     ghost = np.zeros(old.shape)
-    ghost[ok] = crossfade_double_image(frames, old[ok], new[ok], w[ok])
+    ghost[ok] = ghosts.crossfades(old[ok], new[ok], w[ok])
     return ghost.max(axis=1)
 
 

@@ -133,10 +133,13 @@ class TurnPointPlayer(Player):
             return fwd, bwd
         s, d, p = model.src.astype(np.int64), model.dst.astype(np.int64), model.prob
         if self.playback == "hybrid":
-            ok = d <= self._z  # heading forward beyond the last turn: dead end
+            # Heading forward beyond the last turn: a dead end. From before the first turn (the
+            # lead-in, played once) back into it: the walk would replay it, for ever where the
+            # jump is certain (an exit frame's), never reaching the turns; mirrored alike.
+            ok = (d <= self._z) & (s >= self._a)
             fs, fd, fp = s[ok], d[ok], p[ok]
             bs, bd = d + 1, s + 1  # the mirror of i -> j played backward
-            ok = (bd >= self._a) & (bs < t)
+            ok = (bd >= self._a) & (bs < t) & (bs <= self._z)
             bs, bd, bp = bs[ok], bd[ok], p[ok]
         else:
             fs, fd, fp = s, d, p
