@@ -115,6 +115,14 @@ TURNPOINT_PARAMS = (
         "Drop transitions costlier than this many median frame steps.",
         "--tp-max-cost",
     ),
+    Param(
+        "max_ghost",
+        Range(float, 0.0, 1e6),
+        1.0,
+        "Drop transitions whose crossfade shows double images beyond this many times the source's own "
+        "level (0: keep them).",
+        "--tp-max-ghost",
+    ),
 )
 
 MIXTURE_PARAMS = (

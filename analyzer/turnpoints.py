@@ -18,6 +18,10 @@ Analysis, all on a ``T x T`` matrix of frame distances computed on reduced frame
    leads on; the last frame is a dead end), probabilities ``exp(-F / sigma)``, and only
    transitions that are local minima of ``F`` and probable enough kept. Forward-only play
    always jumps at ``exit_frame`` so it never runs off the end.
+4. No double images: a jump whose crossfade (the player's default, ``CROSSFADE`` frames,
+   played forward and mirrored backward) would show the moving parts twice is not taken:
+   every crossfaded frame must be within ``max_ghost`` times the source's own level of
+   :func:`~dynatex.analyzer.metrics.double_image` (that of the mean of two consecutive frames).
 """
 
 from __future__ import annotations
@@ -30,7 +34,13 @@ from ..checks import check_int
 from ..errors import ArgumentTypeError, InvalidArgumentError
 from ..tiledb.turnpoints import TurnPointModel
 from .lds import _stepper
+from .metrics import DoubleImages
 from .video import Clip, Progress, clip_frames
+
+#: Frames of the crossfade a jump is checked with (the player's default ``crossfade``).
+CROSSFADE = 4
+#: Rounds of refusing double-image jumps and looking again for the locally best ones.
+MAX_GHOST_ROUNDS = 6
 
 
 def frame_features(frames: np.ndarray, size: int = 64) -> np.ndarray:
@@ -186,6 +196,7 @@ def learn_turnpoints(
     min_prob: float = 0.02,
     max_per_frame: int = 3,
     max_cost: float = 2.0,
+    max_ghost: float = 1.0,
     progress: Progress | None = None,
 ) -> TurnPointModel:
     """Find turn points and transitions of a clip (the ``turnpoints`` method).
@@ -225,6 +236,10 @@ def learn_turnpoints(
     max_cost : float
         Transitions whose filtered cost exceeds ``max_cost`` times the median distance
         between consecutive frames are dropped (visibly wrong jumps), ``> 0``.
+    max_ghost : float
+        Transitions whose crossfade shows double images beyond ``max_ghost`` times the source's
+        own level (:func:`~dynatex.analyzer.metrics.double_image_level`) are not taken; 0 keeps
+        them all (no check).
     progress : callable(done, total), optional
         Called after each of the 4 stages.
 
@@ -268,6 +283,7 @@ def learn_turnpoints(
     min_prob = _float("min_prob", min_prob, 0.0, 1.0, hi_open=True)
     max_per_frame = _int("max_per_frame", max_per_frame, 1)
     max_cost = _float("max_cost", max_cost, 0.0, 1e6, lo_open=True)
+    max_ghost = _float("max_ghost", max_ghost, 0.0, 1e6)
     step = _stepper(progress, 4)
 
     feats = frame_features(frames, feature_size)
@@ -288,6 +304,15 @@ def learn_turnpoints(
     p_max[turns[0]] = p_max[turns[-1]] = 1.0
     step()
 
+    allowed = None
+    ghost_level = None
+    if max_ghost > 0:
+        ghosts = DoubleImages(frames)
+        ghost_level = ghosts.level()
+
+        def allowed(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+            return crossfade_ghost(ghosts, i, j) <= max_ghost * ghost_level
+
     src, dst, cost, fcost, prob, exit_frame = _transitions(
         d,
         taps=taps,
@@ -298,6 +323,7 @@ def learn_turnpoints(
         min_prob=min_prob,
         max_per_frame=max_per_frame,
         max_cost=max_cost * float(np.median(np.diag(d, 1))),
+        allowed=allowed,
     )
     step()
     consec = np.diag(d, 1)
@@ -317,12 +343,15 @@ def learn_turnpoints(
         "min_prob": min_prob,
         "max_per_frame": max_per_frame,
         "max_cost": max_cost,
+        "max_ghost": max_ghost,
         "distance_correlation": corr,
         "distance_rel_error": rel,
         "median_step": float(np.median(consec)),
         "n_turn_points": int(turns.size),
         "n_transitions": int(src.size),
     }
+    if ghost_level is not None:
+        info["ghost_level"] = ghost_level
     model = TurnPointModel(
         sym_raw=sym_raw,
         symmetry=sym,
@@ -352,6 +381,7 @@ def _transitions(
     min_prob: float,
     max_per_frame: int,
     max_cost: float,
+    allowed=None,
 ):
     t = d.shape[0]
     dp = filtered_distances(d, taps)
@@ -371,11 +401,29 @@ def _transitions(
     cost_p /= scale
     dead = 1e3
     cost_p[~finite] = np.inf
-    f, m = future_costs(cost_p, alpha, dead)
+    checked = np.zeros((t, t), bool)
+    for _ in range(MAX_GHOST_ROUNDS):
+        # Jumps that ``allowed`` refuses are impossible: their neighbours may become the local
+        # minima, and the future costs must not count on them.
+        f, m = future_costs(cost_p, alpha, dead)
+        keep = finite & _is_local_min(f)
+        if allowed is None:
+            break
+        # only the few a frame could keep (the best ``max_per_frame``) are checked
+        f_keep = np.where(keep, f, np.inf)
+        top = np.zeros_like(keep)
+        np.put_along_axis(top, np.argsort(f_keep, axis=1)[:, :max_per_frame], True, axis=1)
+        ks, kd = np.nonzero(top & keep & ~checked)
+        checked[ks, kd] = True
+        bad = ~allowed(ks, kd)
+        finite[ks[bad], kd[bad]] = False
+        cost_p[ks[bad], kd[bad]] = np.inf
+        keep &= finite
+        if not bad.any():
+            break
     # Per-visit probabilities: the continuation (cost alpha m[i+1]) competes with the jumps.
     cont = np.full(t, np.inf)
     cont[:-1] = alpha * m[1:]
-    keep = finite & _is_local_min(f)
     # Locally best, then the best few per frame.
     f_keep = np.where(keep, f, np.inf)
     order = np.argsort(f_keep, axis=1)[:, :max_per_frame]
@@ -389,17 +437,27 @@ def _transitions(
     denom = ew.sum(axis=1) + ec
     prob = np.where(keep, ew / np.where(denom > 0, denom, 1)[:, None], 0.0)
     keep &= prob >= min_prob
+    if allowed is not None:
+        _late_exit(keep, prob, f, finite, allowed, min_prob)
     # Forward play must never run off the end: find the exit frame, the last frame with a
     # kept backward jump, drop everything beyond it and always jump there.
     while True:
         back = keep & (jj < ii)
         rows = np.flatnonzero(back.any(axis=1))
         if rows.size == 0:
-            # No backward jump survived the thresholds: keep the single best one.
+            # No backward jump survived the thresholds: keep the single best one (the best
+            # of the few cheapest that pass ``allowed``, else the cheapest).
             fb = np.where(finite & (jj < ii), f, np.inf)
             i, j = np.unravel_index(int(np.argmin(fb)), fb.shape)
             if not np.isfinite(fb[i, j]):
                 return (*empty, t - 1)
+            if allowed is not None:
+                order = np.argsort(fb, axis=None)[:64]
+                order = order[np.isfinite(fb.ravel()[order])]
+                ci, cj = np.unravel_index(order, fb.shape)
+                ok = np.flatnonzero(allowed(ci, cj))
+                if ok.size:
+                    i, j = ci[ok[0]], cj[ok[0]]
             keep[i, j] = True
             prob[i, j] = max(prob[i, j], min_prob)
             continue
@@ -421,6 +479,57 @@ def _transitions(
         np.clip(prob[src, dst], 0.0, 1.0),
         exit_frame,
     )
+
+
+def _late_exit(keep, prob, f, finite, allowed, min_prob: float, tries: int = 8, block: int = 16) -> None:
+    """Keep the best clean backward jump of the latest frame that has one, when it lies beyond
+    every kept backward jump: refusing double-image jumps must not leave the clip's end unused.
+    Rows are checked from the end in blocks (one ``allowed`` call each)."""
+    t = keep.shape[0]
+    back = np.flatnonzero((keep & np.tri(t, k=-1, dtype=bool)).any(axis=1))
+    first = int(back.max()) + 1 if back.size else 0
+    for top in range(t - 2, first - 1, -block):
+        rows, cols = [], []
+        for i in range(top, max(first, top - block + 1) - 1, -1):
+            cands = np.flatnonzero(finite[i, :i])
+            cands = cands[np.argsort(f[i, cands])][:tries]
+            rows += [i] * cands.size
+            cols += cands.tolist()
+        if not rows:
+            continue
+        ok = np.flatnonzero(allowed(np.array(rows), np.array(cols)))
+        if ok.size:  # rows run from the latest down, each row's candidates best first
+            i, j = rows[ok[0]], cols[ok[0]]
+            keep[i, j] = True
+            prob[i, j] = max(prob[i, j], min_prob)
+            return
+
+
+def crossfade_ghost(
+    frames: np.ndarray | DoubleImages, i: np.ndarray, j: np.ndarray, crossfade: int = CROSSFADE
+) -> np.ndarray:
+    """The largest :func:`~dynatex.analyzer.metrics.double_image` of the crossfaded frames of
+    each jump ``i[k] -> j[k]`` of ``frames`` (or a :class:`DoubleImages` of them), played
+    forward and mirrored backward, ``(len(i),)``.
+
+    Forward, the jump shows ``j + m - 1`` faded in over ``i + m`` for ``m = 1..crossfade``
+    (weight ``m / (crossfade + 1)``); backward (hybrid play's mirror ``j + 1 -> i + 1``),
+    ``i + 2 - m`` over ``j + 1 - m``. Pairs that leave the clip are not shown by the player.
+    """
+    ghosts = frames if isinstance(frames, DoubleImages) else DoubleImages(frames)
+    i, j = np.asarray(i, np.int64), np.asarray(j, np.int64)
+    t = len(ghosts.rows)
+    if i.size == 0:
+        return np.zeros(0)
+    m = np.arange(1, crossfade + 1)
+    w = np.broadcast_to(m / (crossfade + 1), (i.size, crossfade))
+    old = np.concatenate([i[:, None] + m, j[:, None] + 1 - m], axis=1)
+    new = np.concatenate([j[:, None] + m - 1, i[:, None] + 2 - m], axis=1)
+    w = np.concatenate([w, w], axis=1)
+    ok = (old >= 0) & (old < t) & (new >= 0) & (new < t)
+    ghost = np.zeros(old.shape)
+    ghost[ok] = ghosts.crossfades(old[ok], new[ok], w[ok])
+    return ghost.max(axis=1)
 
 
 def _is_local_min(f: np.ndarray) -> np.ndarray:

@@ -269,9 +269,19 @@ class Player:
         or None when ``out`` is complete. Every mode implements this."""
         raise NotImplementedError
 
-    def frames(self, count: int) -> Iterator[np.ndarray]:
-        """Yield ``count`` new frames (each a fresh array)."""
+    def frames(self, count: int, *, loop: bool = False) -> Iterator[np.ndarray]:
+        """Yield ``count`` new frames (each a fresh array).
+
+        With ``loop`` the frames form a closed loop, the last leading into the first as any
+        other step does (the mode's method: :mod:`dynatex.player.loop`; tiles and turnpoints
+        yield the whole number of their loops nearest ``count``, at the source's pace); they
+        are rendered before the first is yielded."""
         count = check_int("count", count, 0)
+        if loop and count:
+            from .loop import loop_frames
+
+            yield from loop_frames(self, count, keep_pace=True)[0]
+            return
         for _ in range(count):
             yield self.next_frame()
 

@@ -6,7 +6,9 @@ playback reverses with an adaptive probability (the seed's eq. 7: it starts at h
 maximum, drops by ``increment`` after a turn and rises by ``increment`` after a pass, so
 the whole clip gets used); elsewhere it may take a transition. The outermost turn points
 always reverse when playback heads outward, and forward-only playback always jumps at the
-exit frame, so the walk never reaches a dead end.
+exit frame, so the walk never reaches a dead end. Hybrid playback takes no jump that starts
+before the first turn point heading forward (or beyond the last heading backward): it would
+replay that lead-in, for ever where the jump is certain.
 
 Frames are kept in memory on the device: ``T * ceil(H*W*3 / 64) * 64`` bytes (grey clips
 are expanded to RGB), e.g. 7.4 MB for the 43-frame 240x240 pendulum clip, 321 MB for 116
@@ -133,10 +135,13 @@ class TurnPointPlayer(Player):
             return fwd, bwd
         s, d, p = model.src.astype(np.int64), model.dst.astype(np.int64), model.prob
         if self.playback == "hybrid":
-            ok = d <= self._z  # heading forward beyond the last turn: dead end
+            # Heading forward beyond the last turn: a dead end. From before the first turn (the
+            # lead-in, played once) back into it: the walk would replay it, for ever where the
+            # jump is certain (an exit frame's), never reaching the turns; mirrored alike.
+            ok = (d <= self._z) & (s >= self._a)
             fs, fd, fp = s[ok], d[ok], p[ok]
             bs, bd = d + 1, s + 1  # the mirror of i -> j played backward
-            ok = (bd >= self._a) & (bs < t)
+            ok = (bd >= self._a) & (bs < t) & (bs <= self._z)
             bs, bd, bp = bs[ok], bd[ok], p[ok]
         else:
             fs, fd, fp = s, d, p

@@ -19,14 +19,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 
 import numpy as np
 
 from ..player import MODES, open_player
-from ..player import tiles as _tiles
+from ..player.loop import loop_frames
+from ..player.loop import render as render_frames
 from ..player.modes import player_class
 from ._common import Number, UsageError, size_arg
 from ._modes import add_mode_arguments, apply_controls, player_kwargs, resolve_args_mode
@@ -141,71 +141,14 @@ def render(args: argparse.Namespace) -> tuple[np.ndarray, str, float, np.ndarray
         apply_controls(player, args)
         args.texture_name = player.texture.name
         if not args.loop:
-            n = args.frames or DEFAULT_FRAMES
-            return _play(player, n), "none", fps, source
-        if cls.capabilities.native_loop:
-            frames, how, pace = (
-                _tiles_loop(player, args.frames) if args.mode == "tiles" else _swing_loop(player, source, args.frames)
-            )
-            if args.fps is None:
-                fps *= pace
-            return frames, how, fps, source
-        else:
-            n = args.frames or DEFAULT_FRAMES
-            blend = args.blend if args.blend is not None else max(1, n // 4)
-            if blend >= n:
-                raise UsageError(f"--blend {blend} must be fewer than the {n} frames")
-            frames = _crossfade_loop(_play(player, n + blend), n, blend)
-            how = f"crossfade of the last {blend} of {n + blend} frames into the first {blend}"
+            return render_frames(player, args.frames or DEFAULT_FRAMES), "none", fps, source
+        n = args.frames if args.frames is not None or cls.capabilities.native_loop else DEFAULT_FRAMES
+        if args.blend is not None and args.blend >= n:
+            raise UsageError(f"--blend {args.blend} must be fewer than the {n} frames")
+        frames, how, pace = loop_frames(player, n, blend=args.blend)
+        if args.fps is None:
+            fps /= pace
         return frames, how, fps, source
-
-
-def _play(player, n: int) -> np.ndarray:
-    frames = np.empty((n,) + player.shape, np.uint8)
-    for k in range(n):
-        player.next_frame(out=frames[k])
-    return frames
-
-
-def _tiles_loop(player, n: int | None) -> tuple[np.ndarray, str, float]:
-    length = player.loop_length
-    n = n or length
-    speed = length / n
-    hi = _tiles.SPEED_RANGE[1]
-    if not speed <= hi:
-        raise UsageError(
-            f"--frames {n}: a tiles loop of {length} frames needs at least "
-            f"{math.ceil(length / hi)} frames (speed at most {hi:g})"
-        )
-    player.epoch = 0  # fixed time offsets: the output repeats with the tile loop
-    player.speed = speed
-    return _play(player, n), f"tile loop of {length} frames at speed {speed:.4g}", 1 / speed
-
-
-def _swing_loop(player, source: np.ndarray | None, n: int | None) -> tuple[np.ndarray, str, float]:
-    if source is None:
-        raise UsageError("a turnpoints loop needs the stored source frames")
-    turns = np.asarray(player.model.turn_points)
-    gaps = np.diff(turns)
-    i = int(np.argmax(gaps))
-    a, b = int(turns[i]), int(turns[i + 1])
-    period = 2 * (b - a)
-    n = n or period
-    pos = np.arange(n) * (period / n)
-    pos = np.where(pos <= b - a, a + pos, a + period - pos)  # a -> b -> back toward a
-    lo = np.floor(pos).astype(int)
-    hi = np.minimum(lo + 1, len(source) - 1)
-    w = (pos - lo)[:, None, None, None]
-    frames = np.rint((1 - w) * source[lo] + w * source[hi]).astype(np.uint8)
-    return frames, f"swing between turn points {a} and {b} and back ({period} source frames)", n / period
-
-
-def _crossfade_loop(frames: np.ndarray, n: int, blend: int) -> np.ndarray:
-    """``frames[:n]`` with ``frames[n:n + blend]`` faded into its start: frame ``n`` follows frame ``n - 1``."""
-    out = frames[:n].copy()
-    w = (np.arange(1, blend + 1) / (blend + 1))[:, None, None, None]
-    out[:blend] = np.rint((1 - w) * frames[n : n + blend] + w * frames[:blend]).astype(np.uint8)
-    return out
 
 
 # -- the bundle ---------------------------------------------------------------------------------------

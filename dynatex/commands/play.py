@@ -12,6 +12,7 @@ import numpy as np
 
 from ..player import open_player
 from ..player import ratemap as _ratemap
+from ..player.loop import loop_frames
 from ..player.modes import player_class
 from ._common import Number, Numbers, UsageError, positive_int
 from ._modes import add_mode_arguments, apply_controls, player_kwargs, resolve_args_mode
@@ -44,6 +45,14 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         default=None,
         help=f"frames to render, %(type)s (default {DEFAULT_FRAMES}; evolve holding its last frame: until the "
         "clock reaches the source's last frame at --speed, at most that)",
+    )
+    p.add_argument(
+        "--loop",
+        action="store_true",
+        help="the last frame leads into the first as any other step does (export --loop's method per "
+        "mode, at the source's pace: tiles and turnpoints play the whole number of tile loops or swings "
+        "nearest --frames, other modes crossfade a quarter of the frames across the wrap); the wrap "
+        "discontinuity is reported",
     )
     p.add_argument(
         "--fps",
@@ -187,13 +196,46 @@ def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: flo
     return 0
 
 
+def _run_loop(args: argparse.Namespace, writer: FrameWriter) -> int:
+    """``--loop``: the frames of :func:`dynatex.player.loop.loop_frames`, and the wrap reported."""
+    from .export import wrap_report
+
+    if player_class(args.mode).capabilities.native_loop and getattr(args, "speed", None) is not None:
+        raise UsageError(f"--speed is set by --loop with mode {args.mode} (whole loops at the source's pace)")
+    t0 = time.perf_counter()
+    with open_player(args.database, args.texture, mode=args.mode, **player_options(args)) as player:
+        _apply(player, args)
+        fps = args.fps if args.fps is not None else player.texture.source.fps
+        frames, how, _ = loop_frames(player, args.frames, keep_pace=True)
+        source = player.texture.frames().read() if player.texture.has_frames else None
+    if source is not None and source.shape[-1] == 1:
+        source = np.repeat(source, 3, axis=-1)
+    wrap = wrap_report(frames, source)
+    writer.open(frames.shape[1:], fps)
+    with writer:
+        for frame in frames:
+            writer.write(frame)
+    dt = time.perf_counter() - t0
+    ratio = wrap["ratio"]
+    print(
+        f"wrote {len(frames)} frames ({frames.shape[2]}x{frames.shape[1]}) to {args.output} in {dt:.2f} s; "
+        f"loop: {how}; wrap discontinuity {'n/a' if ratio is None else f'{ratio:.2f}'} x the {wrap['reference']}",
+        file=sys.stderr,
+    )
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     resolve_args_mode(args)
     writer = FrameWriter(args.output)
+    if getattr(args, "inpaint", None) and args.loop:
+        raise UsageError("--loop does not apply to --inpaint (the frames follow the inpainted video)")
     if getattr(args, "inpaint", None):
         with open_player(args.database, args.texture, mode=args.mode, **player_options(args)) as player:
             _apply(player, args)
             return _run_inpaint(args, player, writer, args.fps)
+    if args.loop:
+        return _run_loop(args, writer)
     with open_player(args.database, args.texture, mode=args.mode, **player_options(args)) as player:
         _apply(player, args)
         if args.frames is None:

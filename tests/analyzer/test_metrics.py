@@ -279,3 +279,41 @@ def test_lattice_correlation_sees_a_tile_lattice_and_not_noise():
     assert 0.3 < m.lattice_correlation(mixed, (12, 10))[0] < 0.7
     with pytest.raises(ValueError, match="period 60x10 must be smaller"):
         m.lattice_correlation(tiled, (60, 10))
+
+
+# -- double images ----------------------------------------------------------------------------------
+def _moving_disc(t: int = 30, size: int = 48) -> np.ndarray:
+    """A bright disc 12 pixels wide crossing a noisy background, 1.5 pixels a frame."""
+    rng = np.random.default_rng(3)
+    yy, xx = np.mgrid[0:size, 0:size]
+    bg = rng.integers(60, 90, (size, size))
+    out = np.empty((t, size, size), np.uint8)
+    for i in range(t):
+        disc = (xx - 4 - 1.5 * i) ** 2 + (yy - size / 2) ** 2 < 36
+        out[i] = np.where(disc, 230, bg)
+    return out
+
+
+def test_double_image_zero_on_source_frames_and_high_on_far_crossfades():
+    clip = _moving_disc()
+    assert np.all(m.double_image(clip, clip) == 0)
+    level = m.double_image_level(clip)
+    assert 0.3 < level < 0.8  # in-betweens of consecutive frames: about half a step
+    near = (clip[10].astype(np.float32) + clip[11]) / 2
+    far = (clip[5].astype(np.float32) + clip[20]) / 2  # two half-transparent discs
+    ghost = m.double_image(np.stack([near, far]), clip)
+    assert ghost[0] <= level + 1e-9
+    assert ghost[1] > 2 * level
+
+
+def test_crossfade_double_image_matches_the_formed_frames():
+    clip = _moving_disc()
+    a, b, w = np.array([3, 8, 20]), np.array([4, 25, 2]), np.array([0.5, 0.25, 0.8])
+    formed = (1 - w)[:, None, None] * clip[a] + w[:, None, None] * clip[b]
+    assert np.allclose(m.crossfade_double_image(clip, a, b, w), m.double_image(formed, clip), atol=1e-6)
+    with pytest.raises(ValueError, match="first must be frame indices in 0..29"):
+        m.crossfade_double_image(clip, [30], [1], [0.5])
+    with pytest.raises(ValueError, match=r"weight must lie in \[0, 1\]"):
+        m.crossfade_double_image(clip, [1], [2], [1.5])
+    with pytest.raises(ValueError, match="does not change"):
+        m.double_image_level(np.zeros((4, 8, 8), np.uint8))

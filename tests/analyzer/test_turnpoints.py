@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from dynatex.analyzer import load_clip
+from dynatex.analyzer.metrics import double_image_level
 from dynatex.analyzer.turnpoints import (
+    crossfade_ghost,
     distance_matrix,
     filtered_distances,
     frame_features,
@@ -92,6 +94,23 @@ def test_transitions_jump_by_a_period_and_never_dead_end(pendulum):
         assert np.all(np.diff(model.prob[sel][order]) <= 1e-12)
 
 
+def test_jumps_whose_crossfade_shows_double_images_are_not_taken():
+    # two swings of different amplitude: a jump between them crossfades the bob at two places
+    a, _ = pendulum_clip(60, 48, amplitude=0.6)
+    b, _ = pendulum_clip(60, 48, amplitude=0.45, phase=10.3, seed=1)
+    frames = np.concatenate([a, b])
+    level = double_image_level(frames)
+    loose = learn_turnpoints(frames, max_ghost=0)
+    assert "ghost_level" not in loose.info
+    assert crossfade_ghost(frames, loose.src, loose.dst).max() > level  # the check has work to do
+    model = learn_turnpoints(frames)
+    assert model.info["ghost_level"] == pytest.approx(level)
+    assert model.src.size > 10
+    assert crossfade_ghost(frames, model.src, model.dst).max() <= level
+    e = model.exit_frame  # forward play still never runs off the end
+    assert np.any((model.src == e) & (model.dst < e)) and model.src.max() <= e
+
+
 def test_filtered_distances_average_along_diagonals():
     d = np.arange(100, dtype=float).reshape(10, 10)
     f = filtered_distances(d, 1)  # taps -1, 0 with weights 1/2, 1/2
@@ -117,6 +136,9 @@ def test_real_pendulum_turn_points(clips_dir):
     # the clip's swing slows to a stop (smallest consecutive differences) near frames 1-2, 12, 22-23, 33
     assert model.turn_points.tolist() == [2, 12, 23, 33]
     assert model.info["distance_correlation"] > 0.95
+    # every jump's crossfade within the clip's own level of double images; the clip's end still used
+    assert crossfade_ghost(clip.frames, model.src, model.dst).max() <= model.info["ghost_level"]
+    assert model.exit_frame >= 40
 
 
 def test_plot_writes_png(tmp_path, pendulum):
@@ -137,6 +159,7 @@ def test_plot_writes_png(tmp_path, pendulum):
         ({"sigma": -1}, "sigma must be in"),
         ({"min_pairs": 9}, "min_pairs must be in 1..n=4"),
         ({"max_cost": 0}, "max_cost must be in"),
+        ({"max_ghost": -1}, "max_ghost must be in"),
     ],
 )
 def test_bad_parameters(pendulum, kwargs, match):

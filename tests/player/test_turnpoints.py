@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dynatex.analyzer import load_clip
-from dynatex.analyzer.metrics import index_coverage, temporal_discontinuity
+from dynatex.analyzer.metrics import double_image, double_image_level, index_coverage, temporal_discontinuity
 from dynatex.analyzer.turnpoints import learn_turnpoints, pendulum_clip
 from dynatex.player import open_player
 from dynatex.player.turnpoints import EVENT_JUMP, EVENT_TURN, PLAYBACKS, TurnPointPlayer
@@ -219,3 +219,18 @@ def test_real_clip_must_show(tmp_path, clips_dir, name):
     assert index_coverage(idx, clip.n_frames) >= 0.9  # >= 90% of the source frames used
     assert ratios.size > 100  # reversals and jumps happened
     assert ratios.mean() <= 1.5, ratios.mean()  # events look like ordinary steps
+
+
+@pytest.mark.clips
+def test_real_pendulum_jumps_show_no_double_images(tmp_path, clips_dir):
+    """Every output frame, crossfades at jumps included, within the clip's own level of double
+    images (that of the mean of two consecutive frames)."""
+    clip = load_clip(clips_dir / "pendulum_clock_schoedl.mov")
+    path, _, _ = make_db(tmp_path / "clock.h5", clip.frames)
+    with TurnPointPlayer(path, backend="numpy", seed=0) as p:
+        frames, events = [], []
+        for _ in range(400):
+            frames.append(p.next_frame())
+            events.append(p.last_event)
+    assert np.count_nonzero(np.array(events) & EVENT_JUMP) >= 5  # jumps were taken
+    assert double_image(np.stack(frames), clip.frames).max() <= double_image_level(clip.frames)
