@@ -41,6 +41,9 @@ def describe(path: str) -> dict:
             }
             for method in tex.methods:
                 entry["methods"][method] = tex.read(method).describe()
+            ranking = tex.ranking
+            if ranking is not None:
+                entry["ranking"] = ranking
             out["textures"][tex.name] = entry
         return out
 
@@ -66,4 +69,9 @@ def run(args: argparse.Namespace) -> int:
                 if isinstance(value, float):
                     value = f"{value:.6g}"
                 print(f"    {key:24s} {value}")
+        if "ranking" in t:
+            from .analyze import format_ranking
+
+            print("  modes ranked against the clip (dynatex analyze --methods auto):")
+            print(format_ranking(t["ranking"]))
     return 0
