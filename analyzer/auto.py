@@ -26,6 +26,8 @@ import numpy as np
 TREND_MIN = 0.4
 #: frames a clip needs for the turn-point texture (a symmetry test of 4 pairs either side, and room to turn)
 TURNPOINT_MIN_FRAMES = 24
+#: modes that play the clip's time-lapse once (then hold): judged over the clip's length, not longer
+TIME_LAPSE_MODES = ("evolve",)
 #: method -> the player mode that plays it
 MODE_OF = {"lds": "lds", "mixture": "mixture", "turnpoints": "turnpoints", "tiles": "tiles", "quilt": "evolve"}
 
@@ -150,14 +152,14 @@ def learn_chosen(
 
 
 def play_mode(db: str | os.PathLike, texture: str, mode: str, frames: int, *, seed: int = 0) -> np.ndarray:
-    """``frames`` frames of ``mode`` from the database, at the source's size where the mode takes a size."""
+    """``frames`` frames of ``mode`` from the database, at the source's size where the mode plays any size."""
     from ..player import open_player, player_class
 
     opts: dict[str, Any] = {"seed": seed}
     with open_player(db, texture, mode=mode, **opts) as probe:
         src = probe.texture.source
         shape = (int(src.height), int(src.width))
-    if any(p.name == "size" for p in player_class(mode).options):
+    if player_class(mode).capabilities.any_size:  # evolve plays its stored canvas, not any size
         opts["size"] = shape
     with open_player(db, texture, mode=mode, **opts) as player:
         out = np.empty((frames,) + tuple(player.shape), np.uint8)
@@ -190,7 +192,8 @@ def rank(
     entries: list[dict[str, Any]] = []
     for i, mode in enumerate(modes):
         try:
-            out = play_mode(db, texture, mode, frames, seed=seed)
+            n = min(frames, len(source)) if mode in TIME_LAPSE_MODES else frames
+            out = play_mode(db, texture, mode, n, seed=seed)
         except DynatexError as exc:  # e.g. no verified OpenCL device the mode insists on
             entries.append({"mode": mode, "verdict": "failed", "score": None, "why": f"cannot play: {exc}"})
             continue

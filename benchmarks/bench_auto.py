@@ -29,13 +29,13 @@ NAMES = (
 )
 
 
-def analyze(clip: Path, out: Path, methods: str) -> float:
+def analyze(clip: Path, out: Path, methods: str) -> float | None:
+    """Seconds the analysis took, or None when it failed (the default lds cannot learn a 43-frame clip)."""
     t = time.perf_counter()
-    subprocess.run(
-        [sys.executable, "-m", "dynatex.cli", "analyze", str(clip), "-o", str(out), "--methods", methods, "-q"],
-        check=True,
+    run = subprocess.run(
+        [sys.executable, "-m", "dynatex.cli", "analyze", str(clip), "-o", str(out), "--methods", methods, "-q"]
     )
-    return time.perf_counter() - t
+    return time.perf_counter() - t if run.returncode == 0 else None
 
 
 def main() -> int:
@@ -50,15 +50,18 @@ def main() -> int:
             if not clip.exists():
                 print(f"skipping {name}: not in {CLIPS}", file=sys.stderr)
                 continue
-            lds = analyze(clip, Path(tmp) / "lds.h5", "lds")
-            auto = analyze(clip, Path(tmp) / "auto.h5", "auto")
-            with open_db(Path(tmp) / "auto.h5") as db:
+            lds = analyze(clip, Path(tmp) / f"{clip.stem}_lds.h5", "lds")
+            auto = analyze(clip, Path(tmp) / f"{clip.stem}_auto.h5", "auto")
+            with open_db(Path(tmp) / f"{clip.stem}_auto.h5") as db:
                 ranking = next(iter(db)).ranking
-            rows.append({"clip": name, "lds_s": lds, "auto_s": auto, "ratio": auto / lds, "ranking": ranking})
+            ratio = None if lds is None else auto / lds
+            rows.append({"clip": name, "lds_s": lds, "auto_s": auto, "ratio": ratio, "ranking": ranking})
             if not args.json:
-                print(f"{name}: lds {lds:.1f} s, auto {auto:.1f} s, ratio {auto / lds:.1f}")
+                lds_text = "failed" if lds is None else f"{lds:.1f} s"
+                ratio_text = "" if ratio is None else f", ratio {ratio:.1f}"
+                print(f"{name}: lds {lds_text}, auto {auto:.1f} s{ratio_text}", flush=True)
                 for e in ranking:
-                    print(f"  {e['rank']}. {e['mode']:<10} {e['verdict']:<5} {e['why']}")
+                    print(f"  {e['rank']}. {e['mode']:<10} {e['verdict']:<5} {e['why']}", flush=True)
     if args.json:
         json.dump(rows, sys.stdout, indent=2)
         print()
