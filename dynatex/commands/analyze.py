@@ -28,6 +28,9 @@ from ._common import (
     tqdm_progress,
 )
 
+#: frames each mode plays for ``--methods auto``'s ranking
+AUTO_FRAMES = 200
+
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
@@ -59,13 +62,14 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p.add_argument(
         "--methods",
         default="lds",
-        help=f"comma-separated methods to run: {', '.join(METHODS)}, or auto: the methods that can suit the "
-        "clip, each played against it and ranked, the best marked as the texture's default mode (default: lds)",
+        help=f"comma-separated methods to run: {', '.join(METHODS)}, or auto (one clip): the methods that can "
+        "suit the clip, each played against it and ranked, the best marked as the texture's default mode "
+        "(default: lds)",
     )
     p.add_argument(
         "--auto-frames",
         type=positive_int,
-        default=200,
+        default=None,
         help="with --methods auto: frames each mode plays for the ranking (default 200)",
     )
     p.add_argument(
@@ -171,6 +175,8 @@ def run(args: argparse.Namespace) -> int:
     if auto and names != [AUTO]:
         raise UsageError("--methods auto chooses the methods itself: name no other method beside it")
     methods = [] if auto else [get_method(m) for m in names]
+    if args.auto_frames is not None and not auto:
+        raise UsageError("--auto-frames works with --methods auto only")
     max_memory = None if args.max_memory is None else _parse_bytes_arg(parse_bytes, args.max_memory)
     clips = find_clips(args.clip)
     corpus = (
@@ -296,7 +302,7 @@ def _rank_into(args: argparse.Namespace, texture: str, source, modes: list[str],
         texture,
         source,
         modes,
-        frames=args.auto_frames,
+        frames=args.auto_frames or AUTO_FRAMES,
         reasons=reasons,
         progress=tqdm_progress("rank", show),
     )
