@@ -339,6 +339,10 @@ METHODS: dict[str, Method] = {
 }
 
 
+#: ``--methods auto``: the methods that can suit the clip, ranked by playing them (:mod:`.auto`)
+AUTO = "auto"
+
+
 def get_method(name: str) -> Method:
     """The method ``name``, or an :class:`~dynatex.errors.InvalidArgumentError` naming the methods."""
     if name not in METHODS:

@@ -34,19 +34,51 @@ def scale_groups(n: int) -> np.ndarray:
 
 
 def edited_poles(poles: np.ndarray, speed: float) -> np.ndarray:
-    """Poles for playback at ``speed``: angles scaled by ``speed`` (negative reverses time),
-    magnitudes kept; poles pushed past pi are annihilated (set to 0).
+    """Poles of the process played ``|speed|`` times faster: ``p ** |speed|`` on the principal
+    branch (magnitude ``|p| ** |speed|``, angle ``|speed| * angle(p)``).
 
-    Real negative poles (angle pi) have no conjugate partner to rotate with; they become
-    ``|p| cos(speed * pi)``, the real part of the rotated pole.
+    A conjugate pair stays conjugate. A real negative pole (angle pi) has no partner to rotate
+    with; as a real matrix it becomes the real part of its power, ``|p| ** s cos(s pi)``. A
+    pole at 0 stays 0 (speed 0 gives 1 for every other pole: the process stands still). The
+    sign of ``speed`` is ignored here: time reversal is a change of basis, see
+    :func:`speed_dynamics`.
     """
+    s = abs(float(speed))
     mag = np.abs(poles)
-    ang = np.angle(poles)
-    neg_real = (np.abs(poles.imag) <= 1e-12 * np.maximum(mag, 1e-300)) & (poles.real < 0)
-    new = mag * np.exp(1j * ang * speed)
-    new = np.where(neg_real, mag * np.cos(np.pi * speed), new)
-    new = np.where(np.abs(ang * speed) > np.pi + 1e-12, 0.0, new)
+    alive = mag > 0
+    logmag = np.log(np.where(alive, mag, 1.0))
+    new = np.where(alive, np.exp(s * logmag + 1j * s * np.angle(poles)), 0.0)
+    if s == 0:
+        new = np.where(alive, 1.0 + 0j, 0.0)
     return new
+
+
+def speed_dynamics(
+    a: np.ndarray, cov: np.ndarray, speed: float, eig: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Transition matrix and noise input ``(A_s, B_s)`` of the process ``x(t+1) = A x(t) + w(t)``
+    (stationary covariance ``cov`` = P) played ``speed`` times faster.
+
+    ``A_s = V diag(p ** |s|) V^-1`` (:func:`edited_poles`; the matrix power ``A ** |s|``), and the
+    driving noise is re-derived so that the stationary covariance stays P:
+    ``B_s B_s^T = P - A_s P A_s^T`` (eigenvalues below 0, numerical, are clipped to 0). A negative
+    speed plays the time-reversed process, whose transition is ``P A_|s|^T P^-1`` (a stationary
+    Gaussian process run backwards has the lag covariances transposed) with the same P. Speed 0:
+    ``A_s = I``, ``B_s = 0``, the state stands still.
+    """
+    n = a.shape[0]
+    if speed == 0:
+        return np.eye(n), np.zeros((n, 0))
+    poles, vecs = np.linalg.eig(a) if eig is None else eig
+    a_s = np.real((vecs * edited_poles(poles, speed)) @ np.linalg.inv(vecs))
+    if speed < 0:
+        pinv = np.linalg.pinv(cov, hermitian=True)
+        a_s = cov @ a_s.T @ pinv
+    q = cov - a_s @ cov @ a_s.T
+    lam, u = np.linalg.eigh(0.5 * (q + q.T))
+    keep = lam > 1e-12 * max(float(lam.max(initial=0.0)), 1e-300)
+    b_s = u[:, keep] * np.sqrt(lam[keep])
+    return np.ascontiguousarray(a_s), np.ascontiguousarray(b_s)
 
 
 class LDSPlayer(ProjectionPlayer):
@@ -71,24 +103,29 @@ class LDSPlayer(ProjectionPlayer):
         self._x0 = model.x0.copy()
         self.stationary_cov = model.stationary_cov
         self._poles, self._vecs = np.linalg.eig(self._A)
-        self._vecs_inv = np.linalg.inv(self._vecs)
         self._groups = scale_groups(self.n)
         self._weights = np.ones(self.n)
-        self._A_edit = self._A
+        self._A_edit, self._B_edit = self._A, self._B
         self._w = np.ones(self.n)
         self._x = self._x0.copy()
 
     # -- controls ----------------------------------------------------------------
-    speed = Control(Range(float, *SPEED_RANGE), 1.0, "Pole angles scaled by speed; negative plays time backwards.")
+    speed = Control(
+        Range(float, *SPEED_RANGE),
+        1.0,
+        "Time runs speed times faster: poles p -> p^|speed|, driving noise re-derived so the stationary "
+        "covariance stays the model's; 0 freezes the state, negative plays the time-reversed process.",
+    )
 
     @speed.setter
     def speed(self, value: float) -> None:
         self._speed = value
         if value == 1.0:
-            self._A_edit = self._A
+            self._A_edit, self._B_edit = self._A, self._B
         else:
-            poles = edited_poles(self._poles, value)
-            self._A_edit = np.ascontiguousarray(((self._vecs * poles) @ self._vecs_inv).real)
+            self._A_edit, self._B_edit = speed_dynamics(
+                self._A, self.stationary_cov, value, eig=(self._poles, self._vecs)
+            )
 
     scales = Control(
         Numbers(Range(float, 0.0, MAX_WEIGHT), 3, "C,M,F"),
@@ -131,8 +168,8 @@ class LDSPlayer(ProjectionPlayer):
         return self._x.copy()
 
     def _step(self) -> None:
-        v = self._rng.standard_normal(self.k)
-        self._x = self._A_edit @ self._x + np.sqrt(self._intensity) * (self._B @ v)
+        v = self._rng.standard_normal(self._B_edit.shape[1])
+        self._x = self._A_edit @ self._x + np.sqrt(self._intensity) * (self._B_edit @ v)
 
     def _vector(self) -> np.ndarray:
         return self._x

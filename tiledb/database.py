@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import unicodedata
 from typing import Any
@@ -94,6 +95,25 @@ class Texture:
     @property
     def has_frames(self) -> bool:
         return schema.FRAMES in self._group
+
+    @property
+    def ranking(self) -> list | None:
+        """The modes ``dynatex analyze --methods auto`` ranked, best first (attribute ``ranking``,
+        JSON), or None when the texture holds none."""
+        try:
+            text = self._group.attrs.get("ranking")
+        except Exception as exc:  # h5py raises several types on unreadable attributes
+            self._db._check.fail(self._group.name + "@ranking", f"cannot be read ({exc})")
+        if text is None:
+            return None
+        text = text.decode("utf-8", "replace") if isinstance(text, bytes) else text
+        try:
+            value = json.loads(text) if isinstance(text, str) and len(text) <= 65536 else None
+        except ValueError:
+            value = None
+        if not isinstance(value, list):
+            self._db._check.fail(self._group.name + "@ranking", "is not a JSON list of at most 65536 characters")
+        return value
 
     def frames(self) -> FrameStore:
         """The stored source frames, read lazily."""

@@ -13,6 +13,7 @@ Where there is no ``fcntl`` (Windows) nothing is locked or removed.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import secrets
@@ -37,6 +38,11 @@ try:
     import fcntl
 except ImportError:  # pragma: no cover (not POSIX)
     fcntl = None  # type: ignore[assignment]
+
+#: texture attributes written by ``--methods auto`` (FORMAT.md): the mode a player opens by default, and why
+DEFAULT_MODE = "default_mode"
+RANKING = "ranking"
+MAX_RANKING = 65536  # characters of the ranking's JSON
 
 #: ``tempfile.mkstemp``'s alphabet and length, so files left by earlier writers are recognised too.
 _TMP_CHARS = "abcdefghijklmnopqrstuvwxyz0123456789_"
@@ -117,6 +123,21 @@ class DatabaseWriter:
             del g[schema.FRAMES]
         _frames.write(g, schema.FRAMES, frames)
 
+    def put_default_mode(self, name: str, mode: str, ranking: list[dict] | None = None) -> None:
+        """Mark ``mode`` as texture ``name``'s default player mode (attribute ``default_mode``), with
+        the ``ranking`` that chose it as a JSON attribute (``dynatex analyze --methods auto``)."""
+        if not isinstance(mode, str) or not re.fullmatch(r"[a-z][a-z0-9_]{0,31}", mode):
+            raise InvalidArgumentError(f"default mode must be a mode name (lower-case letters), not {mode!r}")
+        g = self._texture_group(name)
+        g.attrs[DEFAULT_MODE] = mode
+        if ranking is None:
+            g.attrs.pop(RANKING, None)
+            return
+        text = json.dumps(ranking, allow_nan=False, separators=(",", ":"))
+        if len(text) > MAX_RANKING:
+            raise InvalidArgumentError(f"ranking of texture {name!r} is {len(text)} characters, above {MAX_RANKING}")
+        g.attrs[RANKING] = text
+
     def source(self, name: str) -> SourceInfo:
         from ._check import Checker
 
@@ -133,6 +154,9 @@ class DatabaseWriter:
             for key in old:
                 if key != skip:
                     old.copy(old[key], g, name=key)
+            for key in (DEFAULT_MODE, RANKING):  # the texture's own attributes
+                if key in old.attrs:
+                    g.attrs[key] = old.attrs[key]
             return g
         raise TextureNotFoundError(f"no texture named {name!r}; call put_texture first", filename=self.path)
 

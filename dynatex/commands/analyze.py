@@ -12,7 +12,7 @@ import os
 import sys
 import time
 
-from ..analyzer.methods import METHODS, Method, get_method
+from ..analyzer.methods import AUTO, METHODS, Method, get_method
 from ..params import Param
 from ..tiledb import DatabaseWriter
 from ..tiledb.schema import texture_name_from
@@ -27,6 +27,9 @@ from ._common import (
     size_arg,
     tqdm_progress,
 )
+
+#: frames each mode plays for ``--methods auto``'s ranking
+AUTO_FRAMES = 200
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
@@ -57,7 +60,17 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "name without extension; one clip only)",
     )
     p.add_argument(
-        "--methods", default="lds", help=f"comma-separated methods to run: {', '.join(METHODS)} (default: lds)"
+        "--methods",
+        default="lds",
+        help=f"comma-separated methods to run: {', '.join(METHODS)}, or auto (one clip): the methods that can "
+        "suit the clip, each played against it and ranked, the best marked as the texture's default mode "
+        "(default: lds)",
+    )
+    p.add_argument(
+        "--auto-frames",
+        type=positive_int,
+        default=None,
+        help="with --methods auto: frames each mode plays for the ranking (default 200)",
     )
     p.add_argument(
         "--overwrite",
@@ -158,7 +171,12 @@ def run(args: argparse.Namespace) -> int:
     names = [m.strip() for m in args.methods.split(",") if m.strip()]
     if not names:
         raise UsageError("--methods names no method")
-    methods = [get_method(m) for m in names]
+    auto = AUTO in names
+    if auto and names != [AUTO]:
+        raise UsageError("--methods auto chooses the methods itself: name no other method beside it")
+    methods = [] if auto else [get_method(m) for m in names]
+    if args.auto_frames is not None and not auto:
+        raise UsageError("--auto-frames works with --methods auto only")
     max_memory = None if args.max_memory is None else _parse_bytes_arg(parse_bytes, args.max_memory)
     clips = find_clips(args.clip)
     corpus = (
@@ -169,8 +187,10 @@ def run(args: argparse.Namespace) -> int:
         or os.path.isdir(args.output)
     )
     if corpus:
+        if auto:
+            raise UsageError("--methods auto works with one clip at a time, not a corpus")
         return _run_corpus(args, clips, names, max_memory)
-    return _run_one(args, clips[0], methods, max_memory)
+    return _run_one(args, clips[0], methods, max_memory, auto=auto)
 
 
 def _parse_bytes_arg(parse, text: str) -> int:
@@ -191,7 +211,7 @@ def _load_options(args: argparse.Namespace) -> dict:
     }
 
 
-def _run_one(args: argparse.Namespace, clip_path: str, methods, max_memory: int | None) -> int:
+def _run_one(args: argparse.Namespace, clip_path: str, methods, max_memory: int | None, *, auto: bool = False) -> int:
     from ..analyzer.corpus import learn_into
 
     stem = os.path.splitext(os.path.basename(os.path.normpath(clip_path)))[0]
@@ -210,6 +230,10 @@ def _run_one(args: argparse.Namespace, clip_path: str, methods, max_memory: int 
         if warning:
             print(f"dynatex: warning: {texture}: {warning}", file=sys.stderr)
 
+    if auto:
+        if max_memory is not None:
+            raise UsageError("--methods auto plays every method against the clip in memory: drop --max-memory")
+        return _run_auto(args, clip_path, texture, report, show, t0)
     params = {m.name: method_params(m.name, args) for m in methods}
     # Open (and so validate) an existing database before the long work.
     with DatabaseWriter(args.output, overwrite=args.overwrite) as writer:
@@ -227,12 +251,78 @@ def _run_one(args: argparse.Namespace, clip_path: str, methods, max_memory: int 
             on_model=report,
         )
     if show:
-        s = source
-        print(
-            f"wrote texture {texture!r} ({s.width}x{s.height}x{s.channels}, {s.n_frames} frames, methods "
-            f"{', '.join(m.name for m in methods)}) to {args.output} in {time.perf_counter() - t0:.1f} s"
-        )
+        _wrote(args, texture, source, [m.name for m in methods], t0)
     return 0
+
+
+def _wrote(args: argparse.Namespace, texture: str, s, methods: list[str], t0: float) -> None:
+    print(
+        f"wrote texture {texture!r} ({s.width}x{s.height}x{s.channels}, {s.n_frames} frames, methods "
+        f"{', '.join(methods)}) to {args.output} in {time.perf_counter() - t0:.1f} s"
+    )
+
+
+def _run_auto(args: argparse.Namespace, clip_path: str, texture: str, report, show: bool, t0: float) -> int:
+    """``--methods auto``: choose the methods that can suit the clip, learn each (one that fails is left
+    out with its reason), play each against the clip, rank them, store the best as the default mode."""
+    from ..analyzer.auto import MODE_OF, choose_methods, learn_chosen
+    from ..analyzer.video import load_clip_path
+
+    with DatabaseWriter(args.output, overwrite=args.overwrite) as writer:  # validates an existing one first
+        clip = load_clip_path(clip_path, isolate=True, progress=tqdm_progress("decode", show), **_load_options(args))
+        choices = choose_methods(clip.frames)
+        if show:
+            for c in choices:
+                print(f"auto: {c.method}: {'yes' if c.chosen else 'no'}: {c.reason}", file=sys.stderr)
+        chosen = [c.method for c in choices if c.chosen]
+        learned, failed = learn_chosen(
+            writer,
+            texture,
+            clip,
+            chosen,
+            params={m: method_params(m, args) for m in chosen},
+            progress=lambda stage: tqdm_progress(stage, show),
+            on_model=report,
+        )
+        for method, reason in failed.items():
+            print(f"dynatex: warning: {texture}: auto: {method} left out: {reason}", file=sys.stderr)
+    reasons = {MODE_OF[c.method]: c.reason for c in choices if c.method in learned}
+    _rank_into(args, texture, clip.frames, [MODE_OF[m] for m in learned], reasons, show)
+    if show:
+        _wrote(args, texture, clip.source_info(), learned, t0)
+    return 0
+
+
+def _rank_into(args: argparse.Namespace, texture: str, source, modes: list[str], reasons: dict, show: bool) -> None:
+    """Play each learned mode against the source, rank them, store the best as the default mode."""
+    from ..analyzer.auto import rank
+
+    ranking = rank(
+        args.output,
+        texture,
+        source,
+        modes,
+        frames=args.auto_frames or AUTO_FRAMES,
+        reasons=reasons,
+        progress=tqdm_progress("rank", show),
+    )
+    if ranking[0]["score"] is None:
+        raise UsageError(f"--methods auto: no mode of {texture!r} could play ({ranking[0]['why']})")
+    with DatabaseWriter(args.output) as writer:
+        writer.put_default_mode(texture, ranking[0]["mode"], ranking)
+    if show:
+        print(format_ranking(ranking), file=sys.stderr)
+
+
+def format_ranking(ranking: list[dict]) -> str:
+    """The ranking as lines ``1. mode  verdict  why``, the first marked as the default mode."""
+    lines = []
+    for e in ranking:
+        mark = " (default mode)" if e["rank"] == 1 else ""
+        lines.append(f"  {e['rank']}. {e['mode']:<10} {e['verdict']:<4}  {e['why']}{mark}")
+        if e.get("reason"):
+            lines.append(f"     chosen: {e['reason']}")
+    return "\n".join(lines)
 
 
 def _run_corpus(args: argparse.Namespace, clips: list[str], names: list[str], max_memory: int | None) -> int:

@@ -16,6 +16,8 @@ from ..player import MODES
 from ._common import UsageError, load_clip_arg, positive_int, seed, size_arg
 
 DB_SUFFIXES = (".h5", ".hdf5")
+#: exit code of ``--strict`` when a figure is out of its good range (usage and input errors are 2)
+STRICT_EXIT = 3
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
@@ -46,6 +48,11 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "or every:N for every N-th frame",
     )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help=f"exit with code {STRICT_EXIT} when a figure is outside its good range (a verdict other than good)",
+    )
     p.add_argument(
         "--sheet",
         default=None,
@@ -194,7 +201,7 @@ def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any],
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..analyzer import metrics
+    from ..analyzer import metrics, verdicts
 
     is_db = args.output.lower().endswith(DB_SUFFIXES)
     if not is_db:
@@ -238,6 +245,8 @@ def run(args: argparse.Namespace) -> int:
         except (OSError, ValueError) as e:
             raise UsageError(f"--sheet {args.sheet}: cannot write it: {e}") from None
         report["sheet"] = args.sheet
+    report["verdicts"] = verdicts.judge(report)
+    report["verdict"] = verdicts.worst(report["verdicts"])
     report["source"] = args.source
     report["output"] = args.output
     if is_db:
@@ -252,6 +261,10 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(report, indent=2, allow_nan=False))
     else:
         print(format_table(report))
+    if args.strict and report["verdict"] not in ("good", verdicts.NA):
+        bad = [v["figure"] for v in report["verdicts"] if v["verdict"] not in ("good", verdicts.NA)]
+        print(f"dynatex: evaluate --strict: out of the good range: {', '.join(bad)}", file=sys.stderr)
+        return STRICT_EXIT
     return 0
 
 
@@ -265,25 +278,31 @@ def _fmt(v: Any, digits: int = 3) -> str:
 
 
 def format_table(report: dict[str, Any]) -> str:
-    """The report as aligned ``metric  value  what good looks like`` lines."""
-    rows: list[tuple[str, str, str]] = []
+    """The report as aligned ``metric  value  good  verdict`` lines, then the overall verdict.
+
+    A figure that :mod:`~dynatex.analyzer.verdicts` judges shows its good range and verdict; the
+    others show what good looks like in words.
+    """
+    rows: list[tuple[str, str, str, str | None]] = []  # metric, value, good, figure judged
     st = report.get("stability")
     same = "n/a: output size differs from the source"
     if st is None:
-        rows.append(("stability energy ratio", same, ""))
+        rows.append(("stability energy ratio", same, "", None))
     else:
         lo, hi = st["bounds"]
         rows.append(
             (
                 "stability energy ratio min/max",
                 f"{_fmt(st['min_ratio'])} / {_fmt(st['max_ratio'])}",
-                f"{_fmt(lo, 2)}..{_fmt(hi, 2)} (0.5..2 or the source's own range; decay -> 0, blow-up >> 1)",
+                f"{_fmt(lo, 2)}..{_fmt(hi, 2)} every window",
+                "stability",
             )
         )
-        rows.append(("stability final window", _fmt(st["final_ratio"]), "about 1"))
-        rows.append(("non-finite frames", str(st["nonfinite_frames"]), "0"))
+        rows.append(("stability final window", _fmt(st["final_ratio"]), "about 1", None))
+        rows.append(("mean energy ratio", "", "", "energy_ratio"))
+        rows.append(("non-finite frames", str(st["nonfinite_frames"]), "0", None))
         if st["nonfinite_frames"]:
-            rows.append(("other metrics", "skipped: the output holds NaN/inf", ""))
+            rows.append(("other metrics", "skipped: the output holds NaN/inf", "", None))
     if "frame_step_ratio" in report:
         lp = report.get("lattice_prominence")
         if lp is not None:
@@ -295,6 +314,7 @@ def format_table(report: dict[str, Any]) -> str:
                     f"lattice prominence at {lp['tile'][1]}x{lp['tile'][0]} cells",
                     out,
                     f"<= 0.03, near the source's ({src}); a visible grid 0.1..1",
+                    "lattice_prominence",
                 )
             )
         sv = report["seam_visibility"]
@@ -303,6 +323,7 @@ def format_table(report: dict[str, Any]) -> str:
                 "seam visibility mean/max",
                 "n/a (no --boundaries)" if sv is None else f"{_fmt(sv['mean'])} / {_fmt(sv['max'])}",
                 "about 1 (> 1.5 visible)",
+                "seam_visibility",
             )
         )
         td = report["temporal_discontinuity"]
@@ -311,16 +332,37 @@ def format_table(report: dict[str, Any]) -> str:
                 "temporal discontinuity max",
                 "n/a (no --events)" if td is None else f"{_fmt(td['max'])} over {len(td['events'])} events",
                 "about 1 (> 2 a visible jump)",
+                "temporal_discontinuity",
             )
         )
-        rows.append(("frame step ratio", _fmt(report["frame_step_ratio"]), "about 1 (0 frozen, >> 1 jumpy)"))
-        rows.append(("spectrum distance (dB)", _fmt(report["spectrum_distance_db"], 2), "< 1 good, > 3 unlike"))
-        rows.append(("patch coherence (grey levels)", _fmt(report["patch_coherence"], 2), "low (0 = copies)"))
-        rows.append(("patch completeness (grey levels)", _fmt(report["patch_completeness"], 2), "low (0 = all used)"))
+        rows.append(
+            ("frame step ratio", _fmt(report["frame_step_ratio"]), "about 1 (0 frozen, >> 1 jumpy)", "frame_step_ratio")
+        )
+        rows.append(
+            (
+                "spectrum distance (dB)",
+                _fmt(report["spectrum_distance_db"], 2),
+                "< 1 good, > 3 unlike",
+                "spectrum_distance_db",
+            )
+        )
+        rows.append(("patch coherence (grey levels)", _fmt(report["patch_coherence"], 2), "low (0 = copies)", None))
+        rows.append(
+            ("patch completeness (grey levels)", _fmt(report["patch_completeness"], 2), "low (0 = all used)", None)
+        )
         cov = report["frame_coverage"]
-        rows.append(("frame coverage", same if cov is None else _fmt(cov), "near 1 for a player of frames"))
+        rows.append(
+            (
+                "frame coverage",
+                same if cov is None else _fmt(cov),
+                "near 1 for a player of frames",
+                "frame_coverage",
+            )
+        )
         lag = report["repetition_lag"]
-        rows.append(("repetition lag (frames)", "none found" if lag is None else str(lag), "none, or long"))
+        rows.append(
+            ("repetition lag (frames)", "none found" if lag is None else str(lag), "none, or long", "repetition_lag")
+        )
         lat = report.get("lattice_correlation")
         if lat is not None:
             out, src = (
@@ -328,17 +370,37 @@ def format_table(report: dict[str, Any]) -> str:
                 for v in (lat["output"], lat["source"])
             )
             rows.append(
-                (f"lattice correlation y/x at {lat['period'][1]}x{lat['period'][0]}", out, f"near the source's ({src})")
+                (
+                    f"lattice correlation y/x at {lat['period'][1]}x{lat['period'][0]}",
+                    out,
+                    f"near the source's ({src})",
+                    None,
+                )
             )
+    judged = {v["figure"]: v for v in report.get("verdicts", ())}
+    lines_in: list[tuple[str, str, str, str]] = []
+    for metric, value, good, figure in rows:
+        v = judged.get(figure) if figure else None
+        if v is None:
+            if figure == "energy_ratio":
+                continue
+            lines_in.append((metric, value, good, ""))
+            continue
+        if figure == "energy_ratio":
+            value = _fmt(v["value"])
+        lines_in.append((metric, value, v["good"], v["verdict"]))
     head = (
         f"{report['output']} ({report['output_frames']} frames, {report['output_size'][1]}x"
         f"{report['output_size'][0]}) against {report['source']} ({report['source_frames']} frames, "
         f"{report['source_size'][1]}x{report['source_size'][0]})"
     )
-    w0 = max(len(r[0]) for r in rows)
-    w1 = max(len(r[1]) for r in rows)
-    lines = [head, f"{'metric':<{w0}}  {'value':<{w1}}  good", "-" * (w0 + w1 + 30)]
-    lines += [f"{a:<{w0}}  {b:<{w1}}  {c}".rstrip() for a, b, c in rows]
+    w0 = max(len(r[0]) for r in lines_in)
+    w1 = max(len(r[1]) for r in lines_in)
+    w2 = max(len(r[2]) for r in lines_in)
+    lines = [head, f"{'metric':<{w0}}  {'value':<{w1}}  {'good':<{w2}}  verdict", "-" * (w0 + w1 + w2 + 13)]
+    lines += [f"{a:<{w0}}  {b:<{w1}}  {c:<{w2}}  {d}".rstrip() for a, b, c, d in lines_in]
+    if "verdict" in report:
+        lines.append(f"overall: {report['verdict']} (the worst verdict; analyzer/METRICS.md gives the ranges)")
     return "\n".join(lines)
 
 

@@ -50,6 +50,9 @@ def describe(path: str) -> dict:
             }
             for method in tex.methods:
                 entry["methods"][method] = tex.read(method).describe()
+            ranking = tex.ranking
+            if ranking is not None:
+                entry["ranking"] = ranking
             out["textures"][tex.name] = entry
         offers = describe_modes(db)
         for name, t in offers["textures"].items():
@@ -99,6 +102,11 @@ def run(args: argparse.Namespace) -> int:
                 if isinstance(value, float):
                     value = f"{value:.6g}"
                 print(f"    {key:24s} {value}")
+        if "ranking" in t:
+            from .analyze import format_ranking
+
+            print("  modes ranked against the clip (dynatex analyze --methods auto):")
+            print(format_ranking(t["ranking"]))
     for mode, m in d.get("modes", {}).items():
         print(f"\nmode {mode} (plays {m['method']}): {m['summary']}")
         for title, params in (("options", m["options"]), ("controls", m["controls"])):

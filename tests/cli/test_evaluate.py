@@ -246,3 +246,31 @@ def test_tiles_database_reports_lattice_prominence_and_writes_a_sheet(tmp_path, 
 def test_sheet_to_an_unwritable_place_is_one_line(files, capsys, tmp_path):
     rc, _, err = _run(capsys, files / "src.npy", files / "src.npy", "--sheet", tmp_path / "no" / "such" / "s.png")
     assert rc == 2 and "--sheet" in err and "Traceback" not in err
+
+
+def test_verdicts_in_json_and_table_and_strict_gates(files, capsys):
+    rc, out, _ = _run(capsys, files / "src.npy", files / "src.npy", "--json", "--strict")
+    assert rc == 0
+    rep = json.loads(out)
+    judged = {v["figure"]: v for v in rep["verdicts"]}
+    assert rep["verdict"] == "good" and all(v["verdict"] in ("good", "n/a") for v in rep["verdicts"])
+    assert judged["frame_step_ratio"]["good"] == "0.8..1.25" and judged["seam_visibility"]["verdict"] == "n/a"
+    # a 10-frame loop of the source: repeats after 10 frames (bad), and --strict says so
+    rc, out, err = _run(capsys, files / "src.npy", files / "loop.npy", "--strict")
+    assert rc == 3
+    line = next(ln for ln in out.splitlines() if ln.startswith("repetition lag"))
+    assert line.split()[-1] == "bad"
+    assert out.splitlines()[-1].startswith("overall: bad")
+    assert "repetition_lag" in err
+    # without --strict the same report exits 0
+    rc, _, _ = _run(capsys, files / "src.npy", files / "loop.npy")
+    assert rc == 0
+
+
+def test_a_frozen_output_is_judged_bad(files, capsys, tmp_path):
+    src = np.load(files / "src.npy")
+    np.save(tmp_path / "frozen.npy", np.repeat(src[:1], 40, axis=0))
+    rc, out, _ = _run(capsys, files / "src.npy", tmp_path / "frozen.npy", "--json", "--strict")
+    assert rc == 3
+    judged = {v["figure"]: v["verdict"] for v in json.loads(out)["verdicts"]}
+    assert judged["frame_step_ratio"] == "bad" and judged["spectrum_distance_db"] == "bad"
