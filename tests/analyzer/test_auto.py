@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import h5py
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.auto import MODE_OF, choose_methods, learn_chosen, rank, time_trend
+from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.turnpoints import pendulum_clip
 from dynatex.cli import main
 from dynatex.errors import DynatexError
@@ -78,19 +80,20 @@ def test_rank_orders_by_verdicts(tmp_path):
 def test_writer_stores_default_mode_and_ranking_and_info_shows_them(tmp_path, capsys):
     clip = load_clip(wave_clip(t=30))
     path = tmp_path / "d.h5"
-    ranking = [{"mode": "turnpoints", "rank": 1, "verdict": "good", "score": 0.0, "why": "all 5 judged figures good"}]
+    ranking = [{"mode": "lds", "rank": 1, "verdict": "good", "score": 0.0, "why": "all 5 judged figures good"}]
     with DatabaseWriter(path) as w:
         w.put_texture("d", clip.source_info())
-        w.put_default_mode("d", "turnpoints", ranking)
+        w.put_method("d", "lds", learn_lds(clip.frames, n=4))  # a default mode names a method the texture holds
+        w.put_default_mode("d", "lds", ranking)
         with pytest.raises(DynatexError, match="mode name"):
             w.put_default_mode("d", "Not A Mode!")
     with h5py.File(path, "r") as f:
-        assert f["textures/d"].attrs["default_mode"] == "turnpoints"
+        assert f["textures/d"].attrs["default_mode"] == "lds"
     with open_db(path) as db:
         assert db.texture("d").ranking == ranking
     assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "1. turnpoints good  all 5 judged figures good (default mode)" in out
+    assert re.search(r"1\. lds +good +all 5 judged figures good \(default mode\)", out), out
     # a later write of another texture keeps both attributes
     with DatabaseWriter(path) as w:
         w.put_texture("e", clip.source_info())
