@@ -16,11 +16,14 @@ _KINDS = {"f": "floating point", "i": "signed integer", "u": "unsigned integer",
 #: a model (and linear algebra refuses it), longer floats and complex numbers are not ours
 _ALLOWED = {"f": {"f4", "f8"}, "i": {"i1", "i2", "i4", "i8"}, "u": {"u1", "u2", "u4", "u8"}}
 
-#: filters a dataset may use (HDF5 filter id -> name) and the largest ratio of declared to stored
-#: bytes each can reach (deflate at most about 1032:1, LZF about 89:1, measured on zeros; the
-#: others do not compress). A filter outside this table would make HDF5 load a plugin.
+#: filters a dataset may use (HDF5 filter id -> name); a filter outside this table would make
+#: HDF5 look for a plugin (a shared library) to load
 FILTERS = {1: "deflate", 2: "shuffle", 3: "fletcher32", 32000: "lzf"}
-FILTER_RATIO = {1: 1100, 32000: 128}
+#: the compressing ones among them
+_COMPRESSING = {1, 32000}
+#: most declared bytes a compressed dataset may hold per stored byte: LZF, the writer's filter,
+#: reaches 89:1 on constant data; deflate reaches 1032:1 there, past any real model or frame
+MAX_RATIO = 128
 _LAYOUTS = {h5py.h5d.COMPACT: "compact", h5py.h5d.CONTIGUOUS: "contiguous", h5py.h5d.CHUNKED: "chunked"}
 
 
@@ -218,9 +221,9 @@ def survey(file: h5py.File, check: Checker, file_size: int) -> dict[str, int]:
     object (cycles included), objects other than groups and datasets, external storage, virtual
     datasets, filters outside :data:`FILTERS`, more than :data:`~.schema.MAX_OBJECTS` objects,
     and datasets whose declared size exceeds what their stored bytes can hold: more stored bytes
-    than the file has, or more declared bytes than the stored ones times the largest ratio of
-    their filters (a compression bomb; 1 without a compressing filter, so a never-written,
-    sparse dataset is refused). Attributes are checked against the file size too.
+    than the file has, none at all (a sparse dataset, never written), or more than
+    :data:`MAX_RATIO` declared bytes per stored byte (a compression bomb; without a compressing
+    filter no more than are stored). Attributes are checked against the file size too.
     """
     sizes: dict[str, int] = {}
     seen: set[tuple[int, int]] = set()
@@ -295,17 +298,16 @@ def _dataset(dsid: h5py.h5d.DatasetID, path: str, check: Checker, file_size: int
         stored = int(dsid.get_storage_size())
     except Exception as exc:  # noqa: BLE001
         check.fail(path, f"cannot be read ({_first_line(exc)})")
-    ratio = 1
-    for f in filters:
-        ratio *= FILTER_RATIO.get(f, 1)
+    ratio = MAX_RATIO if _COMPRESSING.intersection(filters) else 1
     if stored > file_size:
         check.fail(path, f"claims {stored} stored bytes, more than the file's {file_size}")
+    if stored == 0:
+        check.fail(path, f"declares {declared} bytes and stores none (a sparse dataset): a database stores its data")
     if declared > stored * ratio:
-        how = "never written (sparse)" if stored == 0 else f"{stored} bytes stored"
         check.fail(
             path,
-            f"declares {declared} bytes with {how}: more than its "
-            + (f"filters can expand ({ratio}:1)" if ratio > 1 else "storage holds"),
+            f"declares {declared} bytes in {stored} stored, "
+            + (f"more than {MAX_RATIO}:1 (a compression bomb)" if ratio > 1 else "more than it holds"),
         )
     return declared
 
