@@ -257,6 +257,8 @@ def main(argv: list[str] | None = None) -> int:
                             "new",
                             "--methods",
                             "lds",
+                            "--n",
+                            "6",
                         ],
                         env,
                         args.timeout,

@@ -97,6 +97,8 @@ class Checker:
             return obj
         try:
             arr = obj[()]
+        except MemoryError:  # out of memory is no defect of the file
+            raise
         except Exception as exc:
             self.fail(path, f"data cannot be read, the file may be truncated or corrupt ({exc})")
         if finite and arr.dtype.kind == "f" and not np.isfinite(arr).all():

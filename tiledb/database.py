@@ -44,6 +44,10 @@ def default_max_bytes() -> int:
     return value
 
 
+#: bytes of frames :meth:`TileDB.validate` reads at a time
+_VALIDATE_BYTES = 64 * 2**20
+
+
 class Texture:
     """One named texture of an open database: its source description and method data."""
 
@@ -217,8 +221,9 @@ class TileDB:
                 tex.read(method)
             if tex.has_frames:
                 store = tex.frames()
-                for i in range(len(store)) if every_frame else range(len(store) - 1, len(store)):
-                    store[i]
+                step = max(1, _VALIDATE_BYTES * len(store) // max(store.nbytes, 1))  # frames per read
+                for i in range(0, len(store), step) if every_frame else range(len(store) - 1, len(store)):
+                    store[i : i + step]
 
     def close(self) -> None:
         self._file.close()

@@ -246,6 +246,8 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
         check.fail(group.name + "/tiles", f"dtype {model.tiles.dtype} is not uint8")
     try:
         model.tiles = model.tiles[()]
+    except MemoryError:  # out of memory is no defect of the file
+        raise
     except Exception as exc:
         check.fail(group.name + "/tiles", f"data cannot be read, the file may be truncated or corrupt ({exc})")
     check.index_range(group.name + "/tile_class", model.tile_class, c)
