@@ -101,6 +101,8 @@ def attacks(folder: Path, bases: dict[str, Path], args) -> dict[str, tuple[Path,
         frames = src["textures/t/frames"][()]
         f["frames"] = np.full_like(frames, 77)  # another file's pictures: flat grey 77
         src.copy(src["textures/t"], f, name="texture")
+        del f["texture/frames"]
+        f["texture/frames"] = f["frames"][()]  # the linked texture plays the grey pictures too
         src.copy(src["textures/t/turnpoints"], f, name="method")
     for name, source in (("vds-foreign", str(foreign)), ("vds-missing", str(folder / "missing.h5"))):
         path = copy("turnpoints", name)

@@ -241,13 +241,19 @@ def plan_structural(seed: int, index: int, inventories: dict[str, dict]) -> dict
     ds = inventories[method]["datasets"]
     targets = sorted(n for n, (_, shape) in ds.items() if len(shape) >= 1 and int(np.prod(shape)) > 0)
     variants = STRUCTURAL[kind]
+    variant = variants[(index // (len(methods) * len(kinds))) % len(variants)]
+    target = targets[int(rng.integers(len(targets)))]
+    parts = target.split("/")  # "", "textures", name, (method,) dataset
+    texture = "/".join(parts[:3])
+    replaced = {"method": "/".join(parts[:-1]), "texture": texture, "source": texture + "/source"}
     return {
         "index": index,
         "seed": seed,
         "method": method,
         "kind": kind,
-        "variant": variants[int(rng.integers(len(variants)))],
-        "target": targets[int(rng.integers(len(targets)))],
+        "variant": variant,
+        "target": target,
+        "object": replaced.get(variant, target) if kind == "extlink" else target,  # what the mutant replaces
     }
 
 
@@ -365,13 +371,7 @@ def _structural(f, spec: dict[str, Any], dest: Path) -> None:
         del f[target]
         f.create_virtual_dataset(target, layout)
     elif kind == "extlink":
-        parts = target.split("/")  # "", "textures", name, (method,) dataset
-        obj = {
-            "dataset": target,
-            "method": "/".join(parts[:-1]),
-            "texture": "/".join(parts[:3]),
-            "source": "/".join(parts[:3] + ["source"]),
-        }[variant]
+        obj = spec["object"]
         with h5py.File(foreign, "w") as g:
             f.copy(f[obj], g, name="copy")  # a faithful copy: only where it lies is wrong
         del f[obj]
