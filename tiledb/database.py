@@ -18,6 +18,7 @@ from .codecs import CODECS
 from .errors import (
     MethodNotFoundError,
     TextureNotFoundError,
+    TileDBError,
     TileDBFormatError,
     TileDBNotFoundError,
     TileDBVersionError,
@@ -213,17 +214,36 @@ class TileDB:
                 objpath=f"/{schema.TEXTURES}/{name}",
             ) from None
 
-    def validate(self, *, every_frame: bool = False) -> None:
+    def validate(self, *, every_frame: bool = False, keep_going: bool = False) -> list[TileDBError]:
         """Read and validate every method and frame store of every texture (open checks only the
-        structure); the last stored frame is read, or all of them one by one with ``every_frame``."""
+        structure); the last stored frame is read, or all of them, in blocks, with ``every_frame``.
+
+        The first error is raised, or with ``keep_going`` every part is read and the errors are
+        returned (the probe child reads what a reader may read even when another part is refused).
+        """
+        errors: list[TileDBError] = []
+
+        def attempt(read, *args) -> None:
+            try:
+                read(*args)
+            except TileDBError as exc:
+                if not keep_going:
+                    raise
+                errors.append(exc)
+
         for tex in self:
             for method in tex.methods:
-                tex.read(method)
+                attempt(tex.read, method)
             if tex.has_frames:
-                store = tex.frames()
-                step = max(1, _VALIDATE_BYTES * len(store) // max(store.nbytes, 1))  # frames per read
-                for i in range(0, len(store), step) if every_frame else range(len(store) - 1, len(store)):
-                    store[i : i + step]
+                attempt(self._read_frames, tex, every_frame)
+        return errors
+
+    @staticmethod
+    def _read_frames(tex: Texture, every_frame: bool) -> None:
+        store = tex.frames()
+        step = max(1, _VALIDATE_BYTES * len(store) // max(store.nbytes, 1))  # frames per read
+        for i in range(0, len(store), step) if every_frame else range(len(store) - 1, len(store)):
+            store[i : i + step]
 
     def close(self) -> None:
         self._file.close()

@@ -220,12 +220,12 @@ def _main(argv: list[str]) -> int:
 
     try:
         with TileDB(argv[0], probe=False, max_bytes=float(argv[1]) if len(argv) > 1 else float("inf")) as db:
-            db.validate(every_frame=True)
+            errors = db.validate(every_frame=True, keep_going=True)  # every part a reader may read
     except MemoryError:
         return _EXIT_MEMORY
     except Exception:  # noqa: BLE001 - any ordinary error: the parent reports it by opening the file itself
         return 1
-    return 0
+    return 1 if errors else 0
 
 
 if __name__ == "__main__":

@@ -277,3 +277,24 @@ def test_a_probe_child_killed_by_sigkill_is_reported_as_out_of_memory(lds_db, tm
     monkeypatch.setenv("DYNATEX_PYTHON", str(fake))
     problem = probe._run_child(str(lds_db), 1)
     assert problem and probe.OUT_OF_MEMORY in problem and "killed by SIGKILL" in problem
+
+
+def test_the_probe_reads_every_part_a_reader_may_read(tmp_path, synthetic_clip):
+    # one texture's model above the bound must not stop the child before the other's
+    from dynatex.analyzer import load_clip
+    from dynatex.analyzer.lds import learn_lds
+
+    clip = load_clip(synthetic_clip)
+    path = tmp_path / "two.h5"
+    with DatabaseWriter(path) as w:
+        for name, n in (("big", 12), ("small", 2)):
+            w.put_texture(name, clip.source_info())
+            w.put_method(name, "lds", learn_lds(clip, n=n))
+    with h5py.File(path, "r") as f:
+        small = sum(d.nbytes for d in f["textures/small/lds"].values())
+    with open_db(path, max_bytes=small) as db:
+        with pytest.raises(TileDBSizeError, match="/textures/big/lds"):
+            db.validate()
+        errors = db.validate(keep_going=True)
+        assert [e.objpath for e in errors] == ["/textures/big/lds"]
+        assert db.texture("small").read("lds").n == 2
