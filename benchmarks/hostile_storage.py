@@ -168,6 +168,10 @@ def attacks(folder: Path, bases: dict[str, Path], args) -> dict[str, tuple[Path,
         tex = f["textures/t"]
         shape = tex["frames"].shape
         del tex["frames"]
+        for name in ("sym_raw", "symmetry", "reduced", "p_max"):  # stored plainly: only the frames compress
+            values = tex["turnpoints"][name][()]
+            del tex["turnpoints"][name]
+            tex["turnpoints"][name] = values
         ds = tex.create_dataset("frames", shape=shape, dtype="u1", chunks=(4096, *shape[1:]), compression="lzf")
         ds[:4096] = 0
         _, raw = ds.id.read_direct_chunk((0, 0, 0, 0))
