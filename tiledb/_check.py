@@ -24,7 +24,7 @@ _COMPRESSING = {1, 32000}
 #: most declared bytes a compressed dataset may hold per stored byte: LZF, the writer's filter,
 #: reaches 89:1 on constant data; deflate reaches 1032:1 there, past any real model or frame
 MAX_RATIO = 128
-_LAYOUTS = {h5py.h5d.COMPACT: "compact", h5py.h5d.CONTIGUOUS: "contiguous", h5py.h5d.CHUNKED: "chunked"}
+_LAYOUTS = {h5py.h5d.COMPACT, h5py.h5d.CONTIGUOUS, h5py.h5d.CHUNKED}  # all inside the file
 
 
 class Checker:

@@ -21,10 +21,11 @@ The child reads with the parent's bound on declared bytes per read (``max_bytes`
 what the parent's open refuses before reading anything (:func:`~dynatex.tiledb._check.survey`).
 
 A file that passed is remembered by its identity (path, device, inode, size, modification
-time) and dynatex's version, in this process and in the user's cache folder
-(``databases.json`` beside the OpenCL device verdicts), so a game pays the probe once per
-new database file, not at every start; a file the writer has just written and read back is
-remembered without a probe (:func:`remember`). Where no Python interpreter can be started (Python
+time), dynatex's version and the bound it was read under (a pass holds for every smaller
+bound), in this process and in the user's cache folder (``databases.json`` beside the OpenCL
+device verdicts), so a game pays the probe once per new database file, not at every start; a
+file the writer has just written and read back is remembered without a probe, for any bound
+(:func:`remember`). Where no Python interpreter can be started (Python
 embedded in an application whose executable is not Python, and ``DYNATEX_PYTHON`` unset)
 the probe is skipped.
 """
