@@ -21,6 +21,7 @@ from .errors import (
     TileDBError,
     TileDBFormatError,
     TileDBNotFoundError,
+    TileDBSizeError,
     TileDBVersionError,
 )
 from .frames import FrameStore
@@ -50,6 +51,7 @@ __all__ = [
     "TileDBError",
     "TileDBFormatError",
     "TileDBNotFoundError",
+    "TileDBSizeError",
     "TileDBVersionError",
     "TilesModel",
     "TurnPointModel",

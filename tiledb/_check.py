@@ -8,20 +8,32 @@ from typing import Any
 import h5py
 import numpy as np
 
-from .errors import TileDBFormatError
-from .schema import MAX_ELEMENTS
+from .errors import TileDBFormatError, TileDBSizeError
+from .schema import MAX_ELEMENTS, MAX_OBJECTS
 
 _KINDS = {"f": "floating point", "i": "signed integer", "u": "unsigned integer", "iu": "integer", "S": "string"}
 #: the dtypes a dataset of each kind may have: float16 has too little range and precision for
 #: a model (and linear algebra refuses it), longer floats and complex numbers are not ours
 _ALLOWED = {"f": {"f4", "f8"}, "i": {"i1", "i2", "i4", "i8"}, "u": {"u1", "u2", "u4", "u8"}}
 
+#: filters a dataset may use (HDF5 filter id -> name); a filter outside this table would make
+#: HDF5 look for a plugin (a shared library) to load
+FILTERS = {1: "deflate", 2: "shuffle", 3: "fletcher32", 32000: "lzf"}
+#: the compressing ones among them
+_COMPRESSING = {1, 32000}
+#: most declared bytes a compressed dataset may hold per stored byte: LZF, the writer's filter,
+#: reaches 89:1 on constant data; deflate reaches 1032:1 there, past any real model or frame
+MAX_RATIO = 128
+_LAYOUTS = {h5py.h5d.COMPACT, h5py.h5d.CONTIGUOUS, h5py.h5d.CHUNKED}  # all inside the file
+
 
 class Checker:
     """Reads objects out of an open HDF5 file and raises :class:`TileDBFormatError` on any defect."""
 
-    def __init__(self, filename: str) -> None:
+    def __init__(self, filename: str, max_bytes: float = float("inf")) -> None:
         self.filename = filename
+        self.max_bytes = max_bytes
+        self.sizes: dict[str, int] = {}  # declared bytes of each dataset, by path (see :func:`survey`)
 
     def fail(self, objpath: str, problem: str) -> None:
         raise TileDBFormatError(problem, filename=self.filename, objpath=objpath)
@@ -44,13 +56,16 @@ class Checker:
         name: str,
         *,
         kind: str,
-        shape: Sequence[int | None],
+        shape: Sequence[int | range],
         finite: bool = True,
         read: bool = True,
     ) -> Any:
-        """Check dtype kind and shape (``None`` = any length), then read the array.
+        """Check dtype kind and shape, then read the array.
 
-        With ``read=False`` the h5py dataset itself is returned (for lazy, chunked access).
+        Each entry of ``shape`` is the length of that axis, or the ``range`` of lengths the role
+        allows (derived from the geometry the data describes, so that no dataset declares more
+        than its role needs). With ``read=False`` the h5py dataset itself is returned (for lazy,
+        chunked access).
         """
         path = _join(parent.name, name)
         try:
@@ -73,19 +88,37 @@ class Checker:
         if dshape is None or len(dshape) != len(shape):
             self.fail(path, f"has shape {dshape}, expected {len(shape)} dimensions")
         for got, want in zip(dshape, shape):
-            if want is not None and got != want:
-                self.fail(path, f"has shape {dshape}, expected {tuple(shape)}")
+            if got not in want if isinstance(want, range) else got != want:
+                expected = ", ".join(f"{w.start}..{w.stop - 1}" if isinstance(w, range) else str(w) for w in shape)
+                self.fail(path, f"has shape {dshape}, expected ({expected})")
         if int(np.prod(dshape, dtype=np.int64)) > MAX_ELEMENTS:
             self.fail(path, f"declares an implausible shape {dshape}")
         if not read:
             return obj
         try:
             arr = obj[()]
+        except MemoryError:  # out of memory is no defect of the file
+            raise
         except Exception as exc:
             self.fail(path, f"data cannot be read, the file may be truncated or corrupt ({exc})")
         if finite and arr.dtype.kind == "f" and not np.isfinite(arr).all():
             self.fail(path, "contains NaN or infinite values")
         return arr
+
+    def admit(self, objpath: str, need: int, what: str) -> None:
+        """Refuse a read of ``need`` declared bytes above the bound, before anything is read."""
+        if need > self.max_bytes:
+            raise TileDBSizeError(
+                f"reading {what} needs {_mib(need)} MiB, more than the bound of {_mib(self.max_bytes)} MiB "
+                "(raise it with TileDB(path, max_bytes=...) or DYNATEX_MAX_READ_BYTES)",
+                filename=self.filename,
+                objpath=objpath,
+            )
+
+    def declared_under(self, objpath: str) -> int:
+        """Declared bytes of every dataset at or below ``objpath``."""
+        prefix = objpath.rstrip("/") + "/"
+        return sum(n for path, n in self.sizes.items() if path == objpath or path.startswith(prefix))
 
     def attr(self, obj: h5py.HLObject, name: str, kind: type, default: Any = ...) -> Any:
         """Read attribute ``name`` as ``kind`` (int, float, str, bool); :meth:`ints` reads integer arrays."""
@@ -179,6 +212,133 @@ class Checker:
         """Every integer in ``arr`` must lie in ``[0, stop)``."""
         if arr.size and (arr.min() < 0 or arr.max() >= stop):
             self.fail(path, f"holds indices outside [0, {stop})")
+
+
+def survey(file: h5py.File, check: Checker, file_size: int) -> dict[str, int]:
+    """Walk every object of ``file`` without following a link or reading a dataset, and return the
+    declared bytes of each dataset by path; :class:`TileDBFormatError` names the first object that
+    would make a read leave the file or outgrow it.
+
+    Refused: links other than hard links (soft, external, user-defined), a second link to one
+    object (cycles included), objects other than groups and datasets, external storage, virtual
+    datasets, filters outside :data:`FILTERS`, more than :data:`~.schema.MAX_OBJECTS` objects,
+    and datasets whose declared size exceeds what their stored bytes can hold: more stored bytes
+    than the file has, none at all (a sparse dataset, never written), or more than
+    :data:`MAX_RATIO` declared bytes per stored byte (a compression bomb; without a compressing
+    filter no more than are stored). Attributes are checked against the file size too.
+    """
+    sizes: dict[str, int] = {}
+    seen: set[tuple[int, int]] = set()
+    root = h5py.h5g.open(file.id, b"/")
+    stack: list[tuple[str, h5py.h5g.GroupID]] = [("/", root)]
+    count = 0
+    while stack:
+        path, gid = stack.pop()
+        _attributes(gid, path, check, file_size)
+        try:
+            names = list(gid)
+        except Exception as exc:  # noqa: BLE001 - h5py's errors on damaged link tables vary
+            check.fail(path, f"cannot be listed ({_first_line(exc)})")
+        for raw in names:
+            count += 1
+            child = _join(path, raw.decode("utf-8", "replace"))
+            if count > MAX_OBJECTS:
+                check.fail(child, f"the file holds more than {MAX_OBJECTS} objects")
+            try:
+                kind = gid.links.get_info(raw).type
+            except Exception as exc:  # noqa: BLE001
+                check.fail(child, f"cannot be read ({_first_line(exc)})")
+            if kind != h5py.h5l.TYPE_HARD:
+                what = {h5py.h5l.TYPE_SOFT: "a soft link", h5py.h5l.TYPE_EXTERNAL: "an external link"}
+                check.fail(
+                    child,
+                    f"is {what.get(kind, f'a user-defined link (type {kind})')}: a database holds only "
+                    "its own groups and datasets",
+                )
+            try:
+                oid = h5py.h5o.open(gid, raw)
+                info = h5py.h5o.get_info(oid)
+            except Exception as exc:  # noqa: BLE001
+                check.fail(child, f"cannot be read ({_first_line(exc)})")
+            if (info.fileno, info.addr) in seen:
+                check.fail(child, "is a second link to an object met before: every object has one place")
+            seen.add((info.fileno, info.addr))
+            if isinstance(oid, h5py.h5g.GroupID):
+                stack.append((child, oid))
+            elif isinstance(oid, h5py.h5d.DatasetID):
+                _attributes(oid, child, check, file_size)
+                sizes[child] = _dataset(oid, child, check, file_size)
+            else:
+                check.fail(child, f"is a {type(oid).__name__}: a database holds only groups and datasets")
+    return sizes
+
+
+def _dataset(dsid: h5py.h5d.DatasetID, path: str, check: Checker, file_size: int) -> int:
+    """The declared bytes of a dataset whose data lies inside the file and fits it."""
+    try:
+        plist = dsid.get_create_plist()
+        layout = plist.get_layout()
+        external = plist.get_external_count() if layout == h5py.h5d.CONTIGUOUS else 0
+        filters = [plist.get_filter(i)[0] for i in range(plist.get_nfilters())]
+        shape = dsid.shape
+        itemsize = dsid.get_type().get_size()
+    except Exception as exc:  # noqa: BLE001
+        check.fail(path, f"cannot be read ({_first_line(exc)})")
+    if layout == h5py.h5d.VIRTUAL:
+        check.fail(path, "is a virtual dataset (it maps other files' data): a database reads only itself")
+    if external:
+        check.fail(path, "keeps its data in external files: a database reads only itself")
+    if layout not in _LAYOUTS:
+        check.fail(path, f"has an unknown storage layout ({layout})")
+    unknown = [f for f in filters if f not in FILTERS]
+    if unknown:
+        check.fail(path, f"uses the HDF5 filter {unknown[0]}, not one of {', '.join(sorted(FILTERS.values()))}")
+    declared = int(np.prod(shape, dtype=object)) * int(itemsize) if shape is not None else int(itemsize)
+    if not declared:
+        return 0
+    try:
+        stored = int(dsid.get_storage_size())
+    except Exception as exc:  # noqa: BLE001
+        check.fail(path, f"cannot be read ({_first_line(exc)})")
+    ratio = MAX_RATIO if _COMPRESSING.intersection(filters) else 1
+    if stored > file_size:
+        check.fail(path, f"claims {stored} stored bytes, more than the file's {file_size}")
+    if stored == 0:
+        check.fail(path, f"declares {declared} bytes and stores none (a sparse dataset): a database stores its data")
+    if declared > stored * ratio:
+        check.fail(
+            path,
+            f"declares {declared} bytes in {stored} stored, "
+            + (f"more than {MAX_RATIO}:1 (a compression bomb)" if ratio > 1 else "more than it holds"),
+        )
+    return declared
+
+
+def _attributes(oid: h5py.h5o.ObjectID, path: str, check: Checker, file_size: int) -> None:
+    """Every attribute of an object declares no more bytes than the file holds (attributes are never compressed)."""
+    try:
+        n = h5py.h5o.get_info(oid).num_attrs
+        if n > MAX_OBJECTS:
+            check.fail(path, f"holds {n} attributes, more than {MAX_OBJECTS}")
+        for i in range(n):
+            aid = h5py.h5a.open(oid, index=i)
+            shape = aid.shape
+            declared = (int(np.prod(shape, dtype=object)) if shape else 1) * aid.get_type().get_size()
+            if declared > file_size:
+                name = aid.name.decode("utf-8", "replace")
+                check.fail(f"{path}@{name}", f"declares {declared} bytes, more than the file's {file_size}")
+    except TileDBFormatError:
+        raise
+    except Exception as exc:  # noqa: BLE001
+        check.fail(path, f"attributes cannot be read ({_first_line(exc)})")
+
+
+def _mib(n: float) -> str:
+    return f"{n / 2**20:.1f}"
+
+
+def _first_line(exc: BaseException) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
 
 
 def _join(parent: str, name: str) -> str:

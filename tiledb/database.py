@@ -14,11 +14,12 @@ from . import frames as _frames
 from . import probe as _probe
 from . import schema
 from . import source as _source
-from ._check import Checker
+from ._check import Checker, survey
 from .codecs import CODECS
 from .errors import (
     MethodNotFoundError,
     TextureNotFoundError,
+    TileDBError,
     TileDBFormatError,
     TileDBNotFoundError,
     TileDBVersionError,
@@ -30,6 +31,28 @@ from .source import SourceInfo
 PLAYER_MODES = ("lds", "turnpoints", "tiles", "evolve", "mixture")
 #: the analysis method each player mode plays
 MODE_METHOD = {"lds": "lds", "turnpoints": "turnpoints", "tiles": "tiles", "evolve": "quilt", "mixture": "mixture"}
+
+#: Most declared bytes one read may bring into memory (one method's model, or a whole frame store),
+#: unless the caller raises it: ``TileDB(path, max_bytes=...)`` or ``DYNATEX_MAX_READ_BYTES``.
+DEFAULT_MAX_BYTES = 4 * 2**30
+
+
+def default_max_bytes() -> int:
+    """``$DYNATEX_MAX_READ_BYTES`` when set to a positive integer, else :data:`DEFAULT_MAX_BYTES`."""
+    text = os.environ.get("DYNATEX_MAX_READ_BYTES", "").strip()
+    if not text:
+        return DEFAULT_MAX_BYTES
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise InvalidArgumentError(f"DYNATEX_MAX_READ_BYTES must be a positive number of bytes, not {text!r}")
+    return value
+
+
+#: bytes of frames :meth:`TileDB.validate` reads at a time
+_VALIDATE_BYTES = 64 * 2**20
 
 
 class Texture:
@@ -90,7 +113,9 @@ class Texture:
                 objpath=self._group.name,
             )
         check = self._db._check
-        return CODECS[method].read(check.group(self._group, method), check, self.source)
+        group = check.group(self._group, method)
+        check.admit(group.name, check.declared_under(group.name), f"the {method} model")
+        return CODECS[method].read(group, check, self.source)
 
     @property
     def has_frames(self) -> bool:
@@ -131,6 +156,13 @@ class TileDB:
     (:mod:`.probe`: the HDF5 library crashes or hangs on some corrupt files; a file that
     passed is remembered); ``probe=False`` skips that, for a file this process just wrote.
 
+    Opening walks every object before any dataset is read and refuses what would read outside
+    the file (external storage, virtual datasets, links other than hard links) or more than it
+    holds (a dataset declaring more bytes than its storage can expand to). Each later read (one
+    method's model, or a whole frame store) may bring at most ``max_bytes`` declared bytes into
+    memory (default :func:`default_max_bytes`; ``math.inf`` lifts the bound), else
+    :class:`~dynatex.tiledb.TileDBSizeError`.
+
     Examples
     --------
     >>> from dynatex.tiledb import open_db
@@ -138,15 +170,20 @@ class TileDB:
     ...     model = db.texture("water").read("lds")
     """
 
-    def __init__(self, path: str | os.PathLike, *, probe: bool = True) -> None:
+    def __init__(self, path: str | os.PathLike, *, probe: bool = True, max_bytes: float | None = None) -> None:
         self.filename = os.fspath(path)
-        self._check = Checker(self.filename)
+        if max_bytes is None:
+            max_bytes = default_max_bytes()
+        if not max_bytes > 0:
+            raise InvalidArgumentError(f"max_bytes must be positive, not {max_bytes!r}")
+        self.max_bytes = max_bytes
+        self._check = Checker(self.filename, max_bytes)
         if not os.path.exists(self.filename):
             raise TileDBNotFoundError("no such database file", filename=self.filename)
         if os.path.isdir(self.filename):
             raise TileDBFormatError("is a folder, not a database file", filename=self.filename)
         if probe:
-            _probe.probe(self.filename)
+            _probe.probe(self.filename, max_bytes)
         try:
             self._file = h5py.File(self.filename, "r")
         except OSError as exc:
@@ -154,6 +191,7 @@ class TileDB:
                 f"not a readable HDF5 file, it may be truncated or corrupt ({_short(exc)})", filename=self.filename
             ) from None
         try:
+            self._check.sizes = survey(self._file, self._check, os.path.getsize(self.filename))
             self._validate_root()
             self._textures: dict[str, Texture] = {}
             group = self._check.group(self._file, schema.TEXTURES)
@@ -220,16 +258,36 @@ class TileDB:
                 objpath=f"/{schema.TEXTURES}/{name}",
             ) from None
 
-    def validate(self, *, every_frame: bool = False) -> None:
+    def validate(self, *, every_frame: bool = False, keep_going: bool = False) -> list[TileDBError]:
         """Read and validate every method and frame store of every texture (open checks only the
-        structure); the last stored frame is read, or all of them one by one with ``every_frame``."""
+        structure); the last stored frame is read, or all of them, in blocks, with ``every_frame``.
+
+        The first error is raised, or with ``keep_going`` every part is read and the errors are
+        returned (the probe child reads what a reader may read even when another part is refused).
+        """
+        errors: list[TileDBError] = []
+
+        def attempt(read, *args) -> None:
+            try:
+                read(*args)
+            except TileDBError as exc:
+                if not keep_going:
+                    raise
+                errors.append(exc)
+
         for tex in self:
             for method in tex.methods:
-                tex.read(method)
+                attempt(tex.read, method)
             if tex.has_frames:
-                store = tex.frames()
-                for i in range(len(store)) if every_frame else range(len(store) - 1, len(store)):
-                    store[i]
+                attempt(self._read_frames, tex, every_frame)
+        return errors
+
+    @staticmethod
+    def _read_frames(tex: Texture, every_frame: bool) -> None:
+        store = tex.frames()
+        step = max(1, _VALIDATE_BYTES * len(store) // max(store.nbytes, 1))  # frames per read
+        for i in range(0, len(store), step) if every_frame else range(len(store) - 1, len(store)):
+            store[i : i + step]
 
     def close(self) -> None:
         self._file.close()
@@ -244,13 +302,15 @@ class TileDB:
         return f"<TileDB {self.filename!r} v{self.version[0]}.{self.version[1]} textures={list(self._textures)}>"
 
 
-def open_db(path: str | os.PathLike) -> TileDB:
+def open_db(path: str | os.PathLike, *, max_bytes: float | None = None) -> TileDB:
     """Open and validate a tile database for reading.
 
     Parameters
     ----------
     path : str or os.PathLike
         The database file (``dynatex analyze`` writes it).
+    max_bytes : float, optional
+        Most declared bytes one read may bring into memory (see :class:`TileDB`).
 
     Returns
     -------
@@ -271,7 +331,7 @@ def open_db(path: str | os.PathLike) -> TileDB:
     ...     db.textures, tex.methods, tex.playable_modes()[:2]
     (('selftest',), ('lds', 'turnpoints', 'quilt', 'mixture', 'tiles'), ('lds', 'turnpoints'))
     """
-    return TileDB(path)
+    return TileDB(path, max_bytes=max_bytes)
 
 
 def _short(exc: BaseException) -> str:

@@ -36,6 +36,10 @@ class TileDBFormatError(TileDBError, ValueError):
     """The file is not a valid dynatex tile database (corrupt, truncated, inconsistent)."""
 
 
+class TileDBSizeError(TileDBFormatError):
+    """A read would bring more declared data into memory than the reader's bound (``max_bytes``) allows."""
+
+
 class TileDBVersionError(TileDBFormatError):
     """The file has a format major version this reader does not understand."""
 

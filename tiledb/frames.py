@@ -43,6 +43,8 @@ class FrameStore:
             self._check.fail(self._ds.name, f"data cannot be read, the file may be corrupt ({exc})")
 
     def read(self) -> np.ndarray:
+        """Every frame, once the bound of the database allows their bytes."""
+        self._check.admit(self._ds.name, self.nbytes, "every stored frame")
         return self[()]
 
 
@@ -57,7 +59,7 @@ def read(
     """Open ``parent/name`` as a :class:`FrameStore` of the source's ``n_frames`` frames of
     ``frame_shape`` (default: the source's); the methods index them by the source's count."""
     shape = frame_shape or source.frame_shape
-    ds = check.dataset(parent, name, kind="u", shape=(None, *shape), read=False)
+    ds = check.dataset(parent, name, kind="u", shape=(range(2**63), *shape), read=False)
     if ds.dtype != np.uint8:
         check.fail(ds.name, f"dtype {ds.dtype} is not uint8")
     if ds.shape[0] < 1:

@@ -102,19 +102,18 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
     if not 1 <= k <= n:
         check.fail(group.name + "@k", f"noise rank {k} out of range 1..{n}")
     ds = check.dataset
+    t = source.n_frames  # the SVD and the training states have at most one value or column per frame
     model = LDSModel(
         mean=ds(group, "mean", kind="f", shape=(p,)),
         basis=ds(group, "basis", kind="f", shape=(n, p)),
-        singular_values=ds(group, "singular_values", kind="f", shape=(None,)),
+        singular_values=ds(group, "singular_values", kind="f", shape=(range(n, t + 1),)),
         A=ds(group, "A", kind="f", shape=(n, n)),
         B=ds(group, "B", kind="f", shape=(n, k)),
         x0=ds(group, "x0", kind="f", shape=(n,)),
-        states=ds(group, "states", kind="f", shape=(n, None)),
+        states=ds(group, "states", kind="f", shape=(n, range(1, t + 1))),
         stationary_cov=ds(group, "stationary_cov", kind="f", shape=(n, n)),
         info=check.info(group),
     )
-    if model.singular_values.shape[0] < n:
-        check.fail(group.name + "/singular_values", f"holds {model.singular_values.shape[0]} values, fewer than n={n}")
     if model.mean.min() < -1 or model.mean.max() > 256:
         check.fail(group.name + "/mean", "values outside the 0..255 pixel range")
     _check_dynamics(group.name, model, check, p)

@@ -187,16 +187,17 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         check.fail(f"{path}@global_dim", f"{dg} exceeds components * (dim + 1) - 1 = {j - 1}")
     ds = check.dataset
     f = "f"
+    frames = range(2, source.n_frames + 1)  # training arrays: a row per frame; SVD and SBC: at most as many
     model = MixtureModel(
         mean=ds(group, "mean", kind=f, shape=(p,)),
         stacked_basis=ds(group, "stacked_basis", kind=f, shape=(j, p)),
         weights=ds(group, "weights", kind=f, shape=(s,)),
         sigma2=ds(group, "sigma2", kind=f, shape=(s,)),
-        singular_values=ds(group, "singular_values", kind=f, shape=(None,)),
-        responsibilities=ds(group, "responsibilities", kind=f, shape=(None, s)),
-        local_coords=ds(group, "local_coords", kind=f, shape=(None, s, d)),
+        singular_values=ds(group, "singular_values", kind=f, shape=(range(source.n_frames + 1),)),
+        responsibilities=ds(group, "responsibilities", kind=f, shape=(frames, s)),
+        local_coords=ds(group, "local_coords", kind=f, shape=(frames, s, d)),
         coord_map=ds(group, "coord_map", kind=f, shape=(j, dg)),
-        global_coords=ds(group, "global_coords", kind=f, shape=(None, dg)),
+        global_coords=ds(group, "global_coords", kind=f, shape=(frames, dg)),
         gauss_mean=ds(group, "gauss_mean", kind=f, shape=(s, dg)),
         gauss_cov=ds(group, "gauss_cov", kind=f, shape=(s, dg, dg)),
         decode_offset=ds(group, "decode_offset", kind=f, shape=(s, d)),
@@ -206,14 +207,12 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         ar_coefs=ds(group, "ar_coefs", kind=f, shape=(order, dg, dg)),
         ar_intercept=ds(group, "ar_intercept", kind=f, shape=(dg,)),
         ar_noise_cov=ds(group, "ar_noise_cov", kind=f, shape=(dg, dg)),
-        sbc=ds(group, "sbc", kind=f, shape=(None,)),
+        sbc=ds(group, "sbc", kind=f, shape=(range(order, source.n_frames + 1),)),
         info=check.info(group, skip=_SIZES),
     )
     t = model.global_coords.shape[0]
     if t < 2 or model.responsibilities.shape[0] != t or model.local_coords.shape[0] != t:
         check.fail(path + "/global_coords", "training arrays disagree on the number of frames (or fewer than 2)")
-    if model.sbc.shape[0] < order:
-        check.fail(path + "/sbc", f"holds {model.sbc.shape[0]} values, fewer than the order {order}")
     if model.weights.min() < 0 or abs(model.weights.sum() - 1) > 1e-6:
         check.fail(path + "/weights", "mixing proportions must be >= 0 and sum to 1")
     if model.sigma2.min() <= 0:

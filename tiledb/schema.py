@@ -81,3 +81,5 @@ def texture_name_from(text: str) -> str:
 
 #: Largest dimension any stored array may declare; guards hostile files.
 MAX_ELEMENTS = 2**34
+#: Most groups and datasets a database may hold (a corpus of a thousand textures holds about 30,000).
+MAX_OBJECTS = 100_000

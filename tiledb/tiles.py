@@ -220,10 +220,8 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
     if not (4 <= th <= 8192 and 4 <= tw <= 8192):
         check.fail(group.name + "@tile_h", f"tile size {th}x{tw} outside 4..8192")
     ds = check.dataset
-    names_raw = ds(group, "class_names", kind="S", shape=(None,))
+    names_raw = ds(group, "class_names", kind="S", shape=(range(1, MAX_CLASSES + 1),))
     c = len(names_raw)
-    if not 1 <= c <= MAX_CLASSES:
-        check.fail(group.name + "/class_names", f"{c} classes, outside 1..{MAX_CLASSES}")
     try:
         names = [bytes(n).decode("utf-8") for n in names_raw]
     except UnicodeDecodeError:
@@ -248,6 +246,8 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TilesModel:
         check.fail(group.name + "/tiles", f"dtype {model.tiles.dtype} is not uint8")
     try:
         model.tiles = model.tiles[()]
+    except MemoryError:  # out of memory is no defect of the file
+        raise
     except Exception as exc:
         check.fail(group.name + "/tiles", f"data cannot be read, the file may be truncated or corrupt ({exc})")
     check.index_range(group.name + "/tile_class", model.tile_class, c)

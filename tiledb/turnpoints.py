@@ -110,8 +110,8 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TurnPointMode
         check.fail(group.name + "@exit_frame", f"{exit_frame} out of range 1..{t - 1}")
     ds = check.dataset
     arrays = {name: ds(group, name, kind="f", shape=(t,)) for name in _PER_FRAME}
-    turns = ds(group, "turn_points", kind="iu", shape=(None,))
-    src = ds(group, "src", kind="iu", shape=(None,))
+    turns = ds(group, "turn_points", kind="iu", shape=(range(t + 1),))
+    src = ds(group, "src", kind="iu", shape=(range(t * (t - 1) + 1),))  # one per ordered pair at most
     m = src.shape[0]
     dst = ds(group, "dst", kind="iu", shape=(m,))
     per_tr = {name: ds(group, name, kind="f", shape=(m,)) for name in _PER_TRANSITION}

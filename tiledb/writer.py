@@ -172,7 +172,7 @@ class DatabaseWriter:
                         self._texture_group(name)
             self._file.close()
             self._file = None
-            with TileDB(self._tmp, probe=False) as db:  # written here, just now
+            with TileDB(self._tmp, probe=False, max_bytes=float("inf")) as db:  # written here, just now
                 db.validate()
             if self._old is not None:
                 self._old.close()

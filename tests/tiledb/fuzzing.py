@@ -11,6 +11,14 @@ A worker handles mutants one after another (process start-up and kernel builds a
 once); when one dies or overruns its time, the mutant it held is recorded as a crash or a
 hang and a fresh worker takes the next.
 
+The structural mutants (:data:`STRUCTURAL`, :func:`plan_structural`) use HDF5's own features
+instead: a dataset's data in external storage (a file the mutator writes with the dataset's own
+bytes, or a FIFO), a virtual dataset over a foreign HDF5 file (or a missing one), an external or
+soft link in place of a dataset or group (the foreign file holding a faithful copy), and size
+bombs (a dataset grown to declare :data:`BOMB_BYTES`, gzip- or LZF-compressed zeros, or never
+written). A database reads only itself, so a link mutant must be rejected; each worker reports
+its own and its probe children's peak resident memory, so a bomb that got read shows.
+
 Outcomes, per mutant (the worst of its steps):
 
 - ``rejected``: a :class:`~dynatex.tiledb.DynatexError` with a one-line message;
@@ -18,6 +26,8 @@ Outcomes, per mutant (the worst of its steps):
 - ``garbage``: passed validation, but the frames of a backend are flat (one value) or
   frozen (identical in time) where the unmutated database's are not;
 - ``error``: any other exception, or a multi-line message;
+- ``foreign``: a structural link mutant (external storage, virtual dataset, external or soft
+  link) passed a step: it read, or could have read, data from outside the file;
 - ``crash``: the worker died (a signal);
 - ``hang``: the worker overran its time.
 
@@ -45,8 +55,19 @@ import numpy as np
 #: method group -> player mode that plays it
 METHOD_MODES = {"lds": "lds", "mixture": "mixture", "quilt": "evolve", "tiles": "tiles", "turnpoints": "turnpoints"}
 KINDS = ("byteflip", "truncate", "value", "index", "shape", "dtype", "attr")
-OUTCOMES = ("rejected", "ok", "garbage", "error", "crash", "hang")
-BAD = ("garbage", "error", "crash", "hang")
+#: mutations with HDF5's own features, and their variants; the first four must always be rejected
+STRUCTURAL = {
+    "external": ("absolute", "relative", "fifo"),
+    "virtual": ("foreign", "missing"),
+    "extlink": ("dataset", "method", "texture", "source"),
+    "softlink": ("moved", "dangling", "loop"),
+    "bomb": ("gzip", "lzf", "sparse"),
+}
+LINKS = ("external", "virtual", "extlink", "softlink")
+#: declared bytes of a size bomb
+BOMB_BYTES = 2**30
+OUTCOMES = ("rejected", "ok", "garbage", "error", "foreign", "crash", "hang")
+BAD = ("garbage", "error", "foreign", "crash", "hang")
 #: frames rendered per backend, and the player options that keep them small
 FRAMES = 4
 MODE_OPTIONS = {"tiles": {"size": (40, 24), "tone": "consensus"}, "evolve": {"size": (32, 24), "jitter": 2.0}}
@@ -210,6 +231,32 @@ def plan(seed: int, index: int, inventories: dict[str, dict]) -> dict[str, Any]:
     return spec
 
 
+def plan_structural(seed: int, index: int, inventories: dict[str, dict]) -> dict[str, Any]:
+    """The structural mutation of mutant ``index``: method, kind, variant and the dataset it replaces."""
+    rng = np.random.default_rng([seed, index, 1])
+    methods = sorted(inventories)
+    method = methods[index % len(methods)]
+    kinds = sorted(STRUCTURAL)
+    kind = kinds[(index // len(methods)) % len(kinds)]
+    ds = inventories[method]["datasets"]
+    targets = sorted(n for n, (_, shape) in ds.items() if len(shape) >= 1 and int(np.prod(shape)) > 0)
+    variants = STRUCTURAL[kind]
+    variant = variants[(index // (len(methods) * len(kinds))) % len(variants)]
+    target = targets[int(rng.integers(len(targets)))]
+    parts = target.split("/")  # "", "textures", name, (method,) dataset
+    texture = "/".join(parts[:3])
+    replaced = {"method": "/".join(parts[:-1]), "texture": texture, "source": texture + "/source"}
+    return {
+        "index": index,
+        "seed": seed,
+        "method": method,
+        "kind": kind,
+        "variant": variant,
+        "target": target,
+        "object": replaced.get(variant, target) if kind == "extlink" else target,  # what the mutant replaces
+    }
+
+
 _SIZE_ATTRS = (
     "n",
     "k",
@@ -280,6 +327,9 @@ def apply(spec: dict[str, Any], base: str | os.PathLike, dest: str | os.PathLike
         return
     with warnings.catch_warnings(), np.errstate(all="ignore"), h5py.File(dest, "r+") as f:
         warnings.simplefilter("ignore")
+        if kind in STRUCTURAL:
+            _structural(f, spec, Path(dest))
+            return
         if kind == "attr" or (kind == "index" and "attr" in spec):
             _mutate_attr(f[spec["target"]], spec)
             return
@@ -289,6 +339,70 @@ def apply(spec: dict[str, Any], base: str | os.PathLike, dest: str | os.PathLike
         del f[target]
         if new is not None:
             f[target] = new
+
+
+def _structural(f, spec: dict[str, Any], dest: Path) -> None:
+    """Replace ``spec["target"]`` (or the group holding it) by the structural mutation ``spec`` names."""
+    import h5py
+
+    kind, variant, target = spec["kind"], spec["variant"], spec["target"]
+    ds = f[target]
+    arr, dtype, shape = ds[()], ds.dtype, ds.shape
+    foreign = dest.with_name(dest.name + ".foreign")
+    for old in (foreign, dest.with_name(dest.name + ".fifo")):
+        if old.exists():
+            old.unlink()
+    if kind == "external":
+        if variant == "fifo":
+            name = str(dest.with_name(dest.name + ".fifo"))
+            os.mkfifo(name)
+        else:
+            foreign.write_bytes(arr.tobytes())  # the dataset's own bytes: only where they lie is wrong
+            name = str(foreign) if variant == "absolute" else os.path.relpath(foreign)
+        del f[target]
+        f.create_dataset(target, shape=shape, dtype=dtype, external=[(name, 0, arr.nbytes)])
+    elif kind == "virtual":
+        with h5py.File(foreign, "w") as g:
+            g["data"] = arr
+        if variant == "missing":
+            foreign.unlink()
+        layout = h5py.VirtualLayout(shape=shape, dtype=dtype)
+        layout[...] = h5py.VirtualSource(str(foreign), "data", shape=shape, dtype=dtype)
+        del f[target]
+        f.create_virtual_dataset(target, layout)
+    elif kind == "extlink":
+        obj = spec["object"]
+        with h5py.File(foreign, "w") as g:
+            f.copy(f[obj], g, name="copy")  # a faithful copy: only where it lies is wrong
+        del f[obj]
+        f[obj] = h5py.ExternalLink(str(foreign), "/copy")
+    elif kind == "softlink":
+        if variant == "moved":
+            f.move(target, "/stash")
+            f[target] = h5py.SoftLink("/stash")
+        else:
+            del f[target]
+            f[target] = h5py.SoftLink("/nowhere" if variant == "dangling" else target.rsplit("/", 1)[0])
+    else:  # bomb
+        _bomb(f, target, arr, variant)
+
+
+def _bomb(f, target: str, arr: np.ndarray, variant: str) -> None:
+    """``target`` grown along its first axis to declare :data:`BOMB_BYTES` of zeros in a few stored bytes."""
+    row = max(1, int(np.prod(arr.shape[1:])) * arr.dtype.itemsize)
+    rows = -(-BOMB_BYTES // row)
+    per_chunk = max(1, min(rows, (8 << 20) // row))
+    shape, chunks = (rows, *arr.shape[1:]), (per_chunk, *arr.shape[1:])
+    del f[target]
+    if variant == "sparse":
+        f.create_dataset(target, shape=shape, dtype=arr.dtype, chunks=chunks)
+        return
+    ds = f.create_dataset(target, shape=shape, dtype=arr.dtype, chunks=chunks, compression=variant)
+    ds[:per_chunk] = 0
+    zero = (0,) * (len(shape) - 1)
+    _, raw = ds.id.read_direct_chunk((0, *zero))
+    for start in range(per_chunk, rows, per_chunk):  # the one compressed chunk, repeated
+        ds.id.write_direct_chunk((start, *zero), raw)
 
 
 def _mutate_attr(obj, spec: dict[str, Any]) -> None:
@@ -458,8 +572,19 @@ def worker_main() -> None:
             steps = {"mutate": dict(made, outcome="error")}  # a fault of the mutator: reported, never hidden
         else:
             steps = run_mutant(job["path"], job["mode"], job["devices"])
-        proto.write(json.dumps(steps) + "\n")
+        proto.write(json.dumps({"steps": steps, "rss": peak_rss()}) + "\n")
         proto.flush()
+
+
+def peak_rss() -> dict[str, int]:
+    """Peak resident bytes of this process and of its largest finished child (the probes) so far."""
+    import resource
+
+    scale = 1 if sys.platform == "darwin" else 1024
+    return {
+        "self": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * scale,
+        "children": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * scale,
+    }
 
 
 # -- the parent's side ------------------------------------------------------------------------
@@ -468,6 +593,7 @@ class Result:
     spec: dict[str, Any]
     outcome: str
     steps: dict[str, Any] = field(default_factory=dict)
+    rss: dict[str, int] = field(default_factory=dict)
 
     def line(self) -> str:
         detail = {k: v for k, v in self.steps.items() if isinstance(v, dict) and v.get("outcome") not in ("ok",)}
@@ -485,7 +611,10 @@ class Runner:
         devices: list[str | None],
         timeout: float = 60.0,
         workers: int = 1,
+        max_bytes: int | None = None,
     ) -> None:
+        """``max_bytes``: the workers' bound on declared bytes per read (``DYNATEX_MAX_READ_BYTES``)."""
+        self.max_bytes = max_bytes
         self.bases = bases
         self.folder = Path(folder)
         self.devices = devices
@@ -505,8 +634,9 @@ class Runner:
             self.controls[method] = res[0].steps
         return self.controls[method]
 
-    def run(self, seed: int, indices: Iterable[int]) -> list[Result]:
-        specs = [plan(seed, i, self.inventories) for i in indices]
+    def run(self, seed: int, indices: Iterable[int], *, structural: bool = False) -> list[Result]:
+        """Mutants ``indices`` of ``seed``: byte and value mutations, or the structural ones."""
+        specs = [(plan_structural if structural else plan)(seed, i, self.inventories) for i in indices]
         for method in {s["method"] for s in specs}:
             self.control(method)
         jobs = [
@@ -533,7 +663,7 @@ class Runner:
                     if "spec" in jobs[j]:
                         jobs[j] = dict(jobs[j], path=str(self.folder / f"mutant-w{w}.h5"))
                     if workers[w] is None or not workers[w].alive():
-                        workers[w] = _Worker(self._log)
+                        workers[w] = _Worker(self._log, self.max_bytes)
                     workers[w].send(jobs[j])
                     busy[w] = (j, time.monotonic() + self.timeout)
             ready = _Worker.wait([workers[w] for w in busy], min(d for _, d in busy.values()) - time.monotonic())
@@ -542,13 +672,14 @@ class Runner:
                 j, deadline = busy[w]
                 worker = workers[w]
                 if worker in ready:
-                    steps = worker.receive()
-                    if steps is None:  # died
+                    answer = worker.receive()
+                    if answer is None:  # died
                         code = worker.close()
                         workers[w] = None
                         results[j] = Result(specs[j], "crash", {"exit": code})
                     else:
-                        results[j] = Result(specs[j], self._classify(specs[j], steps), steps)
+                        steps = answer["steps"]
+                        results[j] = Result(specs[j], self._classify(specs[j], steps), steps, answer["rss"])
                     del busy[w]
                 elif now >= deadline:
                     worker.kill()
@@ -570,6 +701,8 @@ class Runner:
                 got = step["frames"]
                 if (got["flat"] and not ref.get("flat")) or (got["frozen"] and not ref.get("frozen")):
                     outcome = "garbage"
+            if outcome in ("ok", "garbage") and spec.get("kind") in LINKS:
+                outcome = "foreign"
             outcomes.append(outcome)
         return max(outcomes, key=OUTCOMES.index)
 
@@ -578,8 +711,10 @@ class Runner:
 
 
 class _Worker:
-    def __init__(self, log) -> None:
+    def __init__(self, log, max_bytes: int | None = None) -> None:
         env = dict(os.environ, PYTHONWARNINGS="ignore")
+        if max_bytes is not None:
+            env["DYNATEX_MAX_READ_BYTES"] = str(max_bytes)
         self.proc = subprocess.Popen(
             [sys.executable, __file__, "--worker"],
             stdin=subprocess.PIPE,
@@ -650,13 +785,13 @@ def verified_device() -> list[str | None]:
     return [None] + ([ok[0].index] if ok else [])
 
 
-def table(results: list[Result]) -> str:
-    """Outcome counts per method and mutation kind, as a Markdown table."""
+def table(results: list[Result], key: str = "method") -> str:
+    """Outcome counts per ``key`` (``method`` or ``variant``) and mutation kind, as a Markdown table."""
     rows: dict[tuple[str, str], dict[str, int]] = {}
     for r in results:
-        row = rows.setdefault((r.spec["method"], r.spec["kind"]), dict.fromkeys(OUTCOMES, 0))
+        row = rows.setdefault((r.spec.get(key, "-"), r.spec["kind"]), dict.fromkeys(OUTCOMES, 0))
         row[r.outcome] += 1
-    lines = ["| method | mutation | " + " | ".join(OUTCOMES) + " | total |", "|---" * (len(OUTCOMES) + 3) + "|"]
+    lines = [f"| {key} | mutation | " + " | ".join(OUTCOMES) + " | total |", "|---" * (len(OUTCOMES) + 3) + "|"]
     total = dict.fromkeys(OUTCOMES, 0)
     for (method, kind), row in sorted(rows.items()):
         lines.append(
@@ -678,15 +813,23 @@ def fuzz(
     timeout: float = 60.0,
     workers: int = 1,
     devices: list[str | None] | None = None,
+    structural: bool = False,
+    max_bytes: int | None = None,
 ) -> Iterator[Result]:
-    """Run mutants ``start .. start + count - 1`` of ``seed``; yields results in order."""
+    """Run mutants ``start .. start + count - 1`` of ``seed`` (the structural ones with
+    ``structural``); yields results in order."""
     runner = Runner(
-        bases, folder, devices=verified_device() if devices is None else devices, timeout=timeout, workers=workers
+        bases,
+        folder,
+        devices=verified_device() if devices is None else devices,
+        timeout=timeout,
+        workers=workers,
+        max_bytes=max_bytes,
     )
     try:
         step = 50
         for lo in range(start, start + count, step):
-            yield from runner.run(seed, range(lo, min(lo + step, start + count)))
+            yield from runner.run(seed, range(lo, min(lo + step, start + count)), structural=structural)
     finally:
         runner.close()
 

@@ -1,5 +1,7 @@
 """The database fuzzer in the suite: 500 seeded mutants of every method's database through
-``info`` and a short render on numpy and a verified OpenCL device, in worker processes.
+``info`` and a short render on numpy and a verified OpenCL device, in worker processes, and 100
+structural mutants (external storage, virtual datasets, external and soft links, size bombs),
+every one of which must be rejected without reading a bomb.
 
 No mutant may crash a worker, hang, raise anything but a one-line DynatexError, or pass
 validation and then render flat or frozen frames where the unmutated database does not.
@@ -64,6 +66,42 @@ def test_mutants_are_reproducible(runner):
     b = [fuzzing.plan(SEED, i, runner.inventories) for i in range(40)]
     assert a == b
     assert {s["kind"] for s in a} == set(fuzzing.KINDS) and {s["method"] for s in a} == set(fuzzing.METHOD_MODES)
+
+
+#: structural mutants in the suite: every method, kind and variant (5 x 5 x 4)
+STRUCTURAL_COUNT = 100
+#: the workers' bound on declared bytes per read while they take structural mutants
+BOUND = 64 * 2**20
+
+
+@pytest.fixture(scope="module")
+def structural_runner(bases, tmp_path_factory):
+    r = fuzzing.Runner(
+        bases,
+        tmp_path_factory.mktemp("fuzz-structural"),
+        devices=fuzzing.verified_device(),
+        timeout=60.0,
+        workers=2,
+        max_bytes=BOUND,
+    )
+    yield r
+    r.close()
+
+
+@pytest.mark.timeout(900)
+def test_structural_mutants_read_nothing_foreign_and_stay_within_the_bound(structural_runner):
+    results = structural_runner.run(SEED, range(STRUCTURAL_COUNT), structural=True)
+    covered = {(r.spec["method"], r.spec["kind"], r.spec["variant"]) for r in results}
+    assert {(k, v) for _, k, v in covered} == {(k, v) for k, vs in fuzzing.STRUCTURAL.items() for v in vs}
+    assert {m for m, _, _ in covered} == set(fuzzing.METHOD_MODES)
+    bad = [r.line() for r in results if r.outcome != "rejected"]
+    assert not bad, f"{len(bad)} mutants not rejected:\n" + "\n".join(bad[:20]) + "\n" + fuzzing.table(results)
+    for r in results:
+        for step in r.steps.values():  # one line naming the object replaced, or a group holding it
+            objpath = step["message"].split(": ")[1]
+            assert r.spec["object"].startswith(objpath) and "\n" not in step["message"], (r.spec, step)
+    peak = max(max(r.rss["self"], r.rss["children"]) for r in results)
+    assert peak < fuzzing.BOMB_BYTES // 4, f"peak resident memory {peak / 2**20:.0f} MiB: a bomb was read"
 
 
 @pytest.mark.slow

@@ -25,14 +25,15 @@ def _write(path):
 def test_written_files_are_known_and_changed_files_are_probed_then_known(tmp_path, monkeypatch):
     monkeypatch.setenv("DYNATEX_CACHE_DIR", str(tmp_path / "cache"))
     path = str(_write(tmp_path / "a.h5"))
-    assert probe._identity(path) in probe._remembered()
+    assert probe._passed(probe._identity(path), float("inf"))  # read back whole: safe at any bound
     with h5py.File(path, "r+") as f:  # any change makes it another file
         f.attrs["note"] = np.int64(1)
     key = probe._identity(path)
-    assert key not in probe._remembered()
-    with TileDB(path) as db:
+    assert not probe._passed(key, 1)
+    with TileDB(path, max_bytes=2**20) as db:
         assert db.texture("w").read("lds").n == 4
-    assert key in probe._remembered()
+    assert probe._passed(key, 2**20) and probe._passed(key, 1000)
+    assert not probe._passed(key, 2**21)  # a larger bound reads more: probed again
 
 
 def test_without_an_interpreter_the_file_opens_unprobed(tmp_path, monkeypatch):
