@@ -27,6 +27,7 @@ from typing import Any
 
 from ..errors import InvalidArgumentError
 from ..tiledb import DatabaseWriter, TileDB, TileDBError
+from ..tiledb.writer import remove_stale_temp_files
 from .methods import Clips, Method, get_method
 from .stream import parse_bytes
 
@@ -301,15 +302,9 @@ def _from_disk(disk, method: str, max_memory: int):
 
 
 def remove_stale_temporaries(database: str) -> list[str]:
-    """Delete temporary files a killed writer of ``database`` left beside it; returns their paths."""
-    folder, base = os.path.split(os.path.abspath(database))
-    stale = glob.glob(os.path.join(glob.escape(folder), f".{glob.escape(base)}.*.tmp"))
-    for path in stale:
-        try:
-            os.unlink(path)
-        except FileNotFoundError:
-            pass
-    return stale
+    """Delete temporary files a killed writer of ``database`` left beside it (never one a live
+    writer holds: :func:`~dynatex.tiledb.writer.remove_stale_temp_files`); returns their paths."""
+    return remove_stale_temp_files(database)
 
 
 def database_is_complete(task: ClipTask) -> bool:

@@ -8,6 +8,14 @@ removes them. Locks die with their process, so a crash can never make a live fil
 or a stale one look live. On NFS ``flock`` is emulated with POSIX locks, which reach across
 machines but lapse when the writer's HDF5 handle closes; a writer that starts in that moment
 can take the file, and the first writer's commit then fails (the database stays as it was).
+
+Writers of one database serialise their commits on a lock file ``.NAME.lock`` beside it (an
+exclusive ``flock``, held from re-reading the current database to the rename; the holder removes
+the file): a commit carries over every texture the database holds *at that moment*, so writers
+that ran side by side (two analyses, a merge) keep each other's textures. A writer that waits
+says so once on stderr. On NFS the lock works across machines only where the server runs a lock
+manager (NFSv4, or NFSv3 with ``lockd``; not with the ``nolock`` mount option): elsewhere writers
+on different machines are not serialised and the last commit wins.
 Where there is no ``fcntl`` (Windows) nothing is locked or removed.
 """
 
@@ -17,6 +25,7 @@ import os
 import re
 import secrets
 import stat
+import sys
 import unicodedata
 from typing import Any
 
@@ -63,9 +72,12 @@ class DatabaseWriter:
             raise FileNotFoundError(f"{path}: folder {folder} does not exist")
         if os.path.isdir(self.path):
             raise IsADirectoryError(f"{path}: is a folder, not a database file")
-        # Validate the existing database before touching anything.
+        # Validate the existing database before touching anything; commit re-reads it if it changed.
+        self._overwrite = overwrite
         self._old: TileDB | None = None
+        self._old_id: tuple[int, ...] | None = None
         if os.path.exists(self.path) and not overwrite:
+            self._old_id = _identity(self.path)
             self._old = TileDB(self.path)
         remove_stale_temp_files(self.path)
         self._tmp, self._lock = _create_temp(self.path)
@@ -128,38 +140,65 @@ class DatabaseWriter:
         if name in self._textures:
             return self._textures[name]
         if self._old is not None and name in self._old and name not in self._removed:
-            old = self._old._file[schema.TEXTURES][name]
-            g = self._textures.create_group(name)
-            for key in old:
-                if key != skip:
-                    old.copy(old[key], g, name=key)
-            return g
+            return self._carry(self._old, name, skip)
         raise TextureNotFoundError(f"no texture named {name!r}; call put_texture first", filename=self.path)
+
+    def _carry(self, db: TileDB, name: str, skip: str | None = None) -> h5py.Group:
+        """Copy texture ``name`` of ``db`` (all but ``skip``) into the new file."""
+        old = db._file[schema.TEXTURES][name]
+        g = self._textures.create_group(name)
+        for key in old:
+            if key != skip:
+                old.copy(old[key], g, name=key)
+        return g
 
     # -- commit / abort ----------------------------------------------------------
     def commit(self) -> None:
         """Carry over untouched textures, validate the new file, and rename it onto ``path``."""
         if self._file is None:
             raise RuntimeError("writer already committed or aborted")
+        lock = None
         try:
-            if self._old is not None:
-                for name in self._old.textures:
-                    if name not in self._textures and name not in self._removed:
-                        self._texture_group(name)
+            lock = lock_database(self.path)
+            if not self._overwrite:
+                current = self._current()
+                if current is not None:
+                    for name in current.textures:
+                        if name not in self._textures and name not in self._removed:
+                            self._carry(current, name)
             self._file.close()
             self._file = None
             with TileDB(self._tmp, probe=False) as db:  # written here, just now
                 db.validate()
-            if self._old is not None:
-                self._old.close()
-                self._old = None
+            self._close_old()
             _keep_mode(self._tmp, self.path)
             os.replace(self._tmp, self.path)
             _probe.remember(self.path)  # read back above: no probe needed to open it
         except BaseException:
             self.abort()
             raise
+        finally:
+            if lock is not None:
+                lock.release()
         self._release()
+
+    def _current(self) -> TileDB | None:
+        """The database at ``path`` now (under the lock): the one opened at the start when it is
+        unchanged, else the file another writer committed since (validated), or None."""
+        now = _identity(self.path)
+        if now is None:
+            self._close_old()
+            return None
+        if now != self._old_id:
+            self._close_old()
+            self._old = TileDB(self.path)
+            self._old_id = now
+        return self._old
+
+    def _close_old(self) -> None:
+        if self._old is not None:
+            self._old.close()
+            self._old = None
 
     def abort(self) -> None:
         """Discard everything written; ``path`` is left untouched."""
@@ -168,9 +207,7 @@ class DatabaseWriter:
                 self._file.close()
             finally:
                 self._file = None
-        if self._old is not None:
-            self._old.close()
-            self._old = None
+        self._close_old()
         if os.path.exists(self._tmp):
             os.unlink(self._tmp)
         self._release()
@@ -280,6 +317,74 @@ def _open_for_writing(tmp: str, lock: int | None) -> h5py.File:
         if lock is not None:
             fcntl.flock(lock, fcntl.LOCK_UN)
         return h5py.File(tmp, "w")
+
+
+class DatabaseLock:
+    """The exclusive lock on writing database ``path`` (see :func:`lock_database`)."""
+
+    def __init__(self, path: str, fd: int | None) -> None:
+        self.path, self._fd = path, fd
+
+    def release(self) -> None:
+        """Remove the lock file and drop the lock (a writer waiting on the removed file tries again)."""
+        if self._fd is not None:
+            try:
+                os.unlink(self.path)
+            except OSError:
+                pass
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self) -> DatabaseLock:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def lock_path(path: str | os.PathLike) -> str:
+    """The lock file that writers of database ``path`` serialise on: ``.NAME.lock`` beside it."""
+    folder, name = os.path.split(os.path.abspath(os.fspath(path)))
+    return os.path.join(folder, f".{name}.lock")
+
+
+def lock_database(path: str | os.PathLike) -> DatabaseLock:
+    """Take the exclusive lock on writing database ``path``, waiting for the writer that holds it
+    (said once on stderr). A lock file left by a killed writer holds no lock and is taken over."""
+    lock = lock_path(path)
+    if fcntl is None:
+        return DatabaseLock(lock, None)
+    said = False
+    while True:
+        fd = os.open(lock, os.O_RDONLY | os.O_CREAT | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0), 0o666)
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                if not said:
+                    said = True
+                    print(f"dynatex: waiting for another writer of {path} to finish", file=sys.stderr, flush=True)
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            held = os.fstat(fd)
+            try:
+                now = os.lstat(lock)
+            except FileNotFoundError:
+                now = None
+        except BaseException:
+            os.close(fd)
+            raise
+        if now is not None and (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
+            return DatabaseLock(lock, fd)
+        os.close(fd)  # its holder removed that file on release: lock the one that stands now
+
+
+def _identity(path: str) -> tuple[int, ...] | None:
+    """What changes when a writer replaces the file at ``path`` (None when there is none)."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
 
 
 def _keep_mode(tmp: str, path: str) -> None:
