@@ -12,7 +12,7 @@ import hashlib
 import os
 import tempfile
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,6 +26,10 @@ from .video import (
     Progress,
     _crop_resize_color,
     _tuple4,
+    hold_scratch,
+    join_child,
+    release_scratch,
+    remove_stale_scratch,
 )
 
 _UNITS = {
@@ -94,6 +98,7 @@ class DiskClip:
     crop: tuple[int, ...] = ()
     source_size: tuple[int, ...] = ()  # (height, width) of the decoded source frames
     owned: bool = False
+    hold: int | None = field(default=None, repr=False)  # the lock that marks an owned file live
 
     @property
     def pixels(self) -> int:
@@ -149,6 +154,8 @@ class DiskClip:
         """Delete the spill file of an owned clip."""
         if self.owned and os.path.exists(self.path):
             os.unlink(self.path)
+        release_scratch(self.hold)
+        self.hold = None
 
     def __enter__(self) -> DiskClip:  # noqa: PYI034
         return self
@@ -189,15 +196,21 @@ def spill_clip(
         direct = _npy_direct(path, color, fps)
         if direct is not None and plain:
             return direct
-    fd, out = tempfile.mkstemp(prefix="dynatex-spill-", suffix=".u8", dir=folder)
-    os.close(fd)
+    remove_stale_scratch(folder)
+    hold, out = None, None
     try:
+        while hold is None:
+            fd, out = tempfile.mkstemp(prefix="dynatex-spill-", suffix=".u8", dir=folder)
+            os.close(fd)
+            hold = hold_scratch(out)
         if isolate and os.path.isfile(path) and not path.endswith(".npy"):
             meta = _spill_isolated(path, out, start, stop, step, crop_t, size_t, color)
         else:
             meta = _spill(path, out, start, stop, step, crop_t, size_t, color, progress)
     except BaseException:
-        os.unlink(out)
+        if out is not None and os.path.exists(out):
+            os.unlink(out)
+        release_scratch(hold)
         raise
     shape, n, src_fps, digest, source_size = meta
     return DiskClip(
@@ -213,6 +226,7 @@ def spill_clip(
         crop=crop_t or (),
         source_size=source_size,
         owned=True,
+        hold=hold,
     )
 
 
@@ -363,7 +377,7 @@ def _spill_isolated(path, out, start, stop, step, crop, size, color):
     q = ctx.Queue()
     proc = ctx.Process(target=_spill_entry, args=(q, path, out, start, stop, step, crop, size, color), daemon=True)
     proc.start()
-    proc.join()
+    join_child(proc)
     result = q.get(timeout=5) if not q.empty() else None
     if proc.exitcode == 0 and result is not None and result[0] == "ok":
         return result[1]

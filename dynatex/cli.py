@@ -6,15 +6,22 @@ folder) and for a file the user named that cannot be opened; 1 for anything else
 error. Errors print one line (``dynatex: error: ...``) unless
 ``--debug`` asks for the traceback. A reader that closes stdout (``| head -1``) ends the
 command quietly with exit 0; a closed stderr drops warnings and progress, the work goes on.
+Ctrl-C ends a command with "interrupted" and exit 130, SIGTERM the same way with "terminated"
+and exit 143: both unwind, so temporary databases, decode folders and spill files are removed.
+An interrupt that lands where Python cannot raise it (a finaliser) is delivered again, never lost.
 """
 
 from __future__ import annotations
 
+import _thread
 import argparse
 import errno
 import importlib
 import os
+import signal
 import sys
+import threading
+import time
 import traceback
 import warnings
 
@@ -27,6 +34,10 @@ COMMANDS = ("analyze", "info", "play", "bench", "evaluate", "demo", "export")
 
 class UsageError(DynatexError, ValueError):
     """Bad command-line input detected after parsing (exit code 2)."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived: the command ends as on Ctrl-C, cleaning up on the way (exit code 143)."""
 
 
 class OutputError(DynatexError, OSError):
@@ -83,13 +94,15 @@ def main(argv: list[str] | None = None) -> int:
         getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(extra)}")
     debug = getattr(args, "debug", False)
     stderr, sys.stderr = sys.stderr, _Diagnostics(sys.stderr)
+    restore = _catch_signals()
     try:
         code = int(args._run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here when the output was short
         return code
-    except KeyboardInterrupt:
-        print("dynatex: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        terminated = isinstance(exc, Terminated)
+        print(f"dynatex: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
+        return 128 + (signal.SIGTERM if terminated else signal.SIGINT)
     except BrokenPipeError:
         return _reader_gone()
     except _input_errors() as exc:
@@ -99,7 +112,42 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # an internal error: still one line unless --debug
         return _report(exc, debug, 1)
     finally:
+        restore()
         sys.stderr = stderr
+
+
+def _catch_signals():
+    """While a command runs in the main thread: SIGTERM raises :class:`Terminated`, and a
+    KeyboardInterrupt that Python could only report as "Exception ignored" (raised inside a
+    finaliser) is raised again by resending its signal. Returns what restores the previous state."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def on_term(signum, frame):
+        raise Terminated
+
+    def unraisable(info) -> None:
+        if not isinstance(info.exc_value, KeyboardInterrupt):
+            hook(info)
+            return
+        signum = signal.SIGTERM if isinstance(info.exc_value, Terminated) else signal.SIGINT
+        # sent from another thread a moment later, so that it lands after this hook has returned
+        threading.Thread(target=_resend, args=(signum,), daemon=True).start()
+
+    hook = sys.unraisablehook
+    previous = signal.signal(signal.SIGTERM, on_term)
+    sys.unraisablehook = unraisable
+
+    def restore() -> None:
+        signal.signal(signal.SIGTERM, previous)
+        sys.unraisablehook = hook
+
+    return restore
+
+
+def _resend(signum: int) -> None:
+    time.sleep(0.001)
+    _thread.interrupt_main(signum)
 
 
 class _Diagnostics:

@@ -22,6 +22,7 @@ from .errors import (
     TileDBFormatError,
     TileDBNotFoundError,
     TileDBVersionError,
+    TileDBWriteError,
 )
 from .frames import FrameStore
 from .lds import LDSModel
@@ -51,6 +52,7 @@ __all__ = [
     "TileDBFormatError",
     "TileDBNotFoundError",
     "TileDBVersionError",
+    "TileDBWriteError",
     "TilesModel",
     "TurnPointModel",
     "open_db",

@@ -21,6 +21,8 @@ Where there is no ``fcntl`` (Windows) nothing is locked or removed.
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
 import re
 import secrets
@@ -39,7 +41,7 @@ from . import schema
 from . import source as _source
 from .codecs import CODECS
 from .database import TileDB
-from .errors import TextureNotFoundError
+from .errors import TextureNotFoundError, TileDBWriteError
 from .source import SourceInfo
 
 try:
@@ -79,33 +81,38 @@ class DatabaseWriter:
         if os.path.exists(self.path) and not overwrite:
             self._old_id = _identity(self.path)
             self._old = TileDB(self.path)
-        remove_stale_temp_files(self.path)
-        self._tmp, self._lock = _create_temp(self.path)
-        try:
-            self._file: h5py.File | None = _open_for_writing(self._tmp, self._lock)
-        except BaseException:
-            os.unlink(self._tmp)
-            self._release()
-            raise
-        self._file.attrs[schema.ATTR_FORMAT] = schema.FORMAT_NAME
-        self._file.attrs[schema.ATTR_VERSION] = np.asarray(schema.FORMAT_VERSION, np.int32)
-        from . import __version__
-
-        self._file.attrs[schema.ATTR_CREATED_BY] = f"dynatex {__version__}"
-        self._textures = self._file.create_group(schema.TEXTURES)
+        self._file: h5py.File | None = None
+        self._tmp, self._lock = "", None
         self._removed: set[str] = set()
+        try:
+            with self._writing():
+                remove_stale_temp_files(self.path)
+                self._tmp, self._lock = _create_temp(self.path)
+                self._file = _open_for_writing(self._tmp, self._lock)
+                self._file.attrs[schema.ATTR_FORMAT] = schema.FORMAT_NAME
+                self._file.attrs[schema.ATTR_VERSION] = np.asarray(schema.FORMAT_VERSION, np.int32)
+                from . import __version__
+
+                self._file.attrs[schema.ATTR_CREATED_BY] = f"dynatex {__version__}"
+                self._textures = self._file.create_group(schema.TEXTURES)
+        except BaseException:
+            self.abort()
+            raise
 
     # -- textures --------------------------------------------------------------
     def put_texture(self, name: str, source: SourceInfo) -> None:
         """Create texture ``name`` afresh (replacing any texture of that name) with its source description."""
+        self._check_open()
         name = _check_name(name)
         if name in self._textures:
             del self._textures[name]
         self._removed.add(name)  # the old file's copy is not carried over
-        g = self._textures.create_group(name)
-        _source.write(g.create_group(schema.SOURCE), source)
+        with self._writing():
+            g = self._textures.create_group(name)
+            _source.write(g.create_group(schema.SOURCE), source)
 
     def remove_texture(self, name: str) -> None:
+        self._check_open()
         name = _nfc(name)
         if name not in self._textures and not (self._old and name in self._old and name not in self._removed):
             raise TextureNotFoundError(f"no texture named {name!r}", filename=self.path)
@@ -115,19 +122,23 @@ class DatabaseWriter:
 
     def put_method(self, name: str, method: str, model: Any) -> None:
         """Store ``model`` as texture ``name``'s ``method`` group, replacing an earlier one."""
+        self._check_open()
         if method not in CODECS:
             raise InvalidArgumentError(f"method must be one of {sorted(CODECS)}, not {method!r}")
-        g = self._texture_group(name, skip=method)
-        if method in g:
-            del g[method]
-        CODECS[method].write(g.create_group(method), model)
+        with self._writing():
+            g = self._texture_group(name, skip=method)
+            if method in g:
+                del g[method]
+            CODECS[method].write(g.create_group(method), model)
 
     def put_frames(self, name: str, frames: np.ndarray) -> None:
         """Store the source frames texture ``name``'s gather-based methods play from."""
-        g = self._texture_group(name, skip=schema.FRAMES)
-        if schema.FRAMES in g:
-            del g[schema.FRAMES]
-        _frames.write(g, schema.FRAMES, frames)
+        self._check_open()
+        with self._writing():
+            g = self._texture_group(name, skip=schema.FRAMES)
+            if schema.FRAMES in g:
+                del g[schema.FRAMES]
+            _frames.write(g, schema.FRAMES, frames)
 
     def source(self, name: str) -> SourceInfo:
         from ._check import Checker
@@ -155,19 +166,19 @@ class DatabaseWriter:
     # -- commit / abort ----------------------------------------------------------
     def commit(self) -> None:
         """Carry over untouched textures, validate the new file, and rename it onto ``path``."""
-        if self._file is None:
-            raise RuntimeError("writer already committed or aborted")
+        self._check_open()
         lock = None
         try:
             lock = lock_database(self.path)
-            if not self._overwrite:
-                current = self._current()
-                if current is not None:
-                    for name in current.textures:
-                        if name not in self._textures and name not in self._removed:
-                            self._carry(current, name)
-            self._file.close()
-            self._file = None
+            with self._writing():
+                if not self._overwrite:
+                    current = self._current()
+                    if current is not None:
+                        for name in current.textures:
+                            if name not in self._textures and name not in self._removed:
+                                self._carry(current, name)
+                self._file.close()
+                self._file = None
             with TileDB(self._tmp, probe=False) as db:  # written here, just now
                 db.validate()
             self._close_old()
@@ -200,15 +211,33 @@ class DatabaseWriter:
             self._old.close()
             self._old = None
 
+    def _check_open(self) -> None:
+        if self._file is None:
+            raise RuntimeError("writer already committed or aborted")
+
+    @contextlib.contextmanager
+    def _writing(self):
+        """Turn the system refusing a write (full disk, quota, file size limit) into one line."""
+        try:
+            yield
+        except OSError as exc:
+            if exc.errno not in _REFUSED or isinstance(exc, TileDBWriteError):
+                raise
+            self.abort()  # now, before objects the error holds are freed and flush to the full disk
+            folder = os.path.dirname(self.path)
+            raise TileDBWriteError(
+                f"cannot write the database: {os.strerror(exc.errno).lower()} in {folder}; it is unchanged",
+                errno=exc.errno,
+                filename=self.path,
+            ) from None
+
     def abort(self) -> None:
         """Discard everything written; ``path`` is left untouched."""
         if self._file is not None:
-            try:
-                self._file.close()
-            finally:
-                self._file = None
+            file, self._file = self._file, None
+            _discard(file)
         self._close_old()
-        if os.path.exists(self._tmp):
+        if self._tmp and os.path.exists(self._tmp):
             os.unlink(self._tmp)
         self._release()
 
@@ -226,6 +255,28 @@ class DatabaseWriter:
                 self.commit()
         else:
             self.abort()
+
+
+#: What the system refuses a write for, outside dynatex: a full disk, a quota, a file size limit.
+_REFUSED = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+
+
+def _discard(file: h5py.File) -> None:
+    """Close the HDF5 file of a write being discarded without writing to disk: its descriptor is
+    first pointed at an anonymous memory file, so that the flush of cached chunks and metadata that
+    closing makes cannot fail on a full disk (HDF5 left half-closed crashes the interpreter at exit)."""
+    try:
+        fd = file.id.get_vfd_handle()
+        spare = os.memfd_create("dynatex-discard") if hasattr(os, "memfd_create") else None
+        if spare is not None:
+            os.dup2(spare, fd)
+            os.close(spare)
+    except (OSError, ValueError, RuntimeError):
+        pass  # closed already, or another driver: close it as it is
+    try:
+        file.close()
+    except Exception:  # noqa: BLE001, S110 - discarded anyway; closing was what mattered
+        pass
 
 
 def _nfc(name: str) -> str:
@@ -312,11 +363,11 @@ def _open_for_writing(tmp: str, lock: int | None) -> h5py.File:
     the writer's shared one. An HDF5 too old to open unlocked gets the file with its own lock, which
     protects it from cleaners just as well while it is open."""
     try:
-        return h5py.File(tmp, "w", locking=False)
+        return h5py.File(tmp, "w", locking=False, rdcc_nbytes=0)
     except ValueError:
         if lock is not None:
             fcntl.flock(lock, fcntl.LOCK_UN)
-        return h5py.File(tmp, "w")
+        return h5py.File(tmp, "w", rdcc_nbytes=0)
 
 
 class DatabaseLock:
