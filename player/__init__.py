@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 
-from .base import BACKENDS, Player
+from .base import BACKENDS, Player, PlayerClosedError, PlayerForkedError
 from .modes import MODES, player_class
 from .opencl import DeviceNotVerifiedError, KernelBuildError, OpenCLUnavailableError, devices, list_devices
 
@@ -30,6 +30,8 @@ __all__ = [
     "MODES",
     "OpenCLUnavailableError",
     "Player",
+    "PlayerClosedError",
+    "PlayerForkedError",
     "devices",
     "list_devices",
     "open_player",
