@@ -355,17 +355,17 @@ def clip_sha256(path: str, start: int = 0, stop: int | None = None, step: int = 
     if path.endswith(".npy"):
         import numpy as np
 
+        from .video import load_npy, npy_header
+
+        _, fortran, _, offset = npy_header(path)
+        if fortran:
+            return hashlib.sha256(np.ascontiguousarray(load_npy(path)).data).hexdigest()
+        h = hashlib.sha256()
         with open(path, "rb") as f:
-            version = np.lib.format.read_magic(f)
-            reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-            _, fortran, dtype = reader(f)
-            if fortran or dtype.hasobject:
-                arr = np.load(path, allow_pickle=False)
-                return hashlib.sha256(np.ascontiguousarray(arr).data).hexdigest()
-            h = hashlib.sha256()
+            f.seek(offset)
             for block in iter(lambda: f.read(1 << 22), b""):
                 h.update(block)
-            return h.hexdigest()
+        return h.hexdigest()
     return _file_digest(path).hexdigest()
 
 

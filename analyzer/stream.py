@@ -28,6 +28,8 @@ from .video import (
     _tuple4,
     hold_scratch,
     join_child,
+    load_npy,
+    npy_header,
     release_scratch,
     remove_stale_scratch,
 )
@@ -231,14 +233,7 @@ def spill_clip(
 
 
 def _npy_direct(path: str, color: bool, fps: float | None) -> DiskClip | None:
-    with open(path, "rb") as f:
-        try:
-            version = np.lib.format.read_magic(f)
-            reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-            shape, fortran, dtype = reader(f)
-        except ValueError as exc:
-            raise ClipError(f"{path}: not a readable .npy array ({exc})") from None
-        offset = f.tell()
+    shape, fortran, dtype, offset = npy_header(path)
     if dtype != np.uint8 or fortran or len(shape) not in (3, 4):
         return None
     channels = 1 if len(shape) == 3 else shape[3]
@@ -306,7 +301,7 @@ def _frame_source(path: str, start: int, stop: int | None, step: int):
         h = hashlib.sha256()
         return _images(path, names, h), 25.0, h.hexdigest
     if path.endswith(".npy"):
-        arr = np.load(path, mmap_mode="r", allow_pickle=False)
+        arr = load_npy(path, mmap_mode="r")
         from .video import _from_array
 
         digest = hashlib.sha256()

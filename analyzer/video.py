@@ -348,7 +348,7 @@ def _decode_isolated(path: str, start: int, stop: int | None, step: int):
                 f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
                 "re-encode the clip (for example to FFV1 or H.264) and try again"
             )
-        frames = np.load(out)
+        frames = np.load(out, allow_pickle=False)
         with open(out + ".meta") as f:
             fps_s, digest = f.read().split("\n")[:2]
     return frames, float(fps_s), digest
@@ -420,8 +420,47 @@ def clip_frames(clip: Any) -> np.ndarray:
 
 def load_clip_path(path: str, *, isolate: bool = True, **options) -> Clip:
     """:func:`load_clip` of a clip named by a path: a ``.npy`` file is read as an array (no
-    pickles); a video file is decoded in a child process when ``isolate`` (a decoder crash
-    becomes a :class:`ClipError`); a folder of images is read in this process."""
+    pickles, see :func:`load_npy`); a video file is decoded in a child process when ``isolate``
+    (a decoder crash becomes a :class:`ClipError`); a folder of images is read in this process."""
     if path.endswith(".npy") and os.path.isfile(path):
-        return load_clip(np.load(path, allow_pickle=False), **options)
+        return load_clip(load_npy(path), **options)
     return load_clip(path, isolate=isolate and os.path.isfile(path), **options)
+
+
+def npy_header(path: str) -> tuple[tuple[int, ...], bool, np.dtype, int]:
+    """``(shape, fortran_order, dtype, data offset)`` of a ``.npy`` clip, or a :class:`ClipError`
+    naming the file when it cannot hold frames: not a ``.npy`` array, Python objects (a pickle),
+    not 3 or 4 dimensions, an empty dimension, or shorter than its header says."""
+    name = os.path.basename(path)
+    with open(path, "rb") as f:
+        try:
+            version = np.lib.format.read_magic(f)
+            reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, fortran, dtype = reader(f)
+        except (ValueError, OSError, SyntaxError) as exc:
+            raise ClipError(f"{name}: not a readable .npy array ({_one_line(exc)})") from None
+        offset = f.tell()
+    if dtype.hasobject:
+        raise ClipError(f"{name}: holds Python objects (a pickle), not frames; save uint8 frames (T, H, W[, C])")
+    if len(shape) not in (3, 4) or (len(shape) == 4 and shape[3] not in (1, 3)):
+        raise ClipError(f"{name}: array of shape {shape} is not frames (T, H, W), (T, H, W, 1) or (T, H, W, 3)")
+    if 0 in shape:
+        raise ClipError(f"{name}: array of shape {shape} has an empty dimension")
+    need = offset + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    if os.path.getsize(path) < need:
+        raise ClipError(f"{name}: file is truncated ({os.path.getsize(path)} bytes, its {shape} header needs {need})")
+    return tuple(shape), bool(fortran), dtype, offset
+
+
+def load_npy(path: str, mmap_mode: str | None = None) -> np.ndarray:
+    """A ``.npy`` clip's array (checked by :func:`npy_header` first; never unpickled)."""
+    npy_header(path)
+    try:
+        return np.load(path, mmap_mode=mmap_mode, allow_pickle=False)
+    except (ValueError, OSError) as exc:
+        raise ClipError(f"{os.path.basename(path)}: not a readable .npy array ({_one_line(exc)})") from None
+
+
+def _one_line(exc: BaseException) -> str:
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    return lines[0] if lines else type(exc).__name__

@@ -23,6 +23,7 @@ import sys
 import threading
 import time
 import traceback
+import unicodedata
 import warnings
 
 from . import __version__
@@ -250,7 +251,16 @@ def _one_line(exc: BaseException) -> str:
     if isinstance(exc, KeyError) and text.startswith("'") and text.endswith("'"):
         text = text[1:-1]
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-    return lines[0] if lines else type(exc).__name__
+    return printable(lines[0]) if lines else type(exc).__name__
+
+
+def printable(text: object) -> str:
+    """``text`` with control and format characters escaped (``\\x1b``, ``\\u202e``): a name or
+    attribute read from a file must not drive the terminal (set its title, clear it, reorder text)."""
+    return "".join(
+        c if unicodedata.category(c) not in ("Cc", "Cf") else c.encode("unicode_escape").decode("ascii")
+        for c in str(text)
+    )
 
 
 if __name__ == "__main__":  # pragma: no cover

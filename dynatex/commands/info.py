@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from ..cli import printable
 from ..tiledb import open_db
 
 
@@ -51,13 +52,13 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(d, indent=2))
         return 0
     print(
-        f"{d['file']}: dynatex tile database v{d['format_version'][0]}.{d['format_version'][1]}, "
+        f"{printable(d['file'])}: dynatex tile database v{d['format_version'][0]}.{d['format_version'][1]}, "
         f"{len(d['textures'])} texture(s)"
     )
     for name, t in d["textures"].items():
         s = t["source"]
         print(
-            f"\n[{name}] from {s['filename']} ({s['size'][0]}x{s['size'][1]}x{s['channels']}, "
+            f"\n[{printable(name)}] from {printable(s['filename'])} ({s['size'][0]}x{s['size'][1]}x{s['channels']}, "
             f"{s['frames']} frames at {s['fps']:g} fps), frames stored: {'yes' if t['frames_stored'] else 'no'}"
         )
         for method, info in t["methods"].items():
@@ -65,5 +66,5 @@ def run(args: argparse.Namespace) -> int:
             for key, value in info.items():
                 if isinstance(value, float):
                     value = f"{value:.6g}"
-                print(f"    {key:24s} {value}")
+                print(f"    {printable(key):24s} {printable(value)}")
     return 0
