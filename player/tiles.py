@@ -453,7 +453,7 @@ class TilesPlayer(Player):
     max_shift = Control(
         Range(float, 0.0, MAX_TIME),
         None,
-        "Amplitude of the per-tile time offsets, frames (beyond the loop they wrap around it).",
+        "Amplitude of the per-tile time offsets, frames (they wrap around the loop; more than a loop shears tiles).",
         default_doc="a third of the loop, at most 16",
     )
 
