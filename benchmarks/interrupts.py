@@ -57,11 +57,12 @@ def main(argv: list[str] | None = None) -> int:
             swallowed = "Exception ignored" in err and "KeyboardInterrupt" in err
             left = sorted(n for n in os.listdir(scratch) if n != "db.h5")
             committed = os.path.exists(db)
-            line = err.strip().splitlines()[-1] if err.strip() else ""
+            lines = err.strip().splitlines()
+            line = " | ".join(lines[-3:]) if len(lines) > 1 else "".join(lines)
             outcomes[(p.returncode, swallowed, committed, bool(left))] += 1
             print(
                 f"trial {i + 1}: exit {p.returncode}, swallowed {swallowed}, committed {committed}, "
-                f"left {left}, last line {line!r}",
+                f"left {left}, stderr ({len(lines)} lines) {line!r}",
                 flush=True,
             )
     print("exit, swallowed, committed, left anything -> trials")

@@ -89,7 +89,11 @@ def _warning_line(message, category, filename, lineno, line=None) -> str:
 def main(argv: list[str] | None = None) -> int:
     warnings.formatwarning = _warning_line  # a warning is one line too, not a source location
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(argv)
+    try:
+        parser = build_parser(argv)  # imports every command: seconds on a busy machine
+    except KeyboardInterrupt:
+        print("dynatex: interrupted", file=sys.stderr)
+        return 128 + signal.SIGINT
     args, extra = parser.parse_known_args(argv)
     if extra:  # reported by the subcommand's parser, so that the line names the subcommand
         getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(extra)}")
