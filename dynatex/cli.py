@@ -89,25 +89,28 @@ def _warning_line(message, category, filename, lineno, line=None) -> str:
 def main(argv: list[str] | None = None) -> int:
     warnings.formatwarning = _warning_line  # a warning is one line too, not a source location
     argv = sys.argv[1:] if argv is None else list(argv)
+    restore = _catch_signals()
     try:
-        parser = build_parser(argv)  # imports every command: seconds on a busy machine
-    except KeyboardInterrupt:
-        print("dynatex: interrupted", file=sys.stderr)
-        return 128 + signal.SIGINT
+        return _main(argv)
+    except KeyboardInterrupt as exc:  # also while the commands are imported (seconds on a busy machine)
+        terminated = isinstance(exc, Terminated)
+        _Diagnostics(sys.stderr).write(f"dynatex: {'terminated' if terminated else 'interrupted'}\n")
+        return 128 + (signal.SIGTERM if terminated else signal.SIGINT)
+    finally:
+        restore()
+
+
+def _main(argv: list[str]) -> int:
+    parser = build_parser(argv)
     args, extra = parser.parse_known_args(argv)
     if extra:  # reported by the subcommand's parser, so that the line names the subcommand
         getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(extra)}")
     debug = getattr(args, "debug", False)
     stderr, sys.stderr = sys.stderr, _Diagnostics(sys.stderr)
-    restore = _catch_signals()
     try:
         code = int(args._run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here when the output was short
         return code
-    except KeyboardInterrupt as exc:
-        terminated = isinstance(exc, Terminated)
-        print(f"dynatex: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
-        return 128 + (signal.SIGTERM if terminated else signal.SIGINT)
     except BrokenPipeError:
         return _reader_gone()
     except _input_errors() as exc:
@@ -117,7 +120,6 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # an internal error: still one line unless --debug
         return _report(exc, debug, 1)
     finally:
-        restore()
         sys.stderr = stderr
 
 
