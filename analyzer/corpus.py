@@ -27,6 +27,7 @@ from typing import Any
 
 from ..errors import InvalidArgumentError
 from ..tiledb import DatabaseWriter, TileDB, TileDBError
+from ..tiledb.writer import remove_stale_temp_files
 from .methods import Clips, Method, get_method
 from .stream import parse_bytes
 
@@ -301,15 +302,9 @@ def _from_disk(disk, method: str, max_memory: int):
 
 
 def remove_stale_temporaries(database: str) -> list[str]:
-    """Delete temporary files a killed writer of ``database`` left beside it; returns their paths."""
-    folder, base = os.path.split(os.path.abspath(database))
-    stale = glob.glob(os.path.join(glob.escape(folder), f".{glob.escape(base)}.*.tmp"))
-    for path in stale:
-        try:
-            os.unlink(path)
-        except FileNotFoundError:
-            pass
-    return stale
+    """Delete temporary files a killed writer of ``database`` left beside it (never one a live
+    writer holds: :func:`~dynatex.tiledb.writer.remove_stale_temp_files`); returns their paths."""
+    return remove_stale_temp_files(database)
 
 
 def database_is_complete(task: ClipTask) -> bool:
@@ -360,17 +355,17 @@ def clip_sha256(path: str, start: int = 0, stop: int | None = None, step: int = 
     if path.endswith(".npy"):
         import numpy as np
 
+        from .video import load_npy, npy_header
+
+        _, fortran, _, offset = npy_header(path)
+        if fortran:
+            return hashlib.sha256(np.ascontiguousarray(load_npy(path)).data).hexdigest()
+        h = hashlib.sha256()
         with open(path, "rb") as f:
-            version = np.lib.format.read_magic(f)
-            reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-            _, fortran, dtype = reader(f)
-            if fortran or dtype.hasobject:
-                arr = np.load(path, allow_pickle=False)
-                return hashlib.sha256(np.ascontiguousarray(arr).data).hexdigest()
-            h = hashlib.sha256()
+            f.seek(offset)
             for block in iter(lambda: f.read(1 << 22), b""):
                 h.update(block)
-            return h.hexdigest()
+        return h.hexdigest()
     return _file_digest(path).hexdigest()
 
 

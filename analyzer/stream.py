@@ -12,7 +12,7 @@ import hashlib
 import os
 import tempfile
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,6 +26,12 @@ from .video import (
     Progress,
     _crop_resize_color,
     _tuple4,
+    hold_scratch,
+    join_child,
+    load_npy,
+    npy_header,
+    release_scratch,
+    remove_stale_scratch,
 )
 
 _UNITS = {
@@ -94,6 +100,7 @@ class DiskClip:
     crop: tuple[int, ...] = ()
     source_size: tuple[int, ...] = ()  # (height, width) of the decoded source frames
     owned: bool = False
+    hold: int | None = field(default=None, repr=False)  # the lock that marks an owned file live
 
     @property
     def pixels(self) -> int:
@@ -149,6 +156,8 @@ class DiskClip:
         """Delete the spill file of an owned clip."""
         if self.owned and os.path.exists(self.path):
             os.unlink(self.path)
+        release_scratch(self.hold)
+        self.hold = None
 
     def __enter__(self) -> DiskClip:  # noqa: PYI034
         return self
@@ -189,15 +198,21 @@ def spill_clip(
         direct = _npy_direct(path, color, fps)
         if direct is not None and plain:
             return direct
-    fd, out = tempfile.mkstemp(prefix="dynatex-spill-", suffix=".u8", dir=folder)
-    os.close(fd)
+    remove_stale_scratch(folder)
+    hold, out = None, None
     try:
+        while hold is None:
+            fd, out = tempfile.mkstemp(prefix="dynatex-spill-", suffix=".u8", dir=folder)
+            os.close(fd)
+            hold = hold_scratch(out)
         if isolate and os.path.isfile(path) and not path.endswith(".npy"):
             meta = _spill_isolated(path, out, start, stop, step, crop_t, size_t, color)
         else:
             meta = _spill(path, out, start, stop, step, crop_t, size_t, color, progress)
     except BaseException:
-        os.unlink(out)
+        if out is not None and os.path.exists(out):
+            os.unlink(out)
+        release_scratch(hold)
         raise
     shape, n, src_fps, digest, source_size = meta
     return DiskClip(
@@ -213,18 +228,12 @@ def spill_clip(
         crop=crop_t or (),
         source_size=source_size,
         owned=True,
+        hold=hold,
     )
 
 
 def _npy_direct(path: str, color: bool, fps: float | None) -> DiskClip | None:
-    with open(path, "rb") as f:
-        try:
-            version = np.lib.format.read_magic(f)
-            reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-            shape, fortran, dtype = reader(f)
-        except ValueError as exc:
-            raise ClipError(f"{path}: not a readable .npy array ({exc})") from None
-        offset = f.tell()
+    shape, fortran, dtype, offset = npy_header(path)
     if dtype != np.uint8 or fortran or len(shape) not in (3, 4):
         return None
     channels = 1 if len(shape) == 3 else shape[3]
@@ -292,7 +301,7 @@ def _frame_source(path: str, start: int, stop: int | None, step: int):
         h = hashlib.sha256()
         return _images(path, names, h), 25.0, h.hexdigest
     if path.endswith(".npy"):
-        arr = np.load(path, mmap_mode="r", allow_pickle=False)
+        arr = load_npy(path, mmap_mode="r")
         from .video import _from_array
 
         digest = hashlib.sha256()
@@ -363,7 +372,7 @@ def _spill_isolated(path, out, start, stop, step, crop, size, color):
     q = ctx.Queue()
     proc = ctx.Process(target=_spill_entry, args=(q, path, out, start, stop, step, crop, size, color), daemon=True)
     proc.start()
-    proc.join()
+    join_child(proc)
     result = q.get(timeout=5) if not q.empty() else None
     if proc.exitcode == 0 and result is not None and result[0] == "ok":
         return result[1]

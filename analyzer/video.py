@@ -5,10 +5,13 @@ Frames come out as ``(T, H, W, C)`` uint8 in RGB order (``C = 3``) or grey (``C 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
+import re
+import shutil
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,6 +22,14 @@ from ..errors import InvalidArgumentError
 from ..tiledb import DynatexError, SourceInfo
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover (not POSIX)
+    fcntl = None  # type: ignore[assignment]
+
+#: Scratch space of a run: decode folders and ``--max-memory`` spill files, named like ``tempfile``'s.
+SCRATCH_PATTERN = re.compile(r"dynatex-(decode|spill)-[a-z0-9_]{8}(\.u8)?")
 
 Progress = Callable[[int, int | None], None]
 
@@ -244,16 +255,90 @@ def _decode_worker(path: str, start: int, stop: int | None, step: int, out_npy: 
         f.write(f"{fps!r}\n{digest}\n")
 
 
+# -- scratch space ---------------------------------------------------------------------
+def hold_scratch(path: str) -> int | None:
+    """A descriptor holding a shared ``flock`` on scratch file or folder ``path`` while its run lives
+    (closing it releases the lock), so that :func:`remove_stale_scratch` of another run leaves it
+    alone; None when ``path`` was taken by a cleaner in between (create another) or without fcntl."""
+    if fcntl is None:
+        return -1
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+    fcntl.flock(fd, fcntl.LOCK_SH)
+    try:
+        now = os.lstat(path)
+    except FileNotFoundError:
+        now = None
+    held = os.fstat(fd)
+    if now is None or (now.st_dev, now.st_ino) != (held.st_dev, held.st_ino):
+        os.close(fd)
+        return None
+    return fd
+
+
+def release_scratch(fd: int | None) -> None:
+    if fd is not None and fd >= 0:
+        os.close(fd)
+
+
+def remove_stale_scratch(folder: str | None = None) -> list[str]:
+    """Remove the decode folders and spill files that killed runs left in ``folder`` (default: the
+    temporary folder): those named by :data:`SCRATCH_PATTERN` that no live run holds a lock on."""
+    if fcntl is None:
+        return []
+    folder = folder or tempfile.gettempdir()
+    removed = []
+    try:
+        entries = [e for e in os.scandir(folder) if SCRATCH_PATTERN.fullmatch(e.name)]
+    except OSError:
+        return []
+    for entry in entries:
+        try:
+            if entry.is_symlink():
+                continue
+            fd = os.open(entry.path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path)
+            else:
+                os.unlink(entry.path)
+            removed.append(entry.path)
+        except OSError:  # held by a live run, gone, or not ours to remove
+            pass
+        finally:
+            os.close(fd)
+    return removed
+
+
+@contextlib.contextmanager
+def scratch_folder(prefix: str = "dynatex-decode-") -> Iterator[str]:
+    """A new folder in the temporary folder, held (see :func:`hold_scratch`) and removed on every
+    way out; stale ones of killed runs are removed first."""
+    remove_stale_scratch()
+    tmp, fd = None, None
+    try:
+        while fd is None:
+            tmp = tempfile.mkdtemp(prefix=prefix)
+            fd = hold_scratch(tmp)
+        yield tmp
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+        release_scratch(fd)
+
+
 def _decode_isolated(path: str, start: int, stop: int | None, step: int):
     import multiprocessing as mp
 
     ctx = mp.get_context("spawn")
-    with tempfile.TemporaryDirectory(prefix="dynatex-decode-") as tmp:
+    with scratch_folder() as tmp:
         out = os.path.join(tmp, "frames.npy")
         q = ctx.Queue()
         proc = ctx.Process(target=_isolated_entry, args=(q, path, start, stop, step, out), daemon=True)
         proc.start()
-        proc.join()
+        join_child(proc)
         if proc.exitcode != 0:
             err = q.get(timeout=1) if not q.empty() else None
             if err is not None:
@@ -263,10 +348,21 @@ def _decode_isolated(path: str, start: int, stop: int | None, step: int):
                 f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
                 "re-encode the clip (for example to FFV1 or H.264) and try again"
             )
-        frames = np.load(out)
+        frames = np.load(out, allow_pickle=False)
         with open(out + ".meta") as f:
             fps_s, digest = f.read().split("\n")[:2]
     return frames, float(fps_s), digest
+
+
+def join_child(proc) -> None:
+    """Wait for a decoding child; when the wait is interrupted (Ctrl-C, SIGTERM) the child is killed
+    first, so that it writes nothing more into the scratch space about to be removed."""
+    try:
+        proc.join()
+    except BaseException:
+        proc.kill()
+        proc.join()
+        raise
 
 
 def _isolated_entry(q, path, start, stop, step, out) -> None:
@@ -324,8 +420,47 @@ def clip_frames(clip: Any) -> np.ndarray:
 
 def load_clip_path(path: str, *, isolate: bool = True, **options) -> Clip:
     """:func:`load_clip` of a clip named by a path: a ``.npy`` file is read as an array (no
-    pickles); a video file is decoded in a child process when ``isolate`` (a decoder crash
-    becomes a :class:`ClipError`); a folder of images is read in this process."""
+    pickles, see :func:`load_npy`); a video file is decoded in a child process when ``isolate``
+    (a decoder crash becomes a :class:`ClipError`); a folder of images is read in this process."""
     if path.endswith(".npy") and os.path.isfile(path):
-        return load_clip(np.load(path, allow_pickle=False), **options)
+        return load_clip(load_npy(path), **options)
     return load_clip(path, isolate=isolate and os.path.isfile(path), **options)
+
+
+def npy_header(path: str) -> tuple[tuple[int, ...], bool, np.dtype, int]:
+    """``(shape, fortran_order, dtype, data offset)`` of a ``.npy`` clip, or a :class:`ClipError`
+    naming the file when it cannot hold frames: not a ``.npy`` array, Python objects (a pickle),
+    not 3 or 4 dimensions, an empty dimension, or shorter than its header says."""
+    name = os.path.basename(path)
+    with open(path, "rb") as f:
+        try:
+            version = np.lib.format.read_magic(f)
+            reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, fortran, dtype = reader(f)
+        except (ValueError, OSError, SyntaxError) as exc:
+            raise ClipError(f"{name}: not a readable .npy array ({_one_line(exc)})") from None
+        offset = f.tell()
+    if dtype.hasobject:
+        raise ClipError(f"{name}: holds Python objects (a pickle), not frames; save uint8 frames (T, H, W[, C])")
+    if len(shape) not in (3, 4) or (len(shape) == 4 and shape[3] not in (1, 3)):
+        raise ClipError(f"{name}: array of shape {shape} is not frames (T, H, W), (T, H, W, 1) or (T, H, W, 3)")
+    if 0 in shape:
+        raise ClipError(f"{name}: array of shape {shape} has an empty dimension")
+    need = offset + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    if os.path.getsize(path) < need:
+        raise ClipError(f"{name}: file is truncated ({os.path.getsize(path)} bytes, its {shape} header needs {need})")
+    return tuple(shape), bool(fortran), dtype, offset
+
+
+def load_npy(path: str, mmap_mode: str | None = None) -> np.ndarray:
+    """A ``.npy`` clip's array (checked by :func:`npy_header` first; never unpickled)."""
+    npy_header(path)
+    try:
+        return np.load(path, mmap_mode=mmap_mode, allow_pickle=False)
+    except (ValueError, OSError) as exc:
+        raise ClipError(f"{os.path.basename(path)}: not a readable .npy array ({_one_line(exc)})") from None
+
+
+def _one_line(exc: BaseException) -> str:
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    return lines[0] if lines else type(exc).__name__

@@ -6,16 +6,24 @@ folder) and for a file the user named that cannot be opened; 1 for anything else
 error. Errors print one line (``dynatex: error: ...``) unless
 ``--debug`` asks for the traceback. A reader that closes stdout (``| head -1``) ends the
 command quietly with exit 0; a closed stderr drops warnings and progress, the work goes on.
+Ctrl-C ends a command with "interrupted" and exit 130, SIGTERM the same way with "terminated"
+and exit 143: both unwind, so temporary databases, decode folders and spill files are removed.
+An interrupt that lands where Python cannot raise it (a finaliser) is delivered again, never lost.
 """
 
 from __future__ import annotations
 
+import _thread
 import argparse
 import errno
 import importlib
 import os
+import signal
 import sys
+import threading
+import time
 import traceback
+import unicodedata
 import warnings
 
 from . import __version__
@@ -27,6 +35,10 @@ COMMANDS = ("analyze", "info", "play", "bench", "evaluate", "demo", "export")
 
 class UsageError(DynatexError, ValueError):
     """Bad command-line input detected after parsing (exit code 2)."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived: the command ends as on Ctrl-C, cleaning up on the way (exit code 143)."""
 
 
 class OutputError(DynatexError, OSError):
@@ -78,6 +90,18 @@ def _warning_line(message, category, filename, lineno, line=None) -> str:
 def main(argv: list[str] | None = None) -> int:
     warnings.formatwarning = _warning_line  # a warning is one line too, not a source location
     argv = sys.argv[1:] if argv is None else list(argv)
+    restore = _catch_signals()
+    try:
+        return _main(argv)
+    except KeyboardInterrupt as exc:  # also while the commands are imported (seconds on a busy machine)
+        terminated = isinstance(exc, Terminated)
+        _Diagnostics(sys.stderr).write(f"dynatex: {'terminated' if terminated else 'interrupted'}\n")
+        return 128 + (signal.SIGTERM if terminated else signal.SIGINT)
+    finally:
+        restore()
+
+
+def _main(argv: list[str]) -> int:
     parser = build_parser(argv)
     args, extra = parser.parse_known_args(argv)
     if extra:  # reported by the subcommand's parser, so that the line names the subcommand
@@ -88,9 +112,6 @@ def main(argv: list[str] | None = None) -> int:
         code = int(args._run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here when the output was short
         return code
-    except KeyboardInterrupt:
-        print("dynatex: interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:
         return _reader_gone()
     except _input_errors() as exc:
@@ -101,6 +122,40 @@ def main(argv: list[str] | None = None) -> int:
         return _report(exc, debug, 1)
     finally:
         sys.stderr = stderr
+
+
+def _catch_signals():
+    """While a command runs in the main thread: SIGTERM raises :class:`Terminated`, and a
+    KeyboardInterrupt that Python could only report as "Exception ignored" (raised inside a
+    finaliser) is raised again by resending its signal. Returns what restores the previous state."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def on_term(signum, frame):
+        raise Terminated
+
+    def unraisable(info) -> None:
+        if not isinstance(info.exc_value, KeyboardInterrupt):
+            hook(info)
+            return
+        signum = signal.SIGTERM if isinstance(info.exc_value, Terminated) else signal.SIGINT
+        # sent from another thread a moment later, so that it lands after this hook has returned
+        threading.Thread(target=_resend, args=(signum,), daemon=True).start()
+
+    hook = sys.unraisablehook
+    previous = signal.signal(signal.SIGTERM, on_term)
+    sys.unraisablehook = unraisable
+
+    def restore() -> None:
+        signal.signal(signal.SIGTERM, previous)
+        sys.unraisablehook = hook
+
+    return restore
+
+
+def _resend(signum: int) -> None:
+    time.sleep(0.001)
+    _thread.interrupt_main(signum)
 
 
 class _Diagnostics:
@@ -203,7 +258,16 @@ def _one_line(exc: BaseException) -> str:
     if isinstance(exc, KeyError) and text.startswith("'") and text.endswith("'"):
         text = text[1:-1]
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-    return lines[0] if lines else type(exc).__name__
+    return printable(lines[0]) if lines else type(exc).__name__
+
+
+def printable(text: object) -> str:
+    """``text`` with control and format characters escaped (``\\x1b``, ``\\u202e``): a name or
+    attribute read from a file must not drive the terminal (set its title, clear it, reorder text)."""
+    return "".join(
+        c if unicodedata.category(c) not in ("Cc", "Cf") else c.encode("unicode_escape").decode("ascii")
+        for c in str(text)
+    )
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 
 from ..tiledb import TileDB
-from .base import BACKENDS, Player, UnknownControlError
+from .base import BACKENDS, Player, PlayerClosedError, PlayerForkedError, UnknownControlError
 from .modes import MODE_ALIASES, MODE_METHOD, MODE_ORDER, MODES, default_mode, describe, mode_for, player_class
 from .opencl import DeviceNotVerifiedError, KernelBuildError, OpenCLUnavailableError, devices, list_devices
 
@@ -80,6 +80,8 @@ __all__ = [
     "MODE_ORDER",
     "OpenCLUnavailableError",
     "Player",
+    "PlayerClosedError",
+    "PlayerForkedError",
     "UnknownControlError",
     "default_mode",
     "describe",

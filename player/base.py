@@ -6,6 +6,7 @@ import difflib
 import functools
 import inspect
 import os
+import threading
 from collections.abc import Callable, Iterator
 from typing import Any, ClassVar
 
@@ -56,6 +57,17 @@ COMMON_OPTIONS: tuple[Param, ...] = (
 )
 
 _fallback_warned = False
+#: OpenCL objects of players inherited by a forked child: kept, never released there (the driver
+#: belongs to the parent; releasing them in the child can hang).
+_inherited: list[Any] = []
+
+
+class PlayerClosedError(DynatexError, RuntimeError):
+    """The player was closed (``close()`` or the end of its ``with`` block); open a new one."""
+
+
+class PlayerForkedError(DynatexError, RuntimeError):
+    """An OpenCL player used in a process forked from the one that opened it."""
 
 
 class UnknownControlError(DynatexError, AttributeError):
@@ -140,6 +152,14 @@ class Player:
     is not a control (position, random generator). :meth:`set_state` is all or nothing:
     every control entry is checked first, and when anything raises the state taken before
     is applied again; a missing entry's KeyError becomes the ValueError "state lacks '...'".
+
+    Threads: a player may be shared between threads. :meth:`next_frame`, :meth:`start_frame`,
+    :meth:`get_state`, :meth:`set_state` and :meth:`close` take the player's lock, so concurrent
+    calls run one after the other and each frame is produced once (which thread gets which frame
+    is the order they take the lock); a control assigned from another thread takes effect on a
+    frame not yet begun. Processes: an OpenCL player cannot cross ``os.fork()``; in the child it
+    raises :class:`PlayerForkedError` (open a new player there); a numpy player goes on. After
+    :meth:`close` every call raises :class:`PlayerClosedError`.
     """
 
     mode: ClassVar[str] = ""
@@ -190,6 +210,9 @@ class Player:
         format: str = "RGB",
     ) -> None:
         backend = Choice(*BACKEND_CHOICES).check("backend", backend)
+        self._lock = threading.RLock()
+        self._closed = False
+        self._pid = os.getpid()
         for control in self.controls().values():  # every control starts at its declared default
             setattr(self, control.attr, control.param.default)
         #: the frames' pixel format (:data:`dynatex.player.pixels.FORMATS`)
@@ -242,15 +265,27 @@ class Player:
         """Bytes of memory one frame must move at least (for roofline figures), if known."""
         return None
 
+    def _usable(self) -> None:
+        """Raise when the player was closed or crossed a fork with an OpenCL context."""
+        if self._closed:
+            raise PlayerClosedError(f"this {self.mode} player was closed (close() was called); open a new one")
+        if self.ctx is not None and os.getpid() != self._pid:
+            raise PlayerForkedError(
+                f"this {self.mode} player's OpenCL context belongs to process {self._pid}, not to this "
+                f"child made by os.fork(); open a new player in the child (or use backend='numpy')"
+            )
+
     def next_frame(self, out: np.ndarray | None = None) -> np.ndarray:
         """Produce the next frame as ``(H, W, 3)`` uint8, into ``out`` when given."""
-        if out is None:
-            out = np.empty(self.shape, np.uint8)
-        else:
-            check_out(out, self.shape)
-        self._render(out)
-        self.frame_index += 1
-        return out
+        with self._lock:
+            self._usable()
+            if out is None:
+                out = np.empty(self.shape, np.uint8)
+            else:
+                check_out(out, self.shape)
+            self._render(out)
+            self.frame_index += 1
+            return out
 
     def start_frame(self, out: np.ndarray) -> PendingFrame:
         """Start producing the next frame into ``out`` and return at once (double buffering).
@@ -259,10 +294,12 @@ class Player:
         or reused. Alternate two buffers to overlap frame production with the caller's work.
         Every mode leaves the OpenCL frame in flight; the numpy backend renders before returning.
         """
-        check_out(out, self.shape)
-        event = self._start(out)
-        self.frame_index += 1
-        return PendingFrame(out, event)
+        with self._lock:
+            self._usable()
+            check_out(out, self.shape)
+            event = self._start(out)
+            self.frame_index += 1
+            return PendingFrame(out, event)
 
     def _start(self, out: np.ndarray):
         """Begin rendering the next frame into ``out`` and advance; return an event to wait on,
@@ -294,12 +331,14 @@ class Player:
     def get_state(self) -> dict[str, Any]:
         """Everything that decides future frames, as plain Python and numpy values: every
         control, the mode's position and random generator."""
-        state = {name: c.saved(self) for name, c in self.controls().items()}
-        state.update(self._get_state())
-        state["mode"] = self.mode
-        state["texture"] = self.texture.name
-        state["frame_index"] = self.frame_index
-        return state
+        with self._lock:
+            self._usable()
+            state = {name: c.saved(self) for name, c in self.controls().items()}
+            state.update(self._get_state())
+            state["mode"] = self.mode
+            state["texture"] = self.texture.name
+            state["frame_index"] = self.frame_index
+            return state
 
     def set_state(self, state: dict[str, Any]) -> None:
         """Restore a state from :meth:`get_state` of a player of the same mode and texture."""
@@ -307,14 +346,15 @@ class Player:
             raise InvalidArgumentError(f"state must come from a {self.mode!r} player")
         if state.get("texture") != self.texture.name:
             raise InvalidArgumentError(f"state is for texture {state.get('texture')!r}, not {self.texture.name!r}")
-        before = self.get_state()
-        try:
-            self._apply_state(state)
-        except BaseException as exc:
-            self._apply_state(before)  # all or nothing: a bad entry leaves the player as it was
-            if isinstance(exc, KeyError):
-                raise InvalidArgumentError(f"state lacks {exc.args[0]!r}") from None
-            raise
+        with self._lock:
+            before = self.get_state()
+            try:
+                self._apply_state(state)
+            except BaseException as exc:
+                self._apply_state(before)  # all or nothing: a bad entry leaves the player as it was
+                if isinstance(exc, KeyError):
+                    raise InvalidArgumentError(f"state lacks {exc.args[0]!r}") from None
+                raise
 
     def _apply_state(self, state: dict[str, Any]) -> None:
         frame_index = check_int("state frame_index", state["frame_index"], 0)
@@ -332,14 +372,20 @@ class Player:
 
     # -- lifetime ----------------------------------------------------------------
     def close(self) -> None:
-        """Finish the frames in flight, release the engine's device memory and the database."""
-        if self.queue is not None:
-            self.queue.finish()
-        if getattr(self, "engine", None) is not None:
-            self.engine.close()
-            self.engine = None
-        if getattr(self, "_own_db", False) and getattr(self, "db", None) is not None:
-            self.db.close()
+        """Finish the frames in flight, release the engine's device memory and the database.
+        Closing again does nothing; in a forked child the OpenCL objects are left to the parent."""
+        with getattr(self, "_lock", threading.RLock()):
+            self._closed = True
+            if self.ctx is not None and os.getpid() != self._pid:
+                _inherited.append((self.engine, self.queue, self.ctx))
+                self.engine = self.queue = self.ctx = None
+            if self.queue is not None:
+                self.queue.finish()
+            if getattr(self, "engine", None) is not None:
+                self.engine.close()
+                self.engine = None
+            if getattr(self, "_own_db", False) and getattr(self, "db", None) is not None:
+                self.db.close()
 
     def __enter__(self):
         return self

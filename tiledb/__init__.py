@@ -23,6 +23,7 @@ from .errors import (
     TileDBNotFoundError,
     TileDBSizeError,
     TileDBVersionError,
+    TileDBWriteError,
 )
 from .frames import FrameStore
 from .lds import LDSModel
@@ -53,6 +54,7 @@ __all__ = [
     "TileDBNotFoundError",
     "TileDBSizeError",
     "TileDBVersionError",
+    "TileDBWriteError",
     "TilesModel",
     "TurnPointModel",
     "open_db",

@@ -50,3 +50,12 @@ class TextureNotFoundError(TileDBError, KeyError):
 
 class MethodNotFoundError(TileDBError, KeyError):
     """The texture exists but holds no data for the requested method."""
+
+
+class TileDBWriteError(TileDBError, OSError):
+    """The system refused writing the database (a full disk, a quota); the database is unchanged.
+    ``errno`` is the system's."""
+
+    def __init__(self, problem: str, *, errno: int | None = None, filename: str | os.PathLike | None = None) -> None:
+        super().__init__(problem, filename=filename)
+        self.errno = errno

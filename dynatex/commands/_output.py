@@ -315,7 +315,7 @@ class FrameWriter:
             if count < self.index:
                 raise OutputError(
                     f"video {self.output} is incomplete: {count} of {self.index} frames read back "
-                    f"(disk full, or not a regular file?)"
+                    f"({_why_incomplete(self.output)})"
                 )
         finally:
             if self._log is not None:
@@ -329,7 +329,7 @@ class FrameWriter:
         cap = cv2.VideoCapture(self.output)
         count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
         cap.release()
-        return count
+        return max(count, 0)  # a truncated file's header can give any number
 
     def _close_pyav(self, video) -> int:
         import av
@@ -366,7 +366,7 @@ class FrameWriter:
         if total is None or abs(sum(ms) - sum(total)) > len(frames):
             got = "nothing" if total is None else f"{sum(total)} ms of {sum(ms)} ms"
             raise OutputError(
-                f"{anim.label} {self.output} is incomplete: {got} read back (disk full, or not a regular file?)"
+                f"{anim.label} {self.output} is incomplete: {got} read back ({_why_incomplete(self.output)})"
             )
 
     def __enter__(self) -> Self:
@@ -415,6 +415,15 @@ class FrameWriter:
                 line = line.split("]", 1)[1].strip()
             return f"{default} ({line})"
         return default
+
+
+def _why_incomplete(output: str) -> str:
+    """Why an output file did not read back whole, as far as the file system tells."""
+    try:
+        full = os.statvfs(os.path.dirname(os.path.abspath(output))).f_bavail == 0
+    except (OSError, AttributeError):
+        full = False
+    return "no space left on device" if full else "disk full, or not a regular file?"
 
 
 def read_animation(path: str) -> tuple[int, list[int]] | None:

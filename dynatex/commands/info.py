@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ..cli import printable
 from ..player.modes import describe as describe_modes
 from ..tiledb import open_db
 
@@ -83,13 +84,13 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(d, indent=2))
         return 0
     print(
-        f"{d['file']}: dynatex tile database v{d['format_version'][0]}.{d['format_version'][1]}, "
+        f"{printable(d['file'])}: dynatex tile database v{d['format_version'][0]}.{d['format_version'][1]}, "
         f"{len(d['textures'])} texture(s)"
     )
     for name, t in d["textures"].items():
         s = t["source"]
         print(
-            f"\n[{name}] from {s['filename']} ({s['size'][0]}x{s['size'][1]}x{s['channels']}, "
+            f"\n[{printable(name)}] from {printable(s['filename'])} ({s['size'][0]}x{s['size'][1]}x{s['channels']}, "
             f"{s['frames']} frames at {s['fps']:g} fps), frames stored: {'yes' if t['frames_stored'] else 'no'}"
         )
         modes = t.get("modes") or []
@@ -101,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
                 value = summary(value)
                 if isinstance(value, float):
                     value = f"{value:.6g}"
-                print(f"    {key:24s} {value}")
+                print(f"    {printable(key):24s} {printable(value)}")
         if "ranking" in t:
             from .analyze import format_ranking
 

@@ -149,7 +149,7 @@ def test_merge_gathers_every_good_texture(tmp_path, corpus):
 def test_stale_temporaries_of_a_killed_writer_are_removed(tmp_path, corpus):
     out = tmp_path / "dbs"
     out.mkdir()
-    stale = out / ".a.h5.x1y2z3.tmp"
+    stale = out / ".a.h5.x1y2z3w4.tmp"
     stale.write_bytes(b"half an HDF5 file")
     other = out / ".b.h5.keep.tmp"
     other.write_bytes(b"")

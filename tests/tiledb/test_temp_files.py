@@ -107,7 +107,7 @@ def test_a_live_writers_temp_file_is_kept_and_a_killed_ones_removed(tmp_path):
         live.stdout.close()
     assert _temps(db) == []
     with open_db(db) as d:
-        assert d.textures == ("child", "first")  # the child started from "first", and committed last
+        assert d.textures == ("child", "first", "second")  # the child committed last and kept "second"
 
 
 def test_only_files_named_like_ours_are_removed(tmp_path):
