@@ -6,7 +6,8 @@ Analyzes ``CLIP`` (tiles only, defaults), plays ``--frames`` frames at ``--size`
 
 - ``autocorr``: the largest normalised autocorrelation of a frame's mean-removed luma at any
   shift of at least 64 pixels (Chebyshev; up to half the frame), median over a few frames,
-  for the output and for the source (the source's shifts stop at half its own size). A
+  for the output and for the source (the source's shifts start at a quarter of its shorter
+  side when that is under 64 pixels, and stop at half its size). A
   torus laid edge to edge shows its period here (about 0.8); a texture without repetition
   stays near the source's figure.
 - ``lattice``: :func:`dynatex.analyzer.metrics.lattice_prominence` at the stored tile size.
@@ -100,12 +101,14 @@ def main() -> None:
             cell = p.tile_size
     idx = np.unique(np.linspace(0, len(out) - 1, 4).round().astype(int))
     sidx = np.unique(np.linspace(0, len(src) - 1, 4).round().astype(int))
+    src_shift = min(64, min(src.shape[1:3]) // 4)  # a clip under 256 px: a quarter of its side
     res = {
         "clip": Path(args.clip).name,
         "size": args.size,
         "cell": list(cell),
         "autocorr_out": float(np.median([far_autocorrelation(out[i]) for i in idx])),
-        "autocorr_src": float(np.median([far_autocorrelation(src[i], min(64, min(src.shape[1:3]) // 4)) for i in sidx])),
+        "autocorr_src": float(np.median([far_autocorrelation(src[i], src_shift) for i in sidx])),
+        "src_shift": src_shift,
         "lattice": lattice_prominence(out, cell),
         "seams": float(np.median(seam_visibility(out[idx], grid_labels((h, w), cell)))),
         "straight_out": straight_edges(out[idx]),
