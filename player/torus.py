@@ -12,7 +12,8 @@ corner cell joins the four pieces. Every cell edge of the layout is then either 
 continuing itself or a jump strip's own edge, which continues its neighbours exactly; the
 only new seams are the jump cuts, chosen among all pairs of torus lines for the least
 difference over the loop (like the quilt's own cuts) and cross-faded over
-:data:`JUMP_FADE` pixels.
+a third of the cell (:data:`JUMP_FADE`): a jump line runs across the whole output, and a
+narrow fade showed the two lines' difference in brightness as a long straight edge.
 
 Each walk jumps at random (:data:`JUMP_CHANCE` wherever its line has a jump, to one of its
 jumps), so two places of a large output a period apart mostly show different parts of the
@@ -32,8 +33,8 @@ import numpy as np
 JUMP_CHANCE = 0.8  # chance that a walk jumps where its line has a jump
 JUMPS_PER_LINE = 2  # jumps at most from (and to) each torus line
 JUMP_FRAMES = 8  # loop frames compared when jumps are chosen and cut
-JUMP_FADE = 8.0  # pixels of cross-fade across a jump cut
-JUMP_SMOOTH = 3.0  # rows of Gaussian smoothing of a jump cut (no stair-step teeth)
+JUMP_FADE = 1 / 3  # cross-fade across a jump cut, a share of the cell across it
+JUMP_SMOOTH = 6.0  # rows of Gaussian smoothing of a jump cut (no stair-step teeth)
 
 
 def _strips(tiles: np.ndarray, rows: int, cols: int, axis: int, frames: np.ndarray | None = None) -> np.ndarray:
@@ -72,7 +73,7 @@ def _min_path(err: np.ndarray, lo: int, hi: int) -> np.ndarray:
     return path
 
 
-def cut_alpha(err: np.ndarray, *, fade: float = JUMP_FADE, sigma: float = JUMP_SMOOTH) -> np.ndarray:
+def cut_alpha(err: np.ndarray, *, fade: float, sigma: float = JUMP_SMOOTH) -> np.ndarray:
     """Share ``(n, m)`` of the strip left of a closed, smoothed minimum-error cut through
     ``err (n, m)`` (rows wrap: the strip is periodic along its length). The cut keeps
     ``fade / 2 + 1`` pixels from both sides and the share falls linearly over ``fade`` pixels
@@ -246,14 +247,15 @@ def torus_jumps(tiles: np.ndarray, torus: tuple[int, int], *, columns: bool = Tr
     for a, b in zip(col_from, col_to):
         strip_a, strip_b = grid[:, (a + 1) % n_cols], grid[:, b]  # (rows, L, th, tw, 3)
         err = _cut_error(strip_a[:, u], strip_b[:, u]).reshape(n_rows * th, tw)
-        alpha = cut_alpha(err).reshape(n_rows, 1, th, tw, 1)
+        alpha = cut_alpha(err, fade=JUMP_FADE * tw).reshape(n_rows, 1, th, tw, 1)
         col_alpha.append(alpha[:, 0, :, :, 0])
         cells.append(_blend(strip_a, strip_b, alpha))
     row_alpha = []
     for a, b in zip(row_from, row_to):
         strip_a, strip_b = grid[(a + 1) % n_rows], grid[b]  # (cols, L, th, tw, 3)
         err = _cut_error(strip_a[:, u], strip_b[:, u])  # (cols, th, tw)
-        alpha = cut_alpha(err.transpose(0, 2, 1).reshape(n_cols * tw, th)).reshape(n_cols, tw, th).transpose(0, 2, 1)
+        across = cut_alpha(err.transpose(0, 2, 1).reshape(n_cols * tw, th), fade=JUMP_FADE * th)
+        alpha = across.reshape(n_cols, tw, th).transpose(0, 2, 1)
         row_alpha.append(alpha)
         cells.append(_blend(strip_a, strip_b, alpha[:, None, :, :, None]))
     for i, (ra, rb) in enumerate(zip(row_from, row_to)):
