@@ -51,9 +51,7 @@ Pipeline (each step is a public function, so it can be tested and reused):
    :func:`torus_cells` cuts it into cells that the player lays out in torus order (beyond
    the period, in random walks with jumps: :mod:`dynatex.player.torus`). Nothing repeats
    within the period; the cost is storage (the whole torus, so the loop is capped at 64
-   frames by default). Blocks carry whole structures: at least three correlation lengths
-   of the clip (:func:`correlation_length`), so a small clip with long streaks is not cut
-   into short straight-edged fragments. Every cut (here and in steps 5-7) is smoothed and
+   frames by default). Every cut (here and in steps 5-7) is smoothed and
    cross-faded (:func:`path_alpha`): a minimum-error path drawn pixel by pixel shows
    stair-step teeth.
 7. Mixing: every extra texture gets a loop of the same length and its own tiles cut to the
@@ -697,55 +695,13 @@ _QUILT_FEATURE_FRAMES = 12
 _QUILT_COMPONENTS = 8
 
 
-QUILT_MIN_OVERLAP = 12  # pixels of block overlap where the block allows (a third of it at most)
-
-
-def correlation_length(frames: np.ndarray, *, level: float = 0.5, n_frames: int = 8) -> float:
-    """Pixels over which a clip's luma stays correlated: the first lag along x or y (the longer
-    of the two) where the normalised autocorrelation of the mean-removed frames falls below
-    ``level`` (mean over ``n_frames`` evenly spread frames). Long streaks (a waterfall) give a
-    long length, fine grain a short one; the quilted construction sizes its blocks from it.
-
-    Examples
-    --------
-    >>> rng = np.random.default_rng(0)
-    >>> noise = rng.integers(0, 256, (2, 64, 64, 3)).astype(np.uint8)
-    >>> correlation_length(noise)
-    1.0
-    >>> streaks = np.repeat(noise[:, :1], 64, axis=1)        # every row alike: vertical streaks
-    >>> correlation_length(streaks) >= 32
-    True
-    """
-    f = np.asarray(frames)
-    idx = np.unique(np.linspace(0, len(f) - 1, min(n_frames, len(f))).round().astype(int))
-    g = _grey(f[idx]).astype(np.float64)
-    g -= g.mean(axis=(1, 2), keepdims=True)
-    t, h, w = g.shape
-    spec = np.fft.rfft2(g, (2 * h, 2 * w))
-    ac = np.fft.irfft2(spec * np.conj(spec), (2 * h, 2 * w)).sum(axis=0)
-    if ac[0, 0] <= 0:
-        return 1.0
-    along_y = ac[: h // 2, 0] / (h - np.arange(h // 2)) * h / ac[0, 0]
-    along_x = ac[0, : w // 2] / (w - np.arange(w // 2)) * w / ac[0, 0]
-    lengths = [int(np.argmax(a < level)) if (a < level).any() else len(a) for a in (along_y, along_x)]
-    return float(max(1, *lengths))
-
-
 def quilt_geometry(
-    h: int,
-    w: int,
-    *,
-    block: int | None = None,
-    period: Sequence[int] | None = None,
-    scale: float | None = None,
+    h: int, w: int, *, block: int | None = None, period: Sequence[int] | None = None
 ) -> tuple[int, int, tuple[int, int], tuple[int, int]]:
     """``(block, step, cell, period)`` of the quilted torus for an ``h x w`` clip.
 
-    Blocks of ``block`` pixels (default a third of the shorter side, or three structure
-    lengths ``scale`` (:func:`correlation_length`) where that is more, rounded to 8, in 16..128
-    and at most two thirds of the shorter side: a block carries whole structures, not
-    fragments of them) overlap by a quarter, at least :data:`QUILT_MIN_OVERLAP` pixels where a
-    third of the block allows (``step = block - overlap``); cells (the player's lattice, the stored
+    Blocks of ``block`` pixels (default a third of the shorter side rounded to 8, in 16..128) overlap
+    by a quarter (``step = block - block // 4``); cells (the player's lattice, the stored
     tiles) are the fewest steps at least 64 pixels wide, so a 64-pixel run of the gather
     touches at most two cells; the period ``(py, px)`` is whole cells, at least 512 pixels
     (four clip sides for a clip under 128 pixels) and twice the clip up to 768 pixels in
@@ -753,13 +709,11 @@ def quilt_geometry(
     ``period``, rounded up to whole cells).
     """
     if block is None:
-        want = max(min(h, w) / 3, 3 * (scale or 0.0))
-        top = max(16, min(128, (2 * min(h, w) // 3) // 8 * 8))
-        block = int(np.clip(round(want / 8) * 8, 16, top))
+        block = int(np.clip(round(min(h, w) / 3 / 8) * 8, 16, 128))
     block = check_int("block", block, 8)
     if block + 2 > min(h, w):
         raise InvalidArgumentError(f"quilt block {block} (plus 2) is larger than the clip frame {h}x{w}")
-    step = block - min(max(block // 4, QUILT_MIN_OVERLAP), block // 3)
+    step = block - block // 4
     cell = step * -(-64 // step)
     if period is None:
         want = (
@@ -1391,8 +1345,7 @@ def _learn_quilted(
             )
         block = int(tile)
     t, h, w = main.shape[:3]
-    scale = correlation_length(main)
-    b, step, cell, (py, px) = quilt_geometry(h, w, block=block, period=period, scale=scale)
+    b, step, cell, (py, px) = quilt_geometry(h, w, block=block, period=period)
     total = 4 + (py // step) * (px // step)
     done = 0
 
@@ -1417,7 +1370,6 @@ def _learn_quilted(
     # border is then plain clip content
     half = step // 2
     qinfo["cell_offset"] = half
-    qinfo["structure_length"] = scale
     tiles = torus_cells(np.roll(torus, (-half, -half), axis=(1, 2)), cell)
     del torus
     k = len(tiles)

@@ -18,7 +18,8 @@ narrow fade showed the two lines' difference in brightness as a long straight ed
 Each walk jumps at random (:data:`JUMP_CHANCE` wherever its line has a jump, to one of its
 jumps), so two places of a large output a period apart mostly show different parts of the
 torus: a torus of ``n`` lines still shows one line at two places with a chance near ``1/n``,
-which bounds how far the correlation at large shifts falls. Everything here is
+which bounds how far the correlation at large shifts falls (and a torus of three lines or
+fewer along an axis has no jump there that would not show a line again one or two cells on). Everything here is
 computed once when a player opens (numpy, a few loop frames for the choice of jumps, every
 loop frame for the jump cells) and drawn by the unchanged cell-grid gather: the jump cells
 are extra cells in the gather's frame stack, so the frame rate does not change.
