@@ -29,8 +29,8 @@ shifted by a random number of cells per seed (:meth:`TilesPlayer._torus_arrangem
 output no larger than the torus is a window onto a seamless texture. A larger output would
 show the torus again one period away; there the cell rows and columns follow random walks
 through the torus's rows and columns that now and then jump to another line through a jump
-cell built at open (:mod:`dynatex.player.torus`), so the output has no period, and the frame
-rate is that of the plain layout (the jump cells are more cells in the same gather).
+cell built at open (:mod:`dynatex.player.torus`), so the output has no period (the jump
+cells are more cells in the same cell-grid gather).
 """
 
 from __future__ import annotations
