@@ -48,9 +48,12 @@ Pipeline (each step is a public function, so it can be tested and reused):
    :func:`quilted_torus` quilts blocks of the looped clip onto a torus of at least 512
    pixels (and twice the clip, up to 768) per side (image quilting of spatio-temporal blocks, like the
    quilt mode, with the overlap bands wrapping around so the torus tiles the plane), and
-   :func:`torus_cells` cuts it into cells that the player lays out in torus order. Nothing
-   repeats within the period; the cost is storage (the whole torus, so the loop is capped
-   at 64 frames by default).
+   :func:`torus_cells` cuts it into cells that the player lays out in torus order (beyond
+   the period, in random walks with jumps: :mod:`dynatex.player.torus`). Nothing repeats
+   within the period; the cost is storage (the whole torus, so the loop is capped at 64
+   frames by default). Every cut (here and in steps 5-7) is smoothed and
+   cross-faded (:func:`path_alpha`): a minimum-error path drawn pixel by pixel shows
+   stair-step teeth.
 7. Mixing: every extra texture gets a loop of the same length and its own tiles cut to the
    same size; a border tile ``(a, c, side)`` (:func:`side_join`) is class ``a``'s primary
    with a strip of class ``c``'s primary along one side, ending at a closed minimum cut and
@@ -322,6 +325,64 @@ def circular_cut(err: np.ndarray, steps: np.ndarray, move: np.ndarray | None = N
     return best[1], best[0]
 
 
+CUT_SMOOTH = 2.5  # rows: Gaussian smoothing of a cut path before it is drawn (no stair-step teeth)
+CUT_SOFT = 3.0  # pixels: width of the cross-fade across a cut that is otherwise hard
+
+
+def smooth_path(path: np.ndarray, sigma: float = CUT_SMOOTH, *, circular: bool = False) -> np.ndarray:
+    """A cut path (a column per row) Gaussian-smoothed along the rows, as real columns.
+
+    A minimum-error path moves by whole pixels from row to row; drawn as it is, every move
+    is a stair-step tooth along the cut. Smoothed (periodically for a closed path) it runs
+    straight or curves gently between its moves.
+
+    Examples
+    --------
+    >>> smooth_path(np.array([2, 2, 2, 5, 5, 5]), 1.0).round(1).tolist()
+    [2.0, 2.2, 2.9, 4.1, 4.8, 5.0]
+    """
+    p = np.asarray(path, np.float64)
+    if sigma <= 0 or len(p) < 2:
+        return p.copy()
+    r = int(np.ceil(3 * sigma))
+    k = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma) ** 2)
+    k /= k.sum()
+    padded = np.pad(p, r, mode="wrap" if circular else "edge")
+    return np.convolve(padded, k, mode="valid")
+
+
+def path_alpha(
+    path: np.ndarray,
+    m: int,
+    *,
+    fade: float,
+    start: float = 0.5,
+    lo: int = 0,
+    hi: int | None = None,
+    circular: bool = False,
+    sigma: float = CUT_SMOOTH,
+) -> np.ndarray:
+    """Share ``(n, m)`` of the side before a cut: ``path[i]`` is row ``i``'s first pixel past it.
+
+    The path is smoothed (:func:`smooth_path`, kept within ``lo .. hi``) and the share falls
+    linearly across it, from ``start`` at the cut by ``1 / fade`` a pixel (``start=0.5``: a
+    cross-fade ``fade`` pixels wide centred on the cut; ``start=1``: the side before the cut
+    kept whole, fading out beyond it). Columns before ``lo`` are 1 and from ``hi`` on 0.
+
+    Examples
+    --------
+    >>> path_alpha(np.array([2, 2]), 4, fade=2.0).round(2).tolist()     # two pixels across the cut
+    [[1.0, 0.75, 0.25, 0.0], [1.0, 0.75, 0.25, 0.0]]
+    """
+    hi = m if hi is None else hi
+    p = np.clip(smooth_path(path, sigma, circular=circular), lo, hi)
+    x = np.arange(m)[None, :] + 0.5
+    alpha = np.clip(start - (x - p[:, None]) / max(fade, 1e-6), 0.0, 1.0)
+    alpha[:, :lo] = 1.0
+    alpha[:, hi:] = 0.0
+    return alpha
+
+
 def _sample(length: int, n: int) -> np.ndarray:
     return np.unique(np.linspace(0, length - 1, min(n, length)).round().astype(int))
 
@@ -350,10 +411,11 @@ def toroidal_tile(
     e_rows[:, 0] = 1e30  # cut >= 1: column 0 continues column tw - 1
     steps = _steps(flow[:th, :bx].mean(axis=1), flow_gain)
     cut_h, cost_h = circular_cut(e_rows, steps)
-    cut_rows = np.concatenate([cut_h, cut_h[:by]])
-    xx = np.arange(tw)[None, :]
-    left = xx < cut_rows[:, None]  # (hb, tw)
-    mid = np.where(left[None, :, :, None], _shift_cols(block, tw), block[:, :, :tw])
+    # column 0 continues column tw - 1, and columns from bx on have no shifted twin: the
+    # smoothed cut cross-fades the two inside 1 .. bx
+    a = path_alpha(cut_h, tw, fade=min(CUT_SOFT, bx / 2), lo=1, hi=bx, circular=True)
+    a = np.concatenate([a, a[:by]])[None, :, :, None]  # (1, hb, tw, 1)
+    mid = np.rint(a * _shift_cols(block, tw) + (1 - a) * block[:, :, :tw]).astype(np.uint8)
     # vertical wrap on the x-periodic intermediate (hb, tw): a closed path in x.
     subm = mid[u].astype(np.float32)
     d = subm[:, th : th + by] - subm[:, :by]
@@ -361,9 +423,8 @@ def toroidal_tile(
     ev[:, 0] = 1e30
     steps = _steps(flow[:by, :tw].mean(axis=0), flow_gain)
     cut_v, cost_v = circular_cut(ev, steps)
-    yy = np.arange(th)[:, None]
-    top = yy < cut_v[None, :]  # (th, tw)
-    tile = np.where(top[None, :, :, None], _shift_rows(mid, th), mid[:, :th])
+    a = path_alpha(cut_v, th, fade=min(CUT_SOFT, by / 2), lo=1, hi=by, circular=True).T[None, :, :, None]
+    tile = np.rint(a * _shift_rows(mid, th) + (1 - a) * mid[:, :th]).astype(np.uint8)
     return np.ascontiguousarray(tile), cost_h, cost_v
 
 
@@ -397,7 +458,9 @@ def ring_join(
     The cut runs inside a ring of width ``ring`` along the four edges: four DP paths (left,
     right, top, bottom), each keeping at least the outermost pixel from ``ring_tile``.
     With ``feather > 0`` (border tiles between two different textures, which no cut can
-    join invisibly) ``ring_tile`` fades out linearly over ``feather`` pixels inside the cut.
+    join invisibly) ``ring_tile`` fades out linearly over ``feather`` pixels inside the cut,
+    else the two cross-fade over :data:`CUT_SOFT` pixels across it; the paths are smoothed
+    first (:func:`path_alpha`), so the cut shows no stair-step teeth.
     Returns ``(tile, weight, cost)``; ``weight`` (uint8, 0..255) is the share of
     ``ring_tile`` in each pixel (255 outside the cut), ``cost`` the mean squared RGB error
     per frame along the four paths.
@@ -407,9 +470,8 @@ def ring_join(
         raise InvalidArgumentError(f"ring must be in 2..{min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {ring}")
     u = _sample(length, _SAMPLE_FRAMES)
     flow = np.zeros((th, tw), np.float32) if flow is None else flow
-    mask = np.zeros((th, tw), bool)
+    alpha = np.zeros((th, tw))
     costs = []
-    yy, xx = np.arange(th)[:, None], np.arange(tw)[None, :]
     # per side (oriented as the left edge): path over rows, column c in 1..ring = first pixel
     # past the cut; the cost is what the output holds across the cut (see _cut_cost)
     for side in ("left", "right", "top", "bottom"):
@@ -419,25 +481,15 @@ def ring_join(
         fl = _orient(flow, side, tile_axes=(0, 1))
         path, cost = _dp(e, _steps(fl[:, :ring].mean(axis=1), flow_gain), None, move)
         costs.append(cost)
-        if side == "left":
-            mask |= xx < path[:, None]
-        elif side == "right":
-            mask |= xx >= tw - path[:, None]
-        elif side == "top":
-            mask |= yy < path[None, :]
-        else:
-            mask |= yy >= th - path[None, :]
-    if feather > 0:
-        import cv2
-
-        dist = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, 3)
-        alpha = np.clip(1.0 - dist / float(feather + 1), 0.0, 1.0)
-        weight = np.rint(255 * alpha).astype(np.uint8)
-        a = (weight.astype(np.float32) / 255)[None, :, :, None]
-        tile = np.rint(a * ring_tile + (1 - a) * inner.astype(np.float32)).astype(np.uint8)
-    else:
-        weight = np.where(mask, 255, 0).astype(np.uint8)
-        tile = np.where(mask[None, :, :, None], ring_tile, inner)
+        soft = (
+            path_alpha(path, fl.shape[1], fade=feather + 1.0, start=1.0, lo=1)
+            if feather > 0
+            else path_alpha(path, fl.shape[1], fade=CUT_SOFT, lo=1)
+        )
+        alpha = np.maximum(alpha, _unorient(soft, side, tile_axes=(0, 1)))
+    weight = np.rint(255 * alpha).astype(np.uint8)
+    a = (weight.astype(np.float32) / 255)[None, :, :, None]
+    tile = np.rint(a * ring_tile + (1 - a) * inner.astype(np.float32)).astype(np.uint8)
     return np.ascontiguousarray(tile), weight, float(np.mean(costs))
 
 
@@ -518,9 +570,7 @@ def side_join(
     e, move = _cut_cost(rt, it, ring, feather, _sample(length, _SAMPLE_FRAMES))
     fl = np.zeros((n, m), np.float32) if flow is None else _orient(flow, side, tile_axes=(0, 1))
     path, cost = circular_cut(e, _steps(fl[:, :ring].mean(axis=1), flow_gain), move)
-    xx = np.arange(m)[None, :]
-    beyond = (xx - path[:, None] + 1).astype(np.float32)  # 1 at the first pixel past the strip
-    alpha = np.where(xx < path[:, None], 1.0, np.clip(1.0 - beyond / float(feather + 1), 0.0, 1.0))
+    alpha = path_alpha(path, m, fade=feather + 1.0, start=1.0, lo=1, circular=True)
     weight = np.rint(255 * alpha).astype(np.uint8)
     a = (weight.astype(np.float32) / 255)[None, :, :, None]
     tile = np.rint(a * rt + (1 - a) * it.astype(np.float32)).astype(np.uint8)
@@ -681,32 +731,23 @@ def quilt_geometry(
     return block, step, (cell, cell), (py, px)
 
 
-def _block_cut(err: np.ndarray, side: str, margin: int) -> np.ndarray:
-    """Pixels of a ``(B, B)`` block on the new block's side of the minimum cut through the
-    overlap band along ``side`` (``err``: the band's per-pixel error, across x for left/right).
-    The cut keeps ``margin`` pixels from both edges of the band, so its cross-fade stays inside."""
+def _block_alpha(err: np.ndarray, side: str, margin: int, fade: float) -> np.ndarray:
+    """Share ``(B, B)`` of the new block across the minimum cut through the overlap band along
+    ``side`` (``err``: the band's per-pixel error, across x for left/right): the cut, kept
+    ``margin`` pixels from both edges of the band, smoothed (:func:`smooth_path`), and a
+    cross-fade ``fade`` pixels wide centred on it (1 on the new block's side)."""
     from .quilt import min_cut_path
 
-    b = max(err.shape)
-    err = np.array(err, np.float64)
-    across = err.shape[1] if side in ("left", "right") else err.shape[0]
-    lo, hi = margin, max(margin + 1, across - margin)
-    if side in ("left", "right"):
-        err[:, :lo], err[:, hi:] = 1e30, 1e30
-    else:
-        err[:lo], err[hi:] = 1e30, 1e30
-    keep = np.ones((b, b), bool)
-    if side in ("left", "right"):
-        o = err.shape[1]
-        cut = min_cut_path(err)
-        cols = np.arange(b)[None, :]
-        keep &= cols >= cut[:, None] if side == "left" else cols < (b - o + cut)[:, None] + 1
-    else:
-        o = err.shape[0]
-        cut = min_cut_path(err.T)
-        rows = np.arange(b)[:, None]
-        keep &= rows >= cut[None, :] if side == "top" else rows < (b - o + cut)[None, :] + 1
-    return keep
+    err = np.array(err if side in ("left", "right") else err.T, np.float64)  # rows along the cut
+    b, o = err.shape
+    lo, hi = margin, max(margin + 1, o - margin)
+    err[:, :lo], err[:, hi:] = 1e30, 1e30
+    cut = min_cut_path(err)
+    if side in ("left", "top"):  # the band's first pixel past the cut starts the new block
+        alpha = 1.0 - path_alpha(cut, b, fade=fade, lo=lo, hi=hi)
+    else:  # the band sits at the far edge: the new block is before the cut
+        alpha = path_alpha(b - o + cut + 1, b, fade=fade, lo=b - o + lo, hi=b - o + hi)
+    return alpha if side in ("left", "right") else alpha.T
 
 
 QUILT_REUSE = 4
@@ -750,14 +791,12 @@ def quilted_torus(
     ``tolerance`` of the best. A block may continue its left or top neighbour's piece of clip
     for at most :data:`QUILT_MAX_RUN` blocks, so the torus is never a tiling of whole clip
     frames. Each band ends at a minimum-error cut (summed over the loop) and the two sides
-    cross-fade over ``feather`` pixels either side (default a quarter of the overlap; the cut
-    keeps that far from the band's edges). Since the bands wrap, the torus is
+    cross-fade over ``feather`` pixels either side of the smoothed cut (:func:`path_alpha`;
+    default a quarter of the overlap; the cut keeps that far from the band's edges). Since the bands wrap, the torus is
     seamless in x and y; each block loops seamlessly in t like the clip's loop.
 
     Returns ``(torus (L, py, px, 3) uint8, info)``.
     """
-    import cv2
-
     from .quilt import block_errors
 
     f = tx.frames
@@ -854,20 +893,13 @@ def quilted_torus(
             old = torus[:, rows[:, None], cols[None, :]]
             d = new[u_cut].astype(np.float32) - old[u_cut].astype(np.float32)
             perr = (d * d).sum(axis=(0, 3)) / len(u_cut)
-            keep = np.ones((b, b), bool)
             band = {"left": perr[:, :o], "right": perr[:, b - o :], "top": perr[:o, :], "bottom": perr[b - o :, :]}
+            alpha = np.ones((b, b))
             for s in sides:
-                keep &= _block_cut(band[s], s, fe + 1)
+                alpha = np.minimum(alpha, _block_alpha(band[s], s, fe + 1, 2.0 * fe + 1.0))
+            keep = alpha >= 0.5
             costs.append(float(perr[mask & keep].mean()) if (mask & keep).any() else 0.0)
-            if fe:
-                d_in = cv2.distanceTransform(keep.astype(np.uint8), cv2.DIST_L2, 3)
-                d_out = cv2.distanceTransform((~keep).astype(np.uint8), cv2.DIST_L2, 3)
-                # a ramp through the cut that reaches 0 and 1 within fe pixels of it
-                alpha = 0.5 + np.where(keep, d_in - 0.5, 0.5 - d_out) / (2 * fe)
-                alpha = np.where(mask, np.clip(alpha, 0, 1), 1.0).astype(np.float32)
-            else:
-                alpha = np.where(mask, keep, True).astype(np.float32)
-            a = alpha[None, :, :, None]
+            a = alpha.astype(np.float32)[None, :, :, None]
             torus[:, rows[:, None], cols[None, :]] = np.rint(a * new + (1 - a) * old).astype(np.uint8)
             src[i, j] = (y0, x0)
             if j > 0 and (y0, x0) == tuple(src[i, j - 1] + (0, step)):
