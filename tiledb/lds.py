@@ -14,6 +14,7 @@ import numpy as np
 
 from ._check import Checker
 from ._describe import Described
+from . import detail as _detail
 from .source import SourceInfo
 
 #: Largest spectral radius a stored transition matrix may have.
@@ -46,6 +47,9 @@ class LDSModel(Described):
         Stationary state covariance ``P = A P A.T + Q`` of the stored model.
     info : dict
         Scalars describing the fit (``n``, ``k``, ``spectral_radius_raw``, ...), stored as attributes.
+    detail : DetailModel, optional
+        The fine detail and colour range added to the projected frames (the optional ``detail``
+        subgroup, :mod:`.detail`); None in databases written without it.
     """
 
     mean: np.ndarray
@@ -57,6 +61,7 @@ class LDSModel(Described):
     states: np.ndarray
     stationary_cov: np.ndarray
     info: dict = field(default_factory=dict)
+    detail: _detail.DetailModel | None = None
 
     @property
     def n(self) -> int:
@@ -91,6 +96,7 @@ def write(group: h5py.Group, model: LDSModel) -> None:
     for key, value in model.info.items():
         if key not in ("n", "k"):
             group.attrs[key] = value
+    _detail.write(group, model.detail)
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
@@ -112,6 +118,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
         states=ds(group, "states", kind="f", shape=(n, None)),
         stationary_cov=ds(group, "stationary_cov", kind="f", shape=(n, n)),
         info=check.info(group),
+        detail=_detail.read(group, check, source),
     )
     if model.singular_values.shape[0] < n:
         check.fail(group.name + "/singular_values", f"holds {model.singular_values.shape[0]} values, fewer than n={n}")

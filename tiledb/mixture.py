@@ -16,6 +16,7 @@ import numpy as np
 
 from ._check import Checker
 from ._describe import Described
+from . import detail as _detail
 from .source import SourceInfo
 
 #: Largest spectral radius the stored AR process's companion matrix may have.
@@ -73,6 +74,9 @@ class MixtureModel(Described):
         Schwarz's criterion of the orders 1..pmax (the order chosen minimises it).
     info : dict
         Scalars describing the fit, stored as attributes.
+    detail : DetailModel, optional
+        The fine detail and colour range added to the projected frames (the optional ``detail``
+        subgroup, :mod:`.detail`); None in databases written without it.
     """
 
     mean: np.ndarray
@@ -95,6 +99,7 @@ class MixtureModel(Described):
     ar_noise_cov: np.ndarray
     sbc: np.ndarray
     info: dict = field(default_factory=dict)
+    detail: _detail.DetailModel | None = None
 
     @property
     def components(self) -> int:
@@ -165,6 +170,7 @@ def write(group: h5py.Group, model: MixtureModel) -> None:
     for key, value in model.info.items():
         if key not in _SIZES:
             group.attrs[key] = value
+    _detail.write(group, model.detail)
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
@@ -208,6 +214,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         ar_noise_cov=ds(group, "ar_noise_cov", kind=f, shape=(dg, dg)),
         sbc=ds(group, "sbc", kind=f, shape=(None,)),
         info=check.info(group, skip=_SIZES),
+        detail=_detail.read(group, check, source),
     )
     t = model.global_coords.shape[0]
     if t < 2 or model.responsibilities.shape[0] != t or model.local_coords.shape[0] != t:
