@@ -65,7 +65,7 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     low = frames.min(axis=0)
     high = frames.max(axis=0)
     total = 0.0
-    for t0, r in _residual_chunks(frames, reconstruct):
+    for _, r in _residual_chunks(frames, reconstruct):
         flat = r.reshape(-1, c).astype(np.float64)
         cov += flat.T @ flat
         energy += np.einsum("thwc,thwc->hw", r, r, dtype=np.float64)
@@ -116,7 +116,8 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
         "volume_scale": float(scale),
         "seed": int(seed),
     }
-    return DetailModel(volume=volume, gain=gain, low=_dilate(low, np.minimum), high=_dilate(high, np.maximum), info=info)
+    low, high = _dilate(low, np.minimum), _dilate(high, np.maximum)
+    return DetailModel(volume=volume, gain=gain, low=low, high=high, info=info)
 
 
 def _residual_chunks(frames: np.ndarray, reconstruct: Reconstruct, offset: int = 0):

@@ -23,8 +23,8 @@ from ..checks import check_int
 from ..errors import InvalidArgumentError
 from ..tiledb import MixtureModel
 from ..tiledb.mixture import companion_radius
-from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
 from .detail import learn_detail
+from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
 from .stream import DiskClip
 from .video import Clip, Progress, clip_frames
 

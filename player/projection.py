@@ -170,7 +170,7 @@ class ProjectorOpenCL(Projector):
         return self.out.launch(out, self._gsize, self._lsize, wait=wait)
 
     def run_on_device(self):
-        """Project :attr:`coef` into the device frame ``out.buffer`` alone (for a pass that reads it); returns the event."""
+        """Project :attr:`coef` into the device frame ``out.buffer`` alone (a later pass reads it); the event."""
         import pyopencl as cl
 
         cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=False)

@@ -77,9 +77,7 @@ def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> DetailModel 
     vol = ds(g, "volume", kind="i", shape=(None, None, None, c), read=False)
     tv, hv, wv = vol.shape[:3]
     if not (1 <= tv <= MAX_VOLUME_FRAMES and 1 <= hv <= h and 1 <= wv <= w):
-        check.fail(
-            vol.name, f"has shape {vol.shape}: expected 1..{MAX_VOLUME_FRAMES} frames of at most {h}x{w} pixels"
-        )
+        check.fail(vol.name, f"has shape {vol.shape}: expected 1..{MAX_VOLUME_FRAMES} frames of at most {h}x{w} pixels")
     model = DetailModel(
         volume=ds(g, "volume", kind="i", shape=(tv, hv, wv, c)),
         gain=ds(g, "gain", kind="f", shape=(h, w)),

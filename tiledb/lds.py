@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 import h5py
 import numpy as np
 
+from . import detail as _detail
 from ._check import Checker
 from ._describe import Described
-from . import detail as _detail
 from .source import SourceInfo
 
 #: Largest spectral radius a stored transition matrix may have.

@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 import h5py
 import numpy as np
 
+from . import detail as _detail
 from ._check import Checker
 from ._describe import Described
-from . import detail as _detail
 from .source import SourceInfo
 
 #: Largest spectral radius the stored AR process's companion matrix may have.
