@@ -103,7 +103,7 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     vol = np.empty((tv, hv, wv, c))
     for k in range(c):
         white = np.fft.rfftn(rng.standard_normal((tv, hv, wv)))
-        field = np.fft.irfftn(white * np.sqrt(power[k] / max(segments, 1)), s=(tv, hv, wv))
+        field = np.fft.irfftn(white * np.sqrt(power[k] / max(segments, 1)), s=(tv, hv, wv), axes=(0, 1, 2))
         sd = field.std()
         vol[..., k] = field * (np.sqrt(var[k]) / sd) if sd > 0 else 0.0
     vol = vol @ axes.T

@@ -132,7 +132,8 @@ class ProjectionPlayer(Player):
         Range(float, 0.0, MAX_DETAIL),
         1.0,
         "Scale of the fine detail added to each frame (the part of the clip the projection drops; "
-        "0: none, the source's colour range still holds); no effect on textures analysed without it.",
+        "0: none, the source's colour range still holds), times sqrt(intensity); no effect on "
+        "textures analysed without it.",
     )
 
     # -- synthesis -----------------------------------------------------------------
@@ -160,7 +161,7 @@ class ProjectionPlayer(Player):
         """Project the engine's coefficients into ``out``, adding the detail where the model has it."""
         if self.detail_engine is None:
             return self.engine.run(out, wait=wait)
-        layers = self.detail_engine.layers(self.seed, self.frame_index, self._detail)
+        layers = self.detail_engine.layers(self.seed, self.frame_index, self._detail * np.sqrt(self._intensity))
         if self.ctx is None:
             self.engine.run(out)
             self.detail_engine.apply(out, layers)
