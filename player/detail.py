@@ -88,21 +88,32 @@ class DetailReference(Detail):
         (``frame`` itself when None)."""
         out = frame if out is None else out
         h, w = self.shape[:2]
-        ys, xs = np.arange(h)[:, None], np.arange(w)[None, :]
-        noise = None
-        for t, oy, ox, wt in layers:
-            v = self.volume[t][(ys + oy) % self.vh, (xs + ox) % self.vw].astype(np.float32) * np.float32(wt)
-            noise = v if noise is None else noise + v
-        at = self.format.rgb
-        for c in range(self.channels):
-            val = frame[..., at[c]].astype(np.float32) + self.gain * noise[..., c]
-            val = np.clip(np.rint(val), 0, 255).astype(np.uint8)
-            np.clip(val, self.low[..., c], self.high[..., c], out=val)
-            if self.channels == 3:
-                out[..., at[c]] = val
+        noise = np.empty((h, w, self.channels), np.float32)
+        for k, (t, oy, ox, wt) in enumerate(layers):
+            rows = (np.arange(h) + oy) % self.vh
+            cols = (np.arange(w) + ox) % self.vw
+            v = self.volume[t].take(rows, axis=0).take(cols, axis=1).astype(np.float32)
+            v *= np.float32(wt)
+            if k == 0:
+                noise[...] = v
             else:
-                for a in at:
-                    out[..., a] = val
+                noise += v
+        noise *= self.gain[..., None]
+        at = self.format.rgb
+        rgb_in_place = self.channels == 3 and self.format.name == "RGB"
+        val = frame.astype(np.float32) if rgb_in_place else frame[..., list(at[: self.channels])].astype(np.float32)
+        val += noise
+        np.rint(val, out=val)
+        np.clip(val, self.low, self.high, out=val)  # within 0..255 already: low and high are uint8
+        val = val.astype(np.uint8)
+        if rgb_in_place:
+            out[...] = val
+        elif self.channels == 3:
+            for c in range(3):
+                out[..., at[c]] = val[..., c]
+        else:
+            for a in at:
+                out[..., a] = val[..., 0]
         if self.format.alpha is not None:
             out[..., self.format.alpha] = 255
         return out

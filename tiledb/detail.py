@@ -23,6 +23,8 @@ DETAIL_VERSION = 1
 GROUP = "detail"
 #: Longest noise volume, in frames.
 MAX_VOLUME_FRAMES = 256
+#: Residual share above which ``describe()`` warns that the detail is noise standing in for structure.
+WARN_RESIDUAL = 0.2
 #: Largest per-pixel gain: a gain times the int8 range stays within a few pixel ranges.
 MAX_GAIN = 16.0
 
@@ -48,6 +50,21 @@ class DetailModel:
     low: np.ndarray
     high: np.ndarray
     info: dict = field(default_factory=dict)
+
+
+def describe(model: DetailModel | None) -> dict:
+    """Facts for a model's ``describe()``: the residual's share, and a warning where it is large."""
+    if model is None:
+        return {"detail": False}
+    share = float(model.info.get("residual_energy", 0.0))
+    out = {"detail": True, "detail_residual_energy": round(share, 4)}
+    if share > WARN_RESIDUAL:
+        out["warning"] = (
+            f"the projection keeps {1 - share:.0%} of the clip's variance; the detail part adds the rest "
+            "as a noise texture with its spectrum and colours: fine grain and motion, not structure "
+            "such as foam or sharp moving edges"
+        )
+    return out
 
 
 def write(parent: h5py.Group, model: DetailModel | None) -> None:

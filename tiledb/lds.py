@@ -73,7 +73,13 @@ class LDSModel(Described):
 
     def describe(self) -> dict:
         """Facts as plain values: the ``info`` attributes, the orders and the basis size."""
-        return {**super().describe(), "n": self.n, "k": self.k, "basis_mb": round(self.basis.nbytes / 2**20, 2)}
+        return {
+            **super().describe(),
+            "n": self.n,
+            "k": self.k,
+            "basis_mb": round(self.basis.nbytes / 2**20, 2),
+            **_detail.describe(self.detail),
+        }
 
     def summary(self) -> str:
         """One line: orders, energy kept, spectral radius before and after clipping."""

@@ -101,6 +101,10 @@ class MixtureModel(Described):
     info: dict = field(default_factory=dict)
     detail: _detail.DetailModel | None = None
 
+    def describe(self) -> dict:
+        """Facts as plain values: the ``info`` attributes and the detail part's."""
+        return {**super().describe(), **_detail.describe(self.detail)}
+
     @property
     def components(self) -> int:
         return int(self.weights.shape[0])
