@@ -16,7 +16,9 @@ their output look blurred and slow. It is modelled here as a stationary Gaussian
 The player (:mod:`dynatex.player.detail`) plays the volume through two layers at random
 offsets cross-faded with weights whose squares sum to one, scales it by the gain and holds
 every pixel to the colour range the source showed there (``low``/``high``: the per-pixel,
-per-channel minimum and maximum over the clip, widened to the 3 x 3 neighbourhood).
+per-channel minimum and maximum over the clip, widened to the 3 x 3 neighbourhood); a pixel
+whose detail would give it a colour the clip never had (``colours``, the set
+:func:`~dynatex.analyzer.metrics.out_of_gamut_share` measures against) gets none.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..tiledb.detail import MAX_GAIN, DetailModel
+from .metrics import colour_set
 
 #: Frames, rows and columns of the noise volume (capped by the clip's own).
 VOLUME_FRAMES = 32
@@ -117,7 +120,8 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
         "seed": int(seed),
     }
     low, high = _dilate(low, np.minimum), _dilate(high, np.maximum)
-    return DetailModel(volume=volume, gain=gain, low=low, high=high, info=info)
+    colours = colour_set(frames).astype(np.uint8)
+    return DetailModel(volume=volume, gain=gain, low=low, high=high, colours=colours, info=info)
 
 
 def _residual_chunks(frames: np.ndarray, reconstruct: Reconstruct, offset: int = 0):

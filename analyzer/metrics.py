@@ -32,6 +32,7 @@ from ..errors import ArgumentTypeError, InvalidArgumentError
 __all__ = [
     "StabilityReport",
     "check_frames",
+    "colour_set",
     "count_nonfinite",
     "evaluate",
     "frame_coverage",
@@ -1139,8 +1140,9 @@ def _colour_bins(frames: np.ndarray) -> np.ndarray:
     return (f[:, 0].astype(np.int32) * n + f[:, 1]) * n + f[:, 2]
 
 
-def _colour_set(frames: np.ndarray) -> np.ndarray:
-    """The bins ``frames`` occupy, grown by one bin in every direction (26 neighbours)."""
+def colour_set(frames: np.ndarray) -> np.ndarray:
+    """The colour bins ``frames`` occupy, grown by one bin in every direction (26 neighbours):
+    a bool per bin of :func:`_colour_bins` (``32**3``), the set :func:`out_of_gamut_share` tests against."""
     n = 1 << GAMUT_BITS
     occ = np.zeros(n**3, bool)
     for lo in range(0, len(frames), _CHUNK):
@@ -1181,7 +1183,7 @@ def out_of_gamut_share(output: np.ndarray, source: np.ndarray) -> float:
     output = check_frames(output, name="output", min_frames=1)
     source = check_frames(source, name="source", min_frames=2)
     half = len(source) // 2
-    return 0.5 * sum(_share_outside(output, _colour_set(part)) for part in (source[:half], source[half:]))
+    return 0.5 * sum(_share_outside(output, colour_set(part)) for part in (source[:half], source[half:]))
 
 
 def source_gamut_share(source: np.ndarray) -> float:
@@ -1190,7 +1192,7 @@ def source_gamut_share(source: np.ndarray) -> float:
     source = check_frames(source, name="source", min_frames=2)
     half = len(source) // 2
     a, b = source[:half], source[half:]
-    return 0.5 * (_share_outside(b, _colour_set(a)) + _share_outside(a, _colour_set(b)))
+    return 0.5 * (_share_outside(b, colour_set(a)) + _share_outside(a, colour_set(b)))
 
 
 def _json_float(v: float) -> float | None:

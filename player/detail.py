@@ -1,7 +1,8 @@
 """The detail engine: adds a model's fine detail to a projected frame and holds every pixel to
 the source's colour range (the ``detail`` part of ``lds`` and ``mixture``, :mod:`dynatex.tiledb.detail`).
 
-Per frame ``out = clamp(round(src + gain * (w0 * V[l0] + w1 * V[l1])), low, high)``, where
+Per frame ``out = clamp(round(src + gain * (w0 * V[l0] + w1 * V[l1])), low, high)`` (or
+``clamp(src, low, high)`` where that colour is not in the source's colour set), where
 ``V[l]`` is the stored noise volume read at layer ``l``'s frame and offset (it wraps in y and
 x). Two layers cross-fade with weights ``sin`` and ``cos`` of the same phase (squares sum to
 one, so the detail keeps its variance), each reborn at random offsets where its weight is 0:
@@ -15,6 +16,8 @@ reference :class:`DetailReference`: the kernel turns contraction off).
 
 from __future__ import annotations
 
+import functools
+import math
 from typing import Any
 
 import numpy as np
@@ -40,13 +43,19 @@ def layers(model_frames: int, shape: tuple[int, int], seed: int, frame: int, amo
     life = model_frames
     out = []
     for k in range(2):
-        age_total = frame + k * (life // 2)
-        n_life, age = divmod(age_total, life)
-        rng = np.random.default_rng([seed & 0xFFFFFFFFFFFFFFFF, 0xD7, k, n_life])
-        t0, oy, ox = (int(v) for v in rng.integers(0, (life, shape[0], shape[1])))
-        w = np.sin(np.pi * (age + 0.5) / life)
+        n_life, age = divmod(frame + k * (life // 2), life)
+        t0, oy, ox = _birth(seed, k, n_life, life, shape[0], shape[1])
+        w = math.sin(math.pi * (age + 0.5) / life)
         out.append(((t0 + age) % life, oy, ox, float(np.float32(amount * w))))
     return tuple(out)
+
+
+@functools.lru_cache(maxsize=64)
+def _birth(seed: int, k: int, n_life: int, life: int, vh: int, vw: int) -> tuple[int, int, int]:
+    """Start frame and offset of layer ``k``'s life ``n_life`` (drawn once per life, then cached)."""
+    rng = np.random.default_rng([seed & 0xFFFFFFFFFFFFFFFF, 0xD7, k, n_life])
+    t0, oy, ox = (int(v) for v in rng.integers(0, (life, vh, vw)))
+    return t0, oy, ox
 
 
 class Detail:
@@ -63,10 +72,12 @@ class Detail:
         self.gain = np.ascontiguousarray(model.gain, np.float32)
         self.low = np.ascontiguousarray(model.low)
         self.high = np.ascontiguousarray(model.high)
+        self.colours = np.ascontiguousarray(model.colours, np.uint8)
 
     @property
     def bytes_per_frame(self) -> int:
-        """What a frame reads beyond the projected frame: gain, colour range, two volume reads."""
+        """What a frame reads beyond the projected frame: gain, colour range, two volume reads (the
+        colour set, 32 KiB, stays in cache)."""
         h, w = self.shape[:2]
         return int(h * w * (4 + 4 * self.channels))
 
@@ -106,6 +117,13 @@ class DetailReference(Detail):
         np.rint(val, out=val)
         np.clip(val, self.low, self.high, out=val)  # within 0..255 already: low and high are uint8
         val = val.astype(np.uint8)
+        q = (val >> 3).astype(np.int32)
+        r, g, b = (0, 1, 2) if self.channels == 3 else (0, 0, 0)
+        bins = (q[..., r] << 10) | (q[..., g] << 5) | q[..., b]
+        outside = self.colours[bins] == 0
+        if outside.any():
+            plain = frame[..., list(at[: self.channels])][outside]
+            val[outside] = np.clip(plain, self.low[outside], self.high[outside])
         if rgb_in_place:
             out[...] = val
         elif self.channels == 3:
@@ -145,18 +163,19 @@ class DetailOpenCL(Detail):
         mf = cl.mem_flags
         self._bufs = [
             cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
-            for a in (self.volume, self.gain, self.low, self.high)
+            for a in (self.volume, self.gain, self.low, self.high, self.colours)
         ]
         prog = build_program(ctx, "detail.cl", {"CHANNELS": channels, **self.format.defines})
         self._kernel = Kernel(prog, "add_detail")
         h, w = self.shape[:2]
-        vol, gain, low, high = self._bufs
+        vol, gain, low, high, colours = self._bufs
         self._kernel.set(
             src=src,
             vol=vol,
             gain=gain,
             low=low,
             high=high,
+            colours=colours,
             width=np.int32(w),
             height=np.int32(h),
             vh=np.int32(self.vh),

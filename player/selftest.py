@@ -442,6 +442,7 @@ def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
             gain=rng.uniform(0, 0.5, (h, w)).astype(np.float32),
             low=low,
             high=low + rng.integers(0, 128, (h, w, channels), dtype=np.uint8),
+            colours=rng.integers(0, 2, 32**3, dtype=np.uint8),
         )
         frame = rng.integers(0, 256, (h, w, fmt.bytes), dtype=np.uint8)
         ctx = get_context(device)

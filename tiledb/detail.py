@@ -21,6 +21,8 @@ from .source import SourceInfo
 #: Version of the ``detail`` part this reader understands; a newer part is ignored (it is optional).
 DETAIL_VERSION = 1
 GROUP = "detail"
+#: Colour bins: 8 levels per channel.
+COLOUR_BINS = 32**3
 #: Longest noise volume, in frames.
 MAX_VOLUME_FRAMES = 256
 #: Residual share above which ``describe()`` warns that the detail is noise standing in for structure.
@@ -41,6 +43,9 @@ class DetailModel:
         Per-pixel factor turning a volume value into pixel units (the residual's local level).
     low, high : (H, W, C) uint8
         The colour range of each pixel in the source (per channel), ``low <= high``.
+    colours : (32768,) uint8
+        1 for each colour bin (``(r >> 3) * 1024 + (g >> 3) * 32 + (b >> 3)``) the source shows, or
+        a neighbouring bin does; a pixel whose detail would leave this set gets none.
     info : dict
         Scalars (``residual_energy``: the residual's share of the clip's variance, ...).
     """
@@ -49,6 +54,7 @@ class DetailModel:
     gain: np.ndarray
     low: np.ndarray
     high: np.ndarray
+    colours: np.ndarray
     info: dict = field(default_factory=dict)
 
 
@@ -77,6 +83,7 @@ def write(parent: h5py.Group, model: DetailModel | None) -> None:
     g.create_dataset("gain", data=np.asarray(model.gain, np.float32))
     g.create_dataset("low", data=np.asarray(model.low, np.uint8))
     g.create_dataset("high", data=np.asarray(model.high, np.uint8))
+    g.create_dataset("colours", data=np.asarray(model.colours, np.uint8))
     for key, value in model.info.items():
         if key != "version":
             g.attrs[key] = value
@@ -100,12 +107,15 @@ def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> DetailModel 
         gain=ds(g, "gain", kind="f", shape=(h, w)),
         low=ds(g, "low", kind="u", shape=(h, w, c)),
         high=ds(g, "high", kind="u", shape=(h, w, c)),
+        colours=ds(g, "colours", kind="u", shape=(COLOUR_BINS,)),
         info=check.info(g, skip=("version",)),
     )
     if model.volume.dtype != np.int8:
         check.fail(vol.name, f"dtype {model.volume.dtype} is not int8")
     if model.low.dtype != np.uint8 or model.high.dtype != np.uint8:
         check.fail(g.name + "/low", "low and high must be uint8")
+    if model.colours.dtype != np.uint8 or model.colours.max() > 1:
+        check.fail(g.name + "/colours", "must be uint8 flags, 0 or 1")
     if not (model.gain.min() >= 0 and model.gain.max() <= MAX_GAIN):
         check.fail(g.name + "/gain", f"values outside 0..{MAX_GAIN:g}")
     if (model.low > model.high).any():

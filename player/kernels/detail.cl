@@ -1,4 +1,6 @@
-// Fine detail and colour range: out = clamp(round(src + gain * (w0 * vol[layer 0] + w1 * vol[layer 1])), low, high).
+// Fine detail and colour range: out = clamp(round(src + gain * (w0 * vol[layer 0] + w1 * vol[layer 1])), low, high),
+// or clamp(src, low, high) where that colour's bin ((r >> 3) * 1024 + (g >> 3) * 32 + (b >> 3))
+// is not in the source's colour set (colours[bin] == 0).
 //
 // src is a projected frame in the output pixel format; the volume (Tv, Hv, Wv, CHANNELS) int8
 // wraps in y and x; each layer reads volume frame t_k at offset (oy_k, ox_k). One work-item per
@@ -14,6 +16,7 @@ __kernel void add_detail(__global const uchar *restrict src,
                          __global const float *restrict gain,
                          __global const uchar *restrict low,
                          __global const uchar *restrict high,
+                         __global const uchar *restrict colours,
                          __global uchar *restrict out,
                          const int width,
                          const int height,
@@ -44,6 +47,17 @@ __kernel void add_detail(__global const uchar *restrict src,
         const int at = c == 0 ? R_AT : (c == 1 ? G_AT : B_AT);
         const uchar u = convert_uchar_sat_rte((float)s[at] + g * n);
         v[c] = clamp(u, low[p * CHANNELS + c], high[p * CHANNELS + c]);
+    }
+#if CHANNELS == 3
+    const int bin = ((v[0] >> 3) << 10) | ((v[1] >> 3) << 5) | (v[2] >> 3);
+#else
+    const int bin = ((v[0] >> 3) << 10) | ((v[0] >> 3) << 5) | (v[0] >> 3);
+#endif
+    if (!colours[bin]) {
+        for (int c = 0; c < CHANNELS; ++c) {
+            const int at = c == 0 ? R_AT : (c == 1 ? G_AT : B_AT);
+            v[c] = clamp(s[at], low[p * CHANNELS + c], high[p * CHANNELS + c]);
+        }
     }
 #if CHANNELS == 3
     o[R_AT] = v[0];

@@ -19,13 +19,14 @@ from dynatex.tiledb.detail import DetailModel
 from ..conftest import wave_clip
 
 
-def _model(rng, h, w, channels, frames=6, vh=9, vw=14):
+def _model(rng, h, w, channels, frames=6, vh=9, vw=14, colours=None):
     low = rng.integers(0, 128, (h, w, channels), dtype=np.uint8)
     return DetailModel(
         volume=rng.integers(-127, 128, (frames, vh, vw, channels), dtype=np.int8),
         gain=rng.uniform(0, 0.6, (h, w)).astype(np.float32),
         low=low,
         high=low + rng.integers(0, 128, (h, w, channels), dtype=np.uint8),
+        colours=rng.integers(0, 2, 32**3, dtype=np.uint8) if colours is None else colours,
     )
 
 
@@ -65,6 +66,29 @@ def test_reference_holds_the_colour_range_and_replicates_grey():
     grey = out[..., 0]
     assert (grey >= model.low[..., 0]).all() and (grey <= model.high[..., 0]).all()
     assert (out[..., 1] == grey).all() and (out[..., 2] == grey).all() and (out[..., 3] == 255).all()
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_colours_outside_the_set_get_no_detail(channels):
+    rng = np.random.default_rng(4)
+    frame = rng.integers(0, 256, (10, 12, 3), dtype=np.uint8)
+    if channels == 1:
+        frame[...] = frame[..., :1]
+    lay = layers(6, (9, 14), 0, 3)
+    none = DetailReference(
+        _model(rng, 10, 12, channels, colours=np.zeros(32**3, np.uint8)), shape=(10, 12, 3), channels=channels
+    )
+    m = none.low, none.high
+    np.testing.assert_array_equal(
+        none.apply(frame, lay, out=np.empty_like(frame))[..., :channels], np.clip(frame[..., :channels], *m)
+    )
+    every = DetailReference(
+        DetailModel(none.volume, none.gain, none.low, none.high, np.ones(32**3, np.uint8)),
+        shape=(10, 12, 3),
+        channels=channels,
+    )
+    out = every.apply(frame, lay, out=np.empty_like(frame))
+    assert (out[..., :channels] != np.clip(frame[..., :channels], *m)).any()
 
 
 def test_layers_keep_the_variance_and_move_on():

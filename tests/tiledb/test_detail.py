@@ -34,7 +34,7 @@ def test_round_trip(db, method):
     want = models[method].detail
     with TileDB(path) as t:
         got = t.texture("w").read(method).detail
-    for name in ("volume", "gain", "low", "high"):
+    for name in ("volume", "gain", "low", "high", "colours"):
         np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
     assert got.volume.dtype == np.int8 and got.low.dtype == np.uint8
     assert got.info["residual_energy"] == pytest.approx(want.info["residual_energy"])
@@ -85,6 +85,8 @@ def _replace(name, fn):
         ("volume", lambda a: a[..., :1], "expected"),
         ("volume", lambda a: np.zeros((300,) + a.shape[1:], np.int8), "frames of at most"),
         ("high", lambda a: a[:-1], "expected"),
+        ("colours", lambda a: a * 2, "0 or 1"),
+        ("colours", lambda a: a[:-1], "expected"),
     ],
 )
 def test_damaged_detail_is_refused(db, tmp_path, name, fn, match):
