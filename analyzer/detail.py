@@ -4,14 +4,16 @@ The ``lds`` and ``mixture`` models keep a clip's top components; what they leave
 truncation residual: fine, fast detail, a quarter of the variance of a sea) is what makes
 their output look blurred and slow. It is modelled here as a stationary Gaussian texture:
 
-1. the residual's colour principal axes (a 3 x 3 eigendecomposition);
+1. the residual's principal colour axis (a 3 x 3 eigendecomposition): 93% to 99.6% of its
+   variance on noise-like clips (sea, steam, fire); the other axes are left out, because on a
+   clip with structured colour (a flag's edges, 11% there) their noise is red and green confetti;
 2. its local level, a per-pixel gain (the residual's RMS, smoothed), which the texture is
    divided by so that it is stationary;
-3. per axis, its spatio-temporal power spectrum (Welch: cuboids of ``Tv`` frames by
+3. along that axis, its spatio-temporal power spectrum (Welch: cuboids of ``Tv`` frames by
    ``Hv x Wv`` pixels, half overlapping, Hann-windowed), which holds its motion: detail that
    flows along the clip's motion puts its power on the planes of those velocities;
-4. a noise volume drawn with those spectra and random phases, periodic in t, y and x by
-   construction, mixed back into RGB and stored as int8.
+4. a noise volume drawn with that spectrum and random phases, periodic in t, y and x by
+   construction, along the axis in RGB, stored as int8.
 
 The player (:mod:`dynatex.player.detail`) plays the volume through two layers at random
 offsets cross-faded with weights whose squares sum to one, scales it by the gain and holds
@@ -77,39 +79,35 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
         d = frames[t0 : t0 + CHUNK].reshape(-1, clip_mean.size) - clip_mean
         total += float(np.einsum("ij,ij->", d, d))
     resid_energy = float(np.trace(cov))
-    _, axes = np.linalg.eigh(cov / max(t * h * w, 1))
+    eig, axes = np.linalg.eigh(cov)
+    axis = axes[:, -1]
     level = np.sqrt(_box(energy / (t * c), GAIN_BOX))
     rms = np.sqrt(np.mean(level**2))
     norm_gain = level / rms if rms > 0 else np.ones_like(level)
 
-    # Pass 2: per colour axis, the spatio-temporal power spectrum of the levelled residual.
+    # Pass 2: the spatio-temporal power spectrum of the levelled residual along its principal colour axis.
     window = _hann(tv)[:, None, None] * _hann(hv)[None, :, None] * _hann(wv)[None, None, :]
-    power = np.zeros((c, tv, hv, wv // 2 + 1))
-    var = np.zeros(c)
+    power = np.zeros((tv, hv, wv // 2 + 1))
+    var = 0.0
     segments = 0
     starts_t = _starts(t, tv)
     for t0 in starts_t:
         r = np.concatenate([rr for _, rr in _residual_chunks(frames[t0 : t0 + tv], reconstruct, offset=t0)])
-        a = (r.astype(np.float64) @ axes) / np.maximum(norm_gain, 1e-3)[None, :, :, None]
-        var += (a**2).reshape(-1, c).sum(axis=0)
+        a = (r.astype(np.float64) @ axis) / np.maximum(norm_gain, 1e-3)[None]
+        var += float(np.einsum("thw,thw->", a, a))
         for y0 in _starts(h, hv):
             for x0 in _starts(w, wv):
                 cube = a[:, y0 : y0 + hv, x0 : x0 + wv]
-                cube = cube - cube.mean(axis=(0, 1, 2))
-                for k in range(c):
-                    power[k] += np.abs(np.fft.rfftn(cube[..., k] * window)) ** 2
+                power += np.abs(np.fft.rfftn((cube - cube.mean()) * window)) ** 2
                 segments += 1
     var /= len(starts_t) * tv * h * w
 
-    # The volume: random phases under each axis's amplitude, scaled to its variance, into RGB.
+    # The volume: random phases under that amplitude, scaled to the variance, along the axis in RGB.
     rng = np.random.default_rng(seed)
-    vol = np.empty((tv, hv, wv, c))
-    for k in range(c):
-        white = np.fft.rfftn(rng.standard_normal((tv, hv, wv)))
-        field = np.fft.irfftn(white * np.sqrt(power[k] / max(segments, 1)), s=(tv, hv, wv), axes=(0, 1, 2))
-        sd = field.std()
-        vol[..., k] = field * (np.sqrt(var[k]) / sd) if sd > 0 else 0.0
-    vol = vol @ axes.T
+    white = np.fft.rfftn(rng.standard_normal((tv, hv, wv)))
+    field = np.fft.irfftn(white * np.sqrt(power / max(segments, 1)), s=(tv, hv, wv), axes=(0, 1, 2))
+    sd = field.std()
+    vol = (field * (np.sqrt(var) / sd) if sd > 0 else field * 0.0)[..., None] * axis
     span = CLIP_SIGMAS * float(vol.reshape(-1, c).std(axis=0).max())
     scale = span / 127.0 if span > 0 else 1.0
     volume = np.clip(np.rint(vol / scale), -127, 127).astype(np.int8)
@@ -117,6 +115,7 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     info = {
         "residual_energy": resid_energy / total if total > 0 else 0.0,
         "volume_scale": float(scale),
+        "colour_share": float(eig[-1] / eig.sum()) if eig.sum() > 0 else 1.0,
         "seed": int(seed),
     }
     low, high = _dilate(low, np.minimum), _dilate(high, np.maximum)
