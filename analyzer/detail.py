@@ -45,6 +45,21 @@ CHUNK = 16
 Reconstruct = Callable[[int, int], np.ndarray]
 
 
+def volume_shape(t: int, h: int, w: int) -> tuple[int, int, int]:
+    """Frames, rows and columns of the noise volume of a ``t``-frame clip of ``h x w`` pixels."""
+    tv = min(VOLUME_FRAMES, max(2, t // 2))
+    return tv - tv % 2, min(VOLUME_SIDE, h), min(VOLUME_SIDE, w)  # even: the layers are half a volume apart
+
+
+def workspace_bytes(shape: tuple[int, ...]) -> int:
+    """Bytes :func:`learn_detail` needs beyond the clip and the model, for frames ``(T, H, W, C)``:
+    the volume's FFTs (at most 32 x 128 x 128 values, so bounded), one volume of the levelled
+    residual and a few chunks of residual frames."""
+    t, h, w, c = shape
+    tv, hv, wv = volume_shape(t, h, w)
+    return 48 * tv * hv * wv + 4 * tv * h * w + 3 * 4 * CHUNK * h * w * c
+
+
 def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0) -> DetailModel:
     """The detail part of a projection model of ``frames`` ``(T, H, W, C)`` uint8.
 
@@ -61,8 +76,7 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     ((10, 16, 16, 3), 'int8', True)
     """
     t, h, w, c = frames.shape
-    tv, hv, wv = min(VOLUME_FRAMES, max(2, t // 2)), min(VOLUME_SIDE, h), min(VOLUME_SIDE, w)
-    tv -= tv % 2  # the player's two layers are half a volume apart
+    tv, hv, wv = volume_shape(t, h, w)
 
     # Pass 1: colour covariance, per-pixel energy and colour range.
     cov = np.zeros((c, c))
@@ -71,13 +85,14 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     high = frames.max(axis=0)
     total = 0.0
     for _, r in _residual_chunks(frames, reconstruct):
-        flat = r.reshape(-1, c).astype(np.float64)
+        flat = r.reshape(-1, c)
         cov += flat.T @ flat
         energy += np.einsum("thwc,thwc->hw", r, r, dtype=np.float64)
-    clip_mean = frames.reshape(t, -1).mean(axis=0, dtype=np.float64)
+    clip_mean = frames.reshape(t, -1).mean(axis=0, dtype=np.float64).astype(np.float32)
     for t0 in range(0, t, CHUNK):
-        d = frames[t0 : t0 + CHUNK].reshape(-1, clip_mean.size) - clip_mean
-        total += float(np.einsum("ij,ij->", d, d))
+        d = frames[t0 : t0 + CHUNK].reshape(-1, clip_mean.size).astype(np.float32)
+        d -= clip_mean
+        total += float(np.einsum("ij,ij->", d, d, dtype=np.float64))
     resid_energy = float(np.trace(cov))
     eig, axes = np.linalg.eigh(cov)
     axis = axes[:, -1]
@@ -86,15 +101,17 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     norm_gain = level / rms if rms > 0 else np.ones_like(level)
 
     # Pass 2: the spatio-temporal power spectrum of the levelled residual along its principal colour axis.
-    window = _hann(tv)[:, None, None] * _hann(hv)[None, :, None] * _hann(wv)[None, None, :]
+    window = (_hann(tv)[:, None, None] * _hann(hv)[None, :, None] * _hann(wv)[None, None, :]).astype(np.float32)
     power = np.zeros((tv, hv, wv // 2 + 1))
     var = 0.0
     segments = 0
     starts_t = _starts(t, tv)
+    a = np.empty((tv, h, w), np.float32)
+    axis32, level32 = axis.astype(np.float32), np.maximum(norm_gain, 1e-3).astype(np.float32)
     for t0 in starts_t:
-        r = np.concatenate([rr for _, rr in _residual_chunks(frames[t0 : t0 + tv], reconstruct, offset=t0)])
-        a = (r.astype(np.float64) @ axis) / np.maximum(norm_gain, 1e-3)[None]
-        var += float(np.einsum("thw,thw->", a, a))
+        for k, r in _residual_chunks(frames[t0 : t0 + tv], reconstruct, offset=t0):
+            np.divide(r @ axis32, level32, out=a[k : k + len(r)])
+        var += float(np.einsum("thw,thw->", a, a, dtype=np.float64))
         for y0 in _starts(h, hv):
             for x0 in _starts(w, wv):
                 cube = a[:, y0 : y0 + hv, x0 : x0 + wv]
@@ -107,10 +124,12 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     white = np.fft.rfftn(rng.standard_normal((tv, hv, wv)))
     field = np.fft.irfftn(white * np.sqrt(power / max(segments, 1)), s=(tv, hv, wv), axes=(0, 1, 2))
     sd = field.std()
-    vol = (field * (np.sqrt(var) / sd) if sd > 0 else field * 0.0)[..., None] * axis
-    span = CLIP_SIGMAS * float(vol.reshape(-1, c).std(axis=0).max())
+    field *= np.sqrt(var) / sd if sd > 0 else 0.0
+    span = CLIP_SIGMAS * np.sqrt(var) * float(np.abs(axis).max())
     scale = span / 127.0 if span > 0 else 1.0
-    volume = np.clip(np.rint(vol / scale), -127, 127).astype(np.int8)
+    volume = np.empty((tv, hv, wv, c), np.int8)
+    for ch in range(c):  # channel by channel: temporaries of one channel's size
+        volume[..., ch] = np.clip(np.rint(field * (axis[ch] / scale)), -127, 127)
     gain = np.clip(norm_gain * scale, 0, MAX_GAIN).astype(np.float32)
     info = {
         "residual_energy": resid_energy / total if total > 0 else 0.0,
