@@ -165,7 +165,8 @@ class DetailOpenCL(Detail):
             cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
             for a in (self.volume, self.gain, self.low, self.high, self.colours)
         ]
-        prog = build_program(ctx, "detail.cl", {"CHANNELS": channels, **self.format.defines})
+        defines = {"CHANNELS": channels, "VH": self.vh, "VW": self.vw, **self.format.defines}
+        prog = build_program(ctx, "detail.cl", defines)
         self._kernel = Kernel(prog, "add_detail")
         h, w = self.shape[:2]
         vol, gain, low, high, colours = self._bufs
@@ -178,8 +179,6 @@ class DetailOpenCL(Detail):
             colours=colours,
             width=np.int32(w),
             height=np.int32(h),
-            vh=np.int32(self.vh),
-            vw=np.int32(self.vw),
         )
         self.out = FrameOut(ctx, queue, self._kernel, "out", h * w * self.format.bytes)
         self._gsize = (-(-w // LOCAL[0]) * LOCAL[0], -(-h // LOCAL[1]) * LOCAL[1])

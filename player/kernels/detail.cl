@@ -6,8 +6,9 @@
 // wraps in y and x; each layer reads volume frame t_k at offset (oy_k, ox_k). One work-item per
 // pixel. Contraction is off so that the result equals the numpy reference bit for bit.
 //
-// Defines: CHANNELS (1 or 3: values per pixel of the model; grey is replicated), PIXEL_BYTES,
-// R_AT, G_AT, B_AT, A_AT (as in lds.cl).
+// Defines: CHANNELS (1 or 3: values per pixel of the model; grey is replicated), VH and VW (the
+// volume's rows and columns: constants, so that the wrap is a multiply and shift, or a mask for
+// powers of two, rather than a division), PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (as in lds.cl).
 
 #pragma OPENCL FP_CONTRACT OFF
 
@@ -20,8 +21,6 @@ __kernel void add_detail(__global const uchar *restrict src,
                          __global uchar *restrict out,
                          const int width,
                          const int height,
-                         const int vh,
-                         const int vw,
                          const int t0,
                          const int oy0,
                          const int ox0,
@@ -36,8 +35,8 @@ __kernel void add_detail(__global const uchar *restrict src,
     if (x >= width || y >= height)
         return;
     const size_t p = (size_t)y * width + x;
-    const size_t i0 = (((size_t)t0 * vh + (y + oy0) % vh) * vw + (x + ox0) % vw) * CHANNELS;
-    const size_t i1 = (((size_t)t1 * vh + (y + oy1) % vh) * vw + (x + ox1) % vw) * CHANNELS;
+    const size_t i0 = (((size_t)t0 * VH + (y + oy0) % VH) * VW + (x + ox0) % VW) * CHANNELS;
+    const size_t i1 = (((size_t)t1 * VH + (y + oy1) % VH) * VW + (x + ox1) % VW) * CHANNELS;
     const float g = gain[p];
     __global const uchar *s = src + p * PIXEL_BYTES;
     __global uchar *o = out + p * PIXEL_BYTES;
