@@ -9,6 +9,10 @@ synthesized state covariance matches the training one.
 A :class:`~dynatex.analyzer.stream.DiskClip` is learned out of core: the Gram matrix is
 summed over blocks of pixel columns read from disk and the basis is projected block by
 block, so the float32 clip never exists in memory; ``max_memory`` sizes the blocks.
+
+An in-memory clip also gets the model's ``detail`` part (:mod:`.detail`): the truncation
+residual as a noise texture with its colour axes and spatio-temporal spectrum, and the
+source's per-pixel colour range; a streamed clip is learned without it.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import numpy as np
 from ..checks import check_int
 from ..errors import InvalidArgumentError
 from ..tiledb import LDSModel
+from .detail import learn_detail
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
 from .video import Clip, Progress, clip_frames
@@ -136,6 +141,9 @@ def learn_lds(
     model = _fit_dynamics(mean, basis, sv, x, total_energy, tau, k, max_radius, calibrate, energy, auto, method, step)
     if streamed:
         model.info["column_blocks"] = int(blocks)
+    else:
+        basis32, x32 = model.basis, x.T.astype(np.float32)
+        model.detail = learn_detail(frames, lambda t0, t1: x32[t0:t1] @ basis32 + mean, seed=seed)
     return model
 
 

@@ -23,6 +23,7 @@ from ..checks import check_int
 from ..errors import InvalidArgumentError
 from ..tiledb import MixtureModel
 from ..tiledb.mixture import companion_radius
+from .detail import learn_detail
 from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
@@ -241,6 +242,9 @@ def learn_mixture(
         sbc=ar["sbc"],
         info=info,
     )
+    if not streamed:
+        u32, stacked32 = u.astype(np.float32), model.stacked_basis
+        model.detail = learn_detail(frames, lambda t0, t1: u32[t0:t1] @ stacked32 + mean, seed=seed)
     step()
     return model
 

@@ -1,6 +1,10 @@
 """What the projection modes (``lds``, ``mixture``) share: a player whose frame is the
 projection of a small vector, advanced on the host once per frame, through a stored basis.
 
+A model with a ``detail`` part (:mod:`dynatex.tiledb.detail`) also opens the detail engine
+(:mod:`.detail`), which adds the fine detail the projection lacks to each projected frame and
+holds every pixel to the source's colour range.
+
 A mode subclasses :class:`ProjectionPlayer` and supplies its model (``_setup``), the
 vector it advances (``_vector``, ``_dim``, ``_step``) and how that vector becomes
 projection coefficients (``_coefficients``). The base opens the projection engine (:mod:`.projection`),
@@ -20,10 +24,12 @@ from ..params import Param
 from ..tiledb import TileDB
 from .base import Player
 from .controls import Control
+from .detail import open_detail
 from .projection import open_projector
 
 PRECISIONS = ("float32", "float16")
 MAX_INTENSITY = 100.0
+MAX_DETAIL = 4.0
 
 
 class ProjectionPlayer(Player):
@@ -77,6 +83,17 @@ class ProjectionPlayer(Player):
                 format=self.format,
             )
             self.basis_bytes = self.engine.basis_bytes
+            self.detail_engine = None
+            if model.detail is not None:
+                self.detail_engine = open_detail(
+                    model.detail,
+                    shape=self._shape,
+                    channels=self.texture.source.channels,
+                    src=self.engine.out.buffer if self.ctx is not None else None,
+                    ctx=self.ctx,
+                    queue=self.queue,
+                    format=self.format,
+                )
             self.reseed(seed)
             self._project(self._vector(), np.empty(self._shape, np.uint8))  # warm the kernel
         except BaseException:
@@ -101,13 +118,22 @@ class ProjectionPlayer(Player):
     # -- controls ----------------------------------------------------------------
     @property
     def bytes_per_frame(self) -> int:
-        """The basis and mean read, plus the uint8 frame written."""
-        return self.engine.bytes_per_frame
+        """The basis and mean read, plus the uint8 frame written (and the detail's reads)."""
+        extra = 0 if self.detail_engine is None else self.detail_engine.bytes_per_frame
+        return self.engine.bytes_per_frame + extra
 
     intensity = Control(
         Range(float, 0.0, MAX_INTENSITY),
         1.0,
         "Scale of the driving noise's covariance (0 follows the deterministic prediction).",
+    )
+
+    detail = Control(
+        Range(float, 0.0, MAX_DETAIL),
+        1.0,
+        "Scale of the fine detail added to each frame (the part of the clip the projection drops; "
+        "0: none, the source's colour range still holds), times sqrt(intensity); no effect on "
+        "textures analysed without it.",
     )
 
     # -- synthesis -----------------------------------------------------------------
@@ -127,9 +153,21 @@ class ProjectionPlayer(Player):
 
     def _start(self, out: np.ndarray):
         self._coefficients(self._vector(), self.engine.coef)
-        event = self.engine.run(out, wait=False)
+        event = self._run(out, wait=False)
         self._step()
         return event
+
+    def _run(self, out: np.ndarray, *, wait: bool = True):
+        """Project the engine's coefficients into ``out``, adding the detail where the model has it."""
+        if self.detail_engine is None:
+            return self.engine.run(out, wait=wait)
+        layers = self.detail_engine.layers(self.seed, self.frame_index, self._detail * np.sqrt(self._intensity))
+        if self.ctx is None:
+            self.engine.run(out)
+            self.detail_engine.apply(out, layers)
+            return None
+        self.engine.run_on_device()
+        return self.detail_engine.run(layers, out, wait=wait)
 
     def _render_vector(self, name: str, v: np.ndarray, out: np.ndarray | None) -> np.ndarray:
         """Project an arbitrary vector (checked, named ``name`` in errors); the player does not advance."""
@@ -143,4 +181,13 @@ class ProjectionPlayer(Player):
 
     def _project(self, v: np.ndarray, out: np.ndarray) -> None:
         self._coefficients(v, self.engine.coef)
-        self.engine.run(out)
+        self._run(out)
+
+    def close(self) -> None:
+        """Finish the frames in flight and release the engines and the database."""
+        if self.queue is not None:
+            self.queue.finish()
+        if getattr(self, "detail_engine", None) is not None:
+            self.detail_engine.close()
+            self.detail_engine = None
+        super().close()

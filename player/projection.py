@@ -169,6 +169,13 @@ class ProjectorOpenCL(Projector):
         cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=not wait)
         return self.out.launch(out, self._gsize, self._lsize, wait=wait)
 
+    def run_on_device(self):
+        """Project :attr:`coef` into the device frame ``out.buffer`` alone (a later pass reads it); the event."""
+        import pyopencl as cl
+
+        cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=False)
+        return self.out.launch_on_device(self._gsize, self._lsize)
+
     def close(self) -> None:
         self.queue.finish()
         for name in ("_d_basis", "_d_mean", "_d_coef"):

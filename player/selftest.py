@@ -423,6 +423,50 @@ def _copy_check(device: str) -> str | None:
     return None if np.array_equal(out, src) else "the streaming copy lost bytes"
 
 
+def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
+    """The detail engine against its reference, exactly, on a random volume, gain and colour range."""
+
+    def check(device: str) -> str | None:
+        import pyopencl as cl
+
+        from ..tiledb.detail import DetailModel
+        from .detail import DetailOpenCL, DetailReference
+        from .opencl import get_context
+        from .pixels import FORMATS
+
+        rng = np.random.default_rng(5)
+        h, w, fmt = 21, 37, FORMATS[format]
+        low = rng.integers(0, 128, (h, w, channels), dtype=np.uint8)
+        model = DetailModel(
+            volume=rng.integers(-127, 128, (4, 9, 14, channels), dtype=np.int8),
+            gain=rng.uniform(0, 0.5, (h, w)).astype(np.float32),
+            low=low,
+            high=low + rng.integers(0, 128, (h, w, channels), dtype=np.uint8),
+            colours=rng.integers(0, 2, 32**3, dtype=np.uint8),
+        )
+        frame = rng.integers(0, 256, (h, w, fmt.bytes), dtype=np.uint8)
+        ctx = get_context(device)
+        queue = cl.CommandQueue(ctx)
+        src = cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=frame)
+        shape = (h, w, fmt.bytes)
+        engine = DetailOpenCL(model, shape=shape, channels=channels, src=src, ctx=ctx, queue=queue, format=format)
+        ref = DetailReference(model, shape=shape, channels=channels, format=format)
+        try:
+            for k in (0, 7, 40):
+                layers = ref.layers(11, k, 1.3)
+                out = np.empty_like(frame)
+                engine.run(layers, out)
+                problem = _compare(f"frame {k}", out, ref.apply(frame, layers, out=np.empty_like(frame)), 0, 0.0)
+                if problem:
+                    return problem
+        finally:
+            engine.close()
+            src.release()
+        return None
+
+    return check
+
+
 _TILES = ("tiles", {"seed": 3, "size": (136, 72), "tone": "consensus"})
 
 #: name -> check(device) returning None or what failed; run in this order, portable kernels only
@@ -433,6 +477,8 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
         cell=None, time_step=8, wrap="pingpong", interpolate=False
     ),
     "gather: cell grid, time step 3": _gather_check(cell=(5, 7), time_step=3, wrap="loop"),
+    "detail, RGB": _detail_check(3, "RGB"),
+    "detail, grey to BGRA": _detail_check(1, "BGRA"),
     "mode lds, float32": _mode_check("lds", {"seed": 3}),
     "mode lds, float16": _mode_check("lds", {"seed": 3, "precision": "float16"}),
     "mode mixture, float32": _mode_check("mixture", {"seed": 3}),

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import h5py
 import numpy as np
 
+from . import detail as _detail
 from ._check import Checker
 from ._describe import Described
 from .source import SourceInfo
@@ -46,6 +47,9 @@ class LDSModel(Described):
         Stationary state covariance ``P = A P A.T + Q`` of the stored model.
     info : dict
         Scalars describing the fit (``n``, ``k``, ``spectral_radius_raw``, ...), stored as attributes.
+    detail : DetailModel, optional
+        The fine detail and colour range added to the projected frames (the optional ``detail``
+        subgroup, :mod:`.detail`); None in databases written without it.
     """
 
     mean: np.ndarray
@@ -57,6 +61,7 @@ class LDSModel(Described):
     states: np.ndarray
     stationary_cov: np.ndarray
     info: dict = field(default_factory=dict)
+    detail: _detail.DetailModel | None = None
 
     @property
     def n(self) -> int:
@@ -68,7 +73,13 @@ class LDSModel(Described):
 
     def describe(self) -> dict:
         """Facts as plain values: the ``info`` attributes, the orders and the basis size."""
-        return {**super().describe(), "n": self.n, "k": self.k, "basis_mb": round(self.basis.nbytes / 2**20, 2)}
+        return {
+            **super().describe(),
+            "n": self.n,
+            "k": self.k,
+            "basis_mb": round(self.basis.nbytes / 2**20, 2),
+            **_detail.describe(self.detail),
+        }
 
     def summary(self) -> str:
         """One line: orders, energy kept, spectral radius before and after clipping."""
@@ -91,6 +102,7 @@ def write(group: h5py.Group, model: LDSModel) -> None:
     for key, value in model.info.items():
         if key not in ("n", "k"):
             group.attrs[key] = value
+    _detail.write(group, model.detail)
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
@@ -113,6 +125,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
         states=ds(group, "states", kind="f", shape=(n, range(1, t + 1))),
         stationary_cov=ds(group, "stationary_cov", kind="f", shape=(n, n)),
         info=check.info(group),
+        detail=_detail.read(group, check, source),
     )
     if model.mean.min() < -1 or model.mean.max() > 256:
         check.fail(group.name + "/mean", "values outside the 0..255 pixel range")

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import h5py
 import numpy as np
 
+from . import detail as _detail
 from ._check import Checker
 from ._describe import Described
 from .source import SourceInfo
@@ -73,6 +74,9 @@ class MixtureModel(Described):
         Schwarz's criterion of the orders 1..pmax (the order chosen minimises it).
     info : dict
         Scalars describing the fit, stored as attributes.
+    detail : DetailModel, optional
+        The fine detail and colour range added to the projected frames (the optional ``detail``
+        subgroup, :mod:`.detail`); None in databases written without it.
     """
 
     mean: np.ndarray
@@ -95,6 +99,11 @@ class MixtureModel(Described):
     ar_noise_cov: np.ndarray
     sbc: np.ndarray
     info: dict = field(default_factory=dict)
+    detail: _detail.DetailModel | None = None
+
+    def describe(self) -> dict:
+        """Facts as plain values: the ``info`` attributes and the detail part's."""
+        return {**super().describe(), **_detail.describe(self.detail)}
 
     @property
     def components(self) -> int:
@@ -165,6 +174,7 @@ def write(group: h5py.Group, model: MixtureModel) -> None:
     for key, value in model.info.items():
         if key not in _SIZES:
             group.attrs[key] = value
+    _detail.write(group, model.detail)
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
@@ -209,6 +219,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         ar_noise_cov=ds(group, "ar_noise_cov", kind=f, shape=(dg, dg)),
         sbc=ds(group, "sbc", kind=f, shape=(range(order, source.n_frames + 1),)),
         info=check.info(group, skip=_SIZES),
+        detail=_detail.read(group, check, source),
     )
     t = model.global_coords.shape[0]
     if t < 2 or model.responsibilities.shape[0] != t or model.local_coords.shape[0] != t:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from dynatex.analyzer import load_clip
+from dynatex.analyzer.detail import workspace_bytes
 from dynatex.analyzer.lds import learn_lds, stabilize, stationary_covariance
 
 from ..conftest import wave_clip
@@ -98,7 +99,8 @@ def test_memory_holds_one_float32_copy_of_the_clip():
     finally:
         tracemalloc.stop()
     basis = n * frames[0].size * 4
-    assert peak < clip_f32 + 3 * basis + 2**20, (peak, clip_f32)
+    detail = workspace_bytes(frames.shape)  # bounded: the noise volume's FFTs, a few residual chunks
+    assert peak < clip_f32 + 3 * basis + detail + 2**20, (peak, clip_f32)
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,224 @@
+"""The detail engine: adds a model's fine detail to a projected frame and holds every pixel to
+the source's colour range (the ``detail`` part of ``lds`` and ``mixture``, :mod:`dynatex.tiledb.detail`).
+
+Per frame ``out = clamp(round(src + gain * (w0 * V[l0] + w1 * V[l1])), low, high)`` (or
+``clamp(src, low, high)`` where that colour is not in the source's colour set), where
+``V[l]`` is the stored noise volume read at layer ``l``'s frame and offset (it wraps in y and
+x). Two layers cross-fade with weights ``sin`` and ``cos`` of the same phase (squares sum to
+one, so the detail keeps its variance), each reborn at random offsets where its weight is 0:
+the volume's own spatio-temporal spectrum moves the detail, and no loop of the volume ever
+shows. The schedule is a function of the seed and the frame index alone (nothing to save).
+
+OpenCL: kernel ``add_detail`` of ``kernels/detail.cl``, one work-item per pixel, reading the
+projection engine's device frame and writing the caller's array (bit-exact with the numpy
+reference :class:`DetailReference`: the kernel turns contraction off).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Any
+
+import numpy as np
+
+from ..tiledb.detail import DetailModel
+from .pixels import pixel_format
+
+#: Work-group shape of ``add_detail``.
+LOCAL = (16, 4)
+
+
+def layers(model_frames: int, shape: tuple[int, int], seed: int, frame: int, amount: float = 1.0):
+    """The two layers of frame ``frame``: ``((t0, oy0, ox0, w0), (t1, oy1, ox1, w1))``.
+
+    A layer lives ``L`` (the volume's length) frames, playing ``L`` consecutive volume frames
+    from a random start and offset; layer 1 is half a life behind layer 0. ``amount`` scales
+    both weights.
+
+    >>> (a, b) = layers(32, (64, 64), 0, 5)
+    >>> round(a[3] ** 2 + b[3] ** 2, 6)
+    1.0
+    """
+    life = model_frames
+    out = []
+    for k in range(2):
+        n_life, age = divmod(frame + k * (life // 2), life)
+        t0, oy, ox = _birth(seed, k, n_life, life, shape[0], shape[1])
+        w = math.sin(math.pi * (age + 0.5) / life)
+        out.append(((t0 + age) % life, oy, ox, float(np.float32(amount * w))))
+    return tuple(out)
+
+
+@functools.lru_cache(maxsize=64)
+def _birth(seed: int, k: int, n_life: int, life: int, vh: int, vw: int) -> tuple[int, int, int]:
+    """Start frame and offset of layer ``k``'s life ``n_life`` (drawn once per life, then cached)."""
+    rng = np.random.default_rng([seed & 0xFFFFFFFFFFFFFFFF, 0xD7, k, n_life])
+    t0, oy, ox = (int(v) for v in rng.integers(0, (life, vh, vw)))
+    return t0, oy, ox
+
+
+class Detail:
+    """Adds a :class:`DetailModel` to frames of ``shape`` ``(H, W, bytes)`` in ``format``."""
+
+    backend = ""
+
+    def __init__(self, model: DetailModel, *, shape: tuple[int, int, int], channels: int, format: str = "RGB") -> None:
+        self.format = pixel_format(format)
+        self.shape = tuple(shape)
+        self.channels = channels
+        self.volume = np.ascontiguousarray(model.volume)
+        self.frames, self.vh, self.vw = self.volume.shape[:3]
+        self.gain = np.ascontiguousarray(model.gain, np.float32)
+        self.low = np.ascontiguousarray(model.low)
+        self.high = np.ascontiguousarray(model.high)
+        self.colours = np.ascontiguousarray(model.colours, np.uint8)
+
+    @property
+    def bytes_per_frame(self) -> int:
+        """What a frame reads beyond the projected frame: gain, colour range, two volume reads (the
+        colour set, 32 KiB, stays in cache)."""
+        h, w = self.shape[:2]
+        return int(h * w * (4 + 4 * self.channels))
+
+    def layers(self, seed: int, frame: int, amount: float):
+        """:func:`layers` for this volume."""
+        return layers(self.frames, (self.vh, self.vw), seed, frame, amount)
+
+    def close(self) -> None:
+        """Release what the engine holds on a device (nothing for the reference)."""
+
+
+class DetailReference(Detail):
+    """The numpy reference, in float32 in the kernel's order of operations."""
+
+    backend = "numpy"
+
+    def apply(self, frame: np.ndarray, layers: tuple, out: np.ndarray | None = None) -> np.ndarray:
+        """``frame`` (H, W, bytes) uint8 in the output format with the detail added, into ``out``
+        (``frame`` itself when None)."""
+        out = frame if out is None else out
+        h, w = self.shape[:2]
+        noise = np.empty((h, w, self.channels), np.float32)
+        for k, (t, oy, ox, wt) in enumerate(layers):
+            rows = (np.arange(h) + oy) % self.vh
+            cols = (np.arange(w) + ox) % self.vw
+            v = self.volume[t].take(rows, axis=0).take(cols, axis=1).astype(np.float32)
+            v *= np.float32(wt)
+            if k == 0:
+                noise[...] = v
+            else:
+                noise += v
+        noise *= self.gain[..., None]
+        at = self.format.rgb
+        rgb_in_place = self.channels == 3 and self.format.name == "RGB"
+        val = frame.astype(np.float32) if rgb_in_place else frame[..., list(at[: self.channels])].astype(np.float32)
+        val += noise
+        np.rint(val, out=val)
+        np.clip(val, self.low, self.high, out=val)  # within 0..255 already: low and high are uint8
+        val = val.astype(np.uint8)
+        q = (val >> 3).astype(np.int32)
+        r, g, b = (0, 1, 2) if self.channels == 3 else (0, 0, 0)
+        bins = (q[..., r] << 10) | (q[..., g] << 5) | q[..., b]
+        outside = self.colours[bins] == 0
+        if outside.any():
+            plain = frame[..., list(at[: self.channels])][outside]
+            val[outside] = np.clip(plain, self.low[outside], self.high[outside])
+        if rgb_in_place:
+            out[...] = val
+        elif self.channels == 3:
+            for c in range(3):
+                out[..., at[c]] = val[..., c]
+        else:
+            for a in at:
+                out[..., a] = val[..., 0]
+        if self.format.alpha is not None:
+            out[..., self.format.alpha] = 255
+        return out
+
+
+class DetailOpenCL(Detail):
+    """Kernel ``add_detail`` of ``kernels/detail.cl``, reading the device frame ``src``."""
+
+    backend = "opencl"
+
+    def __init__(
+        self,
+        model: DetailModel,
+        *,
+        shape: tuple[int, int, int],
+        channels: int,
+        src: Any,
+        ctx: Any,
+        queue: Any,
+        format: str = "RGB",
+    ) -> None:
+        super().__init__(model, shape=shape, channels=channels, format=format)
+        import pyopencl as cl
+
+        from .engine import FrameOut, Kernel
+        from .opencl import build_program
+
+        self.queue = queue
+        mf = cl.mem_flags
+        self._bufs = [
+            cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
+            for a in (self.volume, self.gain, self.low, self.high, self.colours)
+        ]
+        defines = {"CHANNELS": channels, "VH": self.vh, "VW": self.vw, **self.format.defines}
+        prog = build_program(ctx, "detail.cl", defines)
+        self._kernel = Kernel(prog, "add_detail")
+        h, w = self.shape[:2]
+        vol, gain, low, high, colours = self._bufs
+        self._kernel.set(
+            src=src,
+            vol=vol,
+            gain=gain,
+            low=low,
+            high=high,
+            colours=colours,
+            width=np.int32(w),
+            height=np.int32(h),
+        )
+        self.out = FrameOut(ctx, queue, self._kernel, "out", h * w * self.format.bytes)
+        self._gsize = (-(-w // LOCAL[0]) * LOCAL[0], -(-h // LOCAL[1]) * LOCAL[1])
+
+    def set_source(self, src: Any) -> None:
+        """Read projected frames from device buffer ``src``."""
+        self._kernel.set(src=src)
+
+    def run(self, layers: tuple, out: np.ndarray, *, wait: bool = True):
+        """Add the detail of ``layers`` to the device frame into ``out``; None, or the event (``wait=False``)."""
+        (t0, oy0, ox0, w0), (t1, oy1, ox1, w1) = layers
+        self._kernel.set(
+            t0=np.int32(t0),
+            oy0=np.int32(oy0),
+            ox0=np.int32(ox0),
+            w0=np.float32(w0),
+            t1=np.int32(t1),
+            oy1=np.int32(oy1),
+            ox1=np.int32(ox1),
+            w1=np.float32(w1),
+        )
+        return self.out.launch(out, self._gsize, LOCAL, wait=wait)
+
+    def close(self) -> None:
+        self.queue.finish()
+        for buf in self.__dict__.pop("_bufs", []):
+            buf.release()
+
+
+def open_detail(
+    model: DetailModel,
+    *,
+    shape: tuple[int, int, int],
+    channels: int,
+    src: Any = None,
+    ctx: Any = None,
+    queue: Any = None,
+    format: str = "RGB",
+) -> Detail:
+    """The OpenCL detail engine reading device frames from ``src``, or the numpy reference when ``ctx`` is None."""
+    if ctx is None:
+        return DetailReference(model, shape=shape, channels=channels, format=format)
+    return DetailOpenCL(model, shape=shape, channels=channels, src=src, ctx=ctx, queue=queue, format=format)

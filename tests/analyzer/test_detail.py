@@ -1,0 +1,65 @@
+"""Learning the detail part: its level, its colour range and its motion follow the residual."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynatex.analyzer.detail import learn_detail
+from dynatex.analyzer.lds import learn_lds
+
+
+def _drifting_clip(t=64, h=32, w=32, seed=0):
+    """A slow wave (what the projection keeps) plus fine noise drifting one pixel right per frame."""
+    rng = np.random.default_rng(seed)
+    noise = rng.normal(0, 12, (h, w))
+    yy, xx = np.mgrid[:h, :w]
+    frames = np.empty((t, h, w, 3))
+    for k in range(t):
+        base = 128 + 50 * np.sin(0.2 * k + 0.3 * xx + 0.1 * yy)
+        frames[k] = (base + np.roll(noise, k, axis=1))[..., None] * np.array([1.0, 0.8, 0.6])
+    return np.clip(np.rint(frames), 0, 255).astype(np.uint8)
+
+
+@pytest.fixture(scope="module")
+def learned():
+    clip = _drifting_clip()
+    return clip, learn_lds(clip, n=3)
+
+
+def test_residual_share_and_colour_range(learned):
+    clip, model = learned
+    d = model.detail
+    assert 0.02 < d.info["residual_energy"] < 0.5
+    assert (d.low <= clip.min(axis=0)).all() and (d.high >= clip.max(axis=0)).all()
+    assert d.volume.shape == (32, 32, 32, 3) and np.abs(d.volume).max() > 60
+
+
+def test_volume_keeps_the_colour_axis(learned):
+    _, model = learned
+    v = model.detail.volume.reshape(-1, 3).astype(float)
+    ratio = np.linalg.lstsq(v[:, :1], v[:, 1:], rcond=None)[0][0]
+    np.testing.assert_allclose(ratio, [0.8, 0.6], atol=0.08)  # the residual's colours, not grey or random
+
+
+def test_volume_moves_with_the_residual(learned):
+    """The noise drifts right by a pixel a frame: the volume's frame t+1 matches frame t shifted
+    by one pixel far better than frame t in place."""
+    _, model = learned
+    v = model.detail.volume[..., 0].astype(float)
+
+    def corr(a, b):
+        a, b = a - a.mean(), b - b.mean()
+        return float((a * b).sum() / np.sqrt((a * a).sum() * (b * b).sum()))
+
+    moved = np.mean([corr(v[k + 1], np.roll(v[k], 1, axis=1)) for k in range(len(v) - 1)])
+    still = np.mean([corr(v[k + 1], v[k]) for k in range(len(v) - 1)])
+    assert moved > 0.6 and moved > still + 0.4
+
+
+def test_reconstruction_equal_to_the_clip_leaves_no_detail():
+    clip = _drifting_clip(t=16, h=8, w=8)
+    flat = clip.reshape(16, -1).astype(np.float32)
+    d = learn_detail(clip, lambda a, b: flat[a:b])
+    assert d.info["residual_energy"] == 0.0
+    assert not d.volume.any()

@@ -1,0 +1,63 @@
+"""The out-of-gamut share: zero for a clip against itself, the source's own level from its
+halves, tints a clip never had counted; and, on real clips, its calibration on sources."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynatex.analyzer import metrics as m
+from dynatex.analyzer.video import load_clip_path
+
+
+def _red_lamp(t=20, seed=0):
+    """A red lamp flashing on a dark background, with sensor noise."""
+    rng = np.random.default_rng(seed)
+    f = np.zeros((t, 16, 16, 3), np.float32)
+    level = 60 + 180 * (np.arange(t) % 4 < 2)
+    f[:, 4:12, 4:12, 0] = level[:, None, None]
+    f[:, 4:12, 4:12, 1:] = 0.1 * level[:, None, None, None]
+    f += rng.normal(0, 2, f.shape)
+    return np.clip(np.rint(f), 0, 255).astype(np.uint8)
+
+
+def test_clip_against_itself_and_its_halves():
+    src = _red_lamp()
+    assert m.out_of_gamut_share(src, src) < 0.01
+    assert m.source_gamut_share(src) < 0.01
+
+
+def test_tints_the_clip_never_had_are_counted():
+    src = _red_lamp()
+    out = src.copy()
+    out[:, 4:8, 4:12, 1:] = out[:, 4:8, 4:12, :1]  # the top half of the lamp turns white-ish / cyan tints
+    out[:, 4:8, 4:12, 0] //= 3
+    share = m.out_of_gamut_share(out, src)
+    assert share == pytest.approx(32 / 256, abs=0.02)
+    assert share > 10 * m.source_gamut_share(src)
+
+
+def test_grey_and_float_clips_are_accepted():
+    g = np.roll(np.broadcast_to(np.linspace(0, 255, 64).reshape(8, 8), (4, 8, 8)), 1, axis=2)  # float grey
+    assert m.out_of_gamut_share(g, g.astype(np.uint8)) == 0.0
+    with pytest.raises(ValueError, match="source"):
+        m.source_gamut_share(g[:1])
+
+
+def test_evaluate_reports_both_levels():
+    src = _red_lamp(t=24)
+    rep = m.evaluate(src, src, window=12, downscale=1, n_samples=50)
+    assert rep["out_of_gamut_share"] < 0.01 and rep["source_out_of_gamut_share"] < 0.01
+
+
+@pytest.mark.parametrize(
+    "name", ["water_sea_waves_dyntex.avi", "flag_wind_dyntex_571c110.avi", "small_64px/fire_dyntex_64px.avi"]
+)
+def test_calibrated_on_real_sources(clips_dir, name):
+    """A source's own level (its halves against each other) is small, and a clip shown with its
+    channels swapped (colours it never had) lies far above it."""
+    src = load_clip_path(str(clips_dir / name), stop=60).frames
+    own = m.source_gamut_share(src)
+    assert own < 0.02
+    swapped = src[..., ::-1]
+    assert m.out_of_gamut_share(swapped, src) > max(0.05, 5 * own)
