@@ -44,7 +44,8 @@ def layers(model_frames: int, shape: tuple[int, int], seed: int, frame: int, amo
     out = []
     for k in range(2):
         n_life, age = divmod(frame + k * (life // 2), life)
-        t0, oy, ox = _birth(seed, k, n_life, life, shape[0], shape[1])
+        # a clock run backwards (negative speed) reaches negative lives: wrapped to draw a seed
+        t0, oy, ox = _birth(seed, k, n_life & 0xFFFFFFFFFFFFFFFF, life, shape[0], shape[1])
         w = math.sin(math.pi * (age + 0.5) / life)
         out.append(((t0 + age) % life, oy, ox, float(np.float32(amount * w))))
     return tuple(out)

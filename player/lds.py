@@ -182,14 +182,18 @@ class LDSPlayer(ProjectionPlayer):
         return self._render_vector("x", x, out)
 
     # -- state ---------------------------------------------------------------------
+    def _detail_rate(self) -> float:
+        return self._speed
+
     def _get_state(self) -> dict[str, Any]:
-        return {"x": self._x.copy(), "rng": self._rng.bit_generator.state, "seed": self.seed}
+        return {"x": self._x.copy(), "rng": self._rng.bit_generator.state, "seed": self.seed, **self._detail_state()}
 
     def _set_state(self, state: dict[str, Any]) -> None:
         x = np.asarray(state["x"], dtype=float)
         if x.shape != (self.n,) or not np.isfinite(x).all():
             raise InvalidArgumentError(f"state x must be finite with shape ({self.n},)")
         rng = rng_from_state(state["rng"])
+        self._restore_detail(state)
         self._x = x.copy()
         self._rng = rng
         self.seed = int(state.get("seed", self.seed))

@@ -166,13 +166,19 @@ class MixturePlayer(ProjectionPlayer):
 
     # -- state ---------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:
-        return {"history": self._hist.copy(), "rng": self._rng.bit_generator.state, "seed": self.seed}
+        return {
+            "history": self._hist.copy(),
+            "rng": self._rng.bit_generator.state,
+            "seed": self.seed,
+            **self._detail_state(),
+        }
 
     def _set_state(self, state: dict[str, Any]) -> None:
         hist = np.asarray(state["history"], dtype=float)
         if hist.shape != self._hist.shape or not np.isfinite(hist).all():
             raise InvalidArgumentError(f"state history must be finite with shape {self._hist.shape}")
         rng = rng_from_state(state["rng"])
+        self._restore_detail(state)
         self._hist = hist.copy()
         self._rng = rng
         self.seed = int(state.get("seed", self.seed))

@@ -14,7 +14,9 @@ warms it, and provides ``precision``, the ``intensity`` control, ``bytes_per_fra
 
 from __future__ import annotations
 
+import math
 import os
+from typing import Any
 
 import numpy as np
 
@@ -84,6 +86,7 @@ class ProjectionPlayer(Player):
             )
             self.basis_bytes = self.engine.basis_bytes
             self.detail_engine = None
+            self._detail_clock = 0.0
             if model.detail is not None:
                 self.detail_engine = open_detail(
                     model.detail,
@@ -114,6 +117,20 @@ class ProjectionPlayer(Player):
 
     def _coefficients(self, v: np.ndarray, coef: np.ndarray) -> None:
         raise NotImplementedError
+
+    def _detail_rate(self) -> float:
+        """Volume frames the detail advances per played frame: it keeps the model's pace."""
+        return 1.0
+
+    def _detail_state(self) -> dict[str, Any]:
+        return {"detail_clock": self._detail_clock}
+
+    def _restore_detail(self, state: dict[str, Any]) -> None:
+        """The detail's clock from ``state`` (a state without one: the frame index, as it was)."""
+        clock = float(state.get("detail_clock", state.get("frame_index", 0)))
+        if not np.isfinite(clock):
+            raise InvalidArgumentError("state detail_clock must be a finite number")
+        self._detail_clock = clock
 
     # -- controls ----------------------------------------------------------------
     @property
@@ -146,6 +163,7 @@ class ProjectionPlayer(Player):
         rec = np.empty((steps, self._dim)) if record else None
         for i in range(steps):
             self._step()
+            self._detail_clock += self._detail_rate()
             if rec is not None:
                 rec[i] = self._vector()
         self.frame_index += steps
@@ -155,13 +173,15 @@ class ProjectionPlayer(Player):
         self._coefficients(self._vector(), self.engine.coef)
         event = self._run(out, wait=False)
         self._step()
+        self._detail_clock += self._detail_rate()
         return event
 
     def _run(self, out: np.ndarray, *, wait: bool = True):
         """Project the engine's coefficients into ``out``, adding the detail where the model has it."""
         if self.detail_engine is None:
             return self.engine.run(out, wait=wait)
-        layers = self.detail_engine.layers(self.seed, self.frame_index, self._detail * np.sqrt(self._intensity))
+        clock = math.floor(self._detail_clock)
+        layers = self.detail_engine.layers(self.seed, clock, self._detail * np.sqrt(self._intensity))
         if self.ctx is None:
             self.engine.run(out)
             self.detail_engine.apply(out, layers)

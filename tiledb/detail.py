@@ -98,10 +98,10 @@ def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> DetailModel 
         return None
     h, w, c = source.height, source.width, source.channels
     ds = check.dataset
-    vol = ds(g, "volume", kind="i", shape=(None, None, None, c), read=False)
+    vol = ds(
+        g, "volume", kind="i", shape=(range(1, MAX_VOLUME_FRAMES + 1), range(1, h + 1), range(1, w + 1), c), read=False
+    )
     tv, hv, wv = vol.shape[:3]
-    if not (1 <= tv <= MAX_VOLUME_FRAMES and 1 <= hv <= h and 1 <= wv <= w):
-        check.fail(vol.name, f"has shape {vol.shape}: expected 1..{MAX_VOLUME_FRAMES} frames of at most {h}x{w} pixels")
     model = DetailModel(
         volume=ds(g, "volume", kind="i", shape=(tv, hv, wv, c)),
         gain=ds(g, "gain", kind="f", shape=(h, w)),

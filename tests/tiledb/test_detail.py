@@ -83,7 +83,7 @@ def _replace(name, fn):
         ("low", lambda a: a.astype(np.uint16), "low and high must be uint8"),
         ("volume", lambda a: a.astype(np.int16), "int8"),
         ("volume", lambda a: a[..., :1], "expected"),
-        ("volume", lambda a: np.zeros((300,) + a.shape[1:], np.int8), "frames of at most"),
+        ("volume", lambda a: np.zeros((300,) + a.shape[1:], np.int8), r"expected \(1\.\.256, "),
         ("high", lambda a: a[:-1], "expected"),
         ("colours", lambda a: a * 2, "0 or 1"),
         ("colours", lambda a: a[:-1], "expected"),
