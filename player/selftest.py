@@ -357,9 +357,18 @@ def _mode_check(
 
 
 def _gather_check(
-    *, cell, time_step: int, wrap: str, interpolate: bool = True, size=(40, 136), wide: bool | None = False
+    *,
+    cell,
+    time_step: int,
+    wrap: str,
+    interpolate: bool = True,
+    size=(40, 136),
+    wide: bool | None = False,
+    format: str = "RGB",
+    misalign: int = 0,
 ) -> Callable[[str], str | None]:
-    """The gather engine against its reference, exactly, on random maps and tones."""
+    """The gather engine against its reference, exactly, on random maps and tones, writing
+    ``format`` into an array ``misalign`` bytes past a 64-byte boundary."""
 
     def check(device: str) -> str | None:
         from .gather import open_gather, pack_source
@@ -376,6 +385,7 @@ def _gather_check(
             time_step=time_step,
             cell=cell,
             wide=wide,
+            format=format,
         )
         g.set_tones(rng.uniform(0.5, 1.5, (3, 3)).astype(np.float32), rng.uniform(-20, 20, (3, 3)).astype(np.float32))
         h, w = size
@@ -391,7 +401,7 @@ def _gather_check(
         g.set_time_map(
             rng.uniform(-3, 9, g.tmap_shape).astype(np.float32), rng.uniform(0, 4, g.tmap_shape).astype(np.float32)
         )
-        out = np.empty((h, w, 3), np.uint8)
+        out = _aligned(g.out_shape, misalign)
         for t, fade in ((0.0, 0.0), (2.3, 0.5), (-7.75, 1.0)):
             g.render(t, out, fade=fade)
             problem = _compare(f"t={t}", out, g.render_reference(t, fade=fade), 0, 0.0)
@@ -400,6 +410,14 @@ def _gather_check(
         return None
 
     return check
+
+
+def _aligned(shape: tuple[int, ...], misalign: int) -> np.ndarray:
+    """An uninitialised uint8 array of ``shape`` starting ``misalign`` bytes past a 64-byte boundary."""
+    n = int(np.prod(shape))
+    raw = np.empty(n + 128, np.uint8)
+    start = (-raw.ctypes.data) % 64 + misalign
+    return raw[start : start + n].reshape(shape)
 
 
 def _copy_check(device: str) -> str | None:
@@ -461,6 +479,15 @@ CHECK_VARIANTS: dict[str, dict[str, Callable[[str], str | None]]] = {
     "gather_wide": {
         "grid": _gather_check(cell=(8, 12), time_step=8, wrap="loop", size=(72, 200), wide=True),
         "per-pixel source": _gather_check(cell=None, time_step=8, wrap="clamp", size=(40, 136), wide=True),
+        "grid, BGRA, aligned": _gather_check(
+            cell=(8, 12), time_step=8, wrap="loop", size=(40, 256), wide=True, format="BGRA"
+        ),
+        "grid, RGBA, 32 bytes off": _gather_check(
+            cell=(8, 12), time_step=8, wrap="pingpong", size=(40, 272), wide=True, format="RGBA", misalign=32
+        ),
+        "per-pixel source, RGBA, odd size": _gather_check(
+            cell=None, time_step=8, wrap="clamp", size=(37, 141), wide=True, format="RGBA", misalign=16
+        ),
         "mode tiles": _mode_check(*_TILES),
     },
     "copy_stream": {"copy": lambda device: _copy_check(device)},

@@ -14,7 +14,7 @@ from ..player import ratemap as _ratemap
 from ..player.modes import player_class
 from ._common import Number, Numbers, UsageError, positive_int
 from ._modes import add_mode_arguments, apply_controls, player_kwargs
-from ._output import MAX_FPS, MIN_FPS, FrameWriter
+from ._output import H264_CRF, H264_PRESET, H264_PRESETS, MAX_FPS, MIN_FPS, FrameWriter
 
 RATE = Number(float, 0.0, _ratemap.MAX_RATE)
 FINITE = Number(float)
@@ -46,6 +46,19 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "--output",
         required=True,
         help="out.mp4 / .mkv / .avi / .webp / .apng / .gif, frame_%%04d.png, or a folder",
+    )
+    g = p.add_argument_group(".mp4 (H.264) encoding")
+    g.add_argument(
+        "--crf",
+        type=Number(int, 0, 51),
+        default=H264_CRF,
+        help="constant rate factor, %(type)s: lower is better and larger (default %(default)s)",
+    )
+    g.add_argument(
+        "--preset",
+        choices=H264_PRESETS,
+        default=H264_PRESET,
+        help="x264 preset: slower makes smaller files at the same quality (default %(default)s)",
     )
     cls = add_mode_arguments(p, argv, default=DEFAULT_MODE, common=COMMON)
     mode = cls.mode
@@ -148,7 +161,7 @@ def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: flo
             raise UsageError(f"--mask: cannot read {args.mask}")
     cap = cv2.VideoCapture(args.inpaint)
     try:
-        writer.open(player.shape, fps if fps is not None else cap.get(cv2.CAP_PROP_FPS) or 25.0)
+        writer.open(player.shape, fps if fps is not None else cap.get(cv2.CAP_PROP_FPS) or 25.0, args.frames)
         out = np.empty(player.shape, np.uint8)
         n = 0
         with writer:
@@ -169,7 +182,7 @@ def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: flo
 
 
 def run(args: argparse.Namespace) -> int:
-    writer = FrameWriter(args.output)
+    writer = FrameWriter(args.output, crf=args.crf, preset=args.preset, progress=True)
     if getattr(args, "inpaint", None):
         with open_player(args.database, args.texture, mode=args.mode, **player_options(args)) as player:
             _apply(player, args)
@@ -177,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
     with open_player(args.database, args.texture, mode=args.mode, **player_options(args)) as player:
         _apply(player, args)
         fps = args.fps if args.fps is not None else player.texture.source.fps
-        writer.open(player.shape, fps)
+        writer.open(player.shape, fps, args.frames)
         t0 = time.perf_counter()
         frame = np.empty(player.shape, np.uint8)
         with writer:

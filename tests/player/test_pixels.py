@@ -91,21 +91,20 @@ def test_gather_writes_each_format(cl_context, fmt, step, cell):
     gs[0].close()
 
 
-def test_place_kernel_equals_its_reference(cl_context):
-    """Kernel place (RGB rendered by an RGB-only kernel, put in the output's format): exact,
-    whole 16-pixel items and a tail."""
-    import pyopencl as cl
+@pytest.mark.parametrize("fmt", ["RGB", "RGBA", "BGRA"])
+@pytest.mark.parametrize(
+    "size, cell, misalign", [((40, 256), (8, 12), 0), ((33, 272), (8, 16), 32), ((40, 141), None, 16)]
+)
+def test_wide_variant_writes_each_format(cl_device, fmt, size, cell, misalign):
+    """The x86 variant (where verified) writes every format itself: full runs with
+    non-temporal stores (rows a multiple of 64 bytes, the array 0 or 32 bytes off 64), the
+    head run and tails, against the reference."""
+    from dynatex.player.opencl import get_context, variant_verified
 
-    from dynatex.player.engine import FrameOut, Kernel
-    from dynatex.player.opencl import build_program
-
-    rgb = np.random.default_rng(4).integers(0, 256, (7, 11, 3), dtype=np.uint8)  # 77 pixels: 4 items + 13
-    queue = cl.CommandQueue(cl_context)
-    d_rgb = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=rgb)
-    for name in ("RGBA", "BGRA"):
-        fmt = FORMATS[name]
-        k = Kernel(build_program(cl_context, "pixels.cl", fmt.defines), "place")
-        k.set(rgb=d_rgb, n=np.int32(77))
-        out = np.zeros((7, 11, 4), np.uint8)
-        FrameOut(cl_context, queue, k, "out", out.nbytes).launch(out, (5,))
-        assert np.array_equal(out, fmt.from_rgb(rgb)), name
+    device = get_context(cl_device).devices[0]
+    if not variant_verified(device, "gather_wide"):
+        pytest.skip(f"gather_wide is not verified on {device.name}")
+    check = selftest._gather_check(
+        cell=cell, time_step=8, wrap="loop", size=size, wide=True, format=fmt, misalign=misalign
+    )
+    assert check(cl_device) is None
