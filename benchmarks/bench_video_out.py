@@ -54,7 +54,9 @@ def main() -> None:
         cmd = [sys.executable, "-m", "dynatex", "play", db, "--mode", "tiles", "--size", f"{w}x{h}"]
         cmd += ["--frames", str(args.frames), "--seed", "1", "-o", out, *args.play_args]
         t0 = time.perf_counter()
-        subprocess.run(cmd, check=True, stdin=subprocess.DEVNULL)
+        # run outside the checkout: from its root, ``-m dynatex`` would import the checkout's
+        # dynatex/ whichever interpreter (and installed dynatex) runs it
+        subprocess.run(cmd, check=True, stdin=subprocess.DEVNULL, cwd=tmp)
         seconds = time.perf_counter() - t0
         size = os.path.getsize(out)
         with open_player(db, mode="tiles", size=(h, w), seed=1) as p, av.open(out) as video:
