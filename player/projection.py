@@ -135,13 +135,7 @@ class ProjectorOpenCL(Projector):
         from .opencl import build_program
 
         self.queue = queue
-        # colour in a 4-byte format: a work-item projects three blocks (16 whole pixels)
-        group = 3 if channels == 3 and self.format.bytes == 4 else 1
         blocked = blocked_basis(basis)
-        if blocked.shape[0] % group:
-            blocked = np.concatenate(
-                [blocked, np.zeros((group - blocked.shape[0] % group,) + blocked.shape[1:], blocked.dtype)]
-            )
         blocks = blocked.shape[0]
         padded = blocks * BLOCK
         mean_p = np.zeros(padded, np.float32)
@@ -152,9 +146,7 @@ class ProjectorOpenCL(Projector):
         self._d_mean = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p)
         self._d_coef = cl.Buffer(ctx, mf.READ_ONLY, self.coef.nbytes)
         prog = build_program(
-            ctx,
-            "lds.cl",
-            {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels, "GROUP": group, **self.format.defines},
+            ctx, "lds.cl", {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels, **self.format.defines}
         )
         self._kernel = Kernel(prog, "project")
         self._kernel.set(
@@ -163,7 +155,7 @@ class ProjectorOpenCL(Projector):
         #: the kernel's frame destination (writes straight into callers' arrays where the device shares host memory)
         pixels = self.values // channels
         self.out = FrameOut(ctx, queue, self._kernel, "out", max(padded * (3 // channels), pixels * self.format.bytes))
-        self._gsize = (-(-blocks // group // LOCAL) * LOCAL,)
+        self._gsize = (-(-blocks // LOCAL) * LOCAL,)
         self._lsize = (LOCAL,)
 
     @property
