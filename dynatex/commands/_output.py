@@ -16,6 +16,7 @@ import math
 import os
 import sys
 import tempfile
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from fractions import Fraction
@@ -128,7 +129,7 @@ class FrameWriter:
             raise InvalidArgumentError(f"preset must be one of {H264_PRESETS}, not {preset!r}")
         self.crf, self.preset, self.progress = int(crf), preset, bool(progress)
         self._bar = None
-        self._stage = ""
+        self._stage, self._stage_start = "", 0.0
         self.output = output
         self.index = 0
         self._video = None
@@ -306,21 +307,18 @@ class FrameWriter:
             self._advance("writing", self.index, self._total)
 
     def _advance(self, what: str, done: int, total: int | None) -> None:
-        """Move the progress bar of stage ``what`` to ``done`` of ``total`` (a new bar per stage)."""
-        if self._bar is None or self._stage != what:
+        """Move the progress bar of stage ``what`` to ``done`` of ``total``: a new bar per stage,
+        drawn once the stage has taken :data:`PROGRESS_DELAY` seconds (on a terminal only)."""
+        now = time.monotonic()
+        if self._stage != what:
+            self._end_bar()
+            self._stage, self._stage_start = what, now
+        if self._bar is None:
+            if now - self._stage_start < PROGRESS_DELAY or sys.stderr is None or not sys.stderr.isatty():
+                return
             from tqdm import tqdm
 
-            self._end_bar()
-            self._bar = tqdm(
-                total=total,
-                desc=what,
-                unit="frame",
-                file=sys.stderr,
-                leave=False,
-                delay=PROGRESS_DELAY,
-                disable=not (sys.stderr is not None and sys.stderr.isatty()),
-            )
-            self._stage = what
+            self._bar = tqdm(total=total, desc=what, unit="frame", file=sys.stderr, leave=False)
         self._bar.n = done
         self._bar.refresh()
 
