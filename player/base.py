@@ -33,7 +33,8 @@ COMMON_OPTIONS: tuple[Param, ...] = (
         "backend",
         Choice(*BACKEND_CHOICES),
         "auto",
-        "auto: OpenCL on the first device that passed the self-test, else the numpy reference with one "
+        "auto: OpenCL on the first device that passed the self-test (the numpy reference for an engine "
+        "the self-test measured slower there than numpy), else the numpy reference with one "
         "warning; opencl: a verified device or OpenCLUnavailableError; numpy: the reference.",
     ),
     Param(
@@ -392,6 +393,18 @@ class Player:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    def _prefer_faster(self, backend: str, device: str | None, engine: str) -> None:
+        """Under ``backend="auto"`` with no device named, take the numpy reference for
+        ``engine`` where the self-test measured OpenCL slower on this device (Verdict.speed)."""
+        if backend != "auto" or device is not None or os.environ.get("PYOPENCL_CTX") or self.ctx is None:
+            return
+        from .opencl import engine_speed
+
+        speed = engine_speed(self.ctx.devices[0], engine)
+        if speed is not None and speed < 1.0:
+            self.ctx = self.queue = None
+            self.backend = "numpy"
 
 
 class PendingFrame:

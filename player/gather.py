@@ -91,7 +91,7 @@ import numpy as np
 from ..checks import check_float, check_int, check_out
 from ..errors import ArgumentTypeError, InvalidArgumentError
 from .base import BACKENDS
-from .pixels import FORMATS, pixel_format
+from .pixels import pixel_format
 
 log = logging.getLogger(__name__)
 WRAPS = ("loop", "clamp", "pingpong")
@@ -336,10 +336,8 @@ class Gather:
         or the portable kernel (False). Default: the variant where the device's self-test
         verified it (CPU devices whose compiler is clang), else the portable kernel. Both
         compute the same integers (see the module docstring); :attr:`wide` says which runs.
-        ``wide=True`` on a device where the variant is not verified is an error. The variant
-        writes RGB only: for other formats it renders into a device buffer that kernel
-        ``place`` (``kernels/pixels.cl``) places into the output, which measured faster than
-        the portable kernel's direct write (``benchmarks/bench_formats.py``).
+        ``wide=True`` on a device where the variant is not verified is an error. Both
+        write every format straight into the output.
     format : {"RGB", "RGBA", "BGRA"}
         Output pixel format (:data:`~dynatex.player.engine.FORMATS`); the stack stays RGB,
         the kernel places the bytes (and alpha, 255) as it writes them.
@@ -711,8 +709,7 @@ class GatherOpenCL(Gather):
             "TONE_STRIDE": TONE_STRIDE,
             "TONE_OB": TONE_OB,
         }
-        # the variant writes RGB (kernel place then puts it in the format): so does its program
-        defines.update((FORMATS["RGB"] if self.wide else self.format).defines)
+        defines.update(self.format.defines)
         if self.wide:
             prog = build_program(
                 self.ctx, ("gather.cl", "variants/gather_wide.cl"), {**defines, "STACK_SIGNED": True, "BANDS": BANDS}
@@ -739,17 +736,7 @@ class GatherOpenCL(Gather):
             t0=np.float32(0),
             fade=np.float32(0),
         )
-        self._place = None
-        if self.wide and self.format.name != "RGB":
-            # the variant writes RGB into a device buffer; kernel place puts it in the format
-            self._d_rgb = cl.Buffer(self.ctx, mf.READ_WRITE, h * w * 3)
-            self._k_gather.set(out=self._d_rgb)
-            self._place = Kernel(build_program(self.ctx, "pixels.cl", self.format.defines), "place")
-            self._place.set(rgb=self._d_rgb, n=np.int32(h * w))
-            self._out = FrameOut(self.ctx, self.queue, self._place, "out", h * w * self.format.bytes)
-            self._place_gsize = (-(-h * w // 16),)
-        else:
-            self._out = FrameOut(self.ctx, self.queue, self._k_gather, "out", h * w * self.format.bytes)
+        self._out = FrameOut(self.ctx, self.queue, self._k_gather, "out", h * w * self.format.bytes)
         self._k_smooth_x = Kernel(prog, "smooth")
         self._k_smooth_y = Kernel(prog, "smooth")
         self.direct = self._out.direct
@@ -820,10 +807,7 @@ class GatherOpenCL(Gather):
 
     def _launch(self, t: float, out: np.ndarray):
         self._k_gather.set(t0=np.float32(t), fade=np.float32(self._last_fade))
-        if self._place is None:
-            return self._out.launch(out, self._gsize, self._lsize, wait=False)
-        self._k_gather.launch(self.queue, self._gsize, self._lsize)
-        return self._out.launch(out, self._place_gsize, wait=False)
+        return self._out.launch(out, self._gsize, self._lsize, wait=False)
 
     def render_on_device(self, t: float, *, fade: float = 0.0) -> None:
         """Run the gather kernel alone into the device's own frame buffer and wait (no copy, no
@@ -831,15 +815,11 @@ class GatherOpenCL(Gather):
         if self._source is None:
             raise RuntimeError("set a source (set_source_map or set_source_grid) before render_on_device")
         self._k_gather.set(t0=np.float32(self._fold(float(t))), fade=np.float32(check_float("fade", fade, 0.0, 1.0)))
-        if self._place is None:
-            self._out.launch_on_device(self._gsize, self._lsize).wait()
-            return
-        self._k_gather.launch(self.queue, self._gsize, self._lsize)
-        self._out.launch_on_device(self._place_gsize).wait()
+        self._out.launch_on_device(self._gsize, self._lsize).wait()
 
     def close(self) -> None:
         self.queue.finish()
-        for name in ("_d_stack", "_d_tmap", "_d_target", "_d_tmp", "_d_tones", "_d_source", "_d_rgb"):
+        for name in ("_d_stack", "_d_tmap", "_d_target", "_d_tmp", "_d_tones", "_d_source"):
             buf = self.__dict__.pop(name, None)
             if buf is not None:
                 buf.release()

@@ -212,6 +212,20 @@ def variant_verified(device: cl.Device, variant: str) -> bool:
     return bool(verdict and verdict.ok and verdict.variants.get(variant, False))
 
 
+def engine_speed(device: cl.Device, engine: str) -> float | None:
+    """``engine``'s OpenCL frame rate over its numpy reference's on ``device``, as the self-test
+    measured it (:data:`dynatex.player.selftest.SPEED_CASES`); None when not measured."""
+    from . import selftest
+
+    if selftest.ALLOWED_VARIANTS is not None:  # inside the self-test itself
+        return None
+    try:
+        verdict = selftest.cached_verdict(device_info(device))
+    except OpenCLUnavailableError:
+        return None
+    return verdict.speed.get(engine) if verdict and verdict.ok else None
+
+
 def _match(infos: list[DeviceInfo], spec: str, what: str) -> DeviceInfo:
     spec = spec.strip()
     low = "portable computing language" if spec.lower() == "pocl" else spec.lower()
@@ -402,7 +416,10 @@ def _main(argv: list[str] | None = None) -> int:
             state = "not yet verified (--check runs the self-test)"
         elif v.ok:
             variants = ", ".join(f"{k} {'ok' if ok else 'not used'}" for k, ok in sorted(v.variants.items()))
-            state = f"verified ({v.seconds:.1f} s{'; ' + variants if variants else ''})"
+            speed = ", ".join(
+                f"{k} {x:.2f}x numpy ({'OpenCL' if x >= 1 else 'numpy'} under auto)" for k, x in sorted(v.speed.items())
+            )
+            state = f"verified ({v.seconds:.1f} s{'; ' + variants if variants else ''}{'; ' + speed if speed else ''})"
             passed.append(info)
         else:
             state = f"FAILED: {v.reason}"

@@ -68,6 +68,7 @@ class ProjectionPlayer(Player):
         precision = self.options[0].check(precision)
         super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
+            self._prefer_faster(backend, device, f"projection {precision}")
             model = self.texture.read(self.mode)
             self.model_info = dict(model.info)
             self.precision = precision

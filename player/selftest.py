@@ -74,6 +74,9 @@ class Verdict:
     seconds: float = 0.0
     device: str = ""
     tested: bool = True  # False: the child never reached a check (not the device's fault)
+    #: engine -> its OpenCL frame rate over its numpy reference's, measured once after the checks
+    #: (:data:`SPEED_CASES`); ``backend="auto"`` takes numpy for an engine below 1
+    speed: dict[str, float] = field(default_factory=dict)
 
 
 # -- cache ---------------------------------------------------------------------------------
@@ -291,8 +294,9 @@ def _parse(
     else:
         what = f"exited with status {code}" + (" after its checks" if final is not None else "")
     where = f" in check {current!r}" if current else ""
-    failed = [(k, why) for k, why in failures.items() if not k.startswith("variant ")]
-    portable_done = not failed and current is not None and current.startswith("variant ")
+    # variants and speed measurements come after every portable check has passed
+    failed = [(k, why) for k, why in failures.items() if not k.startswith(("variant ", "speed "))]
+    portable_done = not failed and current is not None and current.startswith(("variant ", "speed "))
     reason = f"{failed[0][0]}: {failed[0][1]}" if failed else "" if portable_done else f"{what}{where}"
     v = Verdict(ok=portable_done, reason=reason, seconds=seconds, device=info.describe())
     for name in CHECK_VARIANTS:
@@ -357,9 +361,18 @@ def _mode_check(
 
 
 def _gather_check(
-    *, cell, time_step: int, wrap: str, interpolate: bool = True, size=(40, 136), wide: bool | None = False
+    *,
+    cell,
+    time_step: int,
+    wrap: str,
+    interpolate: bool = True,
+    size=(40, 136),
+    wide: bool | None = False,
+    format: str = "RGB",
+    misalign: int = 0,
 ) -> Callable[[str], str | None]:
-    """The gather engine against its reference, exactly, on random maps and tones."""
+    """The gather engine against its reference, exactly, on random maps and tones, writing
+    ``format`` into an array ``misalign`` bytes past a 64-byte boundary."""
 
     def check(device: str) -> str | None:
         from .gather import open_gather, pack_source
@@ -376,6 +389,7 @@ def _gather_check(
             time_step=time_step,
             cell=cell,
             wide=wide,
+            format=format,
         )
         g.set_tones(rng.uniform(0.5, 1.5, (3, 3)).astype(np.float32), rng.uniform(-20, 20, (3, 3)).astype(np.float32))
         h, w = size
@@ -391,7 +405,7 @@ def _gather_check(
         g.set_time_map(
             rng.uniform(-3, 9, g.tmap_shape).astype(np.float32), rng.uniform(0, 4, g.tmap_shape).astype(np.float32)
         )
-        out = np.empty((h, w, 3), np.uint8)
+        out = _aligned(g.out_shape, misalign)
         for t, fade in ((0.0, 0.0), (2.3, 0.5), (-7.75, 1.0)):
             g.render(t, out, fade=fade)
             problem = _compare(f"t={t}", out, g.render_reference(t, fade=fade), 0, 0.0)
@@ -400,6 +414,14 @@ def _gather_check(
         return None
 
     return check
+
+
+def _aligned(shape: tuple[int, ...], misalign: int) -> np.ndarray:
+    """An uninitialised uint8 array of ``shape`` starting ``misalign`` bytes past a 64-byte boundary."""
+    n = int(np.prod(shape))
+    raw = np.empty(n + 128, np.uint8)
+    start = (-raw.ctypes.data) % 64 + misalign
+    return raw[start : start + n].reshape(shape)
 
 
 def _copy_check(device: str) -> str | None:
@@ -507,6 +529,15 @@ CHECK_VARIANTS: dict[str, dict[str, Callable[[str], str | None]]] = {
     "gather_wide": {
         "grid": _gather_check(cell=(8, 12), time_step=8, wrap="loop", size=(72, 200), wide=True),
         "per-pixel source": _gather_check(cell=None, time_step=8, wrap="clamp", size=(40, 136), wide=True),
+        "grid, BGRA, aligned": _gather_check(
+            cell=(8, 12), time_step=8, wrap="loop", size=(40, 256), wide=True, format="BGRA"
+        ),
+        "grid, RGBA, 32 bytes off": _gather_check(
+            cell=(8, 12), time_step=8, wrap="pingpong", size=(40, 272), wide=True, format="RGBA", misalign=32
+        ),
+        "per-pixel source, RGBA, odd size": _gather_check(
+            cell=None, time_step=8, wrap="clamp", size=(37, 141), wide=True, format="RGBA", misalign=16
+        ),
         "mode tiles": _mode_check(*_TILES),
     },
     "copy_stream": {"copy": lambda device: _copy_check(device)},
@@ -569,9 +600,62 @@ def _child(expected: DeviceInfo) -> int:
             v.variants[variant] = problem is None
             if problem:
                 v.variant_reasons[variant] = problem
+    if v.ok:
+        for engine, measure in SPEED_CASES.items():
+            print(f"check\tspeed {engine}", flush=True)
+            try:
+                v.speed[engine] = round(measure(index), 3)
+            except Exception as exc:  # a measurement that fails decides nothing: OpenCL stays
+                print(f"fail\tspeed {engine}\t{_one_line(exc)}", flush=True)
+            else:
+                print(f"pass\tspeed {engine}", flush=True)
     v.seconds = time.perf_counter() - start
     print(f"verdict\t{json.dumps(asdict(v))}", flush=True)
     return 0
+
+
+def _projection_speed(precision: str, size: tuple[int, int] = (288, 352), n: int = 50, frames: int = 12):
+    """OpenCL's frame rate over numpy's for the projection engine (lds, mixture) at ``size``
+    (a basis beyond any cache: both are bound by memory there, as at larger sizes), the
+    median of alternating rounds."""
+
+    def measure(device: str) -> float:
+        import pyopencl as cl
+
+        from .opencl import get_context
+        from .projection import open_projector
+
+        h, w = size
+        rng = np.random.default_rng(0)
+        basis = (rng.standard_normal((n, h * w * 3), dtype=np.float32) * 0.1).astype(precision)
+        mean = np.full(h * w * 3, 128, np.float32)
+        ctx = get_context(device)
+        engines = [
+            open_projector(basis, mean, shape=(h, w, 3), channels=3, ctx=c, queue=c and cl.CommandQueue(c))
+            for c in (ctx, None)
+        ]
+        out = np.empty((h, w, 3), np.uint8)
+        times: list[list[float]] = [[], []]
+        try:
+            for r in range(frames + 2):
+                for k, e in enumerate(engines):
+                    e.coef[:] = rng.standard_normal(e.coef.size)
+                    t = time.perf_counter()
+                    e.run(out)
+                    if r >= 2:  # the first rounds warm caches and threads
+                        times[k].append(time.perf_counter() - t)
+        finally:
+            engines[0].close()
+        return float(np.median(times[1]) / np.median(times[0]))
+
+    return measure
+
+
+#: engine -> measure(device): its OpenCL frame rate over its numpy reference's (Verdict.speed)
+SPEED_CASES: dict[str, Callable[[str], float]] = {
+    "projection float32": _projection_speed("float32"),
+    "projection float16": _projection_speed("float16"),
+}
 
 
 def _all(checks: dict[str, Callable[[str], str | None]], device: str) -> str | None:

@@ -16,7 +16,7 @@ from ..player.loop import loop_frames
 from ..player.modes import player_class
 from ._common import Number, Numbers, UsageError, positive_int
 from ._modes import add_mode_arguments, apply_controls, player_kwargs, resolve_args_mode
-from ._output import MAX_FPS, MIN_FPS, FrameWriter
+from ._output import H264_CRF, H264_PRESET, H264_PRESETS, MAX_FPS, MIN_FPS, FrameWriter
 
 RATE = Number(float, 0.0, _ratemap.MAX_RATE)
 FINITE = Number(float)
@@ -65,6 +65,19 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "--output",
         required=True,
         help="out.mp4 / .mkv / .avi / .webp / .apng / .gif, frame_%%04d.png, or a folder",
+    )
+    g = p.add_argument_group(".mp4 (H.264) encoding")
+    g.add_argument(
+        "--crf",
+        type=Number(int, 0, 51),
+        default=H264_CRF,
+        help="constant rate factor, %(type)s: lower is better and larger (default %(default)s)",
+    )
+    g.add_argument(
+        "--preset",
+        choices=H264_PRESETS,
+        default=H264_PRESET,
+        help="x264 preset: slower makes smaller files at the same quality (default %(default)s)",
     )
     cls = add_mode_arguments(p, argv, default=DEFAULT_MODE, common=COMMON)
     mode = cls.mode
@@ -176,7 +189,7 @@ def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: flo
             raise UsageError(f"--mask: cannot read {args.mask}")
     cap = cv2.VideoCapture(args.inpaint)
     try:
-        writer.open(player.shape, fps if fps is not None else cap.get(cv2.CAP_PROP_FPS) or 25.0)
+        writer.open(player.shape, fps if fps is not None else cap.get(cv2.CAP_PROP_FPS) or 25.0, args.frames)
         out = np.empty(player.shape, np.uint8)
         n = 0
         with writer:
@@ -211,7 +224,7 @@ def _run_loop(args: argparse.Namespace, writer: FrameWriter) -> int:
     if source is not None and source.shape[-1] == 1:
         source = np.repeat(source, 3, axis=-1)
     wrap = wrap_report(frames, source)
-    writer.open(frames.shape[1:], fps)
+    writer.open(frames.shape[1:], fps, len(frames))
     with writer:
         for frame in frames:
             writer.write(frame)
@@ -227,7 +240,7 @@ def _run_loop(args: argparse.Namespace, writer: FrameWriter) -> int:
 
 def run(args: argparse.Namespace) -> int:
     resolve_args_mode(args)
-    writer = FrameWriter(args.output)
+    writer = FrameWriter(args.output, crf=args.crf, preset=args.preset, progress=True)
     if getattr(args, "inpaint", None) and args.loop:
         raise UsageError("--loop does not apply to --inpaint (the frames follow the inpainted video)")
     if getattr(args, "inpaint", None):
@@ -241,7 +254,7 @@ def run(args: argparse.Namespace) -> int:
         if args.frames is None:
             args.frames = default_frames(player)
         fps = args.fps if args.fps is not None else player.texture.source.fps
-        writer.open(player.shape, fps)
+        writer.open(player.shape, fps, args.frames)
         t0 = time.perf_counter()
         frame = np.empty(player.shape, np.uint8)
         with writer:

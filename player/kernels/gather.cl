@@ -34,8 +34,7 @@
 // frame), TSTEP, RUN (pixels per work-item), STACK_PAD, STACK_SIGNED (1: the stack holds
 // value ^ 0x80, as the variant reads it), TONE_STRIDE, TONE_OB (shorts per tone row, and
 // where its offsets start), PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (bytes of an output pixel and
-// where each colour, and alpha (255; -1: none), goes); the variant also takes BANDS and
-// writes RGB only.
+// where each colour, and alpha (255; -1: none), goes); the variant also takes BANDS.
 
 #pragma OPENCL FP_CONTRACT OFF      // the time samples round as the numpy reference's float32
 

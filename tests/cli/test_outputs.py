@@ -4,6 +4,9 @@ timing and pixels checked."""
 
 from __future__ import annotations
 
+import io
+import sys
+
 import av
 import numpy as np
 import pytest
@@ -13,7 +16,7 @@ from dynatex.cli import OutputError, main
 from dynatex.commands._output import ANIMATIONS, FrameWriter, read_animation
 from dynatex.player import open_player
 
-#: Lowest PSNR (dB) of an H.264 frame decoded back, against the frame written (CRF 18, yuv420p):
+#: Lowest PSNR (dB) of an H.264 frame decoded back, against the frame written (CRF 17, yuv420p):
 #: these small, saturated test frames lose most to the halved chroma resolution.
 H264_PSNR_DB = 32.0
 
@@ -117,3 +120,62 @@ def test_animation_opened_without_frames_leaves_no_file(tmp_path):
     assert out.exists()  # created at open, so that the OS's refusal comes first
     w.close()
     assert not out.exists()
+
+
+def test_crf_and_preset_trade_size_for_quality(tmp_path):
+    """A lower CRF keeps more (a larger file, a higher PSNR); every preset writes H.264 that
+    decodes back whole; values outside x264's are refused before anything is written."""
+    frames = _smooth_frames(8, 64, 96)
+    sizes, psnr = {}, {}
+    for crf, preset in ((10, "ultrafast"), (40, "ultrafast"), (17, "veryfast")):
+        path = tmp_path / f"c{crf}.mp4"
+        with FrameWriter(str(path), crf=crf, preset=preset) as w:
+            w.open(frames[0].shape, 25.0, len(frames))
+            for f in frames:
+                w.write(f)
+        codec, _, back = _decode(path)
+        assert codec == "h264" and len(back) == len(frames)
+        sizes[crf], psnr[crf] = path.stat().st_size, min(_psnr(a, b) for a, b in zip(back, frames))
+    assert sizes[10] > sizes[17] > sizes[40] and psnr[10] > psnr[40]
+    with pytest.raises(ValueError, match=r"crf must be an integer in \[0, 51\], not 52"):
+        FrameWriter(str(tmp_path / "x.mp4"), crf=52)
+    with pytest.raises(ValueError, match=r"preset must be one of \('ultrafast'.*not 'fastest'"):
+        FrameWriter(str(tmp_path / "x.mp4"), preset="fastest")
+    assert not (tmp_path / "x.mp4").exists()
+
+
+def test_play_refuses_a_crf_out_of_range(lds_db, tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:  # argparse's usage error
+        main(["play", str(lds_db), "--frames", "2", "--crf", "60", "-o", str(tmp_path / "o.mp4")])
+    assert e.value.code == 2
+    assert "--crf" in capsys.readouterr().err and not (tmp_path / "o.mp4").exists()
+
+
+class _Terminal(io.StringIO):
+    """What a terminal would receive (tqdm draws only where stderr is one)."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.mark.parametrize("ext", [".mp4", ".gif"])
+def test_a_progress_bar_counts_frames_on_a_terminal(tmp_path, monkeypatch, ext):
+    """With progress on, a terminal sees the frames written counted against the total (and for an
+    animated image, the frames encoded at close); elsewhere nothing is drawn."""
+    from dynatex.commands import _output
+
+    monkeypatch.setattr(_output, "PROGRESS_DELAY", 0.0)
+    frames = _smooth_frames(5, 32, 48)
+    for tty in (True, False):
+        err = _Terminal() if tty else io.StringIO()
+        monkeypatch.setattr(sys, "stderr", err)
+        with FrameWriter(str(tmp_path / f"p{tty}{ext}"), progress=True) as w:
+            w.open(frames[0].shape, 10.0, len(frames))
+            for f in frames:
+                w.write(f)
+        text = err.getvalue()
+        if tty:
+            assert "writing" in text and "5/5" in text, text
+            assert ("encoding" in text) == (ext == ".gif"), text
+        else:
+            assert text == ""

@@ -91,21 +91,51 @@ def test_gather_writes_each_format(cl_context, fmt, step, cell):
     gs[0].close()
 
 
-def test_place_kernel_equals_its_reference(cl_context):
-    """Kernel place (RGB rendered by an RGB-only kernel, put in the output's format): exact,
-    whole 16-pixel items and a tail."""
+@pytest.mark.parametrize("fmt", ["RGB", "RGBA", "BGRA"])
+@pytest.mark.parametrize(
+    "size, cell, misalign", [((40, 256), (8, 12), 0), ((33, 272), (8, 16), 32), ((40, 141), None, 16)]
+)
+def test_wide_variant_writes_each_format(cl_device, fmt, size, cell, misalign):
+    """The x86 variant (where verified) writes every format itself: full runs with
+    non-temporal stores (rows a multiple of 64 bytes, the array 0 or 32 bytes off 64), the
+    head run and tails, against the reference."""
+    from dynatex.player.opencl import get_context, variant_verified
+
+    device = get_context(cl_device).devices[0]
+    if not variant_verified(device, "gather_wide"):
+        pytest.skip(f"gather_wide is not verified on {device.name}")
+    check = selftest._gather_check(
+        cell=cell, time_step=8, wrap="loop", size=size, wide=True, format=fmt, misalign=misalign
+    )
+    assert check(cl_device) is None
+
+
+@pytest.mark.parametrize("fmt", ["RGB", "RGBA", "BGRA"])
+@pytest.mark.parametrize("size, channels, half", [((7, 11), 3, False), ((16, 24), 3, True), ((5, 9), 1, False)])
+def test_projection_writes_each_format(cl_context, fmt, size, channels, half):
+    """Kernel project against its reference in every format: colour in a 4-byte format goes
+    16 pixels per work-item (here whole groups, and 77 or 45 pixels: a partial last group)."""
     import pyopencl as cl
 
-    from dynatex.player.engine import FrameOut, Kernel
-    from dynatex.player.opencl import build_program
+    from dynatex.player.projection import open_projector
 
-    rgb = np.random.default_rng(4).integers(0, 256, (7, 11, 3), dtype=np.uint8)  # 77 pixels: 4 items + 13
-    queue = cl.CommandQueue(cl_context)
-    d_rgb = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=rgb)
-    for name in ("RGBA", "BGRA"):
-        fmt = FORMATS[name]
-        k = Kernel(build_program(cl_context, "pixels.cl", fmt.defines), "place")
-        k.set(rgb=d_rgb, n=np.int32(77))
-        out = np.zeros((7, 11, 4), np.uint8)
-        FrameOut(cl_context, queue, k, "out", out.nbytes).launch(out, (5,))
-        assert np.array_equal(out, fmt.from_rgb(rgb)), name
+    h, w = size
+    rng = np.random.default_rng(6)
+    basis = (rng.standard_normal((7, h * w * channels)) * 40).astype(np.float16 if half else np.float32)
+    mean = rng.uniform(0, 255, h * w * channels).astype(np.float32)
+    shape = (h, w, FORMATS[fmt].bytes)
+    ref = open_projector(basis, mean, shape=shape, channels=channels, format=fmt)
+    dev = open_projector(
+        basis, mean, shape=shape, channels=channels, ctx=cl_context, queue=cl.CommandQueue(cl_context), format=fmt
+    )
+    for k in range(3):
+        ref.coef[:] = dev.coef[:] = rng.standard_normal(7)
+        got, want = np.zeros(shape, np.uint8), np.zeros(shape, np.uint8)
+        dev.run(got)
+        ref.run(want)
+        # float paths: rounding may differ by one level in a few values (as the self-test allows)
+        d = np.abs(got.astype(int) - want.astype(int))
+        assert d.max() <= 1 and (d > 0).mean() < 0.01, (fmt, k)
+        if fmt != "RGB":
+            assert (got[..., 3] == 255).all()
+    dev.close()

@@ -192,6 +192,35 @@ def test_check_command_lists_every_device_with_its_verdict(device):
     assert "the player uses " in done.stdout
 
 
+def test_every_verified_device_measured_its_engines_against_numpy(cl_device):
+    v = selftest.verdict(next(d for d in opencl.devices() if d.index == cl_device))
+    assert set(v.speed) == set(selftest.SPEED_CASES) and all(x > 0 for x in v.speed.values()), v.speed
+
+
+def test_auto_takes_numpy_for_an_engine_the_self_test_measured_slower(device, monkeypatch):
+    """The verdict's speed decides ``auto`` per engine and precision; a backend asked for is kept."""
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    info = opencl.device_info(opencl.get_context().devices[0])
+    v = selftest.verdict(info)
+    slow = {"projection float32": 0.5, "projection float16": 2.0}
+    monkeypatch.setitem(selftest._verdicts, selftest.cache_key(info), dataclasses.replace(v, speed=slow))
+    db = selftest._db_path()
+    for mode in ("lds", "mixture"):
+        for precision, backend, want in (
+            ("float32", "auto", "numpy"),
+            ("float16", "auto", "opencl"),
+            ("float32", "opencl", "opencl"),
+        ):
+            with open_player(db, selftest.TEXTURE, mode=mode, precision=precision, backend=backend, seed=2) as p:
+                assert p.backend == want and (p.ctx is None) == (want == "numpy"), (mode, precision, backend)
+                assert p.engine.backend == want
+                if want == "numpy":  # the reference itself, frame for frame
+                    with open_player(db, selftest.TEXTURE, mode=mode, backend="numpy", seed=2) as q:
+                        assert np.array_equal(p.next_frame(), q.next_frame())
+    with open_player(db, selftest.TEXTURE, mode="turnpoints", seed=1) as p:  # other engines: not measured
+        assert p.backend == "opencl"
+
+
 def test_players_open_on_a_verified_device_by_default(device):
     with open_player(selftest._db_path(), selftest.TEXTURE, mode="turnpoints", seed=1) as p:
         assert isinstance(p, Player) and p.backend == "opencl"

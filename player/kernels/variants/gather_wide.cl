@@ -4,7 +4,7 @@
 // it to gather.cl (whose helpers and integer contract it shares, with STACK_SIGNED=1) only
 // on a device where the self-test built it and found every pixel equal to the numpy reference.
 //
-// A work-item renders one run of 64 pixels (192 bytes) on BANDS bands of 8 rows, a band being
+// A work-item renders one run of 64 pixels (192 RGB bytes) on BANDS bands of 8 rows, a band being
 // the rows that share one pair of map rows (rows 8k - 4 .. 8k + 3). Runs start at multiples
 // of 8 pixels (see x0 below), so the map intervals a run covers, and each lane's place inside
 // its interval (kx), are the same for every run. Per band the ten map columns of the next map
@@ -20,7 +20,9 @@
 // its weight found by a shuffle. The rows go in segments that share their sources (the rows
 // of one cell row, across bands, or one row of a per-pixel map): each chunk's source offsets
 // and tone factors are set up once per segment, so a row only loads frames, blends, tones and
-// stores. Any other band goes pixel by pixel with the same integers. (Clang's ext_vector_type
+// stores. Any other band goes pixel by pixel with the same integers. A run's 192 RGB bytes
+// go out in the output's pixel format (PIXEL_BYTES 3, or 4: four 64-byte chunks shuffled from
+// the three, alpha set). (Clang's ext_vector_type
 // gives the 64-wide types OpenCL C lacks: on AVX-512 one operation covers 32 or 64 lanes,
 // where a float16 covers 16.)
 typedef uchar  u8x64  __attribute__((ext_vector_type(64)));
@@ -71,6 +73,19 @@ typedef float16 __attribute__((aligned(4))) float16_u;
 #define EVEN32 0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30, 32, 34, 36, 38, 40, 42, 44, 46, 48, 50, 52, 54, 56, 58, 60, 62
 #define ODD32 1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31, 33, 35, 37, 39, 41, 43, 45, 47, 49, 51, 53, 55, 57, 59, 61, 63
 #define PACK64 0, 1, 2, 3, 4, 5, 6, 7, 32, 33, 34, 35, 36, 37, 38, 39, 8, 9, 10, 11, 12, 13, 14, 15, 40, 41, 42, 43, 44, 45, 46, 47, 16, 17, 18, 19, 20, 21, 22, 23, 48, 49, 50, 51, 52, 53, 54, 55, 24, 25, 26, 27, 28, 29, 30, 31, 56, 57, 58, 59, 60, 61, 62, 63
+
+// A run's bytes in a 4-byte format: chunk Q of the output (pixels 16 Q .. 16 Q + 15) is a
+// shuffle of the RGB chunks (c0, c0), (c0, c1), (c1, c2) or (c2, c2) (those bytes start at
+// RGB byte 0, 0, 64, 128), each pixel's colours placed at R_AT, G_AT, B_AT; alpha lanes take
+// any byte and are then set to 255.
+#define CSEL(s) ((s) == R_AT ? 0 : (s) == G_AT ? 1 : (s) == B_AT ? 2 : 0)
+#define PX(Q, j, b) (3 * (16 * (Q) + (j) / 4) + CSEL((j) % 4) - (b))
+#define PX4(Q, j, b) PX(Q, j, b), PX(Q, j + 1, b), PX(Q, j + 2, b), PX(Q, j + 3, b)
+#define PX16(Q, j, b) PX4(Q, j, b), PX4(Q, j + 4, b), PX4(Q, j + 8, b), PX4(Q, j + 12, b)
+#define PX64(Q, b) PX16(Q, 0, b), PX16(Q, 16, b), PX16(Q, 32, b), PX16(Q, 48, b)
+#define AL4(j) ((j) == A_AT ? 255 : 0), ((j) + 1 == A_AT ? 255 : 0), ((j) + 2 == A_AT ? 255 : 0), ((j) + 3 == A_AT ? 255 : 0)
+#define AL16 AL4(0), AL4(0), AL4(0), AL4(0)
+#define AL64 AL16, AL16, AL16, AL16
 
 // X86_BW: the compiler targets AVX-512BW and the x86 builtins below are used (PORTABLE=1, a
 // define for tests, takes the plain vector code instead, which computes the same lanes)
@@ -225,7 +240,7 @@ inline int16 map_samples(__global const float *tmap, __global const float *tmap1
     return floor16((f0 + a) * 4080.0f + 0.5f);
 }
 
-// A full run's 192 bytes go out with non-temporal 64-byte stores where they are 64-byte
+// A full run's bytes go out with non-temporal 64-byte stores where they are 64-byte
 // aligned (the runs are placed so, see the kernel): such a store skips reading the line it
 // fills (a plain store reads it first: twice the memory traffic) and leaves the caches to
 // the frame stack.
@@ -242,8 +257,13 @@ __kernel void gather_wide(GATHER_PARAMS)
     // bytes off 64, x0 (16, 32 or 48 pixels) puts every run on 64-byte boundaries (3 x0 = -out
     // mod 64; 43 = 1/3 mod 64); a head run k = -1 renders pixels 0 .. 63 and keeps x0 of them.
     // x0 is a multiple of 8, so the map intervals of every run are still alike.
+    // In a 4-byte format (a run is 256 bytes) only 32 bytes off 64 can be made up (x0 = 8).
     const int mis = (int)((size_t)out & 63);
+#if PIXEL_BYTES == 3
     const int x0 = (width * 3) % 64 == 0 && mis % 16 == 0 ? (43 * (64 - mis)) & 63 : 0;
+#else
+    const int x0 = (width * PIXEL_BYTES) % 64 == 0 && mis % 32 == 0 ? ((64 - mis) & 63) / 4 : 0;
+#endif
     const int k = (int)get_global_id(0) - (x0 > 0);
     const int xs = max(x0 + 64 * k, 0);
     if (xs >= width)
@@ -342,7 +362,7 @@ __kernel void gather_wide(GATHER_PARAMS)
             if (linear) {
                 long r = (long)(y - seg_y) * (3 * FRAME_W);
                 for (; y < yseg; ++y, v16 += d16, r += 3 * FRAME_W) {
-                    __global uchar *p = out + ((size_t)y * width + xs) * 3;
+                    __global uchar *p = out + ((size_t)y * width + xs) * PIXEL_BYTES;
                     // u = 255 frame (above lo) + weight, within 255 (span + 1)
                     const u16x64 u16 = __builtin_astype(v16 >> 4, u16x64);
                     // frame u / 255 (exact for u < 65535 with the +1), weight u % 255, and the lane's
@@ -360,20 +380,26 @@ __kernel void gather_wide(GATHER_PARAMS)
                     const u16x64 pw = (u16x64)255;
 #endif
                     const u8x64 c0 = CHUNK(0), c1 = CHUNK(1), c2 = CHUNK(2);
+#if PIXEL_BYTES == 3
+                    const u8x64 run[3] = {c0, c1, c2};
+#else
+                    const u8x64 alpha = (u8x64)(AL64);
+                    const u8x64 run[4] = {__builtin_shufflevector(c0, c0, PX64(0, 0)) | alpha,
+                                          __builtin_shufflevector(c0, c1, PX64(1, 0)) | alpha,
+                                          __builtin_shufflevector(c1, c2, PX64(2, 64)) | alpha,
+                                          __builtin_shufflevector(c2, c2, PX64(3, 128)) | alpha};
+#endif
                     if (nvalid == 64 && ((size_t)p & 63) == 0) {
-                        NT_STORE(p, c0);
-                        NT_STORE(p + 64, c1);
-                        NT_STORE(p + 128, c2);
+                        for (int c = 0; c < PIXEL_BYTES; ++c)
+                            NT_STORE(p + 64 * c, run[c]);
                     } else if (nvalid == 64) {
-                        *(__global u8x64_u *)p = c0;
-                        *(__global u8x64_u *)(p + 64) = c1;
-                        *(__global u8x64_u *)(p + 128) = c2;
+                        for (int c = 0; c < PIXEL_BYTES; ++c)
+                            *(__global u8x64_u *)(p + 64 * c) = run[c];
                     } else {                                   // the head run, or a run past the row's end
-                        uchar part[192];
-                        *(u8x64_u *)part = c0;
-                        *(u8x64_u *)(part + 64) = c1;
-                        *(u8x64_u *)(part + 128) = c2;
-                        for (int i = 0; i < 3 * nvalid; ++i)
+                        uchar part[64 * PIXEL_BYTES];
+                        for (int c = 0; c < PIXEL_BYTES; ++c)
+                            *(u8x64_u *)(part + 64 * c) = run[c];
+                        for (int i = 0; i < PIXEL_BYTES * nvalid; ++i)
                             p[i] = part[i];
                     }
                 }
@@ -384,7 +410,7 @@ __kernel void gather_wide(GATHER_PARAMS)
                 int ddy = 0;
 #endif
                 for (; y < yseg; ++y, v16 += d16, ddy += FRAME_W) {
-                    __global uchar *orow = out + (size_t)y * width * 3;
+                    __global uchar *orow = out + (size_t)y * width * PIXEL_BYTES;
                     const int ky = ky0 + 2 * (y - ybeg);
                     for (int q = 0; q < nvalid; ++q) {
                         const int x = xs + q;
@@ -394,7 +420,7 @@ __kernel void gather_wide(GATHER_PARAMS)
                         const int top = ((qa[j] * (16 - kx) + qa[j + 1] * kx + 128) >> 8) - 255 * lo;
                         const int bot = ((qb[j] * (16 - kx) + qb[j + 1] * kx + 128) >> 8) - 255 * lo;
                         const int u = (16 * top + ky * (bot - top) + 8) >> 4;
-                        pixel(stack, tones, pix, (pk >> 24) & 0xFF, base + lo + u / 255, u % 255, orow + 3 * x);
+                        pixel(stack, tones, pix, (pk >> 24) & 0xFF, base + lo + u / 255, u % 255, orow + PIXEL_BYTES * x);
                     }
                 }
             }
