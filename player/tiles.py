@@ -25,12 +25,8 @@ A Wang tile set (``construction="wang"`` in the analyzer) is arranged row by row
 every shared edge has one colour on both sides (:meth:`TilesPlayer._wang_arrangement`);
 a state whose arrangement breaks an edge is refused. A quilted set (the analyzer's default
 for one texture) is the cells of one large torus: they are laid out in the torus's order,
-shifted by a random number of cells per seed (:meth:`TilesPlayer._torus_arrangement`), so an
-output no larger than the torus is a window onto a seamless texture. A larger output would
-show the torus again one period away; there the cell rows and columns follow random walks
-through the torus's rows and columns that now and then jump to another line through a jump
-cell built at open (:mod:`dynatex.player.torus`), so the output has no period (the jump
-cells are more cells in the same cell-grid gather).
+shifted by a random number of cells per seed (:meth:`TilesPlayer._torus_arrangement`), so the
+output is a window onto a seamless texture that repeats only with the torus's period.
 """
 
 from __future__ import annotations
@@ -61,7 +57,6 @@ from ..tiledb import TileDB, TilesModel
 from .base import Player, rng_from_state
 from .controls import Capabilities, Control
 from .gather import MAX_GAIN, MAX_TIME, gaussian_smooth, open_gather, pack_source
-from .torus import torus_jumps
 
 TIME_STEP = 8  # output pixels per time-map sample
 #: Largest ``sigma``, output pixels: smoothing costs time linear in it (0.46 s at 4K for 256 on a busy
@@ -182,21 +177,9 @@ class TilesPlayer(Player):
         self.seed = check_seed("seed", seed)  # label presets such as "blobs" draw from it
         self.labels = self._check_labels(labels)
         mixing = len(np.unique(self.labels)) > 1
-        #: jump cells of a quilted torus, where the output has more cells than the torus
-        #: along an axis (:mod:`dynatex.player.torus`): the output then has no period
-        self.jumps = None
-        if model.torus is not None and (self.grid_shape[0] > model.torus[0] or self.grid_shape[1] > model.torus[1]):
-            gh, gw = self.grid_shape
-            self.jumps = torus_jumps(model.tiles, model.torus, rows=gh > model.torus[0], columns=gw > model.torus[1])
-        extra = 0 if self.jumps is None else len(self.jumps.cells)
-        self.n_cells = k + extra
-        self._cell_classes = np.concatenate([model.tile_class, np.zeros(extra, model.tile_class.dtype)])
         # tiles stacked vertically in each stored frame: one tile's frame is contiguous, so a
         # cell's rows are read as one forward stream (hardware prefetch follows it)
-        stack = np.empty((length, self.n_cells * th, tw, 3), np.uint8)
-        stack[:, : k * th] = model.tiles.transpose(1, 0, 2, 3, 4).reshape(length, k * th, tw, 3)
-        if extra:
-            stack[:, k * th :] = self.jumps.cells.transpose(1, 0, 2, 3, 4).reshape(length, extra * th, tw, 3)
+        stack = np.ascontiguousarray(model.tiles.transpose(1, 0, 2, 3, 4).reshape(length, k * th, tw, 3))
         self.engine = open_gather(
             stack,
             (h, w),
@@ -262,11 +245,6 @@ class TilesPlayer(Player):
         if m.wang:
             self._build_source(self._wang_arrangement())
             return
-        if self.jumps is not None:
-            gh, gw = self.grid_shape
-            rows, cols = self.jumps.walk(gh, 0, self._rng), self.jumps.walk(gw, 1, self._rng)
-            self._build_source(self.jumps.index(rows, cols))
-            return
         if m.torus is not None:
             self._build_source(self._torus_arrangement(*(int(v) for v in self._rng.integers(0, m.torus))))
             return
@@ -308,10 +286,6 @@ class TilesPlayer(Player):
         """Cells of ``arrangement`` out of their torus order (0 for the other constructions)."""
         if self.model.torus is None:
             return 0
-        if self.jumps is not None:
-            rows, cols = self.jumps.decode(arrangement)
-            broken = self.jumps.broken_steps(rows, 0) + self.jumps.broken_steps(cols, 1)
-            return broken or int((arrangement != self.jumps.index(rows, cols)).sum())
         cols = self.model.torus[1]
         first = int(arrangement.flat[0])
         return int((arrangement != self._torus_arrangement(first // cols, first % cols)).sum())
@@ -334,13 +308,13 @@ class TilesPlayer(Player):
             vis_h = np.minimum(th, h - th * np.arange(choice.shape[0]))
             vis_w = np.minimum(tw, w - tw * np.arange(choice.shape[1]))
             area = np.outer(vis_h, vis_w)
-            self._tile_pixels = np.bincount(choice.ravel(), weights=area.ravel(), minlength=self.n_cells)
+            self._tile_pixels = np.bincount(choice.ravel(), weights=area.ravel(), minlength=self.n_tiles)
             # cells cut by the output's right or bottom edge show only their top-left part
             partial = (vis_h[:, None] < th) | (vis_w[None, :] < tw)
             self._partial_cells = [
                 (int(choice[i, j]), int(vis_h[i]), int(vis_w[j])) for i, j in zip(*np.nonzero(partial))
             ]
-            self.engine.set_source_grid(pack_source(choice * (th * tw), self._cell_classes[choice]))
+            self.engine.set_source_grid(pack_source(choice * (th * tw), m.tile_class[choice]))
             self._retone()
             return
         h, w = self._shape[:2]
@@ -387,7 +361,7 @@ class TilesPlayer(Player):
             pair = m.tile_class[tile[feathered]] * m.n_classes + m.ring_class[tile[feathered]]
             q = np.rint(weight[feathered] / 255.0 * (self._tone_levels - 1)).astype(np.int64)
             tone[feathered] = m.n_classes + pair * self._tone_levels + q
-        self._tile_pixels = np.bincount(tile.ravel(), minlength=self.n_cells).astype(float)
+        self._tile_pixels = np.bincount(tile.ravel(), minlength=self.n_tiles).astype(float)
         self._partial_cells = []
         self.engine.set_source_map(pack_source(index, tone))
         self._retone()
@@ -554,26 +528,25 @@ class TilesPlayer(Player):
         idx = np.unique(np.linspace(0, self.loop_length - 1, 32).round().astype(int))
 
         def histogram(k: int, rows: int, cols: int) -> np.ndarray:
-            cell = m.tiles[k] if k < self.n_tiles else self.jumps.cells[k - self.n_tiles]
-            px = cell[idx, :rows, :cols].reshape(-1, 3)
+            px = m.tiles[k, idx, :rows, :cols].reshape(-1, 3)
             return np.stack([np.bincount(px[:, ch], minlength=256) / len(px) for ch in range(3)])
 
         if getattr(self, "_tile_hist", None) is None:
             th, tw = self.tile_size
-            self._tile_hist = np.stack([histogram(k, th, tw) for k in range(self.n_cells)])
+            self._tile_hist = np.stack([histogram(k, th, tw) for k in range(self.n_tiles)])
         counts = getattr(self, "_tile_pixels", None)
         partial = getattr(self, "_partial_cells", [])
         if counts is None:
-            counts, partial = np.ones(self.n_cells), []
+            counts, partial = np.ones(self.n_tiles), []
         counts = np.array(counts, np.float64)
         extra = np.zeros((m.n_classes, 3, 256), np.float64)
         for k, rows, cols in partial:  # replace the full tile's share by the part shown
             counts[k] -= rows * cols
-            extra[self._cell_classes[k]] += rows * cols * histogram(k, rows, cols)
+            extra[m.tile_class[k]] += rows * cols * histogram(k, rows, cols)
         counts = np.maximum(counts, 0.0)
         out = np.zeros((m.n_classes, 3, 256), np.float64)
         for c in range(m.n_classes):
-            own = self._cell_classes == c
+            own = m.tile_class == c
             w = np.where(own, counts, 0.0)
             if w.sum() == 0 and not extra[c].any():
                 w = own.astype(float)
@@ -698,9 +671,9 @@ class TilesPlayer(Player):
         seed = check_seed("seed", state.get("seed", self.seed))
         if any(c.shape != self.grid_shape or not np.isfinite(c).all() for c in cells):
             raise InvalidArgumentError(f"state offsets must be finite with shape {self.grid_shape}")
-        if arrangement.shape != self.grid_shape or arrangement.min() < 0 or arrangement.max() >= self.n_cells:
+        if arrangement.shape != self.grid_shape or arrangement.min() < 0 or arrangement.max() >= self.n_tiles:
             raise InvalidArgumentError("state arrangement does not fit this tile set")
-        if not (self._cell_classes[arrangement] == labels).all():
+        if not (self.model.tile_class[arrangement] == labels).all():
             raise InvalidArgumentError("state arrangement does not match its labels")
         mismatched = self._wang_mismatch(arrangement)
         if mismatched:
