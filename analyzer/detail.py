@@ -96,7 +96,8 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     resid_energy = float(np.trace(cov))
     eig, axes = np.linalg.eigh(cov)
     axis = axes[:, -1]
-    level = np.sqrt(_box(energy / (t * c), GAIN_BOX))
+    # a box filter by running sums leaves rounding-sized negatives where the energy is ~0
+    level = np.sqrt(np.maximum(_box(energy / (t * c), GAIN_BOX), 0.0))
     rms = np.sqrt(np.mean(level**2))
     norm_gain = level / rms if rms > 0 else np.ones_like(level)
 

@@ -183,11 +183,14 @@ def synthetic_lds_db(path: str | os.PathLike, width: int, height: int, *, n: int
         A=a,
         B=b,
         x0=np.zeros(n),
-        states=np.zeros((n, 2)),
+        states=np.zeros((n, n + 1)),
         stationary_cov=stationary_covariance(a, b @ b.T),
         info={"synthetic": True},
     )
-    info = SourceInfo(filename="<synthetic>", sha256="", fps=25.0, width=width, height=height, channels=3, n_frames=2)
+    # n components need at least n + 1 frames: the database refuses a model its source cannot hold
+    info = SourceInfo(
+        filename="<synthetic>", sha256="", fps=25.0, width=width, height=height, channels=3, n_frames=n + 1
+    )
     with DatabaseWriter(path, overwrite=True) as w:
         w.put_texture("synthetic", info)
         w.put_method("synthetic", "lds", model)

@@ -127,8 +127,9 @@ def test_a_missing_method_names_the_modes_the_texture_plays_before_a_new_analysi
 @pytest.mark.parametrize(("mode", "name", "hint"), [("lds", "sped", "did you mean 'speed'"), ("lds", "draws", "")])
 def test_setting_a_control_a_player_does_not_have_is_an_attribute_error(mode, name, hint):
     with open_player(SELFTEST, mode=mode, backend="numpy") as p:
-        with pytest.raises(AttributeError, match=f"no control '{name}': {hint}.*its controls are intensity, speed"):
+        with pytest.raises(AttributeError, match=f"no control '{name}': {hint}.*its controls are ") as info:
             setattr(p, name, 2)
+        assert str(info.value).endswith("its controls are " + ", ".join(p.controls()))
         assert not hasattr(p, name)
         p.speed = 2  # a real control still works
         assert p.speed == 2.0
