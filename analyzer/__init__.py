@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from .corpus import ClipResult, analyze_corpus, format_table
+from .errors import ClipError, SchedulerError
 from .metrics import (
     frame_coverage,
     patch_distances,
@@ -12,9 +13,9 @@ from .metrics import (
     stability,
     temporal_discontinuity,
 )
-from .video import Clip, ClipError, load_clip
+from .video import Clip, load_clip
 
-__all__ = ["Clip", "ClipError", "ClipResult", "analyze_corpus", "format_table", "load_clip"]
+__all__ = ["Clip", "ClipError", "ClipResult", "SchedulerError", "analyze_corpus", "format_table", "load_clip"]
 __all__ += [
     "frame_coverage",
     "patch_distances",

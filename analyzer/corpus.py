@@ -28,6 +28,7 @@ from typing import Any
 from ..errors import InvalidArgumentError
 from ..tiledb import DatabaseWriter, TileDB, TileDBError
 from ..tiledb.writer import remove_stale_temp_files
+from .errors import SchedulerError
 from .methods import Clips, Method, get_method
 from .stream import parse_bytes
 
@@ -39,10 +40,8 @@ STREAMED_METHODS = ("lds", "mixture")
 OK, SKIPPED, FAILED = "ok", "skipped", "failed"
 #: Thread-count variables of the BLAS libraries numpy may use, set for local workers.
 BLAS_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
-
-
-class SchedulerError(ConnectionError, ValueError):
-    """The Dask scheduler named cannot be reached (bad input: a wrong or dead address)."""
+#: Seconds to reach a scheduler named by address before :class:`SchedulerError`.
+SCHEDULER_TIMEOUT_S = 20
 
 
 @dataclass(frozen=True)
@@ -532,7 +531,7 @@ def connect(scheduler: str, workers: int | None, n_tasks: int):
             f"scheduler must be 'none', 'local' or an address like tcp://host:8786, not {scheduler!r}"
         )
     try:
-        return _OwnedClient(Client(scheduler, timeout="20s"), None)
+        return _OwnedClient(Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s"), None)
     except OSError as exc:
         raise SchedulerError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
 

@@ -19,7 +19,8 @@ import numpy as np
 
 from ..checks import MAX_SIDE, check_frames, check_int, check_size
 from ..errors import InvalidArgumentError
-from ..tiledb import DynatexError, SourceInfo
+from ..tiledb import SourceInfo
+from .errors import ClipError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
 
@@ -32,10 +33,6 @@ except ImportError:  # pragma: no cover (not POSIX)
 SCRATCH_PATTERN = re.compile(r"dynatex-(decode|spill)-[a-z0-9_]{8}(\.u8)?")
 
 Progress = Callable[[int, int | None], None]
-
-
-class ClipError(DynatexError, ValueError):
-    """A clip cannot be read or does not hold usable frames."""
 
 
 @dataclass

@@ -23,26 +23,18 @@ import sys
 import threading
 import time
 import traceback
-import unicodedata
 import warnings
 
 from . import __version__
-from .errors import DynatexError
+from .errors import DynatexError, OutputError, UsageError  # noqa: F401 (importable from here, as before)
+from .text import printable
 
 #: subcommand -> module in dynatex.commands (each has ``add_parser(subparsers, argv)`` and ``run(args)``)
 COMMANDS = ("analyze", "info", "play", "bench", "evaluate", "demo", "export")
 
 
-class UsageError(DynatexError, ValueError):
-    """Bad command-line input detected after parsing (exit code 2)."""
-
-
 class Terminated(KeyboardInterrupt):
     """SIGTERM arrived: the command ends as on Ctrl-C, cleaning up on the way (exit code 143)."""
-
-
-class OutputError(DynatexError, OSError):
-    """The command's output cannot be written: refused by the codec, the folder or the disk (exit code 2)."""
 
 
 def _input_errors() -> tuple[type[BaseException], ...]:
@@ -259,15 +251,6 @@ def _one_line(exc: BaseException) -> str:
         text = text[1:-1]
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     return printable(lines[0]) if lines else type(exc).__name__
-
-
-def printable(text: object) -> str:
-    """``text`` with control and format characters escaped (``\\x1b``, ``\\u202e``): a name or
-    attribute read from a file must not drive the terminal (set its title, clear it, reorder text)."""
-    return "".join(
-        c if unicodedata.category(c) not in ("Cc", "Cf") else c.encode("unicode_escape").decode("ascii")
-        for c in str(text)
-    )
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,9 +1,11 @@
-"""The root of every error dynatex raises on purpose, and the errors of bad arguments.
+"""The root of every error dynatex raises on purpose, the errors of bad arguments and the command's.
 
 This module imports nothing of ours, so every layer (the tile database at the bottom, the
 analyzer and the player above it, the CLI on top) may derive its errors from it. Each error
 also derives from the builtin it refines, so ``except ValueError`` keeps working; the CLI
 turns a :class:`DynatexError` into one line and exit code 2, anything else into exit code 1.
+Each layer keeps its own in one module: ``tiledb/errors.py``, ``analyzer/errors.py``,
+``player/errors.py``; the command line's are here.
 """
 
 from __future__ import annotations
@@ -21,4 +23,12 @@ class ArgumentTypeError(InvalidArgumentError, TypeError):
     """An argument of the wrong type. Also a ValueError: to a caller it is one more bad value."""
 
 
-__all__ = ["ArgumentTypeError", "DynatexError", "InvalidArgumentError"]
+class UsageError(DynatexError, ValueError):
+    """Bad command-line input detected after parsing (exit code 2)."""
+
+
+class OutputError(DynatexError, OSError):
+    """The command's output cannot be written: refused by the codec, the folder or the disk (exit code 2)."""
+
+
+__all__ = ["ArgumentTypeError", "DynatexError", "InvalidArgumentError", "OutputError", "UsageError"]

@@ -14,9 +14,17 @@ from __future__ import annotations
 import os
 
 from ..tiledb import TileDB
-from .base import BACKENDS, Player, PlayerClosedError, PlayerForkedError, UnknownControlError
+from .base import BACKENDS, Player
+from .errors import (
+    DeviceNotVerifiedError,
+    KernelBuildError,
+    OpenCLUnavailableError,
+    PlayerClosedError,
+    PlayerForkedError,
+    UnknownControlError,
+)
 from .modes import MODE_ALIASES, MODE_METHOD, MODE_ORDER, MODES, default_mode, describe, mode_for, player_class
-from .opencl import DeviceNotVerifiedError, KernelBuildError, OpenCLUnavailableError, devices, list_devices
+from .opencl import devices, list_devices
 
 
 def open_player(

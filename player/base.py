@@ -13,10 +13,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..checks import MAX_SEED, Choice, Range, Text, check_int, check_out, check_seed
-from ..errors import ArgumentTypeError, DynatexError, InvalidArgumentError
+from ..errors import ArgumentTypeError, InvalidArgumentError
 from ..params import Param
 from ..tiledb import Texture, TileDB
 from .controls import Capabilities, Control, controls_of, document
+from .errors import PlayerClosedError, PlayerForkedError, UnknownControlError
 from .pixels import FORMATS, pixel_format
 
 BACKENDS = ("opencl", "numpy")
@@ -61,18 +62,6 @@ _fallback_warned = False
 #: OpenCL objects of players inherited by a forked child: kept, never released there (the driver
 #: belongs to the parent; releasing them in the child can hang).
 _inherited: list[Any] = []
-
-
-class PlayerClosedError(DynatexError, RuntimeError):
-    """The player was closed (``close()`` or the end of its ``with`` block); open a new one."""
-
-
-class PlayerForkedError(DynatexError, RuntimeError):
-    """An OpenCL player used in a process forked from the one that opened it."""
-
-
-class UnknownControlError(DynatexError, AttributeError):
-    """An attribute a player does not have was set (a misspelt control); names the controls it has."""
 
 
 def _checked_init(init: Callable[..., None]) -> Callable[..., None]:

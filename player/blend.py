@@ -36,7 +36,7 @@ class Blend:
     The interface of both blend engines (:func:`open_blend` picks one): :meth:`render`
     takes ``((frame, weight), ...)`` with 1 to 4 terms, frames in the stack and weights in
     256ths summing to 256, checked before anything reads a frame. The stack is kept in the
-    output's pixel ``format`` (:data:`~dynatex.player.engine.FORMATS`; alpha 255 blends to
+    output's pixel ``format`` (:data:`~dynatex.player.pixels.FORMATS`; alpha 255 blends to
     255), so every format blends byte by byte alike.
     """
 

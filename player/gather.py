@@ -339,7 +339,7 @@ class Gather:
         ``wide=True`` on a device where the variant is not verified is an error. Both
         write every format straight into the output.
     format : {"RGB", "RGBA", "BGRA"}
-        Output pixel format (:data:`~dynatex.player.engine.FORMATS`); the stack stays RGB,
+        Output pixel format (:data:`~dynatex.player.pixels.FORMATS`); the stack stays RGB,
         the kernel places the bytes (and alpha, 255) as it writes them.
 
     After construction call :meth:`set_source_map` or :meth:`set_source_grid`, optionally

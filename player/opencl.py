@@ -16,7 +16,7 @@ from importlib import resources
 
 import numpy as np
 
-from ..tiledb.errors import DynatexError
+from .errors import DeviceNotVerifiedError, KernelBuildError, OpenCLUnavailableError
 
 try:
     import pyopencl as cl
@@ -33,23 +33,11 @@ _NUMPY = "use the numpy backend (backend='numpy'; dynatex --backend numpy)"
 _FIX = f"install an OpenCL platform (./install.sh, or `apt-get install pocl-opencl-icd`), or {_NUMPY}"
 
 
-class OpenCLUnavailableError(DynatexError, RuntimeError):
-    """No usable OpenCL platform or device."""
-
-
-class KernelBuildError(DynatexError, RuntimeError):
-    """An OpenCL program failed to build; the message carries the compiler log."""
-
-
 _lock = threading.Lock()
 _contexts: dict[str, cl.Context] = {}
 _programs: dict[tuple, Program] = {}
 _infos: dict[int, DeviceInfo] = {}  # device handle -> its DeviceInfo, for get_context's devices
 _kernel_fetches = 0
-
-
-class DeviceNotVerifiedError(OpenCLUnavailableError):
-    """An OpenCL device was asked for by name but did not pass the self-test."""
 
 
 @dataclass(frozen=True)

@@ -52,7 +52,7 @@ class Projector:
     channels : {1, 3}
         Values per pixel in ``basis``; grey frames are replicated to RGB.
     format : {"RGB", "RGBA", "BGRA"}
-        Output pixel format (:data:`~dynatex.player.engine.FORMATS`).
+        Output pixel format (:data:`~dynatex.player.pixels.FORMATS`).
     """
 
     backend = ""

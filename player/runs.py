@@ -285,7 +285,7 @@ class Runs:
     interpolate : bool
         Blend linearly between source frames at fractional times.
     format : {"RGB", "RGBA", "BGRA"}
-        Output pixel format (:data:`~dynatex.player.engine.FORMATS`).
+        Output pixel format (:data:`~dynatex.player.pixels.FORMATS`).
     """
 
     backend = ""

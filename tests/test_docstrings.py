@@ -9,13 +9,15 @@ from __future__ import annotations
 
 import doctest
 import importlib
+import inspect
 import pkgutil
+import re
 
 import pytest
 
 import dynatex
 
-PACKAGES = ("dynatex", "dynatex.tiledb", "dynatex.analyzer", "dynatex.player")
+PACKAGES = ("dynatex", "dynatex.commands", "dynatex.tiledb", "dynatex.analyzer", "dynatex.player")
 
 
 def _modules() -> list[str]:
@@ -44,3 +46,38 @@ def test_docstring_examples_run(name):
         runner.run(test)
     result = runner.summarize(verbose=False)
     assert result.failed == 0, f"{result.failed} of {result.attempted} examples in {name} failed (see the output)"
+
+
+#: a Sphinx cross-reference to a name of ours: :data:`~dynatex.player.pixels.FORMATS`
+REFERENCE = re.compile(r":(?:data|func|class|mod|meth|attr|exc):`~?(dynatex\.[\w.]+)`")
+
+
+def _resolves(dotted: str) -> bool:
+    """Whether ``dotted`` names a module, or an attribute reached from the longest module prefix."""
+    parts = dotted.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        for part in parts[i:]:
+            if not hasattr(obj, part):
+                return False
+            obj = getattr(obj, part)
+        return True
+    return False
+
+
+def test_every_reference_to_a_dynatex_name_resolves():
+    """A docstring that points a reader to a name that does not exist (``player.engine.FORMATS``
+    once) sends them nowhere."""
+    found, missing = 0, []
+    for name in MODULES:
+        source = inspect.getsource(importlib.import_module(name))
+        for match in REFERENCE.finditer(source):
+            found += 1
+            if not _resolves(match.group(1)):
+                missing.append(f"{name}: {match.group(1)}")
+    assert found >= 50, found
+    assert not missing, missing
+    assert not _resolves("dynatex.player.engine.FORMATS")

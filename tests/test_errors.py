@@ -2,7 +2,48 @@
 
 from __future__ import annotations
 
+import importlib
+import inspect
+import pkgutil
+
 from dynatex.tiledb import DynatexError, TileDBError, TileDBFormatError
+
+PACKAGES = ("dynatex", "dynatex.commands", "dynatex.tiledb", "dynatex.analyzer", "dynatex.player")
+#: the one exception class that is no error: SIGTERM, handled as Ctrl-C is
+SIGNALS = ("dynatex.cli.Terminated",)
+
+
+def _our_exception_classes() -> dict[str, type]:
+    """Every exception class defined in a module of dynatex, by its qualified name."""
+    found = {}
+    for package in PACKAGES:
+        root = importlib.import_module(package)
+        names = [package] + [i.name for i in pkgutil.iter_modules(root.__path__, package + ".")]
+        for name in names:
+            if name.endswith("__main__"):
+                continue
+            module = importlib.import_module(name)
+            for obj in vars(module).values():
+                if inspect.isclass(obj) and issubclass(obj, BaseException) and obj.__module__ == name:
+                    found[f"{name}.{obj.__qualname__}"] = obj
+    return found
+
+
+def test_every_exception_class_of_ours_is_a_dynatex_error_and_a_builtin_one():
+    """The CLI reports a DynatexError as bad input (exit 2): an error class outside the root
+    would make a user's mistake read as an internal error. Each also refines a builtin
+    (or is the root itself or a family base), so ``except ValueError`` and the like keep working."""
+    classes = _our_exception_classes()
+    assert "dynatex.analyzer.errors.SchedulerError" in classes and "dynatex.cli.Terminated" in classes
+    outside = sorted(n for n, c in classes.items() if n not in SIGNALS and not issubclass(c, DynatexError))
+    assert not outside, f"not under DynatexError: {outside}"
+    for name, cls in classes.items():
+        if name in SIGNALS or cls in (DynatexError, TileDBError):
+            continue
+        builtins = [
+            b for b in cls.__mro__ if b.__module__ == "builtins" and b not in (Exception, BaseException, object)
+        ]
+        assert builtins, f"{name} refines no builtin error"
 
 
 def test_every_dynatex_error_shares_one_root():

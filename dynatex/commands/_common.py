@@ -15,8 +15,7 @@ from typing import Any
 
 from .. import checks
 from ..checks import MAX_COUNT, MAX_SEED, MAX_SIDE, Choice, Flag, Kind, Range, Size
-from ..cli import UsageError
-from ..errors import InvalidArgumentError
+from ..errors import InvalidArgumentError, UsageError
 from ..params import Param
 
 

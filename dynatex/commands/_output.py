@@ -24,8 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..cli import OutputError
-from ..errors import InvalidArgumentError
+from ..errors import InvalidArgumentError, OutputError
 
 if TYPE_CHECKING:
     from typing_extensions import Self

@@ -402,9 +402,3 @@ def format_table(report: dict[str, Any]) -> str:
     if "verdict" in report:
         lines.append(f"overall: {report['verdict']} (the worst verdict; analyzer/METRICS.md gives the ranges)")
     return "\n".join(lines)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    from ..cli import main
-
-    sys.exit(main(["evaluate", *sys.argv[1:]]))

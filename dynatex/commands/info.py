@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from ..cli import printable
 from ..player.modes import describe as describe_modes
+from ..text import printable
 from ..tiledb import open_db
 
 #: lists longer than this print as a summary (``--json`` has them whole)

@@ -97,3 +97,20 @@ def test_output_file_with_several_clips_is_refused(tmp_path, clips, capsys):
     (tmp_path / "x.h5").write_bytes(b"")
     code, _, err = _run(capsys, "analyze", clips / "sea.npy", clips / "fire.npy", "-o", tmp_path / "x.h5")
     assert code == 2 and "-o names a folder" in err
+
+
+def test_an_unreachable_scheduler_is_bad_input_in_one_line(tmp_path, clips, capsys, monkeypatch):
+    """A dead scheduler address is the user's input, not a bug: exit 2, one line naming it."""
+    pytest.importorskip("distributed", reason="the Dask scheduler needs dynatex[dask]")
+    import socket
+
+    import dynatex.analyzer.corpus as corpus
+
+    with socket.socket() as s:  # a port that was free a moment ago: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    monkeypatch.setattr(corpus, "SCHEDULER_TIMEOUT_S", 1)
+    address = f"tcp://127.0.0.1:{port}"
+    code, _, err = _run(capsys, "analyze", clips / "sea.npy", "-o", tmp_path / "dbs", "--scheduler", address)
+    assert code == 2, err
+    assert err.count("\n") == 1 and err.startswith(f"dynatex: error: cannot reach the Dask scheduler at {address}"), err
