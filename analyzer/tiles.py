@@ -48,8 +48,7 @@ Pipeline (each step is a public function, so it can be tested and reused):
    :func:`quilted_torus` quilts blocks of the looped clip onto a torus of at least 512
    pixels (and twice the clip, up to 768) per side (image quilting of spatio-temporal blocks, like the
    quilt mode, with the overlap bands wrapping around so the torus tiles the plane), and
-   :func:`torus_cells` cuts it into cells that the player lays out in torus order (beyond
-   the period, in random walks with jumps: :mod:`dynatex.player.torus`). Nothing repeats
+   :func:`torus_cells` cuts it into cells that the player lays out in torus order. Nothing repeats
    within the period; the cost is storage (the whole torus, so the loop is capped at 64
    frames by default). Every cut (here and in steps 5-7) is smoothed and
    cross-faded (:func:`path_alpha`): a minimum-error path drawn pixel by pixel shows
