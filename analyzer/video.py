@@ -19,6 +19,7 @@ import numpy as np
 
 from ..checks import MAX_SIDE, check_frames, check_int, check_size
 from ..errors import InvalidArgumentError
+from ..stale import remove_unheld
 from ..tiledb import SourceInfo
 from .errors import ClipError
 
@@ -280,33 +281,7 @@ def release_scratch(fd: int | None) -> None:
 def remove_stale_scratch(folder: str | None = None) -> list[str]:
     """Remove the decode folders and spill files that killed runs left in ``folder`` (default: the
     temporary folder): those named by :data:`SCRATCH_PATTERN` that no live run holds a lock on."""
-    if fcntl is None:
-        return []
-    folder = folder or tempfile.gettempdir()
-    removed = []
-    try:
-        entries = [e for e in os.scandir(folder) if SCRATCH_PATTERN.fullmatch(e.name)]
-    except OSError:
-        return []
-    for entry in entries:
-        try:
-            if entry.is_symlink():
-                continue
-            fd = os.open(entry.path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
-        except OSError:
-            continue
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            if entry.is_dir(follow_symlinks=False):
-                shutil.rmtree(entry.path)
-            else:
-                os.unlink(entry.path)
-            removed.append(entry.path)
-        except OSError:  # held by a live run, gone, or not ours to remove
-            pass
-        finally:
-            os.close(fd)
-    return removed
+    return remove_unheld(folder or tempfile.gettempdir(), SCRATCH_PATTERN, folders=True)
 
 
 @contextlib.contextmanager

@@ -36,6 +36,7 @@ import h5py
 import numpy as np
 
 from ..errors import InvalidArgumentError
+from ..stale import remove_unheld
 from . import frames as _frames
 from . import probe as _probe
 from . import schema
@@ -333,34 +334,8 @@ def remove_stale_temp_files(path: str | os.PathLike) -> list[str]:
     a writer keeps a shared ``flock`` on its file, so an exclusive one is granted on stale files
     alone. Returns the paths removed.
     """
-    if fcntl is None:
-        return []
     path = os.path.abspath(os.fspath(path))
-    folder = os.path.dirname(path)
-    pattern = temp_file_pattern(path)
-    removed = []
-    try:
-        entries = [e for e in os.scandir(folder) if pattern.fullmatch(e.name)]
-    except OSError:
-        return []
-    for entry in entries:
-        try:
-            if not entry.is_file(follow_symlinks=False):
-                continue
-            fd = os.open(entry.path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
-        except OSError:
-            continue
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            held, now = os.fstat(fd), os.lstat(entry.path)
-            if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
-                os.unlink(entry.path)
-                removed.append(entry.path)
-        except OSError:  # held by a live writer (BlockingIOError), gone, or not ours to remove
-            pass
-        finally:
-            os.close(fd)
-    return removed
+    return remove_unheld(os.path.dirname(path), temp_file_pattern(path))
 
 
 def _create_temp(path: str) -> tuple[str, int | None]:
