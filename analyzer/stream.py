@@ -26,12 +26,13 @@ from .video import (
     Progress,
     _crop_resize_color,
     _tuple4,
+    child_ignores_stops,
     hold_scratch,
-    join_child,
     load_npy,
     npy_header,
     release_scratch,
     remove_stale_scratch,
+    run_child,
 )
 
 _UNITS = {
@@ -371,8 +372,7 @@ def _spill_isolated(path, out, start, stop, step, crop, size, color):
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
     proc = ctx.Process(target=_spill_entry, args=(q, path, out, start, stop, step, crop, size, color), daemon=True)
-    proc.start()
-    join_child(proc)
+    run_child(proc)
     result = q.get(timeout=5) if not q.empty() else None
     if proc.exitcode == 0 and result is not None and result[0] == "ok":
         return result[1]
@@ -386,6 +386,7 @@ def _spill_isolated(path, out, start, stop, step, crop, size, color):
 
 
 def _spill_entry(q, *args) -> None:
+    child_ignores_stops()
     try:
         q.put(("ok", _spill(*args, None)))
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which re-raises it

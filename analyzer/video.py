@@ -10,7 +10,9 @@ import hashlib
 import os
 import re
 import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -309,8 +311,7 @@ def _decode_isolated(path: str, start: int, stop: int | None, step: int):
         out = os.path.join(tmp, "frames.npy")
         q = ctx.Queue()
         proc = ctx.Process(target=_isolated_entry, args=(q, path, start, stop, step, out), daemon=True)
-        proc.start()
-        join_child(proc)
+        run_child(proc)
         if proc.exitcode != 0:
             err = q.get(timeout=1) if not q.empty() else None
             if err is not None:
@@ -326,18 +327,47 @@ def _decode_isolated(path: str, start: int, stop: int | None, step: int):
     return frames, float(fps_s), digest
 
 
-def join_child(proc) -> None:
-    """Wait for a decoding child; when the wait is interrupted (Ctrl-C, SIGTERM) the child is killed
-    first, so that it writes nothing more into the scratch space about to be removed."""
+#: What a user sends to stop a run: held back while a child starts, ignored by the child itself.
+_STOPS = (signal.SIGINT, signal.SIGTERM)
+
+
+def run_child(proc) -> None:
+    """Start a decoding child and wait for it.
+
+    Ctrl-C and SIGTERM are held back while the child is handed its arguments (an interrupt in the
+    middle makes the child print a traceback on the half-read pipe) and take effect once it runs;
+    when they interrupt the wait, the child is killed first, so that it writes nothing more into
+    the scratch space about to be removed. The child ignores them (:func:`child_ignores_stops`):
+    the parent decides.
+    """
+    hold = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
     try:
+        if hold:
+            mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPS)
+            try:
+                proc.start()
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        else:
+            proc.start()
         proc.join()
     except BaseException:
-        proc.kill()
-        proc.join()
+        if proc.pid is not None:
+            proc.kill()
+            proc.join()
         raise
 
 
+def child_ignores_stops() -> None:
+    """In a child of :func:`run_child`: ignore Ctrl-C (the parent kills the child when it stops) and
+    take the signals the parent held back while starting it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOPS)
+
+
 def _isolated_entry(q, path, start, stop, step, out) -> None:
+    child_ignores_stops()
     try:
         _decode_worker(path, start, stop, step, out)
     except Exception as exc:  # reported to the parent, which re-raises it
