@@ -1,4 +1,4 @@
-"""Issue 5's "must show" quality figures for mode ``tiles`` (metrics from ``analyzer/metrics.py``).
+"""Issue 5's "must show" quality figures for mode ``tiles`` (metrics from ``analyzer/metrics/``).
 
 For each clip: analyze with ``--methods tiles``, play ``--frames`` frames at ``--size``, then
 

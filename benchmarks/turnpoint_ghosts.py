@@ -41,8 +41,10 @@ def _measures():
     try:
         from dynatex.analyzer.metrics import double_image, double_image_level
     except ImportError:  # an older installation: this checkout's measure, on that package
-        path = os.path.join(HERE, "..", "analyzer", "metrics.py")
-        spec = importlib.util.spec_from_file_location("dynatex.analyzer._ghost_metrics", path)
+        path = os.path.join(HERE, "..", "analyzer", "metrics", "__init__.py")
+        spec = importlib.util.spec_from_file_location(
+            "dynatex.analyzer._ghost_metrics", path, submodule_search_locations=[os.path.dirname(path)]
+        )
         mod = sys.modules[spec.name] = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
         double_image, double_image_level = mod.double_image, mod.double_image_level

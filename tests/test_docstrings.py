@@ -25,7 +25,7 @@ def _modules() -> list[str]:
     for package in PACKAGES:
         root = importlib.import_module(package)
         names.add(package)
-        names.update(info.name for info in pkgutil.iter_modules(root.__path__, package + "."))
+        names.update(info.name for info in pkgutil.walk_packages(root.__path__, package + "."))  # subpackages too
     return sorted(n for n in names if not n.endswith("__main__"))
 
 

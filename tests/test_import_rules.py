@@ -93,6 +93,8 @@ PACKAGE_DIRS = {
     "dynatex.commands": "dynatex/commands",
     "dynatex.tiledb": "tiledb",
     "dynatex.analyzer": "analyzer",
+    "dynatex.analyzer.metrics": "analyzer/metrics",
+    "dynatex.analyzer.tiles": "analyzer/tiles",
     "dynatex.player": "player",
 }
 #: Imports inside a package that close a cycle today (issue 31 untangles them): the test refuses

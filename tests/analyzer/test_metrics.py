@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import doctest
+import importlib
 import json
+import pkgutil
 
 import numpy as np
 import pytest
@@ -16,7 +18,14 @@ def _noise(t=12, h=16, w=16, c=3, seed=0):
 
 
 def test_doctests():
-    res = doctest.testmod(m, extraglobs={"np": np}, optionflags=doctest.NORMALIZE_WHITESPACE)
+    """The examples of every module of the package (one per family)."""
+    failed = attempted = 0
+    for info in pkgutil.iter_modules(m.__path__, m.__name__ + "."):
+        r = doctest.testmod(
+            importlib.import_module(info.name), extraglobs={"np": np}, optionflags=doctest.NORMALIZE_WHITESPACE
+        )
+        failed, attempted = failed + r.failed, attempted + r.attempted
+    res = doctest.TestResults(failed, attempted)
     assert res.attempted > 20
     assert res.failed == 0
 

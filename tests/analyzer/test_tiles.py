@@ -1,6 +1,6 @@
 """Tile analysis: period, loop, per-pixel transition, toroidal cuts, compatible tiles, mixing.
 
-Quality figures use analyzer/metrics.py (seam_visibility, temporal_discontinuity).
+Quality figures use analyzer/metrics/ (seam_visibility, temporal_discontinuity).
 """
 
 from __future__ import annotations

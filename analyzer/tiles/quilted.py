@@ -1,0 +1,360 @@
+"""The quilted construction (step 6c of :mod:`dynatex.analyzer.tiles`): one large torus quilted
+from blocks of the looped clip, cut into cells that the player lays out in torus order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ...checks import check_int
+from ...errors import InvalidArgumentError
+from ...tiledb.tiles import TilesModel
+from ..quilt import block_errors, min_cut_path
+from ..video import Progress
+from .cuts import path_alpha
+from .loop import Texture, even_sample, find_loop, transition_map
+from .stats import colour_stats, median_step, stationarity_info
+
+# -- 6c. quilted torus ------------------------------------------------------------------------------
+QUILT_MAX_RUN = 3  # blocks at most taken from one continuous piece of the clip, per direction
+QUILT_MIN_PERIOD = 512  # the torus is at least this large (and twice the clip) in each direction
+QUILT_MAX_PERIOD = 768  # ... but twice the clip only up to this
+QUILT_MAX_LOOP = 64  # default longest loop of the quilted construction (the torus is stored whole)
+_QUILT_FEATURE_FRAMES = 12
+_QUILT_COMPONENTS = 8
+
+
+def quilt_geometry(
+    h: int, w: int, *, block: int | None = None, period: Sequence[int] | None = None
+) -> tuple[int, int, tuple[int, int], tuple[int, int]]:
+    """``(block, step, cell, period)`` of the quilted torus for an ``h x w`` clip.
+
+    Blocks of ``block`` pixels (default a third of the shorter side rounded to 8, in 16..128) overlap
+    by a quarter (``step = block - block // 4``); cells (the player's lattice, the stored
+    tiles) are the fewest steps at least 64 pixels wide, so a 64-pixel run of the gather
+    touches at most two cells; the period ``(py, px)`` is whole cells, at least 512 pixels
+    (four clip sides for a clip under 128 pixels) and twice the clip up to 768 pixels in
+    each direction (the torus is stored whole: 768 x 768 x 64 frames is 113 MB) (or
+    ``period``, rounded up to whole cells).
+    """
+    if block is None:
+        block = int(np.clip(round(min(h, w) / 3 / 8) * 8, 16, 128))
+    block = check_int("block", block, 8)
+    if block + 2 > min(h, w):
+        raise InvalidArgumentError(f"quilt block {block} (plus 2) is larger than the clip frame {h}x{w}")
+    step = block - block // 4
+    cell = step * -(-64 // step)
+    if period is None:
+        want = (
+            max(min(QUILT_MIN_PERIOD, 4 * h), min(2 * h, QUILT_MAX_PERIOD)),
+            max(min(QUILT_MIN_PERIOD, 4 * w), min(2 * w, QUILT_MAX_PERIOD)),
+        )
+    else:
+        try:
+            want = tuple(int(v) for v in period)
+        except (TypeError, ValueError):
+            raise InvalidArgumentError(f"period must be (height, width), not {period!r}") from None
+        if len(want) != 2 or min(want) < 2 * cell:
+            raise InvalidArgumentError(f"period must be two sides of at least {2 * cell} pixels, not {period!r}")
+    py, px = (cell * -(-v // cell) for v in want)
+    return block, step, (cell, cell), (py, px)
+
+
+def _block_alpha(err: np.ndarray, side: str, margin: int, fade: float) -> np.ndarray:
+    """Share ``(B, B)`` of the new block across the minimum cut through the overlap band along
+    ``side`` (``err``: the band's per-pixel error, across x for left/right): the cut, kept
+    ``margin`` pixels from both edges of the band, smoothed (:func:`smooth_path`), and a
+    cross-fade ``fade`` pixels wide centred on it (1 on the new block's side)."""
+
+    err = np.array(err if side in ("left", "right") else err.T, np.float64)  # rows along the cut
+    b, o = err.shape
+    lo, hi = margin, max(margin + 1, o - margin)
+    err[:, :lo], err[:, hi:] = 1e30, 1e30
+    cut = min_cut_path(err)
+    if side in ("left", "top"):  # the band's first pixel past the cut starts the new block
+        alpha = 1.0 - path_alpha(cut, b, fade=fade, lo=lo, hi=hi)
+    else:  # the band sits at the far edge: the new block is before the cut
+        alpha = path_alpha(b - o + cut + 1, b, fade=fade, lo=b - o + lo, hi=b - o + hi)
+    return alpha if side in ("left", "right") else alpha.T
+
+
+QUILT_REUSE = 4
+
+
+def _reuse_order(i: int, j: int, nby: int, nbx: int) -> list[tuple[int, int]]:
+    """Blocks placed before ``(i, j)`` within :data:`QUILT_REUSE` blocks of it on the torus,
+    nearest first."""
+    near = []
+    for di in range(-QUILT_REUSE, QUILT_REUSE + 1):
+        for dj in range(-QUILT_REUSE, QUILT_REUSE + 1):
+            if di == dj == 0:
+                continue
+            ni, nj = (i + di) % nby, (j + dj) % nbx
+            near.append((di * di + dj * dj, ni, nj))
+    seen, out = set(), []
+    for _, ni, nj in sorted(near):
+        if (ni, nj) not in seen and (ni, nj) != (i, j):
+            seen.add((ni, nj))
+            out.append((ni, nj))
+    return out
+
+
+def quilted_torus(
+    tx: Texture,
+    *,
+    block: int | None = None,
+    period: Sequence[int] | None = None,
+    feather: int | None = None,
+    tolerance: float = 0.2,
+    seed: int = 0,
+    step_done=None,
+) -> tuple[np.ndarray, dict]:
+    """A large toroidal texture quilted from spatio-temporal blocks of the looped clip.
+
+    Blocks of ``B x B`` pixels carried through the whole loop are placed on a torus
+    ``(py, px)`` in raster order (image quilting, Efros & Freeman, of cuboids as in the quilt
+    mode): each is the clip place whose sampled loop frames best match what the torus already
+    holds in its overlap bands (left and top; the last column also its right band, which wraps
+    onto the first column, the last row its bottom band), picked at random among those within
+    ``tolerance`` of the best. A block may continue its left or top neighbour's piece of clip
+    for at most :data:`QUILT_MAX_RUN` blocks, so the torus is never a tiling of whole clip
+    frames. Each band ends at a minimum-error cut (summed over the loop) and the two sides
+    cross-fade over ``feather`` pixels either side of the smoothed cut (:func:`path_alpha`;
+    default a quarter of the overlap; the cut keeps that far from the band's edges). Since the bands wrap, the torus is
+    seamless in x and y; each block loops seamlessly in t like the clip's loop.
+
+    Returns ``(torus (L, py, px, 3) uint8, info)``.
+    """
+
+    f = tx.frames
+    h, w = f.shape[1:3]
+    b, step, _, (py, px) = quilt_geometry(h, w, block=block, period=period)
+    o = b - step
+    fe = max(1, o // 4) if feather is None else check_int("feather", feather, 0)
+    fe = min(fe, (o - 1) // 2)
+    nby, nbx = py // step, px // step
+    length = tx.length
+    rng = np.random.default_rng(seed)
+    u_feat = even_sample(length, _QUILT_FEATURE_FRAMES)
+    u_cut = even_sample(length, 16)
+    loop_feat = tx.block(0, 0, h, w, u_feat).astype(np.float32)  # (n, h, w, 3)
+    feat = loop_feat.transpose(1, 2, 0, 3).reshape(h * w, -1)
+    # the comparisons run on the leading principal components of the sampled frames (a third
+    # of the channels: matchTemplate's time is proportional to them)
+    mean = feat.mean(axis=0)
+    _, _, vt = np.linalg.svd(np.cov((feat - mean)[::7].T).astype(np.float64))
+    basis = vt[:_QUILT_COMPONENTS].T.astype(np.float32)
+    features = np.ascontiguousarray(((feat - mean) @ basis).reshape(h, w, -1))
+    torus = np.zeros((length, py, px, 3), np.uint8)
+    src = np.full((nby, nbx, 2), -(10**6), np.int64)
+    run_x = np.zeros((nby, nbx), np.int64)
+    run_y = np.zeros((nby, nbx), np.int64)
+    costs = []
+    r_ex = max(1, step // 2)
+    src[:] = -1
+    for i in range(nby):
+        for j in range(nbx):
+            rows = (i * step + np.arange(b)) % py
+            cols = (j * step + np.arange(b)) % px
+            sides = [
+                s
+                for s, on in (
+                    ("left", j > 0),
+                    ("top", i > 0),
+                    ("right", j == nbx - 1 and nbx > 1),
+                    ("bottom", i == nby - 1 and nby > 1),
+                )
+                if on
+            ]
+            mask = np.zeros((b, b), bool)
+            for s in sides:
+                mask[
+                    {
+                        "left": (slice(None), slice(0, o)),
+                        "right": (slice(None), slice(b - o, b)),
+                        "top": (slice(0, o), slice(None)),
+                        "bottom": (slice(b - o, b), slice(None)),
+                    }[s]
+                ] = True
+            if not sides:
+                y0, x0 = int(rng.integers(0, h - b + 1)), int(rng.integers(0, w - b + 1))
+                torus[:, rows[:, None], cols[None, :]] = tx.block(y0, x0, b, b)
+                src[i, j] = (y0, x0)
+                if step_done:
+                    step_done()
+                continue
+            old_feat = torus[u_feat[:, None, None], rows[None, :, None], cols[None, None, :]].astype(np.float32)
+            template = np.ascontiguousarray(
+                ((old_feat.transpose(1, 2, 0, 3).reshape(b * b, -1) - mean) @ basis).reshape(b, b, -1)
+            )
+            e = block_errors(features, template, mask).astype(np.float64)
+            # no piece of clip again within QUILT_REUSE blocks (on the torus), nearest first, as
+            # long as a tenth of the places stay open (a motif repeated at a few blocks' lag
+            # is a lattice of its own)
+            keep_open = max(1, e.size // 10)
+            for ni, nj in _reuse_order(i, j, nby, nbx):
+                cy, cx = src[ni, nj]
+                if cy < 0:
+                    continue
+                ys, xs = (
+                    slice(max(0, cy - r_ex), max(0, cy + r_ex + 1)),
+                    slice(max(0, cx - r_ex), max(0, cx + r_ex + 1)),
+                )
+                open_here = int(np.isfinite(e[ys, xs]).sum())
+                if int(np.isfinite(e).sum()) - open_here < keep_open:
+                    break
+                e[ys, xs] = np.inf
+            # a piece of clip continued for QUILT_MAX_RUN blocks ends here
+            for (ni, nj), run, (dy, dx) in ((((i, j - 1), run_x, (0, step))), (((i - 1, j), run_y, (step, 0)))):
+                if ni >= 0 and nj >= 0 and run[ni, nj] >= QUILT_MAX_RUN - 1:
+                    cy, cx = src[ni, nj] + (dy, dx)
+                    e[max(0, cy - r_ex) : max(0, cy + r_ex + 1), max(0, cx - r_ex) : max(0, cx + r_ex + 1)] = np.inf
+            if not np.isfinite(e).any():  # a tiny clip: every place is excluded
+                e = block_errors(features, template, mask).astype(np.float64)
+            best = float(e.min())
+            cand = np.flatnonzero(e.ravel() <= best * (1.0 + tolerance) + 1e-6 * (1.0 + best))
+            if cand.size > 8:
+                cand = cand[np.argsort(e.ravel()[cand], kind="stable")[:8]]
+            y0, x0 = (int(v) for v in np.unravel_index(int(cand[rng.integers(0, cand.size)]), e.shape))
+            new = tx.block(y0, x0, b, b)
+            old = torus[:, rows[:, None], cols[None, :]]
+            d = new[u_cut].astype(np.float32) - old[u_cut].astype(np.float32)
+            perr = (d * d).sum(axis=(0, 3)) / len(u_cut)
+            band = {"left": perr[:, :o], "right": perr[:, b - o :], "top": perr[:o, :], "bottom": perr[b - o :, :]}
+            alpha = np.ones((b, b))
+            for s in sides:
+                alpha = np.minimum(alpha, _block_alpha(band[s], s, fe + 1, 2.0 * fe + 1.0))
+            keep = alpha >= 0.5
+            costs.append(float(perr[mask & keep].mean()) if (mask & keep).any() else 0.0)
+            a = alpha.astype(np.float32)[None, :, :, None]
+            torus[:, rows[:, None], cols[None, :]] = np.rint(a * new + (1 - a) * old).astype(np.uint8)
+            src[i, j] = (y0, x0)
+            if j > 0 and (y0, x0) == tuple(src[i, j - 1] + (0, step)):
+                run_x[i, j] = run_x[i, j - 1] + 1
+            if i > 0 and (y0, x0) == tuple(src[i - 1, j] + (step, 0)):
+                run_y[i, j] = run_y[i - 1, j] + 1
+            if step_done:
+                step_done()
+    info = {
+        "quilt_block": b,
+        "quilt_step": step,
+        "quilt_feather": fe,
+        "period_h": py,
+        "period_w": px,
+        "quilt_seam_cost": float(np.mean(costs)) if costs else 0.0,
+    }
+    return torus, info
+
+
+def torus_cells(torus: np.ndarray, cell: Sequence[int]) -> np.ndarray:
+    """The torus cut into cells, row-major: ``(m n, L, ch, cw, 3)`` for an ``(L, m ch, n cw, 3)`` torus."""
+    length, py, px, c = torus.shape
+    ch, cw = cell
+    m, n = py // ch, px // cw
+    return np.ascontiguousarray(
+        torus.reshape(length, m, ch, n, cw, c).transpose(1, 3, 0, 2, 4, 5).reshape(m * n, length, ch, cw, c)
+    )
+
+
+def learn_quilted(
+    main: np.ndarray,
+    names: list[str],
+    *,
+    tile,
+    min_loop: int,
+    max_loop: int | None,
+    transition: int,
+    period,
+    seed: int,
+    progress: Progress | None,
+) -> TilesModel:
+    """The quilted construction of :func:`learn_tiles` (one texture)."""
+    min_loop = check_int("min_loop", min_loop, 2)
+    transition = check_int("transition", transition, 1)
+    max_loop = max(min_loop, QUILT_MAX_LOOP) if max_loop is None else check_int("max_loop", max_loop, min_loop)
+    if transition >= min_loop:
+        raise InvalidArgumentError(f"transition ({transition}) must be smaller than min_loop ({min_loop})")
+    seed = check_int("seed", seed, 0)
+    block = None
+    if tile is not None:
+        if not isinstance(tile, (int, np.integer)) or isinstance(tile, bool):
+            raise InvalidArgumentError(
+                f"tile must be an integer (the quilt block size of construction 'quilted'), not {tile!r}"
+            )
+        block = int(tile)
+    t, h, w = main.shape[:3]
+    b, step, cell, (py, px) = quilt_geometry(h, w, block=block, period=period)
+    total = 4 + (py // step) * (px // step)
+    done = 0
+
+    def step_done(k: int = 1) -> None:
+        nonlocal done
+        done += k
+        if progress is not None:
+            progress(min(done, total), total)
+
+    start, length, loop_cost = find_loop(main, min_loop=min_loop, max_loop=max_loop, transition=transition)
+    tx = Texture(
+        main,
+        start,
+        length,
+        loop_cost,
+        transition_map(main, start, length, transition),
+        np.zeros(main.shape[1:3], np.float32),
+    )
+    step_done(2)
+    torus, qinfo = quilted_torus(tx, block=b, period=(py, px), seed=seed, step_done=step_done)
+    # cells start half a step into the blocks, away from the quilt's overlap bands: a cell
+    # border is then plain clip content
+    half = step // 2
+    qinfo["cell_offset"] = half
+    tiles = torus_cells(np.roll(torus, (-half, -half), axis=(1, 2)), cell)
+    del torus
+    k = len(tiles)
+    stats = [colour_stats(tl) for tl in tiles]
+    step_done()
+    ch, cw = cell
+    model = TilesModel(
+        tiles=tiles,
+        tile_class=np.zeros(k, np.int32),
+        ring_class=np.zeros(k, np.int32),
+        masks=np.full((k, ch, cw), 255, np.uint8),
+        border_side=np.full(k, -1, np.int8),
+        seam_cost=np.zeros(k),
+        mean_rgb=np.array([st[0] for st in stats]),
+        mean_hsv=np.array([st[1] for st in stats]),
+        class_names=names,
+        class_loop_start=np.array([start], np.int64),
+        class_loop_cost=np.array([loop_cost]),
+        class_toroid_cost=np.zeros((1, 2)),
+        info={
+            "construction": "quilted",
+            **stationarity_info(main),
+            "torus_rows": py // ch,
+            "torus_cols": px // cw,
+            **qinfo,
+            "quilt_seed": seed,
+            "tile_h": ch,
+            "tile_w": cw,
+            "loop_length": length,
+            "transition": transition,
+            "overlap_y": b - step,
+            "overlap_x": b - step,
+            "ring": 0,
+            "feather": 0,
+            "border_depth": 0,
+            "ring_feather": 0,
+            "period_y": 0.0,
+            "period_x": 0.0,
+            "periodicity": 0.0,
+            "mean_flow": 0.0,
+            "flow_gain": 0.0,
+            "source_frames": t,
+            "n_classes": 1,
+            "median_frame_step": median_step(main),
+        },
+    )
+    step_done(total)
+    return model
