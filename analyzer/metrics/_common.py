@@ -1,4 +1,4 @@
-"""What the metric families share: option checks, float chunks, luma, downscaling, frame steps."""
+"""What the metric families share: option checks, luma, downscaling, the reference frame step."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import numpy as np
 
 from ...checks import Range, check_int
 from ...errors import ArgumentTypeError, InvalidArgumentError
+from ..framestats import float_chunks, median_step
 
 LUMA = np.array([0.299, 0.587, 0.114], np.float32)
-CHUNK = 32  # frames converted to float at a time (bounds memory on long clips)
 THUMB = 32  # longer side of the thumbnails used by coverage and repetition
 
 
@@ -35,12 +35,6 @@ def same_size(a: np.ndarray, b: np.ndarray, what: str) -> None:
             f"{what} needs output and source of the same frame size; output is "
             f"{a.shape[2]}x{a.shape[1]}, source {b.shape[2]}x{b.shape[1]}"
         )
-
-
-def float_chunks(frames: np.ndarray, start: int = 0, stop: int | None = None):
-    stop = frames.shape[0] if stop is None else stop
-    for i in range(start, stop, CHUNK):
-        yield i, frames[i : min(i + CHUNK, stop)].astype(np.float32)
 
 
 def luma(frames: np.ndarray, factor: int = 1, size: tuple[int, int] | None = None) -> np.ndarray:
@@ -73,26 +67,10 @@ def thumb_size(shape: tuple[int, ...]) -> tuple[int, int]:
     return max(1, round(h * s)), max(1, round(w * s))
 
 
-def step_rms(frames: np.ndarray) -> np.ndarray:
-    """RMS difference (grey levels, over pixels and channels) between consecutive frames, ``(T-1,)``."""
-    t = frames.shape[0]
-    out = np.empty(max(t - 1, 0), np.float64)
-    prev = None
-    for i, chunk in float_chunks(frames):
-        if prev is not None:
-            chunk = np.concatenate([prev, chunk])
-            first = i - 1
-        else:
-            first = i
-        d = np.diff(chunk, axis=0).reshape(chunk.shape[0] - 1, -1)
-        out[first : first + len(d)] = np.sqrt(np.einsum("ij,ij->i", d, d, dtype=np.float64) / d.shape[1])
-        prev = chunk[-1:]
-    return out
-
-
-def median_step(frames: np.ndarray, name: str) -> float:
-    steps = step_rms(frames)
-    ref = float(np.median(steps))
+def reference_step(frames: np.ndarray, name: str) -> float:
+    """The typical frame step of ``frames`` (:func:`~dynatex.analyzer.framestats.median_step`), which
+    measures divide by: an error naming ``name`` when it is 0 (the clip is still)."""
+    ref = median_step(frames)
     if ref <= 0:
         raise InvalidArgumentError(f"{name} does not change from frame to frame (median frame difference is 0)")
     return ref

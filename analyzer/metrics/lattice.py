@@ -8,7 +8,8 @@ import numpy as np
 
 from ...checks import check_frames, check_int
 from ...errors import InvalidArgumentError
-from ._common import float_chunks, int_pair, luma
+from ..framestats import float_chunks
+from ._common import int_pair, luma
 
 
 def lattice_correlation(frames: np.ndarray, period: int | Sequence[int]) -> tuple[float, float]:

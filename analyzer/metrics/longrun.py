@@ -10,7 +10,8 @@ import numpy as np
 
 from ...checks import check_frames, check_int
 from ...errors import ArgumentTypeError, InvalidArgumentError
-from ._common import CHUNK, float_chunks, json_float
+from ..framestats import CHUNK, float_chunks
+from ._common import json_float
 
 
 def count_nonfinite(frames: Any) -> int:

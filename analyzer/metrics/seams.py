@@ -12,7 +12,8 @@ import numpy as np
 
 from ...checks import check_frames
 from ...errors import ArgumentTypeError, InvalidArgumentError
-from ._common import POSITIVE, float_chunks, int_pair, median_step, step_rms
+from ..framestats import float_chunks, step_rms
+from ._common import POSITIVE, int_pair, reference_step
 
 
 # -- seam visibility ----------------------------------------------------------------------
@@ -169,7 +170,7 @@ def temporal_discontinuity(
     """
     output = check_frames(output, name="output", min_frames=2)
     ev = _events(events, output.shape[0])
-    ref = median_step(
+    ref = reference_step(
         output if source is None else check_frames(source, name="source", min_frames=2),
         "output" if source is None else "source",
     )
@@ -214,4 +215,4 @@ def frame_step_ratio(output: np.ndarray, source: np.ndarray) -> float:
     """
     output = check_frames(output, name="output", min_frames=2)
     source = check_frames(source, name="source", min_frames=2)
-    return float(np.median(step_rms(output))) / median_step(source, "source")
+    return float(np.median(step_rms(output))) / reference_step(source, "source")

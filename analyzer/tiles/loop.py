@@ -17,6 +17,7 @@ DEFAULT_MAX_TILE = 256
 
 SAMPLE_FRAMES = 48  # loop frames summed in the cut errors (evenly spread)
 PRE_FRAMES = 12  # loop frames used to rank candidate positions
+STEP_PAIRS = 64  # frame pairs in the stored median frame step (its cost does not grow with the clip)
 
 
 # -- 1. tile size ------------------------------------------------------------------------------

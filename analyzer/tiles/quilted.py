@@ -11,11 +11,12 @@ import numpy as np
 from ...checks import check_int
 from ...errors import InvalidArgumentError
 from ...tiledb.tiles import TilesModel
+from ..framestats import median_step
 from ..quilt import block_errors, min_cut_path
 from ..video import Progress
 from .cuts import path_alpha
-from .loop import Texture, even_sample, find_loop, transition_map
-from .stats import colour_stats, median_step, stationarity_info
+from .loop import STEP_PAIRS, Texture, even_sample, find_loop, transition_map
+from .stats import colour_stats, stationarity_info
 
 # -- 6c. quilted torus ------------------------------------------------------------------------------
 QUILT_MAX_RUN = 3  # blocks at most taken from one continuous piece of the clip, per direction
@@ -353,7 +354,7 @@ def learn_quilted(
             "flow_gain": 0.0,
             "source_frames": t,
             "n_classes": 1,
-            "median_frame_step": median_step(main),
+            "median_frame_step": median_step(main, pairs=STEP_PAIRS),
         },
     )
     step_done(total)

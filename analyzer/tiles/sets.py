@@ -12,11 +12,12 @@ import numpy as np
 from ...checks import check_int
 from ...errors import InvalidArgumentError
 from ...tiledb.tiles import TilesModel
+from ..framestats import median_step
 from ..video import Progress
 from .cuts import primary_tile
-from .loop import Texture, find_loop, flow_magnitude, tile_period, transition_map
+from .loop import STEP_PAIRS, Texture, find_loop, flow_magnitude, tile_period, transition_map
 from .ring import SIDES, ring_feather, ring_tiles, side_join
-from .stats import colour_stats, median_step, stationarity_info
+from .stats import colour_stats, stationarity_info
 from .wang import wang_set
 
 
@@ -103,7 +104,7 @@ def learn_set(
             "flow_gain": float(flow_gain),
             "source_frames": main.shape[0],
             "n_classes": len(textures),
-            "median_frame_step": median_step(main),
+            "median_frame_step": median_step(main, pairs=STEP_PAIRS),
         },
     )
     step(total)

@@ -81,10 +81,3 @@ def colour_stats(tile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def stationarity_info(frames: np.ndarray) -> dict:
     figure, details = stationarity(frames)
     return {"stationarity": figure, "stationarity_worst": details["worst"]}
-
-
-def median_step(frames: np.ndarray) -> float:
-    n = min(frames.shape[0] - 1, 64)
-    idx = np.linspace(0, frames.shape[0] - 2, n).round().astype(int)
-    d = frames[idx + 1].astype(np.float32) - frames[idx].astype(np.float32)
-    return float(np.median(np.sqrt((d * d).mean(axis=(1, 2, 3)))))
