@@ -29,6 +29,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..checks import check_seed
 from ..tiledb.detail import MAX_GAIN, DetailModel
 from .metrics import colour_set
 
@@ -75,6 +76,7 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     >>> d.volume.shape, d.volume.dtype.name, bool((d.low <= d.high).all())
     ((10, 16, 16, 3), 'int8', True)
     """
+    seed = check_seed("seed", seed)
     t, h, w, c = frames.shape
     tv, hv, wv = volume_shape(t, h, w)
 

@@ -25,11 +25,11 @@ from ..checks import check_int
 from ..errors import InvalidArgumentError
 from ..tiledb import LDSModel
 from .detail import learn_detail
+from .methods import check_params
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
 from .video import Clip, Progress, clip_frames
 
-SVD_METHODS = ("auto", "gram", "randomized")
 DEFAULT_N = 50
 DEFAULT_MAX_RADIUS = 0.995
 #: Default bound of an out-of-core learn when none is given.
@@ -101,17 +101,11 @@ def learn_lds(
     tau = clip.n_frames if streamed else frames.shape[0]
     if tau < 3:
         raise InvalidArgumentError(f"clip has {tau} frames; learning an LDS needs at least 3")
-    if svd not in SVD_METHODS:
-        raise InvalidArgumentError(f"svd must be one of {SVD_METHODS}, not {svd!r}")
-    if not 0 < energy <= 1:
-        raise InvalidArgumentError(f"energy must be in (0, 1], not {energy!r}")
-    if not 0 < max_radius < 1:
-        raise InvalidArgumentError(f"max_radius must be in (0, 1), not {max_radius!r}")
-    auto = isinstance(n, str)
-    if auto and n != "auto":
-        raise InvalidArgumentError(f"n must be a positive integer or 'auto', not {n!r}")
+    n, k, energy, svd, max_radius, calibrate, seed = check_params(
+        "lds", n=n, k=k, energy=energy, svd=svd, max_radius=max_radius, calibrate=calibrate, seed=seed
+    )
+    auto = n == "auto"
     if not auto:
-        n = check_int("n", n, 1, rule="a positive integer or 'auto'")
         if n > tau - 1:
             raise InvalidArgumentError(f"n={n} is larger than the clip allows: it has {tau} frames, so n <= {tau - 1}")
     step = _stepper(progress, 5)

@@ -5,7 +5,10 @@ model the tile database stores under the method's group, whether the method play
 the stored source frames, and the parameters it takes (:class:`~dynatex.params.Param`:
 keyword, rule, default, what it does, command-line option). ``dynatex analyze`` builds its
 per-method options and the keyword arguments of each learn function from these
-declarations, so a new parameter is declared here and nowhere else.
+declarations, so a new parameter is declared here and nowhere else. A parameter the command
+line does not offer (``flag=None``) is declared too: every learn function checks its arguments
+by these rules (:func:`check_params`), and checks by hand only bounds that depend on the data
+(a block no larger than the frame) or on another parameter (``k <= n``).
 
 A parameter whose kind is :class:`Clips` takes more clips (the tiles' ``mix``): paths are
 decoded by :func:`~dynatex.analyzer.corpus.learn_into` with the main clip's options.
@@ -73,6 +76,9 @@ class Names(Kind):
 _COUNT = Range(int, 1, MAX_COUNT)
 _SIDE_OR_SIZE = Either(Range(int, 1, MAX_SIDE), Size(MAX_SIDE), metavar="N or WxH")
 _OPEN_UNIT = Range(float, 0.0, 1.0, low_open=True)
+_SEED = Range(int, 0, MAX_SEED)
+#: largest pole magnitude of a projection model's dynamics
+_MAX_RADIUS = Range(float, 0.0, 1.0, low_open=True, high_open=True)
 
 
 def _count(name: str, default: Any, doc: str, flag: str = "", **kw: Any) -> Param:
@@ -95,12 +101,9 @@ LDS_PARAMS = (
         "auto",
         "SVD of the frames: gram (exact), randomized (long clips), auto (gram up to 1500 frames).",
     ),
-    Param(
-        "max_radius",
-        Range(float, 0.0, 1.0, low_open=True, high_open=True),
-        0.995,
-        "Largest pole magnitude.",
-    ),
+    Param("max_radius", _MAX_RADIUS, 0.995, "Largest pole magnitude."),
+    Param("calibrate", Flag(), True, "Scale the noise so that the states keep the training variance.", None),
+    Param("seed", _SEED, 0, "Seed of the randomized SVD and of the detail's phases.", None),
 )
 
 TURNPOINT_PARAMS = (
@@ -123,6 +126,16 @@ TURNPOINT_PARAMS = (
         "level (0: keep them).",
         "--tp-max-ghost",
     ),
+    # Python only
+    _count("min_pairs", 2, "Fewest mirrored pairs a frame near the clip's ends needs, at most n.", None),
+    Param("feature_size", Range(int, 4, MAX_SIDE), 64, "Longer side of the frames compared.", None),
+    _count("taps", 2, "Half-length of the diagonal filter of the transition costs.", None),
+    Param("p", Range(float, 0.0, 10.0, low_open=True), 2.0, "Exponent on the filtered cost.", None),
+    Param("alpha", Range(float, 0.0, 1.0, low_open=True, high_open=True), 0.999, "Future-cost discount.", None),
+    Param("sigma", Range(float, 0.0, 100.0, low_open=True), 0.1, "Probability scale of the costs.", None),
+    _count("min_gap", 6, "Transitions to within this many frames of the successor are dropped.", None),
+    Param("min_prob", Range(float, 0.0, 1.0, high_open=True), 0.02, "Least probability per visit kept.", None),
+    _count("max_per_frame", 3, "Most transitions kept per source frame.", None),
 )
 
 MIXTURE_PARAMS = (
@@ -139,12 +152,17 @@ MIXTURE_PARAMS = (
         optional=True,
         default_doc="5, or less when the clip is short",
     ),
+    # Python only
+    Param("max_radius", _MAX_RADIUS, 0.995, "Largest pole magnitude of the AR dynamics.", None),
+    _count("max_iter", 200, "Most EM iterations.", None),
+    Param("tol", Range(float, 0.0, 1.0, low_open=True, high_open=True), 1e-6, "EM stops below this gain.", None),
+    Param("seed", _SEED, 0, "Seed of the EM initialisation and the randomized SVD.", None),
 )
 
 TILES_PARAMS = (
     Param(
         "tile",
-        _SIDE_OR_SIZE,
+        Either(Range(int, 8, MAX_SIDE), Size(MAX_SIDE, 8), metavar="N or WxH"),
         None,
         "Tile size in pixels; with the quilted construction the quilt block size N.",
         optional=True,
@@ -216,6 +234,28 @@ TILES_PARAMS = (
         optional=True,
         default_doc="main,mix1,...",
     ),
+    # Python only
+    Param("min_tile", Range(int, 8, MAX_SIDE), 32, "Smallest tile side taken from the spatial period.", None),
+    Param("max_tile", Range(int, 8, MAX_SIDE), 256, "Largest tile side taken from the spatial period.", None),
+    Param(
+        "overlap",
+        Range(int, 2, MAX_SIDE),
+        None,
+        "Width of the toroidal overlap bands.",
+        None,
+        optional=True,
+        default_doc="tile/4 plus twice the mean flow",
+    ),
+    Param(
+        "feather",
+        Range(int, 0, MAX_SIDE),
+        None,
+        "Border tiles fade the other texture's strip over this many pixels past the cut.",
+        None,
+        optional=True,
+        default_doc="max(ring, tile/5)",
+    ),
+    Param("seed", _SEED, 0, "Seed of the quilted construction's random picks.", None),
 )
 
 QUILT_PARAMS = (
@@ -230,13 +270,27 @@ QUILT_PARAMS = (
     ),
     Param(
         "block",
-        _SIDE_OR_SIZE,
+        Either(Range(int, 2, MAX_SIDE), Size(MAX_SIDE, 2), metavar="N or WxH"),
         28,
         "Block size; elongated blocks (e.g. 16x64) suit stretching features.",
         "--quilt-block",
     ),
-    _count("overlap", None, "Block overlap.", "--quilt-overlap", optional=True, default_doc="5/16 of the block"),
-    _count("rank", 15, "SVD rank of the block comparisons.", "--quilt-rank"),
+    Param(
+        "overlap",
+        _SIDE_OR_SIZE,
+        None,
+        "Block overlap.",
+        "--quilt-overlap",
+        optional=True,
+        default_doc="5/16 of the block",
+    ),
+    _count(
+        "rank",
+        15,
+        "SVD rank of the block comparisons (None in Python: full time sequences).",
+        "--quilt-rank",
+        optional=True,
+    ),
     Param(
         "tolerance",
         Range(float, 0.0, 1e6),
@@ -270,7 +324,8 @@ QUILT_PARAMS = (
         "With --quilt-lowpass: keep the source's low-frequency gradient instead of flattening it.",
         "--quilt-restore-gradient",
     ),
-    Param("seed", Range(int, 0, MAX_SEED), 0, "Seed of the random block choices.", "--quilt-seed"),
+    Param("seed", _SEED, 0, "Seed of the random block choices.", "--quilt-seed"),
+    Param("balance", Flag(), False, "Weight each frame by its own contrast in the comparisons and cuts.", None),
 )
 
 
@@ -337,6 +392,26 @@ METHODS: dict[str, Method] = {
         QUILT_PARAMS,
     ),
 }
+
+
+def check_params(method: str, **values: Any) -> tuple[Any, ...]:
+    """``values`` (keyword arguments of ``method``'s learn function), each checked and normalized by
+    its declared rule (:meth:`~dynatex.params.Param.check`), in the order given.
+
+    The one check of a method parameter: the command line parses by the same declarations, and
+    every learn function calls this first. An error is one line naming the parameter.
+
+    Examples
+    --------
+    >>> check_params("tiles", n_tiles=3, flow_gain=1)
+    (3, 1.0)
+    >>> check_params("tiles", edge_colours=5)
+    Traceback (most recent call last):
+    ...
+    dynatex.errors.InvalidArgumentError: edge_colours must be an integer in 2..4, not 5
+    """
+    m = get_method(method)
+    return tuple(m.param(name).check(value) for name, value in values.items())
 
 
 #: ``--methods auto``: the methods that can suit the clip, ranked by playing them (:mod:`.auto`)

@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..checks import check_int
 from ..errors import InvalidArgumentError
 from ..tiledb import MixtureModel
 from ..tiledb.mixture import companion_radius
 from .detail import learn_detail
 from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
+from .methods import check_params
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
 from .video import Clip, Progress, clip_frames
@@ -103,17 +103,20 @@ def learn_mixture(
     streamed = isinstance(clip, DiskClip)
     frames = None if streamed else clip_frames(clip)
     tau = clip.n_frames if streamed else frames.shape[0]
-    components = check_int("components", components, 1)
-    dim = check_int("dim", dim, 1)
-    pca_dim = check_int("pca_dim", pca_dim, 1)
-    neighbors = check_int("neighbors", neighbors, 1)
-    max_iter = check_int("max_iter", max_iter, 1)
-    seed = check_int("seed", seed, 0)
-    global_dim = dim if global_dim is None else check_int("global_dim", global_dim, 1)
-    if not 0 < max_radius < 1:
-        raise InvalidArgumentError(f"max_radius must be in (0, 1), not {max_radius!r}")
-    if not 0 < tol < 1:
-        raise InvalidArgumentError(f"tol must be in (0, 1), not {tol!r}")
+    components, dim, global_dim, pca_dim, neighbors, pmax, max_radius, max_iter, tol, seed = check_params(
+        "mixture",
+        components=components,
+        dim=dim,
+        global_dim=global_dim,
+        pca_dim=pca_dim,
+        neighbors=neighbors,
+        pmax=pmax,
+        max_radius=max_radius,
+        max_iter=max_iter,
+        tol=tol,
+        seed=seed,
+    )
+    global_dim = dim if global_dim is None else global_dim
     if tau < 4:
         raise InvalidArgumentError(f"clip has {tau} frames; a subspace mixture needs at least 4")
     if components * (dim + 1) >= tau:
@@ -132,7 +135,6 @@ def learn_mixture(
     if pmax is None:
         # Largest p with T - p > (p + 1) D + 1, capped at the default.
         pmax = max(1, min(DEFAULT_PMAX, (tau - global_dim - 2) // (global_dim + 1)))
-    pmax = check_int("pmax", pmax, 1)
     if not tau - pmax > global_dim * pmax + 1 + global_dim:
         raise InvalidArgumentError(
             f"pmax={pmax} is too large for {tau} frames of {global_dim}-dimensional global "

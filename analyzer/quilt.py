@@ -28,9 +28,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..checks import MAX_SIDE, check_float, check_frames, check_int, check_size
+from ..checks import check_frames, check_int
 from ..errors import ArgumentTypeError, InvalidArgumentError
 from ..tiledb import QuiltModel
+from .methods import check_params
 from .video import Clip, Progress
 
 DEFAULT_RANK = 15
@@ -305,6 +306,19 @@ def learn_quilt(
     >>> q.source_map.shape, q.labels.shape
     ((30, 40, 2), (30, 40))
     """
+    size, block, overlap, rank, tolerance, lowpass, restore_gradient, balance, feather, seed = check_params(
+        "quilt",
+        size=size,
+        block=block,
+        overlap=overlap,
+        rank=rank,
+        tolerance=tolerance,
+        lowpass=lowpass,
+        restore_gradient=restore_gradient,
+        balance=balance,
+        feather=feather,
+        seed=seed,
+    )
     frames = check_frames(clip.frames if isinstance(clip, Clip) else clip, name="clip", min_frames=2, uint8=True)
     t, h, w, c = frames.shape
     bh, bw = _pair("block", block, 2)
@@ -317,18 +331,10 @@ def learn_quilt(
         oy, ox = _pair("overlap", overlap, 1)
         if oy > bh // 2 or ox > bw // 2:
             raise InvalidArgumentError(f"overlap {(oy, ox)} must be at most half the block {(bh, bw)} on each side")
-    if size is None:
-        size = (2 * h, 2 * w)
-    out_h, out_w = check_size("size", size, MAX_SIDE)
-    tolerance = check_float("tolerance", tolerance, 0.0)
-    seed = check_int("seed", seed, 0)
+    out_h, out_w = (2 * h, 2 * w) if size is None else size
     if feather is None:
         feather = min(oy, ox) // 2
     feather = check_int("feather", feather, 0, min(oy, ox))
-    if lowpass is not None:
-        lowpass = check_float("lowpass", lowpass, 0.0)
-        if lowpass <= 0:
-            raise InvalidArgumentError(f"lowpass must be a positive sigma in pixels or None, not {lowpass!r}")
     if rank is not None:
         rank = check_int("rank", rank, 1, min(h * w, t * c))
     rng = np.random.default_rng(seed)

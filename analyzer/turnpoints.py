@@ -31,9 +31,10 @@ import math
 import numpy as np
 
 from ..checks import check_int
-from ..errors import ArgumentTypeError, InvalidArgumentError
+from ..errors import InvalidArgumentError
 from ..tiledb.turnpoints import TurnPointModel
 from .lds import _stepper
+from .methods import check_params
 from .metrics import DoubleImages
 from .video import Clip, Progress, clip_frames
 
@@ -260,12 +261,23 @@ def learn_turnpoints(
     """
     frames = clip_frames(clip)
     t = frames.shape[0]
-    n = _int("n", n, 1)
-    s = _int("s", s, 0)
+    n, s, r, min_symmetry, max_cost, max_ghost = check_params(
+        "turnpoints", n=n, s=s, r=r, min_symmetry=min_symmetry, max_cost=max_cost, max_ghost=max_ghost
+    )
+    min_pairs, feature_size, taps, p, alpha, sigma, min_gap, min_prob, max_per_frame = check_params(
+        "turnpoints",
+        min_pairs=min_pairs,
+        feature_size=feature_size,
+        taps=taps,
+        p=p,
+        alpha=alpha,
+        sigma=sigma,
+        min_gap=min_gap,
+        min_prob=min_prob,
+        max_per_frame=max_per_frame,
+    )
     if not s < n / 2:
         raise InvalidArgumentError(f"s must satisfy 0 <= s < n/2 (the seed's eq. 2), got s={s} with n={n}")
-    r = _int("r", r, 1)
-    min_pairs = _int("min_pairs", min_pairs, 1)
     if min_pairs > n:
         raise InvalidArgumentError(f"min_pairs must be in 1..n={n}, not {min_pairs}")
     if t < 2 * n + 1:
@@ -273,17 +285,6 @@ def learn_turnpoints(
             f"clip has {t} frames, too short for n={n}: the symmetry test needs at least "
             f"2n+1 = {2 * n + 1} frames; use a smaller n"
         )
-    min_symmetry = _float("min_symmetry", min_symmetry, 0.0, 1.0, hi_open=True)
-    feature_size = _int("feature_size", feature_size, 4)
-    taps = _int("taps", taps, 1)
-    p = _float("p", p, 0.0, 10.0, lo_open=True)
-    alpha = _float("alpha", alpha, 0.0, 1.0, lo_open=True, hi_open=True)
-    sigma = _float("sigma", sigma, 0.0, 100.0, lo_open=True)
-    min_gap = _int("min_gap", min_gap, 1)
-    min_prob = _float("min_prob", min_prob, 0.0, 1.0, hi_open=True)
-    max_per_frame = _int("max_per_frame", max_per_frame, 1)
-    max_cost = _float("max_cost", max_cost, 0.0, 1e6, lo_open=True)
-    max_ghost = _float("max_ghost", max_ghost, 0.0, 1e6)
     step = _stepper(progress, 4)
 
     feats = frame_features(frames, feature_size)
@@ -615,18 +616,6 @@ def pendulum_clip(
 # -- checks ---------------------------------------------------------------------------
 def _int(name: str, value, lo: int) -> int:
     return check_int(name, value, lo, rule=f"at least {lo}")
-
-
-def _float(name: str, value, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ArgumentTypeError(f"{name} must be a number, not {value!r}")
-    v = float(value)
-    bad = not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi)
-    if bad:
-        raise InvalidArgumentError(
-            f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}, not {value!r}"
-        )
-    return v
 
 
 def plot_turnpoints(model: TurnPointModel, path: str, *, title: str | None = None) -> str:

@@ -364,7 +364,7 @@ class Numbers(Kind):
 
 
 class Size(Kind):
-    """A ``(height, width)`` pair of integers in ``1..max_side``; ``WxH`` on the command line.
+    """A ``(height, width)`` pair of integers in ``min_side..max_side``; ``WxH`` on the command line.
 
     >>> Size(16384).parse("40x24")
     (24, 40)
@@ -372,8 +372,8 @@ class Size(Kind):
 
     metavar = "WxH"
 
-    def __init__(self, max_side: int) -> None:
-        self.max_side = max_side
+    def __init__(self, max_side: int, min_side: int = 1) -> None:
+        self.max_side, self.min_side = max_side, min_side
 
     def check(self, name: str, value: Any) -> tuple[int, int]:
         if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
@@ -385,15 +385,15 @@ class Size(Kind):
         if any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) for v in value):
             raise ArgumentTypeError(f"{name} must be (height, width) integers, not {value!r}")
         h, w = int(value[0]), int(value[1])
-        if not (1 <= h <= self.max_side and 1 <= w <= self.max_side):
+        if not (self.min_side <= h <= self.max_side and self.min_side <= w <= self.max_side):
             raise InvalidArgumentError(
-                f"{name} must be (height, width) with each side in 1..{self.max_side}, not {value!r}"
+                f"{name} must be (height, width) with each side in {self.min_side}..{self.max_side}, not {value!r}"
             )
         return h, w
 
     def parse(self, text: str) -> tuple[int, int]:
         parts = text.lower().split("x")
-        side = Range(int, 1, self.max_side)
+        side = Range(int, self.min_side, self.max_side)
         try:
             if len(parts) != 2:
                 raise InvalidArgumentError("form")
@@ -403,13 +403,13 @@ class Size(Kind):
         return h, w
 
     def describe(self) -> str:
-        return f"(height, width), each in 1..{self.max_side}"
+        return f"(height, width), each in {self.min_side}..{self.max_side}"
 
     def describe_text(self) -> str:
-        return f"WIDTHxHEIGHT, each side in 1..{self.max_side}"
+        return f"WIDTHxHEIGHT, each side in {self.min_side}..{self.max_side}"
 
     def __str__(self) -> str:
-        return f"WIDTHxHEIGHT, each side in 1..{self.max_side}"
+        return self.describe_text()
 
 
 class Array(Kind):

@@ -80,6 +80,7 @@ from ...tiledb.tiles import (  # the stationarity warning lives with the model t
     TilesModel,
     stationarity_warning,
 )
+from ..methods import check_params
 from ..video import Clip, Progress
 from .cuts import CUT_SMOOTH, CUT_SOFT, MAX_STEP, circular_cut, path_alpha, smooth_path, toroidal_tile
 from .loop import (
@@ -235,34 +236,45 @@ def learn_tiles(
     >>> m.tiles.shape[0], m.tile_size, m.loop_length >= 12
     (2, (16, 16), True)
     """
+    tile, construction, period, n_tiles, edge_colours, min_loop, max_loop, transition, ring, flow_gain = check_params(
+        "tiles",
+        tile=tile,
+        construction=construction,
+        period=period,
+        n_tiles=n_tiles,
+        edge_colours=edge_colours,
+        min_loop=min_loop,
+        max_loop=max_loop,
+        transition=transition,
+        ring=ring,
+        flow_gain=flow_gain,
+    )
+    mix, names, min_tile, max_tile, overlap, feather, seed = check_params(
+        "tiles", mix=mix, names=names, min_tile=min_tile, max_tile=max_tile, overlap=overlap, feather=feather, seed=seed
+    )
     main = _frames("clip", clip)
     extra = [_frames(f"mix[{i}]", c) for i, c in enumerate(mix)]
-    names = list(names) if names is not None else ["main"] + [f"mix{i + 1}" for i in range(len(extra))]
+    names = names if names is not None else ["main"] + [f"mix{i + 1}" for i in range(len(extra))]
     if len(names) != 1 + len(extra):
         raise InvalidArgumentError(f"names must name {1 + len(extra)} textures, not {len(names)}")
     if construction is None:  # ring options name the ring construction
         construction = "ring" if extra or n_tiles is not None or ring is not None else "quilted"
-    _check_construction(construction, bool(extra), n_tiles, period, edge_colours)
-    if not (isinstance(flow_gain, (int, float)) and 0 <= flow_gain <= 10):
-        raise InvalidArgumentError(f"flow_gain must be a number in [0, 10], not {flow_gain!r}")
-    min_loop = check_int("min_loop", min_loop, 2)
-    transition = check_int("transition", transition, 1)
+    _check_construction(construction, bool(extra), tile, n_tiles, period, edge_colours)
     if max_loop is not None:
         max_loop = check_int("max_loop", max_loop, min_loop)
     if transition >= min_loop:
         raise InvalidArgumentError(f"transition ({transition}) must be smaller than min_loop ({min_loop})")
     loop = {"min_loop": min_loop, "max_loop": max_loop, "transition": transition, "progress": progress}
     if construction == "quilted":
-        return learn_quilted(main, names, tile=tile, period=period, seed=seed, **loop)
-    min_tile = check_int("min_tile", min_tile, 8)
+        return learn_quilted(main, names, block=tile, period=period, seed=seed, **loop)
     return learn_set(
         main,
         extra,
         names,
         construction=construction,
         tile=tile,
-        n_tiles=check_int("n_tiles", 4 if n_tiles is None else n_tiles, 1, 64),
-        edge_colours=check_int("edge_colours", edge_colours, 2, 4),
+        n_tiles=4 if n_tiles is None else n_tiles,
+        edge_colours=edge_colours,
         min_tile=min_tile,
         max_tile=check_int("max_tile", max_tile, min_tile),
         overlap=overlap,
@@ -273,14 +285,16 @@ def learn_tiles(
     )
 
 
-def _check_construction(construction: str, mixing: bool, n_tiles: int | None, period, edge_colours: int) -> None:
+def _check_construction(construction: str, mixing: bool, tile, n_tiles: int | None, period, edge_colours: int) -> None:
     """The options that apply to ``construction`` only, refused with the others."""
-    if construction not in CONSTRUCTIONS:
-        raise InvalidArgumentError(f"construction must be one of {CONSTRUCTIONS}, not {construction!r}")
     if construction in ("quilted", "wang") and mixing:
         raise InvalidArgumentError(
             f"construction {construction!r} cannot mix textures: border tiles need every class's shared ring "
             "(construction='ring')"
+        )
+    if construction == "quilted" and not (tile is None or isinstance(tile, int)):
+        raise InvalidArgumentError(
+            f"tile must be an integer (the quilt block size of construction 'quilted'), not {tile!r}"
         )
     if construction == "quilted" and n_tiles is not None:
         raise InvalidArgumentError(

@@ -5,11 +5,12 @@ looped clip a construction cuts its tiles from (:class:`Texture`).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from ...errors import InvalidArgumentError
+from ..video import Progress
 
 DEFAULT_MIN_TILE = 32
 DEFAULT_MAX_TILE = 256
@@ -237,3 +238,16 @@ def lively_first(ranked: list) -> list:
     """
     med = float(np.median([r[3] for r in ranked]))
     return sorted(ranked, key=lambda r: (r[3] < 0.5 * med, r[0]))
+
+
+def progress_steps(progress: Progress | None, total: int) -> Callable[[int], None]:
+    """``step(k=1)``: ``k`` more of an analysis's ``total`` steps done, told to ``progress`` (never past ``total``)."""
+    done = 0
+
+    def step(k: int = 1) -> None:
+        nonlocal done
+        done += k
+        if progress is not None:
+            progress(min(done, total), total)
+
+    return step

@@ -15,7 +15,7 @@ from ..framestats import median_step
 from ..quilt import block_errors, min_cut_path
 from ..video import Progress
 from .cuts import path_alpha
-from .loop import STEP_PAIRS, Texture, even_sample, find_loop, transition_map
+from .loop import STEP_PAIRS, Texture, even_sample, find_loop, progress_steps, transition_map
 from .stats import colour_stats, stationarity_info
 
 # -- 6c. quilted torus ------------------------------------------------------------------------------
@@ -263,7 +263,7 @@ def learn_quilted(
     main: np.ndarray,
     names: list[str],
     *,
-    tile,
+    block: int | None,
     min_loop: int,
     max_loop: int | None,
     transition: int,
@@ -271,30 +271,12 @@ def learn_quilted(
     seed: int,
     progress: Progress | None,
 ) -> TilesModel:
-    """The quilted construction of :func:`learn_tiles` (one texture)."""
-    min_loop = check_int("min_loop", min_loop, 2)
-    transition = check_int("transition", transition, 1)
-    max_loop = max(min_loop, QUILT_MAX_LOOP) if max_loop is None else check_int("max_loop", max_loop, min_loop)
-    if transition >= min_loop:
-        raise InvalidArgumentError(f"transition ({transition}) must be smaller than min_loop ({min_loop})")
-    seed = check_int("seed", seed, 0)
-    block = None
-    if tile is not None:
-        if not isinstance(tile, (int, np.integer)) or isinstance(tile, bool):
-            raise InvalidArgumentError(
-                f"tile must be an integer (the quilt block size of construction 'quilted'), not {tile!r}"
-            )
-        block = int(tile)
+    """The quilted construction of :func:`learn_tiles` (one texture; its arguments checked there)."""
+    max_loop = max(min_loop, QUILT_MAX_LOOP) if max_loop is None else max_loop
     t, h, w = main.shape[:3]
     b, step, cell, (py, px) = quilt_geometry(h, w, block=block, period=period)
     total = 4 + (py // step) * (px // step)
-    done = 0
-
-    def step_done(k: int = 1) -> None:
-        nonlocal done
-        done += k
-        if progress is not None:
-            progress(min(done, total), total)
+    step_done = progress_steps(progress, total)
 
     start, length, loop_cost = find_loop(main, min_loop=min_loop, max_loop=max_loop, transition=transition)
     tx = Texture(

@@ -9,13 +9,12 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ...checks import check_int
 from ...errors import InvalidArgumentError
 from ...tiledb.tiles import TilesModel
 from ..framestats import median_step
 from ..video import Progress
 from .cuts import primary_tile
-from .loop import STEP_PAIRS, Texture, find_loop, flow_magnitude, tile_period, transition_map
+from .loop import STEP_PAIRS, Texture, find_loop, flow_magnitude, progress_steps, tile_period, transition_map
 from .ring import SIDES, ring_feather, ring_tiles, side_join
 from .stats import colour_stats, stationarity_info
 from .wang import wang_set
@@ -44,13 +43,7 @@ def learn_set(
     """The ring or Wang set of ``main`` (and the ring sets and border tiles of the ``extra`` textures)."""
     n_own = edge_colours**3 if construction == "wang" else n_tiles
     total = 6 + n_own + len(extra) * (3 + n_tiles) + (len(extra) + 1) * len(extra)
-    done = 0
-
-    def step(k: int = 1) -> None:
-        nonlocal done
-        done += k
-        if progress is not None:
-            progress(min(done, total), total)
+    step = progress_steps(progress, total)
 
     (th, tw), period, strength = _tile_size(main, extra, tile, min_tile, max_tile)
     step()
@@ -114,18 +107,14 @@ def learn_set(
 def _tile_size(
     main: np.ndarray, extra: Sequence[np.ndarray], tile, min_tile: int, max_tile: int
 ) -> tuple[tuple[int, int], tuple[float, float], float]:
-    """The tile size, the spatial period it comes from and that period's strength (0 when given)."""
+    """The tile size (``tile``: an int or (th, tw) checked by :func:`learn_tiles`, or None), the spatial
+    period it comes from and that period's strength (0 when given)."""
     if tile is None:
         (th, tw), period, strength = tile_period(main, min_tile=min_tile, max_tile=max_tile)
         for f in extra:
             th, tw = min(th, f.shape[1] // 2), min(tw, f.shape[2] // 2)
     else:
-        try:
-            th, tw = (int(tile), int(tile)) if isinstance(tile, (int, np.integer)) else (int(v) for v in tile)
-        except (TypeError, ValueError):
-            raise InvalidArgumentError(f"tile must be an integer or (th, tw), not {tile!r}") from None
-        if th < 8 or tw < 8:
-            raise InvalidArgumentError(f"tile must be at least 8x8, not {th}x{tw}")
+        th, tw = (tile, tile) if isinstance(tile, int) else tile
         period, strength = (0.0, 0.0), 0.0  # not measured: the caller chose the size
     for label, f in [("clip", main)] + [(f"mix[{i}]", e) for i, e in enumerate(extra)]:
         if th + 2 > f.shape[1] or tw + 2 > f.shape[2]:
@@ -170,14 +159,14 @@ def _widths(
 ) -> dict[str, int]:
     """Overlap bands of the toroidal cuts, ring width, border feathering and depth (the model's info)."""
     h, w = main.shape[1:3]
-    b = max(2, min(th, tw) // 4) + int(round(2 * mean_flow)) if overlap is None else check_int("overlap", overlap, 2)
+    b = max(2, min(th, tw) // 4) + int(round(2 * mean_flow)) if overlap is None else overlap
     by = max(2, min(b, h - th, *(f.shape[1] - th for f in extra)))
     bx = max(2, min(b, w - tw, *(f.shape[2] - tw for f in extra)))
     # a narrow ring: every tile of a class repeats it, so it is the only periodic content
-    r = max(2, min(th, tw) // 10) if ring is None else check_int("ring", ring, 2)
+    r = max(2, min(th, tw) // 10) if ring is None else ring
     if r > min(th, tw) // 2 - 1:
         raise InvalidArgumentError(f"ring must be at most {min(th, tw) // 2 - 1} for a {th}x{tw} tile, not {r}")
-    fe = max(r, min(th, tw) // 5) if feather is None else check_int("feather", feather, 0)
+    fe = max(r, min(th, tw) // 5) if feather is None else feather
     fe = min(fe, min(th, tw) // 2 - 1 - r)
     # border cuts may run deeper than the ring (the strip is the other class's toroidal
     # primary, which continues its own cells at any depth), as deep as leaves the fade

@@ -107,12 +107,12 @@ def test_memory_holds_one_float32_copy_of_the_clip():
     "kwargs, message",
     [
         ({"n": 60}, "n=60 is larger than the clip allows: it has 40 frames"),
-        ({"n": 0}, "n must be a positive integer"),
-        ({"n": "many"}, "n must be a positive integer or 'auto'"),
+        ({"n": 0}, r"n must be an integer in 1\.\..* or one of 'auto', not 0"),
+        ({"n": "many"}, r"n must be an integer in 1\.\..* or one of 'auto', not 'many'"),
         ({"n": 5, "k": 6}, "k must be an integer in 1..n=5"),
         ({"svd": "qr"}, "svd must be one of"),
-        ({"energy": 1.5}, "energy must be in"),
-        ({"max_radius": 1.0}, "max_radius must be in"),
+        ({"energy": 1.5}, r"energy must be a finite number in \(0, 1\]"),
+        ({"max_radius": 1.0}, r"max_radius must be a finite number in \(0, 1\)"),
     ],
 )
 def test_bad_parameters(kwargs, message):

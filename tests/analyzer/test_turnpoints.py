@@ -151,15 +151,15 @@ def test_plot_writes_png(tmp_path, pendulum):
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        ({"n": 0}, "n must be at least 1"),
+        ({"n": 0}, r"n must be an integer in 1\.\."),
         ({"n": 2.5}, "n must be an integer"),
-        ({"r": 0}, "r must be at least 1"),
-        ({"min_symmetry": 1.0}, r"min_symmetry must be in \[0.0, 1.0\)"),
-        ({"alpha": 1.0}, r"alpha must be in \(0.0, 1.0\)"),
-        ({"sigma": -1}, "sigma must be in"),
+        ({"r": 0}, r"r must be an integer in 1\.\."),
+        ({"min_symmetry": 1.0}, r"min_symmetry must be a finite number in \[0, 1\)"),
+        ({"alpha": 1.0}, r"alpha must be a finite number in \(0, 1\)"),
+        ({"sigma": -1}, "sigma must be a finite number in"),
         ({"min_pairs": 9}, "min_pairs must be in 1..n=4"),
-        ({"max_cost": 0}, "max_cost must be in"),
-        ({"max_ghost": -1}, "max_ghost must be in"),
+        ({"max_cost": 0}, "max_cost must be a finite number in"),
+        ({"max_ghost": -1}, "max_ghost must be a finite number in"),
     ],
 )
 def test_bad_parameters(pendulum, kwargs, match):
