@@ -64,6 +64,10 @@ Pipeline (each step is a public function, so it can be tested and reused):
    cell of class ``a`` the strip of its neighbour's class ``c < a`` along their shared edge,
    so both sides of the edge show ``c``'s toroidal primary (see :mod:`dynatex.player.tiles`).
 8. Colour statistics per tile (mean RGB and HSV) for tone fitting.
+
+One module per part: ``loop`` (steps 1-4), ``cuts`` (5), ``ring`` (6 and 7), ``wang`` (6b),
+``quilted`` (6c), ``stats`` (8, and the clip's stationarity), ``sets`` (the ring and Wang analysis
+step by step). :func:`learn_tiles`, here, checks the arguments and picks the construction.
 """
 
 from __future__ import annotations
