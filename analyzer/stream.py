@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..checks import check_size
+from ..child import call
 from ..errors import InvalidArgumentError
 from ..tiledb import SourceInfo
 from .video import (
@@ -26,13 +27,13 @@ from .video import (
     Progress,
     _crop_resize_color,
     _tuple4,
-    child_ignores_stops,
+    decode_timeout,
+    decoder_error,
     hold_scratch,
     load_npy,
     npy_header,
     release_scratch,
     remove_stale_scratch,
-    run_child,
 )
 
 _UNITS = {
@@ -367,29 +368,14 @@ def _video_frames(path: str, start: int, stop: int | None, step: int):
 
 
 def _spill_isolated(path, out, start, stop, step, crop, size, color):
-    import multiprocessing as mp
-
-    ctx = mp.get_context("spawn")
-    q = ctx.Queue()
-    proc = ctx.Process(target=_spill_entry, args=(q, path, out, start, stop, step, crop, size, color), daemon=True)
-    run_child(proc)
-    result = q.get(timeout=5) if not q.empty() else None
-    if proc.exitcode == 0 and result is not None and result[0] == "ok":
-        return result[1]
-    if result is not None and result[0] != "ok":
-        kind, msg = result
-        raise (FileNotFoundError if kind == "FileNotFoundError" else ClipError)(msg)
-    raise ClipError(
-        f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
-        "re-encode the clip (for example to FFV1 or H.264) and try again"
-    )
+    child = call(f"{__name__}:_spill_to", path, out, start, stop, step, crop, size, color, timeout=decode_timeout(path))
+    if not child.ok:
+        raise decoder_error(path, child)
+    shape, n, fps, digest, source_size = child.value
+    return tuple(shape), n, fps, digest, tuple(source_size)
 
 
-def _spill_entry(q, *args) -> None:
-    child_ignores_stops()
-    try:
-        q.put(("ok", _spill(*args, None)))
-    except Exception as exc:  # noqa: BLE001 - reported to the parent, which re-raises it
-        q.put((type(exc).__name__, str(exc)))
-    q.close()
-    q.join_thread()
+def _spill_to(path, out, start, stop, step, crop, size, color) -> tuple:
+    """The spilling child's work (:func:`_spill_isolated`): the frames written into ``out``;
+    returns their description."""
+    return _spill(path, out, start, stop, step, crop and tuple(crop), size and tuple(size), color, None)

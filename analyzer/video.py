@@ -10,9 +10,7 @@ import hashlib
 import os
 import re
 import shutil
-import signal
 import tempfile
-import threading
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -20,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..checks import MAX_SIDE, check_frames, check_int, check_size
+from ..child import Outcome, call
 from ..errors import InvalidArgumentError
 from ..stale import remove_unheld
 from ..tiledb import SourceInfo
@@ -36,6 +35,10 @@ except ImportError:  # pragma: no cover (not POSIX)
 SCRATCH_PATTERN = re.compile(r"dynatex-(decode|spill)-[a-z0-9_]{8}(\.u8)?")
 
 Progress = Callable[[int, int | None], None]
+#: Seconds a child decoding a video may take before it counts as hung: this plus DECODE_S_PER_MB per
+#: MB of file.
+DECODE_TIMEOUT_S = 120.0
+DECODE_S_PER_MB = 10.0
 
 
 @dataclass
@@ -248,11 +251,12 @@ def _from_video(path: str, start: int, stop: int | None, step: int, progress: Pr
     return out, fps, _file_digest(path).hexdigest()
 
 
-def _decode_worker(path: str, start: int, stop: int | None, step: int, out_npy: str) -> None:
+def _decode_to(path: str, start: int, stop: int | None, step: int, out_npy: str) -> list:
+    """The decoding child's work (:func:`_decode_isolated`): the frames saved to ``out_npy``;
+    returns ``[fps, sha256]``."""
     frames, fps, digest = _from_video(path, start, stop, step, None)
     np.save(out_npy, frames)
-    with open(out_npy + ".meta", "w") as f:
-        f.write(f"{fps!r}\n{digest}\n")
+    return [fps, digest]
 
 
 # -- scratch space ---------------------------------------------------------------------
@@ -304,77 +308,32 @@ def scratch_folder(prefix: str = "dynatex-decode-") -> Iterator[str]:
 
 
 def _decode_isolated(path: str, start: int, stop: int | None, step: int):
-    import multiprocessing as mp
-
-    ctx = mp.get_context("spawn")
     with scratch_folder() as tmp:
         out = os.path.join(tmp, "frames.npy")
-        q = ctx.Queue()
-        proc = ctx.Process(target=_isolated_entry, args=(q, path, start, stop, step, out), daemon=True)
-        run_child(proc)
-        if proc.exitcode != 0:
-            err = q.get(timeout=1) if not q.empty() else None
-            if err is not None:
-                kind, msg = err
-                raise (FileNotFoundError if kind == "FileNotFoundError" else ClipError)(msg)
-            raise ClipError(
-                f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
-                "re-encode the clip (for example to FFV1 or H.264) and try again"
-            )
+        child = call(f"{__name__}:_decode_to", path, start, stop, step, out, timeout=decode_timeout(path))
+        if not child.ok:
+            raise decoder_error(path, child)
         frames = np.load(out, allow_pickle=False)
-        with open(out + ".meta") as f:
-            fps_s, digest = f.read().split("\n")[:2]
-    return frames, float(fps_s), digest
+    fps, digest = child.value
+    return frames, float(fps), digest
 
 
-#: What a user sends to stop a run: held back while a child starts, ignored by the child itself.
-_STOPS = (signal.SIGINT, signal.SIGTERM)
+def decode_timeout(path: str) -> float:
+    """Seconds a child decoding ``path`` may take before it counts as hung (:data:`DECODE_TIMEOUT_S`
+    plus :data:`DECODE_S_PER_MB` per MB of file)."""
+    return DECODE_TIMEOUT_S + DECODE_S_PER_MB * os.path.getsize(path) / 2**20
 
 
-def run_child(proc) -> None:
-    """Start a decoding child and wait for it.
-
-    Ctrl-C and SIGTERM are held back while the child is handed its arguments (an interrupt in the
-    middle makes the child print a traceback on the half-read pipe) and take effect once it runs;
-    when they interrupt the wait, the child is killed first, so that it writes nothing more into
-    the scratch space about to be removed. The child ignores them (:func:`child_ignores_stops`):
-    the parent decides.
-    """
-    hold = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
-    try:
-        if hold:
-            mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPS)
-            try:
-                proc.start()
-            finally:
-                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-        else:
-            proc.start()
-        proc.join()
-    except BaseException:
-        if proc.pid is not None:
-            proc.kill()
-            proc.join()
-        raise
-
-
-def child_ignores_stops() -> None:
-    """In a child of :func:`run_child`: ignore Ctrl-C (the parent kills the child when it stops) and
-    take the signals the parent held back while starting it."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if hasattr(signal, "pthread_sigmask"):
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOPS)
-
-
-def _isolated_entry(q, path, start, stop, step, out) -> None:
-    child_ignores_stops()
-    try:
-        _decode_worker(path, start, stop, step, out)
-    except Exception as exc:  # reported to the parent, which re-raises it
-        q.put((type(exc).__name__, str(exc)))
-        q.close()
-        q.join_thread()
-        raise SystemExit(3) from None
+def decoder_error(path: str, child: Outcome) -> Exception:
+    """The error for a decoding child that failed: what it raised (a ``FileNotFoundError`` stays
+    one, anything else becomes a :class:`ClipError`), else a :class:`ClipError` saying how the
+    decoder ended (a crash, a hang, no memory)."""
+    if child.raised is not None:
+        kind, message = child.raised
+        return (FileNotFoundError if kind == "FileNotFoundError" else ClipError)(message)
+    return ClipError(
+        f"{path}: the video decoder {child.describe()}; re-encode the clip (for example to FFV1 or H.264) and try again"
+    )
 
 
 # -- geometry -----------------------------------------------------------------------

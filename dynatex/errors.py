@@ -1,4 +1,4 @@
-"""The root of every error dynatex raises on purpose, the errors of bad arguments and the command's.
+"""The root of every error dynatex raises on purpose; the errors of bad arguments, the command line and child processes.
 
 This module imports nothing of ours, so every layer (the tile database at the bottom, the
 analyzer and the player above it, the CLI on top) may derive its errors from it. Each error
@@ -31,4 +31,9 @@ class OutputError(DynatexError, OSError):
     """The command's output cannot be written: refused by the codec, the folder or the disk (exit code 2)."""
 
 
-__all__ = ["ArgumentTypeError", "DynatexError", "InvalidArgumentError", "OutputError", "UsageError"]
+class ChildStartError(DynatexError, OSError):
+    """No child process can be started for risky work (:mod:`dynatex.child`): no Python
+    interpreter to run it with, or the system refused a process."""
+
+
+__all__ = ["ArgumentTypeError", "ChildStartError", "DynatexError", "InvalidArgumentError", "OutputError", "UsageError"]
