@@ -273,16 +273,7 @@ def _from_disk(disk, method: str, max_memory: int):
             f"max_memory {max_memory / 2**30:.2f} GiB; only {', '.join(STREAMED_METHODS)} learn "
             f"out of core"
         )
-    return Clip(
-        frames=disk.frames(),
-        fps=disk.fps,
-        filename=disk.filename,
-        sha256=disk.sha256,
-        frame_start=disk.frame_start,
-        frame_step=disk.frame_step,
-        crop=disk.crop,
-        source_size=disk.source_size,
-    )
+    return Clip(frames=disk.frames(), **disk.source())
 
 
 def database_is_complete(task: ClipTask) -> bool:

@@ -19,11 +19,11 @@ import numpy as np
 from ..checks import check_size
 from ..child import call
 from ..errors import InvalidArgumentError
-from ..tiledb import SourceInfo
 from .video import (
     IMAGE_SUFFIXES,
     MAX_SIDE,
     ClipError,
+    ClipSource,
     Progress,
     _crop_resize_color,
     _tuple4,
@@ -84,7 +84,7 @@ def parse_bytes(text: str | int) -> int:
 
 
 @dataclass
-class DiskClip:
+class DiskClip(ClipSource):
     """Frames ``(T, H, W, C)`` uint8 stored row-major in a file at ``offset``, plus their source description.
 
     ``owned`` clips (spilled by :func:`spill_clip`) delete their file on :meth:`close`.
@@ -94,13 +94,6 @@ class DiskClip:
     offset: int
     frame_shape: tuple[int, int, int]
     n_frames: int
-    fps: float
-    filename: str
-    sha256: str
-    frame_start: int = 0
-    frame_step: int = 1
-    crop: tuple[int, ...] = ()
-    source_size: tuple[int, ...] = ()  # (height, width) of the decoded source frames
     owned: bool = False
     hold: int | None = field(default=None, repr=False)  # the lock that marks an owned file live
 
@@ -112,22 +105,6 @@ class DiskClip:
     @property
     def nbytes(self) -> int:
         return self.n_frames * self.pixels
-
-    def source_info(self) -> SourceInfo:
-        h, w, c = self.frame_shape
-        return SourceInfo(
-            filename=self.filename,
-            sha256=self.sha256,
-            fps=self.fps,
-            width=w,
-            height=h,
-            channels=c,
-            n_frames=self.n_frames,
-            frame_start=self.frame_start,
-            frame_step=self.frame_step,
-            crop=self.crop,
-            source_size=self.source_size,
-        )
 
     def frames(self, t0: int = 0, t1: int | None = None) -> np.ndarray:
         """Frames ``t0:t1`` read into memory, ``(t1 - t0, H, W, C)`` uint8."""

@@ -12,7 +12,7 @@ import re
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -42,10 +42,12 @@ DECODE_S_PER_MB = 10.0
 
 
 @dataclass
-class Clip:
-    """Decoded frames plus where they came from."""
+class ClipSource:
+    """Where a clip's frames came from, as :meth:`source_info` stores it beside the models: one
+    definition for :class:`Clip` (frames in memory) and :class:`~dynatex.analyzer.stream.DiskClip`
+    (frames on disk), which give ``n_frames`` and ``frame_shape`` ``(H, W, C)``."""
 
-    frames: np.ndarray  # (T, H, W, C) uint8
+    _: KW_ONLY
     fps: float
     filename: str
     sha256: str
@@ -53,6 +55,21 @@ class Clip:
     frame_step: int = 1
     crop: tuple[int, ...] = ()
     source_size: tuple[int, ...] = ()  # (height, width) of the decoded source frames
+
+    def source(self) -> dict[str, Any]:
+        """These fields by name: what another clip of the same frames is made with."""
+        return {f.name: getattr(self, f.name) for f in fields(ClipSource)}
+
+    def source_info(self) -> SourceInfo:
+        h, w, c = self.frame_shape
+        return SourceInfo(width=w, height=h, channels=c, n_frames=self.n_frames, **self.source())
+
+
+@dataclass
+class Clip(ClipSource):
+    """Decoded frames plus where they came from."""
+
+    frames: np.ndarray  # (T, H, W, C) uint8
 
     @property
     def n_frames(self) -> int:
@@ -62,21 +79,7 @@ class Clip:
     def shape(self) -> tuple[int, int, int]:
         return tuple(self.frames.shape[1:])  # type: ignore[return-value]
 
-    def source_info(self) -> SourceInfo:
-        t, h, w, c = self.frames.shape
-        return SourceInfo(
-            filename=self.filename,
-            sha256=self.sha256,
-            fps=self.fps,
-            width=w,
-            height=h,
-            channels=c,
-            n_frames=t,
-            frame_start=self.frame_start,
-            frame_step=self.frame_step,
-            crop=self.crop,
-            source_size=self.source_size,
-        )
+    frame_shape = shape
 
 
 def load_clip(
