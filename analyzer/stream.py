@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import stale
 from ..checks import check_size
 from ..child import call
 from ..errors import InvalidArgumentError
@@ -29,10 +30,8 @@ from .video import (
     _tuple4,
     decode_timeout,
     decoder_error,
-    hold_scratch,
     load_npy,
     npy_header,
-    release_scratch,
     remove_stale_scratch,
 )
 
@@ -135,7 +134,7 @@ class DiskClip(ClipSource):
         """Delete the spill file of an owned clip."""
         if self.owned and os.path.exists(self.path):
             os.unlink(self.path)
-        release_scratch(self.hold)
+        stale.release(self.hold)
         self.hold = None
 
     def __enter__(self) -> DiskClip:  # noqa: PYI034
@@ -183,7 +182,7 @@ def spill_clip(
         while hold is None:
             fd, out = tempfile.mkstemp(prefix="dynatex-spill-", suffix=".u8", dir=folder)
             os.close(fd)
-            hold = hold_scratch(out)
+            hold = stale.hold(out)
         if isolate and os.path.isfile(path) and not path.endswith(".npy"):
             meta = _spill_isolated(path, out, start, stop, step, crop_t, size_t, color)
         else:
@@ -191,7 +190,7 @@ def spill_clip(
     except BaseException:
         if out is not None and os.path.exists(out):
             os.unlink(out)
-        release_scratch(hold)
+        stale.release(hold)
         raise
     shape, n, src_fps, digest, source_size = meta
     return DiskClip(

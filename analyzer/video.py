@@ -20,16 +20,11 @@ import numpy as np
 from ..checks import MAX_SIDE, check_frames, check_int, check_size
 from ..child import Outcome, call
 from ..errors import InvalidArgumentError
-from ..stale import remove_unheld
+from ..stale import hold, release, remove_unheld
 from ..tiledb import SourceInfo
 from .errors import ClipError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
-
-try:
-    import fcntl
-except ImportError:  # pragma: no cover (not POSIX)
-    fcntl = None  # type: ignore[assignment]
 
 #: Scratch space of a run: decode folders and ``--max-memory`` spill files, named like ``tempfile``'s.
 SCRATCH_PATTERN = re.compile(r"dynatex-(decode|spill)-[a-z0-9_]{8}(\.u8)?")
@@ -263,30 +258,6 @@ def _decode_to(path: str, start: int, stop: int | None, step: int, out_npy: str)
 
 
 # -- scratch space ---------------------------------------------------------------------
-def hold_scratch(path: str) -> int | None:
-    """A descriptor holding a shared ``flock`` on scratch file or folder ``path`` while its run lives
-    (closing it releases the lock), so that :func:`remove_stale_scratch` of another run leaves it
-    alone; None when ``path`` was taken by a cleaner in between (create another) or without fcntl."""
-    if fcntl is None:
-        return -1
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
-    fcntl.flock(fd, fcntl.LOCK_SH)
-    try:
-        now = os.lstat(path)
-    except FileNotFoundError:
-        now = None
-    held = os.fstat(fd)
-    if now is None or (now.st_dev, now.st_ino) != (held.st_dev, held.st_ino):
-        os.close(fd)
-        return None
-    return fd
-
-
-def release_scratch(fd: int | None) -> None:
-    if fd is not None and fd >= 0:
-        os.close(fd)
-
-
 def remove_stale_scratch(folder: str | None = None) -> list[str]:
     """Remove the decode folders and spill files that killed runs left in ``folder`` (default: the
     temporary folder): those named by :data:`SCRATCH_PATTERN` that no live run holds a lock on."""
@@ -295,19 +266,19 @@ def remove_stale_scratch(folder: str | None = None) -> list[str]:
 
 @contextlib.contextmanager
 def scratch_folder(prefix: str = "dynatex-decode-") -> Iterator[str]:
-    """A new folder in the temporary folder, held (see :func:`hold_scratch`) and removed on every
+    """A new folder in the temporary folder, held (:func:`dynatex.stale.hold`) and removed on every
     way out; stale ones of killed runs are removed first."""
     remove_stale_scratch()
     tmp, fd = None, None
     try:
         while fd is None:
             tmp = tempfile.mkdtemp(prefix=prefix)
-            fd = hold_scratch(tmp)
+            fd = hold(tmp)
         yield tmp
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
-        release_scratch(fd)
+        release(fd)
 
 
 def _decode_isolated(path: str, start: int, stop: int | None, step: int):
