@@ -5,7 +5,8 @@ analyzer and the player above it, the CLI on top) may derive its errors from it.
 also derives from the builtin it refines, so ``except ValueError`` keeps working; the CLI
 turns a :class:`DynatexError` into one line and exit code 2, anything else into exit code 1.
 Each layer keeps its own in one module: ``tiledb/errors.py``, ``analyzer/errors.py``,
-``player/errors.py``; the command line's are here.
+``player/errors.py``; the command line's and the top-level helpers' (:mod:`dynatex.child`) are
+here. README.md ("What ``import dynatex`` gives") lists the family.
 """
 
 from __future__ import annotations
