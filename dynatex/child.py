@@ -111,7 +111,9 @@ def call(target: str, *args: Any, timeout: float) -> Outcome:
     python = interpreter()
     if python is None:
         python = os.environ.get("DYNATEX_PYTHON") or sys.executable
-        raise ChildStartError(f"cannot start a child process: {python!r} is no Python interpreter (set DYNATEX_PYTHON)")
+        raise ChildStartError(
+            f"cannot start a child process: {python!r} is not a Python interpreter (set DYNATEX_PYTHON to one)"
+        )
     env = dict(os.environ)
     env.pop("PYTHONFAULTHANDLER", None)  # any value turns it on: its dump is not our protocol
     cmd = [python, "-m", "dynatex.child", target, json.dumps(list(args))]

@@ -112,6 +112,7 @@ def test_an_interrupt_kills_the_child_before_it_is_raised(tmp_path):
 
 def test_without_an_interpreter_no_child_starts(monkeypatch):
     monkeypatch.setenv("DYNATEX_PYTHON", "/usr/bin/my-game")
-    with pytest.raises(ChildStartError, match="'/usr/bin/my-game' is no Python interpreter") as e:
+    words = r"'/usr/bin/my-game' is not a Python interpreter \(set DYNATEX_PYTHON to one\)"
+    with pytest.raises(ChildStartError, match=words) as e:
         call("os.path:join", "a", timeout=60)
     assert isinstance(e.value, DynatexError) and isinstance(e.value, OSError)
