@@ -109,8 +109,9 @@ def load_clip(
     fps : float, optional
         Frame rate to record (default: the file's, or 25 for images and arrays).
     isolate : bool
-        Decode a video file in a child process, so that a decoder crash on a hostile file
-        becomes a :class:`ClipError` instead of taking down the caller.
+        Decode a video file in a child process (:func:`dynatex.child.call`), so that a decoder
+        crash or hang on a hostile file becomes a :class:`ClipError` (a hang after
+        :func:`decode_timeout` seconds) instead of taking down the caller.
     progress : callable(done, total), optional
         Called as frames are decoded.
 
