@@ -181,6 +181,20 @@ def test_no_command_imports_the_cli_above_it():
     assert not upward, f"import dynatex.cli: {upward}"
 
 
+#: leaf modules every layer may use, the tile database and the player included: they import no
+#: module of ours but the errors (and nothing beyond the standard library: see the test below)
+LEAVES = ("dynatex.errors", "dynatex.stale", "dynatex.child", "dynatex.cache", "dynatex.text")
+
+
+def test_the_leaves_every_layer_uses_stay_leaves():
+    graph = _graph()
+    assert {m: graph[m] - {"dynatex.errors"} for m in LEAVES} == {m: set() for m in LEAVES}
+    code = "import sys\n" + "".join(f"import {m}\n" for m in LEAVES)
+    code += "print(sorted(m for m in ('numpy', 'h5py', 'pyopencl', 'cv2') if m in sys.modules))"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert r.stdout.strip() == "[]", r.stdout
+
+
 def _cycle_imports(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
     """Imports between two modules of one package that lie on a cycle (package ``__init__``
     modules aside: a module may import names from its own package)."""
