@@ -222,6 +222,9 @@ def _one_line(exc: BaseException) -> str:
 def _main(argv: list[str]) -> int:
     """``python -m dynatex.child MODULE:FUNCTION JSON_ARGS``: print what the function returns (or
     raises) as the last line of stdout; exit 0, 1 when it raised, :data:`MEMORY_STATUS` on MemoryError."""
+    if len(argv) != 2 or ":" not in argv[0]:
+        print("usage: python -m dynatex.child MODULE:FUNCTION JSON_ARGS  (run by dynatex.child.call)", file=sys.stderr)
+        return 2
     ignore_stops()
     module, _, function = argv[0].partition(":")
     try:
