@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import glob
 import hashlib
-import multiprocessing
 import os
 import re
 import sys
@@ -27,6 +26,7 @@ from typing import Any
 
 from ..errors import InvalidArgumentError
 from ..tiledb import DatabaseWriter, TileDB, TileDBError
+from ..tiledb.schema import texture_names_from_paths
 from ..tiledb.writer import remove_stale_temp_files
 from .errors import SchedulerError
 from .methods import Clips, Method, get_method
@@ -135,19 +135,6 @@ def _expand(spec: str, depth: int) -> list[str]:
     return [spec]
 
 
-def texture_names(clips: Sequence[str]) -> list[str]:
-    """One valid, distinct texture name per clip, from its file name (``_2``, ``_3`` on clashes)."""
-    names: list[str] = []
-    for clip in clips:
-        stem = os.path.splitext(os.path.basename(os.path.normpath(clip)))[0]
-        base = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)[:60] or "clip"
-        name, i = base, 2
-        while name in names:
-            name, i = f"{base}_{i}", i + 1
-        names.append(name)
-    return names
-
-
 # -- one clip -----------------------------------------------------------------------------
 def analyze_clip(task: ClipTask) -> ClipResult:
     """Run one clip's task: skip it when its database is complete, else learn and write it.
@@ -157,7 +144,7 @@ def analyze_clip(task: ClipTask) -> ClipResult:
     t0 = time.perf_counter()
     worker = _worker_name()
     try:
-        remove_stale_temporaries(task.database)
+        remove_stale_temp_files(task.database)
         if task.skip_complete and database_is_complete(task):
             return ClipResult(
                 task.clip, task.texture, task.database, task.methods, time.perf_counter() - t0, SKIPPED, worker=worker
@@ -178,7 +165,6 @@ def analyze_clip(task: ClipTask) -> ClipResult:
 
 
 def _learn_and_write(task: ClipTask) -> None:
-    isolate = not multiprocessing.current_process().daemon  # a daemon process may not start children
     with DatabaseWriter(task.database, overwrite=True) as writer:
         learn_into(
             writer,
@@ -189,7 +175,6 @@ def _learn_and_write(task: ClipTask) -> None:
             load=task.load,
             max_memory=task.max_memory,
             spill_dir=task.spill_dir,
-            isolate=isolate,
         )
 
 
@@ -288,22 +273,7 @@ def _from_disk(disk, method: str, max_memory: int):
             f"max_memory {max_memory / 2**30:.2f} GiB; only {', '.join(STREAMED_METHODS)} learn "
             f"out of core"
         )
-    return Clip(
-        frames=disk.frames(),
-        fps=disk.fps,
-        filename=disk.filename,
-        sha256=disk.sha256,
-        frame_start=disk.frame_start,
-        frame_step=disk.frame_step,
-        crop=disk.crop,
-        source_size=disk.source_size,
-    )
-
-
-def remove_stale_temporaries(database: str) -> list[str]:
-    """Delete temporary files a killed writer of ``database`` left beside it (never one a live
-    writer holds: :func:`~dynatex.tiledb.writer.remove_stale_temp_files`); returns their paths."""
-    return remove_stale_temp_files(database)
+    return Clip(frames=disk.frames(), **disk.source())
 
 
 def database_is_complete(task: ClipTask) -> bool:
@@ -453,7 +423,7 @@ def analyze_corpus(
     load = dict(load or {})
     load.setdefault("color", True)
     tasks = []
-    for path, name in zip(paths, texture_names(paths)):
+    for path, name in zip(paths, texture_names_from_paths(paths)):
         chosen = tuple(methods(path) if callable(methods) else methods)
         if not chosen:
             raise InvalidArgumentError(f"{path}: no method to run")

@@ -16,23 +16,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import stale
 from ..checks import check_size
+from ..child import call
 from ..errors import InvalidArgumentError
-from ..tiledb import SourceInfo
 from .video import (
     IMAGE_SUFFIXES,
     MAX_SIDE,
     ClipError,
+    ClipSource,
     Progress,
     _crop_resize_color,
     _tuple4,
-    child_ignores_stops,
-    hold_scratch,
+    decode_timeout,
+    decoder_error,
     load_npy,
     npy_header,
-    release_scratch,
     remove_stale_scratch,
-    run_child,
 )
 
 _UNITS = {
@@ -83,7 +83,7 @@ def parse_bytes(text: str | int) -> int:
 
 
 @dataclass
-class DiskClip:
+class DiskClip(ClipSource):
     """Frames ``(T, H, W, C)`` uint8 stored row-major in a file at ``offset``, plus their source description.
 
     ``owned`` clips (spilled by :func:`spill_clip`) delete their file on :meth:`close`.
@@ -93,13 +93,6 @@ class DiskClip:
     offset: int
     frame_shape: tuple[int, int, int]
     n_frames: int
-    fps: float
-    filename: str
-    sha256: str
-    frame_start: int = 0
-    frame_step: int = 1
-    crop: tuple[int, ...] = ()
-    source_size: tuple[int, ...] = ()  # (height, width) of the decoded source frames
     owned: bool = False
     hold: int | None = field(default=None, repr=False)  # the lock that marks an owned file live
 
@@ -111,22 +104,6 @@ class DiskClip:
     @property
     def nbytes(self) -> int:
         return self.n_frames * self.pixels
-
-    def source_info(self) -> SourceInfo:
-        h, w, c = self.frame_shape
-        return SourceInfo(
-            filename=self.filename,
-            sha256=self.sha256,
-            fps=self.fps,
-            width=w,
-            height=h,
-            channels=c,
-            n_frames=self.n_frames,
-            frame_start=self.frame_start,
-            frame_step=self.frame_step,
-            crop=self.crop,
-            source_size=self.source_size,
-        )
 
     def frames(self, t0: int = 0, t1: int | None = None) -> np.ndarray:
         """Frames ``t0:t1`` read into memory, ``(t1 - t0, H, W, C)`` uint8."""
@@ -157,7 +134,7 @@ class DiskClip:
         """Delete the spill file of an owned clip."""
         if self.owned and os.path.exists(self.path):
             os.unlink(self.path)
-        release_scratch(self.hold)
+        stale.release(self.hold)
         self.hold = None
 
     def __enter__(self) -> DiskClip:  # noqa: PYI034
@@ -205,7 +182,7 @@ def spill_clip(
         while hold is None:
             fd, out = tempfile.mkstemp(prefix="dynatex-spill-", suffix=".u8", dir=folder)
             os.close(fd)
-            hold = hold_scratch(out)
+            hold = stale.hold(out)
         if isolate and os.path.isfile(path) and not path.endswith(".npy"):
             meta = _spill_isolated(path, out, start, stop, step, crop_t, size_t, color)
         else:
@@ -213,7 +190,7 @@ def spill_clip(
     except BaseException:
         if out is not None and os.path.exists(out):
             os.unlink(out)
-        release_scratch(hold)
+        stale.release(hold)
         raise
     shape, n, src_fps, digest, source_size = meta
     return DiskClip(
@@ -367,29 +344,14 @@ def _video_frames(path: str, start: int, stop: int | None, step: int):
 
 
 def _spill_isolated(path, out, start, stop, step, crop, size, color):
-    import multiprocessing as mp
-
-    ctx = mp.get_context("spawn")
-    q = ctx.Queue()
-    proc = ctx.Process(target=_spill_entry, args=(q, path, out, start, stop, step, crop, size, color), daemon=True)
-    run_child(proc)
-    result = q.get(timeout=5) if not q.empty() else None
-    if proc.exitcode == 0 and result is not None and result[0] == "ok":
-        return result[1]
-    if result is not None and result[0] != "ok":
-        kind, msg = result
-        raise (FileNotFoundError if kind == "FileNotFoundError" else ClipError)(msg)
-    raise ClipError(
-        f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
-        "re-encode the clip (for example to FFV1 or H.264) and try again"
-    )
+    child = call(f"{__name__}:_spill_to", path, out, start, stop, step, crop, size, color, timeout=decode_timeout(path))
+    if not child.ok:
+        raise decoder_error(path, child)
+    shape, n, fps, digest, source_size = child.value
+    return tuple(shape), n, fps, digest, tuple(source_size)
 
 
-def _spill_entry(q, *args) -> None:
-    child_ignores_stops()
-    try:
-        q.put(("ok", _spill(*args, None)))
-    except Exception as exc:  # noqa: BLE001 - reported to the parent, which re-raises it
-        q.put((type(exc).__name__, str(exc)))
-    q.close()
-    q.join_thread()
+def _spill_to(path, out, start, stop, step, crop, size, color) -> tuple:
+    """The spilling child's work (:func:`_spill_isolated`): the frames written into ``out``;
+    returns their description."""
+    return _spill(path, out, start, stop, step, crop and tuple(crop), size and tuple(size), color, None)

@@ -10,39 +10,39 @@ import hashlib
 import os
 import re
 import shutil
-import signal
 import tempfile
-import threading
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass, fields
 from typing import Any
 
 import numpy as np
 
 from ..checks import MAX_SIDE, check_frames, check_int, check_size
+from ..child import Outcome, call
 from ..errors import InvalidArgumentError
-from ..stale import remove_unheld
+from ..stale import hold, release, remove_unheld
 from ..tiledb import SourceInfo
 from .errors import ClipError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
 
-try:
-    import fcntl
-except ImportError:  # pragma: no cover (not POSIX)
-    fcntl = None  # type: ignore[assignment]
-
 #: Scratch space of a run: decode folders and ``--max-memory`` spill files, named like ``tempfile``'s.
 SCRATCH_PATTERN = re.compile(r"dynatex-(decode|spill)-[a-z0-9_]{8}(\.u8)?")
 
 Progress = Callable[[int, int | None], None]
+#: Seconds a child decoding a video may take before it counts as hung: this plus DECODE_S_PER_MB per
+#: MB of file.
+DECODE_TIMEOUT_S = 120.0
+DECODE_S_PER_MB = 10.0
 
 
 @dataclass
-class Clip:
-    """Decoded frames plus where they came from."""
+class ClipSource:
+    """Where a clip's frames came from, as :meth:`source_info` stores it beside the models: one
+    definition for :class:`Clip` (frames in memory) and :class:`~dynatex.analyzer.stream.DiskClip`
+    (frames on disk), which give ``n_frames`` and ``frame_shape`` ``(H, W, C)``."""
 
-    frames: np.ndarray  # (T, H, W, C) uint8
+    _: KW_ONLY
     fps: float
     filename: str
     sha256: str
@@ -50,6 +50,21 @@ class Clip:
     frame_step: int = 1
     crop: tuple[int, ...] = ()
     source_size: tuple[int, ...] = ()  # (height, width) of the decoded source frames
+
+    def source(self) -> dict[str, Any]:
+        """These fields by name: what another clip of the same frames is made with."""
+        return {f.name: getattr(self, f.name) for f in fields(ClipSource)}
+
+    def source_info(self) -> SourceInfo:
+        h, w, c = self.frame_shape
+        return SourceInfo(width=w, height=h, channels=c, n_frames=self.n_frames, **self.source())
+
+
+@dataclass
+class Clip(ClipSource):
+    """Decoded frames plus where they came from."""
+
+    frames: np.ndarray  # (T, H, W, C) uint8
 
     @property
     def n_frames(self) -> int:
@@ -59,21 +74,7 @@ class Clip:
     def shape(self) -> tuple[int, int, int]:
         return tuple(self.frames.shape[1:])  # type: ignore[return-value]
 
-    def source_info(self) -> SourceInfo:
-        t, h, w, c = self.frames.shape
-        return SourceInfo(
-            filename=self.filename,
-            sha256=self.sha256,
-            fps=self.fps,
-            width=w,
-            height=h,
-            channels=c,
-            n_frames=t,
-            frame_start=self.frame_start,
-            frame_step=self.frame_step,
-            crop=self.crop,
-            source_size=self.source_size,
-        )
+    frame_shape = shape
 
 
 def load_clip(
@@ -108,8 +109,9 @@ def load_clip(
     fps : float, optional
         Frame rate to record (default: the file's, or 25 for images and arrays).
     isolate : bool
-        Decode a video file in a child process, so that a decoder crash on a hostile file
-        becomes a :class:`ClipError` instead of taking down the caller.
+        Decode a video file in a child process (:func:`dynatex.child.call`), so that a decoder
+        crash or hang on a hostile file becomes a :class:`ClipError` (a hang after
+        :func:`decode_timeout` seconds) instead of taking down the caller.
     progress : callable(done, total), optional
         Called as frames are decoded.
 
@@ -248,38 +250,15 @@ def _from_video(path: str, start: int, stop: int | None, step: int, progress: Pr
     return out, fps, _file_digest(path).hexdigest()
 
 
-def _decode_worker(path: str, start: int, stop: int | None, step: int, out_npy: str) -> None:
+def _decode_to(path: str, start: int, stop: int | None, step: int, out_npy: str) -> list:
+    """The decoding child's work (:func:`_decode_isolated`): the frames saved to ``out_npy``;
+    returns ``[fps, sha256]``."""
     frames, fps, digest = _from_video(path, start, stop, step, None)
     np.save(out_npy, frames)
-    with open(out_npy + ".meta", "w") as f:
-        f.write(f"{fps!r}\n{digest}\n")
+    return [fps, digest]
 
 
 # -- scratch space ---------------------------------------------------------------------
-def hold_scratch(path: str) -> int | None:
-    """A descriptor holding a shared ``flock`` on scratch file or folder ``path`` while its run lives
-    (closing it releases the lock), so that :func:`remove_stale_scratch` of another run leaves it
-    alone; None when ``path`` was taken by a cleaner in between (create another) or without fcntl."""
-    if fcntl is None:
-        return -1
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
-    fcntl.flock(fd, fcntl.LOCK_SH)
-    try:
-        now = os.lstat(path)
-    except FileNotFoundError:
-        now = None
-    held = os.fstat(fd)
-    if now is None or (now.st_dev, now.st_ino) != (held.st_dev, held.st_ino):
-        os.close(fd)
-        return None
-    return fd
-
-
-def release_scratch(fd: int | None) -> None:
-    if fd is not None and fd >= 0:
-        os.close(fd)
-
-
 def remove_stale_scratch(folder: str | None = None) -> list[str]:
     """Remove the decode folders and spill files that killed runs left in ``folder`` (default: the
     temporary folder): those named by :data:`SCRATCH_PATTERN` that no live run holds a lock on."""
@@ -288,93 +267,48 @@ def remove_stale_scratch(folder: str | None = None) -> list[str]:
 
 @contextlib.contextmanager
 def scratch_folder(prefix: str = "dynatex-decode-") -> Iterator[str]:
-    """A new folder in the temporary folder, held (see :func:`hold_scratch`) and removed on every
+    """A new folder in the temporary folder, held (:func:`dynatex.stale.hold`) and removed on every
     way out; stale ones of killed runs are removed first."""
     remove_stale_scratch()
     tmp, fd = None, None
     try:
         while fd is None:
             tmp = tempfile.mkdtemp(prefix=prefix)
-            fd = hold_scratch(tmp)
+            fd = hold(tmp)
         yield tmp
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
-        release_scratch(fd)
+        release(fd)
 
 
 def _decode_isolated(path: str, start: int, stop: int | None, step: int):
-    import multiprocessing as mp
-
-    ctx = mp.get_context("spawn")
     with scratch_folder() as tmp:
         out = os.path.join(tmp, "frames.npy")
-        q = ctx.Queue()
-        proc = ctx.Process(target=_isolated_entry, args=(q, path, start, stop, step, out), daemon=True)
-        run_child(proc)
-        if proc.exitcode != 0:
-            err = q.get(timeout=1) if not q.empty() else None
-            if err is not None:
-                kind, msg = err
-                raise (FileNotFoundError if kind == "FileNotFoundError" else ClipError)(msg)
-            raise ClipError(
-                f"{path}: the video decoder crashed (exit code {proc.exitcode}); "
-                "re-encode the clip (for example to FFV1 or H.264) and try again"
-            )
+        child = call(f"{__name__}:_decode_to", path, start, stop, step, out, timeout=decode_timeout(path))
+        if not child.ok:
+            raise decoder_error(path, child)
         frames = np.load(out, allow_pickle=False)
-        with open(out + ".meta") as f:
-            fps_s, digest = f.read().split("\n")[:2]
-    return frames, float(fps_s), digest
+    fps, digest = child.value
+    return frames, float(fps), digest
 
 
-#: What a user sends to stop a run: held back while a child starts, ignored by the child itself.
-_STOPS = (signal.SIGINT, signal.SIGTERM)
+def decode_timeout(path: str) -> float:
+    """Seconds a child decoding ``path`` may take before it counts as hung (:data:`DECODE_TIMEOUT_S`
+    plus :data:`DECODE_S_PER_MB` per MB of file)."""
+    return DECODE_TIMEOUT_S + DECODE_S_PER_MB * os.path.getsize(path) / 2**20
 
 
-def run_child(proc) -> None:
-    """Start a decoding child and wait for it.
-
-    Ctrl-C and SIGTERM are held back while the child is handed its arguments (an interrupt in the
-    middle makes the child print a traceback on the half-read pipe) and take effect once it runs;
-    when they interrupt the wait, the child is killed first, so that it writes nothing more into
-    the scratch space about to be removed. The child ignores them (:func:`child_ignores_stops`):
-    the parent decides.
-    """
-    hold = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
-    try:
-        if hold:
-            mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPS)
-            try:
-                proc.start()
-            finally:
-                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-        else:
-            proc.start()
-        proc.join()
-    except BaseException:
-        if proc.pid is not None:
-            proc.kill()
-            proc.join()
-        raise
-
-
-def child_ignores_stops() -> None:
-    """In a child of :func:`run_child`: ignore Ctrl-C (the parent kills the child when it stops) and
-    take the signals the parent held back while starting it."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if hasattr(signal, "pthread_sigmask"):
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOPS)
-
-
-def _isolated_entry(q, path, start, stop, step, out) -> None:
-    child_ignores_stops()
-    try:
-        _decode_worker(path, start, stop, step, out)
-    except Exception as exc:  # reported to the parent, which re-raises it
-        q.put((type(exc).__name__, str(exc)))
-        q.close()
-        q.join_thread()
-        raise SystemExit(3) from None
+def decoder_error(path: str, child: Outcome) -> Exception:
+    """The error for a decoding child that failed: what it raised (a ``FileNotFoundError`` stays
+    one, anything else becomes a :class:`ClipError`), else a :class:`ClipError` saying how the
+    decoder ended (a crash, a hang, no memory)."""
+    if child.raised is not None:
+        kind, message = child.raised
+        return (FileNotFoundError if kind == "FileNotFoundError" else ClipError)(message)
+    return ClipError(
+        f"{path}: the video decoder {child.describe()}; re-encode the clip (for example to FFV1 or H.264) and try again"
+    )
 
 
 # -- geometry -----------------------------------------------------------------------

@@ -60,7 +60,7 @@ def analyze(
     """
     from .analyzer.methods import get_method
     from .tiledb import DatabaseWriter
-    from .tiledb.schema import texture_name_from
+    from .tiledb.schema import texture_name_from_path
 
     params = dict(params or {})
     chosen = [get_method(m) for m in methods]
@@ -70,7 +70,7 @@ def analyze(
     if isinstance(clip, (str, os.PathLike)):
         from .analyzer.corpus import learn_into
 
-        texture = name or texture_name_from(os.path.splitext(os.path.basename(os.path.normpath(clip)))[0])
+        texture = name or texture_name_from_path(clip)
         with DatabaseWriter(db) as writer:
             learn_into(writer, texture, os.fspath(clip), [m.name for m in chosen], params=params, load=load)
         return texture

@@ -18,7 +18,7 @@ def _our_exception_classes() -> dict[str, type]:
     found = {}
     for package in PACKAGES:
         root = importlib.import_module(package)
-        names = [package] + [i.name for i in pkgutil.iter_modules(root.__path__, package + ".")]
+        names = [package] + [i.name for i in pkgutil.walk_packages(root.__path__, package + ".")]  # subpackages too
         for name in names:
             if name.endswith("__main__"):
                 continue
@@ -35,6 +35,7 @@ def test_every_exception_class_of_ours_is_a_dynatex_error_and_a_builtin_one():
     (or is the root itself or a family base), so ``except ValueError`` and the like keep working."""
     classes = _our_exception_classes()
     assert "dynatex.analyzer.errors.SchedulerError" in classes and "dynatex.cli.Terminated" in classes
+    assert "dynatex.errors.ChildStartError" in classes and "dynatex.tiledb.errors.TileDBWriteError" in classes
     outside = sorted(n for n, c in classes.items() if n not in SIGNALS and not issubclass(c, DynatexError))
     assert not outside, f"not under DynatexError: {outside}"
     for name, cls in classes.items():

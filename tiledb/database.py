@@ -302,6 +302,16 @@ class TileDB:
         return f"<TileDB {self.filename!r} v{self.version[0]}.{self.version[1]} textures={list(self._textures)}>"
 
 
+def read_everything(filename: str, max_bytes: float) -> None:
+    """Open ``filename`` unprobed and read every part a reader may read, with at most ``max_bytes``
+    declared bytes per read; raise the first problem found. What the probe's child process runs
+    (:mod:`.probe`): a crash or hang here is the probe's verdict."""
+    with TileDB(filename, probe=False, max_bytes=max_bytes) as db:
+        errors = db.validate(every_frame=True, keep_going=True)
+    if errors:
+        raise errors[0]
+
+
 def open_db(path: str | os.PathLike, *, max_bytes: float | None = None) -> TileDB:
     """Open and validate a tile database for reading.
 

@@ -2,14 +2,14 @@
 
 The HDF5 library itself segfaults or never returns on some corrupt files (byte flips in
 attribute messages, found by ``tools/fuzz_databases.py``), and no check of ours can run
-before its reads. :func:`probe` runs ``python -m dynatex.tiledb.probe FILE`` in a fresh
-interpreter (safe in a process with threads, and on every platform, unlike ``fork``),
-which opens the file, validates every method and reads every stored frame:
+before its reads. :func:`probe` runs :func:`~dynatex.tiledb.database.read_everything` in a
+child process (:func:`dynatex.child.call`, a fresh interpreter), which opens the file,
+validates every method and reads every stored frame:
 
 - the child exits 0: the file is safe to read here;
 - it exits 1 (an ordinary error, a :class:`~dynatex.tiledb.TileDBError` for instance): the
   probe says nothing, and opening the file here reports the error;
-- it runs out of memory (a ``MemoryError``, exit status 3, or killed by ``SIGKILL`` that the
+- it runs out of memory (a ``MemoryError``, or killed by ``SIGKILL`` that the
   probe did not send, the kernel's out-of-memory killer's signal):
   :class:`~dynatex.tiledb.TileDBFormatError`, "reading the file ran out of memory", with the
   child's peak resident memory; this verdict is not remembered (memory comes and goes);
@@ -22,12 +22,12 @@ what the parent's open refuses before reading anything (:func:`~dynatex.tiledb._
 
 A file that passed is remembered by its identity (path, device, inode, size, modification
 time), dynatex's version and the bound it was read under (a pass holds for every smaller
-bound), in this process and in the user's cache folder (``databases.json`` beside the OpenCL
-device verdicts), so a game pays the probe once per new database file, not at every start; a
-file the writer has just written and read back is remembered without a probe, for any bound
-(:func:`remember`). Where no Python interpreter can be started (Python
-embedded in an application whose executable is not Python, and ``DYNATEX_PYTHON`` unset)
-the probe is skipped.
+bound), in this process and in the user's cache folder (``databases.json`` in
+:func:`dynatex.cache.cache_dir`, beside the OpenCL device verdicts), so a game pays the probe
+once per new database file, not at every start; a file the writer has just written and read
+back is remembered without a probe, for any bound (:func:`remember`). Where no Python
+interpreter can be started (Python embedded in an application whose executable is not Python,
+and ``DYNATEX_PYTHON`` unset) the probe is skipped.
 """
 
 from __future__ import annotations
@@ -35,12 +35,12 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import threading
-import time
 from pathlib import Path
 
+from ..cache import cache_dir
+from ..child import MEMORY_STATUS, call
+from ..errors import ChildStartError
 from .errors import TileDBFormatError
 
 #: seconds a probe may take: this plus one second per PROBE_BYTES_PER_S of file
@@ -51,20 +51,6 @@ MAX_REMEMBERED = 512
 
 _lock = threading.Lock()
 _known: dict[tuple[str, float], str | None] = {}  # (identity, bound) -> the problem found (None: safe)
-
-
-def cache_dir() -> Path:
-    """The user's cache folder of dynatex: ``$DYNATEX_CACHE_DIR``, else the platform's."""
-    root = os.environ.get("DYNATEX_CACHE_DIR")
-    if root:
-        return Path(root)
-    if sys.platform == "win32":
-        base = Path(os.environ.get("LOCALAPPDATA", Path.home() / "AppData" / "Local"))
-    elif sys.platform == "darwin":
-        base = Path.home() / "Library" / "Caches"
-    else:
-        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return base / "dynatex"
 
 
 def probe(filename: str, max_bytes: float = float("inf")) -> None:
@@ -120,71 +106,30 @@ def _passed(key: str, max_bytes: float) -> bool:
 
 #: words of the out-of-memory verdict (never remembered)
 OUT_OF_MEMORY = "ran out of memory"
-#: the child's exit status for a MemoryError
-_EXIT_MEMORY = 3
+#: what the child runs (:func:`dynatex.tiledb.database.read_everything`), named, not imported: the
+#: reader imports the probe
+READER = "dynatex.tiledb.database:read_everything"
 
 
 def _run_child(filename: str, size: int, max_bytes: float = float("inf")) -> str | None:
     """The problem a child reading ``filename`` ran into (a crash, a hang, no memory), else None."""
-    python = os.environ.get("DYNATEX_PYTHON") or sys.executable
-    if not python or "python" not in Path(python).name.lower():
-        return None  # no interpreter to run the child with: read here unprobed
     timeout = PROBE_TIMEOUT_S + size / PROBE_BYTES_PER_S
-    env = dict(os.environ)
-    env.pop("PYTHONFAULTHANDLER", None)
     try:
-        proc = subprocess.Popen(
-            [python, "-m", "dynatex.tiledb.probe", os.path.abspath(filename), repr(float(max_bytes))],
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            env=env,
-            start_new_session=os.name == "posix",
-        )
-    except OSError:
-        return None
-    try:
-        status, peak = _wait(proc, timeout)
-    except subprocess.TimeoutExpired:
-        _kill(proc)
+        child = call(READER, os.path.abspath(filename), float(max_bytes), timeout=timeout)
+    except ChildStartError:
+        return None  # no interpreter to run the child with: read here unprobed
+    if child.timed_out:
         return f"reading the file did not finish within {timeout:.0f} s (the HDF5 library loops on it): it is corrupt"
-    if status in (0, 1):
+    if child.status in (0, 1):
         return None
-    if status == _EXIT_MEMORY or status == -signal.SIGKILL:
+    if child.status == MEMORY_STATUS or child.status == -signal.SIGKILL:
         return (
-            f"reading the file {OUT_OF_MEMORY} in a child process (peak resident memory {peak / 2**20:.0f} MiB"
-            f"{', killed by SIGKILL' if status < 0 else ''}); free memory, or lower max_bytes to refuse it at once"
+            f"reading the file {OUT_OF_MEMORY} in a child process (peak resident memory "
+            f"{child.peak_bytes / 2**20:.0f} MiB{', killed by SIGKILL' if child.status < 0 else ''}); free memory, "
+            "or lower max_bytes to refuse it at once"
         )
-    how = f"signal {-status}" if status < 0 else f"exit status {status}"
+    how = f"signal {-child.status}" if child.status < 0 else f"exit status {child.status}"
     return f"the HDF5 library crashed ({how}) reading the file: it is corrupt"
-
-
-def _wait(proc: subprocess.Popen, timeout: float) -> tuple[int, int]:
-    """The child's exit status and peak resident bytes (0 where the platform does not say)."""
-    if not hasattr(os, "wait4"):
-        return proc.wait(timeout), 0
-    deadline = time.monotonic() + timeout
-    delay = 0.001
-    while True:
-        pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
-        if pid:
-            proc.returncode = os.waitstatus_to_exitcode(status)
-            return proc.returncode, int(usage.ru_maxrss) * (1 if sys.platform == "darwin" else 1024)
-        if time.monotonic() >= deadline:
-            raise subprocess.TimeoutExpired(proc.args, timeout)
-        time.sleep(delay)
-        delay = min(delay * 2, 0.05)
-
-
-def _kill(proc: subprocess.Popen) -> None:
-    try:
-        if os.name == "posix":
-            os.killpg(proc.pid, signal.SIGKILL)
-        else:
-            proc.kill()
-    except OSError:
-        pass
-    proc.wait()
 
 
 def _cache_file() -> Path:
@@ -212,22 +157,3 @@ def _remember(key: str, max_bytes: float) -> None:
         os.replace(tmp, path)
     except OSError:
         pass
-
-
-def _main(argv: list[str]) -> int:
-    """The child: open ``argv[0]`` and read all of it with at most ``argv[1]`` declared bytes per read
-    (default: no bound); 0 when that worked, 3 when memory ran out, 1 on any other ordinary error."""
-    from .database import TileDB
-
-    try:
-        with TileDB(argv[0], probe=False, max_bytes=float(argv[1]) if len(argv) > 1 else float("inf")) as db:
-            errors = db.validate(every_frame=True, keep_going=True)  # every part a reader may read
-    except MemoryError:
-        return _EXIT_MEMORY
-    except Exception:  # noqa: BLE001 - any ordinary error: the parent reports it by opening the file itself
-        return 1
-    return 1 if errors else 0
-
-
-if __name__ == "__main__":
-    sys.exit(_main(sys.argv[1:]))

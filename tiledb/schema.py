@@ -6,7 +6,9 @@ through its API. ``FORMAT.md`` beside this file documents what they mean.
 
 from __future__ import annotations
 
+import os
 import unicodedata
+from collections.abc import Sequence
 
 FORMAT_NAME = "dynatex-tiledb"
 #: (major, minor). A reader refuses another major and accepts any minor.
@@ -77,6 +79,36 @@ def texture_name_from(text: str) -> str:
     text = text.strip().lstrip(".").strip()[:MAX_TEXTURE_NAME].rstrip()
     text = unicodedata.normalize("NFC", text)  # cutting may split a character from its combining marks
     return text if texture_name_problem(text) is None else "texture"
+
+
+def texture_name_from_path(path: str | os.PathLike) -> str:
+    """The texture name a clip at ``path`` gets by default: its file name without extension, made
+    valid by :func:`texture_name_from`.
+
+    >>> texture_name_from_path("clips/sea wave.avi"), texture_name_from_path("clips/.x.npy")
+    ('sea wave', 'x')
+    """
+    return texture_name_from(os.path.splitext(os.path.basename(os.path.normpath(os.fspath(path))))[0])
+
+
+def texture_names_from_paths(paths: Sequence[str | os.PathLike]) -> list[str]:
+    """One valid, distinct texture name per clip (:func:`texture_name_from_path`; ``_2``, ``_3``
+    on clashes). Names that differ only in case clash too: a corpus also names its files by them.
+
+    >>> texture_names_from_paths(["a/Sea.avi", "b/sea.avi", "c/über.npy"])
+    ['Sea', 'sea_2', 'über']
+    """
+    names: list[str] = []
+    taken: set[str] = set()
+    for path in paths:
+        base = texture_name_from_path(path)
+        name, i = base, 2
+        while name.casefold() in taken:
+            suffix = f"_{i}"
+            name, i = texture_name_from(base[: MAX_TEXTURE_NAME - len(suffix)]) + suffix, i + 1
+        names.append(name)
+        taken.add(name.casefold())
+    return names
 
 
 #: Largest dimension any stored array may declare; guards hostile files.

@@ -25,7 +25,11 @@ MAX_TILES = 4096
 CONSTRUCTIONS = ("quilted", "ring", "wang")  # how tiles join in x and y (attribute ``construction``)
 #: How far a stored mean colour may lie from the tiles' (the analyzer averages 16 sampled frames).
 MEAN_RGB_TOLERANCE = 32.0
-MAX_CLASSES = 10  # the player tone table (256 entries) holds blended tones for every pair
+#: Entries of the player's tone table (a tone index is the top 8 bits of a packed source entry):
+#: one tone per tile class, and for every pair of classes the blended tones of a feathered border.
+MAX_TONES = 256
+#: Most tile classes: their tones and at least two blend levels for every pair fit :data:`MAX_TONES`.
+MAX_CLASSES = 10
 STATIONARITY_WARN = 0.5  # below this a clip is not one texture all over (grass 0.74, sea 0.65)
 
 

@@ -36,7 +36,7 @@ import h5py
 import numpy as np
 
 from ..errors import InvalidArgumentError
-from ..stale import remove_unheld
+from ..stale import hold, release, remove_unheld
 from . import frames as _frames
 from . import probe as _probe
 from . import schema
@@ -269,9 +269,8 @@ class DatabaseWriter:
         self._release()
 
     def _release(self) -> None:
-        if self._lock is not None:
-            os.close(self._lock)  # drops the flock
-            self._lock = None
+        release(self._lock)  # drops the flock
+        self._lock = None
 
     def __enter__(self) -> DatabaseWriter:
         return self
@@ -339,23 +338,20 @@ def remove_stale_temp_files(path: str | os.PathLike) -> list[str]:
 
 
 def _create_temp(path: str) -> tuple[str, int | None]:
-    """A new temporary file beside ``path``, created with the umask's mode, and the descriptor that
-    holds its lock (None without ``fcntl``: an open descriptor would only stop the rename there)."""
+    """A new temporary file beside ``path``, created with the umask's mode, and what holds it against
+    cleaners (:func:`dynatex.stale.hold`)."""
     folder, name = os.path.split(path)
     for _ in range(100):
         token = "".join(secrets.choice(_TMP_CHARS) for _ in range(_TMP_LEN))
         tmp = os.path.join(folder, f".{name}.{token}.tmp")
         try:
-            fd = os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666)
+            os.close(os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666))
         except FileExistsError:
             continue
-        if fcntl is None:
-            os.close(fd)
-            return tmp, None
-        fcntl.flock(fd, fcntl.LOCK_SH)
-        if os.fstat(fd).st_nlink > 0:
-            return tmp, fd
-        os.close(fd)  # a cleaner took it between creation and lock: try another name
+        lock = hold(tmp)
+        if lock is not None:
+            return tmp, lock
+        # a cleaner took it between creation and lock: try another name
     raise FileExistsError(f"{path}: cannot create a temporary file in {folder}")
 
 
@@ -366,7 +362,7 @@ def _open_for_writing(tmp: str, lock: int | None) -> h5py.File:
     try:
         return h5py.File(tmp, "w", locking=False, rdcc_nbytes=0)
     except ValueError:
-        if lock is not None:
+        if lock is not None and lock >= 0:
             fcntl.flock(lock, fcntl.LOCK_UN)
         return h5py.File(tmp, "w", rdcc_nbytes=0)
 

@@ -15,7 +15,7 @@ import time
 from ..analyzer.methods import AUTO, METHODS, Method, get_method
 from ..params import Param
 from ..tiledb import DatabaseWriter
-from ..tiledb.schema import texture_name_from
+from ..tiledb.schema import texture_name_from_path
 from ._common import (
     MAX_COUNT,
     Number,
@@ -214,8 +214,7 @@ def _load_options(args: argparse.Namespace) -> dict:
 def _run_one(args: argparse.Namespace, clip_path: str, methods, max_memory: int | None, *, auto: bool = False) -> int:
     from ..analyzer.corpus import learn_into
 
-    stem = os.path.splitext(os.path.basename(os.path.normpath(clip_path)))[0]
-    texture = args.name or texture_name_from(stem)
+    texture = args.name or texture_name_from_path(clip_path)
     show = not args.quiet
     t0 = time.perf_counter()
 

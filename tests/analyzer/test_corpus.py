@@ -14,11 +14,11 @@ from dynatex.analyzer.corpus import (
     blas_threads,
     connect,
     find_clips,
-    remove_stale_temporaries,
-    texture_names,
 )
 from dynatex.analyzer.stream import spill_clip
 from dynatex.tiledb import open_db
+from dynatex.tiledb.schema import texture_names_from_paths
+from dynatex.tiledb.writer import remove_stale_temp_files
 
 from ..conftest import wave_clip
 from .subspace import assert_same_lds
@@ -82,7 +82,9 @@ def test_find_clips_folders_globs_and_lists(tmp_path, corpus):
 
 
 def test_texture_names_are_valid_and_distinct():
-    assert texture_names(["x/sea wave.avi", "y/sea wave.avi", "z/über.npy"]) == ["sea_wave", "sea_wave_2", "_ber"]
+    """The corpus names textures by the one rule of the format (an analysis of one clip uses it too)."""
+    names = texture_names_from_paths(["x/sea wave.avi", "y/sea wave.avi", "z/über.npy", "w/.x.npy"])
+    assert names == ["sea wave", "sea wave_2", "über", "x"]
 
 
 def test_corpus_in_process_fails_bad_clips_keeps_others_and_skips_on_rerun(tmp_path, corpus):
@@ -153,7 +155,7 @@ def test_stale_temporaries_of_a_killed_writer_are_removed(tmp_path, corpus):
     stale.write_bytes(b"half an HDF5 file")
     other = out / ".b.h5.keep.tmp"
     other.write_bytes(b"")
-    assert remove_stale_temporaries(str(out / "a.h5")) == [str(stale)]
+    assert remove_stale_temp_files(str(out / "a.h5")) == [str(stale)]
     assert not stale.exists() and other.exists()
 
 

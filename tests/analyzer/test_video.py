@@ -111,3 +111,22 @@ def test_bad_arrays():
         load_clip(np.zeros((4, 4), np.uint8))
     with pytest.raises(ClipError, match="within 0..255"):
         load_clip(np.full((3, 4, 4), 300.0))
+
+
+def test_a_decoding_child_that_fails_is_one_clip_error_saying_how(tmp_path):
+    """What the decoding child raised comes back as it was (a missing file stays FileNotFoundError);
+    a crash or a hang there is a ClipError that says which, in one line."""
+    from dynatex.analyzer.video import decoder_error
+    from dynatex.child import call
+
+    junk = tmp_path / "junk.avi"
+    junk.write_bytes(b"not a video" * 100)
+    raised = call("dynatex.analyzer.video:_decode_to", str(junk), 0, None, 1, str(tmp_path / "f.npy"), timeout=120)
+    error = decoder_error(str(junk), raised)
+    assert isinstance(error, ClipError) and "junk.avi" in str(error) and "\n" not in str(error)
+    crashed = decoder_error("c.mp4", call("os:abort", timeout=60))
+    assert isinstance(crashed, ClipError) and str(crashed).startswith("c.mp4: the video decoder crashed (signal ")
+    hung = decoder_error("h.mp4", call("time:sleep", 60, timeout=1))
+    assert str(hung).startswith("h.mp4: the video decoder did not finish within 1 s; re-encode the clip")
+    missing = call("dynatex.analyzer.video:_decode_to", str(tmp_path / "no.mp4"), 0, None, 1, "x.npy", timeout=120)
+    assert type(decoder_error("no.mp4", missing)) is FileNotFoundError

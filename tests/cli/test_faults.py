@@ -14,7 +14,8 @@ import time
 import numpy as np
 import pytest
 
-from dynatex.analyzer.video import hold_scratch, release_scratch, remove_stale_scratch
+from dynatex.analyzer.video import remove_stale_scratch
+from dynatex.stale import hold, release
 
 from ..conftest import wave_clip
 
@@ -126,11 +127,11 @@ def test_scratch_left_by_killed_runs_is_removed_and_a_live_runs_kept(tmp_path):
     live.write_bytes(b"")
     other = tmp_path / "dynatex-decode-notours"  # seven characters: not a name of ours
     other.mkdir()
-    held = hold_scratch(str(live))
+    held = hold(str(live))
     try:
         removed = remove_stale_scratch(str(tmp_path))
     finally:
-        release_scratch(held)
+        release(held)
     assert sorted(removed) == sorted([str(stale_dir), str(stale_file)])
     assert sorted(os.listdir(tmp_path)) == ["dynatex-decode-notours", "dynatex-spill-live0000.u8"]
 

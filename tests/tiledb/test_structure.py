@@ -9,6 +9,7 @@ decompression; every other read is bounded by ``max_bytes``.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -257,7 +258,11 @@ def test_a_probe_child_out_of_memory_says_so(tmp_path):
         f["textures/w/lds/states"] = np.zeros((4, t))
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
     baseline = subprocess.run(
-        [sys.executable, "-c", "import dynatex.tiledb.probe; print(open('/proc/self/statm').read().split()[0])"],
+        [
+            sys.executable,
+            "-c",
+            "import dynatex.child, dynatex.tiledb.database; print(open('/proc/self/statm').read().split()[0])",
+        ],
         env=env,
         capture_output=True,
         text=True,
@@ -271,7 +276,7 @@ def test_a_probe_child_out_of_memory_says_so(tmp_path):
 
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
 
-    child = [sys.executable, "-m", "dynatex.tiledb.probe", str(path), "inf"]
+    child = [sys.executable, "-m", "dynatex.child", probe.READER, json.dumps([str(path), float("inf")])]
     assert subprocess.run(child, env=env, preexec_fn=small).returncode == 3
     assert subprocess.run(child, env=env).returncode == 0  # with memory to spare it reads
 

@@ -11,7 +11,7 @@ import pytest
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.tiledb import DatabaseWriter, TileDBFormatError, open_db
-from dynatex.tiledb.schema import texture_name_from, texture_name_problem
+from dynatex.tiledb.schema import texture_name_from, texture_name_problem, texture_names_from_paths
 
 from ..conftest import wave_clip
 
@@ -105,3 +105,12 @@ def test_reader_refuses_a_hostile_name(tmp_path, name):
 def test_default_names_from_file_names_are_valid(stem, name):
     assert texture_name_from(stem) == name
     assert texture_name_problem(name) is None
+
+
+def test_names_from_paths_are_distinct_whatever_the_case_and_length():
+    long = "z" * 80
+    paths = ["a/Fire.avi", "b/fire.mp4", "c/fire_2.avi", f"d/{long}.avi", f"e/{long}.avi", "f/.hidden.npy", "g/ .avi"]
+    names = texture_names_from_paths(paths)
+    assert names == ["Fire", "fire_2", "fire_2_2", "z" * 64, "z" * 62 + "_2", "hidden", "texture"]
+    assert all(texture_name_problem(n) is None for n in names)
+    assert len({n.casefold() for n in names}) == len(names)

@@ -169,3 +169,12 @@ def test_damaged_wang_edges_are_refused(wang_path, tmp_path, edit, match):
     with TileDB(path) as db:
         with pytest.raises(TileDBFormatError, match=match):
             db.texture("waves").read("tiles")
+
+
+def test_the_most_tile_classes_fit_the_tone_table():
+    """Each class's tone and two blend levels for every pair of classes (the fewest a feathered
+    border gets) fit the player's tone table, whose size the format states."""
+    from dynatex.tiledb.tiles import MAX_CLASSES, MAX_TONES
+
+    assert MAX_TONES == 256  # a tone index is 8 bits of a packed source entry
+    assert MAX_CLASSES + 2 * MAX_CLASSES**2 <= MAX_TONES
