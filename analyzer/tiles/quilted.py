@@ -66,7 +66,7 @@ def quilt_geometry(
 def _block_alpha(err: np.ndarray, side: str, margin: int, fade: float) -> np.ndarray:
     """Share ``(B, B)`` of the new block across the minimum cut through the overlap band along
     ``side`` (``err``: the band's per-pixel error, across x for left/right): the cut, kept
-    ``margin`` pixels from both edges of the band, smoothed (:func:`smooth_path`), and a
+    ``margin`` pixels from both edges of the band, smoothed (:func:`.cuts.smooth_path`), and a
     cross-fade ``fade`` pixels wide centred on it (1 on the new block's side)."""
 
     err = np.array(err if side in ("left", "right") else err.T, np.float64)  # rows along the cut
@@ -271,7 +271,8 @@ def learn_quilted(
     seed: int,
     progress: Progress | None,
 ) -> TilesModel:
-    """The quilted construction of :func:`learn_tiles` (one texture; its arguments checked there)."""
+    """The quilted construction of :func:`~dynatex.analyzer.tiles.learn_tiles` (one texture; its
+    arguments checked there)."""
     max_loop = max(min_loop, QUILT_MAX_LOOP) if max_loop is None else max_loop
     t, h, w = main.shape[:3]
     b, step, cell, (py, px) = quilt_geometry(h, w, block=block, period=period)

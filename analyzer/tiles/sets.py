@@ -107,8 +107,9 @@ def learn_set(
 def _tile_size(
     main: np.ndarray, extra: Sequence[np.ndarray], tile, min_tile: int, max_tile: int
 ) -> tuple[tuple[int, int], tuple[float, float], float]:
-    """The tile size (``tile``: an int or (th, tw) checked by :func:`learn_tiles`, or None), the spatial
-    period it comes from and that period's strength (0 when given)."""
+    """The tile size (``tile``: an int or (th, tw) checked by
+    :func:`~dynatex.analyzer.tiles.learn_tiles`, or None), the spatial period it comes from and
+    that period's strength (0 when given)."""
     if tile is None:
         (th, tw), period, strength = tile_period(main, min_tile=min_tile, max_tile=max_tile)
         for f in extra:

@@ -128,7 +128,7 @@ def wang_set(tx: Texture, th: int, tw: int, r: int, colours: int, flow_gain: flo
     typical places apart from each other, each ``2 depth`` pixels across its edge (``depth``
     = the ring plus its feathering, as far as a ring cut and its fade reach). A tile's ring
     is the inner halves of its four strips (:func:`wang_ring`), joined to an interior from
-    yet another place by the ring cuts (:func:`ring_join`).
+    yet another place by the ring cuts (:func:`.ring.ring_join`).
     """
     d = r + ring_feather(r, th, tw) + 1
     f = tx.frames
