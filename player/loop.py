@@ -91,7 +91,7 @@ def _repeats(length: int, count: int | None, keep_pace: bool) -> tuple[int, int]
 
 
 def _tiles_loop(player, count: int | None, keep_pace: bool) -> tuple[np.ndarray, str, float]:
-    from .tiles import SPEED_RANGE
+    from .modes.tiles import SPEED_RANGE
 
     length = player.loop_length
     n, loops = _repeats(length, count, keep_pace)

@@ -11,9 +11,9 @@ import time
 import numpy as np
 
 from ..player import open_player
-from ..player import ratemap as _ratemap
 from ..player.loop import loop_frames
 from ..player.modes import player_class
+from ..player.modes import ratemap as _ratemap
 from ._common import Number, Numbers, UsageError, positive_int
 from ._modes import add_mode_arguments, apply_controls, player_kwargs, resolve_args_mode
 from ._output import H264_CRF, H264_PRESET, H264_PRESETS, MAX_FPS, MIN_FPS, FrameWriter
@@ -128,7 +128,7 @@ def _apply(player, args: argparse.Namespace) -> None:
 
 def rate_map_arg(spec: str, rate_range: tuple[float, float], shape: tuple[int, int]) -> np.ndarray:
     """The rate map ``--rate-map SPEC`` describes, for an output of ``shape`` (H, W)."""
-    from ..player import ratemap
+    from ..player.modes import ratemap
 
     kind, _, rest = spec.partition(":")
     if kind in ("halves", "light") and rest:

@@ -1,7 +1,7 @@
 """The engine layer: what draws a mode's frames, and what the engines share.
 
 A mode (a :class:`~dynatex.player.base.Player`) is a model, a clock and controls; its
-frames come from one engine, ``player.engine``, of one of four kinds, each a pair of an
+frames come from one engine, ``player.engines``, of one of four kinds, each a pair of an
 OpenCL engine and its numpy reference behind one interface:
 
 =============  ===========================  ======================================
@@ -35,7 +35,8 @@ from typing import Any
 
 import numpy as np
 
-from .opencl import KernelBuildError, Program, writes_through
+from ..errors import KernelBuildError
+from ..opencl.programs import Program, writes_through
 
 #: caller's arrays whose host-pointer buffers stay wrapped (double buffering needs two)
 HELD_ARRAYS = 4
@@ -44,7 +45,7 @@ HELD_ARRAYS = 4
 class Kernel:
     """One kernel object of ``program`` with its arguments set by name.
 
-    >>> k = Kernel(build_program(ctx, "lds.cl", defines), "project")   # doctest: +SKIP
+    >>> k = Kernel(build_program(ctx, "projection.cl", defines), "project")   # doctest: +SKIP
     >>> k.set(coef=d_coef, n=np.int32(12))                             # doctest: +SKIP
     """
 

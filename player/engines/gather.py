@@ -70,7 +70,7 @@ writes straight into the caller's array: one launch, no copy.
 Examples
 --------
 >>> import numpy as np
->>> from dynatex.player.gather import open_gather, pack_source
+>>> from dynatex.player.engines.gather import open_gather, pack_source
 >>> stack = np.random.default_rng(0).integers(0, 256, (8, 4, 6, 3), dtype=np.uint8)
 >>> g = open_gather(stack, (4, 6), backend="numpy")
 >>> g.set_source_map(pack_source(np.arange(24).reshape(4, 6)))   # identity map
@@ -88,10 +88,10 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import check_float, check_int, check_out
-from ..errors import ArgumentTypeError, InvalidArgumentError
-from .base import BACKENDS
-from .pixels import pixel_format
+from ...checks import check_float, check_int, check_out
+from ...errors import ArgumentTypeError, InvalidArgumentError
+from ..base import BACKENDS
+from ..pixels import pixel_format
 
 log = logging.getLogger(__name__)
 WRAPS = ("loop", "clamp", "pingpong")
@@ -651,7 +651,7 @@ class GatherOpenCL(Gather):
     """Kernel ``gather`` (``kernels/gather.cl``, or its verified x86 variant) on a device.
 
     ``ctx`` and ``queue`` are shared with the owner (the mode's player); both ``None`` use
-    :func:`dynatex.player.opencl.get_context` (``device``) and a new queue. The engine owns
+    :func:`dynatex.player.opencl.devices.get_context` (``device``) and a new queue. The engine owns
     its buffers: the frame stack, the source, the maps and the tones, uploaded when set;
     the maps are smoothed on the device and read back only when asked for.
     """
@@ -671,8 +671,10 @@ class GatherOpenCL(Gather):
         super().__init__(frames, out_size, **options)
         import pyopencl as cl
 
-        from .engine import FrameOut, Kernel
-        from .opencl import OpenCLUnavailableError, build_program, get_context, variant_verified
+        from ..errors import OpenCLUnavailableError
+        from ..opencl.devices import get_context, variant_verified
+        from ..opencl.programs import build_program
+        from .base import FrameOut, Kernel
 
         self.ctx = get_context(device) if ctx is None else ctx
         self.queue = cl.CommandQueue(self.ctx) if queue is None else queue

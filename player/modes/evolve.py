@@ -17,7 +17,7 @@ that map, at a per-pixel source time built in three steps:
 
 Pixels in a quilt's cross-fade band blend their second source (with its own block's time).
 The player is the time model (clock, controls, the functions below); the runs engine
-(:mod:`.runs`: OpenCL kernel ``kernels/quilt.cl`` or its numpy reference) draws the frames
+(:mod:`dynatex.player.engines.runs`: OpenCL kernel ``kernels/runs.cl`` or its numpy reference) draws the frames
 from the quilt's maps at the source times the model gives it.
 """
 
@@ -29,15 +29,15 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import MAX_COUNT, MAX_SIDE, Choice, Flag, NpyFile, Range, Size, check_float, check_seed, check_size
-from ..errors import InvalidArgumentError
-from ..params import Param
-from ..tiledb import QuiltModel, TileDB
-from .base import Player
-from .controls import Capabilities, Control
-from .gather import gaussian_smooth
+from ...checks import MAX_COUNT, MAX_SIDE, Choice, Flag, NpyFile, Range, Size, check_float, check_seed, check_size
+from ...errors import InvalidArgumentError
+from ...params import Param
+from ...tiledb import QuiltModel, TileDB
+from ..base import Player
+from ..controls import Capabilities, Control
+from ..engines.gather import gaussian_smooth
+from ..engines.runs import open_runs, quantize_rate
 from .ratemap import check_rate_map
-from .runs import open_runs, quantize_rate
 
 ENDS = ("hold", "loop", "pingpong")
 SPEED_RANGE = (-16.0, 16.0)
@@ -114,7 +114,7 @@ class EvolvePlayer(Player):
 
     The clock (:attr:`time`, in source frames at rate 1; assign to seek) is part of the state.
     The rate map is played quantized to steps of 1/512 after smoothing (:func:`quantize_rate`);
-    :mod:`dynatex.player.ratemap` makes rate maps.
+    :mod:`dynatex.player.modes.ratemap` makes rate maps.
 
     Examples
     --------
@@ -259,7 +259,7 @@ class EvolvePlayer(Player):
         NpyFile(),
         None,
         "Per-pixel rate of evolution M, (H, W) in [0, 64] (local time t * M); see "
-        "dynatex.player.ratemap for generators.",
+        "dynatex.player.modes.ratemap for generators.",
         flag=None,
         optional=True,
         default_doc="uniform 1",

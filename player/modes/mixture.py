@@ -5,7 +5,7 @@ drawing ``draws`` noise vectors and keeping the candidate nearest the training c
 (the learned manifold), then decodes it to responsibilities ``r_s`` and local coordinates
 ``z_s`` (microseconds: ``S`` small Gaussians and ``d x D`` maps). The image is the
 projection of ``u = (r_s, r_s z_s)`` onto the stacked basis (component means and loadings)
-with the LDS mode's ``project`` kernel (:mod:`.projection`): one launch per frame,
+with the LDS mode's ``project`` kernel (:mod:`dynatex.player.engines.projection`): one launch per frame,
 memory-bound on the stacked basis.
 """
 
@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import Range
-from ..errors import InvalidArgumentError
-from ..tiledb import MixtureModel, TileDB
-from .base import rng_from_state
-from .controls import Control
+from ...checks import Range
+from ...errors import InvalidArgumentError
+from ...tiledb import MixtureModel, TileDB
+from ..base import rng_from_state
+from ..controls import Control
 from .projected import ProjectionPlayer
 
 DEFAULT_DRAWS = 16

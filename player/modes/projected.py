@@ -2,14 +2,14 @@
 projection of a small vector, advanced on the host once per frame, through a stored basis.
 
 A model with a ``detail`` part (:mod:`dynatex.tiledb.detail`) also opens the detail engine
-(:mod:`.detail`), which adds the fine detail the projection lacks to each projected frame and
-holds every pixel to the source's colour range.
+(:mod:`dynatex.player.engines.detail`), which adds the fine detail the projection lacks to each
+projected frame and holds every pixel to the source's colour range.
 
 A mode subclasses :class:`ProjectionPlayer` and supplies its model (``_setup``), the
 vector it advances (``_vector``, ``_dim``, ``_step``) and how that vector becomes
-projection coefficients (``_coefficients``). The base opens the projection engine (:mod:`.projection`),
-warms it, and provides ``precision``, the ``intensity`` control, ``bytes_per_frame``,
-``advance`` and the frame paths.
+projection coefficients (``_coefficients``). The base opens the projection engine
+(:mod:`dynatex.player.engines.projection`), warms it, and provides ``precision``, the
+``intensity`` control, ``bytes_per_frame``, ``advance`` and the frame paths.
 """
 
 from __future__ import annotations
@@ -20,14 +20,14 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import Choice, Range, check_int
-from ..errors import InvalidArgumentError
-from ..params import Param
-from ..tiledb import TileDB
-from .base import Player
-from .controls import Control
-from .detail import open_detail
-from .projection import open_projector
+from ...checks import Choice, Range, check_int
+from ...errors import InvalidArgumentError
+from ...params import Param
+from ...tiledb import TileDB
+from ..base import Player
+from ..controls import Control
+from ..engines.detail import open_detail
+from ..engines.projection import open_projector
 
 PRECISIONS = ("float32", "float16")
 MAX_INTENSITY = 100.0

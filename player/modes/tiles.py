@@ -7,7 +7,7 @@ random field (neighbouring cells differ little, as the seed asks: "maximal chang
 base time by neighbour patch"), spread over the pixels by a Gaussian of ``sigma`` output
 pixels so time shifts gradually across cell borders, and drifting from one field to the
 next over ``epoch`` frames so the output never repeats with the loop's period. Frames are
-built by the shared :class:`~dynatex.player.gather.Gather` (time interpolation between
+built by the shared :class:`~dynatex.player.engines.gather.Gather` (time interpolation between
 neighbouring loop frames, per-tile colour tone).
 
 Mixing: the edge between a cell of class ``a`` and one of class ``c`` belongs to class
@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import (
+from ...checks import (
     MAX_SIDE,
     Choice,
     Either,
@@ -51,12 +51,12 @@ from ..checks import (
     check_seed,
     check_size,
 )
-from ..errors import InvalidArgumentError
-from ..params import Param
-from ..tiledb import TileDB, TilesModel
-from .base import Player, rng_from_state
-from .controls import Capabilities, Control
-from .gather import MAX_GAIN, MAX_TIME, gaussian_smooth, open_gather, pack_source
+from ...errors import InvalidArgumentError
+from ...params import Param
+from ...tiledb import TileDB, TilesModel
+from ..base import Player, rng_from_state
+from ..controls import Capabilities, Control
+from ..engines.gather import MAX_GAIN, MAX_TIME, gaussian_smooth, open_gather, pack_source
 
 TIME_STEP = 8  # output pixels per time-map sample
 #: Largest ``sigma``, output pixels: smoothing costs time linear in it (0.46 s at 4K for 256 on a busy

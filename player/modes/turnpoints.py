@@ -25,14 +25,14 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import MAX_COUNT, Choice, Range, check_float, check_int
-from ..errors import InvalidArgumentError
-from ..params import Param
-from ..tiledb import TileDB
-from ..tiledb.turnpoints import TurnPointModel
-from .base import Player, rng_from_state
-from .blend import open_blend
-from .controls import Capabilities, Control
+from ...checks import MAX_COUNT, Choice, Range, check_float, check_int
+from ...errors import InvalidArgumentError
+from ...params import Param
+from ...tiledb import TileDB
+from ...tiledb.turnpoints import TurnPointModel
+from ..base import Player, rng_from_state
+from ..controls import Capabilities, Control
+from ..engines.blend import open_blend
 
 PLAYBACKS = ("hybrid", "turns", "jumps")
 SPEED_RANGE = (0.0, 4.0)

@@ -9,9 +9,10 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from dynatex.player import open_player, selftest
-from dynatex.player.engine import FrameOut, Kernel
-from dynatex.player.opencl import build_program
+from dynatex.player import open_player
+from dynatex.player.engines.base import FrameOut, Kernel
+from dynatex.player.opencl import selftest
+from dynatex.player.opencl.programs import build_program
 from dynatex.player.pixels import FORMATS
 
 RGB = FORMATS["RGB"].defines
@@ -26,7 +27,7 @@ MODES = [
 
 
 def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
-    k = Kernel(build_program(cl_context, "lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}), "project")
+    k = Kernel(build_program(cl_context, "projection.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}), "project")
     assert k.args == ("basis", "mean", "coef", "out", "n", "values")
     with pytest.raises(TypeError, match=r"kernel 'project' has no argument 'weights' \(it has basis, mean"):
         k.set(weights=np.int32(1))
@@ -53,9 +54,9 @@ PROGRAMS = [
             **RGB,
         },
     ),
-    ("lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}),
+    ("projection.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}),
     ("blend.cl", {"FRAME_VECS": 4, "ITEMS": 4}),
-    ("quilt.cl", {"INTERP": 1, "GAIN": 0, "PIXEL_BYTES": 3}),
+    ("runs.cl", {"INTERP": 1, "GAIN": 0, "PIXEL_BYTES": 3}),
     ("copy.cl", {}),
 ]
 
@@ -63,7 +64,7 @@ PROGRAMS = [
 @pytest.mark.parametrize("filename, defines", PROGRAMS, ids=[f for f, _ in PROGRAMS])
 def test_argument_names_read_from_the_source_are_the_drivers(cl_context, filename, defines):
     """The names engine.Kernel binds by, read from the .cl text, are those the compiler reports."""
-    from dynatex.player.opencl import kernel_arg_names, kernel_source
+    from dynatex.player.opencl.programs import kernel_arg_names, kernel_source
 
     source = kernel_source(filename)
     options = [f"-D{k}={v}" for k, v in defines.items()] + ["-cl-kernel-arg-info"]
@@ -81,7 +82,7 @@ def test_argument_names_read_from_the_source_are_the_drivers(cl_context, filenam
 def test_frames_reach_the_callers_array_directly_or_by_copy(cl_context, direct):
     """One kernel, both delivery paths, several arrays in turn (double buffering and more):
     each array gets exactly its own frame, left in flight until its event completes."""
-    from dynatex.player.opencl import writes_through
+    from dynatex.player.opencl.programs import writes_through
 
     if direct and not writes_through(cl_context):
         pytest.skip("this device does not share host memory")
@@ -150,7 +151,7 @@ def test_every_mode_draws_through_one_engine_and_closing_releases_it(cl_device, 
 
 _BUILD_CHILD = """
 import sys, numpy as np
-from dynatex.player.gather import open_gather, pack_source
+from dynatex.player.engines.gather import open_gather, pack_source
 g = open_gather(np.zeros((3, 64, 64, 3), np.uint8), (64, 128), device=sys.argv[1], cell=(16, 16), time_step=8)
 g.set_source_grid(pack_source(np.zeros((4, 8), int)))
 g.render(0.5)
