@@ -53,7 +53,7 @@ def _opencl_copy_bandwidth(src: np.ndarray, repeats: int) -> dict[str, float]:
     each the median of ``repeats`` after one warm-up."""
     import pyopencl as cl
 
-    from .player.opencl.devices import get_context, variant_verified
+    from .player.opencl.context import get_context, variant_verified
     from .player.opencl.programs import build_program
 
     ctx = get_context()

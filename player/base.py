@@ -42,7 +42,7 @@ COMMON_OPTIONS: tuple[Param, ...] = (
         "device",
         Text("P:D|NAME"),
         None,
-        "OpenCL device: index P:D or a name substring (see dynatex.player.opencl.devices.get_context).",
+        "OpenCL device: index P:D or a name substring (see dynatex.player.opencl.context.get_context).",
         optional=True,
         default_doc="the first verified device",
     ),
@@ -130,7 +130,7 @@ class Player:
     ``backend`` is "auto" (default: OpenCL on the first device that passed the self-test,
     else the numpy reference with one warning), "opencl" (a verified device or
     :class:`~dynatex.player.OpenCLUnavailableError`) or "numpy" (the reference);
-    ``device`` names an OpenCL device (see :func:`dynatex.player.opencl.devices.get_context`).
+    ``device`` names an OpenCL device (see :func:`dynatex.player.opencl.context.get_context`).
     ``format`` is the frames' pixel format: "RGB" (default), "RGBA" or "BGRA" (alpha 255),
     written straight from the kernels (:mod:`dynatex.player.pixels`); :attr:`shape` ends in
     its bytes per pixel.
@@ -388,7 +388,7 @@ class Player:
         ``engine`` where the self-test measured OpenCL slower on this device (Verdict.speed)."""
         if backend != "auto" or device is not None or os.environ.get("PYOPENCL_CTX") or self.ctx is None:
             return
-        from .opencl.devices import engine_speed
+        from .opencl.context import engine_speed
 
         speed = engine_speed(self.ctx.devices[0], engine)
         if speed is not None and speed < 1.0:
@@ -436,7 +436,7 @@ def _context(backend: str, device: str | None):
     (the numpy backend then, with one warning per process). A device asked for by ``device``
     or ``PYOPENCL_CTX`` is never silently replaced."""
     global _fallback_warned
-    from .opencl import devices as opencl
+    from .opencl import context as opencl
 
     try:
         return opencl.get_context(device)

@@ -91,12 +91,10 @@ def _repeats(length: int, count: int | None, keep_pace: bool) -> tuple[int, int]
 
 
 def _tiles_loop(player, count: int | None, keep_pace: bool) -> tuple[np.ndarray, str, float]:
-    from .modes.tiles import SPEED_RANGE
-
     length = player.loop_length
     n, loops = _repeats(length, count, keep_pace)
     speed = length * loops / n
-    hi = SPEED_RANGE[1]
+    hi = player.controls()["speed"].param.kind.high
     if not speed <= hi:
         raise InvalidArgumentError(
             f"{n} frames: a tiles loop of {length} frames needs at least {math.ceil(length / hi)} frames "

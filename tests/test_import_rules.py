@@ -104,31 +104,6 @@ TOP_PACKAGES = ("dynatex", "dynatex.commands", "dynatex.tiledb", "dynatex.analyz
 #: Imports inside a package that close a cycle today (issue 31 untangles them): the test refuses
 #: any other, so a knot can only shrink. Remove an entry when its import goes.
 KNOWN_CYCLE_IMPORTS = {
-    ("dynatex.player.base", "dynatex.player.loop"),
-    ("dynatex.player.base", "dynatex.player.opencl.devices"),
-    ("dynatex.player.engines.base", "dynatex.player.opencl.programs"),
-    ("dynatex.player.engines.detail", "dynatex.player.engines.base"),
-    ("dynatex.player.engines.detail", "dynatex.player.opencl.programs"),
-    ("dynatex.player.engines.gather", "dynatex.player.base"),
-    ("dynatex.player.engines.gather", "dynatex.player.engines.base"),
-    ("dynatex.player.engines.gather", "dynatex.player.opencl.devices"),
-    ("dynatex.player.engines.gather", "dynatex.player.opencl.programs"),
-    ("dynatex.player.engines.projection", "dynatex.player.engines.base"),
-    ("dynatex.player.engines.projection", "dynatex.player.opencl.programs"),
-    ("dynatex.player.loop", "dynatex.player.modes.tiles"),
-    ("dynatex.player.modes.tiles", "dynatex.player.base"),
-    ("dynatex.player.modes.tiles", "dynatex.player.engines.gather"),
-    ("dynatex.player.opencl.devices", "dynatex.player.opencl.selftest"),
-    ("dynatex.player.opencl.devices", "dynatex.player.opencl.verify"),
-    ("dynatex.player.opencl.programs", "dynatex.player.opencl.devices"),
-    ("dynatex.player.opencl.selftest", "dynatex.player.engines.detail"),
-    ("dynatex.player.opencl.selftest", "dynatex.player.engines.gather"),
-    ("dynatex.player.opencl.selftest", "dynatex.player.engines.projection"),
-    ("dynatex.player.opencl.selftest", "dynatex.player.opencl.devices"),
-    ("dynatex.player.opencl.selftest", "dynatex.player.opencl.programs"),
-    ("dynatex.player.opencl.selftest", "dynatex.player.opencl.verify"),
-    ("dynatex.player.opencl.verify", "dynatex.player.opencl.devices"),
-    ("dynatex.player.opencl.verify", "dynatex.player.opencl.selftest"),
     ("dynatex.tiledb.database", "dynatex.tiledb.probe"),
     ("dynatex.tiledb.probe", "dynatex.tiledb.database"),
 }
@@ -216,3 +191,16 @@ def test_no_new_import_cycle_inside_a_package():
         ("dynatex.x.b", "dynatex.x.c"),
         ("dynatex.x.c", "dynatex.x.a"),
     }
+
+
+def test_the_opencl_plumbing_imports_nothing_above_it():
+    """``player/opencl`` is layered (devices, programs, verify, context) below every engine and
+    mode; only the self-test's checks, which its child process alone imports, reach above."""
+    graph = _graph()
+    below = {"dynatex", "dynatex.errors", "dynatex.tiledb.probe", "dynatex.player.errors"}
+    plumbing = {m for m in graph if m.startswith("dynatex.player.opencl") and m != "dynatex.player.opencl.selftest"}
+    assert {"dynatex.player.opencl.devices", "dynatex.player.opencl.context"} <= plumbing
+    upward = {m: graph[m] - plumbing - below for m in plumbing if graph[m] - plumbing - below}
+    assert not upward, upward
+    importers = sorted(m for m, targets in graph.items() if "dynatex.player.opencl.selftest" in targets)
+    assert not importers, f"the self-test's checks are imported by {importers}"

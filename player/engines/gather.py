@@ -651,7 +651,7 @@ class GatherOpenCL(Gather):
     """Kernel ``gather`` (``kernels/gather.cl``, or its verified x86 variant) on a device.
 
     ``ctx`` and ``queue`` are shared with the owner (the mode's player); both ``None`` use
-    :func:`dynatex.player.opencl.devices.get_context` (``device``) and a new queue. The engine owns
+    :func:`dynatex.player.opencl.context.get_context` (``device``) and a new queue. The engine owns
     its buffers: the frame stack, the source, the maps and the tones, uploaded when set;
     the maps are smoothed on the device and read back only when asked for.
     """
@@ -672,7 +672,7 @@ class GatherOpenCL(Gather):
         import pyopencl as cl
 
         from ..errors import OpenCLUnavailableError
-        from ..opencl.devices import get_context, variant_verified
+        from ..opencl.context import get_context, variant_verified
         from ..opencl.programs import build_program
         from .base import FrameOut, Kernel
 

@@ -1,16 +1,14 @@
-"""OpenCL devices: the devices present, device choice (only devices that passed the
-self-test, :mod:`dynatex.player.opencl.verify`) and one context per device.
+"""OpenCL devices: the devices present, how they are named and the order they are tried in
+(the lowest layer of the plumbing: which of them the player uses is :mod:`.context`'s choice).
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import re
-import threading
 from dataclasses import dataclass
 
-from ..errors import DeviceNotVerifiedError, OpenCLUnavailableError
+from ..errors import OpenCLUnavailableError
 
 try:
     import pyopencl as cl
@@ -25,11 +23,6 @@ log = logging.getLogger(__name__)
 #: the numpy backend, as the API and the command line spell it
 _NUMPY = "use the numpy backend (backend='numpy'; dynatex --backend numpy)"
 _FIX = f"install an OpenCL platform (./install.sh, or `apt-get install pocl-opencl-icd`), or {_NUMPY}"
-
-
-_lock = threading.Lock()
-_contexts: dict[str, cl.Context] = {}
-_infos: dict[int, DeviceInfo] = {}  # device handle -> its DeviceInfo, for get_context's devices
 
 
 @dataclass(frozen=True)
@@ -55,7 +48,7 @@ class DeviceInfo:
 
 def devices() -> list[DeviceInfo]:
     """Every OpenCL device present, in ``PYOPENCL_CTX`` index order (none without OpenCL)."""
-    _require_pyopencl()
+    require_pyopencl()
     try:
         platforms = cl.get_platforms()
     except cl.Error:
@@ -86,23 +79,6 @@ def list_devices() -> list[tuple[str, str]]:
     return [(d.platform, d.name) for d in devices()]
 
 
-def device_info(device: cl.Device) -> DeviceInfo:
-    """The :class:`DeviceInfo` of a pyopencl device (known for the devices of
-    :func:`get_context`'s contexts, else found among :func:`devices`)."""
-    info = _infos.get(device.int_ptr)
-    if info is not None:
-        return info
-    for info in devices():
-        if (info.platform, info.platform_version, info.name, info.driver_version) == (
-            device.platform.name.strip(),
-            device.platform.version.strip(),
-            device.name.strip(),
-            device.driver_version.strip(),
-        ):
-            return info
-    raise OpenCLUnavailableError(f"device {device.name!r} is not among this process's OpenCL devices")
-
-
 def preference_order(infos: list[DeviceInfo]) -> list[DeviceInfo]:
     """The order devices are tried in: PoCL first (newest version first), then the others as listed."""
 
@@ -114,99 +90,9 @@ def preference_order(infos: list[DeviceInfo]) -> list[DeviceInfo]:
     return pocl + [d for d in infos if not d.is_pocl]
 
 
-def get_context(device: str | None = None) -> cl.Context:
-    """The shared context for a verified ``device``.
-
-    ``device`` is ``None`` (``PYOPENCL_CTX`` if set, else the first device that passes the
-    self-test, PoCL first), ``"pocl"``, an index ``"P:D"`` (platform, device) or a substring
-    of a device or platform name. A device named here or by ``PYOPENCL_CTX`` that fails the
-    self-test raises :class:`DeviceNotVerifiedError` saying why; no verified device at all
-    raises :class:`OpenCLUnavailableError` listing each device's failure.
-    """
-    _require_pyopencl()
-    key = device if device is not None else "env:" + os.environ.get("PYOPENCL_CTX", "")
-    with _lock:
-        ctx = _contexts.get(key)
-    if ctx is not None:
-        return ctx
-    info = _pick_device(device)
-    with _lock:
-        ctx = _contexts.get(key)
-        if ctx is None:
-            ctx = _contexts.get(info.index)
-        if ctx is None:
-            ctx = cl.Context([_cl_device(info)])
-            _contexts[info.index] = ctx
-            _infos[ctx.devices[0].int_ptr] = info
-        _contexts[key] = ctx
-        return ctx
-
-
-def _cl_device(info: DeviceInfo) -> cl.Device:
-    p, d = (int(v) for v in info.index.split(":"))
-    return cl.get_platforms()[p].get_devices()[d]
-
-
-def _pick_device(device: str | None) -> DeviceInfo:
-    from . import selftest, verify
-
-    infos = devices()
-    if not infos:
-        raise OpenCLUnavailableError(f"no OpenCL device found; {_FIX}")
-    spec, what = device, "device"
-    if spec is None and os.environ.get("PYOPENCL_CTX"):
-        spec, what = os.environ["PYOPENCL_CTX"], "PYOPENCL_CTX"
-    if selftest.ALLOWED_VARIANTS is not None:  # the self-test's own child process
-        if device is None:
-            raise OpenCLUnavailableError("inside the self-test every context names its device")
-        return _match(infos, device, "device")
-    if spec is not None:
-        info = _match(infos, spec, what)
-        verdict = verify.verdict(info)
-        if not verdict.ok:
-            raise DeviceNotVerifiedError(f"{what}={spec!r}: {info.describe()} failed the self-test: {verdict.reason}")
-        return info
-    failures = []
-    for info in preference_order(infos):
-        verdict = verify.verdict(info)
-        if verdict.ok:
-            return info
-        failures.append(f"{info.describe()}: {verdict.reason}")
-    raise OpenCLUnavailableError(
-        "no OpenCL device here passed the self-test (" + "; ".join(failures) + "). "
-        f"Run ./install.sh (it adds the system PoCL, `apt-get install pocl-opencl-icd`), or {_NUMPY}"
-    )
-
-
-def variant_verified(device: cl.Device, variant: str) -> bool:
-    """Whether kernel ``variant`` (a file of ``kernels/variants/``) passed the self-test on
-    ``device``: its cached verdict says so (no verdict, no variant; nothing is run here)."""
-    from . import selftest, verify
-
-    if selftest.ALLOWED_VARIANTS is not None:  # inside the self-test itself
-        return variant in selftest.ALLOWED_VARIANTS
-    try:
-        verdict = verify.cached_verdict(device_info(device))
-    except OpenCLUnavailableError:
-        return False
-    return bool(verdict and verdict.ok and verdict.variants.get(variant, False))
-
-
-def engine_speed(device: cl.Device, engine: str) -> float | None:
-    """``engine``'s OpenCL frame rate over its numpy reference's on ``device``, as the self-test
-    measured it (:data:`dynatex.player.opencl.selftest.SPEED_CASES`); None when not measured."""
-    from . import selftest, verify
-
-    if selftest.ALLOWED_VARIANTS is not None:  # inside the self-test itself
-        return None
-    try:
-        verdict = verify.cached_verdict(device_info(device))
-    except OpenCLUnavailableError:
-        return None
-    return verdict.speed.get(engine) if verdict and verdict.ok else None
-
-
-def _match(infos: list[DeviceInfo], spec: str, what: str) -> DeviceInfo:
+def find_device(infos: list[DeviceInfo], spec: str, what: str) -> DeviceInfo:
+    """The device of ``infos`` that ``spec`` names (``"pocl"``, an index ``"P:D"`` or a substring
+    of a device or platform name); ``what`` names ``spec``'s origin in the error."""
     spec = spec.strip()
     low = "portable computing language" if spec.lower() == "pocl" else spec.lower()
     parts = spec.split(":")
@@ -225,6 +111,7 @@ def _match(infos: list[DeviceInfo], spec: str, what: str) -> DeviceInfo:
     raise OpenCLUnavailableError(f"{what}={spec!r} matches no OpenCL device (available: {names})")
 
 
-def _require_pyopencl() -> None:
+def require_pyopencl() -> None:
+    """Raise :class:`OpenCLUnavailableError` saying how to fix it when pyopencl cannot be imported."""
     if cl is None:
         raise OpenCLUnavailableError(f"pyopencl cannot be imported ({_IMPORT_ERROR}); {_FIX}")

@@ -69,6 +69,13 @@ def kernel_source(filename: str | tuple[str, ...]) -> str:
     return "\n".join(root.joinpath(name).read_text() for name in names)
 
 
+def kernel_variants() -> tuple[str, ...]:
+    """The kernel variants, by name: the files of ``kernels/variants/`` (not portable OpenCL C),
+    each used on a device only where the self-test verified it."""
+    root = resources.files("dynatex.player.kernels").joinpath("variants")
+    return tuple(sorted(item.name[:-3] for item in root.iterdir() if item.name.endswith(".cl")))
+
+
 _COMMENT = re.compile(r"//[^\n]*|/\*.*?\*/", re.S)
 _MACRO = re.compile(r"^[ \t]*#[ \t]*define[ \t]+(\w+)[ \t]+((?:[^\n]*\\\n)*[^\n]*)", re.M)
 _KERNEL = re.compile(r"__kernel\s+void\s+(\w+)\s*\(([^)]*)\)")

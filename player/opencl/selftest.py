@@ -40,13 +40,12 @@ from pathlib import Path
 
 import numpy as np
 
+from . import verify
 from .devices import DeviceInfo, devices
 from .verify import INJECT_ENV, Verdict
 
 #: The texture of ``selftest.h5``.
 TEXTURE = "selftest"
-#: Set in the self-test's child process: the kernel variants it may use (None: the cached verdicts decide).
-ALLOWED_VARIANTS: frozenset[str] | None = None
 
 
 # -- the checks (run in the child) ------------------------------------------------------------
@@ -168,7 +167,7 @@ def _copy_check(device: str) -> str | None:
     """The benchmark's streaming copy (kernels/variants/copy_stream.cl) copies every byte."""
     import pyopencl as cl
 
-    from .devices import get_context
+    from .context import get_context
     from .programs import build_program
 
     ctx = get_context(device)
@@ -195,7 +194,7 @@ def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
         from ...tiledb.detail import DetailModel
         from ..engines.detail import DetailOpenCL, DetailReference
         from ..pixels import FORMATS
-        from .devices import get_context
+        from .context import get_context
 
         rng = np.random.default_rng(5)
         h, w, fmt = 21, 37, FORMATS[format]
@@ -265,7 +264,8 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
     ),
 }
 
-#: kernel variant -> the checks that must pass before a device uses it (run after CHECKS)
+#: kernel variant (each file of ``kernels/variants/``) -> the checks that must pass before a device
+#: uses it (run after CHECKS)
 CHECK_VARIANTS: dict[str, dict[str, Callable[[str], str | None]]] = {
     "gather_wide": {
         "grid": _gather_check(cell=(8, 12), time_step=8, wrap="loop", size=(72, 200), wide=True),
@@ -289,7 +289,7 @@ def _inject_check(path: str) -> Callable[[str], str | None]:
     def check(device: str) -> str | None:
         import pyopencl as cl
 
-        from .devices import get_context
+        from .context import get_context
 
         ctx = get_context(device)
         queue = cl.CommandQueue(ctx)
@@ -309,7 +309,6 @@ def _inject_check(path: str) -> Callable[[str], str | None]:
 
 def _child(expected: DeviceInfo) -> int:
     """Run every check on device ``expected`` and print progress lines and the verdict (JSON)."""
-    global ALLOWED_VARIANTS
     import warnings
 
     warnings.simplefilter("ignore")  # compiler chatter is not a verdict
@@ -320,7 +319,7 @@ def _child(expected: DeviceInfo) -> int:
         print(f"verdict\t{json.dumps(asdict(v))}", flush=True)
         return 0
     start = time.perf_counter()
-    ALLOWED_VARIANTS = frozenset()
+    verify.suppose(info)  # portable kernels only, until the variants' own checks
     checks = dict(CHECKS)
     if os.environ.get(INJECT_ENV):
         checks = {"injected kernel": _inject_check(os.environ[INJECT_ENV]), **checks}
@@ -332,7 +331,7 @@ def _child(expected: DeviceInfo) -> int:
             break
     if v.ok:
         for variant, vchecks in CHECK_VARIANTS.items():
-            ALLOWED_VARIANTS = frozenset({variant})
+            verify.suppose(info, frozenset({variant}))
             if not info.is_cpu:
                 v.variants[variant] = False
                 v.variant_reasons[variant] = "CPU devices only"
@@ -364,7 +363,7 @@ def _projection_speed(precision: str, size: tuple[int, int] = (288, 352), n: int
         import pyopencl as cl
 
         from ..engines.projection import open_projector
-        from .devices import get_context
+        from .context import get_context
 
         h, w = size
         rng = np.random.default_rng(0)

@@ -19,7 +19,7 @@ from dynatex.player.engines.gather import (
 
 def _need_wide(ctx, wide=True):
     """Skip where the x86 variant is asked for but did not pass this device's self-test."""
-    from dynatex.player.opencl.devices import variant_verified
+    from dynatex.player.opencl.context import variant_verified
 
     if wide and not variant_verified(ctx.devices[0], "gather_wide"):
         pytest.skip(f"the gather_wide variant is not verified on {ctx.devices[0].name}")
@@ -393,7 +393,7 @@ def test_frames_land_in_whichever_array_comes_and_nowhere_else(cl_context):
 def test_a_device_without_the_verified_variant_gets_the_portable_kernel(cl_context, monkeypatch):
     """Where the self-test did not verify the x86 variant, time step 8 renders with the portable
     kernel (the same integers), and asking for the variant is an error that says why."""
-    import dynatex.player.opencl.devices as ocl
+    import dynatex.player.opencl.context as ocl
 
     monkeypatch.setattr(ocl, "variant_verified", lambda device, variant: False)
     stack = _stack(n=5, h=16, w=64)

@@ -100,7 +100,7 @@ def test_wide_variant_writes_each_format(cl_device, fmt, size, cell, misalign):
     """The x86 variant (where verified) writes every format itself: full runs with
     non-temporal stores (rows a multiple of 64 bytes, the array 0 or 32 bytes off 64), the
     head run and tails, against the reference."""
-    from dynatex.player.opencl.devices import get_context, variant_verified
+    from dynatex.player.opencl.context import get_context, variant_verified
 
     device = get_context(cl_device).devices[0]
     if not variant_verified(device, "gather_wide"):

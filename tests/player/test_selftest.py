@@ -14,7 +14,7 @@ import pytest
 
 from dynatex.player import open_player
 from dynatex.player.base import Player
-from dynatex.player.opencl import devices as opencl
+from dynatex.player.opencl import context as opencl
 from dynatex.player.opencl import selftest, verify
 
 from ..conftest import verified_devices
@@ -70,6 +70,14 @@ def device():
     if not devices:
         pytest.skip("no OpenCL device passed the self-test here")
     return devices[0]
+
+
+def test_every_kernel_variant_has_its_checks():
+    """The verdict lists the files of ``kernels/variants/`` (:func:`kernel_variants`), the child checks
+    CHECK_VARIANTS: one list, or a variant would be used unchecked or never reported."""
+    from dynatex.player.opencl.programs import kernel_variants
+
+    assert kernel_variants() and set(kernel_variants()) == set(selftest.CHECK_VARIANTS)
 
 
 def test_every_verified_device_ran_every_check(cl_device):

@@ -788,7 +788,7 @@ class _Worker:
 
 def verified_device() -> list[str | None]:
     """Backends a mutant renders on: numpy, and the first verified OpenCL device if any."""
-    from dynatex.player.opencl import devices as opencl
+    from dynatex.player.opencl import context as opencl
     from dynatex.player.opencl import verify
 
     try:
