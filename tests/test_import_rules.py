@@ -204,3 +204,13 @@ def test_the_opencl_plumbing_imports_nothing_above_it():
     assert not upward, upward
     importers = sorted(m for m, targets in graph.items() if "dynatex.player.opencl.selftest" in targets)
     assert not importers, f"the self-test's checks are imported by {importers}"
+
+
+def test_no_player_module_over_800_lines():
+    """A module a newcomer must read whole stays under 800 lines (issue 31: split it by its parts)."""
+    long = {
+        m: n
+        for m, p in _modules().items()
+        if m.startswith("dynatex.player") and (n := len(p.read_text().splitlines())) > 800
+    }
+    assert not long, long

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 import time
@@ -169,12 +168,10 @@ def _inpaint_size(args: argparse.Namespace) -> tuple[int, int]:
 
 
 def default_frames(player) -> int:
-    """:data:`DEFAULT_FRAMES`, or fewer for a player whose clock stops: an evolve player that holds
-    the last source frame renders until its clock (at its speed, rate map aside) reaches it, plus
-    one frame of the held end, rather than seconds of a still frame."""
-    if player.mode == "evolve" and player.end == "hold" and player.speed > 0:
-        return min(DEFAULT_FRAMES, math.ceil((player.n_frames - 1) / player.speed) + 1)
-    return DEFAULT_FRAMES
+    """:data:`DEFAULT_FRAMES`, or fewer for a player whose clock stops (``player.still_after``:
+    an evolve player that holds the last source frame), rather than seconds of a still frame."""
+    still = player.still_after
+    return DEFAULT_FRAMES if still is None else min(DEFAULT_FRAMES, still)
 
 
 def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: float | None) -> int:

@@ -13,12 +13,14 @@ runs           :mod:`.runs`                 a quilt's runs at per-block times (e
 blend          :mod:`.blend`                weighted sums of stored frames (turnpoints)
 =============  ===========================  ======================================
 
-The interface: built from the model's arrays (uploaded once; ``ctx`` and ``queue`` are
-the player's, the buffers the engine's), a render call that writes a frame into the
-caller's array and returns None once it is there or the event after which it is (so every
-mode can keep a frame in flight), ``bytes_per_frame`` for roofline figures, ``backend``,
-and ``close()``, which the player calls. ``open_projector``, ``open_gather``,
-``open_runs`` and ``open_blend`` pick the OpenCL engine or the reference.
+The interface is :class:`dynatex.player.engines.Engine`: built from the model's arrays
+(uploaded once; ``ctx`` and ``queue`` are the player's, the buffers the engine's), ``draw``
+writes a frame into the caller's array and returns None once it is there or the event after
+which it is (so every mode can keep a frame in flight), ``bytes_per_frame`` for roofline
+figures, ``backend``, and ``close()``, which the player calls.
+:func:`dynatex.player.engines.open_engine` picks the OpenCL engine or the reference, the same
+way for every engine (the detail step, which reads the projection's device frame, has
+:func:`~dynatex.player.engines.detail.open_detail`).
 
 What the OpenCL engines share lives here: :class:`Kernel` binds arguments by the names
 the ``.cl`` file declares, so no index has to mirror a signature.

@@ -79,6 +79,10 @@ class Blend:
     def _render(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, wait: bool):
         raise NotImplementedError
 
+    def draw(self, out: np.ndarray, sources: tuple[tuple[int, int], ...], *, wait: bool = True):
+        """:meth:`render`, in the words of every engine (:class:`~dynatex.player.engines.Engine`)."""
+        return self.render(sources, out, wait=wait)
+
     def close(self) -> None:
         """Release what the engine holds on a device (nothing for the reference)."""
 

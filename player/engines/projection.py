@@ -81,6 +81,10 @@ class Projector:
         """
         raise NotImplementedError
 
+    def draw(self, out: np.ndarray, *, wait: bool = True):
+        """:meth:`run`, in the words of every engine (:class:`~dynatex.player.engines.Engine`)."""
+        return self.run(out, wait=wait)
+
     def close(self) -> None:
         """Release what the engine holds on a device (nothing for the reference)."""
 

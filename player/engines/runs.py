@@ -325,6 +325,10 @@ class Runs:
         """
         raise NotImplementedError
 
+    def draw(self, out: np.ndarray, t: float, *, source_time: SourceTime, loop: bool, wait: bool = True):
+        """:meth:`start`, in the words of every engine (:class:`~dynatex.player.engines.Engine`)."""
+        return self.start(t, out, source_time=source_time, loop=loop, wait=wait)
+
     @property
     def bytes_per_frame(self) -> int:
         """Bytes a frame moves at least (what the engine reads and writes)."""

@@ -83,7 +83,7 @@ def mode_info(mode: str) -> dict[str, Any]:
         return {"rule": p.kind.describe(), "default": p.default_text(), "doc": p.doc}
 
     return {
-        "method": MODE_METHOD[cls.mode],
+        "method": cls.method,
         "summary": (cls.__doc__ or "").strip().splitlines()[0],
         "options": {p.name: entry(p) for p in cls.options},
         "controls": {name: entry(c.param) for name, c in cls.controls().items()},

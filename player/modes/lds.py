@@ -92,6 +92,7 @@ class LDSPlayer(ProjectionPlayer):
     """
 
     mode = "lds"
+    method = "lds"
 
     def _setup(self, model: LDSModel) -> None:
         src = self.texture.source

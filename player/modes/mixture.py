@@ -11,14 +11,13 @@ memory-bound on the stacked basis.
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import numpy as np
 
 from ...checks import Range
 from ...errors import InvalidArgumentError
-from ...tiledb import MixtureModel, TileDB
+from ...tiledb import MixtureModel
 from ..base import rng_from_state
 from ..controls import Control
 from .projected import ProjectionPlayer
@@ -91,22 +90,13 @@ class MixturePlayer(ProjectionPlayer):
     """
 
     mode = "mixture"
+    method = "mixture"
     basis_name = "stacked_basis"
 
-    def __init__(
-        self,
-        db: str | os.PathLike | TileDB,
-        texture: str | None = None,
-        *,
-        backend: str = "auto",
-        device: str | None = None,
-        seed: int = 0,
-        precision: str = "float32",
-        draws: int = DEFAULT_DRAWS,
-        format: str = "RGB",
-    ) -> None:
-        draws = type(self).draws.param.check(draws)  # refused before the database opens
-        super().__init__(db, texture, backend=backend, device=device, seed=seed, precision=precision, format=format)
+    checked_first = ("precision", "draws")
+
+    def _open(self, *, seed: int, precision: str, draws: int = DEFAULT_DRAWS) -> None:
+        super()._open(seed=seed, precision=precision)
         self._draws = draws
 
     def _setup(self, model: MixtureModel) -> None:

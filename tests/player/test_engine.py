@@ -9,7 +9,9 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
+from dynatex.errors import InvalidArgumentError
 from dynatex.player import open_player
+from dynatex.player.engines import ENGINES, Engine, open_engine
 from dynatex.player.engines.base import FrameOut, Kernel
 from dynatex.player.opencl import selftest
 from dynatex.player.opencl.programs import build_program
@@ -147,6 +149,33 @@ def test_every_mode_draws_through_one_engine_and_closing_releases_it(cl_device, 
         if backend == "opencl":
             assert not [k for k in vars(engine) if k.startswith("_d_")], "device buffers left after close"
         assert out.any()
+
+
+@pytest.mark.parametrize("mode, options", MODES, ids=[m for m, _ in MODES])
+def test_every_engine_is_an_engine_and_draws_the_frames_the_mode_does(cl_device, mode, options):
+    """Each mode's engine, on either backend, has the one interface (:class:`Engine`), and its
+    ``draw`` is what the mode's frames come from: a second engine opened by :func:`open_engine`
+    the same way for every engine (OpenCL on a context, the reference on none) draws them too."""
+    db = selftest._db_path()
+    for backend, device in (("opencl", cl_device), ("numpy", None)):
+        with open_player(db, selftest.TEXTURE, mode=mode, backend=backend, device=device, **options) as p:
+            assert isinstance(p.engine, Engine) and p.engine.backend == backend
+            assert type(p.engine).__module__.rsplit(".", 1)[-1] in ENGINES
+    with pytest.raises(InvalidArgumentError, match="engine must be one of"):
+        open_engine("quilt")
+
+
+def test_open_engine_chooses_the_backend_by_the_context(cl_context):
+    frames = np.random.default_rng(0).integers(0, 256, (3, 5, 7, 3), dtype=np.uint8)
+    outs = []
+    for ctx in (cl_context, None):
+        e = open_engine("blend", frames, ctx=ctx, queue=ctx and cl.CommandQueue(ctx))
+        assert e.backend == ("numpy" if ctx is None else "opencl")
+        out = np.empty(e.shape, np.uint8)
+        assert e.draw(out, ((0, 100), (2, 156))) is None  # wait=True: the frame is there
+        outs.append(out)
+        e.close()
+    assert np.array_equal(*outs)
 
 
 _BUILD_CHILD = """
