@@ -178,11 +178,13 @@ class Player:
     written straight from the kernels (:mod:`dynatex.player.pixels`); :attr:`shape` ends in
     its bytes per pixel.
 
-    Subclasses set ``mode``, declare their live controls as :class:`~.controls.Control`
-    attributes, their constructor options in ``options`` and what they can do in
-    ``capabilities`` (:mod:`dynatex.player.controls`; the CLI and the docstring follow from
-    these), implement ``_start(out)``, and ``_get_state``/``_set_state`` for the state that
-    is not a control (position, random generator). :meth:`set_state` is all or nothing:
+    Subclasses set ``mode`` and the ``method`` they play, declare their live controls as
+    :class:`~.controls.Control` attributes, their constructor options in ``options`` and what
+    they can do in ``capabilities`` (:mod:`dynatex.player.controls`; the constructor, the CLI
+    and the docstring follow from these), implement ``_open(**options)`` (model and engine),
+    ``_start(out)``, ``_native_loop`` when they have a loop of their own, and
+    ``_get_state``/``_set_state`` for the state that is not a control (position, random
+    generator). :meth:`set_state` is all or nothing:
     every control entry is checked first, and when anything raises the state taken before
     is applied again; a missing entry's KeyError becomes the ValueError "state lacks '...'".
 
