@@ -22,14 +22,16 @@ from typing import Any
 
 import numpy as np
 
+from ..tiledb.database import MODE_METHOD
+
 #: share of the frames' feature variance a linear trend in time must explain for a time-varying texture
 TREND_MIN = 0.4
 #: frames a clip needs for the turn-point texture (a symmetry test of 4 pairs either side, and room to turn)
 TURNPOINT_MIN_FRAMES = 24
 #: modes that play the clip's time-lapse once (then hold): judged over the clip's length, not longer
 TIME_LAPSE_MODES = ("evolve",)
-#: method -> the player mode that plays it
-MODE_OF = {"lds": "lds", "mixture": "mixture", "turnpoints": "turnpoints", "tiles": "tiles", "quilt": "evolve"}
+#: method -> the player mode that plays it (the modes declare their methods; tiledb knows the pairs)
+MODE_OF = {method: mode for mode, method in MODE_METHOD.items()}
 
 
 @dataclass(frozen=True)

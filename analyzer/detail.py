@@ -15,7 +15,7 @@ their output look blurred and slow. It is modelled here as a stationary Gaussian
 4. a noise volume drawn with that spectrum and random phases, periodic in t, y and x by
    construction, along the axis in RGB, stored as int8.
 
-The player (:mod:`dynatex.player.detail`) plays the volume through two layers at random
+The player (:mod:`dynatex.player.engines.detail`) plays the volume through two layers at random
 offsets cross-faded with weights whose squares sum to one, scales it by the gain and holds
 every pixel to the colour range the source showed there (``low``/``high``: the per-pixel,
 per-channel minimum and maximum over the clip, widened to the 3 x 3 neighbourhood); a pixel

@@ -28,7 +28,8 @@ MODES = {"lds": {}, "mixture": {}, "turnpoints": {}, "tiles": {"size": (720, 128
 CHILD = """
 import time; t0 = time.perf_counter()
 import sys, json
-from dynatex.player import open_player, selftest
+from dynatex.player import open_player
+from dynatex.player.opencl import selftest
 mode, options = sys.argv[1], json.loads(sys.argv[2])
 with open_player(selftest._db_path(), selftest.TEXTURE, mode=mode, backend="opencl", **options) as p:
     t1 = time.perf_counter()

@@ -35,8 +35,8 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import seam_visibility
 from dynatex.analyzer.quilt import learn_quilt, measure_comparison_speedup, rank_errors, spreading_clip
 from dynatex.benchmark import copy_bandwidth, summarize, time_calls
-from dynatex.player import ratemap
-from dynatex.player.quilt import EvolvePlayer
+from dynatex.player.modes import ratemap
+from dynatex.player.modes.evolve import EvolvePlayer
 from dynatex.tiledb import DatabaseWriter
 
 CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"

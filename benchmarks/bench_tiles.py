@@ -37,7 +37,7 @@ import numpy as np
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.tiles import learn_tiles
 from dynatex.benchmark import copy_bandwidth, summarize, time_calls
-from dynatex.player.tiles import TilesPlayer
+from dynatex.player.modes.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter
 
 CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"

@@ -27,7 +27,7 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import frame_step_ratio, index_coverage, spectrum_distance, temporal_discontinuity
 from dynatex.analyzer.turnpoints import learn_turnpoints, pendulum_clip
 from dynatex.benchmark import copy_bandwidth, summarize, time_calls
-from dynatex.player.turnpoints import PLAYBACKS, TurnPointPlayer
+from dynatex.player.modes.turnpoints import PLAYBACKS, TurnPointPlayer
 from dynatex.tiledb import DatabaseWriter
 
 CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"

@@ -40,7 +40,7 @@ import numpy as np
 from dynatex.analyzer import load_clip, metrics
 from dynatex.analyzer.sheet import contact_sheet
 from dynatex.analyzer.tiles import learn_tiles
-from dynatex.player.tiles import TilesPlayer
+from dynatex.player.modes.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter
 from dynatex.tiledb.tiles import CONSTRUCTIONS
 

@@ -32,8 +32,8 @@ import numpy as np
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.mixture import learn_mixture
-from dynatex.player.lds import LDSPlayer
-from dynatex.player.mixture import MixturePlayer, nearest_distance
+from dynatex.player.modes.lds import LDSPlayer
+from dynatex.player.modes.mixture import MixturePlayer, nearest_distance
 from dynatex.tiledb import DatabaseWriter
 
 CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"

@@ -37,8 +37,8 @@ def run_case(name: str, outdir: str, long_steps: int, backend: str) -> dict:
     from dynatex.analyzer import metrics
     from dynatex.analyzer.sheet import contact_sheet
     from dynatex.analyzer.video import load_clip_path
-    from dynatex.player.lds import LDSPlayer
-    from dynatex.player.mixture import MixturePlayer
+    from dynatex.player.modes.lds import LDSPlayer
+    from dynatex.player.modes.mixture import MixturePlayer
 
     clip_file, method, *extra = CASES[name]
     path = os.path.join(CLIPS, clip_file)

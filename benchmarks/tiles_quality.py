@@ -31,7 +31,7 @@ from dynatex.analyzer.metrics import grid_labels, lattice_prominence, seam_visib
 from dynatex.analyzer.sheet import contact_sheet
 from dynatex.analyzer.tiles import learn_tiles
 from dynatex.analyzer.video import load_clip_path
-from dynatex.player.tiles import TilesPlayer
+from dynatex.player.modes.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter
 
 

@@ -53,7 +53,8 @@ def _opencl_copy_bandwidth(src: np.ndarray, repeats: int) -> dict[str, float]:
     each the median of ``repeats`` after one warm-up."""
     import pyopencl as cl
 
-    from .player.opencl import build_program, get_context, variant_verified
+    from .player.opencl.context import get_context, variant_verified
+    from .player.opencl.programs import build_program
 
     ctx = get_context()
     queue = cl.CommandQueue(ctx)

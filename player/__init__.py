@@ -24,7 +24,7 @@ from .errors import (
     UnknownControlError,
 )
 from .modes import MODE_ALIASES, MODE_METHOD, MODE_ORDER, MODES, default_mode, describe, mode_for, player_class
-from .opencl import devices, list_devices
+from .opencl.devices import devices, list_devices
 
 
 def open_player(

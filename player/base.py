@@ -17,10 +17,10 @@ from ..errors import ArgumentTypeError, InvalidArgumentError
 from ..params import Param
 from ..tiledb import Texture, TileDB
 from .controls import Capabilities, Control, controls_of, document
+from .engines import BACKENDS
 from .errors import PlayerClosedError, PlayerForkedError, UnknownControlError
 from .pixels import FORMATS, pixel_format
 
-BACKENDS = ("opencl", "numpy")
 #: what a player's ``backend`` may be: a backend, or "auto" (OpenCL on a verified device, else numpy)
 BACKEND_CHOICES = ("auto", *BACKENDS)
 
@@ -42,7 +42,7 @@ COMMON_OPTIONS: tuple[Param, ...] = (
         "device",
         Text("P:D|NAME"),
         None,
-        "OpenCL device: index P:D or a name substring (see dynatex.player.opencl.get_context).",
+        "OpenCL device: index P:D or a name substring (see dynatex.player.opencl.context.get_context).",
         optional=True,
         default_doc="the first verified device",
     ),
@@ -81,6 +81,49 @@ def _checked_init(init: Callable[..., None]) -> Callable[..., None]:
 
     __init__._checked = True  # type: ignore[attr-defined]
     return __init__
+
+
+def _constructor(cls: type) -> Callable[..., None]:
+    """The constructor of mode class ``cls``, made from its declarations: ``(db, texture=None, *,
+    backend, device, format, seed, <its options>, <its controls' starting values>)`` with the
+    declared defaults (the controls' from :meth:`Player._open`'s signature), all opened by
+    :meth:`Player.__init__`."""
+
+    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, **options: Any) -> None:
+        Player.__init__(self, db, texture, **options)
+
+    keywords = [
+        inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default)
+        for name, default in _defaults(cls).items()
+    ]
+    __init__.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
+        [
+            inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD),
+            inspect.Parameter("db", inspect.Parameter.POSITIONAL_OR_KEYWORD),
+            inspect.Parameter("texture", inspect.Parameter.POSITIONAL_OR_KEYWORD, default=None),
+            *keywords,
+        ]
+    )
+    __init__.__qualname__ = f"{cls.__qualname__}.__init__"
+    return _checked_init(__init__)
+
+
+def _defaults(cls: type) -> dict[str, Any]:
+    """Every keyword mode class ``cls`` takes and its default: the declared options (common, then
+    the mode's), then the controls' starting values its :meth:`Player._open` names."""
+    out = {p.name: p.default for p in (*COMMON_OPTIONS, *cls.options) if p.name not in ("db", "texture")}
+    for p in inspect.signature(cls._open).parameters.values():
+        if p.kind is p.KEYWORD_ONLY and p.name not in out:
+            out[p.name] = p.default
+    return out
+
+
+def _rule(cls: type, name: str) -> Param:
+    """The declared rule of option or control ``name`` of mode class ``cls``."""
+    for p in (*COMMON_OPTIONS, *cls.options):
+        if p.name == name:
+            return p
+    return cls.controls()[name].param
 
 
 @functools.cache
@@ -130,16 +173,18 @@ class Player:
     ``backend`` is "auto" (default: OpenCL on the first device that passed the self-test,
     else the numpy reference with one warning), "opencl" (a verified device or
     :class:`~dynatex.player.OpenCLUnavailableError`) or "numpy" (the reference);
-    ``device`` names an OpenCL device (see :func:`dynatex.player.opencl.get_context`).
+    ``device`` names an OpenCL device (see :func:`dynatex.player.opencl.context.get_context`).
     ``format`` is the frames' pixel format: "RGB" (default), "RGBA" or "BGRA" (alpha 255),
     written straight from the kernels (:mod:`dynatex.player.pixels`); :attr:`shape` ends in
     its bytes per pixel.
 
-    Subclasses set ``mode``, declare their live controls as :class:`~.controls.Control`
-    attributes, their constructor options in ``options`` and what they can do in
-    ``capabilities`` (:mod:`dynatex.player.controls`; the CLI and the docstring follow from
-    these), implement ``_start(out)``, and ``_get_state``/``_set_state`` for the state that
-    is not a control (position, random generator). :meth:`set_state` is all or nothing:
+    Subclasses set ``mode`` and the ``method`` they play, declare their live controls as
+    :class:`~.controls.Control` attributes, their constructor options in ``options`` and what
+    they can do in ``capabilities`` (:mod:`dynatex.player.controls`; the constructor, the CLI
+    and the docstring follow from these), implement ``_open(**options)`` (model and engine),
+    ``_start(out)``, ``_native_loop`` when they have a loop of their own, and
+    ``_get_state``/``_set_state`` for the state that is not a control (position, random
+    generator). :meth:`set_state` is all or nothing:
     every control entry is checked first, and when anything raises the state taken before
     is applied again; a missing entry's KeyError becomes the ValueError "state lacks '...'".
 
@@ -153,16 +198,23 @@ class Player:
     """
 
     mode: ClassVar[str] = ""
+    #: the analysis method whose model the mode plays (``dynatex analyze --methods``; the database
+    #: layer knows the same pairs as ``tiledb.database.MODE_METHOD``, and a test holds them equal)
+    method: ClassVar[str] = ""
     _controls: ClassVar[dict[str, Control]] = {}
     #: constructor options beyond :data:`COMMON_OPTIONS` (fixed for the player's lifetime)
     options: ClassVar[tuple[Param, ...]] = ()
+    #: options (or controls' starting values) checked before the database opens
+    checked_first: ClassVar[tuple[str, ...]] = ()
     capabilities: ClassVar[Capabilities] = Capabilities()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         cls._controls = controls_of(cls)
         init = cls.__dict__.get("__init__")
-        if init is not None and not getattr(init, "_checked", False):
+        if init is None:
+            cls.__init__ = _constructor(cls)
+        elif not getattr(init, "_checked", False):
             cls.__init__ = _checked_init(init)
         if cls.__dict__.get("mode"):
             document(cls, COMMON_OPTIONS)
@@ -190,16 +242,18 @@ class Player:
             f"a {self.mode!r} player has no control {name!r}: {hint}its controls are {', '.join(controls) or 'none'}"
         )
 
-    def __init__(
-        self,
-        db: str | os.PathLike | TileDB,
-        texture: str | None = None,
-        *,
-        backend: str = "auto",
-        device: str | None = None,
-        format: str = "RGB",
-    ) -> None:
+    def __init__(self, db: str | os.PathLike | TileDB, texture: str | None = None, **options: Any) -> None:
+        """Open ``texture`` of ``db`` with ``options`` (any left out take their declared defaults),
+        then the mode's own part (:meth:`_open`); a failure anywhere closes what was opened. A mode
+        writes no constructor: its signature is made from its declarations (:func:`_constructor`)."""
+        cls = type(self)
+        values = {**_defaults(cls), **options}
+        for name in cls.checked_first:  # refused before the database opens
+            values[name] = _rule(cls, name).check(values[name])
+        backend, device, format = values.pop("backend"), values.pop("device"), values.pop("format")
         backend = Choice(*BACKEND_CHOICES).check("backend", backend)
+        #: the backend and device the caller asked for (``auto`` may still take numpy for an engine)
+        self._asked = (backend, device)
         self._lock = threading.RLock()
         self._closed = False
         self._pid = os.getpid()
@@ -233,6 +287,15 @@ class Player:
             self.backend = "opencl"
             self.queue = cl.CommandQueue(self.ctx)
         self.frame_index = 0
+        try:
+            self._open(**values)
+        except BaseException:
+            self.close()
+            raise
+
+    def _open(self, **options: Any) -> None:
+        """The mode's part of opening: read its model, open its engine, warm it. It takes the
+        mode's declared options (and controls' starting values) by name, as keywords."""
 
     # -- frame contract --------------------------------------------------------
     @property
@@ -249,6 +312,11 @@ class Player:
 
     def _on_reseed(self) -> None:
         """Hook run after :meth:`reseed` (for example to redraw a random arrangement)."""
+
+    @property
+    def still_after(self) -> int | None:
+        """Frames after which the picture stops changing (a clock that stops), None when it never does."""
+        return None
 
     @property
     def bytes_per_frame(self) -> int | None:
@@ -311,6 +379,11 @@ class Player:
             return
         for _ in range(count):
             yield self.next_frame()
+
+    def _native_loop(self, count: int | None, keep_pace: bool) -> tuple[np.ndarray, str, float]:
+        """``(frames, how, pace)``: the frames of the mode's own loop, for a mode whose
+        ``capabilities.native_loop`` says it has one (:func:`dynatex.player.loop.loop_frames`)."""
+        raise NotImplementedError(f"mode {self.mode!r} has no loop of its own")
 
     def _render(self, out: np.ndarray) -> None:
         event = self._start(out)
@@ -388,7 +461,7 @@ class Player:
         ``engine`` where the self-test measured OpenCL slower on this device (Verdict.speed)."""
         if backend != "auto" or device is not None or os.environ.get("PYOPENCL_CTX") or self.ctx is None:
             return
-        from .opencl import engine_speed
+        from .opencl.context import engine_speed
 
         speed = engine_speed(self.ctx.devices[0], engine)
         if speed is not None and speed < 1.0:
@@ -436,7 +509,7 @@ def _context(backend: str, device: str | None):
     (the numpy backend then, with one warning per process). A device asked for by ``device``
     or ``PYOPENCL_CTX`` is never silently replaced."""
     global _fallback_warned
-    from . import opencl
+    from .opencl import context as opencl
 
     try:
         return opencl.get_context(device)

@@ -1,15 +1,13 @@
 """Closed loops of any mode: frames whose last leads into the first as any other step does.
 
-One method per mode, shared by ``dynatex export --loop``, ``dynatex play --loop`` and
-:meth:`Player.frames(count, loop=True) <dynatex.player.base.Player.frames>`:
-
-- tiles: the tile loop itself (fixed time offsets, ``epoch = 0``), stepped at the speed that
-  fits a whole number of loops into the frames;
-- turnpoints: the longest swing between two consecutive turn points and back, a path that
-  returns to its start, resampled from the stored frames (neighbours blended);
-- every other mode (lds, mixture, evolve): ``count + blend`` frames are rendered and the last
-  ``blend`` are crossfaded into the first ``blend``, so the frame after the last is the
-  sequence's own next frame.
+Shared by ``dynatex export --loop``, ``dynatex play --loop`` and
+:meth:`Player.frames(count, loop=True) <dynatex.player.base.Player.frames>`. A mode whose
+frames repeat after a loop of its own (``capabilities.native_loop``) closes that loop itself,
+in its ``_native_loop`` (tiles: the tile loop at the speed that fits whole loops into the
+frames; turnpoints: the longest swing between two consecutive turn points and back); for every
+other mode (lds, mixture, evolve) ``count + blend`` frames are rendered and the last ``blend``
+are crossfaded into the first ``blend``, so the frame after the last is the sequence's own
+next frame.
 
 With ``keep_pace`` the native loops play at the source's pace (one source frame per output
 frame, no blending) and repeat the whole number of times nearest ``count`` frames, so the
@@ -20,8 +18,6 @@ whatever pace that takes.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -46,8 +42,7 @@ def loop_frames(
     if blend is not None and native:
         raise InvalidArgumentError(f"blend belongs to modes without a loop of their own, not {player.mode}")
     if native:
-        loop = _tiles_loop if player.mode == "tiles" else _swing_loop
-        frames, how, pace = loop(player, count, keep_pace)
+        frames, how, pace = player._native_loop(count, keep_pace)
         if keep_pace and len(frames) > 2:
             # a cycle: start the file after its smallest step, where a player's wrap shows least
             frames = np.roll(frames, -(_smallest_step(frames) + 1), axis=0)
@@ -79,7 +74,7 @@ def render(player, n: int) -> np.ndarray:
     return frames
 
 
-def _repeats(length: int, count: int | None, keep_pace: bool) -> tuple[int, int]:
+def repeats(length: int, count: int | None, keep_pace: bool) -> tuple[int, int]:
     """(frames, whole loops in them): ``count`` frames holding one loop, or with ``keep_pace``
     the whole loops nearest ``count`` at one source frame per output frame."""
     if count is None:
@@ -88,46 +83,6 @@ def _repeats(length: int, count: int | None, keep_pace: bool) -> tuple[int, int]
         loops = max(1, round(count / length))
         return length * loops, loops
     return int(count), 1
-
-
-def _tiles_loop(player, count: int | None, keep_pace: bool) -> tuple[np.ndarray, str, float]:
-    from .tiles import SPEED_RANGE
-
-    length = player.loop_length
-    n, loops = _repeats(length, count, keep_pace)
-    speed = length * loops / n
-    hi = SPEED_RANGE[1]
-    if not speed <= hi:
-        raise InvalidArgumentError(
-            f"{n} frames: a tiles loop of {length} frames needs at least {math.ceil(length / hi)} frames "
-            f"(speed at most {hi:g})"
-        )
-    player.epoch = 0  # fixed time offsets: the output repeats with the tile loop
-    player.speed = speed
-    return render(player, n), f"tile loop of {length} frames at speed {speed:.4g}, {loops} time(s)", speed
-
-
-def _swing_loop(player, count: int | None, keep_pace: bool) -> tuple[np.ndarray, str, float]:
-    if not player.texture.has_frames:
-        raise InvalidArgumentError("a turnpoints loop needs the stored source frames")
-    source = player.texture.frames().read()
-    if source.shape[-1] == 1:
-        source = np.repeat(source, 3, axis=-1)
-    turns = np.asarray(player.model.turn_points)
-    i = int(np.argmax(np.diff(turns)))
-    a, b = int(turns[i]), int(turns[i + 1])
-    period = 2 * (b - a)
-    n, loops = _repeats(period, count, keep_pace)
-    pos = (np.arange(n) * (period * loops / n)) % period
-    pos = np.where(pos <= b - a, a + pos, a + period - pos)  # a -> b -> back toward a
-    lo = np.floor(pos).astype(int)
-    hi = np.minimum(lo + 1, len(source) - 1)
-    w = (pos - lo)[:, None, None, None]
-    frames = np.rint((1 - w) * source[lo] + w * source[hi]).astype(np.uint8)
-    if frames.shape[1:] != tuple(player.shape):  # the player's pixel format (e.g. BGRA)
-        frames = player.format.from_rgb(frames)
-    how = f"swing between turn points {a} and {b} and back ({period} source frames), {loops} time(s)"
-    return frames, how, period * loops / n
 
 
 def crossfade_loop(frames: np.ndarray, n: int, blend: int) -> np.ndarray:
@@ -145,4 +100,4 @@ def crossfade_loop(frames: np.ndarray, n: int, blend: int) -> np.ndarray:
     return out
 
 
-__all__ = ["crossfade_loop", "loop_frames", "render"]
+__all__ = ["crossfade_loop", "loop_frames", "render", "repeats"]

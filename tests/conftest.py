@@ -50,13 +50,14 @@ _add_intel_runtime()
 
 def verified_devices() -> list:
     """The OpenCL devices that passed the self-test here, in the player's order of preference."""
-    from dynatex.player import opencl, selftest
+    from dynatex.player.opencl import context as opencl
+    from dynatex.player.opencl import verify
 
     try:
         infos = opencl.preference_order(opencl.devices())
     except opencl.OpenCLUnavailableError:
         return []
-    return [d for d in infos if selftest.verdict(d).ok]
+    return [d for d in infos if verify.verdict(d).ok]
 
 
 def opencl_backends() -> list[str]:
@@ -95,7 +96,7 @@ def clips_dir() -> Path:
 @pytest.fixture(scope="session")
 def cl_context(cl_device):
     """The shared OpenCL context of device ``cl_device`` (one verified device per parameter)."""
-    from dynatex.player.opencl import get_context
+    from dynatex.player.opencl.context import get_context
 
     return get_context(cl_device)
 

@@ -7,7 +7,8 @@ import pyopencl as cl
 import pytest
 
 from dynatex.benchmark import COPY_BLOCKS, copy_bandwidth
-from dynatex.player.opencl import build_program, variant_verified
+from dynatex.player.opencl.context import variant_verified
+from dynatex.player.opencl.programs import build_program
 
 from .conftest import verified_devices
 

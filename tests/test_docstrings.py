@@ -17,7 +17,16 @@ import pytest
 
 import dynatex
 
-PACKAGES = ("dynatex", "dynatex.commands", "dynatex.tiledb", "dynatex.analyzer", "dynatex.player")
+PACKAGES = (
+    "dynatex",
+    "dynatex.commands",
+    "dynatex.tiledb",
+    "dynatex.analyzer",
+    "dynatex.player",
+    "dynatex.player.modes",
+    "dynatex.player.engines",
+    "dynatex.player.opencl",
+)
 
 
 def _modules() -> list[str]:
@@ -33,7 +42,7 @@ MODULES = _modules()
 
 
 def test_every_package_module_is_collected():
-    assert len(MODULES) >= 40 and "dynatex.player.runs" in MODULES and "dynatex.tiledb.database" in MODULES
+    assert len(MODULES) >= 40 and "dynatex.player.engines.runs" in MODULES and "dynatex.tiledb.database" in MODULES
     assert dynatex.__name__ in MODULES
 
 

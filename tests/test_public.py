@@ -72,6 +72,18 @@ def test_the_tiledb_and_player_know_the_same_modes():
     assert resolve_mode("quilt") == "evolve"  # the mode that plays a quilt analysis, by its method's name
 
 
+def test_every_mode_declares_its_method_and_how_it_closes_a_loop():
+    """A mode class says which analysis it plays (the database layer's MODE_METHOD agrees) and,
+    when its capabilities say it has a loop of its own, closes that loop itself."""
+    from dynatex.player import player_class
+    from dynatex.player.base import Player
+
+    for mode in MODES:
+        cls = player_class(mode)
+        assert cls.method == MODE_METHOD[mode], mode
+        assert (cls._native_loop is not Player._native_loop) == cls.capabilities.native_loop, mode
+
+
 def _one_method_db(tmp_path, method: str, default: str | None = None) -> Path:
     """The self-test database with only ``method`` kept (and a ``default_mode`` attribute)."""
     path = tmp_path / f"{method}.h5"

@@ -22,7 +22,7 @@ from dynatex.analyzer.mixture import learn_mixture
 from dynatex.analyzer.quilt import learn_quilt
 from dynatex.analyzer.tiles import learn_tiles
 from dynatex.analyzer.turnpoints import learn_turnpoints
-from dynatex.player.selftest import TEXTURE
+from dynatex.player.opencl.selftest import TEXTURE
 from dynatex.tiledb import DatabaseWriter
 
 OUT = Path(__file__).resolve().parents[1] / "player" / "selftest.h5"

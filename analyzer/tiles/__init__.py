@@ -62,7 +62,7 @@ Pipeline (each step is a public function, so it can be tested and reused):
    may run deeper than the ring (as deep as leaves the fade short of the tile centre),
    since the strip continues ``c``'s cells at any depth. The player lends a
    cell of class ``a`` the strip of its neighbour's class ``c < a`` along their shared edge,
-   so both sides of the edge show ``c``'s toroidal primary (see :mod:`dynatex.player.tiles`).
+   so both sides of the edge show ``c``'s toroidal primary (see :mod:`dynatex.player.modes.tiles`).
 8. Colour statistics per tile (mean RGB and HSV) for tone fitting.
 
 One module per part: ``loop`` (steps 1-4), ``cuts`` (5), ``ring`` (6 and 7), ``wang`` (6b),

@@ -48,7 +48,7 @@ def _spreading() -> np.ndarray:
 
 
 def _left_fast() -> np.ndarray:
-    from ..player.ratemap import halves
+    from ..player.modes.ratemap import halves
 
     return halves((96, 128), 2.0, 1.0)
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 import time
@@ -11,9 +10,9 @@ import time
 import numpy as np
 
 from ..player import open_player
-from ..player import ratemap as _ratemap
 from ..player.loop import loop_frames
 from ..player.modes import player_class
+from ..player.modes import ratemap as _ratemap
 from ._common import Number, Numbers, UsageError, positive_int
 from ._modes import add_mode_arguments, apply_controls, player_kwargs, resolve_args_mode
 from ._output import H264_CRF, H264_PRESET, H264_PRESETS, MAX_FPS, MIN_FPS, FrameWriter
@@ -128,7 +127,7 @@ def _apply(player, args: argparse.Namespace) -> None:
 
 def rate_map_arg(spec: str, rate_range: tuple[float, float], shape: tuple[int, int]) -> np.ndarray:
     """The rate map ``--rate-map SPEC`` describes, for an output of ``shape`` (H, W)."""
-    from ..player import ratemap
+    from ..player.modes import ratemap
 
     kind, _, rest = spec.partition(":")
     if kind in ("halves", "light") and rest:
@@ -169,12 +168,10 @@ def _inpaint_size(args: argparse.Namespace) -> tuple[int, int]:
 
 
 def default_frames(player) -> int:
-    """:data:`DEFAULT_FRAMES`, or fewer for a player whose clock stops: an evolve player that holds
-    the last source frame renders until its clock (at its speed, rate map aside) reaches it, plus
-    one frame of the held end, rather than seconds of a still frame."""
-    if player.mode == "evolve" and player.end == "hold" and player.speed > 0:
-        return min(DEFAULT_FRAMES, math.ceil((player.n_frames - 1) / player.speed) + 1)
-    return DEFAULT_FRAMES
+    """:data:`DEFAULT_FRAMES`, or fewer for a player whose clock stops (``player.still_after``:
+    an evolve player that holds the last source frame), rather than seconds of a still frame."""
+    still = player.still_after
+    return DEFAULT_FRAMES if still is None else min(DEFAULT_FRAMES, still)
 
 
 def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: float | None) -> int:

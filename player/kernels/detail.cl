@@ -8,7 +8,7 @@
 //
 // Defines: CHANNELS (1 or 3: values per pixel of the model; grey is replicated), VH and VW (the
 // volume's rows and columns: constants, so that the wrap is a multiply and shift, or a mask for
-// powers of two, rather than a division), PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (as in lds.cl).
+// powers of two, rather than a division), PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (as in projection.cl).
 
 #pragma OPENCL FP_CONTRACT OFF
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynatex.player.blend import BlendOpenCL, blend_reference, open_blend
+from dynatex.player.engines.blend import BlendOpenCL, blend_reference, open_blend
 
 
 def _frames(t=5, h=7, w=11, seed=0):

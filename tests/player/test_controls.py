@@ -14,9 +14,11 @@ import pytest
 from dynatex.checks import Range
 from dynatex.cli import main
 from dynatex.errors import DynatexError
-from dynatex.player import MODES, lds, open_player, player_class, selftest
+from dynatex.player import MODES, open_player, player_class
 from dynatex.player.base import COMMON_OPTIONS
 from dynatex.player.controls import Control, controls_of
+from dynatex.player.modes import lds
+from dynatex.player.opencl import selftest
 
 OPTIONS = {"lds": {}, "mixture": {}, "turnpoints": {}, "tiles": {"size": (40, 72)}, "evolve": {}}
 

@@ -11,7 +11,7 @@ import pytest
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.player import open_player
-from dynatex.player.detail import DetailOpenCL, DetailReference, layers
+from dynatex.player.engines.detail import DetailOpenCL, DetailReference, layers
 from dynatex.player.pixels import FORMATS
 from dynatex.tiledb import DatabaseWriter
 from dynatex.tiledb.detail import DetailModel

@@ -9,9 +9,12 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from dynatex.player import open_player, selftest
-from dynatex.player.engine import FrameOut, Kernel
-from dynatex.player.opencl import build_program
+from dynatex.errors import InvalidArgumentError
+from dynatex.player import open_player
+from dynatex.player.engines import ENGINES, Engine, open_engine
+from dynatex.player.engines.base import FrameOut, Kernel
+from dynatex.player.opencl import selftest
+from dynatex.player.opencl.programs import build_program
 from dynatex.player.pixels import FORMATS
 
 RGB = FORMATS["RGB"].defines
@@ -26,7 +29,7 @@ MODES = [
 
 
 def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
-    k = Kernel(build_program(cl_context, "lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}), "project")
+    k = Kernel(build_program(cl_context, "projection.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}), "project")
     assert k.args == ("basis", "mean", "coef", "out", "n", "values")
     with pytest.raises(TypeError, match=r"kernel 'project' has no argument 'weights' \(it has basis, mean"):
         k.set(weights=np.int32(1))
@@ -53,9 +56,9 @@ PROGRAMS = [
             **RGB,
         },
     ),
-    ("lds.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}),
+    ("projection.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}),
     ("blend.cl", {"FRAME_VECS": 4, "ITEMS": 4}),
-    ("quilt.cl", {"INTERP": 1, "GAIN": 0, "PIXEL_BYTES": 3}),
+    ("runs.cl", {"INTERP": 1, "GAIN": 0, "PIXEL_BYTES": 3}),
     ("copy.cl", {}),
 ]
 
@@ -63,7 +66,7 @@ PROGRAMS = [
 @pytest.mark.parametrize("filename, defines", PROGRAMS, ids=[f for f, _ in PROGRAMS])
 def test_argument_names_read_from_the_source_are_the_drivers(cl_context, filename, defines):
     """The names engine.Kernel binds by, read from the .cl text, are those the compiler reports."""
-    from dynatex.player.opencl import kernel_arg_names, kernel_source
+    from dynatex.player.opencl.programs import kernel_arg_names, kernel_source
 
     source = kernel_source(filename)
     options = [f"-D{k}={v}" for k, v in defines.items()] + ["-cl-kernel-arg-info"]
@@ -81,7 +84,7 @@ def test_argument_names_read_from_the_source_are_the_drivers(cl_context, filenam
 def test_frames_reach_the_callers_array_directly_or_by_copy(cl_context, direct):
     """One kernel, both delivery paths, several arrays in turn (double buffering and more):
     each array gets exactly its own frame, left in flight until its event completes."""
-    from dynatex.player.opencl import writes_through
+    from dynatex.player.opencl.programs import writes_through
 
     if direct and not writes_through(cl_context):
         pytest.skip("this device does not share host memory")
@@ -148,9 +151,36 @@ def test_every_mode_draws_through_one_engine_and_closing_releases_it(cl_device, 
         assert out.any()
 
 
+@pytest.mark.parametrize("mode, options", MODES, ids=[m for m, _ in MODES])
+def test_every_engine_is_an_engine_and_draws_the_frames_the_mode_does(cl_device, mode, options):
+    """Each mode's engine, on either backend, has the one interface (:class:`Engine`), and its
+    ``draw`` is what the mode's frames come from: a second engine opened by :func:`open_engine`
+    the same way for every engine (OpenCL on a context, the reference on none) draws them too."""
+    db = selftest._db_path()
+    for backend, device in (("opencl", cl_device), ("numpy", None)):
+        with open_player(db, selftest.TEXTURE, mode=mode, backend=backend, device=device, **options) as p:
+            assert isinstance(p.engine, Engine) and p.engine.backend == backend
+            assert type(p.engine).__module__.rsplit(".", 1)[-1] in ENGINES
+    with pytest.raises(InvalidArgumentError, match="engine must be one of"):
+        open_engine("quilt")
+
+
+def test_open_engine_chooses_the_backend_by_the_context(cl_context):
+    frames = np.random.default_rng(0).integers(0, 256, (3, 5, 7, 3), dtype=np.uint8)
+    outs = []
+    for ctx in (cl_context, None):
+        e = open_engine("blend", frames, ctx=ctx, queue=ctx and cl.CommandQueue(ctx))
+        assert e.backend == ("numpy" if ctx is None else "opencl")
+        out = np.empty(e.shape, np.uint8)
+        assert e.draw(out, ((0, 100), (2, 156))) is None  # wait=True: the frame is there
+        outs.append(out)
+        e.close()
+    assert np.array_equal(*outs)
+
+
 _BUILD_CHILD = """
 import sys, numpy as np
-from dynatex.player.gather import open_gather, pack_source
+from dynatex.player.engines.gather import open_gather, pack_source
 g = open_gather(np.zeros((3, 64, 64, 3), np.uint8), (64, 128), device=sys.argv[1], cell=(16, 16), time_step=8)
 g.set_source_grid(pack_source(np.zeros((4, 8), int)))
 g.render(0.5)

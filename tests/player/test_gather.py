@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynatex.player.gather import (
+from dynatex.player.engines.gather import (
     gather_reference,
     gaussian_smooth,
     gaussian_weights,
@@ -19,7 +19,7 @@ from dynatex.player.gather import (
 
 def _need_wide(ctx, wide=True):
     """Skip where the x86 variant is asked for but did not pass this device's self-test."""
-    from dynatex.player.opencl import variant_verified
+    from dynatex.player.opencl.context import variant_verified
 
     if wide and not variant_verified(ctx.devices[0], "gather_wide"):
         pytest.skip(f"the gather_wide variant is not verified on {ctx.devices[0].name}")
@@ -342,7 +342,7 @@ def test_render_writes_into_the_callers_array(cl_context):
     stack = _stack(n=5, h=8, w=24)
     g = open_gather(stack, (19, 45), backend="opencl", ctx=cl_context, cell=(8, 8), time_step=8)
     g.set_source_grid(pack_source(np.full((3, 6), 8)))
-    from dynatex.player.opencl import device_shares_host_memory
+    from dynatex.player.opencl.programs import device_shares_host_memory
 
     assert g.direct == device_shares_host_memory(cl_context)
     fresh = g.render(2.5).copy()
@@ -393,7 +393,7 @@ def test_frames_land_in_whichever_array_comes_and_nowhere_else(cl_context):
 def test_a_device_without_the_verified_variant_gets_the_portable_kernel(cl_context, monkeypatch):
     """Where the self-test did not verify the x86 variant, time step 8 renders with the portable
     kernel (the same integers), and asking for the variant is an error that says why."""
-    import dynatex.player.opencl as ocl
+    import dynatex.player.opencl.context as ocl
 
     monkeypatch.setattr(ocl, "variant_verified", lambda device, variant: False)
     stack = _stack(n=5, h=16, w=64)
@@ -457,7 +457,7 @@ def test_the_wide_kernels_plain_vector_code_computes_the_same_integers(cl_contex
     """Where the compiler does not target AVX-512BW the wide variant blends, packs and divides
     with plain vector code instead of x86 builtins; forced here (PORTABLE=1), it must still
     match the reference exactly."""
-    import dynatex.player.opencl as ocl
+    import dynatex.player.opencl.programs as ocl
 
     _need_wide(cl_context)
     real = ocl.build_program

@@ -8,8 +8,8 @@ import pytest
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.player import open_player
-from dynatex.player.lds import LDSPlayer, edited_poles, scale_groups, speed_dynamics
-from dynatex.player.opencl import build_count
+from dynatex.player.modes.lds import LDSPlayer, edited_poles, scale_groups, speed_dynamics
+from dynatex.player.opencl.programs import build_count
 from dynatex.tiledb import DatabaseWriter
 
 from ..conftest import wave_clip

@@ -9,7 +9,7 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.mixture import learn_mixture
 from dynatex.player import open_player
-from dynatex.player.mixture import MixturePlayer, nearest_distance
+from dynatex.player.modes.mixture import MixturePlayer, nearest_distance
 from dynatex.tiledb import DatabaseWriter
 
 from ..conftest import wave_clip

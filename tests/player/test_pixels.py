@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynatex.player import open_player, selftest
-from dynatex.player.gather import open_gather, pack_source
+from dynatex.player import open_player
+from dynatex.player.engines.gather import open_gather, pack_source
+from dynatex.player.opencl import selftest
 from dynatex.player.pixels import FORMATS, pixel_format
 
 MODES = [
@@ -99,7 +100,7 @@ def test_wide_variant_writes_each_format(cl_device, fmt, size, cell, misalign):
     """The x86 variant (where verified) writes every format itself: full runs with
     non-temporal stores (rows a multiple of 64 bytes, the array 0 or 32 bytes off 64), the
     head run and tails, against the reference."""
-    from dynatex.player.opencl import get_context, variant_verified
+    from dynatex.player.opencl.context import get_context, variant_verified
 
     device = get_context(cl_device).devices[0]
     if not variant_verified(device, "gather_wide"):
@@ -117,7 +118,7 @@ def test_projection_writes_each_format(cl_context, fmt, size, channels, half):
     16 pixels per work-item (here whole groups, and 77 or 45 pixels: a partial last group)."""
     import pyopencl as cl
 
-    from dynatex.player.projection import open_projector
+    from dynatex.player.engines.projection import open_projector
 
     h, w = size
     rng = np.random.default_rng(6)

@@ -17,7 +17,7 @@ from dynatex.analyzer.tiles import learn_tiles
 from dynatex.checks import Range
 from dynatex.errors import DynatexError
 from dynatex.player import PlayerClosedError, open_player
-from dynatex.player.tiles import TilesPlayer
+from dynatex.player.modes.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter
 
 from ..conftest import wave_clip

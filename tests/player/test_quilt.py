@@ -10,9 +10,10 @@ import pytest
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import seam_visibility
 from dynatex.analyzer.quilt import learn_quilt, spreading_clip
-from dynatex.player import open_player, ratemap
-from dynatex.player.quilt import ENDS, EvolvePlayer, fold_time, jitter_warp
-from dynatex.player.runs import RATE_STEP, quantize_rate
+from dynatex.player import open_player
+from dynatex.player.engines.runs import RATE_STEP, quantize_rate
+from dynatex.player.modes import ratemap
+from dynatex.player.modes.evolve import ENDS, EvolvePlayer, fold_time, jitter_warp
 from dynatex.tiledb import DatabaseWriter, MethodNotFoundError, QuiltModel
 
 from ..conftest import best_backend
@@ -247,7 +248,7 @@ def test_open_player_and_deterministic(spread_db):
 
 
 def test_kernels_built_once(spread_db, cl_context):
-    from dynatex.player.opencl import build_count
+    from dynatex.player.opencl.programs import build_count
 
     path = spread_db[0]
     with EvolvePlayer(path) as p:
@@ -363,7 +364,7 @@ def test_rate_map_quantized_and_copy_path(spread_db, cl_device):
 # -- hostile maps: no read outside the frame stack ----------------------------------------------------
 _RENDER_CHILD = """
 import sys, numpy as np
-from dynatex.player.quilt import EvolvePlayer
+from dynatex.player.modes.evolve import EvolvePlayer
 with EvolvePlayer(sys.argv[1], backend="opencl", device=sys.argv[2], jitter=2.0) as cl, \\
         EvolvePlayer(sys.argv[1], backend="numpy", jitter=2.0) as ref:
     d = max(int(np.abs(cl.next_frame().astype(int) - ref.next_frame()).max()) for _ in range(5))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dynatex.analyzer.quilt import learn_quilt, spreading_clip
-from dynatex.player.runs import (
+from dynatex.player.engines.runs import (
     RATE_STEP,
     SPILL,
     RunsOpenCL,

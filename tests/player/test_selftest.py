@@ -12,8 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dynatex.player import open_player, opencl, selftest
+from dynatex.player import open_player
 from dynatex.player.base import Player
+from dynatex.player.opencl import context as opencl
+from dynatex.player.opencl import selftest, verify
 
 from ..conftest import verified_devices
 
@@ -44,7 +46,7 @@ KERNELS = {
 def fresh_cache(tmp_path, monkeypatch):
     """An empty verdict cache, and no device or verdict remembered by this process."""
     monkeypatch.setenv("DYNATEX_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(selftest, "_verdicts", {})
+    monkeypatch.setattr(verify, "_verdicts", {})
     monkeypatch.setattr(opencl, "_contexts", {})
     return tmp_path / "cache" / "devices.json"
 
@@ -56,7 +58,7 @@ def inject(tmp_path, monkeypatch, fresh_cache):
     def use(kind: str) -> None:
         path = tmp_path / f"{kind}.cl"
         path.write_text(KERNELS[kind])
-        monkeypatch.setenv(selftest.INJECT_ENV, str(path))
+        monkeypatch.setenv(verify.INJECT_ENV, str(path))
 
     return use
 
@@ -70,8 +72,16 @@ def device():
     return devices[0]
 
 
+def test_every_kernel_variant_has_its_checks():
+    """The verdict lists the files of ``kernels/variants/`` (:func:`kernel_variants`), the child checks
+    CHECK_VARIANTS: one list, or a variant would be used unchecked or never reported."""
+    from dynatex.player.opencl.programs import kernel_variants
+
+    assert kernel_variants() and set(kernel_variants()) == set(selftest.CHECK_VARIANTS)
+
+
 def test_every_verified_device_ran_every_check(cl_device):
-    v = selftest.verdict(next(d for d in opencl.devices() if d.index == cl_device))
+    v = verify.verdict(next(d for d in opencl.devices() if d.index == cl_device))
     assert v.ok and v.reason == "" and v.seconds > 0
     assert set(v.variants) == set(selftest.CHECK_VARIANTS)
 
@@ -81,7 +91,7 @@ def test_a_device_that_crashes_or_computes_wrong_is_rejected(device, inject, kin
     if kind == "crash" and not device.is_cpu:
         pytest.skip("a wild write crashes the process on CPU devices; a GPU may report it instead")
     inject(kind)
-    v = selftest.run_child(device)
+    v = verify.run_child(device)
     assert not v.ok
     assert words in v.reason and "injected kernel" in v.reason
     assert "\n" not in v.reason
@@ -90,7 +100,7 @@ def test_a_device_that_crashes_or_computes_wrong_is_rejected(device, inject, kin
 
 def test_a_device_that_hangs_is_rejected_after_the_timeout(device, inject):
     inject("hang")
-    v = selftest.run_child(device, timeout=20)
+    v = verify.run_child(device, timeout=20)
     assert not v.ok and v.reason == "hung (no verdict after 20 s) in check 'injected kernel'"
     assert 20 <= v.seconds < 60
 
@@ -133,36 +143,36 @@ def test_play_without_a_usable_device_exits_2_with_the_fix_in_one_line(device, i
 
 def test_verdicts_are_cached_per_device_and_driver(device, fresh_cache, monkeypatch):
     info = device
-    v = selftest.verdict(info)
-    assert v.ok and selftest.cache_key(info) in json.loads(fresh_cache.read_text())
+    v = verify.verdict(info)
+    assert v.ok and verify.cache_key(info) in json.loads(fresh_cache.read_text())
     # a new process (nothing in memory) reads the file and runs no child
-    monkeypatch.setattr(selftest, "_verdicts", {})
-    monkeypatch.setattr(selftest, "run_child", lambda *a, **k: pytest.fail("the self-test ran again"))
-    assert selftest.verdict(info) == v
+    monkeypatch.setattr(verify, "_verdicts", {})
+    monkeypatch.setattr(verify, "run_child", lambda *a, **k: pytest.fail("the self-test ran again"))
+    assert verify.verdict(info) == v
     other = dataclasses.replace(info, driver_version=info.driver_version + "-next")
-    assert selftest.cache_key(other) != selftest.cache_key(info)
-    assert selftest.cached_verdict(other) is None
+    assert verify.cache_key(other) != verify.cache_key(info)
+    assert verify.cached_verdict(other) is None
 
 
 def test_an_unwritable_cache_only_costs_the_cache(device, tmp_path, monkeypatch, caplog):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
     monkeypatch.setenv("DYNATEX_CACHE_DIR", str(blocker / "cache"))
-    monkeypatch.setattr(selftest, "_verdicts", {})
+    monkeypatch.setattr(verify, "_verdicts", {})
     with caplog.at_level("WARNING"):
-        assert selftest.verdict(device).ok
+        assert verify.verdict(device).ok
     assert "cannot cache the OpenCL self-test verdict" in caplog.text
 
 
 def test_a_crash_in_a_variant_keeps_the_device_on_its_portable_kernels():
     info = opencl.DeviceInfo("0:0", "P", "OpenCL 3.0", "cpu", "v", "1", True)
     out = "check\tgather: a, b\npass\tgather: a, b\ncheck\tvariant gather_wide\n"
-    v = selftest._parse(out, -11, False, 60.0, 1.0, info)
+    v = verify._parse(out, -11, False, 60.0, 1.0, info)
     assert v.ok and v.tested and v.variants == {"gather_wide": False, "copy_stream": False}
     assert v.variant_reasons == {"gather_wide": "crashed (signal 11) in check 'variant gather_wide'"}
-    v = selftest._parse("check\tgather: a, b\nfail\tgather: a, b\tframe 0: wrong\n", 1, False, 60.0, 1.0, info)
+    v = verify._parse("check\tgather: a, b\nfail\tgather: a, b\tframe 0: wrong\n", 1, False, 60.0, 1.0, info)
     assert not v.ok and v.reason == "gather: a, b: frame 0: wrong"
-    v = selftest._parse("check\tmode lds\n", -6, False, 60.0, 1.0, info)
+    v = verify._parse("check\tmode lds\n", -6, False, 60.0, 1.0, info)
     assert not v.ok and v.reason == "crashed (signal 6) in check 'mode lds'"
 
 
@@ -173,12 +183,12 @@ def test_a_child_that_cannot_run_is_not_the_devices_fault(device, fresh_cache, m
     fake.write_text("#!/bin/sh\necho 'ModuleNotFoundError: No module named dynatex' >&2\nexit 1\n")
     fake.chmod(0o755)
     monkeypatch.setenv("DYNATEX_PYTHON", str(fake))
-    v = selftest.verdict(device)
+    v = verify.verdict(device)
     assert not v.ok and not v.tested
     assert v.reason == "the self-test could not run: ModuleNotFoundError: No module named dynatex"
     assert not fresh_cache.exists()
     monkeypatch.delenv("DYNATEX_PYTHON")
-    assert selftest.verdict(device).ok and fresh_cache.exists()
+    assert verify.verdict(device).ok and fresh_cache.exists()
 
 
 def test_check_command_lists_every_device_with_its_verdict(device):
@@ -193,7 +203,7 @@ def test_check_command_lists_every_device_with_its_verdict(device):
 
 
 def test_every_verified_device_measured_its_engines_against_numpy(cl_device):
-    v = selftest.verdict(next(d for d in opencl.devices() if d.index == cl_device))
+    v = verify.verdict(next(d for d in opencl.devices() if d.index == cl_device))
     assert set(v.speed) == set(selftest.SPEED_CASES) and all(x > 0 for x in v.speed.values()), v.speed
 
 
@@ -201,9 +211,9 @@ def test_auto_takes_numpy_for_an_engine_the_self_test_measured_slower(device, mo
     """The verdict's speed decides ``auto`` per engine and precision; a backend asked for is kept."""
     monkeypatch.delenv("PYOPENCL_CTX", raising=False)
     info = opencl.device_info(opencl.get_context().devices[0])
-    v = selftest.verdict(info)
+    v = verify.verdict(info)
     slow = {"projection float32": 0.5, "projection float16": 2.0}
-    monkeypatch.setitem(selftest._verdicts, selftest.cache_key(info), dataclasses.replace(v, speed=slow))
+    monkeypatch.setitem(verify._verdicts, verify.cache_key(info), dataclasses.replace(v, speed=slow))
     db = selftest._db_path()
     for mode in ("lds", "mixture"):
         for precision, backend, want in (
@@ -233,7 +243,7 @@ def test_an_application_embedding_python_is_not_started_as_the_child(device, fre
     python = sys.executable
     monkeypatch.setattr(sys, "executable", "/opt/game/bin/mygame")
     monkeypatch.delenv("DYNATEX_PYTHON", raising=False)
-    v = selftest.run_child(device)
+    v = verify.run_child(device)
     assert not v.ok and "is not a Python interpreter (set DYNATEX_PYTHON" in v.reason
     monkeypatch.setenv("DYNATEX_PYTHON", python)
-    assert selftest.run_child(device).ok
+    assert verify.run_child(device).ok

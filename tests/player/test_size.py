@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from dynatex.checks import check_size
-from dynatex.player import open_player, selftest
+from dynatex.player import open_player
+from dynatex.player.opencl import selftest
 
 BAD_SIZES = [
     ((0, 10), ValueError, r"size must be \(height, width\) with each side in 1\.\.16384"),

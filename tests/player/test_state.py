@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynatex.player import open_player, selftest
+from dynatex.player import open_player
+from dynatex.player.opencl import selftest
 
 MODES = [
     ("lds", {}),

@@ -8,7 +8,7 @@ import pytest
 from dynatex.analyzer import load_clip, metrics
 from dynatex.analyzer.tiles import learn_tiles
 from dynatex.player import open_player
-from dynatex.player.tiles import TilesPlayer, label_preset
+from dynatex.player.modes.tiles import TilesPlayer, label_preset
 from dynatex.tiledb import DatabaseWriter
 
 from ..conftest import wave_clip

@@ -8,7 +8,7 @@ import pytest
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.tiles import learn_tiles
-from dynatex.player.tiles import TilesPlayer
+from dynatex.player.modes.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter
 
 from ..conftest import wave_clip

@@ -9,7 +9,7 @@ import pytest
 
 from dynatex.analyzer import load_clip, metrics
 from dynatex.analyzer.tiles import learn_tiles, quilt_geometry
-from dynatex.player.tiles import TilesPlayer
+from dynatex.player.modes.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter, TileDB, TileDBFormatError
 
 from ..analyzer.test_tiles import _stochastic

@@ -10,7 +10,7 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import double_image, double_image_level, index_coverage, temporal_discontinuity
 from dynatex.analyzer.turnpoints import learn_turnpoints, pendulum_clip
 from dynatex.player import open_player
-from dynatex.player.turnpoints import EVENT_JUMP, EVENT_TURN, PLAYBACKS, TurnPointPlayer
+from dynatex.player.modes.turnpoints import EVENT_JUMP, EVENT_TURN, PLAYBACKS, TurnPointPlayer
 from dynatex.tiledb import DatabaseWriter, MethodNotFoundError
 
 

@@ -788,13 +788,14 @@ class _Worker:
 
 def verified_device() -> list[str | None]:
     """Backends a mutant renders on: numpy, and the first verified OpenCL device if any."""
-    from dynatex.player import opencl, selftest
+    from dynatex.player.opencl import context as opencl
+    from dynatex.player.opencl import verify
 
     try:
         infos = opencl.preference_order(opencl.devices())
     except opencl.OpenCLUnavailableError:
         return [None]
-    ok = [d for d in infos if selftest.verdict(d).ok]
+    ok = [d for d in infos if verify.verdict(d).ok]
     return [None] + ([ok[0].index] if ok else [])
 
 

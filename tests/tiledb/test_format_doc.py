@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import dynatex.tiledb as tiledb
-from dynatex.player import selftest
+from dynatex.player.opencl import selftest
 
 FORMAT_MD = Path(tiledb.__file__).with_name("FORMAT.md")
 DTYPES = {"int8", "uint8", "int32", "int64", "float16", "float32", "float64"}

@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from ..tiledb.detail import DetailModel
-from .pixels import pixel_format
+from ...tiledb.detail import DetailModel
+from ..pixels import pixel_format
 
 #: Work-group shape of ``add_detail``.
 LOCAL = (16, 4)
@@ -157,8 +157,8 @@ class DetailOpenCL(Detail):
         super().__init__(model, shape=shape, channels=channels, format=format)
         import pyopencl as cl
 
-        from .engine import FrameOut, Kernel
-        from .opencl import build_program
+        from ..opencl.programs import build_program
+        from .base import FrameOut, Kernel
 
         self.queue = queue
         mf = cl.mem_flags

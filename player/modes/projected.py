@@ -2,32 +2,30 @@
 projection of a small vector, advanced on the host once per frame, through a stored basis.
 
 A model with a ``detail`` part (:mod:`dynatex.tiledb.detail`) also opens the detail engine
-(:mod:`.detail`), which adds the fine detail the projection lacks to each projected frame and
-holds every pixel to the source's colour range.
+(:mod:`dynatex.player.engines.detail`), which adds the fine detail the projection lacks to each
+projected frame and holds every pixel to the source's colour range.
 
 A mode subclasses :class:`ProjectionPlayer` and supplies its model (``_setup``), the
 vector it advances (``_vector``, ``_dim``, ``_step``) and how that vector becomes
-projection coefficients (``_coefficients``). The base opens the projection engine (:mod:`.projection`),
-warms it, and provides ``precision``, the ``intensity`` control, ``bytes_per_frame``,
-``advance`` and the frame paths.
+projection coefficients (``_coefficients``). The base opens the projection engine
+(:mod:`dynatex.player.engines.projection`), warms it, and provides ``precision``, the
+``intensity`` control, ``bytes_per_frame``, ``advance`` and the frame paths.
 """
 
 from __future__ import annotations
 
 import math
-import os
 from typing import Any
 
 import numpy as np
 
-from ..checks import Choice, Range, check_int
-from ..errors import InvalidArgumentError
-from ..params import Param
-from ..tiledb import TileDB
-from .base import Player
-from .controls import Control
-from .detail import open_detail
-from .projection import open_projector
+from ...checks import Choice, Range, check_int
+from ...errors import InvalidArgumentError
+from ...params import Param
+from ..base import Player
+from ..controls import Control
+from ..engines import open_engine
+from ..engines.detail import open_detail
 
 PRECISIONS = ("float32", "float16")
 MAX_INTENSITY = 100.0
@@ -54,55 +52,42 @@ class ProjectionPlayer(Player):
         ),
     )
 
-    def __init__(
-        self,
-        db: str | os.PathLike | TileDB,
-        texture: str | None = None,
-        *,
-        backend: str = "auto",
-        device: str | None = None,
-        seed: int = 0,
-        precision: str = "float32",
-        format: str = "RGB",
-    ) -> None:
-        precision = self.options[0].check(precision)
-        super().__init__(db, texture, backend=backend, device=device, format=format)
-        try:
-            self._prefer_faster(backend, device, f"projection {precision}")
-            model = self.texture.read(self.mode)
-            self.model_info = dict(model.info)
-            self.precision = precision
-            self._setup(model)
-            basis = getattr(model, self.basis_name)
-            if precision == "float16":
-                basis = basis.astype(np.float16)
-            self.engine = open_projector(
-                basis,
-                model.mean,
+    checked_first = ("precision",)
+
+    def _open(self, *, seed: int, precision: str) -> None:
+        self._prefer_faster(*self._asked, f"projection {precision}")
+        model = self.texture.read(self.method)
+        self.model_info = dict(model.info)
+        self.precision = precision
+        self._setup(model)
+        basis = getattr(model, self.basis_name)
+        if precision == "float16":
+            basis = basis.astype(np.float16)
+        self.engine = open_engine(
+            "projection",
+            basis,
+            model.mean,
+            shape=self._shape,
+            channels=self.texture.source.channels,
+            ctx=self.ctx,
+            queue=self.queue,
+            format=self.format,
+        )
+        self.basis_bytes = self.engine.basis_bytes
+        self.detail_engine = None
+        self._detail_clock = 0.0
+        if model.detail is not None:
+            self.detail_engine = open_detail(
+                model.detail,
                 shape=self._shape,
                 channels=self.texture.source.channels,
+                src=self.engine.out.buffer if self.ctx is not None else None,
                 ctx=self.ctx,
                 queue=self.queue,
                 format=self.format,
             )
-            self.basis_bytes = self.engine.basis_bytes
-            self.detail_engine = None
-            self._detail_clock = 0.0
-            if model.detail is not None:
-                self.detail_engine = open_detail(
-                    model.detail,
-                    shape=self._shape,
-                    channels=self.texture.source.channels,
-                    src=self.engine.out.buffer if self.ctx is not None else None,
-                    ctx=self.ctx,
-                    queue=self.queue,
-                    format=self.format,
-                )
-            self.reseed(seed)
-            self._project(self._vector(), np.empty(self._shape, np.uint8))  # warm the kernel
-        except BaseException:
-            self.close()
-            raise
+        self.reseed(seed)
+        self._project(self._vector(), np.empty(self._shape, np.uint8))  # warm the kernel
 
     # -- what a mode supplies ----------------------------------------------------------
     _dim: int
@@ -180,11 +165,11 @@ class ProjectionPlayer(Player):
     def _run(self, out: np.ndarray, *, wait: bool = True):
         """Project the engine's coefficients into ``out``, adding the detail where the model has it."""
         if self.detail_engine is None:
-            return self.engine.run(out, wait=wait)
+            return self.engine.draw(out, wait=wait)
         clock = math.floor(self._detail_clock)
         layers = self.detail_engine.layers(self.seed, clock, self._detail * np.sqrt(self._intensity))
         if self.ctx is None:
-            self.engine.run(out)
+            self.engine.draw(out)
             self.detail_engine.apply(out, layers)
             return None
         self.engine.run_on_device()

@@ -20,19 +20,18 @@ so the numpy reference gives identical bytes.
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import numpy as np
 
-from ..checks import MAX_COUNT, Choice, Range, check_float, check_int
-from ..errors import InvalidArgumentError
-from ..params import Param
-from ..tiledb import TileDB
-from ..tiledb.turnpoints import TurnPointModel
-from .base import Player, rng_from_state
-from .blend import open_blend
-from .controls import Capabilities, Control
+from ...checks import MAX_COUNT, Choice, Range, check_float, check_int
+from ...errors import InvalidArgumentError
+from ...params import Param
+from ...tiledb.turnpoints import TurnPointModel
+from ..base import Player, rng_from_state
+from ..controls import Capabilities, Control
+from ..engines import open_engine
+from ..loop import repeats
 
 PLAYBACKS = ("hybrid", "turns", "jumps")
 SPEED_RANGE = (0.0, 4.0)
@@ -56,6 +55,7 @@ class TurnPointPlayer(Player):
     """
 
     mode = "turnpoints"
+    method = "turnpoints"
     options = (
         Param(
             "playback",
@@ -68,25 +68,10 @@ class TurnPointPlayer(Player):
     )
     capabilities = Capabilities(needs_frames=True, native_loop=True)
 
-    def __init__(
-        self,
-        db: str | os.PathLike | TileDB,
-        texture: str | None = None,
-        *,
-        backend: str = "auto",
-        device: str | None = None,
-        seed: int = 0,
-        playback: str = "hybrid",
-        start: int = 0,
-        format: str = "RGB",
-    ) -> None:
-        playback = self.options[0].check(playback)
-        super().__init__(db, texture, backend=backend, device=device, format=format)
-        try:
-            self._setup(self.texture.read("turnpoints"), playback, seed, start)
-        except BaseException:
-            self.close()
-            raise
+    checked_first = ("playback",)
+
+    def _open(self, *, seed: int, playback: str, start: int) -> None:
+        self._setup(self.texture.read(self.method), playback, seed, start)
 
     # -- setup -----------------------------------------------------------------------
     def _setup(self, model: TurnPointModel, playback: str, seed: int, start: int) -> None:
@@ -119,7 +104,7 @@ class TurnPointPlayer(Player):
         frames = store.read()
         if frames.shape[-1] == 1:
             frames = np.repeat(frames, 3, axis=-1)
-        self.engine = open_blend(frames, ctx=self.ctx, queue=self.queue, format=self.format)
+        self.engine = open_engine("blend", frames, ctx=self.ctx, queue=self.queue, format=self.format)
         del frames
         #: bytes the stored frames occupy on the device (or in host memory with numpy)
         self.memory_bytes = self.engine.memory_bytes
@@ -302,7 +287,7 @@ class TurnPointPlayer(Player):
     def _compose(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, *, wait: bool = True):
         """``out`` = the weighted sum of ``sources`` ((frame, weight in 256ths) pairs); returns
         None once it is there, or (``wait=False``) the event after which it is."""
-        return self.engine.render(sources, out, wait=wait)
+        return self.engine.draw(out, sources, wait=wait)
 
     # -- state ---------------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:
@@ -341,6 +326,32 @@ class TurnPointPlayer(Player):
         self._old, self._pending = old, pending
         self._rng = rng
         self.seed = int(state.get("seed", self.seed))
+
+    # -- loop -----------------------------------------------------------------------
+    def _native_loop(self, count: int | None, keep_pace: bool) -> tuple[np.ndarray, str, float]:
+        """The longest swing between two consecutive turn points and back, a path that returns to
+        its start, resampled from the stored frames, neighbours blended
+        (:func:`dynatex.player.loop.loop_frames`)."""
+        if not self.texture.has_frames:
+            raise InvalidArgumentError("a turnpoints loop needs the stored source frames")
+        source = self.texture.frames().read()
+        if source.shape[-1] == 1:
+            source = np.repeat(source, 3, axis=-1)
+        turns = np.asarray(self.model.turn_points)
+        i = int(np.argmax(np.diff(turns)))
+        a, b = int(turns[i]), int(turns[i + 1])
+        period = 2 * (b - a)
+        n, loops = repeats(period, count, keep_pace)
+        pos = (np.arange(n) * (period * loops / n)) % period
+        pos = np.where(pos <= b - a, a + pos, a + period - pos)  # a -> b -> back toward a
+        lo = np.floor(pos).astype(int)
+        hi = np.minimum(lo + 1, len(source) - 1)
+        w = (pos - lo)[:, None, None, None]
+        frames = np.rint((1 - w) * source[lo] + w * source[hi]).astype(np.uint8)
+        if frames.shape[1:] != tuple(self.shape):  # the player's pixel format (e.g. BGRA)
+            frames = self.format.from_rgb(frames)
+        how = f"swing between turn points {a} and {b} and back ({period} source frames), {loops} time(s)"
+        return frames, how, period * loops / n
 
 
 def _fixed_point(weights: dict[int, float]) -> tuple[tuple[int, int], ...]:

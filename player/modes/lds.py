@@ -12,11 +12,11 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import Array, Numbers, Range
-from ..errors import InvalidArgumentError
-from ..tiledb import LDSModel
-from .base import rng_from_state
-from .controls import Control
+from ...checks import Array, Numbers, Range
+from ...errors import InvalidArgumentError
+from ...tiledb import LDSModel
+from ..base import rng_from_state
+from ..controls import Control
 from .projected import ProjectionPlayer
 
 MAX_WEIGHT = 10.0
@@ -92,6 +92,7 @@ class LDSPlayer(ProjectionPlayer):
     """
 
     mode = "lds"
+    method = "lds"
 
     def _setup(self, model: LDSModel) -> None:
         src = self.texture.source

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..errors import ArgumentTypeError, InvalidArgumentError
+from ...errors import ArgumentTypeError, InvalidArgumentError
 
 #: Largest rate accepted: a pixel 64 times faster than the source.
 MAX_RATE = 64.0

@@ -7,7 +7,7 @@ random field (neighbouring cells differ little, as the seed asks: "maximal chang
 base time by neighbour patch"), spread over the pixels by a Gaussian of ``sigma`` output
 pixels so time shifts gradually across cell borders, and drifting from one field to the
 next over ``epoch`` frames so the output never repeats with the loop's period. Frames are
-built by the shared :class:`~dynatex.player.gather.Gather` (time interpolation between
+built by the shared :class:`~dynatex.player.engines.gather.Gather` (time interpolation between
 neighbouring loop frames, per-tile colour tone).
 
 Mixing: the edge between a cell of class ``a`` and one of class ``c`` belongs to class
@@ -31,13 +31,13 @@ output is a window onto a seamless texture that repeats only with the torus's pe
 
 from __future__ import annotations
 
-import os
+import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from ..checks import (
+from ...checks import (
     MAX_SIDE,
     Choice,
     Either,
@@ -51,12 +51,14 @@ from ..checks import (
     check_seed,
     check_size,
 )
-from ..errors import InvalidArgumentError
-from ..params import Param
-from ..tiledb import TileDB, TilesModel
-from .base import Player, rng_from_state
-from .controls import Capabilities, Control
-from .gather import MAX_GAIN, MAX_TIME, gaussian_smooth, open_gather, pack_source
+from ...errors import InvalidArgumentError
+from ...params import Param
+from ...tiledb import TilesModel
+from ..base import Player, rng_from_state
+from ..controls import Capabilities, Control
+from ..engines import open_engine
+from ..engines.gather import MAX_GAIN, MAX_TIME, gaussian_smooth, pack_source
+from ..loop import render, repeats
 
 TIME_STEP = 8  # output pixels per time-map sample
 #: Largest ``sigma``, output pixels: smoothing costs time linear in it (0.46 s at 4K for 256 on a busy
@@ -128,6 +130,7 @@ class TilesPlayer(Player):
     """
 
     mode = "tiles"
+    method = "tiles"
     options = (
         Param("size", Size(MAX_SIDE), None, "Output size; any size.", optional=True, default_doc="the source clip's"),
         Param(
@@ -142,25 +145,8 @@ class TilesPlayer(Player):
     )
     capabilities = Capabilities(any_size=True, native_loop=True, inpaint=True)
 
-    def __init__(
-        self,
-        db: str | os.PathLike | TileDB,
-        texture: str | None = None,
-        *,
-        backend: str = "auto",
-        device: str | None = None,
-        seed: int = 0,
-        size: Sequence[int] | None = None,
-        labels: np.ndarray | None = None,
-        tone: Any = None,
-        format: str = "RGB",
-    ) -> None:
-        super().__init__(db, texture, backend=backend, device=device, format=format)
-        try:
-            self._setup(self.texture.read("tiles"), seed, size, labels, tone)
-        except BaseException:
-            self.close()
-            raise
+    def _open(self, *, seed: int, size: Sequence[int] | None, labels: np.ndarray | None, tone: Any = None) -> None:
+        self._setup(self.texture.read(self.method), seed, size, labels, tone)
 
     def _setup(self, model: TilesModel, seed: int, size, labels, tone) -> None:
         self.model = model
@@ -180,10 +166,10 @@ class TilesPlayer(Player):
         # tiles stacked vertically in each stored frame: one tile's frame is contiguous, so a
         # cell's rows are read as one forward stream (hardware prefetch follows it)
         stack = np.ascontiguousarray(model.tiles.transpose(1, 0, 2, 3, 4).reshape(length, k * th, tw, 3))
-        self.engine = open_gather(
+        self.engine = open_engine(
+            "gather",
             stack,
             (h, w),
-            backend=self.backend,
             ctx=self.ctx,
             queue=self.queue,
             time_step=TIME_STEP,
@@ -601,10 +587,10 @@ class TilesPlayer(Player):
 
     # -- synthesis ---------------------------------------------------------------------------------------
     def _warm(self) -> None:
-        self.engine.render(self._t, np.empty(self._shape, np.uint8), fade=self._fade())
+        self.engine.draw(np.empty(self._shape, np.uint8), self._t, fade=self._fade())
 
     def _start(self, out: np.ndarray):
-        event = self.engine.start(self._t, out, fade=self._fade())
+        event = self.engine.draw(out, self._t, fade=self._fade(), wait=False)
         self._advance_time()
         return event
 
@@ -691,3 +677,20 @@ class TilesPlayer(Player):
         self.seed, self._tone = seed, tone
         self._build_source(arrangement)  # fits the tone to the arrangement too
         self._refresh_fields()
+
+    # -- loop ---------------------------------------------------------------------------------------------
+    def _native_loop(self, count: int | None, keep_pace: bool) -> tuple[np.ndarray, str, float]:
+        """The tile loop itself (fixed time offsets, ``epoch = 0``), stepped at the speed that fits a
+        whole number of loops into the frames (:func:`dynatex.player.loop.loop_frames`)."""
+        length = self.loop_length
+        n, loops = repeats(length, count, keep_pace)
+        speed = length * loops / n
+        hi = SPEED_RANGE[1]
+        if not speed <= hi:
+            raise InvalidArgumentError(
+                f"{n} frames: a tiles loop of {length} frames needs at least {math.ceil(length / hi)} frames "
+                f"(speed at most {hi:g})"
+            )
+        self.epoch = 0  # fixed time offsets: the output repeats with the tile loop
+        self.speed = speed
+        return render(self, n), f"tile loop of {length} frames at speed {speed:.4g}, {loops} time(s)", speed

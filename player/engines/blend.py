@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InvalidArgumentError
-from .pixels import pixel_format
+from ...errors import InvalidArgumentError
+from ..pixels import pixel_format
 
 VEC = 16
 ITEMS = 4  # uchar16 per work-item of the blend kernels
@@ -79,6 +79,10 @@ class Blend:
     def _render(self, sources: tuple[tuple[int, int], ...], out: np.ndarray, wait: bool):
         raise NotImplementedError
 
+    def draw(self, out: np.ndarray, sources: tuple[tuple[int, int], ...], *, wait: bool = True):
+        """:meth:`render`, in the words of every engine (:class:`~dynatex.player.engines.Engine`)."""
+        return self.render(sources, out, wait=wait)
+
     def close(self) -> None:
         """Release what the engine holds on a device (nothing for the reference)."""
 
@@ -109,8 +113,8 @@ class BlendOpenCL(Blend):
         super().__init__(frames, format=format)
         import pyopencl as cl
 
-        from .engine import FrameOut, Kernel
-        from .opencl import build_program
+        from ..opencl.programs import build_program
+        from .base import FrameOut, Kernel
 
         frames = np.asarray(frames)
         self._vecs = -(-self.frame_bytes // (VEC * ITEMS)) * ITEMS

@@ -17,27 +17,28 @@ that map, at a per-pixel source time built in three steps:
 
 Pixels in a quilt's cross-fade band blend their second source (with its own block's time).
 The player is the time model (clock, controls, the functions below); the runs engine
-(:mod:`.runs`: OpenCL kernel ``kernels/quilt.cl`` or its numpy reference) draws the frames
+(:mod:`dynatex.player.engines.runs`: OpenCL kernel ``kernels/runs.cl`` or its numpy reference) draws the frames
 from the quilt's maps at the source times the model gives it.
 """
 
 from __future__ import annotations
 
-import os
+import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from ..checks import MAX_COUNT, MAX_SIDE, Choice, Flag, NpyFile, Range, Size, check_float, check_seed, check_size
-from ..errors import InvalidArgumentError
-from ..params import Param
-from ..tiledb import QuiltModel, TileDB
-from .base import Player
-from .controls import Capabilities, Control
-from .gather import gaussian_smooth
+from ...checks import MAX_COUNT, MAX_SIDE, Choice, Flag, NpyFile, Range, Size, check_float, check_seed, check_size
+from ...errors import InvalidArgumentError
+from ...params import Param
+from ...tiledb import QuiltModel
+from ..base import Player
+from ..controls import Capabilities, Control
+from ..engines import open_engine
+from ..engines.gather import gaussian_smooth
+from ..engines.runs import quantize_rate
 from .ratemap import check_rate_map
-from .runs import open_runs, quantize_rate
 
 ENDS = ("hold", "loop", "pingpong")
 SPEED_RANGE = (-16.0, 16.0)
@@ -114,7 +115,7 @@ class EvolvePlayer(Player):
 
     The clock (:attr:`time`, in source frames at rate 1; assign to seek) is part of the state.
     The rate map is played quantized to steps of 1/512 after smoothing (:func:`quantize_rate`);
-    :mod:`dynatex.player.ratemap` makes rate maps.
+    :mod:`dynatex.player.modes.ratemap` makes rate maps.
 
     Examples
     --------
@@ -124,6 +125,7 @@ class EvolvePlayer(Player):
     """
 
     mode = "evolve"
+    method = "quilt"
     options = (
         Param(
             "size",
@@ -143,35 +145,25 @@ class EvolvePlayer(Player):
     )
     capabilities = Capabilities(needs_frames=True)
 
-    def __init__(
+    def _open(
         self,
-        db: str | os.PathLike | TileDB,
-        texture: str | None = None,
         *,
-        backend: str = "auto",
-        device: str | None = None,
-        seed: int = 0,
-        size: Sequence[int] | None = None,
-        interpolate: bool = True,
+        seed: int,
+        size: Sequence[int] | None,
+        interpolate: bool,
         jitter: float = 0.0,
         end: str = "hold",
         speed: float = 1.0,
         rate_map: np.ndarray | None = None,
         rate_sigma: float = 0.0,
-        format: str = "RGB",
     ) -> None:
-        super().__init__(db, texture, backend=backend, device=device, format=format)
-        try:
-            self._setup(self.texture.read("quilt"), seed, size, bool(interpolate))
-            self.speed = speed
-            self.end = end
-            self.jitter = jitter
-            self.rate_sigma = rate_sigma
-            self.rate_map = rate_map
-            self._warm()
-        except BaseException:
-            self.close()
-            raise
+        self._setup(self.texture.read(self.method), seed, size, bool(interpolate))
+        self.speed = speed
+        self.end = end
+        self.jitter = jitter
+        self.rate_sigma = rate_sigma
+        self.rate_map = rate_map
+        self._warm()
 
     # -- setup ---------------------------------------------------------------------------------
     def _setup(self, model: QuiltModel, seed: int, size, interpolate: bool) -> None:
@@ -211,7 +203,8 @@ class EvolvePlayer(Player):
         self._rate: np.ndarray | None = None
         self._rate_sigma = 0.0
         self._warp = jitter_warp(self.n_blocks, self.n_frames, 0.0, seed=self.seed)
-        self.engine = open_runs(
+        self.engine = open_engine(
+            "runs",
             flat,
             (h, w),
             pix,
@@ -259,7 +252,7 @@ class EvolvePlayer(Player):
         NpyFile(),
         None,
         "Per-pixel rate of evolution M, (H, W) in [0, 64] (local time t * M); see "
-        "dynatex.player.ratemap for generators.",
+        "dynatex.player.modes.ratemap for generators.",
         flag=None,
         optional=True,
         default_doc="uniform 1",
@@ -355,7 +348,8 @@ class EvolvePlayer(Player):
         """The numpy reference of a frame at clock ``t`` (works with either backend)."""
         if self._reference is None:
             e = self.engine
-            self._reference = open_runs(
+            self._reference = open_engine(
+                "runs",
                 e.flat,
                 e.shape,
                 e.pix,
@@ -369,14 +363,22 @@ class EvolvePlayer(Player):
             self._reference.set_rate(self._rate)
         if out is None:
             out = np.empty(self._shape, np.uint8)
-        self._reference.start(
-            check_float("t", t, -1e7, 1e7), out, source_time=self._source_time, loop=self._end == "loop"
+        self._reference.draw(
+            out, check_float("t", t, -1e7, 1e7), source_time=self._source_time, loop=self._end == "loop"
         )
         return out
 
     def _draw(self, t: float, out: np.ndarray, *, wait: bool = True):
         """The frame at clock ``t`` into ``out``; None once there, or (``wait=False``) the event after which it is."""
-        return self.engine.start(t, out, source_time=self._source_time, loop=self._end == "loop", wait=wait)
+        return self.engine.draw(out, t, source_time=self._source_time, loop=self._end == "loop", wait=wait)
+
+    @property
+    def still_after(self) -> int | None:
+        """With ``end="hold"`` and a forward speed, the frames until the clock (rate map aside)
+        reaches the last source frame, plus one frame of the held end; else None."""
+        if self.end == "hold" and self.speed > 0:
+            return math.ceil((self.n_frames - 1) / self.speed) + 1
+        return None
 
     @property
     def n_runs(self) -> int | None:

@@ -8,7 +8,7 @@ never the caller. Verdicts are cached per (platform, platform version, device, d
 version, dynatex version, kernel sources) in the user's cache folder, so a game pays the
 test once per machine and driver.
 
-The checks open the small database shipped beside this module (``selftest.h5``, every
+The checks open the small database shipped with the player (``player/selftest.h5``, every
 method on a 48-frame 32x24 clip; ``tools/make_selftest_db.py`` rebuilds it) with every
 mode on the device and with the numpy backend, and compare frames; the gather engine is
 also checked directly on the defines the modes do not reach. Kernel variants
@@ -17,8 +17,8 @@ that fails only keeps the device on its portable kernel.
 
 Examples
 --------
->>> from dynatex.player import selftest
->>> [v.ok for v in map(selftest.verdict, selftest.devices())]     # doctest: +SKIP
+>>> from dynatex.player.opencl import devices, verify
+>>> [v.ok for v in map(verify.verdict, devices.devices())]     # doctest: +SKIP
 [True, True]
 
 ``python -m dynatex.player --check`` prints the same for every device. Environment:
@@ -29,284 +29,23 @@ an application embedding Python rather than Python itself).
 
 from __future__ import annotations
 
-import functools
-import hashlib
 import json
 import os
-import subprocess
 import sys
-import tempfile
-import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-from .opencl import DeviceInfo, devices
+from . import verify
+from .devices import DeviceInfo, devices
+from .verify import INJECT_ENV, Verdict
 
-#: Seconds a device's whole self-test may take before it counts as hung
-#: (environment variable ``DYNATEX_SELFTEST_TIMEOUT`` overrides).
-TIMEOUT = 180.0
-#: Environment variable naming an extra ``.cl`` file to check first (kernel ``check(src, dst)``
-#: must copy 4096 bytes): how the tests inject a kernel that crashes, hangs or computes wrong.
-INJECT_ENV = "DYNATEX_SELFTEST_INJECT"
 #: The texture of ``selftest.h5``.
 TEXTURE = "selftest"
-#: Set in the self-test's child process: the kernel variants it may use (None: the cached verdicts decide).
-ALLOWED_VARIANTS: frozenset[str] | None = None
-
-_lock = threading.Lock()
-_run_lock = threading.Lock()
-_verdicts: dict[str, Verdict] = {}
-
-
-@dataclass
-class Verdict:
-    """The self-test's finding for one device."""
-
-    ok: bool
-    reason: str = ""  # what failed, one line ("" when ok)
-    variants: dict[str, bool] = field(default_factory=dict)
-    variant_reasons: dict[str, str] = field(default_factory=dict)
-    seconds: float = 0.0
-    device: str = ""
-    tested: bool = True  # False: the child never reached a check (not the device's fault)
-    #: engine -> its OpenCL frame rate over its numpy reference's, measured once after the checks
-    #: (:data:`SPEED_CASES`); ``backend="auto"`` takes numpy for an engine below 1
-    speed: dict[str, float] = field(default_factory=dict)
-
-
-# -- cache ---------------------------------------------------------------------------------
-def cache_path() -> Path:
-    """Where verdicts are kept: ``devices.json`` in dynatex's cache folder (``$DYNATEX_CACHE_DIR``,
-    else the platform's user cache folder; :func:`dynatex.tiledb.probe.cache_dir`)."""
-    from ..tiledb.probe import cache_dir
-
-    return cache_dir() / "devices.json"
-
-
-@functools.lru_cache(maxsize=1)
-def _sources_hash() -> str:
-    """A digest of everything a verdict depends on besides the device: the player's modules,
-    kernels and the self-test's database (read once per process)."""
-    h = hashlib.sha256()
-    for item in sorted(_walk(resources.files("dynatex.player")), key=lambda r: str(r)):
-        h.update(item.name.encode() + b"\0" + item.read_bytes())
-    return h.hexdigest()[:16]
-
-
-def _walk(folder):
-    for item in folder.iterdir():
-        if item.is_dir():
-            if item.name != "__pycache__":
-                yield from _walk(item)
-        elif item.name.endswith((".cl", ".py", ".h5")):
-            yield item
-
-
-def _version() -> str:
-    from .. import __version__
-
-    return __version__
-
-
-def cache_key(info: DeviceInfo) -> str:
-    """The key a device's verdict is cached under (changes with its driver and with dynatex)."""
-    inject = os.environ.get(INJECT_ENV, "")
-    if inject:
-        inject = hashlib.sha256(Path(inject).read_bytes()).hexdigest()[:16] if Path(inject).is_file() else inject
-    parts = [
-        info.platform,
-        info.platform_version,
-        info.name,
-        info.vendor,
-        info.driver_version,
-        _version(),
-        _sources_hash(),
-        inject,
-    ]
-    return hashlib.sha256("\x1f".join(parts).encode()).hexdigest()[:24]
-
-
-def _read_cache() -> dict:
-    try:
-        data = json.loads(cache_path().read_text())
-    except (OSError, ValueError):
-        return {}
-    return data if isinstance(data, dict) else {}
-
-
-def _write_cache(key: str, verdict: Verdict) -> None:
-    """Add one verdict to the cache file atomically; a cache that cannot be written is only logged."""
-    path = cache_path()
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        data = _read_cache()
-        data[key] = asdict(verdict)
-        fd, tmp = tempfile.mkstemp(prefix=".devices.", suffix=".tmp", dir=path.parent)
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=1, sort_keys=True)
-        os.replace(tmp, path)
-    except OSError as exc:
-        from .opencl import log
-
-        log.warning("cannot cache the OpenCL self-test verdict in %s: %s", path, exc)
-
-
-def cached_verdict(info: DeviceInfo) -> Verdict | None:
-    """The verdict already known for ``info`` (this process or the cache file), else None."""
-    key = cache_key(info)
-    with _lock:
-        if key in _verdicts:
-            return _verdicts[key]
-    entry = _read_cache().get(key)
-    if not isinstance(entry, dict):
-        return None
-    try:
-        v = Verdict(**entry)
-    except TypeError:
-        return None
-    with _lock:
-        _verdicts[key] = v
-    return v
-
-
-def verdict(info: DeviceInfo, *, refresh: bool = False) -> Verdict:
-    """The self-test verdict for ``info``: cached, or found now in a child process and cached.
-
-    Self-tests run one at a time (two threads opening players wait for one test). A child
-    that could not start or run its first check (no interpreter, an import failure) says
-    nothing about the device: that verdict is not kept."""
-    if not refresh:
-        v = cached_verdict(info)
-        if v is not None:
-            return v
-    with _run_lock:
-        if not refresh:
-            v = cached_verdict(info)
-            if v is not None:
-                return v
-        v = run_child(info)
-        if v.tested:
-            key = cache_key(info)
-            with _lock:
-                _verdicts[key] = v
-            _write_cache(key, v)
-    return v
-
-
-# -- the parent's side ------------------------------------------------------------------------
-def run_child(info: DeviceInfo, *, timeout: float | None = None) -> Verdict:
-    """Run the checks for ``info`` in a child process; a crash or hang there is a failed verdict."""
-    if timeout is None:
-        timeout = float(os.environ.get("DYNATEX_SELFTEST_TIMEOUT", TIMEOUT))
-    python = os.environ.get("DYNATEX_PYTHON") or sys.executable
-    if not python or "python" not in Path(python).name.lower():
-        # embedded in an application whose executable is not Python: running it could start the app
-        return Verdict(
-            False,
-            f"cannot run the self-test: {python!r} is not a Python interpreter (set DYNATEX_PYTHON to one)",
-            device=info.describe(),
-            tested=False,
-        )
-    cmd = [python, "-m", "dynatex.player.selftest", json.dumps(asdict(info))]
-    env = dict(os.environ)
-    env.pop("PYTHONFAULTHANDLER", None)  # any value turns it on: its dump is not our protocol
-    start = time.perf_counter()
-    try:
-        proc = subprocess.Popen(
-            cmd,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            errors="replace",
-            env=env,
-            start_new_session=os.name == "posix",
-        )
-    except OSError as exc:
-        return Verdict(False, f"cannot start the self-test: {exc}", device=info.describe(), tested=False)
-    hung = False
-    try:
-        out, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        hung = True
-        _kill(proc)
-        try:
-            out, err = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:  # something else still holds the pipes: give up on them
-            out, err = "", ""
-    seconds = time.perf_counter() - start
-    try:
-        return _parse(out, None if hung else proc.returncode, hung, timeout, seconds, info, err)
-    except (ValueError, TypeError) as exc:
-        return Verdict(False, f"unreadable self-test verdict ({exc})", device=info.describe(), tested=False)
-
-
-def _kill(proc: subprocess.Popen) -> None:
-    """Kill the child and whatever it started (a compiler), so nothing keeps the pipes open."""
-    if os.name == "posix":
-        import signal
-
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except OSError:
-            proc.kill()
-    else:
-        proc.kill()
-
-
-def _parse(
-    out: str, code: int | None, hung: bool, timeout: float, seconds: float, info: DeviceInfo, err: str = ""
-) -> Verdict:
-    """The verdict from the child's lines (tab-separated: check NAME, pass NAME, fail NAME WHY,
-    verdict JSON) and how it ended (``code`` None: killed after ``timeout``)."""
-    passed, current, failures, final, started = [], None, {}, None, False
-    for line in out.splitlines():
-        word, _, rest = line.partition("\t")
-        if word == "check":
-            current, started = rest, True
-        elif word == "pass":
-            passed.append(rest)
-            current = None
-        elif word == "fail":
-            name, _, why = rest.partition("\t")
-            failures[name] = why
-            current = None
-        elif word == "verdict":
-            final = rest
-    if final is not None and code == 0:
-        v = Verdict(**json.loads(final))
-        v.seconds = seconds
-        return v
-    if not started and not hung and (code is None or code >= 0):
-        last = err.strip().splitlines()[-1] if err.strip() else f"exit status {code}"
-        return Verdict(
-            False, f"the self-test could not run: {last[:300]}", seconds=seconds, device=info.describe(), tested=False
-        )
-    if hung:
-        what = f"hung (no verdict after {timeout:.0f} s)"
-    elif code is not None and code < 0:
-        what = f"crashed (signal {-code})" + (" at exit, after its checks" if final is not None else "")
-    else:
-        what = f"exited with status {code}" + (" after its checks" if final is not None else "")
-    where = f" in check {current!r}" if current else ""
-    # variants and speed measurements come after every portable check has passed
-    failed = [(k, why) for k, why in failures.items() if not k.startswith(("variant ", "speed "))]
-    portable_done = not failed and current is not None and current.startswith(("variant ", "speed "))
-    reason = f"{failed[0][0]}: {failed[0][1]}" if failed else "" if portable_done else f"{what}{where}"
-    v = Verdict(ok=portable_done, reason=reason, seconds=seconds, device=info.describe())
-    for name in CHECK_VARIANTS:
-        check = f"variant {name}"
-        v.variants[name] = check in passed
-        if check == current:
-            v.variant_reasons[name] = f"{what}{where}"
-        elif check in failures:
-            v.variant_reasons[name] = failures[check]
-    return v
 
 
 # -- the checks (run in the child) ------------------------------------------------------------
@@ -340,7 +79,7 @@ def _mode_check(
     ``frames`` frames compared."""
 
     def check(device: str) -> str | None:
-        from . import open_player
+        from .. import open_player
 
         with (
             open_player(_db_path(), TEXTURE, mode=mode, backend="opencl", device=device, **options) as pc,
@@ -375,7 +114,7 @@ def _gather_check(
     ``format`` into an array ``misalign`` bytes past a 64-byte boundary."""
 
     def check(device: str) -> str | None:
-        from .gather import open_gather, pack_source
+        from ..engines.gather import open_gather, pack_source
 
         rng = np.random.default_rng(7)
         stack = rng.integers(0, 256, (6, 20, 36, 3), dtype=np.uint8)
@@ -428,7 +167,8 @@ def _copy_check(device: str) -> str | None:
     """The benchmark's streaming copy (kernels/variants/copy_stream.cl) copies every byte."""
     import pyopencl as cl
 
-    from .opencl import build_program, get_context
+    from .context import get_context
+    from .programs import build_program
 
     ctx = get_context(device)
     queue = cl.CommandQueue(ctx)
@@ -451,10 +191,10 @@ def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
     def check(device: str) -> str | None:
         import pyopencl as cl
 
-        from ..tiledb.detail import DetailModel
-        from .detail import DetailOpenCL, DetailReference
-        from .opencl import get_context
-        from .pixels import FORMATS
+        from ...tiledb.detail import DetailModel
+        from ..engines.detail import DetailOpenCL, DetailReference
+        from ..pixels import FORMATS
+        from .context import get_context
 
         rng = np.random.default_rng(5)
         h, w, fmt = 21, 37, FORMATS[format]
@@ -524,7 +264,8 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
     ),
 }
 
-#: kernel variant -> the checks that must pass before a device uses it (run after CHECKS)
+#: kernel variant (each file of ``kernels/variants/``) -> the checks that must pass before a device
+#: uses it (run after CHECKS)
 CHECK_VARIANTS: dict[str, dict[str, Callable[[str], str | None]]] = {
     "gather_wide": {
         "grid": _gather_check(cell=(8, 12), time_step=8, wrap="loop", size=(72, 200), wide=True),
@@ -548,7 +289,7 @@ def _inject_check(path: str) -> Callable[[str], str | None]:
     def check(device: str) -> str | None:
         import pyopencl as cl
 
-        from .opencl import get_context
+        from .context import get_context
 
         ctx = get_context(device)
         queue = cl.CommandQueue(ctx)
@@ -568,7 +309,6 @@ def _inject_check(path: str) -> Callable[[str], str | None]:
 
 def _child(expected: DeviceInfo) -> int:
     """Run every check on device ``expected`` and print progress lines and the verdict (JSON)."""
-    global ALLOWED_VARIANTS
     import warnings
 
     warnings.simplefilter("ignore")  # compiler chatter is not a verdict
@@ -579,7 +319,7 @@ def _child(expected: DeviceInfo) -> int:
         print(f"verdict\t{json.dumps(asdict(v))}", flush=True)
         return 0
     start = time.perf_counter()
-    ALLOWED_VARIANTS = frozenset()
+    verify.suppose(info)  # portable kernels only, until the variants' own checks
     checks = dict(CHECKS)
     if os.environ.get(INJECT_ENV):
         checks = {"injected kernel": _inject_check(os.environ[INJECT_ENV]), **checks}
@@ -591,7 +331,7 @@ def _child(expected: DeviceInfo) -> int:
             break
     if v.ok:
         for variant, vchecks in CHECK_VARIANTS.items():
-            ALLOWED_VARIANTS = frozenset({variant})
+            verify.suppose(info, frozenset({variant}))
             if not info.is_cpu:
                 v.variants[variant] = False
                 v.variant_reasons[variant] = "CPU devices only"
@@ -622,8 +362,8 @@ def _projection_speed(precision: str, size: tuple[int, int] = (288, 352), n: int
     def measure(device: str) -> float:
         import pyopencl as cl
 
-        from .opencl import get_context
-        from .projection import open_projector
+        from ..engines.projection import open_projector
+        from .context import get_context
 
         h, w = size
         rng = np.random.default_rng(0)
@@ -692,11 +432,11 @@ def _run_one(name: str, check: Callable[[str], str | None], device: str) -> str 
 if __name__ == "__main__":
     if len(sys.argv) != 2:
         print(
-            "usage: python -m dynatex.player.selftest DEVICE_JSON  (run by the player, not by hand: "
+            "usage: python -m dynatex.player.opencl.selftest DEVICE_JSON  (run by the player, not by hand: "
             "use python -m dynatex.player --check)",
             file=sys.stderr,
         )
         raise SystemExit(2)
-    from dynatex.player import selftest as _module  # this file runs as __main__: use the module's globals
+    from dynatex.player.opencl import selftest as _module  # this file runs as __main__: use the module's globals
 
     raise SystemExit(_module._child(DeviceInfo(**json.loads(sys.argv[1]))))

@@ -3,7 +3,7 @@ quilt, each pixel at its block's source time, cross-fade bands blending two sour
 
 The mode owns the time model (clock, rate map, end mode, jitter warps) and hands the engine
 a *source time* function; the engine owns the frame stack, the run tables and the kernel
-(``kernels/quilt.cl``). :class:`RunsReference` evaluates every pixel in numpy (the
+(``kernels/runs.cl``). :class:`RunsReference` evaluates every pixel in numpy (the
 reference); :class:`RunsOpenCL` cuts the quilt's rows once into *runs* (:func:`build_runs`)
 that read one or two contiguous source rows, so that the kernel moves whole runs with
 16-byte vectors, and evaluates the source time once per (rate, block) *time slot* per frame
@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InvalidArgumentError
-from .pixels import pixel_format
+from ...errors import InvalidArgumentError
+from ..pixels import pixel_format
 
 SPILL = 16  # bytes a kernel chunk may read past a run
 RATE_STEP = 1.0 / 512  # rate maps are quantized to this step (see quantize_rate)
@@ -325,6 +325,10 @@ class Runs:
         """
         raise NotImplementedError
 
+    def draw(self, out: np.ndarray, t: float, *, source_time: SourceTime, loop: bool, wait: bool = True):
+        """:meth:`start`, in the words of every engine (:class:`~dynatex.player.engines.Engine`)."""
+        return self.start(t, out, source_time=source_time, loop=loop, wait=wait)
+
     @property
     def bytes_per_frame(self) -> int:
         """Bytes a frame moves at least (what the engine reads and writes)."""
@@ -368,7 +372,7 @@ class RunsReference(Runs):
 
 
 class RunsOpenCL(Runs):
-    """Kernel ``evolve`` over run tables (module docstring; ``kernels/quilt.cl``).
+    """Kernel ``evolve`` over run tables (module docstring; ``kernels/runs.cl``).
 
     ``ctx`` and ``queue`` belong to the caller (the mode's player); the engine owns its
     buffers, built and bounds-checked at construction (:func:`check_runs`) and again for
@@ -391,8 +395,8 @@ class RunsOpenCL(Runs):
         super().__init__(frames, shape, pix, labels, **options)
         import pyopencl as cl
 
-        from .engine import FrameOut, Kernel
-        from .opencl import build_program
+        from ..opencl.programs import build_program
+        from .base import FrameOut, Kernel
 
         h, w = self.shape
         pb = self.format.bytes
@@ -417,7 +421,7 @@ class RunsOpenCL(Runs):
         gain = np.zeros(4, np.float32) if self.gain is None else _gain_bytes(self.gain, self.format).reshape(-1)
         self._d_gain = cl.Buffer(ctx, ro, hostbuf=np.concatenate([gain, np.zeros(SPILL, np.float32)]))
         defines = {"INTERP": self.interpolate, "GAIN": self.gain is not None, "PIXEL_BYTES": pb}
-        self._kernel = Kernel(build_program(ctx, "quilt.cl", defines), "evolve")
+        self._kernel = Kernel(build_program(ctx, "runs.cl", defines), "evolve")
         self._kernel.set(stack=self._d_stack, code=self._d_code, gain=self._d_gain, height=np.int32(h))
         #: the kernel's frame destination (writes straight into callers' arrays where the device shares host memory)
         self.out = FrameOut(ctx, queue, self._kernel, "out", h * w * pb)

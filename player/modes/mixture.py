@@ -5,22 +5,21 @@ drawing ``draws`` noise vectors and keeping the candidate nearest the training c
 (the learned manifold), then decodes it to responsibilities ``r_s`` and local coordinates
 ``z_s`` (microseconds: ``S`` small Gaussians and ``d x D`` maps). The image is the
 projection of ``u = (r_s, r_s z_s)`` onto the stacked basis (component means and loadings)
-with the LDS mode's ``project`` kernel (:mod:`.projection`): one launch per frame,
+with the LDS mode's ``project`` kernel (:mod:`dynatex.player.engines.projection`): one launch per frame,
 memory-bound on the stacked basis.
 """
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import numpy as np
 
-from ..checks import Range
-from ..errors import InvalidArgumentError
-from ..tiledb import MixtureModel, TileDB
-from .base import rng_from_state
-from .controls import Control
+from ...checks import Range
+from ...errors import InvalidArgumentError
+from ...tiledb import MixtureModel
+from ..base import rng_from_state
+from ..controls import Control
 from .projected import ProjectionPlayer
 
 DEFAULT_DRAWS = 16
@@ -91,22 +90,13 @@ class MixturePlayer(ProjectionPlayer):
     """
 
     mode = "mixture"
+    method = "mixture"
     basis_name = "stacked_basis"
 
-    def __init__(
-        self,
-        db: str | os.PathLike | TileDB,
-        texture: str | None = None,
-        *,
-        backend: str = "auto",
-        device: str | None = None,
-        seed: int = 0,
-        precision: str = "float32",
-        draws: int = DEFAULT_DRAWS,
-        format: str = "RGB",
-    ) -> None:
-        draws = type(self).draws.param.check(draws)  # refused before the database opens
-        super().__init__(db, texture, backend=backend, device=device, seed=seed, precision=precision, format=format)
+    checked_first = ("precision", "draws")
+
+    def _open(self, *, seed: int, precision: str, draws: int = DEFAULT_DRAWS) -> None:
+        super()._open(seed=seed, precision=precision)
         self._draws = draws
 
     def _setup(self, model: MixtureModel) -> None:

@@ -1,7 +1,7 @@
 """The engine layer: what draws a mode's frames, and what the engines share.
 
 A mode (a :class:`~dynatex.player.base.Player`) is a model, a clock and controls; its
-frames come from one engine, ``player.engine``, of one of four kinds, each a pair of an
+frames come from one engine, ``player.engines``, of one of four kinds, each a pair of an
 OpenCL engine and its numpy reference behind one interface:
 
 =============  ===========================  ======================================
@@ -13,12 +13,14 @@ runs           :mod:`.runs`                 a quilt's runs at per-block times (e
 blend          :mod:`.blend`                weighted sums of stored frames (turnpoints)
 =============  ===========================  ======================================
 
-The interface: built from the model's arrays (uploaded once; ``ctx`` and ``queue`` are
-the player's, the buffers the engine's), a render call that writes a frame into the
-caller's array and returns None once it is there or the event after which it is (so every
-mode can keep a frame in flight), ``bytes_per_frame`` for roofline figures, ``backend``,
-and ``close()``, which the player calls. ``open_projector``, ``open_gather``,
-``open_runs`` and ``open_blend`` pick the OpenCL engine or the reference.
+The interface is :class:`dynatex.player.engines.Engine`: built from the model's arrays
+(uploaded once; ``ctx`` and ``queue`` are the player's, the buffers the engine's), ``draw``
+writes a frame into the caller's array and returns None once it is there or the event after
+which it is (so every mode can keep a frame in flight), ``bytes_per_frame`` for roofline
+figures, ``backend``, and ``close()``, which the player calls.
+:func:`dynatex.player.engines.open_engine` picks the OpenCL engine or the reference, the same
+way for every engine (the detail step, which reads the projection's device frame, has
+:func:`~dynatex.player.engines.detail.open_detail`).
 
 What the OpenCL engines share lives here: :class:`Kernel` binds arguments by the names
 the ``.cl`` file declares, so no index has to mirror a signature.
@@ -35,7 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from .opencl import KernelBuildError, Program, writes_through
+from ..errors import KernelBuildError
+from ..opencl.programs import Program, writes_through
 
 #: caller's arrays whose host-pointer buffers stay wrapped (double buffering needs two)
 HELD_ARRAYS = 4
@@ -44,7 +47,7 @@ HELD_ARRAYS = 4
 class Kernel:
     """One kernel object of ``program`` with its arguments set by name.
 
-    >>> k = Kernel(build_program(ctx, "lds.cl", defines), "project")   # doctest: +SKIP
+    >>> k = Kernel(build_program(ctx, "projection.cl", defines), "project")   # doctest: +SKIP
     >>> k.set(coef=d_coef, n=np.int32(12))                             # doctest: +SKIP
     """
 

@@ -1,7 +1,7 @@
 """The projection ``frame = mean + sum_i coef_i * basis[i]`` to uint8, shared by the modes
 whose frames are a linear combination of stored rows (``lds``, ``mixture``).
 
-OpenCL (:class:`ProjectorOpenCL`): kernel ``project`` of ``kernels/lds.cl`` over a blocked
+OpenCL (:class:`ProjectorOpenCL`): kernel ``project`` of ``kernels/projection.cl`` over a blocked
 copy of the basis (for each block of ``BLOCK`` values, its ``n x BLOCK`` sub-matrix is
 contiguous), built once and with its arguments set once; per frame one small upload of the
 coefficients and one launch into the caller's array (or a device buffer copied into it).
@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .pixels import pixel_format
+from ..pixels import pixel_format
 
 BLOCK = 16
 #: Work-group size: left to choose, PoCL may make few large groups that leave a core idle
@@ -81,6 +81,10 @@ class Projector:
         """
         raise NotImplementedError
 
+    def draw(self, out: np.ndarray, *, wait: bool = True):
+        """:meth:`run`, in the words of every engine (:class:`~dynatex.player.engines.Engine`)."""
+        return self.run(out, wait=wait)
+
     def close(self) -> None:
         """Release what the engine holds on a device (nothing for the reference)."""
 
@@ -110,7 +114,7 @@ class ProjectorReference(Projector):
 
 
 class ProjectorOpenCL(Projector):
-    """Kernel ``project`` of ``kernels/lds.cl`` over a blocked copy of the basis (module docstring).
+    """Kernel ``project`` of ``kernels/projection.cl`` over a blocked copy of the basis (module docstring).
 
     ``ctx`` and ``queue`` belong to the caller (the mode's player); the engine owns its buffers.
     """
@@ -131,8 +135,8 @@ class ProjectorOpenCL(Projector):
         super().__init__(basis, mean, shape=shape, channels=channels, format=format)
         import pyopencl as cl
 
-        from .engine import FrameOut, Kernel
-        from .opencl import build_program
+        from ..opencl.programs import build_program
+        from .base import FrameOut, Kernel
 
         self.queue = queue
         blocked = blocked_basis(basis)
@@ -146,7 +150,7 @@ class ProjectorOpenCL(Projector):
         self._d_mean = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p)
         self._d_coef = cl.Buffer(ctx, mf.READ_ONLY, self.coef.nbytes)
         prog = build_program(
-            ctx, "lds.cl", {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels, **self.format.defines}
+            ctx, "projection.cl", {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels, **self.format.defines}
         )
         self._kernel = Kernel(prog, "project")
         self._kernel.set(

@@ -19,18 +19,18 @@ import importlib
 import os
 from typing import Any
 
-from ..errors import InvalidArgumentError
-from ..tiledb import Texture, TileDB
-from ..tiledb.database import MODE_METHOD as _MODE_METHOD
-from ..tiledb.database import PLAYER_MODES
+from ...errors import InvalidArgumentError
+from ...tiledb import Texture, TileDB
+from ...tiledb.database import MODE_METHOD as _MODE_METHOD
+from ...tiledb.database import PLAYER_MODES
 
-#: mode name -> "module:Class" inside dynatex.player
+#: mode name -> "module:Class" inside dynatex.player.modes
 MODES: dict[str, str] = {
     "lds": "lds:LDSPlayer",
     "tiles": "tiles:TilesPlayer",
     "turnpoints": "turnpoints:TurnPointPlayer",
     "mixture": "mixture:MixturePlayer",
-    "evolve": "quilt:EvolvePlayer",
+    "evolve": "evolve:EvolvePlayer",
 }
 #: other names of a mode: the evolve mode plays what ``--methods quilt`` learned
 MODE_ALIASES: dict[str, str] = {"quilt": "evolve"}
@@ -53,7 +53,7 @@ def resolve_mode(mode: str) -> str:
 def player_class(mode: str):
     """The player class of ``mode`` (a mode name or an alias), imported on first use."""
     module, cls = MODES[resolve_mode(mode)].split(":")
-    return getattr(importlib.import_module(f"dynatex.player.{module}"), cls)
+    return getattr(importlib.import_module(f"dynatex.player.modes.{module}"), cls)
 
 
 def default_mode(texture: Texture) -> str:
@@ -83,7 +83,7 @@ def mode_info(mode: str) -> dict[str, Any]:
         return {"rule": p.kind.describe(), "default": p.default_text(), "doc": p.doc}
 
     return {
-        "method": MODE_METHOD[cls.mode],
+        "method": cls.method,
         "summary": (cls.__doc__ or "").strip().splitlines()[0],
         "options": {p.name: entry(p) for p in cls.options},
         "controls": {name: entry(c.param) for name, c in cls.controls().items()},
