@@ -224,7 +224,7 @@ def test_the_opencl_plumbing_imports_nothing_above_it():
     """``player/opencl`` is layered (devices, programs, verify, context) below every engine and
     mode; only the self-test's checks, which its child process alone imports, reach above."""
     graph = _graph()
-    below = {"dynatex", "dynatex.errors", "dynatex.tiledb.probe", "dynatex.player.errors"}
+    below = {"dynatex", "dynatex.player.errors", *LEAVES}
     plumbing = {m for m in graph if m.startswith("dynatex.player.opencl") and m != "dynatex.player.opencl.selftest"}
     assert {"dynatex.player.opencl.devices", "dynatex.player.opencl.context"} <= plumbing
     upward = {m: graph[m] - plumbing - below for m in plumbing if graph[m] - plumbing - below}

@@ -17,10 +17,10 @@ import numpy as np
 
 from ...checks import check_float
 from ...errors import InvalidArgumentError
+from ...tiledb.tiles import MAX_TONES
 
 WRAPS = ("loop", "clamp", "pingpong")
 MAX_FRAME_PIXELS = 1 << 24
-MAX_TONES = 256
 MAX_GAIN, MAX_OFFSET = 63.0, 255.0  # the fixed-point tone's range (every intermediate fits 16 bits)
 
 

@@ -54,6 +54,7 @@ from ...checks import (
 from ...errors import InvalidArgumentError
 from ...params import Param
 from ...tiledb import TilesModel
+from ...tiledb.tiles import MAX_TONES
 from ..base import Player, rng_from_state
 from ..controls import Capabilities, Control
 from ..engines import open_engine
@@ -178,8 +179,8 @@ class TilesPlayer(Player):
         )
         self.mixing = mixing
         c = model.n_classes
-        #: quantization levels of a feathered pixel's tone share (tone table <= 256 entries)
-        self._tone_levels = max(2, min(32, (255 - c) // max(1, c * c)))
+        #: quantization levels of a feathered pixel's tone share
+        self._tone_levels = max(2, min(32, (MAX_TONES - 1 - c) // max(1, c * c)))
         self.engine.set_tones(*self._tone_tables(None))
         self._sigma = min(0.5 * min(th, tw), MAX_SIGMA)
         self._max_shift = min(length / 3.0, 16.0)

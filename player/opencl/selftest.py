@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import asdict
@@ -307,6 +306,12 @@ def _inject_check(path: str) -> Callable[[str], str | None]:
     return check
 
 
+def child_main(info: dict) -> None:
+    """What the self-test's child runs (:func:`~dynatex.player.opencl.verify.run_child`, through
+    :func:`dynatex.child.call`): every check on the device ``info`` describes."""
+    _child(DeviceInfo(**info))
+
+
 def _child(expected: DeviceInfo) -> int:
     """Run every check on device ``expected`` and print progress lines and the verdict (JSON)."""
     import warnings
@@ -427,16 +432,3 @@ def _run_one(name: str, check: Callable[[str], str | None], device: str) -> str 
     else:
         print(f"pass\t{name}", flush=True)
     return problem
-
-
-if __name__ == "__main__":
-    if len(sys.argv) != 2:
-        print(
-            "usage: python -m dynatex.player.opencl.selftest DEVICE_JSON  (run by the player, not by hand: "
-            "use python -m dynatex.player --check)",
-            file=sys.stderr,
-        )
-        raise SystemExit(2)
-    from dynatex.player.opencl import selftest as _module  # this file runs as __main__: use the module's globals
-
-    raise SystemExit(_module._child(DeviceInfo(**json.loads(sys.argv[1]))))

@@ -9,15 +9,15 @@ import functools
 import hashlib
 import json
 import os
-import subprocess
-import sys
 import tempfile
 import threading
-import time
 from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
 
+from ...cache import cache_dir
+from ...child import call
+from ...errors import ChildStartError
 from ..errors import OpenCLUnavailableError
 from .devices import _FIX, DeviceInfo, devices, log, preference_order
 from .programs import kernel_variants
@@ -53,8 +53,7 @@ class Verdict:
 # -- cache ---------------------------------------------------------------------------------
 def cache_path() -> Path:
     """Where verdicts are kept: ``devices.json`` in dynatex's cache folder (``$DYNATEX_CACHE_DIR``,
-    else the platform's user cache folder; :func:`dynatex.tiledb.probe.cache_dir`)."""
-    from ...tiledb.probe import cache_dir
+    else the platform's user cache folder; :func:`dynatex.cache.cache_dir`)."""
 
     return cache_dir() / "devices.json"
 
@@ -181,60 +180,14 @@ def run_child(info: DeviceInfo, *, timeout: float | None = None) -> Verdict:
     """Run the checks for ``info`` in a child process; a crash or hang there is a failed verdict."""
     if timeout is None:
         timeout = float(os.environ.get("DYNATEX_SELFTEST_TIMEOUT", TIMEOUT))
-    python = os.environ.get("DYNATEX_PYTHON") or sys.executable
-    if not python or "python" not in Path(python).name.lower():
-        # embedded in an application whose executable is not Python: running it could start the app
-        return Verdict(
-            False,
-            f"cannot run the self-test: {python!r} is not a Python interpreter (set DYNATEX_PYTHON to one)",
-            device=info.describe(),
-            tested=False,
-        )
-    cmd = [python, "-m", "dynatex.player.opencl.selftest", json.dumps(asdict(info))]
-    env = dict(os.environ)
-    env.pop("PYTHONFAULTHANDLER", None)  # any value turns it on: its dump is not our protocol
-    start = time.perf_counter()
     try:
-        proc = subprocess.Popen(
-            cmd,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            errors="replace",
-            env=env,
-            start_new_session=os.name == "posix",
-        )
-    except OSError as exc:
-        return Verdict(False, f"cannot start the self-test: {exc}", device=info.describe(), tested=False)
-    hung = False
+        child = call("dynatex.player.opencl.selftest:child_main", asdict(info), timeout=timeout)
+    except ChildStartError as exc:
+        return Verdict(False, f"cannot run the self-test: {exc}", device=info.describe(), tested=False)
     try:
-        out, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        hung = True
-        _kill(proc)
-        try:
-            out, err = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:  # something else still holds the pipes: give up on them
-            out, err = "", ""
-    seconds = time.perf_counter() - start
-    try:
-        return _parse(out, None if hung else proc.returncode, hung, timeout, seconds, info, err)
+        return _parse(child.out, child.status, child.timed_out, timeout, child.seconds, info, child.err)
     except (ValueError, TypeError) as exc:
         return Verdict(False, f"unreadable self-test verdict ({exc})", device=info.describe(), tested=False)
-
-
-def _kill(proc: subprocess.Popen) -> None:
-    """Kill the child and whatever it started (a compiler), so nothing keeps the pipes open."""
-    if os.name == "posix":
-        import signal
-
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except OSError:
-            proc.kill()
-    else:
-        proc.kill()
 
 
 def _parse(
