@@ -28,7 +28,8 @@ time
     ``(ceil(H/s), ceil(W/s))``, sample ``(i, j)`` sits at pixel centre ``((i+0.5)s-0.5, ...)``).
     A second map, the target, may be given with it: ``render(t, fade=f)`` then uses
     ``map + f (target - map)``, faded on the device (a player moving between two maps
-    uploads them once, not every frame). Frame indices wrap by ``wrap`` (``"loop"``: modulo
+    uploads them once, not every frame; :meth:`Gather.next_time_map` moves the target in as
+    the map and uploads only the new target). Frame indices wrap by ``wrap`` (``"loop"``: modulo
     ``N``; ``"clamp"``: held at the ends; ``"pingpong"``: forth and back with period
     ``2(N-1)``). With ``interpolate`` the pixel is ``(1-f) F[wrap(i)] + f F[wrap(i+1)]``,
     ``i = floor(time)``, ``f = time - i``. :meth:`Gather.smooth_time_map` Gaussian-smooths
@@ -241,9 +242,14 @@ class Gather:
         """The time map and its target as the frames use them."""
         return self._tmap, self._target
 
-    def _smooth(self, sigma: float, weights: np.ndarray) -> None:
-        """Gaussian-smooth the maps where they are kept (``sigma`` in map samples, its taps)."""
+    def _smooth(self, sigma: float, weights: np.ndarray, target_only: bool = False) -> None:
+        """Gaussian-smooth the maps (or the target alone) where they are kept (``sigma`` in map
+        samples, its taps)."""
         raise NotImplementedError
+
+    def _shift_tmap(self) -> None:
+        """The target has become the time map and :attr:`_target` holds the new target: put it
+        where the frames are drawn (the old target stays there as the map)."""
 
     def _launch(self, t: float, out: np.ndarray):
         """Start the frame at folded time ``t`` (fade: :attr:`_last_fade`) into ``out``; None or an event."""
@@ -335,11 +341,27 @@ class Gather:
     def smooth_time_map(self, sigma: float) -> None:
         """Gaussian-smooth the time map (and its target, if set) in place, ``sigma`` in output
         pixels (0: no change)."""
+        self._smooth_maps(sigma, target_only=False)
+
+    def next_time_map(self, target: np.ndarray, sigma: float = 0.0) -> None:
+        """Move on one map: the target becomes the time map, and ``target`` (as in
+        :meth:`set_time_map`), Gaussian-smoothed by ``sigma`` output pixels where the maps are
+        kept, the new target. A player drifting through a sequence of maps uploads each once
+        and reads none back. Needs a target set."""
+        if self._target is None:
+            raise InvalidArgumentError("next_time_map needs a target: set one with set_time_map(tmap, target)")
+        new = self._check_tmap("target", target)
+        check_float("sigma", sigma, 0.0, 1e4)
+        self._tmap, self._target = self._target, new
+        self._shift_tmap()
+        self._smooth_maps(sigma, target_only=True)
+
+    def _smooth_maps(self, sigma: float, target_only: bool) -> None:
         sigma = check_float("sigma", sigma, 0.0, 1e4) / self.time_step
         w = gaussian_weights(sigma)
         if len(w) == 1:
             return
-        self._smooth(sigma, w)
+        self._smooth(sigma, w, target_only)
 
     def set_tones(self, gain: np.ndarray, offset: np.ndarray | None = None) -> None:
         """Tone table: ``gain`` and ``offset`` ``(n, 3)`` (or ``(3,)`` for one tone), gain in [0, 63],
@@ -465,8 +487,9 @@ class GatherReference(Gather):
 
     backend = "numpy"
 
-    def _smooth(self, sigma: float, weights: np.ndarray) -> None:
-        self._tmap = gaussian_smooth(self._tmap, sigma)
+    def _smooth(self, sigma: float, weights: np.ndarray, target_only: bool = False) -> None:
+        if not target_only:
+            self._tmap = gaussian_smooth(self._tmap, sigma)
         if self._target is not None:
             self._target = gaussian_smooth(self._target, sigma)
 
@@ -523,6 +546,7 @@ class GatherOpenCL(Gather):
         self._d_source: Any = None
         self._source_capacity = 0
         self._tmap_events: list[Any] = []
+        self._weights: tuple[np.ndarray, Any] | None = None  # the smoothing taps and their buffer
         defines = {
             "FRAME_W": self.frame_w,
             "FRAME_PIXELS": self.frame_w * self.frame_h,
@@ -598,8 +622,19 @@ class GatherOpenCL(Gather):
         self._tmap_events = [cl.enqueue_copy(self.queue, self._d_tmap, self._tmap, is_blocking=False)]
         if self._target is not None:
             self._tmap_events.append(cl.enqueue_copy(self.queue, self._d_target, self._target, is_blocking=False))
+        self._set_tmap_args()
+
+    def _set_tmap_args(self) -> None:
         # tmap1: the map the time map fades toward (the map itself when none is set)
-        self._k_gather.set(tmap1=self._d_tmap if self._target is None else self._d_target)
+        self._k_gather.set(tmap=self._d_tmap, tmap1=self._d_tmap if self._target is None else self._d_target)
+
+    def _shift_tmap(self) -> None:
+        import pyopencl as cl
+
+        # the old target's buffer holds the new map: no copy on the device, one upload
+        self._d_tmap, self._d_target = self._d_target, self._d_tmap
+        self._tmap_events = [cl.enqueue_copy(self.queue, self._d_target, self._target, is_blocking=False)]
+        self._set_tmap_args()
 
     def _upload_tones(self) -> None:
         import pyopencl as cl
@@ -620,14 +655,18 @@ class GatherOpenCL(Gather):
             maps.append(m)
         return maps[0], maps[1]
 
-    def _smooth(self, sigma: float, weights: np.ndarray) -> None:
+    def _smooth(self, sigma: float, weights: np.ndarray, target_only: bool = False) -> None:
         import pyopencl as cl
 
         r = (len(weights) - 1) // 2
-        d_w = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=weights)
+        if self._weights is None or not np.array_equal(self._weights[0], weights):  # uploaded once per sigma
+            buf = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=weights)
+            self._weights = (weights, buf)
+        d_w = self._weights[1]
         th, tw = self.tmap_shape
         dims = (np.int32(tw), np.int32(th), np.int32(r))
-        for d_map in [self._d_tmap] + ([self._d_target] if self._target is not None else []):
+        maps = ([] if target_only else [self._d_tmap]) + ([self._d_target] if self._target is not None else [])
+        for d_map in maps:
             passes = ((self._k_smooth_x, d_map, self._d_tmp, 0), (self._k_smooth_y, self._d_tmp, d_map, 1))
             for k, src, dst, along in passes:
                 k.set(src=src, dst=dst, weights=d_w, w=dims[0], h=dims[1], radius=dims[2], along=np.int32(along))
@@ -652,6 +691,9 @@ class GatherOpenCL(Gather):
             buf = self.__dict__.pop(name, None)
             if buf is not None:
                 buf.release()
+        if self.__dict__.get("_weights") is not None:
+            self._weights[1].release()
+            self._weights = None
 
 
 def open_gather(

@@ -388,29 +388,28 @@ class TilesPlayer(Player):
         return (raw - lo) / (hi - lo) if hi > lo else np.full_like(raw, 0.5)
 
     def _pixel_field(self, cells: np.ndarray) -> np.ndarray:
-        """Cell offsets spread on the time-map lattice and Gaussian-smoothed by ``sigma`` (device)."""
+        """Cell offsets spread on the time-map lattice (the engine smooths them by ``sigma``)."""
         th, tw = self.tile_size
         mh, mw = self.engine.tmap_shape
         cy = np.minimum(((np.arange(mh) + 0.5) * TIME_STEP) // th, cells.shape[0] - 1).astype(int)
         cx = np.minimum(((np.arange(mw) + 0.5) * TIME_STEP) // tw, cells.shape[1] - 1).astype(int)
-        field = (cells[cy][:, cx] * self._max_shift).astype(np.float32)
-        self.engine.set_time_map(field)
-        self.engine.smooth_time_map(self._sigma)
-        return self.engine.time_map
+        return (cells[cy][:, cx] * self._max_shift).astype(np.float32)
 
     def _refresh_fields(self) -> None:
-        self._field_a = self._pixel_field(self._cells_a)
-        self._field_b = self._pixel_field(self._cells_b)
-        self.engine.set_time_map(self._field_a, self._field_b)
+        """Both time fields uploaded once and smoothed where the engine keeps them (no read back)."""
+        self.engine.set_time_map(self._pixel_field(self._cells_a), self._pixel_field(self._cells_b))
+        self.engine.smooth_time_map(self._sigma)
 
     def _fade(self) -> float:
         """How far the time map has moved from field a toward field b (the device fades)."""
         return 0.0 if self._epoch == 0 else self._phase / self._epoch
 
     def _time_map(self) -> np.ndarray:
-        """The time map of the next frame, as the device fades it (float32, same operations)."""
+        """The time map of the next frame, as the device fades it (float32, same operations; the
+        maps read back from the engine: for inspection, not for drawing)."""
+        a, b = self.engine.time_map, self.engine.target_map
         f = np.float32(self._fade())
-        return self._field_a + f * (self._field_b - self._field_a)
+        return a + f * (b - a)
 
     def _advance_time(self) -> None:
         self._t = (self._t + self._speed) % self.loop_length
@@ -418,10 +417,9 @@ class TilesPlayer(Player):
             self._phase += 1
             if self._phase >= self._epoch:
                 self._phase = 0
-                self._cells_a, self._field_a = self._cells_b, self._field_b
+                self._cells_a = self._cells_b
                 self._cells_b = self._cell_field()
-                self._field_b = self._pixel_field(self._cells_b)
-                self.engine.set_time_map(self._field_a, self._field_b)
+                self.engine.next_time_map(self._pixel_field(self._cells_b), self._sigma)
 
     # -- controls ------------------------------------------------------------------------------------
     speed = Control(Range(float, *SPEED_RANGE), 1.0, "Loop frames per output frame.")

@@ -137,6 +137,40 @@ def test_grid_gather_with_coarse_time_opencl_matches_numpy(cl_context):
     _close(out["opencl"][0], out["numpy"][0])
 
 
+def test_next_time_map_moves_the_target_in_and_smooths_only_the_new_one(cl_context):
+    """``next_time_map``: the smoothed target becomes the map, the new target is smoothed where
+    the maps are kept; the same maps as ``set_time_map`` of both then ``smooth_time_map``, on
+    each backend, and the frames match the reference."""
+    stack = _stack(n=9, h=32, w=64)
+    rng = np.random.default_rng(5)
+    H, W = 37, 130
+    origins = pack_source(rng.integers(0, 2, (-(-H // 16), -(-W // 32))) * 32)
+    maps = [rng.uniform(0, 6, (-(-H // 8), -(-W // 8))).astype(np.float32) for _ in range(3)]
+    for backend in ("opencl", "numpy"):
+        ctx = cl_context if backend == "opencl" else None
+        moved, direct = (
+            open_gather(stack, (H, W), backend=backend, ctx=ctx, cell=(16, 32), time_step=8) for _ in range(2)
+        )
+        for g in (moved, direct):
+            g.set_source_grid(origins)
+        moved.set_time_map(maps[0], maps[1])
+        moved.smooth_time_map(12.0)
+        moved.next_time_map(maps[2], 12.0)
+        direct.set_time_map(maps[1], maps[2])
+        direct.smooth_time_map(12.0)
+        assert np.array_equal(moved.time_map, direct.time_map) and np.array_equal(moved.target_map, direct.target_map)
+        assert not np.array_equal(moved.target_map, maps[2])  # smoothed
+        for t, fade in ((0.5, 0.0), (3.3, 0.6)):
+            assert np.array_equal(moved.render(t, fade=fade), moved.render_reference(t, fade=fade)), (backend, t)
+        with pytest.raises(ValueError, match="target must have shape"):
+            moved.next_time_map(maps[2][1:])
+        single = open_gather(stack, (H, W), backend=backend, ctx=ctx, cell=(16, 32), time_step=8)
+        with pytest.raises(ValueError, match="needs a target"):
+            single.next_time_map(maps[2])
+        for g in (moved, direct, single):
+            g.close()
+
+
 def test_grid_pixels_come_from_the_named_cell():
     stack = _stack(n=3, h=4, w=8)
     g = open_gather(stack, (4, 8), backend="numpy", cell=(4, 4), interpolate=False)
