@@ -22,6 +22,9 @@ Analysis, all on a ``T x T`` matrix of frame distances computed on reduced frame
    played forward and mirrored backward) would show the moving parts twice is not taken:
    every crossfaded frame must be within ``max_ghost`` times the source's own level of
    :func:`~dynatex.analyzer.metrics.double_image` (that of the mean of two consecutive frames).
+   With ``warp`` on, a jump's crossfade may instead be motion-compensated (both frames warped
+   along their optical flow, :mod:`~dynatex.analyzer.flow`): it is measured both ways, the better
+   counts, and the flows of the jumps whose warp is better are stored for the player.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import numpy as np
 from ..checks import check_int
 from ..errors import ArgumentTypeError, InvalidArgumentError
 from ..tiledb.turnpoints import TurnPointModel
+from .flow import PairFlows, crossfade_pairs, warped_crossfade_ghost
 from .lds import _stepper
 from .metrics import DoubleImages
 from .video import Clip, Progress, clip_frames
@@ -197,6 +201,7 @@ def learn_turnpoints(
     max_per_frame: int = 3,
     max_cost: float = 2.0,
     max_ghost: float = 1.0,
+    warp: str = "on",
     progress: Progress | None = None,
 ) -> TurnPointModel:
     """Find turn points and transitions of a clip (the ``turnpoints`` method).
@@ -240,6 +245,9 @@ def learn_turnpoints(
         Transitions whose crossfade shows double images beyond ``max_ghost`` times the source's
         own level (:func:`~dynatex.analyzer.metrics.double_image_level`) are not taken; 0 keeps
         them all (no check).
+    warp : {"on", "off"}
+        ``on``: motion-compensated crossfades where they show fewer double images than plain ones
+        (the pairs' optical flow is stored); ``off``: plain crossfades only.
     progress : callable(done, total), optional
         Called after each of the 4 stages.
 
@@ -284,6 +292,8 @@ def learn_turnpoints(
     max_per_frame = _int("max_per_frame", max_per_frame, 1)
     max_cost = _float("max_cost", max_cost, 0.0, 1e6, lo_open=True)
     max_ghost = _float("max_ghost", max_ghost, 0.0, 1e6)
+    if warp not in ("on", "off"):
+        raise InvalidArgumentError(f"warp must be 'on' or 'off', not {warp!r}")
     step = _stepper(progress, 4)
 
     feats = frame_features(frames, feature_size)
@@ -306,12 +316,19 @@ def learn_turnpoints(
 
     allowed = None
     ghost_level = None
+    flows = PairFlows(frames) if warp == "on" else None
+    warp_wins: dict[tuple[int, int], bool] = {}
     if max_ghost > 0:
         ghosts = DoubleImages(frames)
         ghost_level = ghosts.level()
 
         def allowed(i: np.ndarray, j: np.ndarray) -> np.ndarray:
-            return crossfade_ghost(ghosts, i, j) <= max_ghost * ghost_level
+            ghost = crossfade_ghost(ghosts, i, j)
+            if flows is not None:
+                warped = warped_crossfade_ghost(flows, ghosts, i, j, CROSSFADE)
+                warp_wins.update(zip(zip(i.tolist(), j.tolist()), (warped < ghost).tolist()))
+                ghost = np.minimum(ghost, warped)
+            return ghost <= max_ghost * ghost_level
 
     src, dst, cost, fcost, prob, exit_frame = _transitions(
         d,
@@ -352,6 +369,12 @@ def learn_turnpoints(
     }
     if ghost_level is not None:
         info["ghost_level"] = ghost_level
+    flow = None
+    if flows is not None:
+        warped = [(a, b) for a, b in zip(src.tolist(), dst.tolist()) if warp_wins.get((a, b), max_ghost == 0)]
+        flow = flows.model((o, n) for a, b in warped for o, n, _ in crossfade_pairs(a, b, CROSSFADE, t))
+        info["n_warped"] = len(warped)
+    info["warp"] = warp
     model = TurnPointModel(
         sym_raw=sym_raw,
         symmetry=sym,
@@ -365,6 +388,7 @@ def learn_turnpoints(
         prob=prob,
         exit_frame=exit_frame,
         info=info,
+        flow=flow,
     )
     step()
     return model
