@@ -22,6 +22,8 @@ from .metrics import DoubleImages
 MAX_GRID_SIDE = 128
 #: Shortest longer side of the frames the flow is computed on (larger frames are halved down to it).
 FLOW_SIDE = 200
+#: Farthest frame from ``a`` the flow from ``a`` to ``b`` follows the clip to (see :class:`PairFlows`).
+CHAIN_REACH = 16
 #: Fixed-point iterations from the flow at ``a`` to the flow at the half-way point.
 MIDPOINT_ITERATIONS = 4
 
@@ -60,30 +62,24 @@ def flow_factor(height: int, width: int) -> int:
     return d
 
 
-def midpoint_flow(a: np.ndarray, b: np.ndarray, step: int, factor: int = 1) -> np.ndarray:
-    """The stored grid ``(Gh, Gw, 2)`` int16 of the midpoint flow from luma frame ``a`` to ``b``
-    (both ``(H, W)`` uint8), computed on frames reduced by ``factor`` (:func:`flow_factor`)."""
+def _remap(field: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """``field`` sampled bilinearly at ``(x + dx, y + dy)`` of every pixel, edges repeated."""
     import cv2
 
-    full = a.shape
-    if factor > 1:
-        size = (max(1, full[1] // factor), max(1, full[0] // factor))
-        a = cv2.resize(a, size, interpolation=cv2.INTER_AREA)
-        b = cv2.resize(b, size, interpolation=cv2.INTER_AREA)
-    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
-    fwd = dis.calc(a, b, None)  # a(p) ~ b(p + fwd(p))
-    bwd = dis.calc(b, a, None)  # b(p) ~ a(p + bwd(p))
-    h, w = a.shape
+    h, w = field.shape[:2]
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
-    m = 0.5 * (fwd - bwd)
-    for _ in range(MIDPOINT_ITERATIONS):
-        half = 0.5 * m
-        at_a = cv2.remap(fwd, xx - half[..., 0], yy - half[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        at_b = cv2.remap(bwd, xx + half[..., 0], yy + half[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        m = 0.5 * (at_a - at_b)
+    return cv2.remap(field, xx + dx, yy + dy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def to_grid(m: np.ndarray, height: int, width: int, step: int, factor: int) -> np.ndarray:
+    """The stored grid ``(Gh, Gw, 2)`` int16 (1/16 px) of a flow ``m`` computed on frames reduced by
+    ``factor`` from ``height`` x ``width``: box-smoothed over the step, sampled every ``step`` pixels."""
+    import cv2
+
+    h, w = m.shape[:2]
     box = max(1, step // factor) + 1
     m = cv2.blur(m, (box, box), borderType=cv2.BORDER_REPLICATE)
-    gh, gw = flow_grid(full[0], full[1], step)
+    gh, gw = flow_grid(height, width, step)
     ys = np.minimum(np.rint(np.arange(gh) * step / factor).astype(int), h - 1)
     xs = np.minimum(np.rint(np.arange(gw) * step / factor).astype(int), w - 1)
     grid = m[ys[:, None], xs[None, :]] * (factor << FLOW_FRACTION_BITS)
@@ -91,14 +87,34 @@ def midpoint_flow(a: np.ndarray, b: np.ndarray, step: int, factor: int = 1) -> n
 
 
 class PairFlows:
-    """Midpoint flows of frame pairs of one clip, computed once each (either order)."""
+    """Midpoint flows of frame pairs of one clip, computed once each (either order).
 
-    def __init__(self, frames: np.ndarray) -> None:
+    Frames a jump pairs are far apart in the clip and often far apart in motion too (that is when a
+    plain crossfade shows two objects); a flow estimator alone finds little of a large motion of a
+    thin object. So the flow from ``a`` to ``b`` follows the clip itself: from ``a`` along the
+    flows between consecutive frames (small, reliable motions) to the frame ``c`` within
+    ``reach`` frames of ``a`` that looks most like ``b``, then the flow from ``c`` to ``b``
+    (``c = a`` is a direct flow). Its midpoint form comes from a fixed-point iteration.
+    """
+
+    def __init__(self, frames: np.ndarray, reach: int = CHAIN_REACH) -> None:
+        import cv2
+
         self.grey = luma(frames)
-        h, w = self.grey.shape[1:]
+        t, h, w = self.grey.shape
         self.step = grid_step(h, w)
         self.step_log2 = self.step.bit_length() - 1
         self.factor = flow_factor(h, w)
+        self.reach = reach
+        size = (max(1, w // self.factor), max(1, h // self.factor))
+        self._small = [cv2.resize(g, size, interpolation=cv2.INTER_AREA) if self.factor > 1 else g for g in self.grey]
+        s = min(1.0, 48 / max(h, w))
+        thumb = (max(1, round(w * s)), max(1, round(h * s)))
+        self._thumbs = np.stack([cv2.resize(g, thumb, interpolation=cv2.INTER_AREA) for g in self.grey]).astype(
+            np.float32
+        )
+        self._dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+        self._steps: dict[tuple[int, int], np.ndarray] = {}
         self._flows: dict[tuple[int, int], np.ndarray] = {}
 
     def get(self, a: int, b: int) -> np.ndarray:
@@ -106,8 +122,31 @@ class PairFlows:
         if (b, a) in self._flows:
             return -self._flows[(b, a)]
         if (a, b) not in self._flows:
-            self._flows[(a, b)] = midpoint_flow(self.grey[a], self.grey[b], self.step, self.factor)
+            f = self.flow(a, b)
+            m = f.copy()
+            for _ in range(MIDPOINT_ITERATIONS):  # m(p) = f(p - m(p) / 2): the flow at the half-way point
+                m = _remap(f, -0.5 * m[..., 0], -0.5 * m[..., 1])
+            self._flows[(a, b)] = to_grid(m, *self.grey.shape[1:], self.step, self.factor)
         return self._flows[(a, b)]
+
+    def flow(self, a: int, b: int) -> np.ndarray:
+        """The flow ``f`` from ``a`` to ``b`` on the reduced frames: ``a(p)`` matches ``b(p + f(p))``."""
+        t = len(self.grey)
+        lo, hi = max(0, a - self.reach), min(t - 1, a + self.reach)
+        d = np.sum((self._thumbs[lo : hi + 1] - self._thumbs[b]) ** 2, axis=(1, 2))
+        c = lo + int(np.argmin(d))
+        acc = np.zeros(self._small[0].shape + (2,), np.float32)
+        step = 1 if c > a else -1
+        for k in range(a, c, step):  # a -> c along the clip: each step's flow where the tracked point is
+            acc += _remap(self._step(k, k + step), acc[..., 0], acc[..., 1])
+        if c != b:
+            acc += _remap(self._dis.calc(self._small[c], self._small[b], None), acc[..., 0], acc[..., 1])
+        return acc
+
+    def _step(self, k: int, n: int) -> np.ndarray:
+        if (k, n) not in self._steps:
+            self._steps[(k, n)] = self._dis.calc(self._small[k], self._small[n], None)
+        return self._steps[(k, n)]
 
     def model(self, pairs) -> FlowModel:
         """The stored part for the frame ``pairs`` (each once, in either order)."""

@@ -123,6 +123,13 @@ TURNPOINT_PARAMS = (
         "level (0: keep them).",
         "--tp-max-ghost",
     ),
+    Param(
+        "warp",
+        Choice("on", "off"),
+        "on",
+        "Motion-compensated jump crossfades (optical flow stored) where they show fewer double images.",
+        "--tp-warp",
+    ),
 )
 
 MIXTURE_PARAMS = (
