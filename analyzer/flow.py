@@ -22,6 +22,8 @@ from .metrics import DoubleImages
 MAX_GRID_SIDE = 128
 #: Shortest longer side of the frames the flow is computed on (larger frames are halved down to it).
 FLOW_SIDE = 200
+#: Shortest side a flow is computed on: OpenCV's DIS crashes the process on frames of 12 pixels or less.
+MIN_FLOW_SIDE = 16
 #: Farthest frame from ``a`` the flow from ``a`` to ``b`` follows the clip to (see :class:`PairFlows`).
 CHAIN_REACH = 16
 #: Fixed-point iterations from the flow at ``a`` to the flow at the half-way point.
@@ -47,6 +49,16 @@ def luma(frames: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(frames[..., 0])
     y = frames.astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
     return np.clip(np.rint(y), 0, 255).astype(np.uint8)
+
+
+def can_flow(height: int, width: int) -> bool:
+    """Whether frames of ``height`` x ``width`` are large enough for a flow (:data:`MIN_FLOW_SIDE`).
+
+    >>> can_flow(8, 48), can_flow(64, 64)
+    (False, True)
+    """
+    d = flow_factor(height, width)
+    return min(height, width) // d >= MIN_FLOW_SIDE
 
 
 def flow_factor(height: int, width: int) -> int:
@@ -179,16 +191,30 @@ def warped_crossfade_ghost(
 ) -> np.ndarray:
     """The largest double image of the motion-compensated crossfaded frames of each jump
     ``i[k] -> j[k]`` (forward and mirrored, as :func:`crossfade_pairs`), ``(len(i),)``: each frame
-    drawn with the player's numpy reference on the luma."""
-    t = len(flows.grey)
-    grey = flows.grey[..., None]
+    drawn with the player's numpy reference on the luma (frames larger than the flow's working
+    size on the reduced luma with the grid scaled alike, then enlarged: the measure looks at
+    thumbnails of at most 96 pixels anyway)."""
+    import cv2
+
+    t, h, w = flows.grey.shape
+    r = flows.factor
+    grey = np.stack(flows._small)[..., None]
+    step_log2 = max(0, flows.step_log2 - (r.bit_length() - 1))
+    grid = flow_grid(grey.shape[1], grey.shape[2], 1 << step_log2)
     out = np.zeros(len(i))
     scratch = np.empty(grey.shape[1:], np.uint8)
     for k, (a, b) in enumerate(zip(np.asarray(i).tolist(), np.asarray(j).tolist())):
         drawn = []
-        for old, new, w in crossfade_pairs(a, b, crossfade, t):
-            warp_reference(grey, old, new, 256 - w, w, flows.get(old, new), flows.step_log2, scratch)
-            drawn.append(scratch[..., 0].copy())
+        for old, new, wgt in crossfade_pairs(a, b, crossfade, t):
+            f = flows.get(old, new)
+            if r > 1:
+                f = np.rint(f[: grid[0], : grid[1]] / r).astype(np.int16)
+                f = np.pad(f, ((0, grid[0] - f.shape[0]), (0, grid[1] - f.shape[1]), (0, 0)), mode="edge")
+            warp_reference(grey, old, new, 256 - wgt, wgt, f, step_log2, scratch)
+            drawn.append(
+                scratch[..., 0] if r == 1 else cv2.resize(scratch[..., 0], (w, h), interpolation=cv2.INTER_LINEAR)
+            )
+            drawn[-1] = drawn[-1].copy()
         if drawn:
             out[k] = ghosts.of(np.stack(drawn)).max()
     return out

@@ -22,8 +22,8 @@ Analysis, all on a ``T x T`` matrix of frame distances computed on reduced frame
    played forward and mirrored backward) would show the moving parts twice is not taken:
    every crossfaded frame must be within ``max_ghost`` times the source's own level of
    :func:`~dynatex.analyzer.metrics.double_image` (that of the mean of two consecutive frames).
-   With ``warp`` on, a jump's crossfade may instead be motion-compensated (both frames warped
-   along their optical flow, :mod:`~dynatex.analyzer.flow`): it is measured both ways, the better
+   With ``warp`` on, a jump whose plain crossfade fails is measured again motion-compensated
+   (both frames warped along their optical flow, :mod:`~dynatex.analyzer.flow`): the better
    counts, and the flows of the jumps whose warp is better are stored for the player.
 """
 
@@ -36,7 +36,7 @@ import numpy as np
 from ..checks import check_int
 from ..errors import ArgumentTypeError, InvalidArgumentError
 from ..tiledb.turnpoints import TurnPointModel
-from .flow import PairFlows, crossfade_pairs, warped_crossfade_ghost
+from .flow import PairFlows, can_flow, crossfade_pairs, warped_crossfade_ghost
 from .lds import _stepper
 from .metrics import DoubleImages
 from .video import Clip, Progress, clip_frames
@@ -246,8 +246,10 @@ def learn_turnpoints(
         own level (:func:`~dynatex.analyzer.metrics.double_image_level`) are not taken; 0 keeps
         them all (no check).
     warp : {"on", "off"}
-        ``on``: motion-compensated crossfades where they show fewer double images than plain ones
-        (the pairs' optical flow is stored); ``off``: plain crossfades only.
+        ``on``: a jump whose plain crossfade shows double images beyond ``max_ghost`` is measured
+        motion-compensated, and kept with its pairs' optical flow stored where that passes;
+        ``off``: plain crossfades only. With ``max_ghost`` 0 every kept jump is warped. Frames
+        too small for a flow (:func:`~dynatex.analyzer.flow.can_flow`) are not warped.
     progress : callable(done, total), optional
         Called after each of the 4 stages.
 
@@ -316,7 +318,7 @@ def learn_turnpoints(
 
     allowed = None
     ghost_level = None
-    flows = PairFlows(frames) if warp == "on" else None
+    flows = PairFlows(frames) if warp == "on" and can_flow(*frames.shape[1:3]) else None
     warp_wins: dict[tuple[int, int], bool] = {}
     if max_ghost > 0:
         ghosts = DoubleImages(frames)
@@ -324,10 +326,11 @@ def learn_turnpoints(
 
         def allowed(i: np.ndarray, j: np.ndarray) -> np.ndarray:
             ghost = crossfade_ghost(ghosts, i, j)
-            if flows is not None:
-                warped = warped_crossfade_ghost(flows, ghosts, i, j, CROSSFADE)
-                warp_wins.update(zip(zip(i.tolist(), j.tolist()), (warped < ghost).tolist()))
-                ghost = np.minimum(ghost, warped)
+            bad = np.flatnonzero(ghost > max_ghost * ghost_level)
+            if flows is not None and bad.size:  # only a jump a plain crossfade would lose is warped
+                warped = warped_crossfade_ghost(flows, ghosts, i[bad], j[bad], CROSSFADE)
+                warp_wins.update(zip(zip(i[bad].tolist(), j[bad].tolist()), (warped < ghost[bad]).tolist()))
+                ghost[bad] = np.minimum(ghost[bad], warped)
             return ghost <= max_ghost * ghost_level
 
     src, dst, cost, fcost, prob, exit_frame = _transitions(
@@ -374,7 +377,7 @@ def learn_turnpoints(
         warped = [(a, b) for a, b in zip(src.tolist(), dst.tolist()) if warp_wins.get((a, b), max_ghost == 0)]
         flow = flows.model((o, n) for a, b in warped for o, n, _ in crossfade_pairs(a, b, CROSSFADE, t))
         info["n_warped"] = len(warped)
-    info["warp"] = warp
+    info["warp"] = "off" if flows is None else "on"
     model = TurnPointModel(
         sym_raw=sym_raw,
         symmetry=sym,

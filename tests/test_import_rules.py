@@ -118,6 +118,13 @@ KNOWN_CYCLE_IMPORTS = {
     ("dynatex.player.selftest", "dynatex.player.projection"),
     ("dynatex.player.tiles", "dynatex.player.base"),
     ("dynatex.player.tiles", "dynatex.player.gather"),
+    ("dynatex.player.blend", "dynatex.player.engine"),
+    ("dynatex.player.blend", "dynatex.player.opencl"),
+    ("dynatex.player.selftest", "dynatex.player.blend"),
+    ("dynatex.player.selftest", "dynatex.player.warp"),
+    ("dynatex.player.warp", "dynatex.player.blend"),
+    ("dynatex.player.warp", "dynatex.player.engine"),
+    ("dynatex.player.warp", "dynatex.player.opencl"),
 }
 
 
