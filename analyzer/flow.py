@@ -21,11 +21,11 @@ from .metrics import DoubleImages
 #: Longest side of the flow grid: the step doubles from 4 pixels until the grid fits.
 MAX_GRID_SIDE = 128
 #: Shortest longer side of the frames the flow is computed on (larger frames are halved down to it).
-FLOW_SIDE = 200
+FLOW_SIDE = 128
 #: Shortest side a flow is computed on: OpenCV's DIS crashes the process on frames of 12 pixels or less.
 MIN_FLOW_SIDE = 16
 #: Farthest frame from ``a`` the flow from ``a`` to ``b`` follows the clip to (see :class:`PairFlows`).
-CHAIN_REACH = 16
+CHAIN_REACH = 12
 #: Fixed-point iterations from the flow at ``a`` to the flow at the half-way point.
 MIDPOINT_ITERATIONS = 4
 
@@ -65,8 +65,8 @@ def flow_factor(height: int, width: int) -> int:
     """Power-of-two reduction of the frames the flow is computed on: the longer side stays at
     least :data:`FLOW_SIDE` pixels.
 
-    >>> flow_factor(240, 240), flow_factor(720, 1280)
-    (1, 4)
+    >>> flow_factor(240, 240), flow_factor(288, 352), flow_factor(720, 1280)
+    (1, 2, 8)
     """
     d = 1
     while max(height, width) / (2 * d) >= FLOW_SIDE:

@@ -43,6 +43,12 @@ from .video import Clip, Progress, clip_frames
 
 #: Frames of the crossfade a jump is checked with (the player's default ``crossfade``).
 CROSSFADE = 4
+#: A jump whose plain crossfade shows more than this many times the allowed double images is not
+#: tried warped: the warp halves a clock pendulum's at best, and each try costs optical flows.
+WARP_HOPE = 2.0
+#: Most jumps an analysis tries warped (of those the search asks about first, the nearest to
+#: passing first); the flows of one cost about a second on a 352x288 clip.
+MAX_WARP_TRIES = 48
 #: Rounds of refusing double-image jumps and looking again for the locally best ones.
 MAX_GHOST_ROUNDS = 6
 
@@ -326,8 +332,10 @@ def learn_turnpoints(
 
         def allowed(i: np.ndarray, j: np.ndarray) -> np.ndarray:
             ghost = crossfade_ghost(ghosts, i, j)
-            bad = np.flatnonzero(ghost > max_ghost * ghost_level)
-            if flows is not None and bad.size:  # only a jump a plain crossfade would lose is warped
+            # only a jump a plain crossfade would lose, by less than WARP_HOPE times, is tried warped
+            bad = np.flatnonzero((ghost > max_ghost * ghost_level) & (ghost <= WARP_HOPE * max_ghost * ghost_level))
+            bad = bad[np.argsort(ghost[bad], kind="stable")][: max(0, MAX_WARP_TRIES - len(warp_wins))]
+            if flows is not None and bad.size:
                 warped = warped_crossfade_ghost(flows, ghosts, i[bad], j[bad], CROSSFADE)
                 warp_wins.update(zip(zip(i[bad].tolist(), j[bad].tolist()), (warped < ghost[bad]).tolist()))
                 ghost[bad] = np.minimum(ghost[bad], warped)

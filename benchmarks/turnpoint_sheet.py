@@ -2,7 +2,7 @@
 (source -> destination, forward or mirrored backward), the frame before the jump and the
 crossfade after it, each labelled with its :func:`double_image` over the source's level.
 
-    python benchmarks/turnpoint_sheet.py CLIP OUT.png [--frames 4000] [--seed 0] [--model]
+    python benchmarks/turnpoint_sheet.py CLIP OUT.png [--frames 4000] [--seed 0] [--model] [--analyze OPTIONS]
 
 ``--model`` adds a row for every transition the analysis kept, forward and mirrored, drawn
 from the source frames as the player blends them (the frame before, then the crossfade);
@@ -39,11 +39,24 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=4000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--model", action="store_true", help="also every transition of the model, both ways")
+    ap.add_argument("--analyze", default="", help="extra analysis options, e.g. '--tp-max-ghost 0 --tp-warp off'")
     args = ap.parse_args()
     double_image, double_image_level = _measures()
     with tempfile.TemporaryDirectory() as tmp:
         db = os.path.join(tmp, "t.h5")
-        cmd = [sys.executable, "-m", "dynatex", "analyze", args.clip, "-o", db, "--methods", "turnpoints", "-q"]
+        cmd = [
+            sys.executable,
+            "-m",
+            "dynatex",
+            "analyze",
+            args.clip,
+            "-o",
+            db,
+            "--methods",
+            "turnpoints",
+            "-q",
+            *args.analyze.split(),
+        ]
         subprocess.run(cmd, check=True, cwd=tmp)
         with open_player(db, mode="turnpoints", seed=args.seed, backend="numpy") as p:
             idx, ev = p.advance(args.frames)
