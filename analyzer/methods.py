@@ -126,6 +126,13 @@ TURNPOINT_PARAMS = (
         "level (0: keep them).",
         "--tp-max-ghost",
     ),
+    Param(
+        "warp",
+        Choice("on", "off"),
+        "on",
+        "Motion-compensated jump crossfades (optical flow stored) where they show fewer double images.",
+        "--tp-warp",
+    ),
     # Python only
     _count("min_pairs", 2, "Fewest mirrored pairs a frame near the clip's ends needs, at most n.", None),
     Param("feature_size", Range(int, 4, MAX_SIDE), 64, "Longer side of the frames compared.", None),

@@ -22,6 +22,9 @@ Analysis, all on a ``T x T`` matrix of frame distances computed on reduced frame
    played forward and mirrored backward) would show the moving parts twice is not taken:
    every crossfaded frame must be within ``max_ghost`` times the source's own level of
    :func:`~dynatex.analyzer.metrics.double_image` (that of the mean of two consecutive frames).
+   With ``warp`` on, a jump whose plain crossfade fails is measured again motion-compensated
+   (both frames warped along their optical flow, :mod:`~dynatex.analyzer.flow`): the better
+   counts, and the flows of the jumps whose warp is better are stored for the player.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import numpy as np
 from ..checks import check_int
 from ..errors import InvalidArgumentError
 from ..tiledb.turnpoints import TurnPointModel
+from .flow import PairFlows, can_flow, crossfade_pairs, warped_crossfade_ghost
 from .lds import _stepper
 from .methods import check_params
 from .metrics import DoubleImages
@@ -40,6 +44,12 @@ from .video import Clip, Progress, clip_frames
 
 #: Frames of the crossfade a jump is checked with (the player's default ``crossfade``).
 CROSSFADE = 4
+#: A jump whose plain crossfade shows more than this many times the allowed double images is not
+#: tried warped: the warp halves a clock pendulum's at best, and each try costs optical flows.
+WARP_HOPE = 2.0
+#: Most jumps an analysis tries warped (of those the search asks about first, the nearest to
+#: passing first); the flows of one cost about a second on a 352x288 clip.
+MAX_WARP_TRIES = 48
 #: Rounds of refusing double-image jumps and looking again for the locally best ones.
 MAX_GHOST_ROUNDS = 6
 
@@ -198,6 +208,7 @@ def learn_turnpoints(
     max_per_frame: int = 3,
     max_cost: float = 2.0,
     max_ghost: float = 1.0,
+    warp: str = "on",
     progress: Progress | None = None,
 ) -> TurnPointModel:
     """Find turn points and transitions of a clip (the ``turnpoints`` method).
@@ -241,6 +252,11 @@ def learn_turnpoints(
         Transitions whose crossfade shows double images beyond ``max_ghost`` times the source's
         own level (:func:`~dynatex.analyzer.metrics.double_image_level`) are not taken; 0 keeps
         them all (no check).
+    warp : {"on", "off"}
+        ``on``: a jump whose plain crossfade shows double images beyond ``max_ghost`` is measured
+        motion-compensated, and kept with its pairs' optical flow stored where that passes;
+        ``off``: plain crossfades only. With ``max_ghost`` 0 every kept jump is warped. Frames
+        too small for a flow (:func:`~dynatex.analyzer.flow.can_flow`) are not warped.
     progress : callable(done, total), optional
         Called after each of the 4 stages.
 
@@ -261,8 +277,8 @@ def learn_turnpoints(
     """
     frames = clip_frames(clip)
     t = frames.shape[0]
-    n, s, r, min_symmetry, max_cost, max_ghost = check_params(
-        "turnpoints", n=n, s=s, r=r, min_symmetry=min_symmetry, max_cost=max_cost, max_ghost=max_ghost
+    n, s, r, min_symmetry, max_cost, max_ghost, warp = check_params(
+        "turnpoints", n=n, s=s, r=r, min_symmetry=min_symmetry, max_cost=max_cost, max_ghost=max_ghost, warp=warp
     )
     min_pairs, feature_size, taps, p, alpha, sigma, min_gap, min_prob, max_per_frame = check_params(
         "turnpoints",
@@ -307,12 +323,22 @@ def learn_turnpoints(
 
     allowed = None
     ghost_level = None
+    flows = PairFlows(frames) if warp == "on" and can_flow(*frames.shape[1:3]) else None
+    warp_wins: dict[tuple[int, int], bool] = {}
     if max_ghost > 0:
         ghosts = DoubleImages(frames)
         ghost_level = ghosts.level()
 
         def allowed(i: np.ndarray, j: np.ndarray) -> np.ndarray:
-            return crossfade_ghost(ghosts, i, j) <= max_ghost * ghost_level
+            ghost = crossfade_ghost(ghosts, i, j)
+            # only a jump a plain crossfade would lose, by less than WARP_HOPE times, is tried warped
+            bad = np.flatnonzero((ghost > max_ghost * ghost_level) & (ghost <= WARP_HOPE * max_ghost * ghost_level))
+            bad = bad[np.argsort(ghost[bad], kind="stable")][: max(0, MAX_WARP_TRIES - len(warp_wins))]
+            if flows is not None and bad.size:
+                warped = warped_crossfade_ghost(flows, ghosts, i[bad], j[bad], CROSSFADE)
+                warp_wins.update(zip(zip(i[bad].tolist(), j[bad].tolist()), (warped < ghost[bad]).tolist()))
+                ghost[bad] = np.minimum(ghost[bad], warped)
+            return ghost <= max_ghost * ghost_level
 
     src, dst, cost, fcost, prob, exit_frame = _transitions(
         d,
@@ -353,6 +379,12 @@ def learn_turnpoints(
     }
     if ghost_level is not None:
         info["ghost_level"] = ghost_level
+    flow = None
+    if flows is not None:
+        warped = [(a, b) for a, b in zip(src.tolist(), dst.tolist()) if warp_wins.get((a, b), max_ghost == 0)]
+        flow = flows.model((o, n) for a, b in warped for o, n, _ in crossfade_pairs(a, b, CROSSFADE, t))
+        info["n_warped"] = len(warped)
+    info["warp"] = "off" if flows is None else "on"
     model = TurnPointModel(
         sym_raw=sym_raw,
         symmetry=sym,
@@ -366,6 +398,7 @@ def learn_turnpoints(
         prob=prob,
         exit_frame=exit_frame,
         info=info,
+        flow=flow,
     )
     step()
     return model

@@ -2,7 +2,7 @@
 (source -> destination, forward or mirrored backward), the frame before the jump and the
 crossfade after it, each labelled with its :func:`double_image` over the source's level.
 
-    python benchmarks/turnpoint_sheet.py CLIP OUT.png [--frames 4000] [--seed 0] [--model]
+    python benchmarks/turnpoint_sheet.py CLIP OUT.png [--frames 4000] [--seed 0] [--model] [--analyze OPTIONS]
 
 ``--model`` adds a row for every transition the analysis kept, forward and mirrored, drawn
 from the source frames as the player blends them (the frame before, then the crossfade);
@@ -39,11 +39,24 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=4000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--model", action="store_true", help="also every transition of the model, both ways")
+    ap.add_argument("--analyze", default="", help="extra analysis options, e.g. '--tp-max-ghost 0 --tp-warp off'")
     args = ap.parse_args()
     double_image, double_image_level = _measures()
     with tempfile.TemporaryDirectory() as tmp:
         db = os.path.join(tmp, "t.h5")
-        cmd = [sys.executable, "-m", "dynatex", "analyze", args.clip, "-o", db, "--methods", "turnpoints", "-q"]
+        cmd = [
+            sys.executable,
+            "-m",
+            "dynatex",
+            "analyze",
+            args.clip,
+            "-o",
+            db,
+            "--methods",
+            "turnpoints",
+            "-q",
+            *args.analyze.split(),
+        ]
         subprocess.run(cmd, check=True, cwd=tmp)
         with open_player(db, mode="turnpoints", seed=args.seed, backend="numpy") as p:
             idx, ev = p.advance(args.frames)
@@ -60,25 +73,37 @@ def main() -> None:
                 f = p.next_frame()
                 if k in want:
                     shown[k] = f
-    level = double_image_level(source)
-    rows = []
-    for (a, b), e in sorted(firsts.items(), key=lambda kv: kv[1]):
-        ks = list(range(e - 1, e + AFTER + 1))
-        frames = np.stack([shown[k] for k in ks])
-        rows.append(_row(frames, ks, f"jump {a} -> {b} at output frame {e}", source, level, double_image))
-    if args.model:  # every transition of the model, forward and mirrored, as the player blends it
-        t = len(source)
-        ms = range(1, 5)
-        for i, j in zip(model_src, model_dst):
-            for label, before, old, new in (
-                (f"transition {i} -> {j} forward", i, [i + m for m in ms], [j + m - 1 for m in ms]),
-                (f"its mirror {j + 1} -> {i + 1} backward", j + 1, [j + 1 - m for m in ms], [i + 2 - m for m in ms]),
-            ):
-                ok = [(o, n, m / 5) for m, (o, n) in enumerate(zip(old, new), 1) if 0 <= o < t and 0 <= n < t]
-                frames = [source[min(before, t - 1)]]
-                frames += [np.rint((1 - w) * source[o] + w * source[n]).astype(np.uint8) for o, n, w in ok]
-                ks = list(range(len(frames)))
-                rows.append(_row(np.stack(frames), ks, label, source, level, double_image))
+            level = double_image_level(source)
+            rows = []
+            for (a, b), e in sorted(firsts.items(), key=lambda kv: kv[1]):
+                ks = list(range(e - 1, e + AFTER + 1))
+                frames = np.stack([shown[k] for k in ks])
+                rows.append(_row(frames, ks, f"jump {a} -> {b} at output frame {e}", source, level, double_image))
+            if args.model:  # every transition of the model, forward and mirrored, as the player draws it
+                t = len(source)
+                ms = range(1, 5)
+                for i, j in zip(model_src, model_dst):
+                    for label, before, old, new in (
+                        (f"transition {i} -> {j} forward", i, [i + m for m in ms], [j + m - 1 for m in ms]),
+                        (
+                            f"its mirror {j + 1} -> {i + 1} backward",
+                            j + 1,
+                            [j + 1 - m for m in ms],
+                            [i + 2 - m for m in ms],
+                        ),
+                    ):
+                        ok = [
+                            (o, n, round(256 * m / 5))
+                            for m, (o, n) in enumerate(zip(old, new), 1)
+                            if 0 <= o < t and 0 <= n < t
+                        ]
+                        frames = [source[min(before, t - 1)]]
+                        for o, n, w in ok:
+                            out = np.empty_like(source[0])
+                            p.engine.render(((n, w), (o, 256 - w)), out)  # warped where the model has the flow
+                            frames.append(out)
+                        ks = list(range(len(frames)))
+                        rows.append(_row(np.stack(frames), ks, label, source, level, double_image))
     sheet = np.concatenate(rows) if rows else np.full((20, 400, 3), 255, np.uint8)
     cv2.imwrite(args.out, cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
     print(f"{len(firsts)} distinct jumps taken, level {level:.2f}: {args.out}")

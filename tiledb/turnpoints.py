@@ -21,6 +21,44 @@ from .source import SourceInfo
 _PER_FRAME = ("sym_raw", "symmetry", "reduced", "p_max")
 _PER_TRANSITION = ("cost", "future_cost", "prob")
 
+#: Version of the optional ``flow`` part this reader understands; a newer part is ignored.
+FLOW_VERSION = 1
+FLOW_GROUP = "flow"
+#: Flow vectors are stored in 1 / 2**FLOW_FRACTION_BITS pixels (int16).
+FLOW_FRACTION_BITS = 4
+#: Largest flow grid step, in pixels (a power of two).
+MAX_FLOW_STEP = 64
+
+
+def flow_grid(height: int, width: int, step: int) -> tuple[int, int]:
+    """Rows and columns of a flow grid with samples every ``step`` pixels from pixel 0, one beyond the last
+    pixel so that bilinear interpolation of every pixel finds its four samples.
+
+    >>> flow_grid(240, 240, 4)
+    (61, 61)
+    """
+    return (height - 1) // step + 2, (width - 1) // step + 2
+
+
+@dataclass
+class FlowModel:
+    """Optical flow between the frame pairs a jump's crossfade blends (motion-compensated jumps).
+
+    Attributes
+    ----------
+    pairs : (P, 2) int32
+        Frame pairs ``(a, b)``, ``a != b``, each once (in either order).
+    flows : (P, Gh, Gw, 2) int16
+        Per pair the midpoint flow ``f`` (x, y) in ``1 / 16`` pixels at grid samples every ``step``
+        pixels (:func:`flow_grid`): ``a(p - f / 2)`` matches ``b(p + f / 2)``.
+    step : int
+        Grid step in pixels, a power of two up to :data:`MAX_FLOW_STEP`.
+    """
+
+    pairs: np.ndarray
+    flows: np.ndarray
+    step: int
+
 
 @dataclass
 class TurnPointModel(Described):
@@ -67,6 +105,8 @@ class TurnPointModel(Described):
     prob: np.ndarray
     exit_frame: int
     info: dict = field(default_factory=dict)
+    #: optional: the flow of the crossfades' frame pairs (None: jumps crossfade plainly)
+    flow: FlowModel | None = None
 
     @property
     def n_frames(self) -> int:
@@ -99,6 +139,13 @@ def write(group: h5py.Group, model: TurnPointModel) -> None:
     for key, value in model.info.items():
         if key not in ("n_frames", "exit_frame"):
             group.attrs[key] = value
+    if model.flow is not None:
+        g = group.create_group(FLOW_GROUP)
+        g.attrs["version"] = FLOW_VERSION
+        g.attrs["step"] = int(model.flow.step)
+        g.create_dataset("pairs", data=np.asarray(model.flow.pairs, np.int32).reshape(-1, 2))
+        flows = np.asarray(model.flow.flows, np.int16)
+        g.create_dataset("flows", data=flows, chunks=(1,) + flows.shape[1:] if len(flows) else None)
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TurnPointModel:
@@ -143,12 +190,40 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TurnPointMode
     if m and np.any((src.astype(np.int64) > exit_frame) | (dst.astype(np.int64) > exit_frame)):
         check.fail(f"{base}/src", "a transition lies beyond the exit frame")
     info = check.info(group)
+    flow = _read_flow(group, check, source) if m else None
     return TurnPointModel(
         turn_points=turns.astype(np.int32),
         src=src.astype(np.int32),
         dst=dst.astype(np.int32),
         exit_frame=exit_frame,
         info=info,
+        flow=flow,
         **arrays,
         **per_tr,
     )
+
+
+def _read_flow(group: h5py.Group, check: Checker, source: SourceInfo) -> FlowModel | None:
+    """The validated ``flow`` part, or None when absent or of a newer version."""
+    if FLOW_GROUP not in group:
+        return None
+    g = check.group(group, FLOW_GROUP)
+    if check.attr(g, "version", int) > FLOW_VERSION:
+        return None
+    step = check.attr(g, "step", int)
+    if step < 1 or step > MAX_FLOW_STEP or step & (step - 1):
+        check.fail(g.name + "@step", f"{step} is not a power of two in 1..{MAX_FLOW_STEP}")
+    t, h, w = source.n_frames, source.height, source.width
+    gh, gw = flow_grid(h, w, step)
+    pairs = check.dataset(g, "pairs", kind="iu", shape=(range(t * (t - 1) // 2 + 1), 2))
+    flows = check.dataset(g, "flows", kind="i", shape=(pairs.shape[0], gh, gw, 2))
+    if flows.dtype != np.int16:
+        check.fail(g.name + "/flows", f"dtype {flows.dtype} is not int16")
+    check.index_range(g.name + "/pairs", pairs, t)
+    pairs = pairs.astype(np.int64)
+    if np.any(pairs[:, 0] == pairs[:, 1]):
+        check.fail(g.name + "/pairs", "a pair names one frame twice")
+    key = np.minimum(pairs[:, 0], pairs[:, 1]) * t + np.maximum(pairs[:, 0], pairs[:, 1])
+    if np.unique(key).size != key.size:
+        check.fail(g.name + "/pairs", "a pair is stored twice")
+    return FlowModel(pairs=pairs.astype(np.int32), flows=np.ascontiguousarray(flows), step=step)

@@ -15,7 +15,9 @@ are expanded to RGB), e.g. 7.4 MB for the 43-frame 240x240 pendulum clip, 321 MB
 frames at 1280x720. A frame that is one stored frame is a single device-to-host copy
 straight into the caller's buffer; a crossfade (after a jump) or a fractional speed
 blends two (or up to four) frames with one kernel launch in exact integer arithmetic,
-so the numpy reference gives identical bytes.
+so the numpy reference gives identical bytes. Where the model stores the optical flow of a
+jump's frame pairs, the crossfade warps both frames toward each other along it
+(:mod:`~dynatex.player.engines.warp`), so a moving object slides instead of showing twice.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from ...tiledb.turnpoints import TurnPointModel
 from ..base import Player, rng_from_state
 from ..controls import Capabilities, Control
 from ..engines import open_engine
+from ..engines.warp import WarpBlend
 from ..loop import repeats
 
 PLAYBACKS = ("hybrid", "turns", "jumps")
@@ -106,6 +109,8 @@ class TurnPointPlayer(Player):
             frames = np.repeat(frames, 3, axis=-1)
         self.engine = open_engine("blend", frames, ctx=self.ctx, queue=self.queue, format=self.format)
         del frames
+        if model.flow is not None and len(model.flow.pairs):  # motion-compensated jump crossfades
+            self.engine = WarpBlend(self.engine, model.flow, ctx=self.ctx, queue=self.queue)
         #: bytes the stored frames occupy on the device (or in host memory with numpy)
         self.memory_bytes = self.engine.memory_bytes
         self._warm()

@@ -228,6 +228,43 @@ def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
     return check
 
 
+def _warp_check(format: str, step: int) -> Callable[[str], str | None]:
+    """Motion-compensated crossfades (kernels/warp.cl) against the reference, exactly, on random frames and
+    flows reaching past the frame's edges."""
+
+    def check(device: str) -> str | None:
+        import pyopencl as cl
+
+        from ...tiledb.turnpoints import FlowModel, flow_grid
+        from ..engines.blend import open_blend
+        from ..engines.warp import WarpBlend, warp_reference
+        from ..pixels import FORMATS
+        from .context import get_context
+
+        rng = np.random.default_rng(9)
+        h, w = 19, 45
+        frames = rng.integers(0, 256, (4, h, w, 3), dtype=np.uint8)
+        flows = rng.integers(-500, 501, (2, *flow_grid(h, w, step), 2)).astype(np.int16)
+        flow = FlowModel(pairs=np.array([[0, 2], [3, 1]], np.int32), flows=flows, step=step)
+        ctx = get_context(device)
+        queue = cl.CommandQueue(ctx)
+        engine = WarpBlend(open_blend(frames, ctx=ctx, queue=queue, format=format), flow, ctx=ctx, queue=queue)
+        stack = FORMATS[format].from_rgb(frames)
+        try:
+            for (a, wa), (b, wb), k in (((0, 205), (2, 51), 0), ((3, 128), (1, 128), 1), ((3, 26), (1, 230), 1)):
+                out = np.empty(stack.shape[1:], np.uint8)
+                engine.render(((a, wa), (b, wb)), out)
+                want = warp_reference(stack, a, b, wa, wb, flows[k], step.bit_length() - 1, np.empty_like(out))
+                problem = _compare(f"pair {a}, {b}", out, want, 0, 0.0)
+                if problem:
+                    return problem
+        finally:
+            engine.close()
+        return None
+
+    return check
+
+
 _TILES = ("tiles", {"seed": 3, "size": (136, 72), "tone": "consensus"})
 
 #: name -> check(device) returning None or what failed; run in this order, portable kernels only
@@ -253,6 +290,8 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
         max_share=0.0,
         controls={"speed": 0.37, "crossfade": 4},
     ),
+    "turn-point warp, RGB": _warp_check("RGB", 4),
+    "turn-point warp, BGRA, step 16": _warp_check("BGRA", 16),
     "mode tiles": _mode_check(*_TILES),
     "mode evolve": _mode_check("evolve", {"seed": 3, "jitter": 2.0}, frames=6, max_share=1.0),
     "mode evolve, rate map": _mode_check(
