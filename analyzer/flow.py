@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..player.warp import warp_reference
+from ..player.engines.warp import warp_reference
 from ..tiledb.turnpoints import FLOW_FRACTION_BITS, FlowModel, flow_grid
 from .metrics import DoubleImages
 
