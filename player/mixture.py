@@ -103,10 +103,20 @@ class MixturePlayer(ProjectionPlayer):
         seed: int = 0,
         precision: str = "float32",
         draws: int = DEFAULT_DRAWS,
+        lookahead: int | None = None,
         format: str = "RGB",
     ) -> None:
         draws = type(self).draws.param.check(draws)  # refused before the database opens
-        super().__init__(db, texture, backend=backend, device=device, seed=seed, precision=precision, format=format)
+        super().__init__(
+            db,
+            texture,
+            backend=backend,
+            device=device,
+            seed=seed,
+            precision=precision,
+            lookahead=lookahead,
+            format=format,
+        )
         self._draws = draws
 
     def _setup(self, model: MixtureModel) -> None:
@@ -140,6 +150,7 @@ class MixturePlayer(ProjectionPlayer):
     @property
     def global_coord(self) -> np.ndarray:
         """The global coordinate of the next frame (a copy)."""
+        self._settle()
         return self._hist[0].copy()
 
     def _step(self) -> None:

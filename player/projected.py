@@ -1,9 +1,19 @@
 """What the projection modes (``lds``, ``mixture``) share: a player whose frame is the
 projection of a small vector, advanced on the host once per frame, through a stored basis.
 
-A model with a ``detail`` part (:mod:`dynatex.tiledb.detail`) also opens the detail engine
-(:mod:`.detail`), which adds the fine detail the projection lacks to each projected frame and
-holds every pixel to the source's colour range.
+A model with a ``detail`` part (:mod:`dynatex.tiledb.detail`) has the projection engine add
+the fine detail the projection lacks to each frame in the same pass (:mod:`.detail` schedules
+it) and hold every pixel to the source's colour range.
+
+Look-ahead (option ``lookahead=k``): the player runs its state up to k frames ahead and
+projects them in one pass over the basis (:mod:`.projection`), then hands them out one by
+one. A control change, :meth:`set_state`, :meth:`reseed` or :meth:`advance` discards the
+frames computed ahead and puts the player back at the last frame handed out (discard and
+recompute), so a change applies to the very next frame, as without look-ahead, and
+:meth:`get_state` is the state after the last frame handed out; after a discard the next
+pass renders one frame, and each later pass twice as many, up to k (a control changed on
+every frame costs what it costs without look-ahead). What look-ahead adds is time, not
+latency in frames: the frame that starts a pass waits for all of its k frames.
 
 A mode subclasses :class:`ProjectionPlayer` and supplies its model (``_setup``), the
 vector it advances (``_vector``, ``_dim``, ``_step``) and how that vector becomes
@@ -26,12 +36,14 @@ from ..params import Param
 from ..tiledb import TileDB
 from .base import Player
 from .controls import Control
-from .detail import open_detail
 from .projection import open_projector
 
 PRECISIONS = ("float32", "float16")
 MAX_INTENSITY = 100.0
 MAX_DETAIL = 4.0
+MAX_LOOKAHEAD = 64
+#: frames per pass for the commands that render a known number of frames (play, export, evaluate, bench)
+KNOWN_COUNT_LOOKAHEAD = 8
 
 
 class ProjectionPlayer(Player):
@@ -52,6 +64,17 @@ class ProjectionPlayer(Player):
             "Storage of the basis on the device; float16 halves the bytes each frame reads (faster, "
             "memory-bound) at PSNR above 45 dB against float32.",
         ),
+        Param(
+            "lookahead",
+            Range(int, 1, MAX_LOOKAHEAD),
+            None,
+            "Frames rendered ahead, k per pass over the basis (about k times less memory traffic); a "
+            "control change discards them and applies from the next frame (see player/MODES.md).",
+            optional=True,
+            default_doc=f"1 (one frame at a time); {KNOWN_COUNT_LOOKAHEAD} in the commands that render a known "
+            "number of frames",
+            extra={"known_count": KNOWN_COUNT_LOOKAHEAD},
+        ),
     )
 
     def __init__(
@@ -63,9 +86,11 @@ class ProjectionPlayer(Player):
         device: str | None = None,
         seed: int = 0,
         precision: str = "float32",
+        lookahead: int | None = None,
         format: str = "RGB",
     ) -> None:
         precision = self.options[0].check(precision)
+        lookahead = self.options[1].check(lookahead) or 1
         super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
             self._prefer_faster(backend, device, f"projection {precision}")
@@ -84,20 +109,19 @@ class ProjectionPlayer(Player):
                 ctx=self.ctx,
                 queue=self.queue,
                 format=self.format,
+                frames=lookahead,
+                detail=model.detail,
             )
             self.basis_bytes = self.engine.basis_bytes
-            self.detail_engine = None
+            #: the detail's arrays and schedule (None: the model has none, or set so to project alone)
+            self.detail_engine = self.engine.detail
             self._detail_clock = 0.0
-            if model.detail is not None:
-                self.detail_engine = open_detail(
-                    model.detail,
-                    shape=self._shape,
-                    channels=self.texture.source.channels,
-                    src=self.engine.out.buffer if self.ctx is not None else None,
-                    ctx=self.ctx,
-                    queue=self.queue,
-                    format=self.format,
-                )
+            #: frames rendered per pass (the ``lookahead`` option)
+            self.lookahead = lookahead
+            self._ahead = np.empty((lookahead, *self._shape), np.uint8) if lookahead > 1 else None
+            self._ahead_states: list[dict[str, Any]] = []
+            self._ahead_next = 0
+            self._pass = lookahead
             self.reseed(seed)
             self._project(self._vector(), np.empty(self._shape, np.uint8))  # warm the kernel
         except BaseException:
@@ -125,6 +149,13 @@ class ProjectionPlayer(Player):
 
     def _detail_state(self) -> dict[str, Any]:
         return {"detail_clock": self._detail_clock}
+
+    def _layers(self):
+        """The detail layers of the next frame (None without detail)."""
+        if self.detail_engine is None:
+            return None
+        amount = self._detail * np.sqrt(self._intensity)
+        return self.detail_engine.layers(self.seed, math.floor(self._detail_clock), amount)
 
     def _restore_detail(self, state: dict[str, Any]) -> None:
         """The detail's clock from ``state`` (a state without one: the frame index, as it was)."""
@@ -161,6 +192,7 @@ class ProjectionPlayer(Player):
         With ``record=True`` returns the visited vectors, ``(steps, dim)``.
         """
         steps = check_int("steps", steps, 0)
+        self._settle()
         rec = np.empty((steps, self._dim)) if record else None
         for i in range(steps):
             self._step()
@@ -171,24 +203,69 @@ class ProjectionPlayer(Player):
         return rec
 
     def _start(self, out: np.ndarray):
+        if self._ahead is not None:
+            if self._ahead_next >= len(self._ahead_states):
+                self._render_ahead()
+            out[...] = self._ahead[self._ahead_next]
+            self._ahead_next += 1
+            return None
         self._coefficients(self._vector(), self.engine.coef)
         event = self._run(out, wait=False)
         self._step()
         self._detail_clock += self._detail_rate()
         return event
 
+    def _render_ahead(self) -> None:
+        """Run the state a pass ahead and project the pass's frames into the look-ahead buffer."""
+        count = self._pass
+        self._pass = min(2 * count, self.lookahead)
+        states, layers = [], [] if self.detail_engine is not None else None
+        for j in range(count):
+            states.append(self._get_state())
+            self._coefficients(self._vector(), self.engine.coefs[j])
+            if layers is not None:
+                layers.append(self._layers())
+            self._step()
+            self._detail_clock += self._detail_rate()
+        self.engine.run(self._ahead[:count], count=count, layers=layers)
+        self._ahead_states, self._ahead_next = states, 0
+
+    def _settle(self) -> None:
+        """Discard the frames computed ahead: the player is back after the last frame handed out."""
+        with self._lock:
+            states, i = self.__dict__.get("_ahead_states"), self.__dict__.get("_ahead_next", 0)
+            if not states:
+                return
+            if i < len(states):
+                self._set_state(states[i])
+            self._ahead_states, self._ahead_next = [], 0
+            self._pass = 1
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name in self._controls and self.__dict__.get("_ahead_states"):
+            self._settle()
+        super().__setattr__(name, value)
+
+    def get_state(self) -> dict[str, Any]:
+        """As :meth:`Player.get_state`; with look-ahead, the state after the last frame handed out."""
+        with self._lock:
+            state = super().get_state()
+            if self._ahead_next < len(self._ahead_states):
+                state.update(self._ahead_states[self._ahead_next])
+            return state
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        self._settle()
+        super().set_state(state)
+
+    def reseed(self, seed: int) -> None:
+        self._settle()
+        super().reseed(seed)
+
     def _run(self, out: np.ndarray, *, wait: bool = True):
         """Project the engine's coefficients into ``out``, adding the detail where the model has it."""
-        if self.detail_engine is None:
-            return self.engine.run(out, wait=wait)
-        clock = math.floor(self._detail_clock)
-        layers = self.detail_engine.layers(self.seed, clock, self._detail * np.sqrt(self._intensity))
-        if self.ctx is None:
-            self.engine.run(out)
-            self.detail_engine.apply(out, layers)
-            return None
-        self.engine.run_on_device()
-        return self.detail_engine.run(layers, out, wait=wait)
+        layers = self._layers()
+        return self.engine.run(out, layers=None if layers is None else [layers], wait=wait)
 
     def _render_vector(self, name: str, v: np.ndarray, out: np.ndarray | None) -> np.ndarray:
         """Project an arbitrary vector (checked, named ``name`` in errors); the player does not advance."""
@@ -208,7 +285,4 @@ class ProjectionPlayer(Player):
         """Finish the frames in flight and release the engines and the database."""
         if self.queue is not None:
             self.queue.finish()
-        if getattr(self, "detail_engine", None) is not None:
-            self.detail_engine.close()
-            self.detail_engine = None
         super().close()
