@@ -188,7 +188,8 @@ class ProjectorOpenCL(Projector):
             arrays = {name: dummy for name in ("vol", "low", "high", "colours")}
             arrays["gain"] = np.zeros(1, np.float32)
         else:
-            arrays = {"vol": d.volume, "gain": d.gain, "low": d.low, "high": d.high, "colours": d.colours}
+            gain = np.repeat(d.gain.reshape(-1), self.channels)  # once per value: the kernel reads it as vectors
+            arrays = {"vol": d.volume, "gain": gain, "low": d.low, "high": d.high, "colours": d.colours}
         for name, a in arrays.items():
             self._bufs[name] = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
         self._kernels: dict[bool, tuple[Any, Any]] = {}

@@ -34,31 +34,63 @@ typedef float basis_t;
 #endif
 
 #if DETAIL
-// The detail of pixel p (at x, y) added to its projected values v[0 .. CHANNELS - 1].
-void add_detail(uchar *v, const size_t p, const int x, const int y, __global const char *restrict vol,
+#if CHANNELS == 3
+#define BIN(d, i) ((((d)[i] >> 3) << 10) | (((d)[(i) + 1] >> 3) << 5) | ((d)[(i) + 2] >> 3))
+#else
+#define BIN(d, i) ((((d)[i] >> 3) << 10) | (((d)[i] >> 3) << 5) | ((d)[i] >> 3))
+#endif
+
+// The detail of frame f added to the projected values v (GROUP values: `count` pixels, the
+// first at (x, y), value `first` of the frame). gain holds each pixel's gain once per channel.
+// A work-item whose pixels lie in one row and read each layer without a wrap works on whole
+// vectors; the others (the end of a row, a wrap) pixel by pixel, with the same operations.
+void add_detail(uchar *v, const int count, int x, int y, const size_t first, __global const char *restrict vol,
                 __global const float *restrict gain, __global const uchar *restrict low,
                 __global const uchar *restrict high, __global const uchar *restrict colours,
-                __global const int *restrict at, __global const float *restrict w)
+                __global const int *restrict at, __global const float *restrict w, const int width)
 {
 #pragma OPENCL FP_CONTRACT OFF
-    const size_t i0 = (((size_t)at[0] * VH + (y + at[1]) % VH) * VW + (x + at[2]) % VW) * CHANNELS;
-    const size_t i1 = (((size_t)at[3] * VH + (y + at[4]) % VH) * VW + (x + at[5]) % VW) * CHANNELS;
-    const float g = gain[p];
+    const int t0 = at[0] * VH, oy0 = at[1], ox0 = at[2], t1 = at[3] * VH, oy1 = at[4], ox1 = at[5];
     const float w0 = w[0], w1 = w[1];
-    uchar d[CHANNELS];
-    for (int c = 0; c < CHANNELS; ++c) {
-        const float n = w0 * (float)vol[i0 + c] + w1 * (float)vol[i1 + c];
-        const uchar u = convert_uchar_sat_rte((float)v[c] + g * n);
-        d[c] = clamp(u, low[p * CHANNELS + c], high[p * CHANNELS + c]);
+    int row0 = (t0 + (y + oy0) % VH) * VW, row1 = (t1 + (y + oy1) % VH) * VW;
+    const int c0 = (x + ox0) % VW, c1 = (x + ox1) % VW;
+    uchar d[GROUP];
+    uchar a[GROUP];
+    if (count == PIXELS && x + PIXELS <= width && c0 + PIXELS <= VW && c1 + PIXELS <= VW) {
+        __global const char *v0 = vol + (row0 + c0) * CHANNELS;
+        __global const char *v1 = vol + (row1 + c1) * CHANNELS;
+        for (int j = 0; j < CHANNELS; ++j) {
+            const float16 n = w0 * convert_float16(vload16(j, v0)) + w1 * convert_float16(vload16(j, v1));
+            const float16 val = convert_float16(vload16(j, v)) + vload16(j, gain + first) * n;
+            const uchar16 lo = vload16(j, low + first), hi = vload16(j, high + first);
+            vstore16(clamp(convert_uchar16_sat_rte(val), lo, hi), j, d);
+            vstore16(clamp(vload16(j, v), lo, hi), j, a);
+        }
+    } else {
+        for (int q = 0; q < count; ++q) {
+            const int i0 = (row0 + (x + ox0) % VW) * CHANNELS;
+            const int i1 = (row1 + (x + ox1) % VW) * CHANNELS;
+            for (int c = 0; c < CHANNELS; ++c) {
+                const size_t k = first + q * CHANNELS + c;
+                const float n = w0 * (float)vol[i0 + c] + w1 * (float)vol[i1 + c];
+                const uchar u = convert_uchar_sat_rte((float)v[q * CHANNELS + c] + gain[k] * n);
+                d[q * CHANNELS + c] = clamp(u, low[k], high[k]);
+                a[q * CHANNELS + c] = clamp(v[q * CHANNELS + c], low[k], high[k]);
+            }
+            if (++x == width) {
+                x = 0;
+                ++y;
+                row0 = (t0 + (y + oy0) % VH) * VW;
+                row1 = (t1 + (y + oy1) % VH) * VW;
+            }
+        }
     }
-#if CHANNELS == 3
-    const int bin = ((d[0] >> 3) << 10) | ((d[1] >> 3) << 5) | (d[2] >> 3);
-#else
-    const int bin = ((d[0] >> 3) << 10) | ((d[0] >> 3) << 5) | (d[0] >> 3);
-#endif
-    const bool inside = colours[bin] != 0;
-    for (int c = 0; c < CHANNELS; ++c)
-        v[c] = inside ? d[c] : clamp(v[c], low[p * CHANNELS + c], high[p * CHANNELS + c]);
+    // a colour outside the source's colour set gets no detail
+    for (int q = 0; q < count; ++q) {
+        const bool inside = colours[BIN(d, q * CHANNELS)] != 0;
+        for (int c = 0; c < CHANNELS; ++c)
+            v[q * CHANNELS + c] = inside ? d[q * CHANNELS + c] : a[q * CHANNELS + c];
+    }
 }
 #endif
 
@@ -87,6 +119,7 @@ __kernel void project(__global const basis_t *restrict basis,
     const size_t pixels = (size_t)values / CHANNELS;
     const size_t p0 = g * PIXELS;
     const int count = (int)min((size_t)PIXELS, pixels - p0);
+    const int y0 = (int)(p0 / (size_t)width), x0 = (int)(p0 - (size_t)y0 * width);
     for (int f = 0; f < frames; ++f) {
         __global const float *c = coef + (size_t)f * stride;
         float16 a0 = vload16(0, mean + first);
@@ -110,12 +143,7 @@ __kernel void project(__global const basis_t *restrict basis,
         vstore16(convert_uchar16_sat_rte(a2), 2, v);
 #endif
 #if DETAIL
-        for (int q = 0; q < count; ++q) {
-            const size_t p = p0 + q;
-            const int y = (int)(p / (size_t)width);
-            add_detail(v + q * CHANNELS, p, (int)(p - (size_t)y * width), y, vol, gain, low, high, colours,
-                       layer_at + 6 * f, layer_w + 2 * f);
-        }
+        add_detail(v, count, x0, y0, first, vol, gain, low, high, colours, layer_at + 6 * f, layer_w + 2 * f, width);
 #endif
         __global uchar *o = out + (size_t)f * pixels * PIXEL_BYTES;
 #if CHANNELS == 3 && PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2
