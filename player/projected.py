@@ -68,8 +68,10 @@ class ProjectionPlayer(Player):
             "lookahead",
             Range(int, 1, MAX_LOOKAHEAD),
             None,
-            "Frames rendered ahead, k per pass over the basis (about k times less memory traffic); a "
-            "control change discards them and applies from the next frame (see player/MODES.md).",
+            "Frames rendered ahead, k per pass over the basis (memory traffic per frame about k times "
+            "less). A control change, set_state, reseed or advance discards the frames not handed out "
+            "and applies from the very next frame (no frames of latency); the frame that starts a pass "
+            "waits for its k frames, and after a discard passes restart at 1 frame and double up to k.",
             optional=True,
             default_doc=f"1 (one frame at a time); {KNOWN_COUNT_LOOKAHEAD} in the commands that render a known "
             "number of frames",
