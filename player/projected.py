@@ -229,7 +229,8 @@ class ProjectionPlayer(Player):
                 layers.append(self._layers())
             self._step()
             self._detail_clock += self._detail_rate()
-        self.engine.run(self._ahead[:count], count=count, layers=layers)
+        dest = self._ahead if count == self.lookahead else self._ahead[:count]  # the same array: wrapped once
+        self.engine.run(dest, count=count, layers=layers)
         self._ahead_states, self._ahead_next = states, 0
 
     def _settle(self) -> None:
