@@ -619,10 +619,12 @@ def _child(expected: DeviceInfo) -> int:
     return 0
 
 
-def _projection_speed(precision: str, size: tuple[int, int] = (288, 352), n: int = 50, frames: int = 12):
+def _projection_speed(
+    precision: str, size: tuple[int, int] = (288, 352), n: int = 50, frames: int = 12, per_pass: int = 1
+):
     """OpenCL's frame rate over numpy's for the projection engine (lds, mixture) at ``size``
-    (a basis beyond any cache: both are bound by memory there, as at larger sizes), the
-    median of alternating rounds."""
+    (a basis beyond any cache: both are bound by memory there, as at larger sizes) with
+    ``per_pass`` frames per pass (a look-ahead), the median of alternating rounds."""
 
     def measure(device: str) -> float:
         import pyopencl as cl
@@ -636,17 +638,19 @@ def _projection_speed(precision: str, size: tuple[int, int] = (288, 352), n: int
         mean = np.full(h * w * 3, 128, np.float32)
         ctx = get_context(device)
         engines = [
-            open_projector(basis, mean, shape=(h, w, 3), channels=3, ctx=c, queue=c and cl.CommandQueue(c))
+            open_projector(
+                basis, mean, shape=(h, w, 3), channels=3, ctx=c, queue=c and cl.CommandQueue(c), frames=per_pass
+            )
             for c in (ctx, None)
         ]
-        out = np.empty((h, w, 3), np.uint8)
+        out = np.empty((per_pass, h, w, 3), np.uint8)
         times: list[list[float]] = [[], []]
         try:
             for r in range(frames + 2):
                 for k, e in enumerate(engines):
-                    e.coef[:] = rng.standard_normal(e.coef.size)
+                    e.coefs[:] = rng.standard_normal(e.coefs.shape)
                     t = time.perf_counter()
-                    e.run(out)
+                    e.run(out, count=per_pass)
                     if r >= 2:  # the first rounds warm caches and threads
                         times[k].append(time.perf_counter() - t)
         finally:
@@ -660,6 +664,8 @@ def _projection_speed(precision: str, size: tuple[int, int] = (288, 352), n: int
 SPEED_CASES: dict[str, Callable[[str], float]] = {
     "projection float32": _projection_speed("float32"),
     "projection float16": _projection_speed("float16"),
+    "projection float32, 8 per pass": _projection_speed("float32", frames=4, per_pass=8),
+    "projection float16, 8 per pass": _projection_speed("float16", frames=4, per_pass=8),
 }
 
 
