@@ -121,9 +121,12 @@ class ProjectionPlayer(Player):
             self._detail_clock = 0.0
             #: frames rendered per pass (the ``lookahead`` option)
             self.lookahead = lookahead
-            self._ahead = np.empty((lookahead, *self._shape), np.uint8) if lookahead > 1 else None
+            # two pass buffers: on OpenCL the next pass renders into one while the other is handed out
+            self._buffers = [np.empty((lookahead, *self._shape), np.uint8) for _ in range(2 if lookahead > 1 else 0)]
+            self._ahead = self._buffers[0] if self._buffers else None
             self._ahead_states: list[dict[str, Any]] = []
             self._ahead_next = 0
+            self._in_flight: tuple[Any, list[dict[str, Any]], np.ndarray] | None = None
             self._pass = lookahead
             self.reseed(seed)
             self._project(self._vector(), np.empty(self._shape, np.uint8))  # warm the kernel
@@ -208,7 +211,19 @@ class ProjectionPlayer(Player):
     def _start(self, out: np.ndarray):
         if self._ahead is not None:
             if self._ahead_next >= len(self._ahead_states):
-                self._render_ahead()
+                if self._in_flight is not None:
+                    event, states, buffer = self._in_flight
+                    self._in_flight = None
+                    if event is not None:
+                        event.wait()
+                    self._ahead, self._ahead_states, self._ahead_next = buffer, states, 0
+                else:
+                    self._ahead_states = self._render_ahead(self._ahead, wait=True)[1]
+                    self._ahead_next = 0
+                if self.ctx is not None:  # the next pass renders while this one is handed out
+                    other = self._buffers[1] if self._ahead is self._buffers[0] else self._buffers[0]
+                    event, states = self._render_ahead(other, wait=False)
+                    self._in_flight = (event, states, other)
             out[...] = self._ahead[self._ahead_next]
             self._ahead_next += 1
             return None
@@ -218,8 +233,9 @@ class ProjectionPlayer(Player):
         self._detail_clock += self._detail_rate()
         return event
 
-    def _render_ahead(self) -> None:
-        """Run the state a pass ahead and project the pass's frames into the look-ahead buffer."""
+    def _render_ahead(self, buffer: np.ndarray, *, wait: bool):
+        """Run the state a pass ahead and project the pass's frames into ``buffer``; the event
+        after which they are there (None once they are) and the state before each frame."""
         count = self._pass
         self._pass = min(2 * count, self.lookahead)
         states, layers = [], [] if self.detail_engine is not None else None
@@ -230,23 +246,33 @@ class ProjectionPlayer(Player):
                 layers.append(self._layers())
             self._step()
             self._detail_clock += self._detail_rate()
-        dest = self._ahead if count == self.lookahead else self._ahead[:count]  # the same array: wrapped once
-        self.engine.run(dest, count=count, layers=layers)
-        self._ahead_states, self._ahead_next = states, 0
+        dest = buffer if count == self.lookahead else buffer[:count]  # the same array: wrapped once
+        return self.engine.run(dest, count=count, layers=layers, wait=wait), states
 
     def _settle(self) -> None:
         """Discard the frames computed ahead: the player is back after the last frame handed out."""
         with self._lock:
-            states, i = self.__dict__.get("_ahead_states"), self.__dict__.get("_ahead_next", 0)
-            if not states:
+            state = self._delivered()
+            if state is None:
                 return
-            if i < len(states):
-                self._set_state(states[i])
+            if self._in_flight is not None:
+                if self._in_flight[0] is not None:
+                    self._in_flight[0].wait()
+                self._in_flight = None
+            self._set_state(state)
             self._ahead_states, self._ahead_next = [], 0
             self._pass = 1
 
+    def _delivered(self) -> dict[str, Any] | None:
+        """The mode's state after the last frame handed out, where frames were computed past it."""
+        states, i = self.__dict__.get("_ahead_states"), self.__dict__.get("_ahead_next", 0)
+        if states and i < len(states):
+            return states[i]
+        pending = self.__dict__.get("_in_flight")
+        return pending[1][0] if pending is not None else None
+
     def __setattr__(self, name: str, value: Any) -> None:
-        if name in self._controls and self.__dict__.get("_ahead_states"):
+        if name in self._controls and self._delivered() is not None:
             self._settle()
         super().__setattr__(name, value)
 
@@ -254,8 +280,7 @@ class ProjectionPlayer(Player):
         """As :meth:`Player.get_state`; with look-ahead, the state after the last frame handed out."""
         with self._lock:
             state = super().get_state()
-            if self._ahead_next < len(self._ahead_states):
-                state.update(self._ahead_states[self._ahead_next])
+            state.update(self._delivered() or {})
             return state
 
     def set_state(self, state: dict[str, Any]) -> None:

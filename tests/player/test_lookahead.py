@@ -91,13 +91,10 @@ def test_engine_gemm_equals_one_product_at_a_time(cl_context):
             e.close()
 
 
-@pytest.mark.parametrize("mode", ["lds", "mixture"])
-def test_a_control_change_applies_to_the_next_frame(dbs, mode):
+def check_control_change(path, mode: str, backend: str, device) -> None:
     control, value = ("speed", -0.5) if mode == "lds" else ("intensity", 2.5)
-    with (
-        open_player(dbs, mode=mode, seed=1, backend="numpy") as one,
-        open_player(dbs, mode=mode, seed=1, backend="numpy", lookahead=8) as ahead,
-    ):
+    kw = {"mode": mode, "seed": 1, "backend": backend, "device": device}
+    with open_player(path, **kw) as one, open_player(path, lookahead=8, **kw) as ahead:
         for p in (one, ahead):
             for _ in range(3):
                 p.next_frame()
@@ -107,12 +104,9 @@ def test_a_control_change_applies_to_the_next_frame(dbs, mode):
         assert getattr(ahead, control) == value
 
 
-@pytest.mark.parametrize("mode", ["lds", "mixture"])
-def test_state_mid_pass_is_exact_and_restores(dbs, mode):
-    with (
-        open_player(dbs, mode=mode, seed=3, backend="numpy") as one,
-        open_player(dbs, mode=mode, seed=3, backend="numpy", lookahead=6) as ahead,
-    ):
+def check_state_mid_pass(path, mode: str, backend: str, device) -> None:
+    kw = {"mode": mode, "seed": 3, "backend": backend, "device": device}
+    with open_player(path, **kw) as one, open_player(path, lookahead=6, **kw) as ahead:
         for _ in range(4):
             one.next_frame()
             ahead.next_frame()
@@ -128,9 +122,26 @@ def test_state_mid_pass_is_exact_and_restores(dbs, mode):
         again = [ahead.next_frame() for _ in range(9)]
         for a, b in zip(later, again):
             assert_close(a, b)
-        with open_player(dbs, mode=mode, backend="numpy") as fresh:
+        with open_player(path, mode=mode, backend="numpy") as fresh:
             fresh.set_state(s2)
             assert_close(fresh.next_frame(), later[0])
+
+
+@pytest.mark.parametrize("mode", ["lds", "mixture"])
+def test_a_control_change_applies_to_the_next_frame_numpy(dbs, mode):
+    check_control_change(dbs, mode, "numpy", None)
+
+
+@pytest.mark.parametrize("mode", ["lds", "mixture"])
+def test_state_mid_pass_is_exact_and_restores_numpy(dbs, mode):
+    check_state_mid_pass(dbs, mode, "numpy", None)
+
+
+@pytest.mark.parametrize("mode", ["lds", "mixture"])
+def test_control_and_state_with_a_pass_in_flight_opencl(dbs, cl_device, mode):
+    """On OpenCL the next pass renders while one is handed out: two passes ahead, still exact."""
+    check_control_change(dbs, mode, "opencl", cl_device)
+    check_state_mid_pass(dbs, mode, "opencl", cl_device)
 
 
 def test_state_property_and_advance_see_the_frames_handed_out(dbs):
