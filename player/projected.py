@@ -13,7 +13,9 @@ recompute), so a change applies to the very next frame, as without look-ahead, a
 :meth:`get_state` is the state after the last frame handed out; after a discard the next
 pass renders one frame, and each later pass twice as many, up to k (a control changed on
 every frame costs what it costs without look-ahead). What look-ahead adds is time, not
-latency in frames: the frame that starts a pass waits for all of its k frames.
+latency in frames: on numpy the frame that starts a pass waits for all of its k frames; on
+OpenCL the next pass renders into a second buffer while the current one is handed out, and a
+frame waits only where that pass is not done yet.
 
 A mode subclasses :class:`ProjectionPlayer` and supplies its model (``_setup``), the
 vector it advances (``_vector``, ``_dim``, ``_step``) and how that vector becomes
