@@ -100,8 +100,12 @@ def time_calls(fn: Callable[[], object], *, frames: int, warmup: int = 3, max_se
     return np.array(out)
 
 
-def summarize(times: np.ndarray) -> dict[str, float]:
-    med = float(np.median(times))
+def summarize(times: np.ndarray, *, per_pass: int = 1) -> dict[str, float]:
+    """Median and 99th percentile of per-frame times; with ``per_pass`` frames rendered per pass
+    (a look-ahead: one call renders the pass, the others hand its frames out), the median of
+    whole passes' times per frame (``times`` starts at a pass)."""
+    whole = times.size // per_pass * per_pass
+    med = float(np.median(times[:whole].reshape(-1, per_pass).sum(axis=1))) / per_pass if whole else np.nan
     return {
         "frames": int(times.size),
         "median_ms": med * 1e3,
@@ -126,6 +130,7 @@ def bench_player(
     The two backends run in alternating rounds, so that both see the same machine load.
     """
     options = dict(options or {})
+    per_pass = options.get("lookahead") or 1
     result: dict = {"mode": mode}
     n_frames = {"opencl": frames, "numpy": numpy_frames or max(10, frames // 4)}
     times: dict[str, list[np.ndarray]] = {"opencl": [], "numpy": []}
@@ -136,19 +141,20 @@ def bench_player(
         out = np.empty(pc.shape, np.uint8)
         for r in range(rounds):
             for backend, p in (("opencl", pc), ("numpy", pn)):
-                per_round = max(2, n_frames[backend] // rounds)
-                times[backend].append(
-                    time_calls(
-                        lambda p=p, out=out: p.next_frame(out=out),
-                        frames=per_round,
-                        warmup=3 if r == 0 else 1,
-                        max_seconds=20.0 / rounds,
-                    )
+                per_round = -(-max(2, n_frames[backend] // rounds) // per_pass) * per_pass
+                t = time_calls(
+                    lambda p=p, out=out: p.next_frame(out=out),
+                    frames=per_round,
+                    warmup=(3 if r == 0 else 1) * per_pass,  # whole passes: the timed calls start one
+                    max_seconds=20.0 / rounds,
                 )
+                for _ in range(-t.size % per_pass):  # a round cut short: the next starts at a pass
+                    p.next_frame(out=out)
+                times[backend].append(t[: t.size // per_pass * per_pass])
         result["size"] = f"{pc.shape[1]}x{pc.shape[0]}"
         result["bytes_per_frame"] = pc.bytes_per_frame
     for backend in times:
-        result[backend] = summarize(np.concatenate(times[backend]))
+        result[backend] = summarize(np.concatenate(times[backend]), per_pass=per_pass)
     result["speedup_vs_numpy"] = result["numpy"]["median_ms"] / result["opencl"]["median_ms"]
     if bandwidth_gbs and result.get("bytes_per_frame"):
         roof_ms = result["bytes_per_frame"] / (bandwidth_gbs * 1e9) * 1e3

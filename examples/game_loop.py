@@ -11,7 +11,10 @@ The loop shows how a game embeds the player: it asks for the next frame with ``s
 display flips, and only then ``wait``s for it; two frame buffers take turns. Frames come as
 BGRA, the byte order of pygame's 32-bit display surfaces on little-endian machines, so the
 buffer becomes a surface with no conversion. Every second it prints the frame rate it reaches
-(on stderr) and it warns once when a frame's work overran the budget. ``--frames N`` stops after
+(on stderr) and it warns once when a frame's work overran the budget. Modes lds and mixture
+render ``--lookahead`` frames per pass over their basis (each frame of a large texture reads
+the whole basis: one frame at a time is bound by memory bandwidth); a key press still applies
+from the next frame. ``--frames N`` stops after
 N frames and prints a JSON summary (frames drawn, frame rate, mean time of the loop's own work
 against the frame budget, frames over budget), and
 ``--autopilot`` presses the keys by itself: that is how the test suite runs it headless
@@ -36,7 +39,9 @@ except ModuleNotFoundError:  # the base install has no pygame
     sys.exit('examples/game_loop.py needs pygame: pip install -e ".[examples]" (or ./install.sh examples)')
 
 from dynatex.checks import Size  # noqa: E402
-from dynatex.player import open_player  # noqa: E402
+from dynatex.player import open_player, player_class  # noqa: E402
+from dynatex.player.modes import default_mode  # noqa: E402
+from dynatex.tiledb import TileDB  # noqa: E402
 
 #: Frame -> key the autopilot presses, spread over a short run.
 AUTOPILOT = {30: pygame.K_UP, 60: pygame.K_r, 90: pygame.K_PLUS, 120: pygame.K_RIGHT}
@@ -125,7 +130,12 @@ def run(args: argparse.Namespace, db: str) -> dict:
     try:
         screen = pygame.display.set_mode(args.window[::-1])  # pygame sizes are (width, height)
         pygame.display.set_caption("dynatex: Up/Down speed, R reverse, +/- intensity, Left/Right scroll")
-        with open_player(db, args.texture, mode=args.mode, backend=args.backend, format="BGRA") as player:
+        mode = args.mode
+        if mode is None:
+            with TileDB(db) as tdb:
+                mode = default_mode(tdb.texture(args.texture))
+        ahead = {"lookahead": args.lookahead} if "lookahead" in [o.name for o in player_class(mode).options] else {}
+        with open_player(db, args.texture, mode=mode, backend=args.backend, format="BGRA", **ahead) as player:
             return _loop(args, screen, player)
     finally:
         pygame.quit()
@@ -187,6 +197,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--texture")
     ap.add_argument("--mode", default=None, help="player mode (default: the texture's own)")
     ap.add_argument("--backend", default="auto", choices=("auto", "opencl", "numpy"))
+    ap.add_argument(
+        "--lookahead",
+        type=int,
+        default=8,
+        help="frames the player renders ahead, k per pass over the basis (modes lds and mixture; 1: one "
+        "at a time; a key press discards them, so it applies from the next frame)",
+    )
     ap.add_argument("--fps", type=float, default=60.0, help="target frame rate (the frame budget is 1/fps)")
     ap.add_argument(
         "--window",

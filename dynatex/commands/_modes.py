@@ -140,6 +140,16 @@ def player_kwargs(args: argparse.Namespace, cls: type, *, common: tuple[str, ...
     return {name: getattr(args, name) for name in names if hasattr(args, name)}
 
 
+def known_count(cls: type, opts: dict[str, Any]) -> dict[str, Any]:
+    """``opts`` with each option of mode ``cls`` that declares a value for commands rendering a
+    known number of frames (``Param.extra["known_count"]``: the projection modes' ``lookahead``)
+    set to it where the command line left it unset."""
+    for p in cls.options:
+        if "known_count" in p.extra and opts.get(p.name) is None:
+            opts[p.name] = p.extra["known_count"]
+    return opts
+
+
 def apply_controls(player: Any, args: argparse.Namespace) -> None:
     """Set every control the command line gave on ``player``."""
     for name, control in player.controls().items():
@@ -151,6 +161,7 @@ __all__ = [
     "add_mode_arguments",
     "apply_controls",
     "guess_mode",
+    "known_count",
     "mode_from_argv",
     "mode_name",
     "player_kwargs",

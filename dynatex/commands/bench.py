@@ -7,9 +7,9 @@ import json
 import sys
 
 from ..benchmark import bench_lds_sizes, bench_player, copy_bandwidth, format_result
-from ..player import MODES
+from ..player import MODES, player_class
 from ._common import UsageError, positive_int, size_arg
-from ._modes import mode_name, resolve_args_mode
+from ._modes import known_count, mode_name, resolve_args_mode
 
 
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         report = bench_lds_sizes(sizes, n=args.n, frames=args.frames, log=log)
     else:
         resolve_args_mode(args)
-        options = {} if args.size is None else {"size": args.size}
+        options = known_count(player_class(args.mode), {} if args.size is None else {"size": args.size})
         bw = copy_bandwidth()
         r = bench_player(
             args.database, args.texture, mode=args.mode, frames=args.frames, bandwidth_gbs=bw["gbs"], options=options

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..player import MODES
 from ._common import UsageError, load_clip_arg, positive_int, seed, size_arg
+from ._modes import known_count
 
 DB_SUFFIXES = (".h5", ".hdf5")
 #: exit code of ``--strict`` when a figure is out of its good range (usage and input errors are 2)
@@ -181,6 +182,7 @@ def play_database(args: argparse.Namespace) -> tuple[np.ndarray, dict[str, Any],
         if not any(p.name == "size" for p in player_class(args.mode).options):
             raise UsageError(f"--size is not supported by mode {args.mode} (it plays at the clip's resolution)")
         opts["size"] = args.size
+    known_count(player_class(args.mode), opts)
     n = args.frames or 300
     with open_player(args.output, args.texture, mode=args.mode, **opts) as player:
         src = player.texture.source

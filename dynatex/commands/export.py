@@ -29,7 +29,7 @@ from ..player.loop import loop_frames
 from ..player.loop import render as render_frames
 from ..player.modes import player_class
 from ._common import Number, UsageError, size_arg
-from ._modes import add_mode_arguments, apply_controls, player_kwargs, resolve_args_mode
+from ._modes import add_mode_arguments, apply_controls, known_count, player_kwargs, resolve_args_mode
 from ._output import MAX_FPS, MIN_FPS, OutputError
 
 #: Most frames a flipbook holds (a 64x64 grid).
@@ -133,7 +133,8 @@ def render(args: argparse.Namespace) -> tuple[np.ndarray, str, float, np.ndarray
         raise UsageError(f"--blend belongs to --loop with mode {', '.join(blended)}")
     if args.loop and getattr(args, "speed", None) is not None:
         raise UsageError("--speed is set by --loop (the loop's length and --frames)")
-    with open_player(args.database, args.texture, mode=args.mode, **player_kwargs(args, cls, common=COMMON)) as player:
+    opts = known_count(cls, player_kwargs(args, cls, common=COMMON))
+    with open_player(args.database, args.texture, mode=args.mode, **opts) as player:
         fps = args.fps if args.fps is not None else player.texture.source.fps
         source = player.texture.frames().read() if player.texture.has_frames else None
         if source is not None and source.shape[-1] == 1:

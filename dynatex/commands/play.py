@@ -14,7 +14,7 @@ from ..player.loop import loop_frames
 from ..player.modes import player_class
 from ..player.modes import ratemap as _ratemap
 from ._common import Number, Numbers, UsageError, positive_int
-from ._modes import add_mode_arguments, apply_controls, player_kwargs, resolve_args_mode
+from ._modes import add_mode_arguments, apply_controls, known_count, player_kwargs, resolve_args_mode
 from ._output import H264_CRF, H264_PRESET, H264_PRESETS, MAX_FPS, MIN_FPS, FrameWriter
 
 RATE = Number(float, 0.0, _ratemap.MAX_RATE)
@@ -111,7 +111,7 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
 
 def player_options(args: argparse.Namespace) -> dict:
     """Constructor options of the chosen mode, from the command line."""
-    opts = player_kwargs(args, player_class(args.mode), common=COMMON)
+    opts = known_count(player_class(args.mode), player_kwargs(args, player_class(args.mode), common=COMMON))
     if getattr(args, "inpaint", None):
         opts["size"] = _inpaint_size(args)
     elif getattr(args, "mask", None):

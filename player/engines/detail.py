@@ -9,24 +9,20 @@ one, so the detail keeps its variance), each reborn at random offsets where its 
 the volume's own spatio-temporal spectrum moves the detail, and no loop of the volume ever
 shows. The schedule is a function of the seed and the frame index alone (nothing to save).
 
-OpenCL: kernel ``add_detail`` of ``kernels/detail.cl``, one work-item per pixel, reading the
-projection engine's device frame and writing the caller's array (bit-exact with the numpy
-reference :class:`DetailReference`: the kernel turns contraction off).
+OpenCL: the projection kernel adds it in the same pass as it projects (:mod:`.projection`,
+``kernels/lds.cl``), to the projected uint8 values, bit-exact with the numpy reference
+:class:`DetailReference` (the kernel turns contraction off there).
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from typing import Any
 
 import numpy as np
 
 from ...tiledb.detail import DetailModel
 from ..pixels import pixel_format
-
-#: Work-group shape of ``add_detail``.
-LOCAL = (16, 4)
 
 
 def layers(model_frames: int, shape: tuple[int, int], seed: int, frame: int, amount: float = 1.0):
@@ -86,9 +82,6 @@ class Detail:
         """:func:`layers` for this volume."""
         return layers(self.frames, (self.vh, self.vw), seed, frame, amount)
 
-    def close(self) -> None:
-        """Release what the engine holds on a device (nothing for the reference)."""
-
 
 class DetailReference(Detail):
     """The numpy reference, in float32 in the kernel's order of operations."""
@@ -136,90 +129,3 @@ class DetailReference(Detail):
         if self.format.alpha is not None:
             out[..., self.format.alpha] = 255
         return out
-
-
-class DetailOpenCL(Detail):
-    """Kernel ``add_detail`` of ``kernels/detail.cl``, reading the device frame ``src``."""
-
-    backend = "opencl"
-
-    def __init__(
-        self,
-        model: DetailModel,
-        *,
-        shape: tuple[int, int, int],
-        channels: int,
-        src: Any,
-        ctx: Any,
-        queue: Any,
-        format: str = "RGB",
-    ) -> None:
-        super().__init__(model, shape=shape, channels=channels, format=format)
-        import pyopencl as cl
-
-        from ..opencl.programs import build_program
-        from .base import FrameOut, Kernel
-
-        self.queue = queue
-        mf = cl.mem_flags
-        self._bufs = [
-            cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
-            for a in (self.volume, self.gain, self.low, self.high, self.colours)
-        ]
-        defines = {"CHANNELS": channels, "VH": self.vh, "VW": self.vw, **self.format.defines}
-        prog = build_program(ctx, "detail.cl", defines)
-        self._kernel = Kernel(prog, "add_detail")
-        h, w = self.shape[:2]
-        vol, gain, low, high, colours = self._bufs
-        self._kernel.set(
-            src=src,
-            vol=vol,
-            gain=gain,
-            low=low,
-            high=high,
-            colours=colours,
-            width=np.int32(w),
-            height=np.int32(h),
-        )
-        self.out = FrameOut(ctx, queue, self._kernel, "out", h * w * self.format.bytes)
-        self._gsize = (-(-w // LOCAL[0]) * LOCAL[0], -(-h // LOCAL[1]) * LOCAL[1])
-
-    def set_source(self, src: Any) -> None:
-        """Read projected frames from device buffer ``src``."""
-        self._kernel.set(src=src)
-
-    def run(self, layers: tuple, out: np.ndarray, *, wait: bool = True):
-        """Add the detail of ``layers`` to the device frame into ``out``; None, or the event (``wait=False``)."""
-        (t0, oy0, ox0, w0), (t1, oy1, ox1, w1) = layers
-        self._kernel.set(
-            t0=np.int32(t0),
-            oy0=np.int32(oy0),
-            ox0=np.int32(ox0),
-            w0=np.float32(w0),
-            t1=np.int32(t1),
-            oy1=np.int32(oy1),
-            ox1=np.int32(ox1),
-            w1=np.float32(w1),
-        )
-        return self.out.launch(out, self._gsize, LOCAL, wait=wait)
-
-    def close(self) -> None:
-        self.queue.finish()
-        for buf in self.__dict__.pop("_bufs", []):
-            buf.release()
-
-
-def open_detail(
-    model: DetailModel,
-    *,
-    shape: tuple[int, int, int],
-    channels: int,
-    src: Any = None,
-    ctx: Any = None,
-    queue: Any = None,
-    format: str = "RGB",
-) -> Detail:
-    """The OpenCL detail engine reading device frames from ``src``, or the numpy reference when ``ctx`` is None."""
-    if ctx is None:
-        return DetailReference(model, shape=shape, channels=channels, format=format)
-    return DetailOpenCL(model, shape=shape, channels=channels, src=src, ctx=ctx, queue=queue, format=format)

@@ -1,11 +1,22 @@
 """The projection ``frame = mean + sum_i coef_i * basis[i]`` to uint8, shared by the modes
-whose frames are a linear combination of stored rows (``lds``, ``mixture``).
+whose frames are a linear combination of stored rows (``lds``, ``mixture``), for up to
+``frames`` coefficient vectors per pass over the basis, with a model's fine detail
+(:mod:`.detail`) added in the same pass.
+
+Each frame reads the whole basis, so one frame at a time is bound by memory bandwidth; k
+frames per pass read it once (a matrix-matrix product), which is what a caller that knows
+its next frames (a file, a look-ahead) gains from.
 
 OpenCL (:class:`ProjectorOpenCL`): kernel ``project`` of ``kernels/projection.cl`` over a blocked
-copy of the basis (for each block of ``BLOCK`` values, its ``n x BLOCK`` sub-matrix is
-contiguous), built once and with its arguments set once; per frame one small upload of the
-coefficients and one launch into the caller's array (or a device buffer copied into it).
-numpy: :class:`ProjectorReference`. :func:`open_projector` picks one.
+copy of the basis (for each group of ``GROUP`` values, its ``n x GROUP`` sub-matrix is
+contiguous), built once and with its arguments set once; per pass one small upload of the
+coefficients (and the detail's layers) and one launch into the caller's array (or a device
+buffer copied into it). numpy: :class:`ProjectorReference` (one ``coef (k x n) @ basis``
+GEMM). :func:`open_projector` picks one.
+
+Tolerance: the two backends, and k frames against one at a time, sum in different orders in
+float32, so a value may round to the neighbouring integer (at most 1 apart, on a small share
+of values); the detail then sees those integers exactly as a separate pass would.
 """
 
 from __future__ import annotations
@@ -14,15 +25,18 @@ from typing import Any
 
 import numpy as np
 
+from ...tiledb.detail import DetailModel
 from ..pixels import pixel_format
+from .detail import Detail, DetailReference
 
-BLOCK = 16
+#: Pixels per work-item of ``project`` (``PIXELS`` in the kernel): a group is ``16 * channels`` values.
+PIXELS = 16
 #: Work-group size: left to choose, PoCL may make few large groups that leave a core idle
 #: (CHANGELOG.md has the measurement).
 LOCAL = 32
 
 
-def blocked_basis(basis: np.ndarray, block: int = BLOCK) -> np.ndarray:
+def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:
     """``(n, P)`` -> ``(ceil(P / block), n, block)``, zero-padded: the kernel's streaming layout."""
     n, p = basis.shape
     blocks = -(-p // block)
@@ -35,11 +49,11 @@ def blocked_basis(basis: np.ndarray, block: int = BLOCK) -> np.ndarray:
 
 
 class Projector:
-    """Projects coefficient vectors through a fixed basis into ``(H, W, 3)`` uint8 frames.
+    """Projects coefficient vectors through a fixed basis into ``(H, W, bytes)`` uint8 frames.
 
     The interface of both projection engines (:func:`open_projector` picks one). The
-    coefficients are written into :attr:`coef` (float32, length ``max(n, 1)``) and
-    :meth:`run` projects them.
+    coefficients of frame ``j`` of a pass are written into ``coefs[j]`` (float32; :attr:`coef`
+    is ``coefs[0]``) and :meth:`run` projects them.
 
     Parameters
     ----------
@@ -53,73 +67,13 @@ class Projector:
         Values per pixel in ``basis``; grey frames are replicated to RGB.
     format : {"RGB", "RGBA", "BGRA"}
         Output pixel format (:data:`~dynatex.player.pixels.FORMATS`).
+    frames : int
+        Most frames one pass projects.
+    detail : DetailModel, optional
+        The model's fine detail, added to a pass given its layers (:attr:`detail` describes it).
     """
 
     backend = ""
-
-    def __init__(
-        self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int, format: str = "RGB"
-    ) -> None:
-        self.format = pixel_format(format)
-        self.n, self.values = basis.shape
-        self.shape = tuple(shape)
-        self.channels = channels
-        self.half = basis.dtype == np.float16
-        self.basis_bytes = basis.nbytes
-        self.coef = np.zeros(max(self.n, 1), np.float32)
-
-    @property
-    def bytes_per_frame(self) -> int:
-        """The basis and mean read, plus the uint8 frame written."""
-        return int(self.basis_bytes + 4 * self.values + int(np.prod(self.shape)))
-
-    def run(self, out: np.ndarray, *, wait: bool = True):
-        """Project :attr:`coef` into ``out`` ((H, W, 3) uint8, C-contiguous).
-
-        Returns None once ``out`` holds the frame, or (``wait=False``, OpenCL) the event after
-        which it does. :attr:`coef` may be changed as soon as this returns.
-        """
-        raise NotImplementedError
-
-    def draw(self, out: np.ndarray, *, wait: bool = True):
-        """:meth:`run`, in the words of every engine (:class:`~dynatex.player.engines.Engine`)."""
-        return self.run(out, wait=wait)
-
-    def close(self) -> None:
-        """Release what the engine holds on a device (nothing for the reference)."""
-
-
-class ProjectorReference(Projector):
-    """The numpy reference: ``coef @ basis + mean``, rounded and saturated, in float32."""
-
-    backend = "numpy"
-
-    def __init__(
-        self, basis: np.ndarray, mean: np.ndarray, *, shape: tuple[int, int, int], channels: int, format: str = "RGB"
-    ) -> None:
-        super().__init__(basis, mean, shape=shape, channels=channels, format=format)
-        self._basis = basis.astype(np.float32) if self.half else basis
-        self._mean = mean
-
-    def run(self, out: np.ndarray, *, wait: bool = True):
-        frame = self.coef[: self.n] @ self._basis
-        frame += self._mean
-        np.rint(frame, out=frame)
-        np.clip(frame, 0, 255, out=frame)
-        h, w = self.shape[:2]
-        if self.format.name == "RGB":
-            out[...] = frame.reshape(h, w, self.channels)
-        else:
-            self.format.from_rgb(np.broadcast_to(frame.reshape(h, w, self.channels), (h, w, 3)), out)
-
-
-class ProjectorOpenCL(Projector):
-    """Kernel ``project`` of ``kernels/projection.cl`` over a blocked copy of the basis (module docstring).
-
-    ``ctx`` and ``queue`` belong to the caller (the mode's player); the engine owns its buffers.
-    """
-
-    backend = "opencl"
 
     def __init__(
         self,
@@ -128,64 +82,186 @@ class ProjectorOpenCL(Projector):
         *,
         shape: tuple[int, int, int],
         channels: int,
-        ctx: Any,
-        queue: Any,
         format: str = "RGB",
+        frames: int = 1,
+        detail: DetailModel | None = None,
     ) -> None:
-        super().__init__(basis, mean, shape=shape, channels=channels, format=format)
+        self.format = pixel_format(format)
+        self.n, self.values = basis.shape
+        self.shape = tuple(shape)
+        self.channels = channels
+        self.half = basis.dtype == np.float16
+        self.basis_bytes = basis.nbytes
+        self.frames = int(frames)
+        self.coefs = np.zeros((self.frames, max(self.n, 1)), np.float32)
+        self.coef = self.coefs[0]
+        #: the detail's arrays and layer schedule (None: the model has none)
+        self.detail: Detail | None = None
+        if detail is not None:
+            self.detail = DetailReference(detail, shape=self.shape, channels=channels, format=format)
+
+    @property
+    def bytes_per_frame(self) -> int:
+        """The basis and mean read, plus the uint8 frame written, for one frame at a time."""
+        return int(self.basis_bytes + 4 * self.values + int(np.prod(self.shape)))
+
+    def run(self, out: np.ndarray, *, count: int | None = None, layers: list | None = None, wait: bool = True):
+        """Project :attr:`coef` into ``out`` ((H, W, bytes) uint8, C-contiguous), or with
+        ``count`` the first ``count`` rows of :attr:`coefs` into ``out`` ((count, H, W, bytes)).
+
+        ``layers``: each frame's detail layers (:meth:`.Detail.layers`), to add the detail;
+        None projects alone. Returns None once ``out`` holds the frames, or (``wait=False``,
+        OpenCL) the event after which it does. The coefficients may be changed as soon as
+        this returns.
+        """
+        raise NotImplementedError
+
+    def draw(self, out: np.ndarray, *, count: int | None = None, layers: list | None = None, wait: bool = True):
+        """:meth:`run`, in the words of every engine (:class:`~dynatex.player.engines.Engine`)."""
+        return self.run(out, count=count, layers=layers, wait=wait)
+
+    def close(self) -> None:
+        """Release what the engine holds on a device (nothing for the reference)."""
+
+
+class ProjectorReference(Projector):
+    """The numpy reference: ``coef @ basis + mean`` (k frames: one ``coefs (k x n) @ basis``
+    GEMM), rounded and saturated, in float32; the detail by :class:`.DetailReference`."""
+
+    backend = "numpy"
+
+    def __init__(self, basis: np.ndarray, mean: np.ndarray, **kwargs: Any) -> None:
+        super().__init__(basis, mean, **kwargs)
+        self._basis = basis.astype(np.float32) if self.half else basis
+        self._mean = mean
+
+    def run(self, out: np.ndarray, *, count: int | None = None, layers: list | None = None, wait: bool = True):
+        h, w = self.shape[:2]
+        if count is None:
+            frames = (self.coef[: self.n] @ self._basis)[None]
+            outs = out[None]
+        else:
+            frames = self.coefs[:count, : self.n] @ self._basis
+            outs = out
+        frames += self._mean
+        np.rint(frames, out=frames)
+        np.clip(frames, 0, 255, out=frames)
+        for j, frame in enumerate(frames):
+            o = outs[j]
+            if self.format.name == "RGB":
+                o[...] = frame.reshape(h, w, self.channels)
+            else:
+                self.format.from_rgb(np.broadcast_to(frame.reshape(h, w, self.channels), (h, w, 3)), o)
+            if layers is not None:
+                self.detail.apply(o, layers[j])
+
+
+class ProjectorOpenCL(Projector):
+    """Kernel ``project`` of ``kernels/projection.cl`` over a blocked copy of the basis (module docstring).
+
+    ``ctx`` and ``queue`` belong to the caller (the mode's player); the engine owns its buffers.
+    The kernel with the detail and the one without are built once each, when first needed.
+    """
+
+    backend = "opencl"
+
+    def __init__(self, basis: np.ndarray, mean: np.ndarray, *, ctx: Any, queue: Any, **kwargs: Any) -> None:
+        super().__init__(basis, mean, **kwargs)
         import pyopencl as cl
 
+        self.ctx, self.queue = ctx, queue
+        group = PIXELS * self.channels
+        blocked = blocked_basis(basis, group)
+        groups = blocked.shape[0]
+        mean_p = np.zeros(groups * group, np.float32)
+        mean_p[: self.values] = mean
+        mf = cl.mem_flags
+        self._bufs: dict[str, Any] = {
+            "basis": cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blocked),
+            "mean": cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p),
+            "coef": cl.Buffer(ctx, mf.READ_ONLY, self.coefs.nbytes),
+        }
+        del blocked
+        self._layer_at = np.zeros((self.frames, 6), np.int32)
+        self._layer_w = np.zeros((self.frames, 2), np.float32)
+        self._bufs["layer_at"] = cl.Buffer(ctx, mf.READ_ONLY, self._layer_at.nbytes)
+        self._bufs["layer_w"] = cl.Buffer(ctx, mf.READ_ONLY, self._layer_w.nbytes)
+        d = self.detail
+        if d is None:
+            dummy = np.zeros(1, np.uint8)
+            arrays = {name: dummy for name in ("vol", "low", "high", "colours")}
+            arrays["gain"] = np.zeros(1, np.float32)
+        else:
+            gain = np.repeat(d.gain.reshape(-1), self.channels)  # once per value: the kernel reads it as vectors
+            arrays = {"vol": d.volume, "gain": gain, "low": d.low, "high": d.high, "colours": d.colours}
+        for name, a in arrays.items():
+            self._bufs[name] = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
+        self._kernels: dict[bool, tuple[Any, Any]] = {}
+        self._frame_bytes = int(np.prod(self.shape))
+        self._gsize = (-(-groups // LOCAL) * LOCAL,)
+        self._lsize = (LOCAL,)
+        self.out = None
+        self._kernel(self.detail is not None)
+
+    def _kernel(self, detail: bool):
+        """The kernel with or without the detail, built and bound on first use; binds :attr:`out` to it."""
         from ..opencl.programs import build_program
         from .base import FrameOut, Kernel
 
-        self.queue = queue
-        blocked = blocked_basis(basis)
-        blocks = blocked.shape[0]
-        padded = blocks * BLOCK
-        mean_p = np.zeros(padded, np.float32)
-        mean_p[: self.values] = mean
-        mf = cl.mem_flags
-        self._d_basis = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blocked)
-        del blocked
-        self._d_mean = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p)
-        self._d_coef = cl.Buffer(ctx, mf.READ_ONLY, self.coef.nbytes)
-        prog = build_program(
-            ctx, "projection.cl", {"BLOCK": BLOCK, "HALF": self.half, "CHANNELS": channels, **self.format.defines}
-        )
-        self._kernel = Kernel(prog, "project")
-        self._kernel.set(
-            basis=self._d_basis, mean=self._d_mean, coef=self._d_coef, n=np.int32(self.n), values=np.int32(self.values)
-        )
-        #: the kernel's frame destination (writes straight into callers' arrays where the device shares host memory)
-        pixels = self.values // channels
-        self.out = FrameOut(ctx, queue, self._kernel, "out", max(padded * (3 // channels), pixels * self.format.bytes))
-        self._gsize = (-(-blocks // LOCAL) * LOCAL,)
-        self._lsize = (LOCAL,)
+        if detail not in self._kernels:
+            vh, vw = (self.detail.vh, self.detail.vw) if detail else (1, 1)
+            defines = {"HALF": self.half, "CHANNELS": self.channels, "DETAIL": detail, "VH": vh, "VW": vw}
+            prog = build_program(self.ctx, "projection.cl", {**defines, **self.format.defines})
+            k = Kernel(prog, "project")
+            k.set(
+                n=np.int32(self.n),
+                values=np.int32(self.values),
+                stride=np.int32(self.coefs.shape[1]),
+                width=np.int32(self.shape[1]),
+                **self._bufs,
+            )
+            self._kernels[detail] = k, FrameOut(self.ctx, self.queue, k, "out", self.frames * self._frame_bytes)
+        k, self.out = self._kernels[detail]
+        return k
 
     @property
     def direct(self) -> bool:
         """Frames are written straight into the caller's array (no copy)."""
         return self.out.direct
 
-    def run(self, out: np.ndarray, *, wait: bool = True):
+    def _prepare(self, count: int | None, layers: list | None, wait: bool):
+        """Bind the kernel for ``layers`` and upload what the pass reads; the kernel."""
         import pyopencl as cl
 
-        cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=not wait)
+        k = self._kernel(layers is not None)
+        frames = 1 if count is None else count
+        k.set(frames=np.int32(frames))
+        if layers is not None:
+            for j, ((t0, oy0, ox0, w0), (t1, oy1, ox1, w1)) in enumerate(layers[:frames]):
+                self._layer_at[j] = (t0, oy0, ox0, t1, oy1, ox1)
+                self._layer_w[j] = (w0, w1)
+            cl.enqueue_copy(self.queue, self._bufs["layer_at"], self._layer_at, is_blocking=False)
+            cl.enqueue_copy(self.queue, self._bufs["layer_w"], self._layer_w, is_blocking=False)
+        # the queue is in order: once this copy is done the layers' are too, and the caller
+        # may change the coefficients (a frame it waits for is done with them anyway)
+        cl.enqueue_copy(self.queue, self._bufs["coef"], self.coefs[:frames], is_blocking=not wait)
+        return k
+
+    def run(self, out: np.ndarray, *, count: int | None = None, layers: list | None = None, wait: bool = True):
+        self._prepare(count, layers, wait)
         return self.out.launch(out, self._gsize, self._lsize, wait=wait)
 
-    def run_on_device(self):
-        """Project :attr:`coef` into the device frame ``out.buffer`` alone (a later pass reads it); the event."""
-        import pyopencl as cl
-
-        cl.enqueue_copy(self.queue, self._d_coef, self.coef, is_blocking=False)
+    def run_on_device(self, *, count: int | None = None, layers: list | None = None):
+        """Project into the device frame buffer ``out.buffer`` alone (the benchmarks' kernel time); the event."""
+        self._prepare(count, layers, False)
         return self.out.launch_on_device(self._gsize, self._lsize)
 
     def close(self) -> None:
         self.queue.finish()
-        for name in ("_d_basis", "_d_mean", "_d_coef"):
-            buf = self.__dict__.pop(name, None)
-            if buf is not None:
-                buf.release()
+        for buf in self.__dict__.pop("_bufs", {}).values():
+            buf.release()
+        for _, frames in self.__dict__.pop("_kernels", {}).values():
+            frames.buffer.release()
 
 
 def open_projector(
@@ -197,8 +273,11 @@ def open_projector(
     ctx: Any = None,
     queue: Any = None,
     format: str = "RGB",
+    frames: int = 1,
+    detail: DetailModel | None = None,
 ) -> Projector:
     """The OpenCL projection engine on ``ctx``/``queue``, or the numpy reference when ``ctx`` is None."""
+    kwargs = dict(shape=shape, channels=channels, format=format, frames=frames, detail=detail)
     if ctx is None:
-        return ProjectorReference(basis, mean, shape=shape, channels=channels, format=format)
-    return ProjectorOpenCL(basis, mean, shape=shape, channels=channels, ctx=ctx, queue=queue, format=format)
+        return ProjectorReference(basis, mean, **kwargs)
+    return ProjectorOpenCL(basis, mean, ctx=ctx, queue=queue, **kwargs)

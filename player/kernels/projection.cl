@@ -1,74 +1,173 @@
-// LDS projection: frame = basis^T (w * x) + mean, written as saturated uint8.
+// Projection: frame = mean + sum_i coef_i * basis[i], written as saturated uint8, for
+// `frames` coefficient vectors in one pass over the basis, with the fine detail added in the
+// same pass where the model has it (DETAIL).
 //
-// The basis is stored blocked for streaming: for block b of BLOCK consecutive values,
-// its n x BLOCK sub-matrix is contiguous (row i at offset (b * n + i) * BLOCK), so one
-// work-item reads one contiguous run and consecutive work-items read consecutive runs.
+// One work-item owns PIXELS consecutive pixels (GROUP = PIXELS * CHANNELS values). The basis
+// is stored blocked for streaming: for group g, its n x GROUP sub-matrix is contiguous (row i
+// at offset (g * n + i) * GROUP), so one work-item reads one contiguous run and consecutive
+// work-items read consecutive runs. A work-item projects every frame of the pass from that
+// run: the first frame brings it into cache (n * GROUP values: a few KiB), the others read it
+// from there, so k frames cost about one frame's memory traffic.
 //
-// Defines: BLOCK (16), HALF (1: basis stored as half floats), CHANNELS (1 or 3: values per
-// pixel of the basis; grey is replicated), PIXEL_BYTES (3 or 4: bytes per output pixel),
-// R_AT, G_AT, B_AT (the byte of each colour in an output pixel), A_AT (alpha's, 255; -1: none).
+// DETAIL: out = clamp(round(p + gain * (w0 * vol[layer 0] + w1 * vol[layer 1])), low, high),
+// or clamp(p, low, high) where that colour's bin ((r >> 3) * 1024 + (g >> 3) * 32 + (b >> 3))
+// is not in the source's colour set (colours[bin] == 0); p is the projected uint8 value, so
+// the detail sees the integers a separate pass would. The volume (Tv, VH, VW, CHANNELS) int8
+// wraps in y and x; layer k of frame f reads volume frame layer_at[6 f + 3 k] at offset
+// (layer_at[6 f + 3 k + 1], layer_at[6 f + 3 k + 2]) with weight layer_w[2 f + k].
+// Contraction is off there so that the result equals the numpy reference bit for bit.
+//
+// Defines: HALF (1: basis stored as half floats), CHANNELS (1 or 3: values per pixel of the
+// basis; grey is replicated), PIXEL_BYTES (3 or 4: bytes per output pixel), R_AT, G_AT, B_AT
+// (the byte of each colour in an output pixel), A_AT (alpha's, 255; -1: none), DETAIL (0 or
+// 1), VH and VW (the detail volume's rows and columns; constants, so that the wrap is cheap).
 
-#if BLOCK != 16
-#error "BLOCK must be 16"
-#endif
+#define PIXELS 16
+#define GROUP (PIXELS * CHANNELS)
 
 #if HALF
 typedef half basis_t;
-#define LOAD_ROW(i) vload_half16(0, row + (size_t)(i) * BLOCK)
+#define LOAD(row, j) vload_half16(j, row)
 #else
 typedef float basis_t;
-#define LOAD_ROW(i) vload16(0, row + (size_t)(i) * BLOCK)
+#define LOAD(row, j) vload16(j, row)
+#endif
+
+#if DETAIL
+#if CHANNELS == 3
+#define BIN(d, i) ((((d)[i] >> 3) << 10) | (((d)[(i) + 1] >> 3) << 5) | ((d)[(i) + 2] >> 3))
+#else
+#define BIN(d, i) ((((d)[i] >> 3) << 10) | (((d)[i] >> 3) << 5) | ((d)[i] >> 3))
+#endif
+
+// The detail of frame f added to the projected values v (GROUP values: `count` pixels, the
+// first at (x, y), value `first` of the frame). gain holds each pixel's gain once per channel.
+// A work-item whose pixels lie in one row and read each layer without a wrap works on whole
+// vectors; the others (the end of a row, a wrap) pixel by pixel, with the same operations.
+void add_detail(uchar *v, const int count, int x, int y, const size_t first, __global const char *restrict vol,
+                __global const float *restrict gain, __global const uchar *restrict low,
+                __global const uchar *restrict high, __global const uchar *restrict colours,
+                __global const int *restrict at, __global const float *restrict w, const int width)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    const int t0 = at[0] * VH, oy0 = at[1], ox0 = at[2], t1 = at[3] * VH, oy1 = at[4], ox1 = at[5];
+    const float w0 = w[0], w1 = w[1];
+    int row0 = (t0 + (y + oy0) % VH) * VW, row1 = (t1 + (y + oy1) % VH) * VW;
+    const int c0 = (x + ox0) % VW, c1 = (x + ox1) % VW;
+    uchar d[GROUP];
+    uchar a[GROUP];
+    if (count == PIXELS && x + PIXELS <= width && c0 + PIXELS <= VW && c1 + PIXELS <= VW) {
+        __global const char *v0 = vol + (row0 + c0) * CHANNELS;
+        __global const char *v1 = vol + (row1 + c1) * CHANNELS;
+        for (int j = 0; j < CHANNELS; ++j) {
+            const float16 n = w0 * convert_float16(vload16(j, v0)) + w1 * convert_float16(vload16(j, v1));
+            const float16 val = convert_float16(vload16(j, v)) + vload16(j, gain + first) * n;
+            const uchar16 lo = vload16(j, low + first), hi = vload16(j, high + first);
+            vstore16(clamp(convert_uchar16_sat_rte(val), lo, hi), j, d);
+            vstore16(clamp(vload16(j, v), lo, hi), j, a);
+        }
+    } else {
+        for (int q = 0; q < count; ++q) {
+            const int i0 = (row0 + (x + ox0) % VW) * CHANNELS;
+            const int i1 = (row1 + (x + ox1) % VW) * CHANNELS;
+            for (int c = 0; c < CHANNELS; ++c) {
+                const size_t k = first + q * CHANNELS + c;
+                const float n = w0 * (float)vol[i0 + c] + w1 * (float)vol[i1 + c];
+                const uchar u = convert_uchar_sat_rte((float)v[q * CHANNELS + c] + gain[k] * n);
+                d[q * CHANNELS + c] = clamp(u, low[k], high[k]);
+                a[q * CHANNELS + c] = clamp(v[q * CHANNELS + c], low[k], high[k]);
+            }
+            if (++x == width) {
+                x = 0;
+                ++y;
+                row0 = (t0 + (y + oy0) % VH) * VW;
+                row1 = (t1 + (y + oy1) % VH) * VW;
+            }
+        }
+    }
+    // a colour outside the source's colour set gets no detail
+    for (int q = 0; q < count; ++q) {
+        const bool inside = colours[BIN(d, q * CHANNELS)] != 0;
+        for (int c = 0; c < CHANNELS; ++c)
+            v[q * CHANNELS + c] = inside ? d[q * CHANNELS + c] : a[q * CHANNELS + c];
+    }
+}
 #endif
 
 __kernel void project(__global const basis_t *restrict basis,
                       __global const float *restrict mean,
-                      __constant float *restrict coef,
+                      __global const float *restrict coef,
                       __global uchar *restrict out,
                       const int n,
-                      const int values)
+                      const int values,
+                      const int stride,
+                      const int frames,
+                      const int width,
+                      __global const char *restrict vol,
+                      __global const float *restrict gain,
+                      __global const uchar *restrict low,
+                      __global const uchar *restrict high,
+                      __global const uchar *restrict colours,
+                      __global const int *restrict layer_at,
+                      __global const float *restrict layer_w)
 {
-    const size_t b = get_global_id(0);
-    if (b * BLOCK >= (size_t)values)
+    const size_t g = get_global_id(0);
+    const size_t first = g * GROUP;
+    if (first >= (size_t)values)
         return;  // the global size is rounded up to whole work-groups
-    __global const basis_t *row = basis + b * (size_t)n * BLOCK;
-    float16 acc = vload16(b, mean);
-    int i = 0;
-    for (; i + 4 <= n; i += 4) {
-        acc += coef[i] * LOAD_ROW(i);
-        acc += coef[i + 1] * LOAD_ROW(i + 1);
-        acc += coef[i + 2] * LOAD_ROW(i + 2);
-        acc += coef[i + 3] * LOAD_ROW(i + 3);
-    }
-    for (; i < n; ++i)
-        acc += coef[i] * LOAD_ROW(i);
-    uchar16 px = convert_uchar16_sat_rte(acc);
-    const size_t first = b * BLOCK;
-#if CHANNELS == 3 && PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2
-    if (first + BLOCK <= (size_t)values) {
-        vstore16(px, b, out);
-        return;
-    }
-#endif
-    uchar tmp[16];
-    vstore16(px, 0, tmp);
-    for (size_t j = 0; j < BLOCK && first + j < (size_t)values; ++j) {
+    __global const basis_t *rows = basis + g * (size_t)n * GROUP;
+    const size_t pixels = (size_t)values / CHANNELS;
+    const size_t p0 = g * PIXELS;
+    const int count = (int)min((size_t)PIXELS, pixels - p0);
+    const int y0 = (int)(p0 / (size_t)width), x0 = (int)(p0 - (size_t)y0 * width);
+    for (int f = 0; f < frames; ++f) {
+        __global const float *c = coef + (size_t)f * stride;
+        float16 a0 = vload16(0, mean + first);
 #if CHANNELS == 3
-        const size_t p = (first + j) / 3;
-        const int c = (int)(first + j - 3 * p);
-        __global uchar *o = out + p * PIXEL_BYTES;
-        o[c == 0 ? R_AT : (c == 1 ? G_AT : B_AT)] = tmp[j];
-#if A_AT >= 0
-        if (c == 0)
-            o[A_AT] = 255;
+        float16 a1 = vload16(1, mean + first);
+        float16 a2 = vload16(2, mean + first);
 #endif
+        for (int i = 0; i < n; ++i) {
+            const float ci = c[i];
+            __global const basis_t *row = rows + (size_t)i * GROUP;
+            a0 += ci * LOAD(row, 0);
+#if CHANNELS == 3
+            a1 += ci * LOAD(row, 1);
+            a2 += ci * LOAD(row, 2);
+#endif
+        }
+        uchar v[GROUP];
+        vstore16(convert_uchar16_sat_rte(a0), 0, v);
+#if CHANNELS == 3
+        vstore16(convert_uchar16_sat_rte(a1), 1, v);
+        vstore16(convert_uchar16_sat_rte(a2), 2, v);
+#endif
+#if DETAIL
+        add_detail(v, count, x0, y0, first, vol, gain, low, high, colours, layer_at + 6 * f, layer_w + 2 * f, width);
+#endif
+        __global uchar *o = out + (size_t)f * pixels * PIXEL_BYTES;
+#if CHANNELS == 3 && PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2
+        if (count == PIXELS) {
+            vstore16(vload16(0, v), 3 * g, o);
+            vstore16(vload16(1, v), 3 * g + 1, o);
+            vstore16(vload16(2, v), 3 * g + 2, o);
+            continue;
+        }
+#endif
+        for (int q = 0; q < count; ++q) {
+            __global uchar *px = o + (p0 + q) * PIXEL_BYTES;
+#if CHANNELS == 3
+            px[R_AT] = v[3 * q];
+            px[G_AT] = v[3 * q + 1];
+            px[B_AT] = v[3 * q + 2];
 #else
-        __global uchar *o = out + (first + j) * PIXEL_BYTES;
-        o[R_AT] = tmp[j];
-        o[G_AT] = tmp[j];
-        o[B_AT] = tmp[j];
+            px[R_AT] = v[q];
+            px[G_AT] = v[q];
+            px[B_AT] = v[q];
+#endif
 #if A_AT >= 0
-        o[A_AT] = 255;
+            px[A_AT] = 255;
 #endif
-#endif
+        }
     }
 }

@@ -166,6 +166,7 @@ class LDSPlayer(ProjectionPlayer):
     @property
     def state(self) -> np.ndarray:
         """The current state vector ``x`` (a copy)."""
+        self._settle()
         return self._x.copy()
 
     def _step(self) -> None:

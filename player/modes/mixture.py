@@ -95,8 +95,8 @@ class MixturePlayer(ProjectionPlayer):
 
     checked_first = ("precision", "draws")
 
-    def _open(self, *, seed: int, precision: str, draws: int = DEFAULT_DRAWS) -> None:
-        super()._open(seed=seed, precision=precision)
+    def _open(self, *, seed: int, precision: str, lookahead: int | None, draws: int = DEFAULT_DRAWS) -> None:
+        super()._open(seed=seed, precision=precision, lookahead=lookahead)
         self._draws = draws
 
     def _setup(self, model: MixtureModel) -> None:
@@ -130,6 +130,7 @@ class MixturePlayer(ProjectionPlayer):
     @property
     def global_coord(self) -> np.ndarray:
         """The global coordinate of the next frame (a copy)."""
+        self._settle()
         return self._hist[0].copy()
 
     def _step(self) -> None:

@@ -185,13 +185,15 @@ def _copy_check(device: str) -> str | None:
 
 
 def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
-    """The detail engine against its reference, exactly, on a random volume, gain and colour range."""
+    """The projection kernel with the detail fused, 3 frames per pass and one at a time, against
+    its reference, exactly: a basis and coefficients whose sums are exact in float32 in any
+    order, and a random volume, gain and colour range."""
 
     def check(device: str) -> str | None:
         import pyopencl as cl
 
         from ...tiledb.detail import DetailModel
-        from ..engines.detail import DetailOpenCL, DetailReference
+        from ..engines.projection import open_projector
         from ..pixels import FORMATS
         from .context import get_context
 
@@ -205,25 +207,27 @@ def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
             high=low + rng.integers(0, 128, (h, w, channels), dtype=np.uint8),
             colours=rng.integers(0, 2, 32**3, dtype=np.uint8),
         )
-        frame = rng.integers(0, 256, (h, w, fmt.bytes), dtype=np.uint8)
+        basis = rng.integers(-8, 9, (4, h * w * channels)).astype(np.float32)
+        mean = rng.integers(-40, 300, h * w * channels).astype(np.float32)
         ctx = get_context(device)
-        queue = cl.CommandQueue(ctx)
-        src = cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=frame)
         shape = (h, w, fmt.bytes)
-        engine = DetailOpenCL(model, shape=shape, channels=channels, src=src, ctx=ctx, queue=queue, format=format)
-        ref = DetailReference(model, shape=shape, channels=channels, format=format)
+        kw = {"shape": shape, "channels": channels, "format": format, "frames": 3, "detail": model}
+        engine = open_projector(basis, mean, ctx=ctx, queue=cl.CommandQueue(ctx), **kw)
+        ref = open_projector(basis, mean, **kw)
         try:
-            for k in (0, 7, 40):
-                layers = ref.layers(11, k, 1.3)
-                out = np.empty_like(frame)
-                engine.run(layers, out)
-                problem = _compare(f"frame {k}", out, ref.apply(frame, layers, out=np.empty_like(frame)), 0, 0.0)
-                if problem:
-                    return problem
+            engine.coefs[:] = ref.coefs[:] = rng.integers(-4, 5, (3, 4))
+            layers = [ref.detail.layers(11, k, 1.3) for k in (0, 7, 40)]
+            want, got = np.empty((3, *shape), np.uint8), np.empty((3, *shape), np.uint8)
+            ref.run(want, count=3, layers=layers)
+            engine.run(got, count=3, layers=layers)
+            problem = _compare("3 frames per pass", got, want, 0, 0.0)
+            if problem:
+                return problem
+            engine.coef[:] = ref.coefs[1]
+            engine.run(got[0], layers=[layers[1]])
+            return _compare("one frame", got[0], want[1], 0, 0.0)
         finally:
             engine.close()
-            src.release()
-        return None
 
     return check
 
@@ -275,9 +279,10 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
         cell=None, time_step=8, wrap="pingpong", interpolate=False
     ),
     "gather: cell grid, time step 3": _gather_check(cell=(5, 7), time_step=3, wrap="loop"),
-    "detail, RGB": _detail_check(3, "RGB"),
-    "detail, grey to BGRA": _detail_check(1, "BGRA"),
+    "projection with detail, RGB": _detail_check(3, "RGB"),
+    "projection with detail, grey to BGRA": _detail_check(1, "BGRA"),
     "mode lds, float32": _mode_check("lds", {"seed": 3}),
+    "mode lds, 3 frames per pass": _mode_check("lds", {"seed": 3, "lookahead": 3}, frames=5),
     "mode lds, float16": _mode_check("lds", {"seed": 3, "precision": "float16"}),
     "mode mixture, float32": _mode_check("mixture", {"seed": 3}),
     "mode mixture, float16": _mode_check("mixture", {"seed": 3, "precision": "float16"}),
@@ -398,10 +403,12 @@ def _child(expected: DeviceInfo) -> int:
     return 0
 
 
-def _projection_speed(precision: str, size: tuple[int, int] = (288, 352), n: int = 50, frames: int = 12):
+def _projection_speed(
+    precision: str, size: tuple[int, int] = (288, 352), n: int = 50, frames: int = 12, per_pass: int = 1
+):
     """OpenCL's frame rate over numpy's for the projection engine (lds, mixture) at ``size``
-    (a basis beyond any cache: both are bound by memory there, as at larger sizes), the
-    median of alternating rounds."""
+    (a basis beyond any cache: both are bound by memory there, as at larger sizes) with
+    ``per_pass`` frames per pass (a look-ahead), the median of alternating rounds."""
 
     def measure(device: str) -> float:
         import pyopencl as cl
@@ -415,17 +422,19 @@ def _projection_speed(precision: str, size: tuple[int, int] = (288, 352), n: int
         mean = np.full(h * w * 3, 128, np.float32)
         ctx = get_context(device)
         engines = [
-            open_projector(basis, mean, shape=(h, w, 3), channels=3, ctx=c, queue=c and cl.CommandQueue(c))
+            open_projector(
+                basis, mean, shape=(h, w, 3), channels=3, ctx=c, queue=c and cl.CommandQueue(c), frames=per_pass
+            )
             for c in (ctx, None)
         ]
-        out = np.empty((h, w, 3), np.uint8)
+        out = np.empty((per_pass, h, w, 3), np.uint8)
         times: list[list[float]] = [[], []]
         try:
             for r in range(frames + 2):
                 for k, e in enumerate(engines):
-                    e.coef[:] = rng.standard_normal(e.coef.size)
+                    e.coefs[:] = rng.standard_normal(e.coefs.shape)
                     t = time.perf_counter()
-                    e.run(out)
+                    e.run(out, count=per_pass)
                     if r >= 2:  # the first rounds warm caches and threads
                         times[k].append(time.perf_counter() - t)
         finally:
@@ -439,6 +448,8 @@ def _projection_speed(precision: str, size: tuple[int, int] = (288, 352), n: int
 SPEED_CASES: dict[str, Callable[[str], float]] = {
     "projection float32": _projection_speed("float32"),
     "projection float16": _projection_speed("float16"),
+    "projection float32, 8 per pass": _projection_speed("float32", frames=4, per_pass=8),
+    "projection float16, 8 per pass": _projection_speed("float16", frames=4, per_pass=8),
 }
 
 

@@ -1,4 +1,4 @@
-"""The detail engine: kernel equals its numpy reference, the layer schedule keeps the detail's
+"""The detail: the fused projection kernel equals its numpy reference, the layer schedule keeps the detail's
 variance, the colour range holds, and lds/mixture textures play with and without the part."""
 
 from __future__ import annotations
@@ -11,7 +11,8 @@ import pytest
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.player import open_player
-from dynatex.player.engines.detail import DetailOpenCL, DetailReference, layers
+from dynatex.player.engines.detail import DetailReference, layers
+from dynatex.player.engines.projection import open_projector
 from dynatex.player.pixels import FORMATS
 from dynatex.tiledb import DatabaseWriter
 from dynatex.tiledb.detail import DetailModel
@@ -30,31 +31,47 @@ def _model(rng, h, w, channels, frames=6, vh=9, vw=14, colours=None):
     )
 
 
+def exact_projection(rng, h, w, channels, n=5):
+    """A basis, mean and coefficients whose sums are exact in float32 in any order: the projected
+    integers are the same on every backend, so what follows them (the detail) must be too."""
+    basis = rng.integers(-8, 9, (n, h * w * channels)).astype(np.float32)
+    mean = rng.integers(-40, 300, h * w * channels).astype(np.float32)
+    return basis, mean
+
+
 @pytest.mark.parametrize("channels", [1, 3])
 @pytest.mark.parametrize("format", ["RGB", "RGBA", "BGRA"])
-def test_kernel_equals_numpy_reference(cl_context, channels, format):
+@pytest.mark.parametrize("size", [(23, 41, 9, 14), (20, 64, 24, 40)], ids=["pixel-by-pixel", "vectors"])
+def test_fused_kernel_equals_numpy_reference(cl_context, channels, format, size):
+    """The projection kernel adds the detail in its own pass, k frames at a time, bit for bit as
+    the reference projects and then adds it (rows of whole vectors and a volume wider than
+    them take the kernel's vector path, the others its pixel-by-pixel path)."""
     rng = np.random.default_rng(channels)
-    h, w, fmt = 23, 41, FORMATS[format]
-    model = _model(rng, h, w, channels)
-    frame = rng.integers(0, 256, (h, w, fmt.bytes), dtype=np.uint8)
-    queue = cl.CommandQueue(cl_context)
-    src = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=frame)
+    h, w, vh, vw = size
+    fmt = FORMATS[format]
+    model = _model(rng, h, w, channels, vh=vh, vw=vw)
+    basis, mean = exact_projection(rng, h, w, channels)
     shape = (h, w, fmt.bytes)
-    engine = DetailOpenCL(model, shape=shape, channels=channels, src=src, ctx=cl_context, queue=queue, format=format)
-    ref = DetailReference(model, shape=shape, channels=channels, format=format)
+    kw = dict(shape=shape, channels=channels, format=format, frames=5, detail=model)
+    queue = cl.CommandQueue(cl_context)
+    engine = open_projector(basis, mean, ctx=cl_context, queue=queue, **kw)
+    ref = open_projector(basis, mean, **kw)
     try:
-        changed = 0
-        for k in (0, 1, 5, 17, 1000):
-            lay = ref.layers(9, k, 2.0)
-            out = np.empty_like(frame)
-            engine.run(lay, out)
-            want = ref.apply(frame, lay, out=np.empty_like(frame))
-            np.testing.assert_array_equal(out, want)
-            changed += int((want != frame).sum())
-        assert changed > 0  # the detail did something the comparison could catch
+        coefs = rng.integers(-4, 5, (5, 5)).astype(np.float32)
+        engine.coefs[:] = ref.coefs[:] = coefs
+        lay = [ref.detail.layers(9, k, 2.0) for k in (0, 1, 5, 17, 1000)]
+        got, want, bare = (np.empty((5, *shape), np.uint8) for _ in range(3))
+        engine.run(got, count=5, layers=lay)
+        ref.run(want, count=5, layers=lay)
+        ref.run(bare, count=5)
+        np.testing.assert_array_equal(got, want)
+        assert (want != bare).sum() > 0  # the detail did something the comparison could catch
+        single = np.empty(shape, np.uint8)
+        engine.coef[:] = coefs[3]
+        engine.run(single, layers=[lay[3]])
+        np.testing.assert_array_equal(single, want[3])
     finally:
         engine.close()
-        src.release()
 
 
 def test_reference_holds_the_colour_range_and_replicates_grey():

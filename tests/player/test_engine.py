@@ -29,8 +29,8 @@ MODES = [
 
 
 def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
-    k = Kernel(build_program(cl_context, "projection.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}), "project")
-    assert k.args == ("basis", "mean", "coef", "out", "n", "values")
+    k = Kernel(build_program(cl_context, "projection.cl", {"HALF": 0, "CHANNELS": 3, "DETAIL": 0, **RGB}), "project")
+    assert k.args[:9] == ("basis", "mean", "coef", "out", "n", "values", "stride", "frames", "width")
     with pytest.raises(TypeError, match=r"kernel 'project' has no argument 'weights' \(it has basis, mean"):
         k.set(weights=np.int32(1))
 
@@ -56,7 +56,7 @@ PROGRAMS = [
             **RGB,
         },
     ),
-    ("projection.cl", {"BLOCK": 16, "HALF": 0, "CHANNELS": 3, **RGB}),
+    ("projection.cl", {"HALF": 0, "CHANNELS": 3, "DETAIL": 1, "VH": 9, "VW": 14, **RGB}),
     ("blend.cl", {"FRAME_VECS": 4, "ITEMS": 4}),
     ("runs.cl", {"INTERP": 1, "GAIN": 0, "PIXEL_BYTES": 3}),
     ("copy.cl", {}),
