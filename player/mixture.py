@@ -2,7 +2,10 @@
 
 Per frame the host runs the AR(p) recursion on the ``D``-dimensional global coordinate,
 drawing ``draws`` noise vectors and keeping the candidate nearest the training coordinates
-(the learned manifold), then decodes it to responsibilities ``r_s`` and local coordinates
+(the learned manifold) among those whose frame differs from the last one by no more than the
+clip's own frame steps do (``STEP_QUANTILE`` of the decoded training steps; a candidate that
+switches to a component decoding a different image would otherwise make the whole frame jump),
+then decodes it to responsibilities ``r_s`` and local coordinates
 ``z_s`` (microseconds: ``S`` small Gaussians and ``d x D`` maps). The image is the
 projection of ``u = (r_s, r_s z_s)`` onto the stacked basis (component means and loadings)
 with the LDS mode's ``project`` kernel (:mod:`.projection`): one launch per frame,
@@ -25,6 +28,8 @@ from .projected import ProjectionPlayer
 
 DEFAULT_DRAWS = 16
 MAX_DRAWS = 1024
+STEP_QUANTILE = 0.99
+STEP_PIXELS = 1 << 16  # pixels (basis columns) the frame-step measure averages over
 
 
 class GlobalDecoder:
@@ -72,6 +77,18 @@ class GlobalDecoder:
         u = np.concatenate([np.ones(z.shape[:2] + (1,)), z], axis=2) * r[:, :, None]
         u = u.reshape(g2.shape[0], -1)
         return u[0] if single else u
+
+
+def step_gram(basis: np.ndarray) -> np.ndarray:
+    """``(J, J)`` Gram matrix of the basis rows over (at most ``STEP_PIXELS`` evenly spaced) columns,
+    per column: ``du^T G du`` is the mean squared pixel change of a coefficient change ``du``."""
+    cols = basis[:, :: max(1, basis.shape[1] // STEP_PIXELS)].astype(np.float64)
+    return cols @ cols.T / cols.shape[1]
+
+
+def step_sizes(gram: np.ndarray, du: np.ndarray) -> np.ndarray:
+    """Mean squared pixel change of each coefficient change, rows of ``du`` (N, J) -> (N,)."""
+    return np.einsum("ni,ij,nj->n", du, gram, du)
 
 
 def nearest_distance(train: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -126,6 +143,12 @@ class MixturePlayer(ProjectionPlayer):
         self._w = model.ar_intercept.copy()
         self._noise = np.linalg.cholesky(model.ar_noise_cov)
         p = self.order
+        self._gram = step_gram(model.stacked_basis)
+        self._step_limit = float(
+            np.quantile(
+                step_sizes(self._gram, np.diff(self.decoder.coefficients(self.train_coords), axis=0)), STEP_QUANTILE
+            )
+        )
         self._hist0 = self.train_coords[p - 1 :: -1].copy()  # hist[i] = g_{t-i}
         self._hist = self._hist0.copy()
 
@@ -133,7 +156,8 @@ class MixturePlayer(ProjectionPlayer):
     draws = Control(
         Range(int, 1, MAX_DRAWS),
         DEFAULT_DRAWS,
-        "Noise draws per step; the candidate nearest the learned manifold is kept (1: the plain AR process).",
+        "Noise draws per step; the candidate nearest the learned manifold is kept among those whose frame "
+        "step stays within the clip's own (1: the plain AR process).",
     )
 
     # -- synthesis -----------------------------------------------------------------
@@ -148,7 +172,10 @@ class MixturePlayer(ProjectionPlayer):
         cand = pred + np.sqrt(self._intensity) * (eps @ self._noise.T)
         if self._draws > 1:
             d2 = (self._train_sq[None] - 2 * cand @ self.train_coords.T).min(axis=1) + (cand * cand).sum(1)
-            best = cand[int(np.argmin(d2))]
+            u = self.decoder.coefficients(np.concatenate([self._hist[:1], cand]))
+            step = step_sizes(self._gram, u[1:] - u[0])
+            within = step <= self._step_limit
+            best = cand[int(np.argmin(np.where(within, d2, np.inf)) if within.any() else np.argmin(step))]
         else:
             best = cand[0]
         self._hist[1:] = self._hist[:-1]
