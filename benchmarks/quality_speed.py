@@ -73,6 +73,8 @@ def play(db: Path, speed: float, frames: int, pix: np.ndarray, mean: np.ndarray,
         model = p.texture.read("lds")
         rows = model.basis[:, pix].astype(np.float64)
         sig = np.clip(np.rint(x @ rows + model.mean[pix]), 0, 255)
+        if model.detail is not None:  # the source's per-pixel colour range holds with the detail off too
+            sig = np.clip(sig, model.detail.low.reshape(-1)[pix], model.detail.high.reshape(-1)[pix])
         p.detail = 0.0  # the projection's pixels (the detail's clock follows the speed on its own)
         for t in (0, frames // 2, frames - 1):  # the shortcut is what the player draws
             drawn = p.render_state(x[t]).reshape(-1)[pix].astype(np.float64)

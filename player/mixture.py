@@ -88,7 +88,7 @@ def step_gram(basis: np.ndarray) -> np.ndarray:
 
 def step_sizes(gram: np.ndarray, du: np.ndarray) -> np.ndarray:
     """Mean squared pixel change of each coefficient change, rows of ``du`` (N, J) -> (N,)."""
-    return np.einsum("ni,ij,nj->n", du, gram, du)
+    return ((du @ gram) * du).sum(axis=1)
 
 
 def nearest_distance(train: np.ndarray, g: np.ndarray) -> np.ndarray:
