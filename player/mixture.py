@@ -172,10 +172,17 @@ class MixturePlayer(ProjectionPlayer):
         cand = pred + np.sqrt(self._intensity) * (eps @ self._noise.T)
         if self._draws > 1:
             d2 = (self._train_sq[None] - 2 * cand @ self.train_coords.T).min(axis=1) + (cand * cand).sum(1)
-            u = self.decoder.coefficients(np.concatenate([self._hist[:1], cand]))
-            step = step_sizes(self._gram, u[1:] - u[0])
-            within = step <= self._step_limit
-            best = cand[int(np.argmin(np.where(within, d2, np.inf)) if within.any() else np.argmin(step))]
+            u0 = self._decoded(self._hist[0])
+            pick = int(np.argmin(d2))
+            u = self.decoder.coefficients(cand[pick])
+            if step_sizes(self._gram, (u - u0)[None])[0] > self._step_limit:  # decode them all
+                us = self.decoder.coefficients(cand)
+                step = step_sizes(self._gram, us - u0)
+                within = step <= self._step_limit
+                pick = int(np.argmin(np.where(within, d2, np.inf)) if within.any() else np.argmin(step))
+                u = us[pick]
+            best = cand[pick]
+            self._last_decoded = (best.copy(), u)
         else:
             best = cand[0]
         self._hist[1:] = self._hist[:-1]
@@ -183,6 +190,13 @@ class MixturePlayer(ProjectionPlayer):
 
     def _vector(self) -> np.ndarray:
         return self._hist[0]
+
+    def _decoded(self, g: np.ndarray) -> np.ndarray:
+        """The coefficients of ``g``, from the last step's decode when it drew ``g`` (a cache only)."""
+        last = getattr(self, "_last_decoded", None)
+        if last is not None and np.array_equal(last[0], g):
+            return last[1]
+        return self.decoder.coefficients(g)
 
     def _coefficients(self, g: np.ndarray, coef: np.ndarray) -> None:
         coef[:] = self.decoder.coefficients(g)
