@@ -7,13 +7,17 @@ their output look blurred and slow. It is modelled here as a stationary Gaussian
 1. the residual's principal colour axis (a 3 x 3 eigendecomposition): 93% to 99.6% of its
    variance on noise-like clips (sea, steam, fire); the other axes are left out, because on a
    clip with structured colour (a flag's edges, 11% there) their noise is red and green confetti;
-2. its local level, a per-pixel gain (the residual's RMS, smoothed), which the texture is
-   divided by so that it is stationary;
+2. its local level, a per-pixel gain (the residual's RMS, smoothed), which the stationary
+   texture is multiplied by;
 3. along that axis, its spatio-temporal power spectrum (Welch: cuboids of ``Tv`` frames by
    ``Hv x Wv`` pixels, half overlapping, Hann-windowed), which holds its motion: detail that
-   flows along the clip's motion puts its power on the planes of those velocities;
+   flows along the clip's motion puts its power on the planes of those velocities. The residual
+   is not divided by its level first: where the level is near zero (a still background) that
+   division amplifies rounding into white noise, which whitens the whole spectrum (seen as
+   whole-region flicker);
 4. a noise volume drawn with that spectrum and random phases, periodic in t, y and x by
-   construction, along the axis in RGB, stored as int8.
+   construction, along the axis in RGB, stored as int8, its variance (times the gain's) the
+   whole residual's energy: the detail brings back the variance the projection drops.
 
 The player (:mod:`dynatex.player.engines.detail`) plays the volume through two layers at random
 offsets cross-faded with weights whose squares sum to one, scales it by the gain and holds
@@ -103,24 +107,23 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     rms = np.sqrt(np.mean(level**2))
     norm_gain = level / rms if rms > 0 else np.ones_like(level)
 
-    # Pass 2: the spatio-temporal power spectrum of the levelled residual along its principal colour axis.
+    # Pass 2: the spatio-temporal power spectrum of the residual along its principal colour axis.
     window = (_hann(tv)[:, None, None] * _hann(hv)[None, :, None] * _hann(wv)[None, None, :]).astype(np.float32)
     power = np.zeros((tv, hv, wv // 2 + 1))
-    var = 0.0
     segments = 0
     starts_t = _starts(t, tv)
     a = np.empty((tv, h, w), np.float32)
-    axis32, level32 = axis.astype(np.float32), np.maximum(norm_gain, 1e-3).astype(np.float32)
+    axis32 = axis.astype(np.float32)
     for t0 in starts_t:
         for k, r in _residual_chunks(frames[t0 : t0 + tv], reconstruct, offset=t0):
-            np.divide(r @ axis32, level32, out=a[k : k + len(r)])
-        var += float(np.einsum("thw,thw->", a, a, dtype=np.float64))
+            np.matmul(r, axis32, out=a[k : k + len(r)])
         for y0 in _starts(h, hv):
             for x0 in _starts(w, wv):
                 cube = a[:, y0 : y0 + hv, x0 : x0 + wv]
                 power += np.abs(np.fft.rfftn((cube - cube.mean()) * window)) ** 2
                 segments += 1
-    var /= len(starts_t) * tv * h * w
+    # The whole residual's energy, its other colour axes' included.
+    var = resid_energy / (t * h * w) / max(float(np.mean(norm_gain**2)), 1e-12)
 
     # The volume: random phases under that amplitude, scaled to the variance, along the axis in RGB.
     rng = np.random.default_rng(seed)

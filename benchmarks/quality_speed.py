@@ -63,7 +63,7 @@ def play(db: Path, speed: float, frames: int, pix: np.ndarray, mean: np.ndarray,
     """Sampled pixel series and mean dynamic energy of ``frames`` frames at ``speed``.
 
     The player runs its own recursion (``advance``); the sampled pixels of each frame are its
-    projection, rounded and saturated to uint8 as the kernel does (checked against rendered
+    projection (the detail part left out), rounded and saturated to uint8 as the kernel does (checked against rendered
     frames), so long runs cost microseconds a frame instead of a full projection.
     """
     with open_player(db, seed=seed) as p:
@@ -73,6 +73,9 @@ def play(db: Path, speed: float, frames: int, pix: np.ndarray, mean: np.ndarray,
         model = p.texture.read("lds")
         rows = model.basis[:, pix].astype(np.float64)
         sig = np.clip(np.rint(x @ rows + model.mean[pix]), 0, 255)
+        if model.detail is not None:  # the source's per-pixel colour range holds with the detail off too
+            sig = np.clip(sig, model.detail.low.reshape(-1)[pix], model.detail.high.reshape(-1)[pix])
+        p.detail = 0.0  # the projection's pixels (the detail's clock follows the speed on its own)
         for t in (0, frames // 2, frames - 1):  # the shortcut is what the player draws
             drawn = p.render_state(x[t]).reshape(-1)[pix].astype(np.float64)
             assert np.abs(drawn - sig[t]).max() <= 1, "sampled projection differs from the rendered frame"

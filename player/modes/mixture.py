@@ -2,7 +2,10 @@
 
 Per frame the host runs the AR(p) recursion on the ``D``-dimensional global coordinate,
 drawing ``draws`` noise vectors and keeping the candidate nearest the training coordinates
-(the learned manifold), then decodes it to responsibilities ``r_s`` and local coordinates
+(the learned manifold) among those whose frame differs from the last one by no more than the
+clip's own frame steps do (``STEP_QUANTILE`` of the decoded training steps; a candidate that
+switches to a component decoding a different image would otherwise make the whole frame jump),
+then decodes it to responsibilities ``r_s`` and local coordinates
 ``z_s`` (microseconds: ``S`` small Gaussians and ``d x D`` maps). The image is the
 projection of ``u = (r_s, r_s z_s)`` onto the stacked basis (component means and loadings)
 with the LDS mode's ``project`` kernel (:mod:`dynatex.player.engines.projection`): one launch per frame,
@@ -24,6 +27,8 @@ from .projected import ProjectionPlayer
 
 DEFAULT_DRAWS = 16
 MAX_DRAWS = 1024
+STEP_QUANTILE = 0.99
+STEP_PIXELS = 1 << 16  # pixels (basis columns) the frame-step measure averages over
 
 
 class GlobalDecoder:
@@ -73,6 +78,18 @@ class GlobalDecoder:
         return u[0] if single else u
 
 
+def step_gram(basis: np.ndarray) -> np.ndarray:
+    """``(J, J)`` Gram matrix of the basis rows over (at most ``STEP_PIXELS`` evenly spaced) columns,
+    per column: ``du^T G du`` is the mean squared pixel change of a coefficient change ``du``."""
+    cols = basis[:, :: max(1, basis.shape[1] // STEP_PIXELS)].astype(np.float64)
+    return cols @ cols.T / cols.shape[1]
+
+
+def step_sizes(gram: np.ndarray, du: np.ndarray) -> np.ndarray:
+    """Mean squared pixel change of each coefficient change, rows of ``du`` (N, J) -> (N,)."""
+    return ((du @ gram) * du).sum(axis=1)
+
+
 def nearest_distance(train: np.ndarray, g: np.ndarray) -> np.ndarray:
     """Euclidean distance of each row of ``g`` (N, D) to its nearest row of ``train`` (T, D)."""
     d2 = (g * g).sum(1)[:, None] - 2 * g @ train.T + (train * train).sum(1)[None]
@@ -116,6 +133,12 @@ class MixturePlayer(ProjectionPlayer):
         self._w = model.ar_intercept.copy()
         self._noise = np.linalg.cholesky(model.ar_noise_cov)
         p = self.order
+        self._gram = step_gram(model.stacked_basis)
+        self._step_limit = float(
+            np.quantile(
+                step_sizes(self._gram, np.diff(self.decoder.coefficients(self.train_coords), axis=0)), STEP_QUANTILE
+            )
+        )
         self._hist0 = self.train_coords[p - 1 :: -1].copy()  # hist[i] = g_{t-i}
         self._hist = self._hist0.copy()
 
@@ -123,7 +146,8 @@ class MixturePlayer(ProjectionPlayer):
     draws = Control(
         Range(int, 1, MAX_DRAWS),
         DEFAULT_DRAWS,
-        "Noise draws per step; the candidate nearest the learned manifold is kept (1: the plain AR process).",
+        "Noise draws per step; the candidate nearest the learned manifold is kept among those whose frame "
+        "step stays within the clip's own (1: the plain AR process).",
     )
 
     # -- synthesis -----------------------------------------------------------------
@@ -139,7 +163,17 @@ class MixturePlayer(ProjectionPlayer):
         cand = pred + np.sqrt(self._intensity) * (eps @ self._noise.T)
         if self._draws > 1:
             d2 = (self._train_sq[None] - 2 * cand @ self.train_coords.T).min(axis=1) + (cand * cand).sum(1)
-            best = cand[int(np.argmin(d2))]
+            u0 = self._decoded(self._hist[0])
+            pick = int(np.argmin(d2))
+            u = self.decoder.coefficients(cand[pick])
+            if step_sizes(self._gram, (u - u0)[None])[0] > self._step_limit:  # decode them all
+                us = self.decoder.coefficients(cand)
+                step = step_sizes(self._gram, us - u0)
+                within = step <= self._step_limit
+                pick = int(np.argmin(np.where(within, d2, np.inf)) if within.any() else np.argmin(step))
+                u = us[pick]
+            best = cand[pick]
+            self._last_decoded = (best.copy(), u)
         else:
             best = cand[0]
         self._hist[1:] = self._hist[:-1]
@@ -147,6 +181,13 @@ class MixturePlayer(ProjectionPlayer):
 
     def _vector(self) -> np.ndarray:
         return self._hist[0]
+
+    def _decoded(self, g: np.ndarray) -> np.ndarray:
+        """The coefficients of ``g``, from the last step's decode when it drew ``g`` (a cache only)."""
+        last = getattr(self, "_last_decoded", None)
+        if last is not None and np.array_equal(last[0], g):
+            return last[1]
+        return self.decoder.coefficients(g)
 
     def _coefficients(self, g: np.ndarray, coef: np.ndarray) -> None:
         coef[:] = self.decoder.coefficients(g)

@@ -63,3 +63,22 @@ def test_reconstruction_equal_to_the_clip_leaves_no_detail():
     d = learn_detail(clip, lambda a, b: flat[a:b])
     assert d.info["residual_energy"] == 0.0
     assert not d.volume.any()
+
+
+def test_volume_carries_the_residual_energy():
+    """Gain times volume holds the whole residual's energy per pixel (other colour axes' included),
+    so played frames keep the clip's energy; a residual whose level varies across the frame
+    (here: noise on the left half only) is where the levelled estimate fell short."""
+    clip = _drifting_clip().astype(np.float64)
+    rng = np.random.default_rng(3)
+    clip[:, :, :16] += rng.normal(0, 6, clip[:, :, :16].shape)  # uncorrelated colours, left half
+    clip = np.clip(np.rint(clip), 0, 255).astype(np.uint8)
+    model = learn_lds(clip, n=3)
+    d = model.detail
+    y = clip.reshape(len(clip), -1).astype(np.float64) - model.mean
+    resid = y - model.states.T @ model.basis.astype(np.float64)
+    per_pixel = float((resid**2).sum() / (clip.shape[0] * clip.shape[1] * clip.shape[2]))
+    carried = float(
+        np.mean(d.gain.astype(np.float64) ** 2) * (d.volume.astype(np.float64) ** 2).mean(axis=(0, 1, 2)).sum()
+    )
+    assert carried == pytest.approx(per_pixel, rel=0.05)  # the levelled estimate: 0.9

@@ -9,7 +9,7 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.mixture import learn_mixture
 from dynatex.player import open_player
-from dynatex.player.modes.mixture import MixturePlayer, nearest_distance
+from dynatex.player.modes.mixture import MixturePlayer, nearest_distance, step_gram, step_sizes
 from dynatex.tiledb import DatabaseWriter
 
 from ..conftest import wave_clip
@@ -150,3 +150,25 @@ def test_real_clip_long_run_beside_the_lds(clips_dir, tmp_path):
     fe = np.mean([((f.reshape(-1) - m.mean) ** 2).sum() for f in frames]) / src_energy
     assert 0.3 < fe < 3.0
     assert nearest_distance(m.global_coords, g).max() < 0.5 * np.sqrt(m.global_dim) * 3
+
+
+@pytest.mark.clips
+def test_real_clip_frames_step_like_the_clip(clips_dir, tmp_path):
+    """Whole-frame jumps (a switch to a component that decodes a different image) are refused:
+    the played frame steps keep the clip's own tail (the 64 px ocean jumped 2.5x past it)."""
+    clip = load_clip(clips_dir / "small_64px" / "ocean_dyntex_64px.avi")
+    path = tmp_path / "o.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("o", clip.source_info())
+        w.put_method("o", "mixture", learn_mixture(clip))
+    with MixturePlayer(path, backend="numpy", seed=0) as p:
+        gram = step_gram(p.engine._basis)
+
+        def steps(g):
+            return np.sqrt(step_sizes(gram, np.diff(p.decoder.coefficients(g), axis=0)))
+
+        train = np.quantile(steps(p.train_coords), 0.99)
+        played = np.quantile(steps(p.advance(2000, record=True)), 0.99)
+        p.draws = 1  # the plain AR process: no selection, still finite
+        assert np.isfinite(p.advance(100, record=True)).all()
+    assert played < 1.25 * train
