@@ -47,7 +47,7 @@ def run_case(name: str, outdir: str) -> dict:
 
     from dynatex.analyzer.video import load_clip_path
     from dynatex.player.lds import LDSPlayer
-    from dynatex.player.mixture import MixturePlayer
+    from dynatex.player.modes.mixture import MixturePlayer
 
     clip_file, method, *_ = CASES[name]
     src = load_clip_path(os.path.join(CLIPS, clip_file)).frames
