@@ -46,7 +46,7 @@ def run_case(name: str, outdir: str) -> dict:
     from PIL import Image
 
     from dynatex.analyzer.video import load_clip_path
-    from dynatex.player.lds import LDSPlayer
+    from dynatex.player.modes.lds import LDSPlayer
     from dynatex.player.modes.mixture import MixturePlayer
 
     clip_file, method, *_ = CASES[name]

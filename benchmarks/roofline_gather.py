@@ -31,8 +31,8 @@ from dynatex.analyzer import load_clip  # noqa: E402
 from dynatex.analyzer.quilt import learn_quilt, spreading_clip  # noqa: E402
 from dynatex.analyzer.tiles import learn_tiles  # noqa: E402
 from dynatex.benchmark import copy_bandwidth, time_calls  # noqa: E402
-from dynatex.player.quilt import EvolvePlayer  # noqa: E402
-from dynatex.player.tiles import TilesPlayer  # noqa: E402
+from dynatex.player.modes.evolve import EvolvePlayer  # noqa: E402
+from dynatex.player.modes.tiles import TilesPlayer  # noqa: E402
 from dynatex.tiledb import DatabaseWriter  # noqa: E402
 
 
