@@ -19,8 +19,7 @@ writes a frame into the caller's array and returns None once it is there or the 
 which it is (so every mode can keep a frame in flight), ``bytes_per_frame`` for roofline
 figures, ``backend``, and ``close()``, which the player calls.
 :func:`dynatex.player.engines.open_engine` picks the OpenCL engine or the reference, the same
-way for every engine (the detail step, which reads the projection's device frame, has
-:func:`~dynatex.player.engines.detail.open_detail`).
+way for every engine.
 
 What the OpenCL engines share lives here: :class:`Kernel` binds arguments by the names
 the ``.cl`` file declares, so no index has to mirror a signature.

@@ -126,7 +126,7 @@ class Projector:
 
 class ProjectorReference(Projector):
     """The numpy reference: ``coef @ basis + mean`` (k frames: one ``coefs (k x n) @ basis``
-    GEMM), rounded and saturated, in float32; the detail by :class:`.DetailReference`."""
+    GEMM), rounded and saturated, in float32; the detail by :class:`~.detail.DetailReference`."""
 
     backend = "numpy"
 

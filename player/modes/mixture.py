@@ -110,7 +110,7 @@ class MixturePlayer(ProjectionPlayer):
     method = "mixture"
     basis_name = "stacked_basis"
 
-    checked_first = ("precision", "draws")
+    checked_first = ("precision", "draws", "lookahead")
 
     def _open(self, *, seed: int, precision: str, lookahead: int | None, draws: int = DEFAULT_DRAWS) -> None:
         super()._open(seed=seed, precision=precision, lookahead=lookahead)

@@ -79,7 +79,7 @@ class ProjectionPlayer(Player):
         ),
     )
 
-    checked_first = ("precision",)
+    checked_first = ("precision", "lookahead")
 
     def _open(self, *, seed: int, precision: str, lookahead: int | None) -> None:
         lookahead = lookahead or 1
