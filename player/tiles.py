@@ -26,7 +26,11 @@ every shared edge has one colour on both sides (:meth:`TilesPlayer._wang_arrange
 a state whose arrangement breaks an edge is refused. A quilted set (the analyzer's default
 for one texture) is the cells of one large torus: they are laid out in the torus's order,
 shifted by a random number of cells per seed (:meth:`TilesPlayer._torus_arrangement`), so the
-output is a window onto a seamless texture that repeats only with the torus's period.
+output is a window onto a seamless texture that repeats only with the torus's period. An output
+larger than the torus would show that period; it takes the stochastic layout instead (option
+``layout``, :mod:`~dynatex.player.stochastic`): random windows of the torus on a triangle grid,
+each with its own time offset (the cell field sampled at its vertex), blended so that the
+histogram holds.
 """
 
 from __future__ import annotations
@@ -57,6 +61,7 @@ from ..tiledb import TileDB, TilesModel
 from .base import Player, rng_from_state
 from .controls import Capabilities, Control
 from .gather import MAX_GAIN, MAX_TIME, gaussian_smooth, open_gather, pack_source
+from .stochastic import LAYOUTS, choose_layout, open_stochastic, torus_frames
 
 TIME_STEP = 8  # output pixels per time-map sample
 #: Largest ``sigma``, output pixels: smoothing costs time linear in it (0.46 s at 4K for 256 on a busy
@@ -139,6 +144,14 @@ class TilesPlayer(Player):
             optional=True,
             default_doc="everything the main texture, class 0",
         ),
+        Param(
+            "layout",
+            Choice(*LAYOUTS),
+            "auto",
+            "How a quilted torus covers the output: torus (its cells edge to edge, repeating with its period), "
+            "stochastic (random windows of it blended on a triangle grid, no period) or auto (stochastic "
+            "exactly when the output is larger than the torus). Other tile sets have only their cells.",
+        ),
     )
     capabilities = Capabilities(any_size=True, native_loop=True, inpaint=True)
 
@@ -154,15 +167,16 @@ class TilesPlayer(Player):
         labels: np.ndarray | None = None,
         tone: Any = None,
         format: str = "RGB",
+        layout: str = "auto",
     ) -> None:
         super().__init__(db, texture, backend=backend, device=device, format=format)
         try:
-            self._setup(self.texture.read("tiles"), seed, size, labels, tone)
+            self._setup(self.texture.read("tiles"), seed, size, labels, tone, layout)
         except BaseException:
             self.close()
             raise
 
-    def _setup(self, model: TilesModel, seed: int, size, labels, tone) -> None:
+    def _setup(self, model: TilesModel, seed: int, size, labels, tone, layout: str = "auto") -> None:
         self.model = model
         self.model_info = dict(model.info)
         k, length, th, tw, _ = model.tiles.shape
@@ -177,19 +191,32 @@ class TilesPlayer(Player):
         self.seed = check_seed("seed", seed)  # label presets such as "blobs" draw from it
         self.labels = self._check_labels(labels)
         mixing = len(np.unique(self.labels)) > 1
-        # tiles stacked vertically in each stored frame: one tile's frame is contiguous, so a
-        # cell's rows are read as one forward stream (hardware prefetch follows it)
-        stack = np.ascontiguousarray(model.tiles.transpose(1, 0, 2, 3, 4).reshape(length, k * th, tw, 3))
-        self.engine = open_gather(
-            stack,
-            (h, w),
-            backend=self.backend,
-            ctx=self.ctx,
-            queue=self.queue,
-            time_step=TIME_STEP,
-            cell=None if mixing else (th, tw),
-            format=self.format,
-        )
+        torus = None if model.torus is None else (model.torus[0] * th, model.torus[1] * tw)
+        self.layout = choose_layout(layout, (h, w), torus)
+        if self.layout == "stochastic":
+            self.engine = open_stochastic(
+                torus_frames(model.tiles, model.torus),
+                (h, w),
+                backend=self.backend,
+                ctx=self.ctx,
+                queue=self.queue,
+                seed=self.seed,
+                format=self.format,
+            )
+        else:
+            # tiles stacked vertically in each stored frame: one tile's frame is contiguous, so a
+            # cell's rows are read as one forward stream (hardware prefetch follows it)
+            stack = np.ascontiguousarray(model.tiles.transpose(1, 0, 2, 3, 4).reshape(length, k * th, tw, 3))
+            self.engine = open_gather(
+                stack,
+                (h, w),
+                backend=self.backend,
+                ctx=self.ctx,
+                queue=self.queue,
+                time_step=TIME_STEP,
+                cell=None if mixing else (th, tw),
+                format=self.format,
+            )
         self.mixing = mixing
         c = model.n_classes
         #: quantization levels of a feathered pixel's tone share (tone table <= 256 entries)
@@ -302,6 +329,12 @@ class TilesPlayer(Player):
         th, tw = self.tile_size
         choice = np.array(choice, np.int64)
         self.arrangement = choice
+        if self.layout == "stochastic":  # every cell of the torus shows alike; windows follow the arrangement
+            self._class_map = None
+            self._tile_pixels, self._partial_cells = np.full(self.n_tiles, float(th * tw)), []
+            self.engine.set_windows(self.seed * self.n_tiles + int(choice.flat[0]))
+            self._retone()
+            return
         if not self.mixing:
             self._class_map = None
             h, w = self._shape[:2]
@@ -403,6 +436,11 @@ class TilesPlayer(Player):
     def _pixel_field(self, cells: np.ndarray) -> np.ndarray:
         """Cell offsets spread on the time-map lattice and Gaussian-smoothed by ``sigma`` (device)."""
         th, tw = self.tile_size
+        if self.layout == "stochastic":  # one offset per window: the cell field at its vertex
+            vy, vx = self.engine.vertex_pixels
+            field = (cells[vy // th, vx // tw] * self._max_shift).astype(np.float32)
+            self.engine.set_time_map(field)
+            return field
         mh, mw = self.engine.tmap_shape
         cy = np.minimum(((np.arange(mh) + 0.5) * TIME_STEP) // th, cells.shape[0] - 1).astype(int)
         cx = np.minimum(((np.arange(mw) + 0.5) * TIME_STEP) // tw, cells.shape[1] - 1).astype(int)
