@@ -151,6 +151,7 @@ class TilesPlayer(Player):
             "How a quilted torus covers the output: torus (its cells edge to edge, repeating with its period), "
             "stochastic (random windows of it blended on a triangle grid, no period) or auto (stochastic "
             "exactly when the output is larger than the torus). Other tile sets have only their cells.",
+            flag="--tile-layout",  # export's --layout names its file layout
         ),
     )
     capabilities = Capabilities(any_size=True, native_loop=True, inpaint=True)
@@ -479,7 +480,8 @@ class TilesPlayer(Player):
     sigma = Control(
         Range(float, 0.0, MAX_SIGMA),
         None,
-        "Gaussian smoothing of the per-tile time offsets, output pixels.",
+        "Gaussian smoothing of the per-tile time offsets, output pixels (torus layout; in the stochastic "
+        "layout each window keeps one offset and the blend spreads it).",
         default_doc=f"half a tile, at most {MAX_SIGMA:g}",
     )
 

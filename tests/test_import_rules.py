@@ -116,8 +116,13 @@ KNOWN_CYCLE_IMPORTS = {
     ("dynatex.player.selftest", "dynatex.player.gather"),
     ("dynatex.player.selftest", "dynatex.player.opencl"),
     ("dynatex.player.selftest", "dynatex.player.projection"),
+    ("dynatex.player.selftest", "dynatex.player.stochastic"),
+    ("dynatex.player.stochastic", "dynatex.player.base"),
+    ("dynatex.player.stochastic", "dynatex.player.engine"),
+    ("dynatex.player.stochastic", "dynatex.player.opencl"),
     ("dynatex.player.tiles", "dynatex.player.base"),
     ("dynatex.player.tiles", "dynatex.player.gather"),
+    ("dynatex.player.tiles", "dynatex.player.stochastic"),
 }
 
 
