@@ -40,10 +40,12 @@ inline void put(__global uchar *o, const uchar r, const uchar g, const uchar b)
 #endif
 }
 
-inline int window_pixel(const int4 v, const int y, const int x)
+// the torus pixel of window v at output (y, x), given ym = y mod TORUS_H and xm = x mod TORUS_W
+inline int window_pixel(const int4 v, const int ym, const int xm)
 {
-    const int ty = (y + v.x) % TORUS_H;
-    const int tx = (x + v.y) % TORUS_W;
+    int ty = ym + v.x, tx = xm + v.y;
+    ty -= ty >= TORUS_H ? TORUS_H : 0;
+    tx -= tx >= TORUS_W ? TORUS_W : 0;
     return ty * TORUS_W + tx;
 }
 
@@ -90,7 +92,9 @@ __kernel void stochastic(
     const int odd = j & 1;
     const int top = j * VCOLS, bottom = (j + 1) * VCOLS;
     const int x1 = min(x0 + RUN, width);
-    for (int x = x0; x < x1; ++x) {
+    const int ym = y % TORUS_H;
+    int xm = x0 % TORUS_W;
+    for (int x = x0; x < x1; ++x, xm = xm + 1 == TORUS_W ? 0 : xm + 1) {
         const int xs = x + CELL_W - odd * (CELL_W / 2);
         const int i = xs / CELL_W;
         const int c = xs - i * CELL_W;
@@ -107,25 +111,26 @@ __kernel void stochastic(
         __global uchar *o = out + ((size_t)y * width + x) * PIXEL_BYTES;
         if (single) {
             const int4 v = vertices[single == 1 ? vid.x : single == 2 ? vid.y : vid.z];
-            const int p = window_pixel(v, y, x);
+            const int p = window_pixel(v, ym, xm);
             const int3 a = convert_int3(vload3((size_t)v.z * (TORUS_H * TORUS_W) + p, torus));
             const int3 b = convert_int3(vload3((size_t)next_frame(v.z) * (TORUS_H * TORUS_W) + p, torus));
-            const int3 m = ((255 - v.w) * a + v.w * b + 127) / 255;
+            const int3 n = (255 - v.w) * a + v.w * b + 127;
+            const int3 m = (n + 1 + (n >> 8)) >> 8;  // n / 255 for 0 <= n < 65535
             put(o, tone[m.x], tone[256 + m.y], tone[512 + m.z]);
             continue;
         }
         float3 acc = (float3)(0.0f);
         if (wt.x != 0.0f) {
             const int4 v = vertices[vid.x];
-            acc = wt.x * gauss(torus, table, v, window_pixel(v, y, x));
+            acc = wt.x * gauss(torus, table, v, window_pixel(v, ym, xm));
         }
         if (wt.y != 0.0f) {
             const int4 v = vertices[vid.y];
-            acc = acc + wt.y * gauss(torus, table, v, window_pixel(v, y, x));
+            acc = acc + wt.y * gauss(torus, table, v, window_pixel(v, ym, xm));
         }
         if (wt.z != 0.0f) {
             const int4 v = vertices[vid.z];
-            acc = acc + wt.z * gauss(torus, table, v, window_pixel(v, y, x));
+            acc = acc + wt.z * gauss(torus, table, v, window_pixel(v, ym, xm));
         }
         put(o,
             inverse[inverse_index(acc.x)],
