@@ -517,8 +517,8 @@ class StochasticOpenCL(Stochastic):
         self._upload_tables()
 
     def _upload_tables(self) -> None:
-        if not hasattr(self, "_d_table"):
-            return  # the base class sets its first tables before the buffers exist
+        if not hasattr(self, "_k"):
+            return  # the base class sets its first tables before the kernel exists
         import pyopencl as cl
 
         table, inverse, tone = self._tables

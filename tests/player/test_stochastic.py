@@ -39,14 +39,19 @@ def quilted(tmp_path_factory):
     return model, path
 
 
-@pytest.mark.parametrize("format", ["RGB", "RGBA", "BGRA"])
-def test_kernel_equals_its_reference(cl_device, format):
+@pytest.mark.parametrize(
+    "format, cell, toned",
+    [("RGB", (11, 18), True), ("RGB", (24, 64), False), ("RGBA", (24, 64), False), ("BGRA", (11, 18), True)],
+)
+def test_kernel_equals_its_reference(cl_device, format, cell, toned):
+    """Small cells blend almost everywhere, large ones show single windows over most pixels."""
     rng = np.random.default_rng(4)
-    torus = rng.integers(0, 256, (7, 36, 50, 3), dtype=np.uint8)
-    s = open_stochastic(torus, (53, 161), backend="opencl", device=cl_device, seed=5, cell=(11, 18), format=format)
+    torus = rng.integers(0, 256, (7, 40, 100, 3), dtype=np.uint8)
+    s = open_stochastic(torus, (53, 197), backend="opencl", device=cl_device, seed=5, cell=cell, format=format)
     try:
         s.set_time_map(rng.uniform(-40, 40, s.tmap_shape), rng.uniform(0, 9, s.tmap_shape))
-        s.set_tones(np.array([[0.7, 1.3, 1.0]]))
+        if toned:
+            s.set_tones(np.array([[0.7, 1.3, 1.0]]))
         for t, fade in ((0.0, 0.0), (3.6, 0.25), (-11.2, 1.0), (1e5 + 0.4, 0.7)):
             got = s.render(t, fade=fade)
             assert np.array_equal(got, s.render_reference(t, fade=fade)), (t, fade)
@@ -55,7 +60,9 @@ def test_kernel_equals_its_reference(cl_device, format):
 
 
 def test_selftest_checks_the_kernel():
-    assert {"stochastic tiling, RGB", "stochastic tiling, BGRA"} <= set(selftest.CHECKS)
+    assert {"stochastic tiling, RGB", "stochastic tiling, RGB, toned", "stochastic tiling, BGRA, toned"} <= set(
+        selftest.CHECKS
+    )
 
 
 def test_weights_keep_the_variance_and_leave_most_pixels_to_one_window():
