@@ -1,12 +1,13 @@
 """The engines that draw the modes' frames, one module each, and the interface they share.
 
 A mode holds one :class:`Engine` in ``player.engine``: :mod:`.projection` (lds, mixture),
-:mod:`.gather` (tiles), :mod:`.runs` (evolve) or :mod:`.blend` (turnpoints); the projection
+:mod:`.gather` (tiles), :mod:`.stochastic` (tiles above the torus's size), :mod:`.runs` (evolve)
+or :mod:`.blend` (turnpoints); the projection
 modes add the detail step of :mod:`.detail` to the projected frame. Each is a pair of an
 OpenCL engine and its numpy reference computing the same integers, opened by
 :func:`open_engine`; each OpenCL engine draws with the kernel of its name
-(``kernels/projection.cl``, ``kernels/gather.cl``, ``kernels/runs.cl``, ``kernels/blend.cl``,
-``kernels/detail.cl``). :mod:`.base` holds what the OpenCL engines share.
+(``kernels/projection.cl``, ``kernels/gather.cl``, ``kernels/stochastic.cl``, ``kernels/runs.cl``,
+``kernels/blend.cl``, ``kernels/detail.cl``). :mod:`.base` holds what the OpenCL engines share.
 
 Examples
 --------
@@ -40,6 +41,7 @@ ENGINES: dict[str, tuple[str, str, str]] = {
     "gather": ("gather", "GatherReference", "GatherOpenCL"),
     "runs": ("runs", "RunsReference", "RunsOpenCL"),
     "blend": ("blend", "BlendReference", "BlendOpenCL"),
+    "stochastic": ("stochastic", "StochasticReference", "StochasticOpenCL"),
 }
 
 
