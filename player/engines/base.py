@@ -120,6 +120,11 @@ class FrameOut:
             self._held.popitem(last=False)
         return buf
 
+    def destination(self, out: np.ndarray | None = None):
+        """The buffer the frame ending in ``out`` (None: the device's own) is written to, for a
+        kernel that runs before :meth:`launch` on the same frame (an earlier pass)."""
+        return self._host_buffer(out) if self.direct and out is not None else self.buffer
+
     def launch(
         self,
         out: np.ndarray,

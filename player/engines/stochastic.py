@@ -46,11 +46,14 @@ from ...checks import check_float, check_out
 from ...errors import InvalidArgumentError
 from ..pixels import pixel_format
 from .stochastic_reference import (
-    ISCALE,
     N_INVERSE,
     SHARPNESS,
+    blend_weights,
+    copy_table,
     gauss_tables,
+    gaussianize,
     stochastic_reference,
+    tone_gains,
     triangle_cell,
     vertex_grid,
     vertex_pixels,
@@ -58,7 +61,8 @@ from .stochastic_reference import (
     weight_table,
 )
 
-RUN = 16  # output pixels per work-item
+RUN = 16  # output pixels per work-item of pass 1 (whole vectors where one window shows)
+GROUP = 16  # work-items per work-group along a cell's blend pixels (pass 2)
 ROWS = 256  # output rows per block of the numpy reference (bounded memory)
 
 
@@ -107,6 +111,7 @@ class Stochastic:
         self._target: np.ndarray | None = None
         self._gain = np.ones(3)
         self._tables = gauss_tables(self._hist)
+        self.gauss_torus = gaussianize(self.torus, self._tables[0])
         self._last_t, self._last_fade = 0.0, 0.0
 
     # -- what an engine implements --------------------------------------------------------------
@@ -212,7 +217,9 @@ class Stochastic:
         h, w = self.out_shape[:2]
         for r0 in range(0, h, ROWS):
             rows = range(r0, min(r0 + ROWS, h))
-            rgb = stochastic_reference(self.torus, self.weights, vertices, *self._tables, (h, w), rows=rows)
+            rgb = stochastic_reference(
+                self.torus, self.gauss_torus, self.weights, vertices, *self._tables[1:], (h, w), rows=rows
+            )
             self.format.from_rgb(rgb, out[r0 : rows.stop])
         return out
 
@@ -266,40 +273,63 @@ class StochasticOpenCL(Stochastic):
         mf = cl.mem_flags
         h, w = self.out_shape[:2]
         th, tw = self.torus.shape[1:3]
+        ch, cw = self.cell
+        # the blend pixels of one cell (pass 2 runs over them at every cell): (r, c) pairs
+        self._blend = np.ascontiguousarray(np.argwhere(self.weights[..., 3] < 4).astype(np.int32).reshape(-1, 2))
+        self._cells = ((h - 1) // ch + 1, (w - 1 + cw) // cw + 1)
         defines = {
             "TORUS_H": th,
             "TORUS_W": tw,
+            "TORUS_WP": tw + RUN,
             "NFRAMES": self.n_frames,
             "CELL_H": self.cell[0],
             "CELL_W": self.cell[1],
             "VCOLS": self.tmap_shape[1],
-            "N_INVERSE": N_INVERSE,
-            "ISCALE": float(ISCALE),
+            "CELLS_X": self._cells[1],
+            "NBLEND": len(self._blend),
             "RUN": RUN,
+            "N_INVERSE": N_INVERSE,
             **self.format.defines,
         }
         prog = build_program(self.ctx, "stochastic.cl", defines)
-        self._d_torus = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self.torus)
-        self._d_weights = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self.weights)
+        # every torus row carries its first RUN pixels again, so a run of pass 1 never wraps
+        pad = np.arange(tw + RUN) % tw
+        for name, frames in (("_d_torus", self.torus), ("_d_gauss", self.gauss_torus)):
+            padded = np.ascontiguousarray(np.take(frames, pad, axis=2))
+            setattr(self, name, cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded))
+        self._d_copy = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=copy_table(self.weights))
+        self._d_gains = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * RUN * 4)
+        self._d_weights = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blend_weights(self.weights))
         self._vtab = np.zeros(self.tmap_shape + (4,), np.int32)
         self._d_vertices = cl.Buffer(self.ctx, mf.READ_ONLY, self._vtab.nbytes)
-        self._d_table = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * 256 * 4)
         self._d_inverse = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * N_INVERSE)
         self._d_tone = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * 256)
-        self._k = Kernel(prog, "stochastic")
-        self._k.set(
+        blend = self._blend if len(self._blend) else np.zeros((1, 2), np.int32)  # no empty buffer
+        self._d_blend = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blend)
+        self._k_copy = Kernel(prog, "stochastic_copy")
+        self._k_copy.set(
             torus=self._d_torus,
-            weights=self._d_weights,
+            copy=self._d_copy,
             vertices=self._d_vertices,
-            table=self._d_table,
-            inverse=self._d_inverse,
             tone=self._d_tone,
+            gains=self._d_gains,
+            width=np.int32(w),
+            height=np.int32(h),
+        )
+        self._k = Kernel(prog, "stochastic_blend")
+        self._k.set(
+            gauss=self._d_gauss,
+            weights=self._d_weights,
+            blend=self._d_blend,
+            vertices=self._d_vertices,
+            inverse=self._d_inverse,
             width=np.int32(w),
             height=np.int32(h),
         )
         self._out = FrameOut(self.ctx, self.queue, self._k, "out", h * w * self.format.bytes)
         self.direct = self._out.direct
-        self._gsize = (-(-w // RUN), h)
+        self._copy_size = (-(-w // RUN), h)
+        self._blend_size = (_round_up(max(1, len(self._blend)), GROUP), self._cells[0] * self._cells[1])
         self._upload_tables()
 
     def _upload_tables(self) -> None:
@@ -307,28 +337,41 @@ class StochasticOpenCL(Stochastic):
             return  # the base class sets its first tables before the kernel exists
         import pyopencl as cl
 
-        table, inverse, tone = self._tables
-        for buf, host in ((self._d_table, table), (self._d_inverse, inverse), (self._d_tone, tone)):
+        _, inverse, tone = self._tables
+        gains = np.resize(tone_gains(self._gain), 3 * RUN).astype(np.uint32)  # byte b of a run: channel b % 3
+        for buf, host in (
+            (self._d_inverse, inverse),
+            (self._d_tone, tone),
+            (self._d_gains, gains),
+        ):
             cl.enqueue_copy(self.queue, buf, np.ascontiguousarray(host), is_blocking=True)
 
-    def _launch(self, vertices: np.ndarray, out: np.ndarray):
+    def _passes(self, vertices: np.ndarray, out: np.ndarray | None) -> None:
+        """Upload ``vertices`` and run pass 1 into the frame's destination."""
         import pyopencl as cl
 
         self._vtab = np.ascontiguousarray(vertices, np.int32)
         cl.enqueue_copy(self.queue, self._d_vertices, self._vtab, is_blocking=True)
-        return self._out.launch(out, self._gsize, None, wait=False)
+        self._k_copy.set(out=self._out.destination(out))
+        self._k_copy.launch(self.queue, self._copy_size, None)
+
+    def _launch(self, vertices: np.ndarray, out: np.ndarray):
+        self._passes(vertices, out)
+        return self._out.launch(out, self._blend_size, (GROUP, 1), wait=False)
 
     def render_on_device(self, t: float, *, fade: float = 0.0) -> None:
-        """The kernel alone into the device's own frame buffer, waited for (the benchmarks' kernel time)."""
-        import pyopencl as cl
-
-        self._vtab = np.ascontiguousarray(self.vertices(float(t), fade), np.int32)
-        cl.enqueue_copy(self.queue, self._d_vertices, self._vtab, is_blocking=True)
-        self._out.launch_on_device(self._gsize, None).wait()
+        """Both passes alone into the device's own frame buffer, waited for (the benchmarks' kernel time)."""
+        self._passes(self.vertices(float(t), fade), None)
+        self._out.launch_on_device(self._blend_size, (GROUP, 1)).wait()
 
     def close(self) -> None:
         self.queue.finish()
-        for name in ("_d_torus", "_d_weights", "_d_vertices", "_d_table", "_d_inverse", "_d_tone"):
+        held = ("_d_torus", "_d_gauss", "_d_weights", "_d_copy", "_d_gains", "_d_blend", "_d_vertices", "_d_inverse")
+        for name in (*held, "_d_tone"):
             buf = self.__dict__.pop(name, None)
             if buf is not None:
                 buf.release()
+
+
+def _round_up(v: int, m: int) -> int:
+    return -(-v // m) * m

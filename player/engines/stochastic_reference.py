@@ -19,9 +19,10 @@ import numpy as np
 
 from ...errors import InvalidArgumentError
 
-N_INVERSE = 4096  # entries of the inverse table per channel
-G_RANGE = 6.0  # the inverse table covers Gaussian values in [-G_RANGE, G_RANGE)
-ISCALE = N_INVERSE / (2 * G_RANGE)
+GS = 32  # levels of the Gaussianized torus (bytes, 128 the mean) per standard deviation
+STEPS = 16  # entries of the inverse table per level
+N_INVERSE = 256 * STEPS  # entries of the inverse table per channel (Gaussian values within +-128 / GS)
+WQ = 256  # blend weights in 256ths
 SHARPNESS = 6.0  # exponent of the barycentric weights
 CUTOFF = 0.02  # sharpened weights under this share are dropped (one window alone shows)
 
@@ -87,16 +88,17 @@ def _normal_cdf(g: np.ndarray) -> np.ndarray:
 
 def gauss_tables(hist: np.ndarray, gain: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Heitz and Neyret's tables from per-channel value histograms ``hist`` ``(3, 256)``:
-    ``T`` ``(3, 256)`` float32, the standard-normal quantile of each value's mid-rank (a value
-    drawn from the histogram comes out standard normal); ``inverse`` ``(3, N_INVERSE)``
-    uint8, for Gaussian values on a lattice of ``1 / ISCALE`` from ``-G_RANGE``, the smallest
-    value whose cumulative share reaches the value's normal probability (T's inverse, which
-    gives the histogram back); ``tone`` ``(3, 256)`` uint8, a value times the tone ``gain``
-    (per channel, default 1) rounded and saturated, which ``inverse`` also holds.
+    ``T`` ``(3, 256)`` uint8, the standard-normal quantile of each value's mid-rank (a value
+    drawn from the histogram comes out standard normal) in bytes, ``128 + rint(GS q)`` saturated
+    (the paper stores the transformed input as an 8-bit texture too); ``inverse`` ``(3,
+    N_INVERSE)`` uint8, for Gaussian values on a lattice of ``1 / STEPS`` levels from ``-128``,
+    the smallest value whose cumulative share reaches the value's normal probability (T's
+    inverse, which gives the histogram back); ``tone`` ``(3, 256)`` uint8, a value toned by
+    ``gain`` (per channel, default 1; :func:`tone_gains`), which ``inverse`` also holds.
 
     >>> T, inv, tone = gauss_tables(np.ones((3, 256)))
-    >>> bool(abs(T[0].mean()) < 1e-3), int(inv[0, (N_INVERSE // 2 + 1)]), int(tone[1, 200])
-    (True, 128, 200)
+    >>> int(T[0, 0]) < 60 < 128 - 1 <= int(T[0, 127]) <= 128 < 200 < int(T[0, 255]), int(tone[1, 200])
+    (True, 200)
     """
     hist = np.asarray(hist, np.float64)
     if hist.shape != (3, 256) or not np.isfinite(hist).all() or (hist < 0).any() or (hist.sum(1) <= 0).any():
@@ -104,16 +106,56 @@ def gauss_tables(hist: np.ndarray, gain: np.ndarray | None = None) -> tuple[np.n
     gain = np.ones(3) if gain is None else np.asarray(gain, np.float64)
     cdf = np.cumsum(hist, 1) / hist.sum(1, keepdims=True)
     mid = 0.5 * (cdf + np.concatenate([np.zeros((3, 1)), cdf[:, :-1]], 1))
-    grid = np.linspace(-G_RANGE - 2, G_RANGE + 2, 8193)
+    grid = np.linspace(-8.0, 8.0, 8193)
     phi = _normal_cdf(grid)
-    table = np.stack([np.interp(np.clip(m, 1e-9, 1 - 1e-9), phi, grid) for m in mid]).astype(np.float32)
-    centres = (np.arange(N_INVERSE) + 0.5) / ISCALE - G_RANGE
+    q = np.stack([np.interp(np.clip(m, 1e-9, 1 - 1e-9), phi, grid) for m in mid])
+    table = np.clip(np.rint(q * GS) + 128, 0, 255).astype(np.uint8)
+    centres = (np.arange(N_INVERSE) - N_INVERSE // 2) / (STEPS * GS)
     p = _normal_cdf(centres)
     v = np.stack([np.minimum(np.searchsorted(c, p), 255) for c in cdf])
-    values = np.arange(256, dtype=np.float64)
-    tone = np.stack([np.clip(np.rint(values * gain[ch]), 0, 255) for ch in range(3)]).astype(np.uint8)
+    values = np.arange(256)
+    tone = np.minimum(255, (values.astype(np.int64)[None] * tone_gains(gain)[:, None] + 128) >> 8).astype(np.uint8)
     inverse = np.take_along_axis(tone, v, 1).astype(np.uint8)
     return table, inverse, tone
+
+
+def gaussianize(torus: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """The torus ``(..., 3)`` uint8 through the Gaussianizing ``table`` (:func:`gauss_tables`),
+    channel by channel: what the blend reads, computed once."""
+    out = np.empty_like(torus)
+    for ch in range(3):
+        out[..., ch] = table[ch][torus[..., ch]]
+    return out
+
+
+def blend_weights(weights: np.ndarray) -> np.ndarray:
+    """``(ch, cw, 4)`` int32: :func:`weight_table`'s blend weights in ``WQ``-ths (rounded) and its code."""
+    w = np.rint(weights[..., :3].astype(np.float64) * WQ)
+    return np.concatenate([w, weights[..., 3:]], -1).astype(np.int32)
+
+
+def inverse_index(acc: np.ndarray) -> np.ndarray:
+    """The inverse table's entry for ``acc``, a blend of Gaussianized levels ``sum W_k d_k`` (``W``
+    in ``WQ``-ths, ``d`` the time-interpolated level minus 128 in 255ths), rounded to the nearest
+    of ``STEPS`` per level, in shifts and one product (``257 / 4096`` for ``STEPS / 255``)."""
+    u = np.asarray(acc, np.int64) + (1 << 25)
+    return np.clip((((u >> 8) * 257 + 2048) >> 12) - (8224 - N_INVERSE // 2), 0, N_INVERSE - 1)
+
+
+def tone_gains(gain: np.ndarray) -> np.ndarray:
+    """The tone ``gain`` per channel in 256ths (int64), as the kernel multiplies: a value ``m``
+    is toned to ``min(255, (m g + 128) >> 8)``."""
+    return np.rint(np.clip(np.asarray(gain, np.float64), 0.0, 255.0) * 256.0).astype(np.int64)
+
+
+def copy_table(weights: np.ndarray) -> np.ndarray:
+    """``(ch, cw)`` uint8 of the kernel's pass 1: ``tri + 4 k`` with ``k`` (1..3) the vertex of
+    the pixel's triangle with the largest weight (the window alone where one is; elsewhere the
+    nearest vertex, so a row meets each vertex's pixels in one interval)."""
+    code = weights[..., 3].astype(np.int64)
+    single = code >> 2
+    k = np.where(single > 0, single, np.argmax(weights[..., :3], -1) + 1)
+    return ((code & 3) + 4 * k).astype(np.uint8)
 
 
 def vertex_grid(size: Sequence[int], cell: Sequence[int]) -> tuple[int, int]:
@@ -187,53 +229,53 @@ def vertex_table(
 
 def stochastic_reference(
     torus: np.ndarray,
+    gauss_torus: np.ndarray,
     weights: np.ndarray,
     vertices: np.ndarray,
-    table: np.ndarray,
     inverse: np.ndarray,
     tone: np.ndarray,
     size: Sequence[int],
     *,
     rows: range | None = None,
 ) -> np.ndarray:
-    """Reference of kernel ``stochastic``: ``(len(rows), W, 3)`` uint8 RGB of the output rows
-    ``rows`` (default all) of an output ``size``, from the ``torus`` ``(L, TH, TW, 3)``, the
-    cell's ``weights`` (:func:`weight_table`), the ``vertices`` (:func:`vertex_table`) and the
-    tables (:func:`gauss_tables`). The same float32 operations in the same order as the kernel."""
+    """Reference of kernels ``stochastic_copy`` and ``stochastic_blend``: ``(len(rows), W, 3)``
+    uint8 RGB of the output rows ``rows`` (default all) of an output ``size``, from the ``torus``
+    ``(L, TH, TW, 3)``, its :func:`gaussianize` d copy, the cell's ``weights``
+    (:func:`weight_table`), the ``vertices`` (:func:`vertex_table`) and the tables
+    (:func:`gauss_tables`). The same integers as the kernels."""
     h, w = (int(v) for v in size)
     n, th, tw, _ = torus.shape
     vcols = vertices.shape[1]
     rows = range(h) if rows is None else rows
     flat = torus.reshape(n, th * tw, 3)
+    gflat = gauss_torus.reshape(n, th * tw, 3)
     vflat = vertices.reshape(-1, 4).astype(np.int64)
     y = np.arange(rows.start, rows.stop)[:, None] + np.zeros((1, w), np.int64)
     x = np.arange(w)[None, :] + np.zeros((len(rows), 1), np.int64)
     wt, single, vid = pixel_vertices(y, x, weights, vcols)
-    inv255 = np.float32(1.0) / np.float32(255.0)
+    wq = blend_weights(wt)[..., :3].astype(np.int64)
     ch3 = np.arange(3)
 
-    def samples(v: np.ndarray, sel: np.ndarray):
+    def samples(source: np.ndarray, v: np.ndarray, sel: np.ndarray):
         vv = vflat[v]
         p = ((y[sel] + vv[..., 0]) % th) * tw + (x[sel] + vv[..., 1]) % tw
         f = vv[..., 2]
-        a = flat[f, p].astype(np.int64)
-        b = flat[np.where(f + 1 == n, 0, f + 1), p].astype(np.int64)
+        a = source[f, p].astype(np.int64)
+        b = source[np.where(f + 1 == n, 0, f + 1), p].astype(np.int64)
         return a, b, vv[..., 3][..., None]
 
     out = np.empty((len(rows), w, 3), np.uint8)
     one = single > 0
     if one.any():
         v = np.choose(np.maximum(single - 1, 0), vid)[one]
-        a, b, wb = samples(v, one)
-        value = ((255 - wb) * a + wb * b + 127) // 255
-        out[one] = tone[ch3, value]
+        a, b, wb = samples(flat, v, one)
+        nn = (255 - wb) * a + wb * b + 127
+        out[one] = tone[ch3, (nn + 1 + (nn >> 8)) >> 8]
     blend = ~one
     if blend.any():
-        acc = np.zeros((int(blend.sum()), 3), np.float32)
+        acc = np.zeros((int(blend.sum()), 3), np.int64)
         for k in range(3):
-            a, b, wb = samples(vid[k][blend], blend)
-            g = ((255 - wb).astype(np.float32) * table[ch3, a] + wb.astype(np.float32) * table[ch3, b]) * inv255
-            acc = acc + wt[..., k][blend][:, None] * g
-        q = np.clip(acc * np.float32(ISCALE) + np.float32(N_INVERSE // 2), 0, N_INVERSE - 1).astype(np.int64)
-        out[blend] = inverse[ch3, q]
+            a, b, wb = samples(gflat, vid[k][blend], blend)
+            acc += wq[..., k][blend][:, None] * ((255 - wb) * a + wb * b - 128 * 255)
+        out[blend] = inverse[ch3, inverse_index(acc)]
     return out

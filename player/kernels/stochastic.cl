@@ -2,33 +2,34 @@
 // windows of the torus, one per vertex of a triangle grid, blended with Heitz and Neyret's
 // histogram-preserving operator (High-Performance By-Example Noise using a
 // Histogram-Preserving Blending Operator, 2018). The numpy reference is
-// player/engines/stochastic_reference.py; both compute the same floats in the same order
-// (no contraction), so the results are equal.
+// player/engines/stochastic_reference.py; both compute the same integers, so the results
+// are equal.
 //
 // Triangle grid: rows of CELL_H pixels; row j's vertices sit at x = (k - 2) CELL_W + (j & 1)
 // CELL_W / 2 (vertex column k of the table, k >= 0). Pixel (y, x): band j = y / CELL_H,
 // r = y - j CELL_H, xs = x + CELL_W - (j & 1) CELL_W / 2, cell i = xs / CELL_W, c = xs - i CELL_W.
-// weights[r CELL_W + c] = (W0, W1, W2, code): the normalised blend weights of the pixel's
-// three vertices and code = tri + 4 single, tri naming the triangle of the cell (0: T0 B-1 B0,
+// weights[r CELL_W + c] = (W0, W1, W2, code): the blend weights of the pixel's three vertices
+// (256ths) and code = tri + 4 single, tri naming the triangle of the cell (0: T0 B-1 B0,
 // 1: T0 T1 B0, 2: T1 B0 B1; T top row j, B bottom row j + 1, indices relative to the cell)
 // and single (1..3) the one vertex that alone shows there (0: a blend).
 //
 // vertices[v] = (oy, ox, frame, w): the window of vertex v is the torus shifted by (oy, ox),
 // played at stored frame `frame` blended with the next one by w / 255.
 //
-// One window: out = tone[ch][((255 - w) a + w b + 127) / 255] (integers, as the gather).
-// A blend: g_k = ((255 - w_k) T[a_k] + w_k T[b_k]) / 255 per window (T: the Gaussianizing
-// table of the channel), G = (W0 g0 + W1 g1) + W2 g2 (a window of weight 0 is not read and
-// adds nothing), out = inverse[ch][clamp(G ISCALE + N_INVERSE / 2, 0, N_INVERSE - 1)]
-// (the inverse table holds the tone too).
+// One window: out = tone[ch][((255 - w) a + w b + 127) / 255] (integers, as the gather; the
+// tone table is min(255, (m gain + 128) >> 8), gain in 256ths).
+// A blend, in integers: the torus Gaussianized once at open (bytes, 128 the mean, 32 levels a
+// standard deviation), d_k = (255 - w_k) a_k + w_k b_k - 128 255 per window and channel,
+// out = inverse[ch][inverse_index(W0 d0 + W1 d1 + W2 d2)] (the inverse table holds the tone too).
 //
-// Defines: TORUS_H, TORUS_W, NFRAMES (the stored torus), CELL_H, CELL_W (triangle rows and
-// width, CELL_W even), VCOLS (vertex columns per row), N_INVERSE, ISCALE (float), RUN (pixels
-// per work-item), PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (output pixel layout; A_AT -1: none).
-
-#pragma OPENCL FP_CONTRACT OFF
-
-#define INV255 (1.0f / 255.0f)
+// Two passes: stochastic_copy draws every pixel as one window alone would, stochastic_blend then
+// draws the blend pixels only (a list of one cell's, at every cell), so neither branches on the
+// pixel's kind. Each window is read with weight 0 too where it has one (it adds nothing).
+//
+// Defines: TORUS_H, TORUS_W, TORUS_WP (its row pitch, TORUS_W + RUN), NFRAMES (the stored torus), CELL_H, CELL_W (triangle rows and
+// width, CELL_W even), VCOLS (vertex columns per row), CELLS_X (cells per band), NBLEND (blend
+// pixels per cell), RUN (pixels per work-item of pass 1), N_INVERSE, PIXEL_BYTES, R_AT, G_AT,
+// B_AT, A_AT (output pixel layout; A_AT -1: none).
 
 inline void put(__global uchar *o, const uchar r, const uchar g, const uchar b)
 {
@@ -46,7 +47,7 @@ inline int window_pixel(const int4 v, const int ym, const int xm)
     int ty = ym + v.x, tx = xm + v.y;
     ty -= ty >= TORUS_H ? TORUS_H : 0;
     tx -= tx >= TORUS_W ? TORUS_W : 0;
-    return ty * TORUS_W + tx;
+    return ty * TORUS_WP + tx;
 }
 
 inline int next_frame(const int f)
@@ -54,31 +55,67 @@ inline int next_frame(const int f)
     return f + 1 == NFRAMES ? 0 : f + 1;
 }
 
-// the window's Gaussianized colour (three channels) at pixel p
-inline float3 gauss(__global const uchar *torus, __global const float *table, const int4 v, const int p)
+// the window's Gaussianized level (three channels, the time-interpolated byte minus 128, in 255ths)
+// at pixel p of the Gaussianized torus
+inline int3 level(__global const uchar *gauss, const int4 v, const int p)
 {
-    const int3 a = convert_int3(vload3((size_t)v.z * (TORUS_H * TORUS_W) + p, torus));
-    const int3 b = convert_int3(vload3((size_t)next_frame(v.z) * (TORUS_H * TORUS_W) + p, torus));
-    const float wa = (float)(255 - v.w), wb = (float)v.w;
-    float3 g;
-    g.x = (wa * table[a.x] + wb * table[b.x]) * INV255;
-    g.y = (wa * table[256 + a.y] + wb * table[256 + b.y]) * INV255;
-    g.z = (wa * table[512 + a.z] + wb * table[512 + b.z]) * INV255;
-    return g;
+    const int3 a = convert_int3(vload3((size_t)v.z * (TORUS_H * TORUS_WP) + p, gauss));
+    const int3 b = convert_int3(vload3((size_t)next_frame(v.z) * (TORUS_H * TORUS_WP) + p, gauss));
+    return (255 - v.w) * a + v.w * b - 128 * 255;
 }
 
-inline int inverse_index(const float g)
+// the inverse table's entry of a blend acc = sum W_k d_k (W in 256ths): STEPS = 16 entries per
+// level, rounded; 257 / 4096 stands for 16 / 255; every operand stays positive and below 2^31
+inline int3 inverse_index(const int3 acc)
 {
-    return (int)clamp(g * ISCALE + (float)(N_INVERSE / 2), 0.0f, (float)(N_INVERSE - 1));
+    const int3 u = acc + (1 << 25);
+    return clamp((((u >> 8) * 257 + 2048) >> 12) - (8224 - N_INVERSE / 2), 0, N_INVERSE - 1);
 }
 
-__kernel void stochastic(
-    __global const uchar *torus,      // NFRAMES x TORUS_H x TORUS_W x 3
-    __global const float4 *weights,   // CELL_H x CELL_W
+// the three vertex indices of triangle tri of the cell (band j, cell i)
+inline int3 triangle(const int tri, const int top, const int bottom, const int i, const int odd)
+{
+    return tri == 0 ? (int3)(top + i + 1, bottom + i + odd, bottom + i + 1 + odd)
+         : tri == 1 ? (int3)(top + i + 1, top + i + 2, bottom + i + 1 + odd)
+                    : (int3)(top + i + 2, bottom + i + 1 + odd, bottom + i + 2 + odd);
+}
+
+// the window that pixel x of band j (row r of the band) copies in pass 1: the vertex of the
+// pixel's hexagon (copy[r CELL_W + c] = tri + 4 k, k = 1..3 the triangle's vertex)
+inline int copy_vertex(__global const uchar *copy, const int x, const int r, const int top, const int bottom, const int odd)
+{
+    const int xs = x + CELL_W - odd * (CELL_W / 2);
+    const int i = xs / CELL_W;
+    const int code = copy[r * CELL_W + xs - i * CELL_W];
+    const int3 vid = triangle(code & 3, top, bottom, i, odd);
+    return (code >> 2) == 1 ? vid.x : (code >> 2) == 2 ? vid.y : vid.z;
+}
+
+// ((255 - w) a + w b + 127) / 255, as (n + 1 + (n >> 8)) >> 8 (exact for 0 <= n < 65535)
+inline int3 mix3(const int3 a, const int3 b, const int w)
+{
+    const int3 n = (255 - w) * a + w * b + 127;
+    return (n + 1 + (n >> 8)) >> 8;
+}
+
+inline ushort16 mix16(const ushort16 a, const ushort16 b, const int w)
+{
+    const ushort16 n = (ushort16)(255 - w) * a + (ushort16)w * b + (ushort16)127;
+    return (n + (ushort16)1 + (n >> (ushort16)8)) >> (ushort16)8;
+}
+
+// Pass 1, RUN pixels of a row per work-item: every pixel as the window of its hexagon alone
+// shows it (pass 2 overwrites the blend pixels). A run inside one hexagon (the window is the same
+// at both its ends: a hexagon meets a row in one interval) is copied with whole vectors: the
+// torus rows carry RUN pixels of their start again (TORUS_WP = TORUS_W + RUN), so a run never
+// wraps; the tone of channel value m is min(255, (m gain + 128) >> 8), gain in 256ths per byte of
+// the run (gains[48]). Other runs, pixel by pixel, the same integers.
+__kernel void stochastic_copy(
+    __global const uchar *torus,      // NFRAMES x TORUS_H x TORUS_WP x 3
+    __global const uchar *copy,       // CELL_H x CELL_W: the hexagon's vertex (tri + 4 k)
     __global const int4 *vertices,    // rows x VCOLS
-    __global const float *table,      // 3 x 256: Gaussianizing table per channel
-    __global const uchar *inverse,    // 3 x N_INVERSE: its inverse, toned
     __global const uchar *tone,       // 3 x 256: tone of a single window
+    __global const uint *gains,       // 3 x RUN: the tone gain (256ths) of each byte of a run
     __global uchar *out,
     const int width,
     const int height)
@@ -93,48 +130,63 @@ __kernel void stochastic(
     const int top = j * VCOLS, bottom = (j + 1) * VCOLS;
     const int x1 = min(x0 + RUN, width);
     const int ym = y % TORUS_H;
+    const int first = copy_vertex(copy, x0, r, top, bottom, odd);
+#if PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2
+    if (x1 - x0 == RUN && first == copy_vertex(copy, x1 - 1, r, top, bottom, odd)) {
+        const int4 v = vertices[first];
+        const int p = window_pixel(v, ym, x0 % TORUS_W);
+        __global const uchar *a = torus + ((size_t)v.z * (TORUS_H * TORUS_WP) + p) * 3;
+        __global const uchar *b = torus + ((size_t)next_frame(v.z) * (TORUS_H * TORUS_WP) + p) * 3;
+        __global uchar *o = out + ((size_t)y * width + x0) * 3;
+        for (int q = 0; q < 3; ++q) {
+            const ushort16 m = mix16(convert_ushort16(vload16(q, a)), convert_ushort16(vload16(q, b)), v.w);
+            const uint16 toned = (convert_uint16(m) * vload16(q, gains) + (uint16)128) >> 8;
+            vstore16(convert_uchar16(min(toned, (uint16)255)), q, o);
+        }
+        return;
+    }
+#endif
     int xm = x0 % TORUS_W;
     for (int x = x0; x < x1; ++x, xm = xm + 1 == TORUS_W ? 0 : xm + 1) {
-        const int xs = x + CELL_W - odd * (CELL_W / 2);
-        const int i = xs / CELL_W;
-        const int c = xs - i * CELL_W;
-        const float4 wt = weights[r * CELL_W + c];
-        const int code = (int)wt.w;
-        const int tri = code & 3, single = code >> 2;
-        int3 vid;
-        if (tri == 0)
-            vid = (int3)(top + i + 1, bottom + i + odd, bottom + i + 1 + odd);
-        else if (tri == 1)
-            vid = (int3)(top + i + 1, top + i + 2, bottom + i + 1 + odd);
-        else
-            vid = (int3)(top + i + 2, bottom + i + 1 + odd, bottom + i + 2 + odd);
-        __global uchar *o = out + ((size_t)y * width + x) * PIXEL_BYTES;
-        if (single) {
-            const int4 v = vertices[single == 1 ? vid.x : single == 2 ? vid.y : vid.z];
-            const int p = window_pixel(v, ym, xm);
-            const int3 a = convert_int3(vload3((size_t)v.z * (TORUS_H * TORUS_W) + p, torus));
-            const int3 b = convert_int3(vload3((size_t)next_frame(v.z) * (TORUS_H * TORUS_W) + p, torus));
-            const int3 n = (255 - v.w) * a + v.w * b + 127;
-            const int3 m = (n + 1 + (n >> 8)) >> 8;  // n / 255 for 0 <= n < 65535
-            put(o, tone[m.x], tone[256 + m.y], tone[512 + m.z]);
-            continue;
-        }
-        float3 acc = (float3)(0.0f);
-        if (wt.x != 0.0f) {
-            const int4 v = vertices[vid.x];
-            acc = wt.x * gauss(torus, table, v, window_pixel(v, ym, xm));
-        }
-        if (wt.y != 0.0f) {
-            const int4 v = vertices[vid.y];
-            acc = acc + wt.y * gauss(torus, table, v, window_pixel(v, ym, xm));
-        }
-        if (wt.z != 0.0f) {
-            const int4 v = vertices[vid.z];
-            acc = acc + wt.z * gauss(torus, table, v, window_pixel(v, ym, xm));
-        }
-        put(o,
-            inverse[inverse_index(acc.x)],
-            inverse[N_INVERSE + inverse_index(acc.y)],
-            inverse[2 * N_INVERSE + inverse_index(acc.z)]);
+        const int4 v = vertices[copy_vertex(copy, x, r, top, bottom, odd)];
+        const int p = window_pixel(v, ym, xm);
+        const int3 a = convert_int3(vload3((size_t)v.z * (TORUS_H * TORUS_WP) + p, torus));
+        const int3 b = convert_int3(vload3((size_t)next_frame(v.z) * (TORUS_H * TORUS_WP) + p, torus));
+        const int3 m = mix3(a, b, v.w);
+        put(out + ((size_t)y * width + x) * PIXEL_BYTES, tone[m.x], tone[256 + m.y], tone[512 + m.z]);
     }
+}
+
+// Pass 2, one work-item per blend pixel: blend[k] = (r, c) of the k-th blend pixel of a cell
+// (NBLEND of them), dimension 1 the cell (band j = id / CELLS_X, cell i = id - j CELLS_X).
+__kernel void stochastic_blend(
+    __global const uchar *gauss,      // NFRAMES x TORUS_H x TORUS_WP x 3: the Gaussianized torus
+    __global const int4 *weights,     // CELL_H x CELL_W: (W0, W1, W2) in 256ths, code
+    __global const int2 *blend,       // NBLEND: (r, c) of the blend pixels of a cell
+    __global const int4 *vertices,    // rows x VCOLS
+    __global const uchar *inverse,    // 3 x N_INVERSE: the Gaussianizing table's inverse, toned
+    __global uchar *out,
+    const int width,
+    const int height)
+{
+    const int k = get_global_id(0);
+    const int cell = get_global_id(1);
+    if (k >= NBLEND)
+        return;
+    const int j = cell / CELLS_X;
+    const int i = cell - j * CELLS_X;
+    const int2 rc = blend[k];
+    const int odd = j & 1;
+    const int y = j * CELL_H + rc.x;
+    const int x = i * CELL_W + rc.y - CELL_W + odd * (CELL_W / 2);
+    if (y >= height || x < 0 || x >= width)
+        return;
+    const int4 wt = weights[rc.x * CELL_W + rc.y];
+    const int3 vid = triangle(wt.w & 3, j * VCOLS, (j + 1) * VCOLS, i, odd);
+    const int ym = y % TORUS_H, xm = x % TORUS_W;
+    const int4 v0 = vertices[vid.x], v1 = vertices[vid.y], v2 = vertices[vid.z];
+    const int3 acc = wt.x * level(gauss, v0, window_pixel(v0, ym, xm)) + wt.y * level(gauss, v1, window_pixel(v1, ym, xm))
+                   + wt.z * level(gauss, v2, window_pixel(v2, ym, xm));
+    const int3 q = inverse_index(acc);
+    put(out + ((size_t)y * width + x) * PIXEL_BYTES, inverse[q.x], inverse[N_INVERSE + q.y], inverse[2 * N_INVERSE + q.z]);
 }
