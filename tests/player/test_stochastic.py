@@ -141,6 +141,8 @@ def test_an_output_larger_than_the_torus_has_no_period(quilted):
         p.max_shift = 0.0
         before = p.next_frame()
     with TilesPlayer(path, size=size, backend=backend, seed=1) as p:
+        assert p.layout == "torus"  # the default: the torus's speed
+    with TilesPlayer(path, size=size, backend=backend, seed=1, layout="auto") as p:
         assert p.layout == "stochastic"
         p.max_shift = 0.0
         frames = np.stack([p.next_frame() for _ in range(4)])
@@ -159,27 +161,34 @@ def test_an_output_larger_than_the_torus_has_no_period(quilted):
 def test_backends_agree_and_state_restores(quilted):
     _, path = quilted
     size = (250, 330)
-    with TilesPlayer(path, size=size, backend="numpy", seed=6, tone=(120, 110, 100)) as ref:
+    with TilesPlayer(path, size=size, backend="numpy", seed=6, tone=(120, 110, 100), layout="auto") as ref:
         want = [ref.next_frame() for _ in range(3)]
         state = ref.get_state()
         more = ref.next_frame()
-    with TilesPlayer(path, size=size, backend=best_backend(), seed=6, tone=(120, 110, 100)) as p:
+    with TilesPlayer(path, size=size, backend=best_backend(), seed=6, tone=(120, 110, 100), layout="auto") as p:
         assert p.layout == "stochastic"
         for frame in want:
             assert np.array_equal(p.next_frame(), frame)
         p.next_frame()
         p.set_state(state)
         assert np.array_equal(p.next_frame(), more)
-    with TilesPlayer(path, size=size, backend="numpy", seed=7) as other:
+    with TilesPlayer(path, size=size, backend="numpy", seed=7, layout="auto") as other:
         assert not np.array_equal(other.next_frame(), want[0])
 
 
 def test_time_offsets_follow_the_cell_field(quilted):
     _, path = quilted
-    with TilesPlayer(path, size=(300, 400), backend="numpy", seed=2) as p:
+    with TilesPlayer(path, size=(300, 400), backend="numpy", seed=2, layout="stochastic") as p:
         p.max_shift = 6.0
         offsets = p.engine.time_map
         assert offsets.shape == p.engine.tmap_shape
         assert 0 <= offsets.min() and offsets.max() <= 6.0 and offsets.std() > 0.5
+        # an epoch moves on one map: the target becomes the time map (next_time_map)
+        p.epoch = 2
+        target = p.engine.target_map
+        assert not np.array_equal(target, offsets)
+        p.next_frame()
+        p.next_frame()
+        assert np.array_equal(p.engine.time_map, target)
         p.max_shift = 0.0
         assert (p.engine.time_map == 0).all()
