@@ -281,7 +281,7 @@ class StochasticOpenCL(Stochastic):
         th, tw = self.torus.shape[1:3]
         ch, cw = self.cell
         # the blend pixels of one cell (pass 2 runs over them at every cell): (r, c) pairs
-        self._blend = np.ascontiguousarray(np.argwhere(self.weights[..., 3] < 4).astype(np.int32).reshape(-1, 2))
+        self._runs = blend_runs(self.weights, RUN)
         self._cells = ((h - 1) // ch + 1, (w - 1 + cw) // cw + 1)
         defines = {
             "TORUS_H": th,
@@ -292,7 +292,7 @@ class StochasticOpenCL(Stochastic):
             "CELL_W": self.cell[1],
             "VCOLS": self.tmap_shape[1],
             "CELLS_X": self._cells[1],
-            "NBLEND": len(self._blend),
+            "NRUNS": len(self._runs),
             "RUN": RUN,
             "N_INVERSE": N_INVERSE,
             **self.format.defines,
@@ -310,8 +310,13 @@ class StochasticOpenCL(Stochastic):
         self._d_vertices = cl.Buffer(self.ctx, mf.READ_ONLY, self._vtab.nbytes)
         self._d_inverse = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * N_INVERSE)
         self._d_tone = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * 256)
-        blend = self._blend if len(self._blend) else np.zeros((1, 2), np.int32)  # no empty buffer
-        self._d_blend = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blend)
+        runs = self._runs if len(self._runs) else np.zeros((1, 4), np.int32)  # no empty buffer
+        self._d_blend = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=runs)
+        wq = blend_weights(self.weights)[..., :3].astype(np.uint16)
+        wbytes = np.ascontiguousarray(np.repeat(np.moveaxis(wq, -1, 0)[..., None], 3, -1))  # (3, ch, cw, 3)
+        self._d_wbytes = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=wbytes)
+        chan = (np.arange(3 * RUN) % 3 * N_INVERSE).astype(np.int32)
+        self._d_chan = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=chan)
         self._k_copy = Kernel(prog, "stochastic_copy")
         self._k_copy.set(
             torus=self._d_torus,
@@ -326,7 +331,9 @@ class StochasticOpenCL(Stochastic):
         self._k.set(
             gauss=self._d_gauss,
             weights=self._d_weights,
-            blend=self._d_blend,
+            wbytes=self._d_wbytes,
+            chan=self._d_chan,
+            runs=self._d_blend,
             vertices=self._d_vertices,
             inverse=self._d_inverse,
             width=np.int32(w),
@@ -335,7 +342,7 @@ class StochasticOpenCL(Stochastic):
         self._out = FrameOut(self.ctx, self.queue, self._k, "out", h * w * self.format.bytes)
         self.direct = self._out.direct
         self._copy_size = (-(-w // RUN), h)
-        self._blend_size = (_round_up(max(1, len(self._blend)), GROUP), self._cells[0] * self._cells[1])
+        self._blend_size = (_round_up(max(1, len(self._runs)), GROUP), self._cells[0] * self._cells[1])
         self._upload_tables()
 
     def _upload_tables(self) -> None:
@@ -373,10 +380,31 @@ class StochasticOpenCL(Stochastic):
     def close(self) -> None:
         self.queue.finish()
         held = ("_d_torus", "_d_gauss", "_d_weights", "_d_copy", "_d_gains", "_d_blend", "_d_vertices", "_d_inverse")
+        held += ("_d_wbytes", "_d_chan")
         for name in (*held, "_d_tone"):
             buf = self.__dict__.pop(name, None)
             if buf is not None:
                 buf.release()
+
+
+def blend_runs(weights: np.ndarray, run: int) -> np.ndarray:
+    """``(n, 4)`` int32 ``(r, c, length, 0)``: the blend pixels of one cell of ``weights``
+    (:func:`~.stochastic_reference.weight_table`) in runs of at most ``run`` along a row, each in
+    one triangle (so its pixels blend the same three windows)."""
+    out = []
+    code = weights[..., 3].astype(np.int64)
+    for r in range(code.shape[0]):
+        c = 0
+        while c < code.shape[1]:
+            if code[r, c] >= 4:
+                c += 1
+                continue
+            n = 1
+            while n < run and c + n < code.shape[1] and code[r, c + n] == code[r, c]:
+                n += 1
+            out.append((r, c, n, 0))
+            c += n
+    return np.array(out, np.int32).reshape(-1, 4)
 
 
 def _round_up(v: int, m: int) -> int:

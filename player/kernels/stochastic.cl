@@ -23,12 +23,12 @@
 // out = inverse[ch][inverse_index(W0 d0 + W1 d1 + W2 d2)] (the inverse table holds the tone too).
 //
 // Two passes: stochastic_copy draws every pixel as one window alone would, stochastic_blend then
-// draws the blend pixels only (a list of one cell's, at every cell), so neither branches on the
+// draws the blend pixels only (a list of one cell's runs, at every cell), so neither branches on the
 // pixel's kind. Each window is read with weight 0 too where it has one (it adds nothing).
 //
 // Defines: TORUS_H, TORUS_W, TORUS_WP (its row pitch, TORUS_W + RUN), NFRAMES (the stored torus), CELL_H, CELL_W (triangle rows and
-// width, CELL_W even), VCOLS (vertex columns per row), CELLS_X (cells per band), NBLEND (blend
-// pixels per cell), RUN (pixels per work-item of pass 1), N_INVERSE, PIXEL_BYTES, R_AT, G_AT,
+// width, CELL_W even), VCOLS (vertex columns per row), CELLS_X (cells per band), NRUNS (runs of
+// blend pixels per cell), RUN (pixels per work-item of pass 1), N_INVERSE, PIXEL_BYTES, R_AT, G_AT,
 // B_AT, A_AT (output pixel layout; A_AT -1: none).
 
 inline void put(__global uchar *o, const uchar r, const uchar g, const uchar b)
@@ -157,12 +157,28 @@ __kernel void stochastic_copy(
     }
 }
 
-// Pass 2, one work-item per blend pixel: blend[k] = (r, c) of the k-th blend pixel of a cell
-// (NBLEND of them), dimension 1 the cell (band j = id / CELLS_X, cell i = id - j CELLS_X).
+// one blend pixel (y, x) of weights wt, its three windows v (torus pixels p)
+inline void blend_pixel(__global const uchar *gauss, __global const uchar *inverse, __global uchar *o, const int4 wt,
+                        const int4 v0, const int4 v1, const int4 v2, const int ym, const int xm)
+{
+    const int3 acc = wt.x * level(gauss, v0, window_pixel(v0, ym, xm)) + wt.y * level(gauss, v1, window_pixel(v1, ym, xm))
+                   + wt.z * level(gauss, v2, window_pixel(v2, ym, xm));
+    const int3 q = inverse_index(acc);
+    put(o, inverse[q.x], inverse[N_INVERSE + q.y], inverse[2 * N_INVERSE + q.z]);
+}
+
+// Pass 2, one work-item per run of blend pixels: runs[k] = (r, c, n) of a cell, n <= RUN blend
+// pixels from (r, c) on in one triangle (NRUNS of them), dimension 1 the cell (band j = id /
+// CELLS_X, cell i = id - j CELLS_X). A whole run inside the output is blended with whole
+// vectors (bytes of the run: wbytes holds each pixel's weights per byte, W_k at
+// [(k CELL_H + r) CELL_W 3 + 3 c + ch]; chan the inverse table's offset of each byte), the
+// inverse looked up byte by byte; other runs pixel by pixel, the same integers.
 __kernel void stochastic_blend(
     __global const uchar *gauss,      // NFRAMES x TORUS_H x TORUS_WP x 3: the Gaussianized torus
     __global const int4 *weights,     // CELL_H x CELL_W: (W0, W1, W2) in 256ths, code
-    __global const int2 *blend,       // NBLEND: (r, c) of the blend pixels of a cell
+    __global const ushort *wbytes,    // 3 x CELL_H x CELL_W x 3: the weights per byte
+    __global const int *chan,         // 3 RUN: N_INVERSE times the channel of each byte of a run
+    __global const int4 *runs,        // NRUNS: (r, c, n, 0)
     __global const int4 *vertices,    // rows x VCOLS
     __global const uchar *inverse,    // 3 x N_INVERSE: the Gaussianizing table's inverse, toned
     __global uchar *out,
@@ -171,22 +187,54 @@ __kernel void stochastic_blend(
 {
     const int k = get_global_id(0);
     const int cell = get_global_id(1);
-    if (k >= NBLEND)
+    if (k >= NRUNS)
         return;
     const int j = cell / CELLS_X;
     const int i = cell - j * CELLS_X;
-    const int2 rc = blend[k];
+    const int4 run = runs[k];
     const int odd = j & 1;
-    const int y = j * CELL_H + rc.x;
-    const int x = i * CELL_W + rc.y - CELL_W + odd * (CELL_W / 2);
-    if (y >= height || x < 0 || x >= width)
+    const int y = j * CELL_H + run.x;
+    const int x0 = i * CELL_W + run.y - CELL_W + odd * (CELL_W / 2);
+    if (y >= height || x0 >= width || x0 + run.z <= 0)
         return;
-    const int4 wt = weights[rc.x * CELL_W + rc.y];
-    const int3 vid = triangle(wt.w & 3, j * VCOLS, (j + 1) * VCOLS, i, odd);
-    const int ym = y % TORUS_H, xm = x % TORUS_W;
+    const int4 wt0 = weights[run.x * CELL_W + run.y];
+    const int3 vid = triangle(wt0.w & 3, j * VCOLS, (j + 1) * VCOLS, i, odd);
     const int4 v0 = vertices[vid.x], v1 = vertices[vid.y], v2 = vertices[vid.z];
-    const int3 acc = wt.x * level(gauss, v0, window_pixel(v0, ym, xm)) + wt.y * level(gauss, v1, window_pixel(v1, ym, xm))
-                   + wt.z * level(gauss, v2, window_pixel(v2, ym, xm));
-    const int3 q = inverse_index(acc);
-    put(out + ((size_t)y * width + x) * PIXEL_BYTES, inverse[q.x], inverse[N_INVERSE + q.y], inverse[2 * N_INVERSE + q.z]);
+    const int ym = y % TORUS_H;
+#if PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2
+    if (run.z == RUN && x0 >= 0 && x0 + RUN <= width) {
+        const int xm = x0 % TORUS_W;
+        __global const uchar *g0 = gauss + (size_t)window_pixel(v0, ym, xm) * 3;
+        __global const uchar *g1 = gauss + (size_t)window_pixel(v1, ym, xm) * 3;
+        __global const uchar *g2 = gauss + (size_t)window_pixel(v2, ym, xm) * 3;
+        const size_t frame = (size_t)(TORUS_H * TORUS_WP) * 3;
+        __global const ushort *w = wbytes + (size_t)(run.x * CELL_W + run.y) * 3;
+        const size_t wk = (size_t)CELL_H * CELL_W * 3;
+        __global uchar *o = out + ((size_t)y * width + x0) * 3;
+        for (int q = 0; q < 3; ++q) {
+            int16 acc = convert_int16(vload16(q, w)) * ((255 - v0.w) * convert_int16(vload16(q, g0 + v0.z * frame))
+                        + v0.w * convert_int16(vload16(q, g0 + next_frame(v0.z) * frame)) - 128 * 255);
+            acc += convert_int16(vload16(q, w + wk)) * ((255 - v1.w) * convert_int16(vload16(q, g1 + v1.z * frame))
+                   + v1.w * convert_int16(vload16(q, g1 + next_frame(v1.z) * frame)) - 128 * 255);
+            acc += convert_int16(vload16(q, w + 2 * wk)) * ((255 - v2.w) * convert_int16(vload16(q, g2 + v2.z * frame))
+                   + v2.w * convert_int16(vload16(q, g2 + next_frame(v2.z) * frame)) - 128 * 255);
+            const int16 u = acc + (1 << 25);
+            const int16 e = clamp((((u >> 8) * 257 + 2048) >> 12) - (8224 - N_INVERSE / 2), 0, N_INVERSE - 1)
+                          + vload16(q, chan);
+            int at[16];
+            uchar value[16];
+            vstore16(e, 0, at);
+            for (int l = 0; l < 16; ++l)
+                value[l] = inverse[at[l]];
+            vstore16(vload16(0, value), q, o);
+        }
+        return;
+    }
+#endif
+    for (int n = 0; n < run.z; ++n) {
+        const int x = x0 + n;
+        if (x >= 0 && x < width)
+            blend_pixel(gauss, inverse, out + ((size_t)y * width + x) * PIXEL_BYTES, weights[run.x * CELL_W + run.y + n],
+                        v0, v1, v2, ym, x % TORUS_W);
+    }
 }
