@@ -141,8 +141,6 @@ def test_an_output_larger_than_the_torus_has_no_period(quilted):
         p.max_shift = 0.0
         before = p.next_frame()
     with TilesPlayer(path, size=size, backend=backend, seed=1) as p:
-        assert p.layout == "torus"  # the default: the torus's speed
-    with TilesPlayer(path, size=size, backend=backend, seed=1, layout="auto") as p:
         assert p.layout == "stochastic"
         p.max_shift = 0.0
         frames = np.stack([p.next_frame() for _ in range(4)])
