@@ -1,13 +1,14 @@
 """The engines that draw the modes' frames, one module each, and the interface they share.
 
 A mode holds one :class:`Engine` in ``player.engine``: :mod:`.projection` (lds, mixture),
-:mod:`.gather` (tiles), :mod:`.runs` (evolve) or :mod:`.blend` (turnpoints, with :mod:`.warp` for
-motion-compensated jumps); the projection engine adds a model's fine detail (:mod:`.detail`) in
-the same pass. Each is a pair of an
-OpenCL engine and its numpy reference computing the same integers, opened by
+:mod:`.gather` (tiles), :mod:`.stochastic` (tiles above the torus's size), :mod:`.runs`
+(evolve) or :mod:`.blend` (turnpoints, with :mod:`.warp` for motion-compensated jumps); the
+projection engine adds a model's fine detail (:mod:`.detail`) in the same pass. Each is a pair
+of an OpenCL engine and its numpy reference computing the same integers, opened by
 :func:`open_engine`; each OpenCL engine draws with the kernel of its name
-(``kernels/projection.cl``, ``kernels/gather.cl``, ``kernels/runs.cl``, ``kernels/blend.cl``,
-``kernels/warp.cl``). :mod:`.base` holds what the OpenCL engines share.
+(``kernels/projection.cl``, ``kernels/gather.cl``, ``kernels/stochastic.cl``,
+``kernels/runs.cl``, ``kernels/blend.cl``, ``kernels/warp.cl``). :mod:`.base` holds what the
+OpenCL engines share.
 
 Examples
 --------
@@ -41,6 +42,7 @@ ENGINES: dict[str, tuple[str, str, str]] = {
     "gather": ("gather", "GatherReference", "GatherOpenCL"),
     "runs": ("runs", "RunsReference", "RunsOpenCL"),
     "blend": ("blend", "BlendReference", "BlendOpenCL"),
+    "stochastic": ("stochastic", "StochasticReference", "StochasticOpenCL"),
 }
 
 

@@ -1,7 +1,7 @@
 """The engine layer: what draws a mode's frames, and what the engines share.
 
 A mode (a :class:`~dynatex.player.base.Player`) is a model, a clock and controls; its
-frames come from one engine, ``player.engines``, of one of four kinds, each a pair of an
+frames come from one engine, ``player.engines``, of one of five kinds, each a pair of an
 OpenCL engine and its numpy reference behind one interface:
 
 =============  ===========================  ======================================
@@ -9,6 +9,7 @@ engine         module                        draws
 =============  ===========================  ======================================
 projection     :mod:`.projection`           ``mean + coef @ basis`` (lds, mixture)
 gather         :mod:`.gather`               stored pixels at per-pixel times (tiles)
+stochastic     :mod:`.stochastic`           blended torus windows (tiles above the torus)
 runs           :mod:`.runs`                 a quilt's runs at per-block times (evolve)
 blend          :mod:`.blend`                weighted sums of stored frames (turnpoints)
 =============  ===========================  ======================================
@@ -117,6 +118,11 @@ class FrameOut:
         while len(self._held) > HELD_ARRAYS:
             self._held.popitem(last=False)
         return buf
+
+    def destination(self, out: np.ndarray | None = None):
+        """The buffer the frame ending in ``out`` (None: the device's own) is written to, for a
+        kernel that runs before :meth:`launch` on the same frame (an earlier pass)."""
+        return self._host_buffer(out) if self.direct and out is not None else self.buffer
 
     def launch(
         self,

@@ -269,6 +269,34 @@ def _warp_check(format: str, step: int) -> Callable[[str], str | None]:
     return check
 
 
+def _stochastic_check(format: str, toned: bool) -> Callable[[str], str | None]:
+    """The stochastic tiling engine against its reference, exactly, on a random torus and time
+    offsets faded between two maps, with a tone or without."""
+
+    def check(device: str) -> str | None:
+        from ..engines.stochastic import StochasticOpenCL
+
+        rng = np.random.default_rng(11)
+        torus = rng.integers(0, 256, (5, 30, 96, 3), dtype=np.uint8)
+        cell = (9, 14) if toned else (20, 64)  # small cells blend almost everywhere
+        s = StochasticOpenCL(torus, (41, 133), device=device, seed=2, cell=cell, format=format)
+        try:
+            s.set_time_map(
+                rng.uniform(-3, 9, s.tmap_shape).astype(np.float32), rng.uniform(0, 4, s.tmap_shape).astype(np.float32)
+            )
+            if toned:
+                s.set_tones(np.array([[1.2, 0.9, 1.0]], np.float32))
+            for t, fade in ((0.0, 0.0), (2.3, 0.5), (-7.75, 1.0)):
+                problem = _compare(f"t={t}", s.render(t, fade=fade), s.render_reference(t, fade=fade), 0, 0.0)
+                if problem:
+                    return problem
+        finally:
+            s.close()
+        return None
+
+    return check
+
+
 _TILES = ("tiles", {"seed": 3, "size": (136, 72), "tone": "consensus"})
 
 #: name -> check(device) returning None or what failed; run in this order, portable kernels only
@@ -279,6 +307,9 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
         cell=None, time_step=8, wrap="pingpong", interpolate=False
     ),
     "gather: cell grid, time step 3": _gather_check(cell=(5, 7), time_step=3, wrap="loop"),
+    "stochastic tiling, RGB": _stochastic_check("RGB", False),
+    "stochastic tiling, RGB, toned": _stochastic_check("RGB", True),
+    "stochastic tiling, BGRA, toned": _stochastic_check("BGRA", True),
     "projection with detail, RGB": _detail_check(3, "RGB"),
     "projection with detail, grey to BGRA": _detail_check(1, "BGRA"),
     "mode lds, float32": _mode_check("lds", {"seed": 3}),

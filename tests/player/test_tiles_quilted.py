@@ -71,7 +71,7 @@ def test_the_player_shows_a_window_of_the_torus(quilted):
     torus = _torus(model)
     ch, cw = model.tile_size
     rows, cols = model.torus
-    with TilesPlayer(path, size=(300, 400), backend="numpy", seed=3) as p:
+    with TilesPlayer(path, size=(300, 400), backend="numpy", seed=3, layout="torus") as p:
         p.max_shift = 0.0
         dy, dx = divmod(int(p.arrangement[0, 0]), cols)
         expect_cells = ((np.arange(p.grid_shape[0])[:, None] + dy) % rows) * cols + (

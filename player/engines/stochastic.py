@@ -1,0 +1,411 @@
+"""Stochastic tiling of a quilted torus: tiles of any size without a period.
+
+A quilted tile set is one seamless torus (at most 768 px a side); an output larger than it,
+laid out as the torus edge to edge, repeats with the torus's period. Here the output is
+covered by a triangle grid instead (Heitz and Neyret, High-Performance By-Example Noise
+using a Histogram-Preserving Blending Operator, 2018): every vertex shows its own window of
+the torus (a random offset, and its own time offset, so windows play out of step), and a
+pixel blends the windows of its triangle's three vertices. The blend is Heitz and Neyret's
+variance-preserving one in a Gaussianized space: each channel value goes through a table
+``T`` (built at open from the torus's histogram) that makes it standard normal, the windows
+are summed with weights ``w_i / sqrt(sum w_j^2)`` (the sum keeps the variance, so contrast
+does not wash out where windows meet), and the inverse of ``T`` gives the channel back with
+the torus's histogram. Weights are the barycentric coordinates raised to ``sharpness`` and
+renormalised, and those under ``CUTOFF`` dropped, so each vertex shows its window alone
+over most of its hexagon (a plain copy, as the gather draws) and windows meet in bands
+along the hexagons' edges, narrow enough not to ghost. Windows span at most half the
+torus, so a window never shows the torus's period.
+
+What is fixed at open: the torus and its Gaussianized copy (each channel through ``T``, stored
+as bytes as the paper stores it: 32 levels a standard deviation), the pattern of weights of one
+grid cell (:func:`~.stochastic_reference.weight_table`), the window offsets (from the seed).
+Per frame the host computes each vertex's stored frame and blend weight (a few hundred
+vertices at 4K) and uploads them; the kernels (``kernels/stochastic.cl``) draw in two passes
+that do not branch on a pixel's kind: every pixel copied from the window of its hexagon
+(whole vectors where a run of 16 pixels lies in one window), then the blend pixels alone (a
+list of one cell's, at every cell) blended in integers from the Gaussianized copy, with one
+inverse lookup per channel. The numpy reference
+:func:`~.stochastic_reference.stochastic_reference` computes the same integers, so the two
+backends agree exactly (tested on every verified device); the 8-bit Gaussianized copy gives a
+value back within one level (98-99%; within 4 in a sparse tail), in the blend bands only.
+
+Examples
+--------
+>>> import numpy as np
+>>> torus = np.random.default_rng(0).integers(0, 256, (4, 40, 48, 3), dtype=np.uint8)
+>>> from dynatex.player.engines import open_engine
+>>> s = open_engine("stochastic", torus, (100, 150), seed=1)      # no ctx: the numpy reference
+>>> s.set_time_map(np.zeros(s.tmap_shape, np.float32))
+>>> out = np.empty(s.out_shape, np.uint8)
+>>> s.draw(out, 0.0)                                               # the frame is in out
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ...checks import check_float, check_out
+from ...errors import InvalidArgumentError
+from ..pixels import pixel_format
+from .stochastic_reference import (
+    N_INVERSE,
+    SHARPNESS,
+    blend_weights,
+    copy_table,
+    gauss_tables,
+    gaussianize,
+    stochastic_reference,
+    tone_gains,
+    triangle_cell,
+    vertex_grid,
+    vertex_pixels,
+    vertex_table,
+    weight_table,
+)
+
+RUN = 16  # output pixels per work-item of pass 1 (whole vectors where one window shows)
+GROUP = 16  # work-items per work-group along a cell's blend pixels (pass 2)
+ROWS = 256  # output rows per block of the numpy reference (bounded memory)
+
+
+class Stochastic:
+    """Frames of the stochastic layout of one ``torus`` ``(L, TH, TW, 3)`` uint8 at ``out_size``.
+
+    The interface of both engines (:func:`~dynatex.player.engines.open_engine` picks one), shaped
+    like the gather engine's where a tiles player uses it: :attr:`tmap_shape` is the vertex grid
+    and the time maps hold one offset per vertex (frames; :meth:`set_time_map` with a target fades
+    between two, ``draw``'s ``fade``; :meth:`next_time_map` moves on one map; nothing to smooth:
+    the blend spreads a window's offset), :meth:`set_tones` takes the tone table of the gather
+    (its first row's gains), :meth:`draw` draws a frame at time ``t``.
+    ``seed`` draws the window offsets; ``hist`` ``(3, 256)`` (default: the torus's own) builds the
+    Gaussianizing tables.
+    """
+
+    backend = ""
+
+    def __init__(
+        self,
+        torus: np.ndarray,
+        out_size: Sequence[int],
+        *,
+        seed: int = 0,
+        cell: Sequence[int] | None = None,
+        sharpness: float = SHARPNESS,
+        format: str = "RGB",
+    ) -> None:
+        torus = np.asarray(torus)
+        if torus.dtype != np.uint8 or torus.ndim != 4 or torus.shape[3] != 3 or torus.shape[0] < 1:
+            raise InvalidArgumentError(f"torus must be uint8 (L, h, w, 3) with L >= 1, not {torus.dtype} {torus.shape}")
+        self.torus = np.ascontiguousarray(torus)
+        self.n_frames, th, tw = (int(v) for v in torus.shape[:3])
+        h, w = (int(v) for v in out_size)
+        self.format = pixel_format(format)
+        self.out_shape = (h, w, self.format.bytes)
+        self.cell = triangle_cell((th, tw)) if cell is None else (int(cell[0]), int(cell[1]))
+        self.weights = weight_table(self.cell, check_float("sharpness", sharpness, 1.0, 64.0))
+        self.tmap_shape = vertex_grid((h, w), self.cell)
+        self.vertex_pixels = vertex_pixels((h, w), self.cell)
+        self.direct = False
+        sample = self.torus[:: max(1, self.n_frames // 16)].reshape(-1, 3)
+        self._hist = np.stack([np.bincount(sample[:, ch], minlength=256) for ch in range(3)]).astype(np.float64)
+        self.set_windows(seed)
+        self._tmap = np.zeros(self.tmap_shape, np.float32)
+        self._target: np.ndarray | None = None
+        self._gain = np.ones(3)
+        self._tables = gauss_tables(self._hist)
+        self.gauss_torus = gaussianize(self.torus, self._tables[0])
+        self._last_t, self._last_fade = 0.0, 0.0
+
+    # -- what an engine implements --------------------------------------------------------------
+    def _upload_tables(self) -> None:
+        """Put the Gaussianizing, inverse and tone tables where the frames are drawn."""
+
+    def _launch(self, vertices: np.ndarray, out: np.ndarray):
+        """Start the frame of ``vertices`` into ``out``; None or an event."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release what the engine holds on a device (nothing for the reference)."""
+
+    # -- inputs --------------------------------------------------------------------------------
+    def set_windows(self, seed: int) -> None:
+        """Draw every vertex's window offset (into the torus) from ``seed``."""
+        rng = np.random.default_rng([int(seed), 0x57C4])
+        th, tw = self.torus.shape[1:3]
+        self._offsets = np.stack(
+            [rng.integers(0, th, self.tmap_shape), rng.integers(0, tw, self.tmap_shape)], -1
+        ).astype(np.int64)
+
+    def set_time_map(self, tmap: np.ndarray, target: np.ndarray | None = None) -> None:
+        """Per-vertex time offsets (frames, :attr:`tmap_shape`), and optionally the map they fade toward."""
+        maps = []
+        for name, m in (("tmap", tmap), ("target", target)):
+            if m is None:
+                maps.append(None)
+                continue
+            m = np.asarray(m, np.float32)
+            if m.shape != self.tmap_shape or not np.isfinite(m).all():
+                raise InvalidArgumentError(f"{name} must be finite with shape {self.tmap_shape}, not {m.shape}")
+            maps.append(m.copy())
+        self._tmap, self._target = maps
+
+    @property
+    def time_map(self) -> np.ndarray:
+        """The per-vertex time offsets (a copy)."""
+        return self._tmap.copy()
+
+    @property
+    def target_map(self) -> np.ndarray | None:
+        """The per-vertex offsets the time map fades toward, or None (a copy)."""
+        return None if self._target is None else self._target.copy()
+
+    def smooth_time_map(self, sigma: float) -> None:
+        """Nothing to smooth: a window keeps one offset and the blend spreads it (``sigma`` checked)."""
+        check_float("sigma", sigma, 0.0, 1e4)
+
+    def next_time_map(self, target: np.ndarray, sigma: float = 0.0) -> None:
+        """Move on one map: the target becomes the time map and ``target`` the new target
+        (``sigma`` as :meth:`smooth_time_map`). Needs a target set."""
+        if self._target is None:
+            raise InvalidArgumentError("next_time_map needs a target: set one with set_time_map(tmap, target)")
+        self.smooth_time_map(sigma)
+        self.set_time_map(self._target, target)
+
+    def set_tones(self, tones: np.ndarray, offsets: np.ndarray | None = None) -> None:
+        """Tone gains: the first row of a gather tone table ``(n, 3)`` (offsets must be 0)."""
+        tones = np.asarray(tones, np.float64)
+        if offsets is not None and np.any(np.asarray(offsets) != 0):
+            raise InvalidArgumentError("the stochastic layout tones by gain only; offsets must be 0")
+        self._gain = tones.reshape(-1, 3)[0]
+        self._tables = gauss_tables(self._hist, self._gain)
+        self._upload_tables()
+
+    def vertices(self, t: float, fade: float = 0.0) -> np.ndarray:
+        """The vertex table of the frame at ``t`` (:func:`vertex_table`)."""
+        return vertex_table(self._offsets, t, self._tmap, self._target, fade, self.n_frames)
+
+    # -- frames --------------------------------------------------------------------------------
+    def render(self, t: float, out: np.ndarray | None = None, *, fade: float = 0.0) -> np.ndarray:
+        """The frame at time ``t`` (frames of the torus's loop), into ``out`` when given."""
+        if out is None:
+            out = np.empty(self.out_shape, np.uint8)
+        event = self.start(t, out, fade=fade)
+        if event is not None:
+            event.wait()
+        return out
+
+    def start(self, t: float, out: np.ndarray, *, fade: float = 0.0):
+        """Start the frame at ``t`` into ``out``; returns None once it is there, or the event after which it is."""
+        check_out(out, self.out_shape)
+        if not math.isfinite(float(t)):
+            raise InvalidArgumentError(f"t must be finite, not {t!r}")
+        self._last_t, self._last_fade = float(t), check_float("fade", fade, 0.0, 1.0)
+        return self._launch(self.vertices(self._last_t, self._last_fade), out)
+
+    def draw(self, out: np.ndarray, t: float, *, fade: float = 0.0, wait: bool = True):
+        """:meth:`start`, in the words of every engine (:class:`~dynatex.player.engines.Engine`):
+        None once ``out`` holds the frame at ``t``, or with ``wait=False`` the event after which it does."""
+        event = self.start(t, out, fade=fade)
+        if wait and event is not None:
+            event.wait()
+            return None
+        return event
+
+    def render_reference(self, t: float, out: np.ndarray | None = None, *, fade: float = 0.0) -> np.ndarray:
+        """The numpy reference of :meth:`render` (either backend)."""
+        if out is None:
+            out = np.empty(self.out_shape, np.uint8)
+        vertices = self.vertices(float(t), fade)
+        h, w = self.out_shape[:2]
+        for r0 in range(0, h, ROWS):
+            rows = range(r0, min(r0 + ROWS, h))
+            rgb = stochastic_reference(
+                self.torus, self.gauss_torus, self.weights, vertices, *self._tables[1:], (h, w), rows=rows
+            )
+            self.format.from_rgb(rgb, out[r0 : rows.stop])
+        return out
+
+    def frame_traffic(self) -> dict[str, int]:
+        """Bytes a frame moves at least: ``output`` written, ``stored`` the torus's two frames
+        per window read (an upper bound: windows overlap in the torus)."""
+        h, w = self.out_shape[:2]
+        th, tw = self.torus.shape[1:3]
+        windows = int(np.prod(self.tmap_shape))
+        return {"output": h * w * self.format.bytes, "stored": 2 * 3 * min(h * w, windows * th * tw)}
+
+    @property
+    def bytes_per_frame(self) -> int:
+        """Bytes one render must move at least (:meth:`frame_traffic`)."""
+        return sum(self.frame_traffic().values())
+
+
+class StochasticReference(Stochastic):
+    """The numpy engine: every frame is :meth:`Stochastic.render_reference`."""
+
+    backend = "numpy"
+
+    def _launch(self, vertices: np.ndarray, out: np.ndarray):
+        self.render_reference(self._last_t, out, fade=self._last_fade)
+
+
+class StochasticOpenCL(Stochastic):
+    """Kernel ``stochastic`` (``kernels/stochastic.cl``) on a device; ``ctx``/``queue`` the player's."""
+
+    backend = "opencl"
+
+    def __init__(
+        self,
+        torus: np.ndarray,
+        out_size: Sequence[int],
+        *,
+        ctx: Any = None,
+        queue: Any = None,
+        device: str | None = None,
+        **options: Any,
+    ) -> None:
+        super().__init__(torus, out_size, **options)
+        import pyopencl as cl
+
+        from ..opencl.context import get_context
+        from ..opencl.programs import build_program
+        from .base import FrameOut, Kernel
+
+        self.ctx = get_context(device) if ctx is None else ctx
+        self.queue = cl.CommandQueue(self.ctx) if queue is None else queue
+        mf = cl.mem_flags
+        h, w = self.out_shape[:2]
+        th, tw = self.torus.shape[1:3]
+        ch, cw = self.cell
+        # the blend pixels of one cell (pass 2 runs over them at every cell): (r, c) pairs
+        self._runs = blend_runs(self.weights, RUN)
+        self._cells = ((h - 1) // ch + 1, (w - 1 + cw) // cw + 1)
+        defines = {
+            "TORUS_H": th,
+            "TORUS_W": tw,
+            "TORUS_WP": tw + RUN,
+            "NFRAMES": self.n_frames,
+            "CELL_H": self.cell[0],
+            "CELL_W": self.cell[1],
+            "VCOLS": self.tmap_shape[1],
+            "CELLS_X": self._cells[1],
+            "NRUNS": len(self._runs),
+            "RUN": RUN,
+            "N_INVERSE": N_INVERSE,
+            **self.format.defines,
+        }
+        prog = build_program(self.ctx, "stochastic.cl", defines)
+        # every torus row carries its first RUN pixels again, so a run of pass 1 never wraps
+        pad = np.arange(tw + RUN) % tw
+        for name, frames in (("_d_torus", self.torus), ("_d_gauss", self.gauss_torus)):
+            padded = np.ascontiguousarray(np.take(frames, pad, axis=2))
+            setattr(self, name, cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded))
+        self._d_copy = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=copy_table(self.weights))
+        self._d_gains = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * RUN * 4)
+        self._d_weights = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blend_weights(self.weights))
+        self._vtab = np.zeros(self.tmap_shape + (4,), np.int32)
+        self._d_vertices = cl.Buffer(self.ctx, mf.READ_ONLY, self._vtab.nbytes)
+        self._d_inverse = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * N_INVERSE)
+        self._d_tone = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * 256)
+        runs = self._runs if len(self._runs) else np.zeros((1, 4), np.int32)  # no empty buffer
+        self._d_blend = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=runs)
+        wq = blend_weights(self.weights)[..., :3].astype(np.uint16)
+        wbytes = np.ascontiguousarray(np.repeat(np.moveaxis(wq, -1, 0)[..., None], 3, -1))  # (3, ch, cw, 3)
+        self._d_wbytes = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=wbytes)
+        chan = (np.arange(3 * RUN) % 3 * N_INVERSE).astype(np.int32)
+        self._d_chan = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=chan)
+        self._k_copy = Kernel(prog, "stochastic_copy")
+        self._k_copy.set(
+            torus=self._d_torus,
+            copy=self._d_copy,
+            vertices=self._d_vertices,
+            tone=self._d_tone,
+            gains=self._d_gains,
+            width=np.int32(w),
+            height=np.int32(h),
+        )
+        self._k = Kernel(prog, "stochastic_blend")
+        self._k.set(
+            gauss=self._d_gauss,
+            weights=self._d_weights,
+            wbytes=self._d_wbytes,
+            chan=self._d_chan,
+            runs=self._d_blend,
+            vertices=self._d_vertices,
+            inverse=self._d_inverse,
+            width=np.int32(w),
+            height=np.int32(h),
+        )
+        self._out = FrameOut(self.ctx, self.queue, self._k, "out", h * w * self.format.bytes)
+        self.direct = self._out.direct
+        self._copy_size = (-(-w // RUN), h)
+        self._blend_size = (_round_up(max(1, len(self._runs)), GROUP), self._cells[0] * self._cells[1])
+        self._upload_tables()
+
+    def _upload_tables(self) -> None:
+        if not hasattr(self, "_k"):
+            return  # the base class sets its first tables before the kernel exists
+        import pyopencl as cl
+
+        _, inverse, tone = self._tables
+        gains = np.resize(tone_gains(self._gain), 3 * RUN).astype(np.uint32)  # byte b of a run: channel b % 3
+        for buf, host in (
+            (self._d_inverse, inverse),
+            (self._d_tone, tone),
+            (self._d_gains, gains),
+        ):
+            cl.enqueue_copy(self.queue, buf, np.ascontiguousarray(host), is_blocking=True)
+
+    def _passes(self, vertices: np.ndarray, out: np.ndarray | None) -> None:
+        """Upload ``vertices`` and run pass 1 into the frame's destination."""
+        import pyopencl as cl
+
+        self._vtab = np.ascontiguousarray(vertices, np.int32)
+        cl.enqueue_copy(self.queue, self._d_vertices, self._vtab, is_blocking=True)
+        self._k_copy.set(out=self._out.destination(out))
+        self._k_copy.launch(self.queue, self._copy_size, None)
+
+    def _launch(self, vertices: np.ndarray, out: np.ndarray):
+        self._passes(vertices, out)
+        return self._out.launch(out, self._blend_size, (GROUP, 1), wait=False)
+
+    def render_on_device(self, t: float, *, fade: float = 0.0) -> None:
+        """Both passes alone into the device's own frame buffer, waited for (the benchmarks' kernel time)."""
+        self._passes(self.vertices(float(t), fade), None)
+        self._out.launch_on_device(self._blend_size, (GROUP, 1)).wait()
+
+    def close(self) -> None:
+        self.queue.finish()
+        held = ("_d_torus", "_d_gauss", "_d_weights", "_d_copy", "_d_gains", "_d_blend", "_d_vertices", "_d_inverse")
+        held += ("_d_wbytes", "_d_chan")
+        for name in (*held, "_d_tone"):
+            buf = self.__dict__.pop(name, None)
+            if buf is not None:
+                buf.release()
+
+
+def blend_runs(weights: np.ndarray, run: int) -> np.ndarray:
+    """``(n, 4)`` int32 ``(r, c, length, 0)``: the blend pixels of one cell of ``weights``
+    (:func:`~.stochastic_reference.weight_table`) in runs of at most ``run`` along a row, each in
+    one triangle (so its pixels blend the same three windows)."""
+    out = []
+    code = weights[..., 3].astype(np.int64)
+    for r in range(code.shape[0]):
+        c = 0
+        while c < code.shape[1]:
+            if code[r, c] >= 4:
+                c += 1
+                continue
+            n = 1
+            while n < run and c + n < code.shape[1] and code[r, c + n] == code[r, c]:
+                n += 1
+            out.append((r, c, n, 0))
+            c += n
+    return np.array(out, np.int32).reshape(-1, 4)
+
+
+def _round_up(v: int, m: int) -> int:
+    return -(-v // m) * m
