@@ -107,6 +107,7 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p.add_argument("--no-motion-vectors", action="store_true", help="write the colour atlas only")
     p.add_argument(
         "--layout",
+        dest="file_layout",  # a player option of mode tiles is named layout
         choices=("atlas", "array"),
         default="atlas",
         help="atlas (default), or array: NAME_array_rgba8.raw, one RGBA8 layer per frame "
@@ -231,14 +232,14 @@ def run(args: argparse.Namespace) -> int:
     }
     packed = fb.packing(grid, frames.shape[1:3], args.packing)
     doc = fb.sidecar(
-        name, grid, fps=fps, loop=how, strength=strength, source=src, wrap=wrap, layout=args.layout, packed=packed
+        name, grid, fps=fps, loop=how, strength=strength, source=src, wrap=wrap, layout=args.file_layout, packed=packed
     )
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as exc:
         raise OutputError(f"cannot create output folder {out}: {exc.strerror or exc}") from None
     files = doc["files"]
-    if args.layout == "atlas":
+    if args.file_layout == "atlas":
         _write_png(os.path.join(out, files["color"]), fb.color_atlas(tiles, grid))
         if uv is not None:
             _write_png(os.path.join(out, files["motion_vectors"]), fb.vector_atlas(uv, grid, strength)[0])
