@@ -1,10 +1,11 @@
 """Mode tiles on small clips: straight-edged fragments of the quilted torus against the source.
 
     python benchmarks/small_clip_tiles.py CLIP [CLIP ...] [--blocks default,24,40] [--scale 5]
-        [--max-side 1024] [--frames 8] [--crop N] [--sheets DIR] [--json]
+        [--max-side 1024] [--frames 8] [--seeds 0] [--crop N] [--sheets DIR] [--json]
 
-For every clip and every quilt block size in ``--blocks`` (``default``: the analyzer's own
-choice, :func:`dynatex.analyzer.tiles.quilted.quilt_geometry`), analyzes the clip (tiles only),
+For every clip, every quilt block size in ``--blocks`` (``default``: the analyzer's own
+choice, :func:`dynatex.analyzer.tiles.quilted.quilt_geometry`) and every quilt seed in
+``--seeds`` (the lattice figure varies by about 0.03 between seeds), analyzes the clip (tiles only),
 plays ``--frames`` frames at ``--scale`` times the clip's size (each side at most
 ``--max-side``; ``--crop N``: the clip's central ``N x N`` pixels instead, a small clip cut
 from a large one) and prints:
@@ -43,7 +44,7 @@ from dynatex.player.modes.tiles import TilesPlayer  # noqa: E402
 from dynatex.tiledb import DatabaseWriter  # noqa: E402
 
 
-def figures(clip_path: str, block: int | None, args: argparse.Namespace, folder: Path) -> dict:
+def figures(clip_path: str, block: int | None, seed: int, args: argparse.Namespace, folder: Path) -> dict:
     name = Path(clip_path).name
     clip = load_clip_path(clip_path)
     if args.crop:
@@ -53,7 +54,7 @@ def figures(clip_path: str, block: int | None, args: argparse.Namespace, folder:
     src = clip.frames
     h, w = src.shape[1:3]
     size = (min(args.scale * h, args.max_side), min(args.scale * w, args.max_side))
-    model = learn_tiles(clip, tile=block)
+    model = learn_tiles(clip, tile=block, seed=seed)
     db = folder / f"{Path(clip_path).stem}_{args.crop}_{block or 'default'}.h5"
     with DatabaseWriter(db, overwrite=True) as wr:
         wr.put_texture("t", clip.source_info())
@@ -67,6 +68,7 @@ def figures(clip_path: str, block: int | None, args: argparse.Namespace, folder:
     res = {
         "clip": name,
         "blocks": "default" if block is None else str(block),
+        "seed": seed,
         "block": int(info["quilt_block"]),
         "cell": int(info["tile_h"]),
         "period": f"{info['period_w']}x{info['period_h']}",
@@ -78,7 +80,7 @@ def figures(clip_path: str, block: int | None, args: argparse.Namespace, folder:
     }
     if args.sheets is not None:
         args.sheets.mkdir(parents=True, exist_ok=True)
-        path = args.sheets / f"{Path(clip_path).stem}_{h}px_{res['size']}_block{res['block']}.png"
+        path = args.sheets / f"{Path(clip_path).stem}_{h}px_{res['size']}_block{res['block']}_seed{seed}.png"
         contact_sheet(src, out, str(path), rows=2, title=f"tiles {res['size']} block {res['block']} {name}")
     return res
 
@@ -90,6 +92,7 @@ def main() -> None:
     ap.add_argument("--scale", type=int, default=5)
     ap.add_argument("--max-side", type=int, default=1024)
     ap.add_argument("--frames", type=int, default=8)
+    ap.add_argument("--seeds", default="0", help="comma-separated quilt seeds")
     ap.add_argument("--crop", type=int, help="use the clip's central N x N pixels")
     ap.add_argument("--sheets", type=Path, help="write contact sheets here")
     ap.add_argument("--json", action="store_true")
@@ -97,8 +100,8 @@ def main() -> None:
     blocks = [None if b == "default" else int(b) for b in args.blocks.split(",") if b]
     with tempfile.TemporaryDirectory() as tmp:
         for clip_path in args.clips:
-            for block in blocks:
-                res = figures(clip_path, block, args, Path(tmp))
+            for block, seed in ((b, int(s)) for b in blocks for s in args.seeds.split(",")):
+                res = figures(clip_path, block, seed, args, Path(tmp))
                 if args.json:
                     print(json.dumps(res), flush=True)
                 else:
