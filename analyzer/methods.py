@@ -173,7 +173,7 @@ TILES_PARAMS = (
         None,
         "Tile size in pixels; with the quilted construction the quilt block size N.",
         optional=True,
-        default_doc="from the dominant spatial period; quilted: a third of the shorter side",
+        default_doc="from the dominant spatial period; quilted: a third of the shorter side (under 128 px at least 32)",
     ),
     Param(
         "construction",

@@ -22,6 +22,8 @@ from .stats import colour_stats, stationarity_info
 QUILT_MAX_RUN = 3  # blocks at most taken from one continuous piece of the clip, per direction
 QUILT_MIN_PERIOD = 512  # the torus is at least this large (and twice the clip) in each direction
 QUILT_MAX_PERIOD = 768  # ... but twice the clip only up to this
+QUILT_SMALL_SIDE = 128  # a clip with a shorter side under this gets larger, more overlapping blocks
+QUILT_SMALL_BLOCK = 32  # ... of at least this many pixels
 QUILT_MAX_LOOP = 64  # default longest loop of the quilted construction (the torus is stored whole)
 _QUILT_FEATURE_FRAMES = 12
 _QUILT_COMPONENTS = 8
@@ -33,24 +35,33 @@ def quilt_geometry(
     """``(block, step, cell, period)`` of the quilted torus for an ``h x w`` clip.
 
     Blocks of ``block`` pixels (default a third of the shorter side rounded to 8, in 16..128) overlap
-    by a quarter (``step = block - block // 4``); cells (the player's lattice, the stored
+    by a quarter (``step = block - block // 4``). A clip whose shorter side is under
+    :data:`QUILT_SMALL_SIDE` pixels gets blocks of at least :data:`QUILT_SMALL_BLOCK` pixels (at
+    most half its side, rounded down to 8) overlapping by half: with 24-pixel blocks overlapping by
+    a quarter a cut has 2 pixels to wander in, and a 64-pixel clip played at several times its
+    size is a mosaic of straight-edged blocks where the source has long streaks. Cells (the player's lattice, the stored
     tiles) are the fewest steps at least 64 pixels wide, so a 64-pixel run of the gather
     touches at most two cells; the period ``(py, px)`` is whole cells, at least 512 pixels
-    (four clip sides for a clip under 128 pixels) and twice the clip up to 768 pixels in
+    (four clip sides for a clip under 128 pixels, two cells at least) and twice the clip up to 768 pixels in
     each direction (the torus is stored whole: 768 x 768 x 64 frames is 113 MB) (or
     ``period``, rounded up to whole cells).
     """
+    small = min(h, w) < QUILT_SMALL_SIDE
     if block is None:
-        block = int(np.clip(round(min(h, w) / 3 / 8) * 8, 16, 128))
+        side = min(h, w)
+        block = int(np.clip(round(side / 3 / 8) * 8, QUILT_SMALL_BLOCK if small else 16, 128))
+        if small:  # enough clip places left to choose among
+            block = min(block, max(16, side // 2 // 8 * 8))
+        block = max(8, min(block, (side - 2) // 8 * 8))
     block = check_int("block", block, 8)
     if block + 2 > min(h, w):
         raise InvalidArgumentError(f"quilt block {block} (plus 2) is larger than the clip frame {h}x{w}")
-    step = block - block // 4
+    step = block - block // (2 if small else 4)
     cell = step * -(-64 // step)
     if period is None:
         want = (
-            max(min(QUILT_MIN_PERIOD, 4 * h), min(2 * h, QUILT_MAX_PERIOD)),
-            max(min(QUILT_MIN_PERIOD, 4 * w), min(2 * w, QUILT_MAX_PERIOD)),
+            max(min(QUILT_MIN_PERIOD, 4 * h), min(2 * h, QUILT_MAX_PERIOD), 2 * cell),
+            max(min(QUILT_MIN_PERIOD, 4 * w), min(2 * w, QUILT_MAX_PERIOD), 2 * cell),
         )
     else:
         try:

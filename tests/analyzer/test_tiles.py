@@ -15,12 +15,14 @@ from dynatex.analyzer.tiles import (
     find_loop,
     learn_tiles,
     looped_block,
+    quilt_geometry,
     ring_join,
     side_join,
     tile_period,
     transition_map,
     wang_edges,
 )
+from dynatex.analyzer.tiles.quilted import QUILT_SMALL_BLOCK, QUILT_SMALL_SIDE
 
 from ..conftest import wave_clip
 
@@ -266,3 +268,27 @@ def test_wang_tiles_join_where_edge_colours_match(wang_model):
 def test_wang_bad_options_are_clear_errors(kwargs, message):
     with pytest.raises(ValueError, match=message):
         learn_tiles(_stochastic(t=40), tile=16, min_loop=12, transition=4, **kwargs)
+
+
+@pytest.mark.parametrize("side", [10, 17, 18, 34, 48, 64, 100, 127, 128, 288, 1080])
+def test_quilt_block_follows_the_small_clip_rule(side):
+    """Under QUILT_SMALL_SIDE: blocks of at least QUILT_SMALL_BLOCK (at most half the side)
+    overlapping by half; above it: a third of the side overlapping by a quarter; always valid."""
+    block, step, (ch, cw), (py, px) = quilt_geometry(side, side + 20)
+    assert block % 8 == 0 and block + 2 <= side and ch % step == 0 and ch >= 64 and py % ch == 0
+    if side < QUILT_SMALL_SIDE:
+        assert step == block - block // 2
+        assert block <= max(16, side // 2) or block == (side - 2) // 8 * 8
+        assert block >= min(QUILT_SMALL_BLOCK, max(16, side // 2 // 8 * 8), (side - 2) // 8 * 8)
+    else:
+        assert step == block - block // 4
+        assert abs(block - min(max(side / 3, 16), 128)) <= 4
+
+
+@pytest.mark.parametrize("side", [12, 64])
+def test_small_clips_learn_a_quilted_torus_with_the_default_block(side):
+    frames = wave_clip(t=40, h=side, w=side)
+    m = learn_tiles(frames, construction="quilted", min_loop=16)
+    block, step, cell, _ = quilt_geometry(side, side)
+    assert (m.info["quilt_block"], m.info["quilt_step"]) == (block, step)
+    assert m.info["tile_h"] == cell[0] and m.tiles.shape[2:4] == cell
