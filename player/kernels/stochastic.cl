@@ -41,6 +41,13 @@ inline void put(__global uchar *o, const uchar r, const uchar g, const uchar b)
 #endif
 }
 
+// 16 pixels, their bytes in RGB order in rgb, to the output layout
+inline void put16(__global uchar *o, const uchar *rgb)
+{
+    for (int l = 0; l < 16; ++l)
+        put(o + l * PIXEL_BYTES, rgb[3 * l], rgb[3 * l + 1], rgb[3 * l + 2]);
+}
+
 // the torus pixel of window v at output (y, x), given ym = y mod TORUS_H and xm = x mod TORUS_W
 inline int window_pixel(const int4 v, const int ym, const int xm)
 {
@@ -109,7 +116,8 @@ inline ushort16 mix16(const ushort16 a, const ushort16 b, const int w)
 // at both its ends: a hexagon meets a row in one interval) is copied with whole vectors: the
 // torus rows carry RUN pixels of their start again (TORUS_WP = TORUS_W + RUN), so a run never
 // wraps; the tone of channel value m is min(255, (m gain + 128) >> 8), gain in 256ths per byte of
-// the run (gains[48]). Other runs, pixel by pixel, the same integers.
+// the run (gains[48]); formats other than RGB place the run's 48 bytes pixel by pixel from private
+// memory. Other runs, pixel by pixel, the same integers.
 __kernel void stochastic_copy(
     __global const uchar *torus,      // NFRAMES x TORUS_H x TORUS_WP x 3
     __global const uchar *copy,       // CELL_H x CELL_W: the hexagon's vertex (tri + 4 k)
@@ -131,21 +139,29 @@ __kernel void stochastic_copy(
     const int x1 = min(x0 + RUN, width);
     const int ym = y % TORUS_H;
     const int first = copy_vertex(copy, x0, r, top, bottom, odd);
-#if PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2
     if (x1 - x0 == RUN && first == copy_vertex(copy, x1 - 1, r, top, bottom, odd)) {
         const int4 v = vertices[first];
         const int p = window_pixel(v, ym, x0 % TORUS_W);
         __global const uchar *a = torus + ((size_t)v.z * (TORUS_H * TORUS_WP) + p) * 3;
         __global const uchar *b = torus + ((size_t)next_frame(v.z) * (TORUS_H * TORUS_WP) + p) * 3;
-        __global uchar *o = out + ((size_t)y * width + x0) * 3;
+        __global uchar *o = out + ((size_t)y * width + x0) * PIXEL_BYTES;
+#if PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2
         for (int q = 0; q < 3; ++q) {
             const ushort16 m = mix16(convert_ushort16(vload16(q, a)), convert_ushort16(vload16(q, b)), v.w);
             const uint16 toned = (convert_uint16(m) * vload16(q, gains) + (uint16)128) >> 8;
             vstore16(convert_uchar16(min(toned, (uint16)255)), q, o);
         }
+#else
+        uchar rgb[48];
+        for (int q = 0; q < 3; ++q) {
+            const ushort16 m = mix16(convert_ushort16(vload16(q, a)), convert_ushort16(vload16(q, b)), v.w);
+            const uint16 toned = (convert_uint16(m) * vload16(q, gains) + (uint16)128) >> 8;
+            vstore16(convert_uchar16(min(toned, (uint16)255)), q, rgb);
+        }
+        put16(o, rgb);
+#endif
         return;
     }
-#endif
     int xm = x0 % TORUS_W;
     for (int x = x0; x < x1; ++x, xm = xm + 1 == TORUS_W ? 0 : xm + 1) {
         const int4 v = vertices[copy_vertex(copy, x, r, top, bottom, odd)];
@@ -201,7 +217,6 @@ __kernel void stochastic_blend(
     const int3 vid = triangle(wt0.w & 3, j * VCOLS, (j + 1) * VCOLS, i, odd);
     const int4 v0 = vertices[vid.x], v1 = vertices[vid.y], v2 = vertices[vid.z];
     const int ym = y % TORUS_H;
-#if PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2
     if (run.z == RUN && x0 >= 0 && x0 + RUN <= width) {
         const int xm = x0 % TORUS_W;
         __global const uchar *g0 = gauss + (size_t)window_pixel(v0, ym, xm) * 3;
@@ -210,7 +225,10 @@ __kernel void stochastic_blend(
         const size_t frame = (size_t)(TORUS_H * TORUS_WP) * 3;
         __global const ushort *w = wbytes + (size_t)(run.x * CELL_W + run.y) * 3;
         const size_t wk = (size_t)CELL_H * CELL_W * 3;
-        __global uchar *o = out + ((size_t)y * width + x0) * 3;
+        __global uchar *o = out + ((size_t)y * width + x0) * PIXEL_BYTES;
+#if !(PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2)
+        uchar rgb[48];
+#endif
         for (int q = 0; q < 3; ++q) {
             int16 acc = convert_int16(vload16(q, w)) * ((255 - v0.w) * convert_int16(vload16(q, g0 + v0.z * frame))
                         + v0.w * convert_int16(vload16(q, g0 + next_frame(v0.z) * frame)) - 128 * 255);
@@ -226,11 +244,17 @@ __kernel void stochastic_blend(
             vstore16(e, 0, at);
             for (int l = 0; l < 16; ++l)
                 value[l] = inverse[at[l]];
+#if PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2
             vstore16(vload16(0, value), q, o);
+#else
+            vstore16(vload16(0, value), q, rgb);
+#endif
         }
+#if !(PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2)
+        put16(o, rgb);
+#endif
         return;
     }
-#endif
     for (int n = 0; n < run.z; ++n) {
         const int x = x0 + n;
         if (x >= 0 && x < width)

@@ -48,11 +48,12 @@ def quilted(tmp_path_factory):
         ("RGB", (24, 64), True),
         ("RGBA", (24, 64), False),
         ("BGRA", (11, 18), True),
+        ("BGRA", (24, 64), True),
     ],
 )
 def test_kernel_equals_its_reference(cl_device, format, cell, toned):
     """Small cells blend almost everywhere, large ones show single windows over most pixels (and
-    runs of 16 pixels in one window or one triangle: the kernels' vector paths, RGB only)."""
+    runs of 16 pixels in one window or one triangle: the kernels' vector paths, in every format)."""
     rng = np.random.default_rng(4)
     torus = rng.integers(0, 256, (7, 40, 100, 3), dtype=np.uint8)
     s = StochasticOpenCL(torus, (53, 197), device=cl_device, seed=5, cell=cell, format=format)
