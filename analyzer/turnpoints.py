@@ -277,11 +277,32 @@ def learn_turnpoints(
     """
     frames = clip_frames(clip)
     t = frames.shape[0]
-    n, s, r, min_symmetry, max_cost, max_ghost, warp = check_params(
-        "turnpoints", n=n, s=s, r=r, min_symmetry=min_symmetry, max_cost=max_cost, max_ghost=max_ghost, warp=warp
-    )
-    min_pairs, feature_size, taps, p, alpha, sigma, min_gap, min_prob, max_per_frame = check_params(
+    (
+        n,
+        s,
+        r,
+        min_symmetry,
+        max_cost,
+        max_ghost,
+        warp,
+        min_pairs,
+        feature_size,
+        taps,
+        p,
+        alpha,
+        sigma,
+        min_gap,
+        min_prob,
+        max_per_frame,
+    ) = check_params(
         "turnpoints",
+        n=n,
+        s=s,
+        r=r,
+        min_symmetry=min_symmetry,
+        max_cost=max_cost,
+        max_ghost=max_ghost,
+        warp=warp,
         min_pairs=min_pairs,
         feature_size=feature_size,
         taps=taps,

@@ -160,6 +160,17 @@ class FrameOut:
         return finish(event, wait)
 
 
+def context_and_queue(ctx: Any, queue: Any, device: str | None) -> tuple[Any, Any]:
+    """The owner's ``ctx`` and ``queue``, or for an engine used on its own (``ctx`` None) the
+    context of ``device`` (:func:`~dynatex.player.opencl.context.get_context`) and a new queue."""
+    import pyopencl as cl
+
+    from ..opencl.context import get_context
+
+    ctx = get_context(device) if ctx is None else ctx
+    return ctx, cl.CommandQueue(ctx) if queue is None else queue
+
+
 def finish(event, wait: bool):
     """``event`` completed and None when ``wait``, else ``event`` itself."""
     if wait:

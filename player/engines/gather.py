@@ -522,12 +522,11 @@ class GatherOpenCL(Gather):
         import pyopencl as cl
 
         from ..errors import OpenCLUnavailableError
-        from ..opencl.context import get_context, variant_verified
+        from ..opencl.context import variant_verified
         from ..opencl.programs import build_program
-        from .base import FrameOut, Kernel
+        from .base import FrameOut, Kernel, context_and_queue
 
-        self.ctx = get_context(device) if ctx is None else ctx
-        self.queue = cl.CommandQueue(self.ctx) if queue is None else queue
+        self.ctx, self.queue = context_and_queue(ctx, queue, device)
         mf = cl.mem_flags
         h, w = self.out_shape[:2]
         # the x86 variant only where the self-test verified it on this device

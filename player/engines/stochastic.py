@@ -270,12 +270,10 @@ class StochasticOpenCL(Stochastic):
         super().__init__(torus, out_size, **options)
         import pyopencl as cl
 
-        from ..opencl.context import get_context
         from ..opencl.programs import build_program
-        from .base import FrameOut, Kernel
+        from .base import FrameOut, Kernel, context_and_queue
 
-        self.ctx = get_context(device) if ctx is None else ctx
-        self.queue = cl.CommandQueue(self.ctx) if queue is None else queue
+        self.ctx, self.queue = context_and_queue(ctx, queue, device)
         mf = cl.mem_flags
         h, w = self.out_shape[:2]
         th, tw = self.torus.shape[1:3]
