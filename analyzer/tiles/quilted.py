@@ -133,16 +133,31 @@ def _blur_matrix(n: int, sigma: float) -> np.ndarray:
     return m / m.sum(axis=1, keepdims=True)
 
 
-def _low_pass(x: np.ndarray, m: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
-    """``x (L, B, B, 3)`` smoothed in space by ``m``; with ``weight (B, B)``, a normalised
-    convolution that ignores pixels of weight 0 (the torus not yet filled)."""
-    n, b = x.shape[:2]
-    y = x if weight is None else x * weight[None, :, :, None]
-    y = np.matmul(m, y.reshape(n, b, -1))  # along rows
-    y = np.matmul(m, y.reshape(n * b, b, -1)).reshape(x.shape)  # along columns
-    if weight is None:
-        return y
-    return y / np.maximum(m @ weight @ m.T, 1e-6)[None, :, :, None]
+def _smoother(n: int, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(up, down)``, ``(n, k)`` and ``(k, n)`` float32, whose product smooths one axis of length
+    ``n`` by a Gaussian of ``sigma`` pixels: ``down`` averages cells of about ``sigma // 2`` pixels and
+    smooths them, ``up`` interpolates back (a wide Gaussian costs no more than a narrow one)."""
+    f = max(1, int(sigma // 2))
+    if f == 1:
+        return np.eye(n, dtype=np.float32), _blur_matrix(n, sigma).astype(np.float32)
+    k = -(-n // f)
+    pool = np.zeros((k, n))
+    pool[np.arange(n) * k // n, np.arange(n)] = 1.0  # cells of f or f - 1 pixels
+    centres = pool @ np.arange(n) / pool.sum(axis=1)
+    pool /= pool.sum(axis=1, keepdims=True)
+    up = np.stack([np.interp(np.arange(n), centres, np.eye(k)[i]) for i in range(k)], axis=1)
+    return up.astype(np.float32), (_blur_matrix(k, sigma / f) @ pool).astype(np.float32)
+
+
+def _low_pass(x: np.ndarray, smoother: tuple[np.ndarray, np.ndarray], weight: np.ndarray) -> np.ndarray:
+    """``x (L, B, B, 3)`` smoothed in space (:func:`_smoother`) over the pixels of ``weight (B, B)``
+    1 only (a normalised convolution: the torus not yet filled does not count)."""
+    up, down = smoother
+    y = x * weight[None, :, :, None]
+    for m in (down, up):
+        y = np.tensordot(m, y, axes=(1, 1))  # along rows: (., L, B, 3)
+        y = np.tensordot(m, y, axes=(1, 2)).transpose(2, 1, 0, 3)  # along columns, back to (L, ., ., 3)
+    return y / np.maximum(up @ down @ weight @ down.T @ up.T, 1e-6)[None, :, :, None]
 
 
 QUILT_REUSE = 4
@@ -209,7 +224,7 @@ def quilted_torus(
     fe = int(np.clip(round(scale / 2), 1, max(1, o // 8))) if feather is None else check_int("feather", feather, 0)
     fe = min(fe, (o - 1) // 2)
     low = QUILT_LOW_FEATURES * scale if low is None else float(low)
-    blur = _blur_matrix(b, low).astype(np.float32) if low > 0 else None
+    smoother = _smoother(b, low) if low > 0 else None
     filled = np.zeros((py, px), bool)
     nby, nbx = py // step, px // step
     length = tx.length
@@ -308,14 +323,12 @@ def quilted_torus(
             keep = sharp >= 0.5
             costs.append(float(perr[mask & keep].mean()) if (mask & keep).any() else 0.0)
             a = sharp.astype(np.float32)[None, :, :, None]
-            if blur is None:
-                out = a * new + (1 - a) * old
-            else:  # the low band fades across the whole overlap, the rest at the cut
-                newf, oldf = new.astype(np.float32), old.astype(np.float32)
-                low_new = _low_pass(newf, blur)
-                low_old = _low_pass(oldf, blur, filled[rows[:, None], cols[None, :]].astype(np.float32))
+            oldf = old.astype(np.float32)
+            d = new - oldf
+            out = oldf + a * d
+            if smoother is not None:  # the coarse difference fades across the whole overlap
                 aw = wide.astype(np.float32)[None, :, :, None]
-                out = oldf + aw * (low_new - low_old) + a * (newf - low_new - oldf + low_old)
+                out += (aw - a) * _low_pass(d, smoother, filled[rows[:, None], cols[None, :]].astype(np.float32))
             torus[:, rows[:, None], cols[None, :]] = np.clip(np.rint(out), 0, 255).astype(np.uint8)
             filled[rows[:, None], cols[None, :]] = True
             src[i, j] = (y0, x0)

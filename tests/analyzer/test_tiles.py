@@ -22,7 +22,7 @@ from dynatex.analyzer.tiles import (
     transition_map,
     wang_edges,
 )
-from dynatex.analyzer.tiles.quilted import QUILT_SMALL_SIDE, _block_alpha, _blur_matrix, _low_pass
+from dynatex.analyzer.tiles.quilted import QUILT_SMALL_SIDE, _block_alpha, _blur_matrix, _low_pass, _smoother
 from dynatex.analyzer.tiles.stats import feature_scale
 
 from ..conftest import wave_clip
@@ -336,14 +336,20 @@ def test_quilt_cut_shares_are_continuous_across_the_band():
 
 
 def test_low_pass_ignores_the_unfilled_torus():
-    m = _blur_matrix(16, 4.0)
-    assert np.allclose(m.sum(axis=1), 1.0)
-    x = np.full((2, 16, 16, 3), 200.0)
-    weight = np.zeros((16, 16))
-    weight[:, :6] = 1.0
-    x[:, :, 6:] = 0.0  # what the torus holds where nothing is placed yet
-    low = _low_pass(x, m, weight)
-    assert np.allclose(low, 200.0)
+    """The coarse band is smoothed over filled pixels only, by a wide or a narrow Gaussian."""
+    assert np.allclose(_blur_matrix(16, 4.0).sum(axis=1), 1.0)
+    for sigma in (1.5, 4.0, 12.0):
+        up, down = _smoother(16, sigma)
+        assert np.allclose((up @ down).sum(axis=1), 1.0, atol=1e-5)
+        x = np.full((2, 16, 16, 3), 200.0, np.float32)
+        weight = np.zeros((16, 16), np.float32)
+        weight[:, :6] = 1.0
+        x[:, :, 6:] = 0.0  # what the torus holds where nothing is placed yet
+        assert np.allclose(_low_pass(x, (up, down), weight)[:, :, :8], 200.0, atol=1e-2)  # the band and past it
+    for n, sigma in ((32, 8.0), (96, 10.0), (96, 30.0)):  # pooled, it stays close to the Gaussian
+        up, down = _smoother(n, sigma)
+        exact = _blur_matrix(n, sigma)
+        assert up.shape[1] < n and np.abs(up @ down - exact).max() < 0.3 * exact.max()
 
 
 @pytest.mark.parametrize("side", [12, 64])
