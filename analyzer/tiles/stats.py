@@ -75,7 +75,7 @@ def feature_scale(frames: np.ndarray, *, n_frames: int = 8, max_lag: int | None 
 
     Fine-grained textures (snow, spray) score 1-3 pixels; waterfalls, smoke and waves 10-40, a
     streaked texture its streaks' length. Lags stop at ``max_lag`` (default half the shorter
-    side), so the figure is at most that.
+    side), so the figure is at most about that.
 
     Examples
     --------
@@ -83,10 +83,12 @@ def feature_scale(frames: np.ndarray, *, n_frames: int = 8, max_lag: int | None 
     >>> noise = rng.integers(0, 256, (4, 64, 64, 3)).astype(np.uint8)
     >>> feature_scale(noise) <= 1.0
     True
-    >>> x = np.arange(64)
-    >>> waves = np.broadcast_to(128 + 100 * np.sin(2 * np.pi * x / 64), (4, 64, 64)).astype(np.uint8)
-    >>> 6 <= feature_scale(waves[..., None]) <= 12
+    >>> s = np.sin(2 * np.pi * np.arange(64) / 64)
+    >>> blobs = np.broadcast_to(128 + 100 * s[:, None] * s[None, :], (4, 64, 64)).astype(np.uint8)
+    >>> 10 <= feature_scale(blobs[..., None]) <= 15     # blobs 32 px across
     True
+    >>> round(feature_scale(np.broadcast_to(blobs[:, :, 16:17], (4, 64, 64))[..., None]))  # streaks: the limit
+    32
     """
     t, h, w = frames.shape[:3]
     lag = max(1, min(h, w) // 2 if max_lag is None else int(max_lag))
