@@ -103,6 +103,7 @@ class ProjectionPlayer(Player):
             format=self.format,
             frames=lookahead,
             detail=model.detail,
+            gamut=model.gamut,
         )
         self.basis_bytes = self.engine.basis_bytes
         #: the detail's arrays and schedule (None: the model has none, or set so to project alone)
