@@ -5,8 +5,9 @@ A projection ``mean + basis x state`` can leave the colours the clip showed: whe
 moves over blue sky, a state past the sky's gives the opposite of red (cyan). The map sends
 each colour bin (8 levels per channel, ``(r >> 3) * 1024 + (g >> 3) * 32 + (b >> 3)``) to the
 nearest bin of the source's colour set (itself for a bin in the set); the player clamps a
-pixel whose bin is outside into that one, channel by channel (the bin's closest colour). Colour (three-channel) sources only: a grey projection cannot take a hue.
-Databases written before it play without it.
+pixel whose bin is outside into that one, channel by channel (the bin's closest colour).
+Colour (three-channel) sources only: a grey projection cannot take a hue. Databases written
+before it play without it.
 """
 
 from __future__ import annotations
