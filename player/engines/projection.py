@@ -50,8 +50,8 @@ def snap_colours(frames: np.ndarray, nearest: np.ndarray, rgb: tuple[int, int, i
     [[[200, 7, 7]]]
     """
     r, g, b = (frames[..., i] for i in rgb)
-    bins = (r >> 3).astype(np.int32) << 10
-    bins |= (g >> 3).astype(np.int32) << 5
+    bins = (r >> 3).astype(np.uint16) << 10
+    bins |= (g >> 3).astype(np.uint16) << 5
     bins |= b >> 3
     target = nearest[bins]
     away = target != bins
