@@ -15,6 +15,7 @@ import h5py
 import numpy as np
 
 from . import detail as _detail
+from . import gamut as _gamut
 from ._check import Checker
 from ._describe import Described
 from .source import SourceInfo
@@ -77,6 +78,9 @@ class MixtureModel(Described):
     detail : DetailModel, optional
         The fine detail and colour range added to the projected frames (the optional ``detail``
         subgroup, :mod:`.detail`); None in databases written without it.
+    gamut : GamutModel, optional
+        The source's colour set, which the projected frames are held to (the optional ``gamut``
+        subgroup, :mod:`.gamut`); None in databases written without it and for grey sources.
     """
 
     mean: np.ndarray
@@ -100,10 +104,11 @@ class MixtureModel(Described):
     sbc: np.ndarray
     info: dict = field(default_factory=dict)
     detail: _detail.DetailModel | None = None
+    gamut: _gamut.GamutModel | None = None
 
     def describe(self) -> dict:
-        """Facts as plain values: the ``info`` attributes and the detail part's."""
-        return {**super().describe(), **_detail.describe(self.detail)}
+        """Facts as plain values: the ``info`` attributes, the detail part's and the colour set's."""
+        return {**super().describe(), **_detail.describe(self.detail), **_gamut.describe(self.gamut)}
 
     @property
     def components(self) -> int:
@@ -175,6 +180,7 @@ def write(group: h5py.Group, model: MixtureModel) -> None:
         if key not in _SIZES:
             group.attrs[key] = value
     _detail.write(group, model.detail)
+    _gamut.write(group, model.gamut)
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
@@ -220,6 +226,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         sbc=ds(group, "sbc", kind=f, shape=(range(order, source.n_frames + 1),)),
         info=check.info(group, skip=_SIZES),
         detail=_detail.read(group, check, source),
+        gamut=_gamut.read(group, check, source),
     )
     t = model.global_coords.shape[0]
     if t < 2 or model.responsibilities.shape[0] != t or model.local_coords.shape[0] != t:
