@@ -81,6 +81,16 @@ inline void store_part(__global uchar *o, const uchar *bytes, const int lo, cons
         o[b] = bytes[b];
 }
 
+// 16 bytes (vector q) of window v alone, a and c its two frames: ((255 - w) a + w c + 127) / 255, toned
+inline uchar16 copy16(__global const uchar *a, __global const uchar *c, const int w, __global const uint *gains,
+                      const int toned, const int q)
+{
+    const ushort16 m = div255((ushort16)(255 - w) * convert_ushort16(vload16(q, a))
+                              + (ushort16)w * convert_ushort16(vload16(q, c)) + (ushort16)127);
+    return toned ? convert_uchar16(min((convert_uint16(m) * vload16(q, gains) + (uint16)128) >> 8, (uint16)255))
+                 : convert_uchar16(m);
+}
+
 // a copy piece: pixels lo .. hi - 1 of the RUN from output (y, x0) as window v alone shows them
 inline void copy_piece(__global const uchar *torus, const int4 v, __global const uint *gains, const int toned,
                        __global uchar *o, const int ym, const int xm, const int lo, const int hi)
@@ -88,20 +98,15 @@ inline void copy_piece(__global const uchar *torus, const int4 v, __global const
     const size_t p = window_byte(v, ym, xm);
     __global const uchar *a = torus + (size_t)v.z * FRAME_BYTES + p;
     __global const uchar *c = torus + next_frame(v.z) * FRAME_BYTES + p;
-    const bool whole = lo == 0 && hi == RUN;
-    uchar bytes[PIECE_BYTES];
-    for (int q = 0; q < PIECE_BYTES / 16; ++q) {
-        const ushort16 m = div255((ushort16)(255 - v.w) * convert_ushort16(vload16(q, a))
-                                  + (ushort16)v.w * convert_ushort16(vload16(q, c)) + (ushort16)127);
-        const uchar16 value = toned ? convert_uchar16(min((convert_uint16(m) * vload16(q, gains) + (uint16)128) >> 8, (uint16)255))
-                                    : convert_uchar16(m);
-        if (whole)
-            vstore16(value, q, o);
-        else
-            vstore16(value, q, bytes);
+    if (lo == 0 && hi == RUN) {
+        for (int q = 0; q < PIECE_BYTES / 16; ++q)
+            vstore16(copy16(a, c, v.w, gains, toned, q), q, o);
+        return;
     }
-    if (!whole)
-        store_part(o, bytes, lo, hi);
+    uchar bytes[PIECE_BYTES];
+    for (int q = 0; q < PIECE_BYTES / 16; ++q)
+        vstore16(copy16(a, c, v.w, gains, toned, q), q, bytes);
+    store_part(o, bytes, lo, hi);
 }
 
 // the inverse table's entry of a blend acc = sum W_k d_k (W in 256ths): STEPS = 16 entries per
