@@ -30,9 +30,10 @@ output is a window onto a seamless texture that repeats only with the torus's pe
 larger than the torus would show that period; it takes the stochastic layout instead (option
 ``layout``, default ``auto``; :mod:`~dynatex.player.engines.stochastic`): random windows of the
 torus on a triangle grid, each with its own time offset (the cell field sampled at its vertex),
-blended so that the histogram holds. A frame costs 4-9x the torus's copy (CPU time a frame at
-1280x720 on the 2-core test machine: 7-8 ms on PoCL and 6 on Intel's runtime, against 1-1.5 ms for
-the torus); ``layout="torus"`` keeps the copy.
+blended so that the histogram holds. A frame costs 4-9x the torus's copy where the x86 gather
+variant draws it (CPU time a frame at 1280x720 on the 2-core test machine: 7-8 ms on PoCL and 6 on
+Intel's runtime, against 1-1.5 ms), a third to a half of the portable gather's (14-15 ms);
+``layout="torus"`` keeps the copy.
 """
 
 from __future__ import annotations
