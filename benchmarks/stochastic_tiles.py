@@ -17,8 +17,9 @@ stochastic layout existed) and with ``layout="stochastic"`` and prints, per layo
 - ``contrast``: the output's luma standard deviation over the source's (a washed-out blend
   falls below 1).
 
-``--fps`` sizes: frames per second of both layouts (best of three runs of a few frames,
-alternating, in one process on the default device). ``--sheets``: a contact sheet per clip and
+``--fps`` sizes: frames per second of both layouts (best of five runs of a few frames,
+alternating, in one process on the default device) and the CPU time a frame of each, the figure
+that a loaded machine leaves comparable. ``--sheets``: a contact sheet per clip and
 size and layout (source frames beside output frames).
 """
 
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import sys
 import tempfile
 import time
@@ -91,24 +93,43 @@ def figures(db: str, src: np.ndarray, size: tuple[int, int], frames: int, sheets
     return rows
 
 
+def _cpu_seconds() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
 def frame_rates(db: str, size: tuple[int, int], name: str) -> dict:
+    """Both layouts' frame rates (wall clock, best of 5) and CPU time a frame (every thread of the
+    process, the OpenCL CPU device's included; median of 5): on a loaded machine the wall clock
+    waits for other processes, the CPU time counts the work."""
     best = dict.fromkeys(LAYOUTS, 0.0)
+    cpu: dict[str, list[float]] = {layout: [] for layout in LAYOUTS}
     n = 12 if size[0] * size[1] < 2e6 else 4
-    for _ in range(3):
-        for layout in LAYOUTS:
-            with TilesPlayer(db, size=size, seed=3, layout=layout) as p:
-                out = np.empty(p.shape, np.uint8)
-                p.next_frame(out=out)
-                t0 = time.perf_counter()
+    players = {layout: TilesPlayer(db, size=size, seed=3, layout=layout) for layout in LAYOUTS}
+    try:
+        outs = {layout: np.empty(p.shape, np.uint8) for layout, p in players.items()}
+        for layout, p in players.items():
+            p.next_frame(out=outs[layout])
+        for _ in range(5):
+            for layout, p in players.items():
+                t0, c0 = time.perf_counter(), _cpu_seconds()
                 for _ in range(n):
-                    p.next_frame(out=out)
+                    p.next_frame(out=outs[layout])
                 best[layout] = max(best[layout], n / (time.perf_counter() - t0))
+                cpu[layout].append((_cpu_seconds() - c0) / n)
+    finally:
+        for p in players.values():
+            p.close()
+    ms = {layout: 1e3 * float(np.median(v)) for layout, v in cpu.items()}
     return {
         "clip": name,
         "size": f"{size[1]}x{size[0]}",
         "fps_torus": best["torus"],
         "fps_stochastic": best["stochastic"],
         "ratio": best["stochastic"] / best["torus"],
+        "cpu_ms_torus": ms["torus"],
+        "cpu_ms_stochastic": ms["stochastic"],
+        "cpu_ratio": ms["torus"] / ms["stochastic"],
     }
 
 

@@ -10,24 +10,25 @@ variance-preserving one in a Gaussianized space: each channel value goes through
 ``T`` (built at open from the torus's histogram) that makes it standard normal, the windows
 are summed with weights ``w_i / sqrt(sum w_j^2)`` (the sum keeps the variance, so contrast
 does not wash out where windows meet), and the inverse of ``T`` gives the channel back with
-the torus's histogram. Weights are the barycentric coordinates raised to ``sharpness`` and
-renormalised, and those under ``CUTOFF`` dropped, so each vertex shows its window alone
-over most of its hexagon (a plain copy, as the gather draws) and windows meet in bands
-along the hexagons' edges, narrow enough not to ghost. Windows span at most half the
-torus, so a window never shows the torus's period.
+the torus's histogram. A vertex takes part where its barycentric coordinate is within
+``band`` of the pixel's largest (a smoothstep ramp, :func:`~.stochastic_reference.weight_table`),
+so each vertex shows its window alone over most of its hexagon (a plain copy, as the gather
+draws) and windows meet in bands about ``band`` times the cell's width wide along the hexagons'
+edges (18% of the pixels at the default 0.1). Windows span at most the torus, so a window never
+shows the torus's period.
 
 What is fixed at open: the torus and its Gaussianized copy (each channel through ``T``, stored
-as bytes as the paper stores it: 32 levels a standard deviation), the pattern of weights of one
-grid cell (:func:`~.stochastic_reference.weight_table`), the window offsets (from the seed).
-Per frame the host computes each vertex's stored frame and blend weight (a few hundred
-vertices at 4K) and uploads them; the kernels (``kernels/stochastic.cl``) draw in two passes
-that do not branch on a pixel's kind: every pixel copied from the window of its hexagon
-(whole vectors where a run of 16 pixels lies in one window), then the blend pixels alone (a
-list of one cell's, at every cell) blended in integers from the Gaussianized copy, with one
-inverse lookup per channel. The numpy reference
-:func:`~.stochastic_reference.stochastic_reference` computes the same integers, so the two
-backends agree exactly (tested on every verified device); the 8-bit Gaussianized copy gives a
-value back within one level (98-99%; within 4 in a sparse tail), in the blend bands only.
+as bytes as the paper stores it: 32 levels a standard deviation; both in the output's pixel
+layout), the pattern of weights of one grid cell, cut into pieces of at most ``RUN`` pixels of a
+row that one window shows alone or that blend the same windows (:func:`cell_pieces`), the window
+offsets (from the seed). Per frame the host computes each vertex's stored frame and blend weight
+(a few hundred vertices at 4K) and uploads them without waiting; one kernel
+(``kernels/stochastic.cl``) draws every piece of every cell once, as whole vectors: a copy piece
+from the torus, a blend piece in integers from the Gaussianized copy with one inverse lookup per
+byte. The numpy reference :func:`~.stochastic_reference.stochastic_reference` computes the same
+integers, so the two backends agree exactly (tested on every verified device); the 8-bit
+Gaussianized copy gives a value back within one level (98-99%; within 4 in a sparse tail), in
+the blend bands only.
 
 Examples
 --------
@@ -52,10 +53,9 @@ from ...checks import check_float, check_out
 from ...errors import InvalidArgumentError
 from ..pixels import pixel_format
 from .stochastic_reference import (
+    BAND,
     N_INVERSE,
-    SHARPNESS,
     blend_weights,
-    copy_table,
     gauss_tables,
     gaussianize,
     stochastic_reference,
@@ -67,8 +67,8 @@ from .stochastic_reference import (
     weight_table,
 )
 
-RUN = 16  # output pixels per work-item of pass 1 (whole vectors where one window shows)
-GROUP = 16  # work-items per work-group along a cell's blend pixels (pass 2)
+RUN = 32  # output pixels per piece at most
+GROUP = 8  # pieces per work-group
 ROWS = 256  # output rows per block of the numpy reference (bounded memory)
 
 
@@ -81,8 +81,9 @@ class Stochastic:
     between two, ``draw``'s ``fade``; :meth:`next_time_map` moves on one map; nothing to smooth:
     the blend spreads a window's offset), :meth:`set_tones` takes the tone table of the gather
     (its first row's gains), :meth:`draw` draws a frame at time ``t``.
-    ``seed`` draws the window offsets; ``hist`` ``(3, 256)`` (default: the torus's own) builds the
-    Gaussianizing tables.
+    ``seed`` draws the window offsets; ``cell`` (default :func:`triangle_cell`, at most the torus's
+    width) is the triangle grid's ``(row height, width)``; ``band`` the width of the blend bands
+    (:func:`weight_table`).
     """
 
     backend = ""
@@ -94,7 +95,7 @@ class Stochastic:
         *,
         seed: int = 0,
         cell: Sequence[int] | None = None,
-        sharpness: float = SHARPNESS,
+        band: float = BAND,
         format: str = "RGB",
     ) -> None:
         torus = np.asarray(torus)
@@ -106,7 +107,9 @@ class Stochastic:
         self.format = pixel_format(format)
         self.out_shape = (h, w, self.format.bytes)
         self.cell = triangle_cell((th, tw)) if cell is None else (int(cell[0]), int(cell[1]))
-        self.weights = weight_table(self.cell, check_float("sharpness", sharpness, 1.0, 64.0))
+        if self.cell[1] > tw:
+            raise InvalidArgumentError(f"cell must be at most as wide as the torus ({tw}), not {self.cell}")
+        self.weights = weight_table(self.cell, check_float("band", band, 0.01, 1.0))
         self.tmap_shape = vertex_grid((h, w), self.cell)
         self.vertex_pixels = vertex_pixels((h, w), self.cell)
         self.direct = False
@@ -278,69 +281,62 @@ class StochasticOpenCL(Stochastic):
         h, w = self.out_shape[:2]
         th, tw = self.torus.shape[1:3]
         ch, cw = self.cell
-        # the blend pixels of one cell (pass 2 runs over them at every cell): (r, c) pairs
-        self._runs = blend_runs(self.weights, RUN)
+        pb = self.format.bytes
+        pieces, bweights = cell_pieces(self.weights, RUN)
         self._cells = ((h - 1) // ch + 1, (w - 1 + cw) // cw + 1)
         defines = {
             "TORUS_H": th,
             "TORUS_W": tw,
             "TORUS_WP": tw + RUN,
             "NFRAMES": self.n_frames,
-            "CELL_H": self.cell[0],
-            "CELL_W": self.cell[1],
+            "CELL_H": ch,
+            "CELL_W": cw,
             "VCOLS": self.tmap_shape[1],
             "CELLS_X": self._cells[1],
-            "NRUNS": len(self._runs),
+            "NPIECES": len(pieces),
             "RUN": RUN,
             "N_INVERSE": N_INVERSE,
-            **self.format.defines,
+            "PIXEL_BYTES": pb,
         }
         prog = build_program(self.ctx, "stochastic.cl", defines)
-        # every torus row carries its first RUN pixels again, so a run of pass 1 never wraps
+        # in the output's layout, every torus row carrying its first RUN pixels again (no piece wraps)
         pad = np.arange(tw + RUN) % tw
         for name, frames in (("_d_torus", self.torus), ("_d_gauss", self.gauss_torus)):
-            padded = np.ascontiguousarray(np.take(frames, pad, axis=2))
+            padded = self.format.from_rgb(np.take(frames, pad, axis=2))
             setattr(self, name, cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded))
-        self._d_copy = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=copy_table(self.weights))
-        self._d_gains = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * RUN * 4)
-        self._d_weights = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blend_weights(self.weights))
+        # the RGB channel of each byte of a piece (3: alpha)
+        channel = np.full(pb, 3, np.int64)
+        channel[list(self.format.rgb)] = np.arange(3)
+        self._byte_channel = np.tile(channel, RUN)
+
+        def table(rows: np.ndarray, dtype) -> Any:
+            rows = rows if len(rows) else np.zeros((1,) + rows.shape[1:], rows.dtype)  # no empty buffer
+            return cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(rows, dtype))
+
+        self._d_pieces = table(pieces, np.int32)
+        self._d_wbytes = table(np.repeat(bweights, pb, axis=-1), np.uint16)  # (blend pieces, 3, PIECE_BYTES)
+        self._d_chan = table(self._byte_channel * N_INVERSE, np.int32)
+        self._d_gains = cl.Buffer(self.ctx, mf.READ_ONLY, pb * RUN * 4)
+        self._d_inverse = cl.Buffer(self.ctx, mf.READ_ONLY, 4 * N_INVERSE)
         self._vtab = np.zeros(self.tmap_shape + (4,), np.int32)
         self._d_vertices = cl.Buffer(self.ctx, mf.READ_ONLY, self._vtab.nbytes)
-        self._d_inverse = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * N_INVERSE)
-        self._d_tone = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * 256)
-        runs = self._runs if len(self._runs) else np.zeros((1, 4), np.int32)  # no empty buffer
-        self._d_blend = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=runs)
-        wq = blend_weights(self.weights)[..., :3].astype(np.uint16)
-        wbytes = np.ascontiguousarray(np.repeat(np.moveaxis(wq, -1, 0)[..., None], 3, -1))  # (3, ch, cw, 3)
-        self._d_wbytes = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=wbytes)
-        chan = (np.arange(3 * RUN) % 3 * N_INVERSE).astype(np.int32)
-        self._d_chan = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=chan)
-        self._k_copy = Kernel(prog, "stochastic_copy")
-        self._k_copy.set(
-            torus=self._d_torus,
-            copy=self._d_copy,
-            vertices=self._d_vertices,
-            tone=self._d_tone,
-            gains=self._d_gains,
-            width=np.int32(w),
-            height=np.int32(h),
-        )
-        self._k = Kernel(prog, "stochastic_blend")
+        self._k = Kernel(prog, "stochastic")
         self._k.set(
+            torus=self._d_torus,
             gauss=self._d_gauss,
-            weights=self._d_weights,
+            pieces=self._d_pieces,
             wbytes=self._d_wbytes,
             chan=self._d_chan,
-            runs=self._d_blend,
+            gains=self._d_gains,
             vertices=self._d_vertices,
             inverse=self._d_inverse,
             width=np.int32(w),
             height=np.int32(h),
         )
-        self._out = FrameOut(self.ctx, self.queue, self._k, "out", h * w * self.format.bytes)
+        self._out = FrameOut(self.ctx, self.queue, self._k, "out", h * w * pb)
         self.direct = self._out.direct
-        self._copy_size = (-(-w // RUN), h)
-        self._blend_size = (_round_up(max(1, len(self._runs)), GROUP), self._cells[0] * self._cells[1])
+        self._local = (GROUP, 1)
+        self._size = (_round_up(max(1, len(pieces)), GROUP), self._cells[0] * self._cells[1])
         self._upload_tables()
 
     def _upload_tables(self) -> None:
@@ -348,61 +344,78 @@ class StochasticOpenCL(Stochastic):
             return  # the base class sets its first tables before the kernel exists
         import pyopencl as cl
 
-        _, inverse, tone = self._tables
-        gains = np.resize(tone_gains(self._gain), 3 * RUN).astype(np.uint32)  # byte b of a run: channel b % 3
-        for buf, host in (
-            (self._d_inverse, inverse),
-            (self._d_tone, tone),
-            (self._d_gains, gains),
-        ):
+        _, inverse, _ = self._tables
+        inverse = np.concatenate([inverse, np.full((1, N_INVERSE), 255, np.uint8)])  # alpha: 255
+        gains = np.append(tone_gains(self._gain), 256)[self._byte_channel].astype(np.uint32)
+        for buf, host in ((self._d_inverse, inverse), (self._d_gains, gains)):
             cl.enqueue_copy(self.queue, buf, np.ascontiguousarray(host), is_blocking=True)
+        self._k.set(toned=np.int32((gains != 256).any()))
 
-    def _passes(self, vertices: np.ndarray, out: np.ndarray | None) -> None:
-        """Upload ``vertices`` and run pass 1 into the frame's destination."""
+    def _upload_vertices(self, vertices: np.ndarray) -> None:
         import pyopencl as cl
 
+        # not waited for: the queue is in order, and the transfer keeps the array until it is done
         self._vtab = np.ascontiguousarray(vertices, np.int32)
-        cl.enqueue_copy(self.queue, self._d_vertices, self._vtab, is_blocking=True)
-        self._k_copy.set(out=self._out.destination(out))
-        self._k_copy.launch(self.queue, self._copy_size, None)
+        cl.enqueue_copy(self.queue, self._d_vertices, self._vtab, is_blocking=False)
 
     def _launch(self, vertices: np.ndarray, out: np.ndarray):
-        self._passes(vertices, out)
-        return self._out.launch(out, self._blend_size, (GROUP, 1), wait=False)
+        self._upload_vertices(vertices)
+        return self._out.launch(out, self._size, self._local, wait=False)
 
     def render_on_device(self, t: float, *, fade: float = 0.0) -> None:
-        """Both passes alone into the device's own frame buffer, waited for (the benchmarks' kernel time)."""
-        self._passes(self.vertices(float(t), fade), None)
-        self._out.launch_on_device(self._blend_size, (GROUP, 1)).wait()
+        """The kernel alone into the device's own frame buffer, waited for (the benchmarks' kernel time)."""
+        self._upload_vertices(self.vertices(float(t), fade))
+        self._out.launch_on_device(self._size, self._local).wait()
 
     def close(self) -> None:
         self.queue.finish()
-        held = ("_d_torus", "_d_gauss", "_d_weights", "_d_copy", "_d_gains", "_d_blend", "_d_vertices", "_d_inverse")
-        held += ("_d_wbytes", "_d_chan")
-        for name in (*held, "_d_tone"):
+        held = ("_d_torus", "_d_gauss", "_d_pieces", "_d_wbytes", "_d_chan", "_d_gains")
+        for name in (*held, "_d_inverse", "_d_vertices"):
             buf = self.__dict__.pop(name, None)
             if buf is not None:
                 buf.release()
 
 
-def blend_runs(weights: np.ndarray, run: int) -> np.ndarray:
-    """``(n, 4)`` int32 ``(r, c, length, 0)``: the blend pixels of one cell of ``weights``
-    (:func:`~.stochastic_reference.weight_table`) in runs of at most ``run`` along a row, each in
-    one triangle (so its pixels blend the same three windows)."""
-    out = []
-    code = weights[..., 3].astype(np.int64)
-    for r in range(code.shape[0]):
+#: the vertex codes (``kernels/stochastic.cl``) of each triangle's three vertices
+TRIANGLE_CODES = np.array([(0, 2, 3), (0, 1, 3), (1, 3, 4)])
+
+
+def cell_pieces(weights: np.ndarray, run: int) -> tuple[np.ndarray, np.ndarray]:
+    """One cell of ``weights`` (:func:`~.stochastic_reference.weight_table`) cut into the kernel's
+    pieces, each at most ``run`` pixels of a row, in row order: ``pieces`` ``(n, 8)`` int32 ``(r,
+    c, length, blend, code0, code1, code2, row)``; ``blend`` 0: pixels that one window (vertex
+    ``code0``) shows alone; 1: pixels that blend at most windows ``code0..2`` (a code repeated
+    where fewer take part), weighted by ``bweights[row]``: ``(m, 3, run)`` int, each window's
+    weight (``WQ``-ths) at each pixel of the piece (0 past its length and where it takes no part)."""
+    wq = blend_weights(weights)
+    ch, cw = wq.shape[:2]
+    single = wq[..., 3] >> 2
+    codes = TRIANGLE_CODES[wq[..., 3] & 3]  # (ch, cw, 3)
+    copy_code = np.take_along_axis(codes, np.maximum(single - 1, 0)[..., None], -1)[..., 0]
+    pieces, bweights = [], []
+    for r in range(ch):
         c = 0
-        while c < code.shape[1]:
-            if code[r, c] >= 4:
-                c += 1
-                continue
+        while c < cw:
             n = 1
-            while n < run and c + n < code.shape[1] and code[r, c + n] == code[r, c]:
-                n += 1
-            out.append((r, c, n, 0))
+            if single[r, c]:
+                while n < run and c + n < cw and single[r, c + n] and copy_code[r, c + n] == copy_code[r, c]:
+                    n += 1
+                pieces.append((r, c, n, 0, copy_code[r, c], 0, 0, 0))
+            else:
+                taking = {int(v) for v, q in zip(codes[r, c], wq[r, c, :3]) if q > 0}
+                while n < run and c + n < cw and not single[r, c + n]:
+                    more = taking | {int(v) for v, q in zip(codes[r, c + n], wq[r, c + n, :3]) if q > 0}
+                    if len(more) > 3:
+                        break
+                    taking, n = more, n + 1
+                slots = sorted(taking) + [max(taking)] * (3 - len(taking))
+                w = np.zeros((3, run), np.int64)
+                for k, code in enumerate(sorted(taking)):
+                    w[k, :n] = (wq[r, c : c + n, :3] * (codes[r, c : c + n] == code)).sum(-1)
+                pieces.append((r, c, n, 1, *slots, len(bweights)))
+                bweights.append(w)
             c += n
-    return np.array(out, np.int32).reshape(-1, 4)
+    return np.array(pieces, np.int32).reshape(-1, 8), np.array(bweights, np.int64).reshape(-1, 3, run)
 
 
 def _round_up(v: int, m: int) -> int:

@@ -23,8 +23,7 @@ GS = 32  # levels of the Gaussianized torus (bytes, 128 the mean) per standard d
 STEPS = 16  # entries of the inverse table per level
 N_INVERSE = 256 * STEPS  # entries of the inverse table per channel (Gaussian values within +-128 / GS)
 WQ = 256  # blend weights in 256ths
-SHARPNESS = 6.0  # exponent of the barycentric weights
-CUTOFF = 0.02  # sharpened weights under this share are dropped (one window alone shows)
+BAND = 0.1  # a vertex blends where its barycentric coordinate is within this of the largest
 
 
 def triangle_cell(torus_shape: Sequence[int]) -> tuple[int, int]:
@@ -36,17 +35,20 @@ def triangle_cell(torus_shape: Sequence[int]) -> tuple[int, int]:
     return max(2, int(round(w * math.sqrt(3) / 2))), w
 
 
-def weight_table(cell: Sequence[int], sharpness: float = SHARPNESS, cutoff: float = CUTOFF) -> np.ndarray:
+def weight_table(cell: Sequence[int], band: float = BAND) -> np.ndarray:
     """``(ch, cw, 4)`` float32: for each pixel of one grid cell (``ch`` rows of a band, ``cw``
     columns), the blend weights of its triangle's three vertices and ``tri + 4 single``
     (module ``kernels/stochastic.cl`` says which triangle and vertex these name).
 
-    Barycentric coordinates of the pixel centre, raised to ``sharpness``, renormalised, those
-    under ``cutoff`` dropped and the rest renormalised again; a single one left is the window
-    alone (weights (1, 0, 0) at its place), else Heitz and Neyret's variance-preserving
-    weights ``s_i / sqrt(sum s_j^2)``.
+    A vertex takes part where its barycentric coordinate is within ``band`` of the pixel's
+    largest one: ``s = smoothstep((b - max b + band) / band)``, so each vertex shows its window
+    alone over most of its hexagon and windows meet in bands about ``band`` times the cell's
+    width wide along the hexagons' edges, their weights rising from 0 with zero slope (no
+    edge to the band). A blend takes Heitz and Neyret's variance-preserving weights
+    ``s_i / sqrt(sum s_j^2)``; where one weight alone is left in ``WQ``-ths, the window alone
+    shows (weights (1, 0, 0) at its place).
 
-    >>> t = weight_table((13, 16))
+    >>> t = weight_table((13, 16), 0.3)
     >>> blend = t[..., 3] < 4
     >>> bool(np.allclose((t[blend][:, :3] ** 2).sum(-1), 1, atol=1e-6)), [int(v) for v in np.unique(t[..., 3] // 4)]
     (True, [0, 1, 2, 3])
@@ -54,6 +56,8 @@ def weight_table(cell: Sequence[int], sharpness: float = SHARPNESS, cutoff: floa
     ch, cw = (int(v) for v in cell)
     if ch < 1 or cw < 2 or cw % 2:
         raise InvalidArgumentError(f"cell must be (rows >= 1, even width >= 2), not {tuple(cell)}")
+    if not 0.0 < float(band) <= 1.0:
+        raise InvalidArgumentError(f"band must be in (0, 1], not {band!r}")
     y = (np.arange(ch) + 0.5)[:, None] * np.ones((1, cw))
     x = np.ones((ch, 1)) * (np.arange(cw) + 0.5)[None, :]
     half = cw / 2.0
@@ -71,13 +75,11 @@ def weight_table(cell: Sequence[int], sharpness: float = SHARPNESS, cutoff: floa
         b1 = ((y2 - y0) * (x - x2) + (x0 - x2) * (y - y2)) / det
         sel = tri == t
         bary[sel] = np.stack([b0, b1, 1 - b0 - b1], -1)[sel]
-    s = np.clip(bary, 0.0, 1.0) ** sharpness
-    s /= s.sum(-1, keepdims=True)
-    s = np.where(s < cutoff, 0.0, s)
-    s /= s.sum(-1, keepdims=True)
+    s = np.clip((bary - bary.max(-1, keepdims=True) + float(band)) / float(band), 0.0, 1.0)
+    s = s * s * (3.0 - 2.0 * s)
     w = s / np.sqrt((s * s).sum(-1, keepdims=True))
-    alone = (s > 0).sum(-1) == 1
-    single = np.where(alone, np.argmax(s, -1) + 1, 0)
+    alone = (np.rint(w * WQ) > 0).sum(-1) == 1
+    single = np.where(alone, np.argmax(w, -1) + 1, 0)
     w = np.where(alone[..., None], 0.0, w)
     return np.concatenate([w, (tri + 4 * single)[..., None]], -1).astype(np.float32)
 
@@ -146,16 +148,6 @@ def tone_gains(gain: np.ndarray) -> np.ndarray:
     """The tone ``gain`` per channel in 256ths (int64), as the kernel multiplies: a value ``m``
     is toned to ``min(255, (m g + 128) >> 8)``."""
     return np.rint(np.clip(np.asarray(gain, np.float64), 0.0, 255.0) * 256.0).astype(np.int64)
-
-
-def copy_table(weights: np.ndarray) -> np.ndarray:
-    """``(ch, cw)`` uint8 of the kernel's pass 1: ``tri + 4 k`` with ``k`` (1..3) the vertex of
-    the pixel's triangle with the largest weight (the window alone where one is; elsewhere the
-    nearest vertex, so a row meets each vertex's pixels in one interval)."""
-    code = weights[..., 3].astype(np.int64)
-    single = code >> 2
-    k = np.where(single > 0, single, np.argmax(weights[..., :3], -1) + 1)
-    return ((code & 3) + 4 * k).astype(np.uint8)
 
 
 def vertex_grid(size: Sequence[int], cell: Sequence[int]) -> tuple[int, int]:

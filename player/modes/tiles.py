@@ -30,9 +30,10 @@ output is a window onto a seamless texture that repeats only with the torus's pe
 larger than the torus would show that period; it takes the stochastic layout instead (option
 ``layout``, default ``auto``; :mod:`~dynatex.player.engines.stochastic`): random windows of the
 torus on a triangle grid, each with its own time offset (the cell field sampled at its vertex),
-blended so that the histogram holds. A frame costs 5-9x the torus's copy (1280x720 on the loaded
-2-core test machine: about 150 fps on PoCL and 170-240 on Intel's runtime, against 900-960 for
-the torus); ``layout="torus"`` keeps the copy.
+blended so that the histogram holds. A frame costs 4-9x the torus's copy where the x86 gather
+variant draws it (CPU time a frame at 1280x720 on the 2-core test machine: 7-8 ms on PoCL and 6 on
+Intel's runtime, against 1-1.5 ms), a third to a half of the portable gather's (14-15 ms);
+``layout="torus"`` keeps the copy.
 """
 
 from __future__ import annotations
@@ -191,7 +192,7 @@ class TilesPlayer(Player):
             "auto",
             "How a quilted torus covers the output: torus (its cells edge to edge, repeating with its period "
             "beyond its size; a copy, the fastest), stochastic (random windows of it blended on a triangle grid: "
-            "no period at any size, 5-9x slower) or auto (stochastic exactly when the output is larger than "
+            "no period at any size, 4-9x slower) or auto (stochastic exactly when the output is larger than "
             "the torus). Other tile sets have only their cells.",
             flag="--tile-layout",  # export's --layout names its file layout
         ),

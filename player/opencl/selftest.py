@@ -290,8 +290,9 @@ def _stochastic_check(format: str, toned: bool) -> Callable[[str], str | None]:
 
         rng = np.random.default_rng(11)
         torus = rng.integers(0, 256, (5, 30, 96, 3), dtype=np.uint8)
-        cell = (9, 14) if toned else (20, 64)  # small cells blend almost everywhere
-        s = StochasticOpenCL(torus, (41, 133), device=device, seed=2, cell=cell, format=format)
+        # small cells blend almost everywhere; (20, 96) with a wide band has whole pieces of both kinds
+        cell, band = ((9, 14), 0.1) if toned else ((20, 96), 0.5)
+        s = StochasticOpenCL(torus, (41, 133), device=device, seed=2, cell=cell, band=band, format=format)
         try:
             s.set_time_map(
                 rng.uniform(-3, 9, s.tmap_shape).astype(np.float32), rng.uniform(0, 4, s.tmap_shape).astype(np.float32)

@@ -10,10 +10,12 @@ import pytest
 from dynatex.analyzer import load_clip, metrics
 from dynatex.analyzer.tiles import learn_tiles
 from dynatex.errors import InvalidArgumentError
-from dynatex.player.engines.stochastic import StochasticOpenCL
+from dynatex.player.engines.stochastic import RUN, TRIANGLE_CODES, StochasticOpenCL, cell_pieces
 from dynatex.player.engines.stochastic_reference import (
+    BAND,
     GS,
     WQ,
+    blend_weights,
     gauss_tables,
     inverse_index,
     weight_table,
@@ -41,22 +43,24 @@ def quilted(tmp_path_factory):
 
 
 @pytest.mark.parametrize(
-    "format, cell, toned",
+    "format, cell, band, toned",
     [
-        ("RGB", (11, 18), True),
-        ("RGB", (24, 64), False),
-        ("RGB", (24, 64), True),
-        ("RGBA", (24, 64), False),
-        ("BGRA", (11, 18), True),
-        ("BGRA", (24, 64), True),
+        ("RGB", (11, 18), 0.3, True),
+        ("RGB", (24, 64), 0.1, False),
+        ("RGB", (24, 96), 0.5, True),
+        ("RGB", (24, 64), 1.0, False),
+        ("RGBA", (24, 96), 0.5, False),
+        ("BGRA", (11, 18), 0.1, True),
+        ("BGRA", (24, 96), 0.5, True),
     ],
 )
-def test_kernel_equals_its_reference(cl_device, format, cell, toned):
-    """Small cells blend almost everywhere, large ones show single windows over most pixels (and
-    runs of 16 pixels in one window or one triangle: the kernels' vector paths, in every format)."""
+def test_kernel_equals_its_reference(cl_device, format, cell, band, toned):
+    """Small cells blend almost everywhere, large ones with a narrow band show single windows over
+    most pixels, a wide band has whole pieces of both kinds (the kernel's vector stores, in every
+    format) and partial ones at the output's edges."""
     rng = np.random.default_rng(4)
     torus = rng.integers(0, 256, (7, 40, 100, 3), dtype=np.uint8)
-    s = StochasticOpenCL(torus, (53, 197), device=cl_device, seed=5, cell=cell, format=format)
+    s = StochasticOpenCL(torus, (53, 197), device=cl_device, seed=5, cell=cell, band=band, format=format)
     try:
         s.set_time_map(rng.uniform(-40, 40, s.tmap_shape), rng.uniform(0, 9, s.tmap_shape))
         if toned:
@@ -66,6 +70,35 @@ def test_kernel_equals_its_reference(cl_device, format, cell, toned):
             assert np.array_equal(got, s.render_reference(t, fade=fade)), (t, fade)
     finally:
         s.close()
+
+
+@pytest.mark.parametrize("cell, band", [((11, 18), 0.3), ((24, 96), 0.5), ((249, 288), BAND)])
+def test_pieces_cover_a_cell_once(cell, band):
+    """Every pixel of a cell lies in one piece; a copy piece's pixels show its window alone, a blend
+    piece's weights are the pixels' own (its windows among the triangle's, zero where one takes no part)."""
+    weights = weight_table(cell, band)
+    wq = blend_weights(weights)
+    pieces, bweights = cell_pieces(weights, RUN)
+    seen = np.zeros(cell, int)
+    codes = TRIANGLE_CODES[wq[..., 3] & 3]
+    for r, c, n, blend, c0, c1, c2, row in pieces:
+        assert 1 <= n <= RUN and c + n <= cell[1]
+        seen[r, c : c + n] += 1
+        single = wq[r, c : c + n, 3] >> 2
+        if not blend:
+            assert (single > 0).all()
+            assert (np.take_along_axis(codes[r, c : c + n], single[:, None] - 1, 1)[:, 0] == c0).all()
+            continue
+        assert (single == 0).all() and len({c0, c1, c2}) >= 2
+        for k in range(n):
+            want = dict.fromkeys((c0, c1, c2), 0)
+            for code, w in zip(codes[r, c + k], wq[r, c + k, :3]):
+                assert w == 0 or code in want
+                want[code] = want.get(code, 0) + w
+            got = dict(zip(sorted({c0, c1, c2}), bweights[row][:, k]))
+            assert all(got[code] == want[code] for code in got)
+        assert (bweights[row][:, n:] == 0).all()
+    assert (seen == 1).all()
 
 
 def test_selftest_checks_the_kernel():
@@ -79,10 +112,15 @@ def test_weights_keep_the_variance_and_leave_most_pixels_to_one_window():
     single = table[..., 3] >= 4
     w = table[~single][:, :3]
     assert np.allclose((w * w).sum(-1), 1.0, atol=1e-6) and (w >= 0).all()
-    assert 0.3 < single.mean() < 0.9  # blend bands along the hexagons' edges, windows alone inside
+    assert 0.7 < single.mean() < 0.9  # narrow blend bands along the hexagons' edges, windows alone inside
     assert (table[single][:, :3] == 0).all()
+    # a wider band blends more pixels; weights rise from 0 without a step at the band's edge
+    assert (weight_table((104, 120), 0.3)[..., 3] >= 4).mean() < 0.6
+    assert np.rint(w * WQ).min() <= 1
     with pytest.raises(InvalidArgumentError, match="even width"):
         weight_table((10, 7))
+    with pytest.raises(InvalidArgumentError, match="band must be"):
+        weight_table((10, 8), 0.0)
 
 
 def test_gauss_tables_invert_and_keep_the_histogram():
