@@ -21,6 +21,7 @@ of values); the detail then sees those integers exactly as a separate pass would
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -34,6 +35,20 @@ PIXELS = 16
 #: Work-group size: left to choose, PoCL may make few large groups that leave a core idle
 #: (CHANGELOG.md has the measurement).
 LOCAL = 32
+#: (height, width) of the RGB frames at which the device self-test times this engine against
+#: numpy (:data:`dynatex.player.opencl.selftest.SPEED_CASES`): a basis beyond any cache, and a
+#: 720p one several times larger; a player takes the figure of the size nearest its own
+SPEED_SIZES = ((288, 352), (720, 1280))
+#: frames per pass of the self-test's look-ahead figures (any look-ahead above 1 takes them)
+SPEED_PER_PASS = 8
+
+
+def speed_case(precision: str, values: int, per_pass: int) -> str:
+    """The self-test's speed figure that decides ``backend="auto"`` for a projection of ``values``
+    values a frame in ``precision`` with ``per_pass`` frames per pass: the measured size nearest
+    in log scale (``"projection float32 1280x720, 8 per pass"``)."""
+    h, w = min(SPEED_SIZES, key=lambda s: abs(math.log(max(values, 1) / (s[0] * s[1] * 3))))
+    return f"projection {precision} {w}x{h}" + (f", {SPEED_PER_PASS} per pass" if per_pass > 1 else "")
 
 
 def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:
