@@ -205,7 +205,7 @@ def test_check_command_lists_every_device_with_its_verdict(device):
 
 def test_every_verified_device_measured_its_engines_against_numpy(cl_device):
     v = verify.verdict(next(d for d in opencl.devices() if d.index == cl_device))
-    assert set(v.speed) == set(selftest.SPEED_CASES), v.speed
+    assert set(selftest.SELFTEST_SPEED_CASES) <= set(v.speed) <= set(selftest.SPEED_CASES), v.speed
     for engine, f in v.speed.items():
         rounds, measures = len(f["rounds"]), f["measures"]  # more than one: an unsettled figure measured again
         assert verify.MIN_ROUNDS * measures <= rounds <= verify.MAX_ROUNDS * measures, (engine, f)

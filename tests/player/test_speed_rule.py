@@ -106,6 +106,7 @@ def test_a_player_takes_the_figure_of_the_nearest_measured_size():
         for h, w in ((288, 352), (720, 1280))
         for k in (1, 8)
     }
+    assert len(selftest.SELFTEST_SPEED_CASES) == 4 and all("352x288" in e for e in selftest.SELFTEST_SPEED_CASES)
 
 
 def test_rounds_alternate_which_goes_first_and_stop_once_settled(monkeypatch):
