@@ -43,12 +43,17 @@ SPEED_SIZES = ((288, 352), (720, 1280))
 SPEED_PER_PASS = 8
 
 
-def speed_case(precision: str, values: int, per_pass: int) -> str:
+def speed_case(precision: str, values: int, per_pass: int, detail: bool = False) -> str:
     """The self-test's speed figure that decides ``backend="auto"`` for a projection of ``values``
-    values a frame in ``precision`` with ``per_pass`` frames per pass: the measured size nearest
-    in log scale (``"projection float32 1280x720, 8 per pass"``)."""
+    values a frame in ``precision`` with ``per_pass`` frames per pass, with the fine detail or
+    without (the numpy reference adds it in passes of its own): the measured size nearest in log
+    scale (``"projection float32 1280x720, 8 per pass, detail"``)."""
     h, w = min(SPEED_SIZES, key=lambda s: abs(math.log(max(values, 1) / (s[0] * s[1] * 3))))
-    return f"projection {precision} {w}x{h}" + (f", {SPEED_PER_PASS} per pass" if per_pass > 1 else "")
+    return (
+        f"projection {precision} {w}x{h}"
+        + (f", {SPEED_PER_PASS} per pass" if per_pass > 1 else "")
+        + (", detail" if detail else "")
+    )
 
 
 def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:

@@ -436,20 +436,23 @@ def _child(expected: DeviceInfo) -> int:
     return 0
 
 
-def _projection_speed(precision: str, size: tuple[int, int], per_pass: int = 1):
+def _projection_speed(precision: str, size: tuple[int, int], per_pass: int = 1, detail: bool = False):
     """The projection engine (lds, mixture) at ``size`` with ``per_pass`` frames per pass (a
-    look-ahead), OpenCL against numpy: the per-round ratios of :func:`measure_rounds`."""
+    look-ahead), with a fine detail or without, OpenCL against numpy: the per-round ratios of
+    :func:`measure_rounds`."""
 
     def measure(device: str) -> list[float]:
         from ..engines.projection import SPEED_PER_PASS
 
-        engines = _speed_engines(device, precision, size, SPEED_PER_PASS)
+        engines = _speed_engines(device, precision, size, SPEED_PER_PASS, detail)
         h, w = size
         out = np.empty((per_pass, h, w, 3), np.uint8)
+        d = engines[1].detail
+        layers = [d.layers(3, k, 1.0) for k in range(per_pass)] if detail else None
         if per_pass == 1:  # a player without look-ahead: one frame from coef, as it runs
-            calls = [lambda e=e: e.run(out[0]) for e in engines]
+            calls = [lambda e=e: e.run(out[0], layers=layers) for e in engines]
         else:
-            calls = [lambda e=e: e.run(out, count=per_pass) for e in engines]
+            calls = [lambda e=e: e.run(out, count=per_pass, layers=layers) for e in engines]
         return measure_rounds(*calls)
 
     return measure
@@ -458,27 +461,46 @@ def _projection_speed(precision: str, size: tuple[int, int], per_pass: int = 1):
 _speed_held: list = []  # (key, engines): the last pair of engines measured, shared by 1 and 8 per pass
 
 
-def _speed_engines(device: str, precision: str, size: tuple[int, int], frames: int, n: int = 50) -> list:
-    """The OpenCL engine and its numpy reference on a basis of ``size`` (n=50), held until other ones are asked."""
+def _speed_engines(device: str, precision: str, size: tuple[int, int], frames: int, detail: bool, n: int = 50) -> list:
+    """The OpenCL engine and its numpy reference on a basis of ``size`` (n=50), with a detail
+    model of the analyser's shape (a 32 x 128 x 128 volume) or none, held until other ones are asked."""
     import pyopencl as cl
 
+    from ...tiledb.detail import DetailModel
     from ..engines.projection import open_projector
     from .context import get_context
 
-    key = (device, precision, size, frames)
+    key = (device, precision, size, frames, detail)
     if _speed_held and _speed_held[0][0] == key:
         return _speed_held[0][1]
-    while _speed_held:
-        _speed_held.pop()[1][0].close()
+    _release_speed_engines()
     h, w = size
     rng = np.random.default_rng(0)
     # speed does not depend on the values: a random block repeated is as good and quick to make
     block = (rng.standard_normal((n, 4096), dtype=np.float32) * 0.1).astype(precision)
     basis = np.resize(block, (n, h * w * 3))
     mean = np.full(h * w * 3, 128, np.float32)
+    model = None
+    if detail:
+        model = DetailModel(
+            volume=rng.integers(-20, 21, (32, 128, 128, 3), dtype=np.int8),
+            gain=np.full((h, w), 0.5, np.float32),
+            low=np.full((h, w, 3), 16, np.uint8),
+            high=np.full((h, w, 3), 240, np.uint8),
+            colours=np.ones(32**3, np.uint8),
+        )
     ctx = get_context(device)
     engines = [
-        open_projector(basis, mean, shape=(h, w, 3), channels=3, ctx=c, queue=c and cl.CommandQueue(c), frames=frames)
+        open_projector(
+            basis,
+            mean,
+            shape=(h, w, 3),
+            channels=3,
+            ctx=c,
+            queue=c and cl.CommandQueue(c),
+            frames=frames,
+            detail=model,
+        )
         for c in (ctx, None)
     ]
     for e in engines:
@@ -495,7 +517,7 @@ def measure_rounds(
     blocks of ``block_s`` seconds or more, after warm-up calls. At least
     :data:`~.verify.MIN_ROUNDS` rounds, more while the figure is unsettled
     (:func:`~.verify.speed_settled`), up to :data:`~.verify.MAX_ROUNDS` or ``budget_s`` seconds."""
-    for f in (opencl, numpy, opencl, numpy):  # kernels built, caches and thread pools warm
+    for f in (opencl, numpy):  # kernels built, caches and thread pools warm
         f()
     t = time.perf_counter()
     numpy()
@@ -528,8 +550,11 @@ def _speed_cases() -> dict[str, Callable[[str], list[float]]]:
     cases = {}
     for h, w in SPEED_SIZES:
         for precision in ("float32", "float16"):
-            for per_pass in (1, SPEED_PER_PASS):
-                cases[speed_case(precision, h * w * 3, per_pass)] = _projection_speed(precision, (h, w), per_pass)
+            for detail in (False, True):
+                for per_pass in (1, SPEED_PER_PASS):
+                    cases[speed_case(precision, h * w * 3, per_pass, detail)] = _projection_speed(
+                        precision, (h, w), per_pass, detail
+                    )
     return cases
 
 

@@ -58,7 +58,7 @@ class Verdict:
 #: per-round ratios at least 1); a tie is numpy's: the contract is "never slower than numpy"
 MARGIN = 1.1
 #: rounds each figure takes at least, and at most while it is unsettled (:func:`speed_settled`)
-MIN_ROUNDS, MAX_ROUNDS = 7, 21
+MIN_ROUNDS, MAX_ROUNDS = 5, 21
 #: an unsettled figure is measured again, its rounds pooled with the earlier ones, on first use
 #: at least REMEASURE_S seconds after the last measurement, until it has MAX_MEASURES of them
 REMEASURE_S, MAX_MEASURES = 600.0, 3

@@ -100,13 +100,15 @@ def test_a_player_takes_the_figure_of_the_nearest_measured_size():
     assert speed_case("float16", 288 * 352, 1) == "projection float16 352x288"  # grey
     assert speed_case("float32", 720 * 1280 * 3, 4) == f"projection float32 1280x720, {SPEED_PER_PASS} per pass"
     assert speed_case("float32", 1080 * 1920 * 3, 1) == "projection float32 1280x720"
+    assert speed_case("float32", 288 * 352 * 3, 1, detail=True) == "projection float32 352x288, detail"
     assert set(selftest.SPEED_CASES) == {
-        speed_case(p, h * w * 3, k)
+        speed_case(p, h * w * 3, k, d)
         for p in ("float32", "float16")
         for h, w in ((288, 352), (720, 1280))
         for k in (1, 8)
+        for d in (False, True)
     }
-    assert len(selftest.SELFTEST_SPEED_CASES) == 4 and all("352x288" in e for e in selftest.SELFTEST_SPEED_CASES)
+    assert len(selftest.SELFTEST_SPEED_CASES) == 8 and all("352x288" in e for e in selftest.SELFTEST_SPEED_CASES)
 
 
 def test_rounds_alternate_which_goes_first_and_stop_once_settled(monkeypatch):
@@ -124,7 +126,7 @@ def test_rounds_alternate_which_goes_first_and_stop_once_settled(monkeypatch):
     monkeypatch.setattr(selftest.time, "perf_counter", lambda: clock[0])
     ratios = selftest.measure_rounds(call("opencl", 0.01), call("numpy", 0.02), block_s=0.04)
     assert ratios == pytest.approx([2.0] * verify.MIN_ROUNDS)
-    timed = order[5:]  # after the warm-up calls and the calibration
+    timed = order[3:]  # after the warm-up calls and the calibration
     blocks = [timed[k : k + 2] for k in range(0, len(timed), 2)]  # 2 calls of 20 ms make a 40 ms block
     assert all(len(set(b)) == 1 for b in blocks) and blocks[0][0] == "numpy" and blocks[2][0] == "opencl"
 
