@@ -566,12 +566,18 @@ SPEED_CASES: dict[str, Callable[[str], list[float]]] = _speed_cases()
 SELFTEST_SPEED_CASES = tuple(e for e in SPEED_CASES if " 352x288" in e)
 
 
-def speed_main(info: dict, engines: list[str]) -> dict[str, list[float]]:
+def speed_main(info: dict, engines: list[str] | None, figures: dict | None = None) -> dict[str, list[float]]:
     """What a re-measurement's child runs (:func:`.verify.refresh_speeds`): the rounds of each of
-    ``engines`` on the device ``info`` describes, which passed its checks."""
+    ``engines`` (None: those of :data:`SPEED_CASES` whose figure in ``figures`` is due,
+    :func:`.verify.speed_stale`) on the device ``info`` describes, which passed its checks."""
     import warnings
 
     warnings.simplefilter("ignore")
+    if engines is None:
+        now, config = time.time(), verify.speed_config()
+        engines = [e for e in SPEED_CASES if verify.speed_stale((figures or {}).get(e), now=now, config=config)]
+        if not engines:
+            return {}
     expected = DeviceInfo(**info)
     found = next((d for d in devices() if d.index == expected.index), None)
     if found != expected:

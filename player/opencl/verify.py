@@ -296,40 +296,40 @@ def speed(info: DeviceInfo, engine: str) -> dict | None:
 
 
 def refresh_speeds(info: DeviceInfo, engines: list[str] | None = None) -> Verdict:
-    """Measure again those of ``engines`` (default: every engine the verdict holds or the
-    self-test measures) that :func:`speed_stale` names, in one child process, and cache the
-    verdict with their new figures (pooled with an unsettled figure's earlier rounds). A
-    measurement that fails keeps the old figure and is not tried again in this process."""
-    from .selftest import SPEED_CASES
-
+    """Measure again those of ``engines`` that :func:`speed_stale` names (None: every engine the
+    self-test knows, as its child finds them), in one child process, and cache the verdict with
+    their new figures (pooled with an unsettled figure's earlier rounds). A measurement that
+    fails keeps the old figure and is not tried again in this process."""
     with _run_lock:
         v = cached_verdict(info)
         if v is None or not v.ok:
             return v
         key, config, now = cache_key(info), speed_config(), time.time()
-        wanted = [
-            e
-            for e in (engines if engines is not None else list(SPEED_CASES))
-            if e in SPEED_CASES
-            and (key, e) not in _speed_failed
-            and speed_stale(v.speed.get(e), now=now, config=config) is not None
-        ]
-        if not wanted:
-            return v
+        wanted = None
+        if engines is not None:
+            wanted = [
+                e
+                for e in engines
+                if (key, e) not in _speed_failed and speed_stale(v.speed.get(e), now=now, config=config) is not None
+            ]
+            if not wanted:
+                return v
         timeout = float(os.environ.get("DYNATEX_SELFTEST_TIMEOUT", TIMEOUT))
         try:
-            child = call("dynatex.player.opencl.selftest:speed_main", asdict(info), wanted, timeout=timeout)
+            child = call("dynatex.player.opencl.selftest:speed_main", asdict(info), wanted, v.speed, timeout=timeout)
             measured = child.value if child.status == 0 and isinstance(child.value, dict) else {}
         except ChildStartError:
             measured = {}
         figures = dict(v.speed)
-        for e in wanted:
-            ratios = measured.get(e)
+        for e, ratios in measured.items():
             if ratios:
                 figures[e] = pooled_figure(v.speed.get(e), ratios, at=time.time(), config=config)
-            else:
+        for e in wanted or ():
+            if not measured.get(e):
                 _speed_failed.add((key, e))
                 log.warning("could not measure %s on %s again; its earlier figure stays", e, info.describe())
+        if figures == v.speed:
+            return v
         v = replace(v, speed=figures)
         with _lock:
             _verdicts[key] = v

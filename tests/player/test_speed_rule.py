@@ -163,7 +163,7 @@ def test_a_stale_figure_is_measured_again_in_a_child_and_pooled(tmp_path, monkey
     verify._write_cache(verify.cache_key(info), v)
     asked = []
 
-    def fake_call(target, info_dict, engines, timeout):
+    def fake_call(target, info_dict, engines, figures, timeout):
         asked.append((target, engines))
         return Outcome(0, timeout, 1.0, 0, value={e: [1.6] * 7 for e in engines})
 
@@ -175,7 +175,7 @@ def test_a_stale_figure_is_measured_again_in_a_child_and_pooled(tmp_path, monkey
     assert verify.cached_verdict(info).speed[engine] == got  # cached
     assert verify.speed(info, engine) == got and len(asked) == 1  # now recent: not again
 
-    def failing_call(target, info_dict, engines, timeout):
+    def failing_call(target, info_dict, engines, figures, timeout):
         return Outcome(1, timeout, 1.0, 0)
 
     other = "projection float16 352x288"
@@ -184,3 +184,24 @@ def test_a_stale_figure_is_measured_again_in_a_child_and_pooled(tmp_path, monkey
     monkeypatch.setattr(verify, "call", fake_call)
     assert verify.speed(info, other) is None and len(asked) == 1  # not tried again in this process
     assert dataclasses.asdict(verify.cached_verdict(info))["speed"].keys() == {engine}
+
+
+def test_check_leaves_the_choice_of_what_is_due_to_the_child(tmp_path, monkeypatch):
+    """``--check`` measures every engine due: the plumbing does not import the self-test's cases,
+    so the child finds them from the figures it is given, and starts nothing when none is due."""
+    monkeypatch.setenv("DYNATEX_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(verify, "_verdicts", {})
+    monkeypatch.setattr(verify, "_sources_hash", lambda: "0" * 16)
+    info = DeviceInfo("9:0", "Test platform", "Test 1.0", "dev", "vendor", "1.0", True)
+    fresh = {e: figure([1.6] * 7, at=time.time(), config=verify.speed_config()) for e in selftest.SPEED_CASES}
+    assert selftest.speed_main(dataclasses.asdict(info), None, fresh) == {}  # the device is not even looked for
+    verify._write_cache(verify.cache_key(info), verify.Verdict(True, device=info.describe(), speed=fresh))
+    asked = []
+
+    def fake_call(target, info_dict, engines, figures, timeout):
+        asked.append((engines, figures))
+        return Outcome(0, timeout, 1.0, 0, value={})
+
+    monkeypatch.setattr(verify, "call", fake_call)
+    assert verify.refresh_speeds(info).speed == fresh
+    assert asked == [(None, fresh)]
