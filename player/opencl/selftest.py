@@ -510,13 +510,14 @@ def _speed_engines(device: str, precision: str, size: tuple[int, int], frames: i
 
 
 def measure_rounds(
-    opencl: Callable[[], object], numpy: Callable[[], object], *, block_s: float = 0.02, budget_s: float = 4.0
+    opencl: Callable[[], object], numpy: Callable[[], object], *, block_s: float = 0.05, budget_s: float = 5.0
 ) -> list[float]:
     """OpenCL's rate over numpy's per round: each round times a block of calls of one, then of
     the other (the order alternating, so neither always runs first under a changing load),
     blocks of ``block_s`` seconds or more, after warm-up calls. At least
-    :data:`~.verify.MIN_ROUNDS` rounds, more while the figure is unsettled
-    (:func:`~.verify.speed_settled`), up to :data:`~.verify.MAX_ROUNDS` or ``budget_s`` seconds."""
+    :data:`~.verify.MIN_ROUNDS` rounds over :data:`~.verify.MIN_SECONDS` seconds, more while the
+    figure is unsettled (:func:`~.verify.speed_settled`), up to :data:`~.verify.MAX_ROUNDS` or
+    ``budget_s`` seconds."""
     for f in (opencl, numpy):  # kernels built, caches and thread pools warm
         f()
     t = time.perf_counter()
@@ -537,10 +538,10 @@ def measure_rounds(
         else:
             t_np, t_cl = block(numpy), block(opencl)
         ratios.append(t_np / t_cl)
-        if len(ratios) >= verify.MIN_ROUNDS and (
-            verify.speed_settled(ratios) or time.perf_counter() - start > budget_s
-        ):
-            break
+        spent = time.perf_counter() - start
+        if len(ratios) >= verify.MIN_ROUNDS and spent >= verify.MIN_SECONDS:
+            if verify.speed_settled(ratios) or spent > budget_s:
+                break
     return ratios
 
 

@@ -59,6 +59,9 @@ class Verdict:
 MARGIN = 1.1
 #: rounds each figure takes at least, and at most while it is unsettled (:func:`speed_settled`)
 MIN_ROUNDS, MAX_ROUNDS = 5, 21
+#: seconds the rounds of a figure span at least, so that they sample more than one moment of a
+#: changing load (a burst of other work lasts about as long as a few small rounds)
+MIN_SECONDS = 1.5
 #: an unsettled figure is measured again, its rounds pooled with the earlier ones, on first use
 #: at least REMEASURE_S seconds after the last measurement, until it has MAX_MEASURES of them
 REMEASURE_S, MAX_MEASURES = 600.0, 3

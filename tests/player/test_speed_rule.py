@@ -124,8 +124,10 @@ def test_rounds_alternate_which_goes_first_and_stop_once_settled(monkeypatch):
         return f
 
     monkeypatch.setattr(selftest.time, "perf_counter", lambda: clock[0])
-    ratios = selftest.measure_rounds(call("opencl", 0.01), call("numpy", 0.02), block_s=0.04)
-    assert ratios == pytest.approx([2.0] * verify.MIN_ROUNDS)
+    ratios = selftest.measure_rounds(call("opencl", 0.1), call("numpy", 0.2), block_s=0.4)
+    # a round takes 0.4 + 0.2 s: settled once MIN_ROUNDS rounds and MIN_SECONDS have passed
+    rounds = max(verify.MIN_ROUNDS, int(-(-verify.MIN_SECONDS // 0.6)))
+    assert ratios == pytest.approx([2.0] * rounds)
     timed = order[3:]  # after the warm-up calls and the calibration
     blocks = [timed[k : k + 2] for k in range(0, len(timed), 2)]  # 2 calls of 20 ms make a 40 ms block
     assert all(len(set(b)) == 1 for b in blocks) and blocks[0][0] == "numpy" and blocks[2][0] == "opencl"
