@@ -9,10 +9,11 @@ size and precision: the backend auto chose (the self-test's measured speed decid
 Timing: alternating rounds (auto then numpy, numpy then auto, ...), each a block of ``--frames``
 frames of one player; the figure is the median of the per-round ratios (numpy's block time over
 auto's), with its quartiles, so a load that changes during the run weighs on both alike.
-``--first`` puts one device first in the player's order of preference, as on a machine where
-it is the only one (a device named with ``device=`` is OpenCL's by the user's choice, so auto's
-rule is measured on the device it takes by itself); ``--lookahead`` renders k frames per pass
-on both players.
+``--first`` (an index ``P:D`` or a name, as ``device=``: "Intel(R) OpenCL" for Intel's CPU
+runtime, whose device name PoCL's also holds) puts one device first in the player's order of
+preference, as on a machine where it is the only one (a device named with ``device=`` is
+OpenCL's by the user's choice, so auto's rule is measured on the device it takes by itself);
+``--lookahead`` renders k frames per pass on both players.
 
 lds textures are synthetic (n=50, as bench_lds); mixture is learned from the first 100 frames
 of the real sea clip when ../shared/data/clips is there (else a generated clip), at each size
@@ -81,7 +82,8 @@ def first(spec: str) -> None:
     """Put the device ``spec`` names first in the player's order of preference (this process only)."""
     from dynatex.player.opencl import context, devices
 
-    chosen = devices.find_device(devices.devices(), spec, "--first")
+    chosen = devices.find_device(devices.devices(), spec, "--first")  # a name matching several: PoCL's
+    print(f"auto's device: {chosen.index} {chosen.describe()}", flush=True)
     order = devices.preference_order
 
     def preference_order(infos):
