@@ -458,13 +458,14 @@ class Player:
 
     def _prefer_faster(self, backend: str, device: str | None, engine: str) -> None:
         """Under ``backend="auto"`` with no device named, take the numpy reference for
-        ``engine`` where the self-test measured OpenCL slower on this device (Verdict.speed)."""
+        ``engine`` unless the self-test measured OpenCL clearly faster on this device
+        (:func:`.opencl.verify.prefers_opencl` on Verdict.speed; an engine never measured stays on OpenCL)."""
         if backend != "auto" or device is not None or os.environ.get("PYOPENCL_CTX") or self.ctx is None:
             return
         from .opencl.context import engine_speed
 
-        speed = engine_speed(self.ctx.devices[0], engine)
-        if speed is not None and speed < 1.0:
+        figure = engine_speed(self.ctx.devices[0], engine)
+        if figure is not None and not figure.get("opencl", False):
             self.ctx = self.queue = None
             self.backend = "numpy"
 

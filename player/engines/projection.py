@@ -24,6 +24,7 @@ colour set (integers alone) is applied exactly.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -38,6 +39,25 @@ PIXELS = 16
 #: Work-group size: left to choose, PoCL may make few large groups that leave a core idle
 #: (CHANGELOG.md has the measurement).
 LOCAL = 32
+#: (height, width) of the RGB frames at which the device self-test times this engine against
+#: numpy (:data:`dynatex.player.opencl.selftest.SPEED_CASES`): a basis beyond any cache, and a
+#: 720p one several times larger; a player takes the figure of the size nearest its own
+SPEED_SIZES = ((288, 352), (720, 1280))
+#: frames per pass of the self-test's look-ahead figures (any look-ahead above 1 takes them)
+SPEED_PER_PASS = 8
+
+
+def speed_case(precision: str, values: int, per_pass: int, detail: bool = False) -> str:
+    """The self-test's speed figure that decides ``backend="auto"`` for a projection of ``values``
+    values a frame in ``precision`` with ``per_pass`` frames per pass, with the fine detail or
+    without (the numpy reference adds it in passes of its own): the measured size nearest in log
+    scale (``"projection float32 1280x720, 8 per pass, detail"``)."""
+    h, w = min(SPEED_SIZES, key=lambda s: abs(math.log(max(values, 1) / (s[0] * s[1] * 3))))
+    return (
+        f"projection {precision} {w}x{h}"
+        + (f", {SPEED_PER_PASS} per pass" if per_pass > 1 else "")
+        + (", detail" if detail else "")
+    )
 
 
 def snap_colours(frames: np.ndarray, nearest: np.ndarray, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:

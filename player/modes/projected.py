@@ -39,6 +39,7 @@ from ...params import Param
 from ..base import Player
 from ..controls import Control
 from ..engines import open_engine
+from ..engines.projection import speed_case
 
 PRECISIONS = ("float32", "float16")
 MAX_INTENSITY = 100.0
@@ -85,13 +86,12 @@ class ProjectionPlayer(Player):
 
     def _open(self, *, seed: int, precision: str, lookahead: int | None) -> None:
         lookahead = lookahead or 1
-        per_pass = ", 8 per pass" if lookahead > 1 else ""  # the self-test measures 1 and 8 frames per pass
-        self._prefer_faster(*self._asked, f"projection {precision}{per_pass}")
         model = self.texture.read(self.method)
         self.model_info = dict(model.info)
         self.precision = precision
         self._setup(model)
         basis = getattr(model, self.basis_name)
+        self._prefer_faster(*self._asked, speed_case(precision, basis.shape[1], lookahead, model.detail is not None))
         if precision == "float16":
             basis = basis.astype(np.float16)
         self.engine = open_engine(

@@ -103,11 +103,13 @@ def variant_verified(device: cl.Device, variant: str) -> bool:
     return bool(verdict and verdict.ok and verdict.variants.get(variant, False))
 
 
-def engine_speed(device: cl.Device, engine: str) -> float | None:
-    """``engine``'s OpenCL frame rate over its numpy reference's on ``device``, as the self-test
-    measured it (:data:`dynatex.player.opencl.selftest.SPEED_CASES`); None when not measured."""
+def engine_speed(device: cl.Device, engine: str) -> dict | None:
+    """``engine``'s speed figure on ``device`` (:func:`.verify.speed_figure`: OpenCL's rate over
+    numpy's, and ``"opencl"``, whether ``backend="auto"`` takes OpenCL), measured again first
+    where it is unsettled, old or from another configuration (:func:`.verify.speed_stale`);
+    None when not measured."""
     try:
-        verdict = verify.cached_verdict(device_info(device))
+        info = device_info(device)
     except OpenCLUnavailableError:
         return None
-    return verdict.speed.get(engine) if verdict and verdict.ok else None
+    return verify.speed(info, engine)

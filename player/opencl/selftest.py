@@ -434,67 +434,178 @@ def _child(expected: DeviceInfo) -> int:
             if problem:
                 v.variant_reasons[variant] = problem
     if v.ok:
-        for engine, measure in SPEED_CASES.items():
+        config = verify.speed_config()
+        for engine in SELFTEST_SPEED_CASES:
             print(f"check\tspeed {engine}", flush=True)
             try:
-                v.speed[engine] = round(measure(index), 3)
+                v.speed[engine] = verify.speed_figure(SPEED_CASES[engine](index), at=time.time(), config=config)
             except Exception as exc:  # a measurement that fails decides nothing: OpenCL stays
                 print(f"fail\tspeed {engine}\t{_one_line(exc)}", flush=True)
             else:
                 print(f"pass\tspeed {engine}", flush=True)
+        _release_speed_engines()
     v.seconds = time.perf_counter() - start
     print(f"verdict\t{json.dumps(asdict(v))}", flush=True)
     return 0
 
 
-def _projection_speed(
-    precision: str, size: tuple[int, int] = (288, 352), n: int = 50, frames: int = 12, per_pass: int = 1
-):
-    """OpenCL's frame rate over numpy's for the projection engine (lds, mixture) at ``size``
-    (a basis beyond any cache: both are bound by memory there, as at larger sizes) with
-    ``per_pass`` frames per pass (a look-ahead), the median of alternating rounds."""
+def _projection_speed(precision: str, size: tuple[int, int], per_pass: int = 1, detail: bool = False):
+    """The projection engine (lds, mixture) at ``size`` with ``per_pass`` frames per pass (a
+    look-ahead), with a fine detail or without, OpenCL against numpy: the per-round ratios of
+    :func:`measure_rounds`."""
 
-    def measure(device: str) -> float:
-        import pyopencl as cl
+    def measure(device: str) -> list[float]:
+        from ..engines.projection import SPEED_PER_PASS
 
-        from ..engines.projection import open_projector
-        from .context import get_context
-
+        engines = _speed_engines(device, precision, size, SPEED_PER_PASS, detail)
         h, w = size
-        rng = np.random.default_rng(0)
-        basis = (rng.standard_normal((n, h * w * 3), dtype=np.float32) * 0.1).astype(precision)
-        mean = np.full(h * w * 3, 128, np.float32)
-        ctx = get_context(device)
-        engines = [
-            open_projector(
-                basis, mean, shape=(h, w, 3), channels=3, ctx=c, queue=c and cl.CommandQueue(c), frames=per_pass
-            )
-            for c in (ctx, None)
-        ]
         out = np.empty((per_pass, h, w, 3), np.uint8)
-        times: list[list[float]] = [[], []]
-        try:
-            for r in range(frames + 2):
-                for k, e in enumerate(engines):
-                    e.coefs[:] = rng.standard_normal(e.coefs.shape)
-                    t = time.perf_counter()
-                    e.run(out, count=per_pass)
-                    if r >= 2:  # the first rounds warm caches and threads
-                        times[k].append(time.perf_counter() - t)
-        finally:
-            engines[0].close()
-        return float(np.median(times[1]) / np.median(times[0]))
+        d = engines[1].detail
+        layers = [d.layers(3, k, 1.0) for k in range(per_pass)] if detail else None
+        if per_pass == 1:  # a player without look-ahead: one frame from coef, as it runs
+            calls = [lambda e=e: e.run(out[0], layers=layers) for e in engines]
+        else:
+            calls = [lambda e=e: e.run(out, count=per_pass, layers=layers) for e in engines]
+        return measure_rounds(*calls)
 
     return measure
 
 
-#: engine -> measure(device): its OpenCL frame rate over its numpy reference's (Verdict.speed)
-SPEED_CASES: dict[str, Callable[[str], float]] = {
-    "projection float32": _projection_speed("float32"),
-    "projection float16": _projection_speed("float16"),
-    "projection float32, 8 per pass": _projection_speed("float32", frames=4, per_pass=8),
-    "projection float16, 8 per pass": _projection_speed("float16", frames=4, per_pass=8),
-}
+_speed_held: list = []  # (key, engines): the last pair of engines measured, shared by 1 and 8 per pass
+
+
+def _speed_engines(device: str, precision: str, size: tuple[int, int], frames: int, detail: bool, n: int = 50) -> list:
+    """The OpenCL engine and its numpy reference on a basis of ``size`` (n=50), with a detail
+    model of the analyser's shape (a 32 x 128 x 128 volume) or none, held until other ones are asked."""
+    import pyopencl as cl
+
+    from ...tiledb.detail import DetailModel
+    from ..engines.projection import open_projector
+    from .context import get_context
+
+    key = (device, precision, size, frames, detail)
+    if _speed_held and _speed_held[0][0] == key:
+        return _speed_held[0][1]
+    _release_speed_engines()
+    h, w = size
+    rng = np.random.default_rng(0)
+    # speed does not depend on the values: a random block repeated is as good and quick to make
+    block = (rng.standard_normal((n, 4096), dtype=np.float32) * 0.1).astype(precision)
+    basis = np.resize(block, (n, h * w * 3))
+    mean = np.full(h * w * 3, 128, np.float32)
+    model = None
+    if detail:
+        model = DetailModel(
+            volume=rng.integers(-20, 21, (32, 128, 128, 3), dtype=np.int8),
+            gain=np.full((h, w), 0.5, np.float32),
+            low=np.full((h, w, 3), 16, np.uint8),
+            high=np.full((h, w, 3), 240, np.uint8),
+            colours=np.ones(32**3, np.uint8),
+        )
+    ctx = get_context(device)
+    engines = [
+        open_projector(
+            basis,
+            mean,
+            shape=(h, w, 3),
+            channels=3,
+            ctx=c,
+            queue=c and cl.CommandQueue(c),
+            frames=frames,
+            detail=model,
+        )
+        for c in (ctx, None)
+    ]
+    for e in engines:
+        e.coefs[:] = rng.standard_normal(e.coefs.shape)
+    _speed_held.append((key, engines))
+    return engines
+
+
+def measure_rounds(
+    opencl: Callable[[], object], numpy: Callable[[], object], *, block_s: float = 0.05, budget_s: float = 5.0
+) -> list[float]:
+    """OpenCL's rate over numpy's per round: each round times a block of calls of one, then of
+    the other (the order alternating, so neither always runs first under a changing load),
+    blocks of ``block_s`` seconds or more, after warm-up calls. At least
+    :data:`~.verify.MIN_ROUNDS` rounds over :data:`~.verify.MIN_SECONDS` seconds, more while the
+    figure is unsettled (:func:`~.verify.speed_settled`), up to :data:`~.verify.MAX_ROUNDS` or
+    ``budget_s`` seconds."""
+    for f in (opencl, numpy):  # kernels built, caches and thread pools warm
+        f()
+    t = time.perf_counter()
+    numpy()
+    calls = max(1, min(64, round(block_s / max(time.perf_counter() - t, 1e-6))))
+
+    def block(f: Callable[[], object]) -> float:
+        t = time.perf_counter()
+        for _ in range(calls):
+            f()
+        return time.perf_counter() - t
+
+    ratios: list[float] = []
+    start = time.perf_counter()
+    while len(ratios) < verify.MAX_ROUNDS:
+        if len(ratios) % 2:
+            t_cl, t_np = block(opencl), block(numpy)
+        else:
+            t_np, t_cl = block(numpy), block(opencl)
+        ratios.append(t_np / t_cl)
+        spent = time.perf_counter() - start
+        if len(ratios) >= verify.MIN_ROUNDS and spent >= verify.MIN_SECONDS:
+            if verify.speed_settled(ratios) or spent > budget_s:
+                break
+    return ratios
+
+
+def _speed_cases() -> dict[str, Callable[[str], list[float]]]:
+    from ..engines.projection import SPEED_PER_PASS, SPEED_SIZES, speed_case
+
+    cases = {}
+    for h, w in SPEED_SIZES:
+        for precision in ("float32", "float16"):
+            for detail in (False, True):
+                for per_pass in (1, SPEED_PER_PASS):
+                    cases[speed_case(precision, h * w * 3, per_pass, detail)] = _projection_speed(
+                        precision, (h, w), per_pass, detail
+                    )
+    return cases
+
+
+#: engine -> measure(device): its OpenCL rate over its numpy reference's, one ratio per round
+#: (:func:`measure_rounds`; :func:`.verify.speed_figure` sums them up in the verdict)
+SPEED_CASES: dict[str, Callable[[str], list[float]]] = _speed_cases()
+#: the cases the self-test measures after its checks (the smallest size: a few seconds); the
+#: others are measured by ``--check`` or by the first player that needs one (:func:`.verify.speed`)
+SELFTEST_SPEED_CASES = tuple(e for e in SPEED_CASES if " 352x288" in e)
+
+
+def speed_main(info: dict, engines: list[str] | None, figures: dict | None = None) -> dict[str, list[float]]:
+    """What a re-measurement's child runs (:func:`.verify.refresh_speeds`): the rounds of each of
+    ``engines`` (None: those of :data:`SPEED_CASES` whose figure in ``figures`` is due,
+    :func:`.verify.speed_stale`) on the device ``info`` describes, which passed its checks."""
+    import warnings
+
+    warnings.simplefilter("ignore")
+    if engines is None:
+        now, config = time.time(), verify.speed_config()
+        engines = [e for e in SPEED_CASES if verify.speed_stale((figures or {}).get(e), now=now, config=config)]
+        if not engines:
+            return {}
+    expected = DeviceInfo(**info)
+    found = next((d for d in devices() if d.index == expected.index), None)
+    if found != expected:
+        raise RuntimeError(f"device {expected.index} is not {expected.describe()} in this process")
+    verify.suppose(found)
+    try:
+        return {e: SPEED_CASES[e](found.index) for e in engines if e in SPEED_CASES}
+    finally:
+        _release_speed_engines()
+
+
+def _release_speed_engines() -> None:
+    while _speed_held:
+        _speed_held.pop()[1][0].close()
 
 
 def _all(checks: dict[str, Callable[[str], str | None]], device: str) -> str | None:

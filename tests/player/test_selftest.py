@@ -7,6 +7,7 @@ import dataclasses
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -204,7 +205,13 @@ def test_check_command_lists_every_device_with_its_verdict(device):
 
 def test_every_verified_device_measured_its_engines_against_numpy(cl_device):
     v = verify.verdict(next(d for d in opencl.devices() if d.index == cl_device))
-    assert set(v.speed) == set(selftest.SPEED_CASES) and all(x > 0 for x in v.speed.values()), v.speed
+    assert set(selftest.SELFTEST_SPEED_CASES) <= set(v.speed) <= set(selftest.SPEED_CASES), v.speed
+    for engine, f in v.speed.items():
+        rounds, measures = len(f["rounds"]), f["measures"]  # more than one: an unsettled figure measured again
+        assert verify.MIN_ROUNDS * measures <= rounds <= verify.MAX_ROUNDS * measures, (engine, f)
+        assert min(f["rounds"]) > 0 and 1 <= measures <= verify.MAX_MEASURES, (engine, f)
+        assert f["low"] <= f["ratio"] <= f["high"] and f["opencl"] == verify.prefers_opencl(f["rounds"]), (engine, f)
+        assert f["config"] == verify.speed_config(), (engine, f)
 
 
 def test_auto_takes_numpy_for_an_engine_the_self_test_measured_slower(device, monkeypatch):
@@ -212,7 +219,11 @@ def test_auto_takes_numpy_for_an_engine_the_self_test_measured_slower(device, mo
     monkeypatch.delenv("PYOPENCL_CTX", raising=False)
     info = opencl.device_info(opencl.get_context().devices[0])
     v = verify.verdict(info)
-    slow = {"projection float32": 0.5, "projection float16": 2.0}
+    at, config = time.time(), verify.speed_config()
+    slow = {
+        "projection float32 352x288": verify.speed_figure([0.5] * 7, at=at, config=config),
+        "projection float16 352x288": verify.speed_figure([2.0] * 7, at=at, config=config),
+    }
     monkeypatch.setitem(verify._verdicts, verify.cache_key(info), dataclasses.replace(v, speed=slow))
     db = selftest._db_path()
     for mode in ("lds", "mixture"):
