@@ -11,6 +11,8 @@ its peak memory, and what the function returned or raised.
   Ctrl-C and SIGTERM are held back in the parent while the child starts (an interrupt there would
   leave a child no one waits for) and take effect once it runs; when they interrupt the wait, or
   the child overruns ``timeout``, the parent kills the child and everything it started.
+- A child ends with its parent, however the parent ends (killed outright included): its stdin is
+  a pipe the parent never writes to, and when it closes the child kills itself and what it started.
 - Every wait has a bound: a child that a kill cannot end (stuck in the kernel) is left after
   :data:`REAP_S` seconds rather than hanging the caller.
 - What the child prints goes to unlinked temporary files, not pipes, so a child (or a compiler
@@ -125,6 +127,8 @@ def call(target: str, *args: Any, timeout: float) -> Outcome:
         except BaseException:  # an interrupt: the child must not outlive the wait
             _kill(proc)
             raise
+        finally:
+            proc.stdin.close()
         seconds = time.monotonic() - start
         text, errors = _read(out), _read(err)
     outcome = Outcome(status, timeout, seconds, peak, err=errors)
@@ -150,7 +154,7 @@ def _start(cmd: list[str], out, err, env: dict) -> subprocess.Popen:
     try:
         return subprocess.Popen(
             cmd,
-            stdin=subprocess.DEVNULL,
+            stdin=subprocess.PIPE,  # the lifeline (end_with_parent); never written to
             stdout=out,
             stderr=err,
             env=env,
@@ -214,6 +218,23 @@ def ignore_stops() -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPS)
 
 
+def end_with_parent() -> None:
+    """In a child: when the parent is gone (the lifeline on stdin closes, however the parent
+    ended), kill this child's session (itself and what it started; only itself off POSIX)."""
+
+    def watch() -> None:
+        try:
+            while os.read(0, 4096):  # the raw descriptor: a daemon thread in sys.stdin's lock aborts exit
+                pass
+        except OSError:
+            return
+        if os.name == "posix":
+            os.killpg(0, signal.SIGKILL)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="dynatex-lifeline", daemon=True).start()
+
+
 def _one_line(exc: BaseException) -> str:
     lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
     return lines[0] if lines else type(exc).__name__
@@ -226,6 +247,7 @@ def _main(argv: list[str]) -> int:
         print("usage: python -m dynatex.child MODULE:FUNCTION JSON_ARGS  (run by dynatex.child.call)", file=sys.stderr)
         return 2
     ignore_stops()
+    end_with_parent()
     module, _, function = argv[0].partition(":")
     try:
         value = getattr(importlib.import_module(module), function)(*json.loads(argv[1]))

@@ -110,6 +110,28 @@ def test_an_interrupt_kills_the_child_before_it_is_raised(tmp_path):
     assert _gone(sleep_pid)
 
 
+@posix
+def test_a_child_ends_when_its_parent_is_killed_outright(tmp_path):
+    """SIGKILL gives the parent no chance to kill its child: the lifeline on stdin ends it."""
+    import subprocess
+
+    pids = tmp_path / "pids"
+    script = f"echo $PPID > {pids}.tmp; echo $$ >> {pids}.tmp; mv {pids}.tmp {pids}; exec sleep 60"
+    parent = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            f"from dynatex.child import call; call('subprocess:call', ['sh', '-c', {script!r}], timeout=120)",
+        ]
+    )
+    try:
+        child_pid, sleep_pid = _pids(pids)
+    finally:
+        parent.kill()
+        parent.wait(30)
+    assert _gone(child_pid) and _gone(sleep_pid)
+
+
 def test_without_an_interpreter_no_child_starts(monkeypatch):
     monkeypatch.setenv("DYNATEX_PYTHON", "/usr/bin/my-game")
     words = r"'/usr/bin/my-game' is not a Python interpreter \(set DYNATEX_PYTHON to one\)"
