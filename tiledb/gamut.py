@@ -85,4 +85,9 @@ def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> GamutModel |
         check.fail(path, f"a bin outside 0..{COLOUR_BINS - 1}")
     if (nearest[nearest] != nearest).any():
         check.fail(path, "a bin maps to a bin outside the colour set (a target must map to itself)")
-    return GamutModel(nearest=np.ascontiguousarray(nearest), info=check.info(g, skip=("version",)))
+    stated = check.attr(g, "colours", int)
+    colours = int(np.count_nonzero(nearest == np.arange(COLOUR_BINS)))
+    if colours != stated:  # a damaged map (zeroed, say) would snap every frame to a few colours
+        check.fail(path, f"holds {colours} colours where the part says {stated}")
+    info = check.info(g, skip=("version",))
+    return GamutModel(nearest=np.ascontiguousarray(nearest), info=info)

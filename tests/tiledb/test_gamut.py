@@ -120,6 +120,7 @@ def _replace(fn):
         (lambda a: a[:-1], "expected"),
         (lambda a: np.full_like(a, 40000), "a bin outside 0..32767"),
         (lambda a: np.roll(np.arange(32**3, dtype=np.uint16), 1), "must map to itself"),
+        (np.zeros_like, r"holds 1 colours where the part says \d+"),  # every frame would go black
     ],
 )
 def test_damaged_map_is_refused(db, tmp_path, fn, match):
