@@ -15,8 +15,9 @@ A model with switching dynamics (``model.switching``, analysed since format 1.5)
 them instead: the component follows the learned Markov chain, every component's local
 coordinates run their own AR(1) process (on the component's subspace, with its covariance),
 and a switch cross-fades the responsibilities from the old component to the new one over
-as many frames as keep each frame's step within the clip's (``STEP_QUANTILE``); ``draws``
-then has no effect.
+as many frames as keep each frame's step within the clip's typical one (``FADE_QUANTILE`` of
+its steps: a fade as fast as the clip's 99th percentile step flashed whole-frame brightness at
+twice the clip's largest change); ``draws`` then has no effect.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ MAX_DRAWS = 1024
 STEP_QUANTILE = 0.99
 STEP_PIXELS = 1 << 16  # pixels (basis columns) the frame-step measure averages over
 MAX_FADE = 32  # frames a switch's cross-fade may last
+FADE_QUANTILE = 0.5
 
 
 class GlobalDecoder:
@@ -150,13 +152,16 @@ class MixturePlayer(ProjectionPlayer):
             train = (ext * model.responsibilities[:, :, None]).reshape(len(z), -1)
         else:
             train = self.decoder.coefficients(self.train_coords)
-        self._step_limit = float(np.quantile(step_sizes(self._gram, np.diff(train, axis=0)), STEP_QUANTILE))
+        steps = step_sizes(self._gram, np.diff(train, axis=0))
+        self._step_limit = float(np.quantile(steps, STEP_QUANTILE))
+        self._fade_step = float(np.quantile(steps, FADE_QUANTILE))
         self._hist0 = self.train_coords[p - 1 :: -1].copy()  # hist[i] = g_{t-i}
         self._hist = self._hist0.copy()
         if self.switching is not None:
             self._dim = self.components * (self.dim + 1)
             self._offset = model.decode_offset
             self._label = int(model.responsibilities[0].argmax())
+            self._chain = np.cumsum(self.switching.transitions, axis=1)
             order = self.switching.local_ar.shape[1]
             self._zh = np.repeat(model.local_coords[:1] - self._offset[None], order, axis=0)  # z_{t-i} - c
             self._r = np.eye(self.components)[self._label]
@@ -182,12 +187,21 @@ class MixturePlayer(ProjectionPlayer):
         return self._hist[0].copy()
 
     def _switch_coefficients(self) -> np.ndarray:
-        ext = np.concatenate([np.ones((self.components, 1)), self._offset + self._zh[0]], axis=1)
-        return (ext * self._r[:, None]).reshape(-1)
+        """The coefficients of the current local coordinates, each component's pulled back into the
+        ellipsoid of its training coordinates (as :class:`GlobalDecoder` does; the process runs on)."""
+        dz = self._zh[0]
+        rad = np.sqrt((np.einsum("sij,sj->si", self.decoder.local_whiten, dz) ** 2).sum(axis=1))
+        dz = dz * np.minimum(1.0, self.decoder.radius / np.maximum(rad, 1e-300))[:, None]
+        # Mean images mix by the responsibilities; the components' independent fluctuations by
+        # weights whose squares sum to one, so that a cross-fade keeps their variance.
+        r = self._r
+        w = r / np.sqrt(r @ r)
+        ext = np.concatenate([r[:, None], r[:, None] * self._offset + w[:, None] * dz], axis=1)
+        return ext.reshape(-1)
 
     def _switch_step(self) -> None:
         dyn, s_count = self.switching, self.components
-        new = int(self._rng.choice(s_count, p=dyn.transitions[self._label]))
+        new = min(int(np.searchsorted(self._chain[self._label], self._rng.random(), side="right")), s_count - 1)
         eps = self._rng.standard_normal(self._zh.shape[1:])
         dz = np.einsum("spij,psj->si", dyn.local_ar, self._zh)
         dz += np.sqrt(self._intensity) * np.einsum("sij,sj->si", dyn.local_noise, eps)
@@ -195,12 +209,12 @@ class MixturePlayer(ProjectionPlayer):
         self._zh[0] = dz
         start, done, total = self._fade
         if new != self._label:
-            alone = np.concatenate([[1.0], self._offset[new] + dz[new]])
-            jump = np.zeros_like(self._u)
-            jump[new * (self.dim + 1) : (new + 1) * (self.dim + 1)] = alone
+            r, self._r = self._r, np.eye(s_count)[new]
+            jump = self._switch_coefficients()
+            self._r = r
             jump -= self._switch_coefficients()
             size = step_sizes(self._gram, jump[None])[0]
-            total = int(min(MAX_FADE, np.ceil(np.sqrt(size / max(self._step_limit, 1e-300)))))
+            total = int(min(MAX_FADE, np.ceil(np.sqrt(size / max(self._fade_step, 1e-300)))))
             start, done, self._label = self._r.copy(), 0, new
         one = np.eye(s_count)[self._label]
         if done < total:
