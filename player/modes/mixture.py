@@ -16,8 +16,8 @@ them instead: the component follows the learned Markov chain, every component's 
 coordinates run their own AR(1) process (on the component's subspace, with its covariance),
 and a switch cross-fades the responsibilities from the old component to the new one over
 as many frames as keep each frame's step within the clip's typical one (``FADE_QUANTILE`` of
-its steps: a fade as fast as the clip's 99th percentile step flashed whole-frame brightness at
-twice the clip's largest change); ``draws`` then has no effect.
+its steps), so a switch changes the frame no faster than the clip's own motion; ``draws`` then
+has no effect.
 """
 
 from __future__ import annotations
@@ -281,7 +281,9 @@ class MixturePlayer(ProjectionPlayer):
                 "component": self._label,
                 "local": self._zh.copy(),
                 "responsibilities": self._r.copy(),
-                "fade": (start.copy(), done, total),
+                "fade_from": start.copy(),
+                "fade_done": done,
+                "fade_frames": total,
                 "rng": self._rng.bit_generator.state,
                 "seed": self.seed,
                 **self._detail_state(),
@@ -312,17 +314,19 @@ class MixturePlayer(ProjectionPlayer):
             label = int(state["component"])
             z = np.asarray(state["local"], dtype=float)
             r = np.asarray(state["responsibilities"], dtype=float)
-            start, done, total = state["fade"]
-            start, done, total = np.asarray(start, dtype=float), int(done), int(total)
+            start = np.asarray(state["fade_from"], dtype=float)
+            done, total = int(state["fade_done"]), int(state["fade_frames"])
         except (KeyError, TypeError, ValueError) as e:
             raise InvalidArgumentError(f"state of a switching mixture is missing or malformed: {e}") from None
         if not 0 <= label < s_count or z.shape != self._zh.shape or r.shape != (s_count,) or start.shape != (s_count,):
             raise InvalidArgumentError(
                 f"state must have component in 0..{s_count - 1}, local of shape {self._zh.shape} and "
-                f"responsibilities and fade of shape ({s_count},)"
+                f"responsibilities and fade_from of shape ({s_count},)"
             )
         if not (np.isfinite(z).all() and np.isfinite(r).all() and np.isfinite(start).all()) or not 0 <= done <= total:
-            raise InvalidArgumentError("state local, responsibilities and fade must be finite, with 0 <= done <= total")
+            raise InvalidArgumentError(
+                "state local, responsibilities and fade_from must be finite, with 0 <= fade_done <= fade_frames"
+            )
         rng = rng_from_state(state["rng"])
         self._restore_detail(state)
         self._label, self._zh, self._r, self._fade = label, z.copy(), r.copy(), (start.copy(), done, total)

@@ -120,7 +120,7 @@ def test_controls_are_validated(mix_db, ar_db):
         with pytest.raises(ValueError, match="state must have component in 0..1"):
             p.set_state({**p.get_state(), "local": np.zeros((1, 1))})
         with pytest.raises(ValueError, match="state of a switching mixture is missing"):
-            p.set_state({k: v for k, v in p.get_state().items() if k != "fade"})
+            p.set_state({k: v for k, v in p.get_state().items() if k != "fade_from"})
         with pytest.raises(ValueError, match="must be finite"):
             p.set_state({**p.get_state(), "local": np.full_like(p.get_state()["local"], np.inf)})
     with MixturePlayer(ar_db, backend="numpy") as p:
