@@ -161,8 +161,13 @@ class MixtureModel(Described):
     def summary(self) -> str:
         """One line: sizes, AR order, reconstruction error against a single PCA."""
         info = self.info
+        dynamics = (
+            f"AR({self.order}) by Schwarz"
+            if self.switching is None
+            else f"switching, AR({self.switching.local_ar.shape[1]}) per component"
+        )
         return (
-            f"S={self.components} d={self.dim} D={self.global_dim}, AR({self.order}) by Schwarz, "
+            f"S={self.components} d={self.dim} D={self.global_dim}, {dynamics}, "
             f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
             f"{info.get('recon_error_pca_dim', 0):.3f})"
         )
