@@ -25,6 +25,7 @@ from ..checks import check_int
 from ..errors import InvalidArgumentError
 from ..tiledb import LDSModel
 from .detail import learn_detail
+from .gamut import learn_gamut
 from .methods import check_params
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
@@ -138,6 +139,7 @@ def learn_lds(
     else:
         basis32, x32 = model.basis, x.T.astype(np.float32)
         model.detail = learn_detail(frames, lambda t0, t1: x32[t0:t1] @ basis32 + mean, seed=seed)
+        model.gamut = learn_gamut(frames)
     return model
 
 

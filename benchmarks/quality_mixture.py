@@ -8,7 +8,7 @@
    PCA of that size is the optimal affine subspace, so no mixture can beat it on the
    training frames).
 2. Long-run synthesis: ``--frames`` global coordinates from the mixture player with its
-   switching dynamics (format 1.5) and, as analysed before them, the AR process on the global
+   switching dynamics (format 1.6) and, as analysed before them, the AR process on the global
    coordinates (draws = 16, its default, and 1 = the plain AR process), and states from the plain LDS of the same
    clip (``learn_lds(n=50)``, ``LDSPlayer.advance``): distance of each global coordinate to
    the nearest training coordinate, distance of each synthesized frame to the nearest
@@ -79,7 +79,7 @@ def evaluate(path: Path, frames: int, tmp: str) -> dict:
         w.put_texture("t", clip.source_info())
         w.put_method("t", "mixture", m)
         w.put_method("t", "lds", lds)
-        w.put_texture("ar", clip.source_info())  # the same model as analysed before format 1.5
+        w.put_texture("ar", clip.source_info())  # the same model as analysed before format 1.6
         w.put_method("ar", "mixture", dataclasses.replace(m, switching=None))
     yc = clip.frames.reshape(t, -1).astype(np.float64) - m.mean
     ynorm = (yc**2).sum(axis=1)

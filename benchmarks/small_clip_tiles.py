@@ -15,7 +15,8 @@ from a large one) and prints:
   scores above its source.
 - ``lattice``: :func:`dynatex.analyzer.metrics.lattice_prominence` at the stored tile size.
 - ``seams``: :func:`dynatex.analyzer.metrics.seam_visibility` across the cell lattice.
-- ``block``, ``cell``, ``period``: the geometry the analysis chose.
+- ``scale``, ``block``, ``step``, ``cell``, ``period``: the clip's feature scale
+  (:func:`dynatex.analyzer.tiles.feature_scale`) and the geometry the analysis chose from it.
 
 ``--sheets``: a contact sheet (source frames beside output frames) per clip and block.
 Run it with ``/work/main/.venv/bin/python`` for the figures before a change.
@@ -69,7 +70,9 @@ def figures(clip_path: str, block: int | None, seed: int, args: argparse.Namespa
         "clip": name,
         "blocks": "default" if block is None else str(block),
         "seed": seed,
+        "scale": round(float(info.get("quilt_scale", float("nan"))), 1),
         "block": int(info["quilt_block"]),
+        "step": int(info["quilt_step"]),
         "cell": int(info["tile_h"]),
         "period": f"{info['period_w']}x{info['period_h']}",
         "size": f"{size[1]}x{size[0]}",

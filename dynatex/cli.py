@@ -26,11 +26,9 @@ import traceback
 import warnings
 
 from . import __version__
+from .commands import COMMANDS
 from .errors import DynatexError, OutputError, UsageError  # noqa: F401 (importable from here, as before)
 from .text import printable
-
-#: subcommand -> module in dynatex.commands (each has ``add_parser(subparsers, argv)`` and ``run(args)``)
-COMMANDS = ("analyze", "info", "play", "bench", "evaluate", "demo", "export")
 
 
 class Terminated(KeyboardInterrupt):
@@ -55,24 +53,35 @@ class Parser(argparse.ArgumentParser):
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
-    """The ``dynatex`` parser for the command line ``argv``: a command whose options depend on
-    another option (``play --mode tiles`` offers the tiles controls) reads it from ``argv``."""
+    """The ``dynatex`` parser for the command line ``argv``.
+
+    Only the module of the command that ``argv`` names is imported (``dynatex play`` loads no
+    analyzer); every other command is a name and its one-line help from
+    :data:`~dynatex.commands.COMMANDS`, enough for ``dynatex --help``. A command whose options
+    depend on another option (``play --mode tiles`` offers the tiles controls) reads it from
+    ``argv``. ``argv=None`` builds every command in full (for tests and tools that read them all).
+    """
     parser = Parser(prog="dynatex", description="Endless, editable dynamic textures.")
     parser.add_argument("--version", action="version", version=f"dynatex {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in COMMANDS:
-        try:
-            module = importlib.import_module(f"dynatex.commands.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"dynatex.commands.{name}":
-                continue  # command not built yet
-            raise
+    named = _command_named(argv)
+    for name, summary in COMMANDS.items():
+        if argv is not None and name != named:
+            sub.add_parser(name, help=summary)
+            continue
+        module = importlib.import_module(f"dynatex.commands.{name}")
         p = module.add_parser(sub, argv)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks on errors")
         p.set_defaults(_run=module.run, _parser=p)
     return parser
+
+
+def _command_named(argv: list[str] | None) -> str | None:
+    """The command ``argv`` names: its first word that is not an option, as argparse reads it
+    (``dynatex`` itself takes no option with a value)."""
+    return next((a for a in argv or () if not a.startswith("-")), None)
 
 
 def _warning_line(message, category, filename, lineno, line=None) -> str:
@@ -85,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     restore = _catch_signals()
     try:
         return _main(argv)
-    except KeyboardInterrupt as exc:  # also while the commands are imported (seconds on a busy machine)
+    except KeyboardInterrupt as exc:  # also while the command is imported (seconds on a busy machine)
         terminated = isinstance(exc, Terminated)
         _Diagnostics(sys.stderr).write(f"dynatex: {'terminated' if terminated else 'interrupted'}\n")
         return 128 + (signal.SIGTERM if terminated else signal.SIGINT)

@@ -1,10 +1,12 @@
 """The dependency rules: the player ships without OpenCV, SciPy, matplotlib, PyAV, Pillow, Dask or the
-analyzer; tiledb imports nothing above it; no command imports the CLI; no new import cycle in a package
-(imports inside functions and methods count)."""
+analyzer; ``dynatex CMD`` loads CMD's module alone, and ``play``/``info`` no analyzer; tiledb imports
+nothing above it; no command imports the CLI; no new import cycle in a package (imports inside
+functions and methods count)."""
 
 from __future__ import annotations
 
 import ast
+import json
 import subprocess
 import sys
 import textwrap
@@ -41,6 +43,54 @@ def test_player_imports_and_runs_without_analyzer_dependencies(lds_db):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip().endswith("ok")
+
+
+#: runs ``dynatex ARGV`` in this process, then prints (last line) its exit code, the command modules
+#: it loaded and the analyzer side it loaded (the analyzer, OpenCV, SciPy, matplotlib, Dask)
+LOADED = textwrap.dedent("""
+    import json, sys
+    from dynatex.cli import main
+    try:
+        code = main(sys.argv[1:])
+    except SystemExit as exc:  # --help
+        code = exc.code
+    commands = sorted(m for m in sys.modules if m.startswith("dynatex.commands."))
+    heavy = ("cv2", "scipy", "matplotlib", "dask", "distributed")
+    heavy = sorted(m for m in sys.modules if m.split(".")[0] in heavy or m.startswith("dynatex.analyzer"))
+    print(json.dumps([code, commands, heavy]))
+""")
+
+
+def test_a_command_loads_its_own_module_and_play_or_info_no_analyzer(lds_db, tmp_path):
+    """``dynatex --help`` names every command without importing one; ``dynatex CMD`` imports
+    CMD's module (and its helpers) alone, so ``play`` and ``info`` load no analyzer, OpenCV,
+    SciPy or Dask, and ``analyze`` no player command."""
+    from dynatex.commands import COMMANDS
+
+    def loaded(*argv) -> tuple[str, list[str], list[str]]:
+        r = subprocess.run(
+            [sys.executable, "-c", LOADED, *map(str, argv)], capture_output=True, text=True, timeout=300, check=False
+        )
+        code, commands, heavy = json.loads(r.stdout.splitlines()[-1])
+        assert code == 0, r.stderr
+        return r.stdout, [m.rsplit(".", 1)[1] for m in commands], heavy
+
+    out, commands, heavy = loaded("--help")
+    assert commands == [] and heavy == [], (commands, heavy)
+    listed = " ".join(out.split())
+    assert all(f"{name} {summary}" in listed for name, summary in COMMANDS.items()), out
+    player_side = ["_common", "_modes", "_output", "play"]
+    video = tmp_path / "o.mp4"  # H.264 through PyAV (PNG frames, .mkv and .avi are written by OpenCV)
+    for argv, own in (
+        (("info", lds_db), ["info"]),
+        (("play", "--help"), player_side),
+        (("play", lds_db, "--frames", "2", "-o", video), player_side),
+    ):
+        out, commands, heavy = loaded(*argv)
+        assert (commands, heavy) == (own, []), argv
+    assert video.stat().st_size > 0
+    out, commands, heavy = loaded("analyze", "--help")
+    assert commands == ["_common", "analyze"] and "--methods" in out, commands
 
 
 def test_tiledb_imports_nothing_above_it():

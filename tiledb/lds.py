@@ -13,6 +13,7 @@ import h5py
 import numpy as np
 
 from . import detail as _detail
+from . import gamut as _gamut
 from ._check import Checker
 from ._describe import Described
 from .source import SourceInfo
@@ -50,6 +51,9 @@ class LDSModel(Described):
     detail : DetailModel, optional
         The fine detail and colour range added to the projected frames (the optional ``detail``
         subgroup, :mod:`.detail`); None in databases written without it.
+    gamut : GamutModel, optional
+        The source's colour set, which the projected frames are held to (the optional ``gamut``
+        subgroup, :mod:`.gamut`); None in databases written without it and for grey sources.
     """
 
     mean: np.ndarray
@@ -62,6 +66,7 @@ class LDSModel(Described):
     stationary_cov: np.ndarray
     info: dict = field(default_factory=dict)
     detail: _detail.DetailModel | None = None
+    gamut: _gamut.GamutModel | None = None
 
     @property
     def n(self) -> int:
@@ -79,6 +84,7 @@ class LDSModel(Described):
             "k": self.k,
             "basis_mb": round(self.basis.nbytes / 2**20, 2),
             **_detail.describe(self.detail),
+            **_gamut.describe(self.gamut),
         }
 
     def summary(self) -> str:
@@ -103,6 +109,7 @@ def write(group: h5py.Group, model: LDSModel) -> None:
         if key not in ("n", "k"):
             group.attrs[key] = value
     _detail.write(group, model.detail)
+    _gamut.write(group, model.gamut)
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
@@ -126,6 +133,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
         stationary_cov=ds(group, "stationary_cov", kind="f", shape=(n, n)),
         info=check.info(group),
         detail=_detail.read(group, check, source),
+        gamut=_gamut.read(group, check, source),
     )
     if model.mean.min() < -1 or model.mean.max() > 256:
         check.fail(group.name + "/mean", "values outside the 0..255 pixel range")

@@ -6,7 +6,7 @@ linear map ``L``. Dynamics: an AR(p) process on the global coordinates. A frame 
 ``mean + sum_j u_j stacked_basis[j]`` with ``u = (r_s, r_s z_s)`` per component, so the
 player decodes a global coordinate to ``u`` and projects it like an LDS state.
 
-The optional ``switching`` subgroup (format 1.5) holds dynamics the player prefers when present:
+The optional ``switching`` subgroup (format 1.6) holds dynamics the player prefers when present:
 a Markov chain over the components and, per component, an AR(1) process on its local
 coordinates whose stationary covariance is the component's own (``local_cov``), so the
 synthesis stays on each component's subspace and visits the components as the clip does.
@@ -21,6 +21,7 @@ import h5py
 import numpy as np
 
 from . import detail as _detail
+from . import gamut as _gamut
 from ._check import Checker
 from ._describe import Described
 from .source import SourceInfo
@@ -110,6 +111,9 @@ class MixtureModel(Described):
     detail : DetailModel, optional
         The fine detail and colour range added to the projected frames (the optional ``detail``
         subgroup, :mod:`.detail`); None in databases written without it.
+    gamut : GamutModel, optional
+        The source's colour set, which the projected frames are held to (the optional ``gamut``
+        subgroup, :mod:`.gamut`); None in databases written without it and for grey sources.
     switching : SwitchingDynamics, optional
         Component-switching dynamics on the local coordinates (the optional ``switching``
         subgroup); None in databases written without it.
@@ -136,11 +140,12 @@ class MixtureModel(Described):
     sbc: np.ndarray
     info: dict = field(default_factory=dict)
     detail: _detail.DetailModel | None = None
+    gamut: _gamut.GamutModel | None = None
     switching: SwitchingDynamics | None = None
 
     def describe(self) -> dict:
-        """Facts as plain values: the ``info`` attributes and the detail part's."""
-        return {**super().describe(), **_detail.describe(self.detail)}
+        """Facts as plain values: the ``info`` attributes, the detail part's and the colour set's."""
+        return {**super().describe(), **_detail.describe(self.detail), **_gamut.describe(self.gamut)}
 
     @property
     def components(self) -> int:
@@ -217,6 +222,7 @@ def write(group: h5py.Group, model: MixtureModel) -> None:
         if key not in _SIZES:
             group.attrs[key] = value
     _detail.write(group, model.detail)
+    _gamut.write(group, model.gamut)
     if model.switching is not None:
         g = group.create_group(SWITCHING_GROUP)
         g.attrs["version"] = SWITCHING_VERSION
@@ -267,6 +273,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         sbc=ds(group, "sbc", kind=f, shape=(range(order, source.n_frames + 1),)),
         info=check.info(group, skip=_SIZES),
         detail=_detail.read(group, check, source),
+        gamut=_gamut.read(group, check, source),
     )
     model.switching = _read_switching(group, check, model)
     t = model.global_coords.shape[0]

@@ -14,7 +14,7 @@ from ..framestats import CHUNK
 GAMUT_BITS = 5
 
 
-def _colour_bins(frames: np.ndarray) -> np.ndarray:
+def colour_bins(frames: np.ndarray) -> np.ndarray:
     """Each pixel's colour bin, ``(r >> 3) * 1024 + (g >> 3) * 32 + (b >> 3)`` (grey: r = g = b)."""
     f = np.asarray(frames)
     if f.dtype != np.uint8:
@@ -30,11 +30,11 @@ def _colour_bins(frames: np.ndarray) -> np.ndarray:
 
 def colour_set(frames: np.ndarray) -> np.ndarray:
     """The colour bins ``frames`` occupy, grown by one bin in every direction (26 neighbours):
-    a bool per bin of :func:`_colour_bins` (``32**3``), the set :func:`out_of_gamut_share` tests against."""
+    a bool per bin of :func:`colour_bins` (``32**3``), the set :func:`out_of_gamut_share` tests against."""
     n = 1 << GAMUT_BITS
     occ = np.zeros(n**3, bool)
     for lo in range(0, len(frames), CHUNK):
-        occ[_colour_bins(frames[lo : lo + CHUNK])] = True
+        occ[colour_bins(frames[lo : lo + CHUNK])] = True
     occ = np.pad(occ.reshape(n, n, n), 1)
     grown = np.zeros((n, n, n), bool)
     for dr in range(3):
@@ -47,7 +47,7 @@ def colour_set(frames: np.ndarray) -> np.ndarray:
 def _share_outside(frames: np.ndarray, colours: np.ndarray) -> float:
     outside = total = 0
     for lo in range(0, len(frames), CHUNK):
-        bins = _colour_bins(frames[lo : lo + CHUNK])
+        bins = colour_bins(frames[lo : lo + CHUNK])
         outside += int(np.count_nonzero(~colours[bins]))
         total += bins.size
     return outside / max(total, 1)

@@ -50,7 +50,11 @@ Pipeline (each step is a public function, so it can be tested and reused):
    quilt mode, with the overlap bands wrapping around so the torus tiles the plane), and
    :func:`torus_cells` cuts it into cells that the player lays out in torus order. Nothing repeats
    within the period; the cost is storage (the whole torus, so the loop is capped at 64
-   frames by default). Every cut (here and in steps 5-7) is smoothed and
+   frames by default). Blocks and overlaps follow the clip's feature scale
+   (:func:`feature_scale`, the correlation length along its longest direction): small blocks
+   with narrow overlaps for grain, large ones whose cuts have room around coarse features, and
+   the coarse band of two blocks fades across the whole overlap, so blocks of different
+   brightness leave no straight-edged fragments. Every cut (here and in steps 5-7) is smoothed and
    cross-faded (:func:`path_alpha`): a minimum-error path drawn pixel by pixel shows
    stair-step teeth.
 7. Mixing: every extra texture gets a loop of the same length and its own tiles cut to the
@@ -109,7 +113,7 @@ from .quilted import (
 )
 from .ring import SIDES, ring_join, side_join
 from .sets import learn_set
-from .stats import colour_stats, stationarity
+from .stats import colour_stats, feature_scale, stationarity
 from .wang import corner_cut, wang_edges, wang_ring
 
 __all__ = [
@@ -130,6 +134,7 @@ __all__ = [
     "circular_cut",
     "colour_stats",
     "corner_cut",
+    "feature_scale",
     "find_loop",
     "flow_magnitude",
     "learn_tiles",

@@ -14,49 +14,66 @@ from ...tiledb.tiles import TilesModel
 from ..framestats import median_step
 from ..quilt import block_errors, min_cut_path
 from ..video import Progress
-from .cuts import path_alpha
+from .cuts import path_alpha, smooth_path
 from .loop import STEP_PAIRS, Texture, even_sample, find_loop, progress_steps, transition_map
-from .stats import colour_stats, stationarity_info
+from .stats import colour_stats, feature_scale, stationarity_info
 
 # -- 6c. quilted torus ------------------------------------------------------------------------------
 QUILT_MAX_RUN = 3  # blocks at most taken from one continuous piece of the clip, per direction
 QUILT_MIN_PERIOD = 512  # the torus is at least this large (and twice the clip) in each direction
 QUILT_MAX_PERIOD = 768  # ... but twice the clip only up to this
-QUILT_SMALL_SIDE = 128  # a clip with a shorter side under this gets larger, more overlapping blocks
-QUILT_SMALL_BLOCK = 32  # ... of at least this many pixels
+QUILT_SMALL_SIDE = 128  # a clip with a shorter side under this gets blocks of at most half its side
+QUILT_BLOCK_FEATURES = 4  # a block is this many feature scales wide (within the clip's bounds)
+QUILT_OVERLAP_FEATURES = 3  # the overlap is this many feature scales (a quarter to a half of the block)
+QUILT_LOW_FEATURES = 2  # the low band (cross-faded over the whole overlap) is coarser than this many
 QUILT_MAX_LOOP = 64  # default longest loop of the quilted construction (the torus is stored whole)
 _QUILT_FEATURE_FRAMES = 12
 _QUILT_COMPONENTS = 8
 
 
 def quilt_geometry(
-    h: int, w: int, *, block: int | None = None, period: Sequence[int] | None = None
+    h: int,
+    w: int,
+    *,
+    block: int | None = None,
+    period: Sequence[int] | None = None,
+    scale: float | None = None,
 ) -> tuple[int, int, tuple[int, int], tuple[int, int]]:
-    """``(block, step, cell, period)`` of the quilted torus for an ``h x w`` clip.
+    """``(block, step, cell, period)`` of the quilted torus for an ``h x w`` clip whose largest
+    coherent features are ``scale`` pixels across (:func:`.stats.feature_scale`).
 
-    Blocks of ``block`` pixels (default a third of the shorter side rounded to 8, in 16..128) overlap
-    by a quarter (``step = block - block // 4``). A clip whose shorter side is under
-    :data:`QUILT_SMALL_SIDE` pixels gets blocks of at least :data:`QUILT_SMALL_BLOCK` pixels (at
-    most half its side, rounded down to 8) overlapping by half: with 24-pixel blocks overlapping by
-    a quarter a cut has 2 pixels to wander in, and a 64-pixel clip played at several times its
-    size is a mosaic of straight-edged blocks where the source has long streaks. Cells (the player's lattice, the stored
-    tiles) are the fewest steps at least 64 pixels wide, so a 64-pixel run of the gather
-    touches at most two cells; the period ``(py, px)`` is whole cells, at least 512 pixels
-    (four clip sides for a clip under 128 pixels, two cells at least) and twice the clip up to 768 pixels in
-    each direction (the torus is stored whole: 768 x 768 x 64 frames is 113 MB) (or
-    ``period``, rounded up to whole cells).
+    The block (default :data:`QUILT_BLOCK_FEATURES` feature scales, rounded to 8) stays within
+    bounds set by the clip: at least 16 pixels, at most half the shorter side (so enough clip
+    places are left to choose among) on a clip under :data:`QUILT_SMALL_SIDE` pixels, and a
+    third of the shorter side (16..128) on a larger clip (which bounds the blocks per torus and
+    so the analysis time). Blocks overlap by :data:`QUILT_OVERLAP_FEATURES` feature scales, at
+    least a quarter and at most half the block: a fine-grained clip gets small blocks with
+    narrow overlaps, a coarse one large blocks whose cuts have room to go round its features.
+    Without ``scale``, the coarsest choice. Cells (the player's lattice, the stored tiles) are
+    the fewest steps at least 64 pixels wide, so a 64-pixel run of the gather touches at most two
+    cells; the period ``(py, px)`` is whole cells, at least 512 pixels (four clip sides for a
+    clip under 128 pixels, two cells at least) and twice the clip up to 768 pixels in each
+    direction (the torus is stored whole: 768 x 768 x 64 frames is 113 MB) (or ``period``,
+    rounded up to whole cells).
+
+    Examples
+    --------
+    >>> quilt_geometry(64, 64, scale=2.0)[:2], quilt_geometry(64, 64, scale=15.0)[:2]
+    ((16, 10), (32, 16))
     """
-    small = min(h, w) < QUILT_SMALL_SIDE
+    side = min(h, w)
+    small = side < QUILT_SMALL_SIDE
+    hi = max(16, side // 2 // 8 * 8) if small else int(np.clip(round(side / 3 / 8) * 8, 16, 128))
+    lo = 16 if small else hi
+    feat = float(side) if scale is None else max(0.0, float(scale))
     if block is None:
-        side = min(h, w)
-        block = int(np.clip(round(side / 3 / 8) * 8, QUILT_SMALL_BLOCK if small else 16, 128))
-        if small:  # enough clip places left to choose among
-            block = min(block, max(16, side // 2 // 8 * 8))
+        block = int(np.clip(round(QUILT_BLOCK_FEATURES * feat / 8) * 8, lo, hi))
         block = max(8, min(block, (side - 2) // 8 * 8))
     block = check_int("block", block, 8)
-    if block + 2 > min(h, w):
+    if block + 2 > side:
         raise InvalidArgumentError(f"quilt block {block} (plus 2) is larger than the clip frame {h}x{w}")
-    step = block - block // (2 if small else 4)
+    overlap = int(np.clip(round(QUILT_OVERLAP_FEATURES * feat), block // 4, block // 2))
+    step = block - overlap
     cell = step * -(-64 // step)
     if period is None:
         want = (
@@ -74,22 +91,73 @@ def quilt_geometry(
     return block, step, (cell, cell), (py, px)
 
 
-def _block_alpha(err: np.ndarray, side: str, margin: int, fade: float) -> np.ndarray:
-    """Share ``(B, B)`` of the new block across the minimum cut through the overlap band along
-    ``side`` (``err``: the band's per-pixel error, across x for left/right): the cut, kept
-    ``margin`` pixels from both edges of the band, smoothed (:func:`.cuts.smooth_path`), and a
-    cross-fade ``fade`` pixels wide centred on it (1 on the new block's side)."""
+def _block_alpha(err: np.ndarray, side: str, margin: int, fade: float) -> tuple[np.ndarray, np.ndarray]:
+    """Shares ``(B, B)`` of the new block across the minimum cut through the overlap band along
+    ``side`` (``err``: the band's per-pixel error, across x for left/right): ``(sharp, wide)``.
+
+    The cut keeps ``margin`` pixels from both edges of the band and is smoothed
+    (:func:`.cuts.smooth_path`). ``sharp`` cross-fades ``fade`` pixels wide centred on it;
+    ``wide`` rises smoothly across the whole band, from 0 at the old side's edge through 0.5 at
+    the cut to 1 at the new side's edge (1 on the new block's side)."""
 
     err = np.array(err if side in ("left", "right") else err.T, np.float64)  # rows along the cut
     b, o = err.shape
     lo, hi = margin, max(margin + 1, o - margin)
     err[:, :lo], err[:, hi:] = 1e30, 1e30
     cut = min_cut_path(err)
+    p = np.clip(smooth_path(cut), lo, hi)[:, None]  # the band's first pixel past the cut, smoothed
+    x = np.arange(o)[None, :] + 0.5
+    u = np.where(x < p, 0.5 * x / p, 0.5 + 0.5 * (x - p) / np.maximum(o - p, 1e-6))
+    wide = np.ones((b, b))
     if side in ("left", "top"):  # the band's first pixel past the cut starts the new block
-        alpha = 1.0 - path_alpha(cut, b, fade=fade, lo=lo, hi=hi)
+        sharp = 1.0 - path_alpha(cut, b, fade=fade, lo=lo, hi=hi)
+        wide[:, :o] = u * u * (3 - 2 * u)
     else:  # the band sits at the far edge: the new block is before the cut
-        alpha = path_alpha(b - o + cut + 1, b, fade=fade, lo=b - o + lo, hi=b - o + hi)
-    return alpha if side in ("left", "right") else alpha.T
+        sharp = path_alpha(b - o + cut + 1, b, fade=fade, lo=b - o + lo, hi=b - o + hi)
+        wide[:, b - o :] = 1.0 - u * u * (3 - 2 * u)
+    if side in ("left", "right"):
+        return sharp, wide
+    return sharp.T, wide.T
+
+
+def _blur_matrix(n: int, sigma: float) -> np.ndarray:
+    """``(n, n)`` Gaussian smoothing along one axis of length ``n`` (reflected at both ends)."""
+    if sigma <= 0:
+        return np.eye(n)
+    r = np.arange(-n + 1, 2 * n - 1)  # positions reflected into 0 .. n - 1
+    src = np.where(r < 0, -r - 1, np.where(r >= n, 2 * n - 1 - r, r))
+    k = np.exp(-0.5 * ((np.arange(n)[:, None] - r[None, :]) / sigma) ** 2)
+    m = np.zeros((n, n))
+    for j in range(n):
+        m[:, j] = k[:, src == j].sum(axis=1)
+    return m / m.sum(axis=1, keepdims=True)
+
+
+def _smoother(n: int, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(up, down)``, ``(n, k)`` and ``(k, n)`` float32, whose product smooths one axis of length
+    ``n`` by a Gaussian of ``sigma`` pixels: ``down`` averages cells of about ``sigma // 2`` pixels and
+    smooths them, ``up`` interpolates back (a wide Gaussian costs no more than a narrow one)."""
+    f = max(1, int(sigma // 2))
+    if f == 1:
+        return np.eye(n, dtype=np.float32), _blur_matrix(n, sigma).astype(np.float32)
+    k = -(-n // f)
+    pool = np.zeros((k, n))
+    pool[np.arange(n) * k // n, np.arange(n)] = 1.0  # cells of f or f - 1 pixels
+    centres = pool @ np.arange(n) / pool.sum(axis=1)
+    pool /= pool.sum(axis=1, keepdims=True)
+    up = np.stack([np.interp(np.arange(n), centres, np.eye(k)[i]) for i in range(k)], axis=1)
+    return up.astype(np.float32), (_blur_matrix(k, sigma / f) @ pool).astype(np.float32)
+
+
+def _low_pass(x: np.ndarray, smoother: tuple[np.ndarray, np.ndarray], weight: np.ndarray) -> np.ndarray:
+    """``x (L, B, B, 3)`` smoothed in space (:func:`_smoother`) over the pixels of ``weight (B, B)``
+    1 only (a normalised convolution: the torus not yet filled does not count)."""
+    up, down = smoother
+    y = x * weight[None, :, :, None]
+    for m in (down, up):
+        y = np.tensordot(m, y, axes=(1, 1))  # along rows: (., L, B, 3)
+        y = np.tensordot(m, y, axes=(1, 2)).transpose(2, 1, 0, 3)  # along columns, back to (L, ., ., 3)
+    return y / np.maximum(up @ down @ weight @ down.T @ up.T, 1e-6)[None, :, :, None]
 
 
 QUILT_REUSE = 4
@@ -119,6 +187,8 @@ def quilted_torus(
     block: int | None = None,
     period: Sequence[int] | None = None,
     feather: int | None = None,
+    scale: float | None = None,
+    low: float | None = None,
     tolerance: float = 0.2,
     seed: int = 0,
     step_done=None,
@@ -132,20 +202,30 @@ def quilted_torus(
     onto the first column, the last row its bottom band), picked at random among those within
     ``tolerance`` of the best. A block may continue its left or top neighbour's piece of clip
     for at most :data:`QUILT_MAX_RUN` blocks, so the torus is never a tiling of whole clip
-    frames. Each band ends at a minimum-error cut (summed over the loop) and the two sides
-    cross-fade over ``feather`` pixels either side of the smoothed cut (:func:`path_alpha`;
-    default a quarter of the overlap; the cut keeps that far from the band's edges). Since the bands wrap, the torus is
-    seamless in x and y; each block loops seamlessly in t like the clip's loop.
+    frames. Block, step and the defaults below follow the clip's feature scale ``scale``
+    (default :func:`.stats.feature_scale` of the clip; :func:`quilt_geometry`). Each band ends
+    at a minimum-error cut (summed over the loop), smoothed, and the blocks meet across it in
+    two bands: the detail finer than ``low`` pixels (a Gaussian's sigma; default
+    :data:`QUILT_LOW_FEATURES` feature scales) cross-fades over ``2 feather + 1`` pixels centred on
+    the cut (default ``feather`` half a feature scale, at most an eighth of the overlap; the cut
+    keeps ``feather + 1`` pixels from the band's edges), the coarser rest rises smoothly across
+    the whole band, so two blocks of different brightness leave no straight-edged step (``low``
+    0: one band). Since the bands wrap, the torus is seamless in x and y; each block loops
+    seamlessly in t like the clip's loop.
 
     Returns ``(torus (L, py, px, 3) uint8, info)``.
     """
 
     f = tx.frames
     h, w = f.shape[1:3]
-    b, step, _, (py, px) = quilt_geometry(h, w, block=block, period=period)
+    scale = feature_scale(f) if scale is None else float(scale)
+    b, step, _, (py, px) = quilt_geometry(h, w, block=block, period=period, scale=scale)
     o = b - step
-    fe = max(1, o // 4) if feather is None else check_int("feather", feather, 0)
+    fe = int(np.clip(round(scale / 2), 1, max(1, o // 8))) if feather is None else check_int("feather", feather, 0)
     fe = min(fe, (o - 1) // 2)
+    low = QUILT_LOW_FEATURES * scale if low is None else float(low)
+    smoother = _smoother(b, low) if low > 0 else None
+    filled = np.zeros((py, px), bool)
     nby, nbx = py // step, px // step
     length = tx.length
     rng = np.random.default_rng(seed)
@@ -193,6 +273,7 @@ def quilted_torus(
             if not sides:
                 y0, x0 = int(rng.integers(0, h - b + 1)), int(rng.integers(0, w - b + 1))
                 torus[:, rows[:, None], cols[None, :]] = tx.block(y0, x0, b, b)
+                filled[rows[:, None], cols[None, :]] = True
                 src[i, j] = (y0, x0)
                 if step_done:
                     step_done()
@@ -235,13 +316,21 @@ def quilted_torus(
             d = new[u_cut].astype(np.float32) - old[u_cut].astype(np.float32)
             perr = (d * d).sum(axis=(0, 3)) / len(u_cut)
             band = {"left": perr[:, :o], "right": perr[:, b - o :], "top": perr[:o, :], "bottom": perr[b - o :, :]}
-            alpha = np.ones((b, b))
+            sharp, wide = np.ones((b, b)), np.ones((b, b))
             for s in sides:
-                alpha = np.minimum(alpha, _block_alpha(band[s], s, fe + 1, 2.0 * fe + 1.0))
-            keep = alpha >= 0.5
+                sa, wa = _block_alpha(band[s], s, fe + 1, 2.0 * fe + 1.0)
+                sharp, wide = np.minimum(sharp, sa), np.minimum(wide, wa)
+            keep = sharp >= 0.5
             costs.append(float(perr[mask & keep].mean()) if (mask & keep).any() else 0.0)
-            a = alpha.astype(np.float32)[None, :, :, None]
-            torus[:, rows[:, None], cols[None, :]] = np.rint(a * new + (1 - a) * old).astype(np.uint8)
+            a = sharp.astype(np.float32)[None, :, :, None]
+            oldf = old.astype(np.float32)
+            d = new - oldf
+            out = oldf + a * d
+            if smoother is not None:  # the coarse difference fades across the whole overlap
+                aw = wide.astype(np.float32)[None, :, :, None]
+                out += (aw - a) * _low_pass(d, smoother, filled[rows[:, None], cols[None, :]].astype(np.float32))
+            torus[:, rows[:, None], cols[None, :]] = np.clip(np.rint(out), 0, 255).astype(np.uint8)
+            filled[rows[:, None], cols[None, :]] = True
             src[i, j] = (y0, x0)
             if j > 0 and (y0, x0) == tuple(src[i, j - 1] + (0, step)):
                 run_x[i, j] = run_x[i, j - 1] + 1
@@ -253,6 +342,8 @@ def quilted_torus(
         "quilt_block": b,
         "quilt_step": step,
         "quilt_feather": fe,
+        "quilt_scale": scale,
+        "quilt_low": low,
         "period_h": py,
         "period_w": px,
         "quilt_seam_cost": float(np.mean(costs)) if costs else 0.0,
@@ -286,7 +377,8 @@ def learn_quilted(
     arguments checked there)."""
     max_loop = max(min_loop, QUILT_MAX_LOOP) if max_loop is None else max_loop
     t, h, w = main.shape[:3]
-    b, step, cell, (py, px) = quilt_geometry(h, w, block=block, period=period)
+    scale = feature_scale(main)
+    b, step, cell, (py, px) = quilt_geometry(h, w, block=block, period=period, scale=scale)
     total = 4 + (py // step) * (px // step)
     step_done = progress_steps(progress, total)
 
@@ -300,7 +392,7 @@ def learn_quilted(
         np.zeros(main.shape[1:3], np.float32),
     )
     step_done(2)
-    torus, qinfo = quilted_torus(tx, block=b, period=(py, px), seed=seed, step_done=step_done)
+    torus, qinfo = quilted_torus(tx, block=b, period=(py, px), scale=scale, seed=seed, step_done=step_done)
     # cells start half a step into the blocks, away from the quilt's overlap bands: a cell
     # border is then plain clip content
     half = step // 2

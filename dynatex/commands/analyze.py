@@ -16,6 +16,7 @@ from ..analyzer.methods import AUTO, METHODS, Method, get_method
 from ..params import Param
 from ..tiledb import DatabaseWriter
 from ..tiledb.schema import texture_name_from_path
+from . import COMMANDS
 from ._common import (
     MAX_COUNT,
     Number,
@@ -35,7 +36,7 @@ AUTO_FRAMES = 200
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "analyze",
-        help="learn models from clips and write tile databases",
+        help=COMMANDS["analyze"],
         description="Read a clip, run the chosen methods and write them into a tile "
         "database (other textures already in it are kept). Given several clips "
         "(or a glob, a folder of clips, a .txt list), write one database per clip "

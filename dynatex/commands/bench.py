@@ -8,6 +8,7 @@ import sys
 
 from ..benchmark import bench_lds_sizes, bench_player, copy_bandwidth, format_result
 from ..player import MODES, player_class
+from . import COMMANDS
 from ._common import UsageError, positive_int, size_arg
 from ._modes import known_count, mode_name, resolve_args_mode
 
@@ -15,7 +16,7 @@ from ._modes import known_count, mode_name, resolve_args_mode
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "bench",
-        help="benchmark the player (fps, latency, roofline, numpy side by side)",
+        help=COMMANDS["bench"],
         description="Without a database: LDS players (n=50) on synthetic textures at each "
         "--sizes, float32 and float16 bases. With a database: the chosen texture "
         "and mode. Copy bandwidth is measured in the same run for the roofline.",

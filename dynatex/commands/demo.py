@@ -22,6 +22,7 @@ from ..analyzer.video import load_clip
 from ..player import open_player
 from ..sample import ripples
 from ..tiledb import DatabaseWriter
+from . import COMMANDS
 from ._common import seed
 
 
@@ -123,7 +124,7 @@ DEMO_STEPS: list[DemoStep] = [
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "demo",
-        help="analyze a built-in sample, play every mode, write a video and a contact sheet",
+        help=COMMANDS["demo"],
         description="The embedded default: make a sample clip, analyze it, play it with "
         "several edits, write demo.mp4 and contact_sheet.png, print a short benchmark.",
     )

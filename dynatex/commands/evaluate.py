@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..player import MODES
+from . import COMMANDS
 from ._common import UsageError, load_clip_arg, positive_int, seed, size_arg
 from ._modes import known_count
 
@@ -24,7 +25,7 @@ STRICT_EXIT = 3
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "evaluate",
-        help="measure the quality of a synthesized texture against its source",
+        help=COMMANDS["evaluate"],
         description="Compare OUTPUT with SOURCE: long-run stability, seam visibility, temporal "
         "discontinuity at events, spectrum and patch likeness, coverage and repetition "
         "(see analyzer/METRICS.md). OUTPUT is a video, a folder of images or a .npy array, "

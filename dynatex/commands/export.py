@@ -28,6 +28,7 @@ from ..player import MODES, open_player
 from ..player.loop import loop_frames
 from ..player.loop import render as render_frames
 from ..player.modes import player_class
+from . import COMMANDS
 from ._common import Number, UsageError, size_arg
 from ._modes import add_mode_arguments, apply_controls, known_count, player_kwargs, resolve_args_mode
 from ._output import MAX_FPS, MIN_FPS, OutputError
@@ -47,7 +48,7 @@ COMMON = ("backend", "device", "seed")
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "export",
-        help="write a flipbook (atlas, motion vectors, engine sidecar) of a texture",
+        help=COMMANDS["export"],
         description="Render frames of a texture and write a flipbook for Unity, Unreal or Godot: "
         "NAME_COLSxROWS.png (colour atlas, sRGB, frames row-major from the top-left, packed by --packing), "
         "NAME_COLSxROWS_mv.png (optical-flow motion vectors, RG centred at 128, linear) "

@@ -11,6 +11,7 @@ import numpy as np
 from ..player.modes import describe as describe_modes
 from ..text import printable
 from ..tiledb import open_db
+from . import COMMANDS
 
 #: lists longer than this print as a summary (``--json`` has them whole)
 LONG_LIST = 8
@@ -19,7 +20,7 @@ LONG_LIST = 8
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "info",
-        help="describe a tile database",
+        help=COMMANDS["info"],
         description="List the textures of a tile database, their source, the methods stored for "
         "each (validating them) and the player modes that play them, then each mode's options and "
         "controls with their ranges and defaults. Long per-tile lists print as min/median/max; "

@@ -13,6 +13,7 @@ from ..player import open_player
 from ..player.loop import loop_frames
 from ..player.modes import player_class
 from ..player.modes import ratemap as _ratemap
+from . import COMMANDS
 from ._common import Number, Numbers, UsageError, positive_int
 from ._modes import add_mode_arguments, apply_controls, known_count, player_kwargs, resolve_args_mode
 from ._output import H264_CRF, H264_PRESET, H264_PRESETS, MAX_FPS, MIN_FPS, FrameWriter
@@ -30,7 +31,7 @@ DEFAULT_FRAMES = 250
 def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "play",
-        help="render frames of a texture to a video or PNG frames",
+        help=COMMANDS["play"],
         description="Play a texture with the real-time player and write the frames to a "
         "video (.mp4: H.264, browser-playable; .mkv, .avi), an animated image "
         "(.webp, .apng, .gif; looping) or numbered PNG files (an output ending in "

@@ -89,7 +89,7 @@ from typing import Any
 
 import numpy as np
 
-from ...checks import check_float, check_int, check_out
+from ...checks import MAX_SIDE, Size, check_float, check_int, check_out
 from ...errors import ArgumentTypeError, InvalidArgumentError
 from ..pixels import pixel_format
 from . import BACKENDS
@@ -120,6 +120,7 @@ BANDS = 8  # wide variant: a work-item renders one run of 64 pixels on BANDS ban
 TONE_STRIDE = 384  # int16 per device tone row: 192 gains then 192 offsets, per byte of a 64-pixel run
 TONE_OB = 192
 _WRAP_CODE = {"loop": 0, "clamp": 1, "pingpong": 2}
+SIDES = Size(MAX_SIDE)  # out_size and cell: (height, width), each side in 1..MAX_SIDE
 #: the bytes of a 64-pixel run in the order of the wide kernel's 16-bit lanes: per 64-byte
 #: chunk, the low then the high half of the x86 byte interleave (bytes 0-7 of each 16-byte
 #: lane, then 8-15)
@@ -201,14 +202,14 @@ class Gather:
             )
         if wrap not in WRAPS:
             raise InvalidArgumentError(f"wrap must be one of {WRAPS}, not {wrap!r}")
-        h_out, w_out = _size("out_size", out_size)
+        h_out, w_out = SIDES.check("out_size", out_size)
         self.time_step = check_int("time_step", time_step, 1, 4096)
         if wide is not None and not isinstance(wide, (bool, np.bool_)):
             raise ArgumentTypeError(f"wide must be None, True or False, not {wide!r}")
         self._wide_choice = wide
         self.wrap, self.interpolate = wrap, bool(interpolate)
         self.n_frames, self.frame_h, self.frame_w = (int(v) for v in frames.shape[:3])
-        self.cell = None if cell is None else _size("cell", cell)
+        self.cell = None if cell is None else SIDES.check("cell", cell)
         self.grid = self.cell is not None
         if self.grid and (self.cell[0] > self.frame_h or self.cell[1] > self.frame_w):
             raise InvalidArgumentError(
@@ -725,16 +726,6 @@ def _expand_tones(tones: np.ndarray) -> np.ndarray:
     out[:, :TONE_OB] = gain[:, channel]
     out[:, TONE_OB:] = offset[:, channel]
     return out
-
-
-def _size(name: str, value: Sequence[int]) -> tuple[int, int]:
-    try:
-        a, b = (int(v) for v in value)
-    except (TypeError, ValueError):
-        raise InvalidArgumentError(f"{name} must be two positive integers, not {value!r}") from None
-    if a < 1 or b < 1:
-        raise InvalidArgumentError(f"{name} must be two positive integers, not {value!r}")
-    return a, b
 
 
 def _round_up(v: int, m: int) -> int:

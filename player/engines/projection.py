@@ -1,7 +1,9 @@
 """The projection ``frame = mean + sum_i coef_i * basis[i]`` to uint8, shared by the modes
 whose frames are a linear combination of stored rows (``lds``, ``mixture``), for up to
 ``frames`` coefficient vectors per pass over the basis, with a model's fine detail
-(:mod:`.detail`) added in the same pass.
+(:mod:`.detail`) added in the same pass and, where the model has a colour set
+(:mod:`dynatex.tiledb.gamut`), every pixel whose colour the source never had moved to the
+nearest one it had as it is stored (:func:`snap_colours`).
 
 Each frame reads the whole basis, so one frame at a time is bound by memory bandwidth; k
 frames per pass read it once (a matrix-matrix product), which is what a caller that knows
@@ -16,7 +18,8 @@ GEMM). :func:`open_projector` picks one.
 
 Tolerance: the two backends, and k frames against one at a time, sum in different orders in
 float32, so a value may round to the neighbouring integer (at most 1 apart, on a small share
-of values); the detail then sees those integers exactly as a separate pass would.
+of values); the detail then sees those integers exactly as a separate pass would, and the
+colour set (integers alone) is applied exactly.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from ...tiledb.detail import DetailModel
+from ...tiledb.gamut import GamutModel
 from ..pixels import pixel_format
 from .detail import Detail, DetailReference
 
@@ -34,6 +38,30 @@ PIXELS = 16
 #: Work-group size: left to choose, PoCL may make few large groups that leave a core idle
 #: (CHANGELOG.md has the measurement).
 LOCAL = 32
+
+
+def snap_colours(frames: np.ndarray, nearest: np.ndarray, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
+    """Clamp, in place, each pixel of ``frames`` (..., bytes) uint8 whose colour bin
+    (``(r >> 3) * 1024 + (g >> 3) * 32 + (b >> 3)``) is not its own ``nearest`` entry into that
+    bin, channel by channel (the closest colour of the bin); ``rgb``: the bytes of r, g, b.
+
+    >>> nearest = np.arange(32**3, dtype=np.uint16); nearest[(0 * 32 + 25) * 32 + 25] = 25 * 1024
+    >>> px = np.array([[[3, 201, 202]]], np.uint8); snap_colours(px, nearest); px.tolist()
+    [[[200, 7, 7]]]
+    """
+    r, g, b = (frames[..., i] for i in rgb)
+    bins = (r >> 3).astype(np.uint16) << 10
+    bins |= (g >> 3).astype(np.uint16) << 5
+    bins |= b >> 3
+    target = nearest[bins]
+    away = target != bins
+    if not away.any():
+        return
+    t = target[away]
+    for i, shift in zip(rgb, (10, 5, 0)):
+        ch = frames[..., i]
+        lo = ((t >> shift) & 31).astype(np.uint8) << 3
+        ch[away] = np.clip(ch[away], lo, lo + 7)
 
 
 def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:
@@ -71,6 +99,9 @@ class Projector:
         Most frames one pass projects.
     detail : DetailModel, optional
         The model's fine detail, added to a pass given its layers (:attr:`detail` describes it).
+    gamut : GamutModel, optional
+        The source's colour set (``channels`` 3 only): every frame's pixels outside it are moved
+        to the nearest colour in it (:func:`snap_colours`), after the detail.
     """
 
     backend = ""
@@ -85,6 +116,7 @@ class Projector:
         format: str = "RGB",
         frames: int = 1,
         detail: DetailModel | None = None,
+        gamut: GamutModel | None = None,
     ) -> None:
         self.format = pixel_format(format)
         self.n, self.values = basis.shape
@@ -99,6 +131,10 @@ class Projector:
         self.detail: Detail | None = None
         if detail is not None:
             self.detail = DetailReference(detail, shape=self.shape, channels=channels, format=format)
+        #: each colour bin's nearest bin of the source's colour set (None: the model has none)
+        self.nearest: np.ndarray | None = None
+        if gamut is not None and channels == 3:
+            self.nearest = np.ascontiguousarray(gamut.nearest, np.uint16)
 
     @property
     def bytes_per_frame(self) -> int:
@@ -154,6 +190,8 @@ class ProjectorReference(Projector):
                 self.format.from_rgb(np.broadcast_to(frame.reshape(h, w, self.channels), (h, w, 3)), o)
             if layers is not None:
                 self.detail.apply(o, layers[j])
+            if self.nearest is not None:
+                snap_colours(o, self.nearest, self.format.rgb)
 
 
 class ProjectorOpenCL(Projector):
@@ -194,6 +232,7 @@ class ProjectorOpenCL(Projector):
         else:
             gain = np.repeat(d.gain.reshape(-1), self.channels)  # once per value: the kernel reads it as vectors
             arrays = {"vol": d.volume, "gain": gain, "low": d.low, "high": d.high, "colours": d.colours}
+        arrays["nearest"] = np.zeros(1, np.uint16) if self.nearest is None else self.nearest
         for name, a in arrays.items():
             self._bufs[name] = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
         self._kernels: dict[bool, tuple[Any, Any]] = {}
@@ -211,6 +250,7 @@ class ProjectorOpenCL(Projector):
         if detail not in self._kernels:
             vh, vw = (self.detail.vh, self.detail.vw) if detail else (1, 1)
             defines = {"HALF": self.half, "CHANNELS": self.channels, "DETAIL": detail, "VH": vh, "VW": vw}
+            defines["GAMUT"] = self.nearest is not None
             prog = build_program(self.ctx, "projection.cl", {**defines, **self.format.defines})
             k = Kernel(prog, "project")
             k.set(
@@ -275,9 +315,10 @@ def open_projector(
     format: str = "RGB",
     frames: int = 1,
     detail: DetailModel | None = None,
+    gamut: GamutModel | None = None,
 ) -> Projector:
     """The OpenCL projection engine on ``ctx``/``queue``, or the numpy reference when ``ctx`` is None."""
-    kwargs = dict(shape=shape, channels=channels, format=format, frames=frames, detail=detail)
+    kwargs = dict(shape=shape, channels=channels, format=format, frames=frames, detail=detail, gamut=gamut)
     if ctx is None:
         return ProjectorReference(basis, mean, **kwargs)
     return ProjectorOpenCL(basis, mean, ctx=ctx, queue=queue, **kwargs)

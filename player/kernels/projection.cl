@@ -17,10 +17,15 @@
 // (layer_at[6 f + 3 k + 1], layer_at[6 f + 3 k + 2]) with weight layer_w[2 f + k].
 // Contraction is off there so that the result equals the numpy reference bit for bit.
 //
+// GAMUT (CHANNELS 3 only): last, a pixel whose colour bin is not its own nearest[bin] (the
+// nearest bin of the source's colour set) is clamped into that bin, channel by channel
+// (integers alone: exact).
+//
 // Defines: HALF (1: basis stored as half floats), CHANNELS (1 or 3: values per pixel of the
 // basis; grey is replicated), PIXEL_BYTES (3 or 4: bytes per output pixel), R_AT, G_AT, B_AT
 // (the byte of each colour in an output pixel), A_AT (alpha's, 255; -1: none), DETAIL (0 or
-// 1), VH and VW (the detail volume's rows and columns; constants, so that the wrap is cheap).
+// 1), VH and VW (the detail volume's rows and columns; constants, so that the wrap is cheap),
+// GAMUT (0 or 1).
 
 #define PIXELS 16
 #define GROUP (PIXELS * CHANNELS)
@@ -33,12 +38,34 @@ typedef float basis_t;
 #define LOAD(row, j) vload16(j, row)
 #endif
 
-#if DETAIL
 #if CHANNELS == 3
 #define BIN(d, i) ((((d)[i] >> 3) << 10) | (((d)[(i) + 1] >> 3) << 5) | ((d)[(i) + 2] >> 3))
 #else
 #define BIN(d, i) ((((d)[i] >> 3) << 10) | (((d)[i] >> 3) << 5) | ((d)[i] >> 3))
 #endif
+
+#if GAMUT
+#if CHANNELS != 3
+#error "GAMUT needs CHANNELS 3"
+#endif
+// The `count` pixels of v moved into the source's colour set (the header's GAMUT).
+void snap_colours(uchar *v, const int count, __global const ushort *restrict nearest)
+{
+    for (int q = 0; q < count; ++q) {
+        uchar *p = v + 3 * q;
+        const int bin = BIN(p, 0);
+        const int t = nearest[bin];
+        if (t != bin) {
+            const int r = (t >> 10) << 3, g = ((t >> 5) & 31) << 3, b = (t & 31) << 3;
+            p[0] = (uchar)clamp((int)p[0], r, r + 7);
+            p[1] = (uchar)clamp((int)p[1], g, g + 7);
+            p[2] = (uchar)clamp((int)p[2], b, b + 7);
+        }
+    }
+}
+#endif
+
+#if DETAIL
 
 // The detail of frame f added to the projected values v (GROUP values: `count` pixels, the
 // first at (x, y), value `first` of the frame). gain holds each pixel's gain once per channel.
@@ -109,7 +136,8 @@ __kernel void project(__global const basis_t *restrict basis,
                       __global const uchar *restrict high,
                       __global const uchar *restrict colours,
                       __global const int *restrict layer_at,
-                      __global const float *restrict layer_w)
+                      __global const float *restrict layer_w,
+                      __global const ushort *restrict nearest)
 {
     const size_t g = get_global_id(0);
     const size_t first = g * GROUP;
@@ -144,6 +172,9 @@ __kernel void project(__global const basis_t *restrict basis,
 #endif
 #if DETAIL
         add_detail(v, count, x0, y0, first, vol, gain, low, high, colours, layer_at + 6 * f, layer_w + 2 * f, width);
+#endif
+#if GAMUT
+        snap_colours(v, count, nearest);
 #endif
         __global uchar *o = out + (size_t)f * pixels * PIXEL_BYTES;
 #if CHANNELS == 3 && PIXEL_BYTES == 3 && R_AT == 0 && G_AT == 1 && B_AT == 2

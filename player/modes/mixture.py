@@ -11,7 +11,7 @@ projection of ``u = (r_s, r_s z_s)`` onto the stacked basis (component means and
 with the LDS mode's ``project`` kernel (:mod:`dynatex.player.engines.projection`): one launch per frame,
 memory-bound on the stacked basis.
 
-A model with switching dynamics (``model.switching``, analysed since format 1.5) is played by
+A model with switching dynamics (``model.switching``, analysed since format 1.6) is played by
 them instead: the component follows the learned Markov chain, every component's local
 coordinates run their own AR(1) process (on the component's subspace, with its covariance),
 and a switch cross-fades the responsibilities from the old component to the new one over
@@ -174,7 +174,7 @@ class MixturePlayer(ProjectionPlayer):
         DEFAULT_DRAWS,
         "Noise draws per step; the candidate nearest the learned manifold is kept among those whose frame "
         "step stays within the clip's own (1: the plain AR process). No effect on textures with switching "
-        "dynamics (analysed since format 1.5), whose process stays on the components by itself.",
+        "dynamics (analysed since format 1.6), whose process stays on the components by itself.",
     )
 
     # -- synthesis -----------------------------------------------------------------

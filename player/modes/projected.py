@@ -3,7 +3,9 @@ projection of a small vector, advanced on the host once per frame, through a sto
 
 A model with a ``detail`` part (:mod:`dynatex.tiledb.detail`) has the projection engine add
 the fine detail the projection lacks to each frame in the same pass (:mod:`~dynatex.player.engines.detail` schedules
-it) and hold every pixel to the source's colour range.
+it) and hold every pixel to the source's colour range; one with a ``gamut`` part
+(:mod:`dynatex.tiledb.gamut`) has it move every colour the source never had to the nearest
+one it had, last.
 
 Look-ahead (option ``lookahead=k``): the player runs its state up to k frames ahead and
 projects them in one pass over the basis (:mod:`~dynatex.player.engines.projection`), then hands them out one by
@@ -103,6 +105,7 @@ class ProjectionPlayer(Player):
             format=self.format,
             frames=lookahead,
             detail=model.detail,
+            gamut=model.gamut,
         )
         self.basis_bytes = self.engine.basis_bytes
         #: the detail's arrays and schedule (None: the model has none, or set so to project alone)

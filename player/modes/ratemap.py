@@ -13,10 +13,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ...checks import MAX_SIDE, Size
 from ...errors import ArgumentTypeError, InvalidArgumentError
 
 #: Largest rate accepted: a pixel 64 times faster than the source.
 MAX_RATE = 64.0
+#: The output's ``shape`` every generator takes: (height, width), each side in 1..MAX_SIDE.
+SHAPE = Size(MAX_SIDE)
 
 
 def check_rate_map(rate: object, shape: tuple[int, int], *, name: str = "rate_map") -> np.ndarray:
@@ -47,7 +50,7 @@ def check_rate_map(rate: object, shape: tuple[int, int], *, name: str = "rate_ma
 
 def uniform(shape: Sequence[int], rate: float = 1.0) -> np.ndarray:
     """A constant map."""
-    h, w = _shape(shape)
+    h, w = SHAPE.check("shape", shape)
     return np.full((h, w), _rate("rate", rate), np.float32)
 
 
@@ -59,7 +62,7 @@ def halves(shape: Sequence[int], left: float = 2.0, right: float = 1.0) -> np.nd
     >>> halves((1, 4), 2, 1).tolist()
     [[2.0, 2.0, 1.0, 1.0]]
     """
-    h, w = _shape(shape)
+    h, w = SHAPE.check("shape", shape)
     m = np.full((h, w), _rate("right", right), np.float32)
     m[:, : w // 2] = _rate("left", left)
     return m
@@ -80,7 +83,7 @@ def point_light(
     >>> float(m[2, 2]), bool(m[0, 0] < m[1, 1] < m[2, 2])
     (2.0, True)
     """
-    h, w = _shape(shape)
+    h, w = SHAPE.check("shape", shape)
     try:
         cx, cy = (float(v) for v in center)
     except (TypeError, ValueError):
@@ -133,16 +136,6 @@ def _rate(name: str, v: object, hi: float = MAX_RATE) -> float:
     if not np.isfinite(f) or f < 0 or f > hi:
         raise InvalidArgumentError(f"{name} must be a finite number in [0, {hi:g}], not {v!r}")
     return f
-
-
-def _shape(shape: Sequence[int]) -> tuple[int, int]:
-    try:
-        h, w = (int(v) for v in shape)
-    except (TypeError, ValueError):
-        raise ArgumentTypeError(f"shape must be (height, width), not {shape!r}") from None
-    if h < 1 or w < 1:
-        raise InvalidArgumentError(f"shape must be two positive integers (height, width), not {shape!r}")
-    return h, w
 
 
 def _wh(shape: tuple[int, ...]) -> str:

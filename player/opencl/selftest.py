@@ -184,15 +184,25 @@ def _copy_check(device: str) -> str | None:
     return None if np.array_equal(out, src) else "the streaming copy lost bytes"
 
 
+def random_colour_set(rng: np.random.Generator, share: float = 0.5) -> np.ndarray:
+    """A valid nearest-colour map (:mod:`dynatex.tiledb.gamut`) of a random set of about ``share``
+    of the bins, each other bin mapped to a random bin of the set (not the nearest: the kernel
+    and its reference need only agree)."""
+    bins = np.arange(32**3)
+    inside = rng.random(bins.size) < share
+    return np.where(inside, bins, rng.choice(bins[inside], bins.size)).astype(np.uint16)
+
+
 def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
     """The projection kernel with the detail fused, 3 frames per pass and one at a time, against
     its reference, exactly: a basis and coefficients whose sums are exact in float32 in any
-    order, and a random volume, gain and colour range."""
+    order, and a random volume, gain and colour range (and, in colour, a random colour set)."""
 
     def check(device: str) -> str | None:
         import pyopencl as cl
 
         from ...tiledb.detail import DetailModel
+        from ...tiledb.gamut import GamutModel
         from ..engines.projection import open_projector
         from ..pixels import FORMATS
         from .context import get_context
@@ -212,6 +222,8 @@ def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
         ctx = get_context(device)
         shape = (h, w, fmt.bytes)
         kw = {"shape": shape, "channels": channels, "format": format, "frames": 3, "detail": model}
+        if channels == 3:
+            kw["gamut"] = GamutModel(random_colour_set(rng))
         engine = open_projector(basis, mean, ctx=ctx, queue=cl.CommandQueue(ctx), **kw)
         ref = open_projector(basis, mean, **kw)
         try:

@@ -22,7 +22,8 @@ from dynatex.analyzer.tiles import (
     transition_map,
     wang_edges,
 )
-from dynatex.analyzer.tiles.quilted import QUILT_SMALL_BLOCK, QUILT_SMALL_SIDE
+from dynatex.analyzer.tiles.quilted import QUILT_SMALL_SIDE, _block_alpha, _blur_matrix, _low_pass, _smoother
+from dynatex.analyzer.tiles.stats import feature_scale
 
 from ..conftest import wave_clip
 
@@ -271,18 +272,84 @@ def test_wang_bad_options_are_clear_errors(kwargs, message):
 
 
 @pytest.mark.parametrize("side", [10, 17, 18, 34, 48, 64, 100, 127, 128, 288, 1080])
-def test_quilt_block_follows_the_small_clip_rule(side):
-    """Under QUILT_SMALL_SIDE: blocks of at least QUILT_SMALL_BLOCK (at most half the side)
-    overlapping by half; above it: a third of the side overlapping by a quarter; always valid."""
-    block, step, (ch, cw), (py, px) = quilt_geometry(side, side + 20)
+@pytest.mark.parametrize("scale", [None, 0.0, 1.0, 2.5, 8.0, 15.0, 40.0, 500.0])
+def test_quilt_block_stays_within_the_clips_bounds(side, scale):
+    """Any feature scale: a valid block of at least 16 pixels (or what the clip allows), at most
+    half the side under QUILT_SMALL_SIDE and a third of it (16..128) above, overlapping by a
+    quarter to a half."""
+    block, step, (ch, cw), (py, px) = quilt_geometry(side, side + 20, scale=scale)
     assert block % 8 == 0 and block + 2 <= side and ch % step == 0 and ch >= 64 and py % ch == 0
+    assert block // 4 <= block - step <= block // 2
+    assert block >= min(16, (side - 2) // 8 * 8)
     if side < QUILT_SMALL_SIDE:
-        assert step == block - block // 2
-        assert block <= max(16, side // 2) or block == (side - 2) // 8 * 8
-        assert block >= min(QUILT_SMALL_BLOCK, max(16, side // 2 // 8 * 8), (side - 2) // 8 * 8)
+        assert block <= max(16, side // 2)
     else:
-        assert step == block - block // 4
         assert abs(block - min(max(side / 3, 16), 128)) <= 4
+
+
+def _smooth_noise(sigma: float, side: int = 64, t: int = 40, seed: int = 0) -> np.ndarray:
+    """Drifting Gaussian-smoothed noise: features about ``sigma`` pixels across."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    big = rng.normal(0, 1, (side + t, side + t)).astype(np.float32)
+    big = cv2.GaussianBlur(big, (0, 0), sigma) if sigma > 0 else big
+    g = np.stack([big[i : i + side, i : i + side] for i in range(t)])
+    g = np.clip(128 + 50 * g / g.std(), 0, 255).astype(np.uint8)
+    return np.repeat(g[..., None], 3, axis=3)
+
+
+def test_a_fine_and_a_coarse_texture_get_different_blocks():
+    """The block and overlap follow the measured feature scale: small blocks with narrow overlaps
+    for grain, the largest the clip allows with half overlaps for coarse features."""
+    fine, coarse = _smooth_noise(0.0), _smooth_noise(6.0)
+    s_fine, s_coarse = feature_scale(fine), feature_scale(coarse)
+    assert s_fine <= 2.0 and s_coarse >= 8.0
+    geo_fine, geo_coarse = quilt_geometry(64, 64, scale=s_fine), quilt_geometry(64, 64, scale=s_coarse)
+    assert geo_fine[:2] == (16, 12) and geo_coarse[:2] == (32, 16)
+    for frames, (block, step, _, _) in ((fine, geo_fine), (coarse, geo_coarse)):
+        m = learn_tiles(frames, construction="quilted", min_loop=16, max_loop=16)
+        assert (m.info["quilt_block"], m.info["quilt_step"]) == (block, step)
+
+
+def test_feature_scale_follows_the_correlation_length_and_its_longest_direction():
+    x = np.arange(96)
+    streaks = 128 + 100 * np.sin(2 * np.pi * x / 96)[None, None, :] * np.ones((3, 96, 1))  # along y
+    scale = feature_scale(np.repeat(streaks.astype(np.uint8)[..., None], 3, axis=3))
+    assert scale == 48.0  # the lag limit: correlated all along the streaks
+    assert feature_scale(np.full((3, 32, 32, 3), 7, np.uint8)) == 0.0  # flat: no features
+
+
+def test_quilt_cut_shares_are_continuous_across_the_band():
+    """The sharp share steps at the cut; the wide one rises from 0 at the old edge to 1 at the new
+    edge, without a jump anywhere (a jump would be a straight edge in the low band)."""
+    err = np.random.default_rng(0).random((32, 16))
+    for side in ("left", "right", "top", "bottom"):
+        sharp, wide = _block_alpha(err if side in ("left", "right") else err.T, side, 3, 5.0)
+        w = wide if side in ("left", "right") else wide.T
+        s = sharp if side in ("left", "right") else sharp.T
+        if side in ("right", "bottom"):
+            w, s = w[:, ::-1], s[:, ::-1]
+        assert w[:, 0].max() < 0.02 and w[:, 15].min() > 0.98 and (w[:, 16:] == 1).all()
+        assert np.abs(np.diff(w, axis=1)).max() <= 0.75 / 3 + 1e-9 and (np.diff(w, axis=1) >= -1e-9).all()
+        assert (s[:, :3] == 0).all() and (s[:, 13:] == 1).all()
+
+
+def test_low_pass_ignores_the_unfilled_torus():
+    """The coarse band is smoothed over filled pixels only, by a wide or a narrow Gaussian."""
+    assert np.allclose(_blur_matrix(16, 4.0).sum(axis=1), 1.0)
+    for sigma in (1.5, 4.0, 12.0):
+        up, down = _smoother(16, sigma)
+        assert np.allclose((up @ down).sum(axis=1), 1.0, atol=1e-5)
+        x = np.full((2, 16, 16, 3), 200.0, np.float32)
+        weight = np.zeros((16, 16), np.float32)
+        weight[:, :6] = 1.0
+        x[:, :, 6:] = 0.0  # what the torus holds where nothing is placed yet
+        assert np.allclose(_low_pass(x, (up, down), weight)[:, :, :8], 200.0, atol=1e-2)  # the band and past it
+    for n, sigma in ((32, 8.0), (96, 10.0), (96, 30.0)):  # pooled, it stays close to the Gaussian
+        up, down = _smoother(n, sigma)
+        exact = _blur_matrix(n, sigma)
+        assert up.shape[1] < n and np.abs(up @ down - exact).max() < 0.3 * exact.max()
 
 
 @pytest.mark.parametrize("side", [12, 64])

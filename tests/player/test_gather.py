@@ -297,6 +297,12 @@ def test_bad_inputs_are_clear_errors():
         gg.set_source_grid(pack_source(np.full((1, 1), 10)))
     with pytest.raises(ValueError, match="cell 11x4 is larger"):
         open_gather(stack, (4, 4), backend="numpy", cell=(11, 4))
+    with pytest.raises(ValueError, match=r"out_size must be \(height, width\) with each side in 1\.\.16384"):
+        open_gather(stack, (0, 4), backend="numpy")
+    with pytest.raises(ValueError, match=r"cell must be \(height, width\), two integers"):
+        open_gather(stack, (4, 4), backend="numpy", cell=(4,))
+    with pytest.raises(TypeError, match=r"out_size must be \(height, width\) integers"):
+        open_gather(stack, (4.0, 4), backend="numpy")
 
 
 @pytest.mark.parametrize("cell", [(8, 8), (5, 7), (9, 40), (7, 64), (9, 72), (12, 100)])

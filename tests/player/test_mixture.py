@@ -1,5 +1,5 @@
 """Mode ``mixture``: OpenCL against the numpy reference, determinism, state, controls, long-run
-stability; with the switching dynamics (format 1.5) and as analysed before them."""
+stability; with the switching dynamics (format 1.6) and as analysed before them."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from ..conftest import wave_clip
 
 
 def _db(path, frames, *, switching=True, **kw):
-    """A database of ``frames``; ``switching=False`` writes it as before format 1.5 (no switching dynamics)."""
+    """A database of ``frames``; ``switching=False`` writes it as before format 1.6 (no switching dynamics)."""
     clip = load_clip(frames)
     model = learn_mixture(clip, **kw)
     if not switching:
@@ -50,7 +50,7 @@ def mix_db(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def ar_db(tmp_path_factory):
-    """The same texture as analysed before format 1.5: the AR process on the global coordinates."""
+    """The same texture as analysed before format 1.6: the AR process on the global coordinates."""
     return _db(
         tmp_path_factory.mktemp("mixa") / "a.h5",
         wave_clip(80, h=30, w=37),
@@ -246,7 +246,7 @@ def test_real_clip_frames_step_like_the_clip(clips_dir, tmp_path):
         train = np.quantile(np.sqrt(step_sizes(gram, np.diff(_train_coefficients(model), axis=0))), 0.99)
         played = np.quantile(np.sqrt(step_sizes(gram, np.diff(p.advance(2000, record=True), axis=0))), 0.99)
     assert played < 1.25 * train
-    model.switching = None  # as analysed before format 1.5
+    model.switching = None  # as analysed before format 1.6
     with DatabaseWriter(path) as w:
         w.put_method("o", "mixture", model)
     with MixturePlayer(path, backend="numpy", seed=0) as p:

@@ -306,6 +306,10 @@ def test_ratemap_generators():
         ratemap.point_light((4, 4), (1, 1), 0.0)
     with pytest.raises(ValueError, match="image values"):
         ratemap.from_image(np.full((3, 3), 2.0))
+    with pytest.raises(ValueError, match=r"shape must be \(height, width\) with each side in 1\.\.16384, not \(0, 4\)"):
+        ratemap.halves((0, 4))
+    with pytest.raises(TypeError, match=r"shape must be \(height, width\) integers, not \(4\.5, 4\)"):
+        ratemap.uniform((4.5, 4))
 
 
 # -- must show on a real clip --------------------------------------------------------------------------

@@ -32,7 +32,7 @@ PERIOD = (216, 288)
 @pytest.fixture(scope="module")
 def quilted(tmp_path_factory):
     clip = _stochastic(t=60, h=56, w=72)
-    model = learn_tiles(clip, min_loop=24, period=PERIOD)
+    model = learn_tiles(clip, tile=24, min_loop=24, period=PERIOD)
     path = tmp_path_factory.mktemp("stochastic") / "q.h5"
     with DatabaseWriter(path) as w:
         w.put_texture("noise", load_clip(clip).source_info())

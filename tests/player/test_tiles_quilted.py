@@ -20,7 +20,7 @@ PERIOD = (216, 288)
 @pytest.fixture(scope="module")
 def quilted(tmp_path_factory):
     clip = _stochastic(t=60, h=56, w=72)
-    model = learn_tiles(clip, min_loop=24, period=PERIOD)
+    model = learn_tiles(clip, tile=24, min_loop=24, period=PERIOD)
     path = tmp_path_factory.mktemp("quilted") / "q.h5"
     with DatabaseWriter(path) as w:
         w.put_texture("noise", load_clip(clip).source_info())
@@ -39,10 +39,10 @@ def _torus(model) -> np.ndarray:
 
 
 def test_geometry_cells_cover_whole_steps_and_the_period():
-    block, step, (ch, cw), (py, px) = quilt_geometry(288, 352)
+    block, step, (ch, cw), (py, px) = quilt_geometry(288, 352, scale=5.0)  # grass-like grain
     assert (block, step) == (96, 72) and ch % step == 0 and ch >= 64
     assert py % ch == 0 and px % cw == 0 and py >= 576 and px >= 704
-    assert quilt_geometry(288, 352, period=(1000, 1000))[3] == (1008, 1008)
+    assert quilt_geometry(288, 352, period=(1000, 1000), scale=5.0)[3] == (1008, 1008)
     with pytest.raises(ValueError, match="larger than the clip frame"):
         quilt_geometry(40, 48, block=64)
     with pytest.raises(ValueError, match="period must be"):

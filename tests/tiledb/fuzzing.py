@@ -79,8 +79,8 @@ TEXTURE = "t"
 # -- the databases ----------------------------------------------------------------------------
 def build_bases(folder: str | os.PathLike, *, detail: bool = True) -> dict[str, Path]:
     """One small database per method (texture ``t``, frames stored where the method plays them);
-    ``detail=False`` leaves out the lds and mixture models' detail part (the layout of the bases
-    before it existed, which fixed byte-flip mutants of the regression tests refer to)."""
+    ``detail=False`` leaves out the lds and mixture models' detail and gamut parts (the layout of
+    the bases before they existed, which fixed byte-flip mutants of the regression tests refer to)."""
     from dynatex.analyzer import load_clip
     from dynatex.analyzer.lds import learn_lds
     from dynatex.analyzer.mixture import learn_mixture
@@ -115,7 +115,7 @@ def build_bases(folder: str | os.PathLike, *, detail: bool = True) -> dict[str, 
                 w.put_frames(TEXTURE, clip.frames)
             model = learn(clip)
             if not detail and hasattr(model, "detail"):
-                model.detail = None
+                model.detail = model.gamut = None
             w.put_method(TEXTURE, method, model)
         out[method] = path
     return out

@@ -48,7 +48,7 @@ def test_round_trip(db_path):
 
 
 def test_switching_part_is_optional_and_versioned(db_path, tmp_path):
-    """A database written before format 1.5 (no ``switching``) reads with none; a newer part is ignored."""
+    """A database written before format 1.6 (no ``switching``) reads with none; a newer part is ignored."""
     for edit in (lambda g: g.__delitem__("switching"), lambda g: g["switching"].attrs.__setitem__("version", 2)):
         path = _damaged(db_path, tmp_path, edit)
         with TileDB(path) as db:

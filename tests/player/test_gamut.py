@@ -1,0 +1,153 @@
+"""The colour set at the projection's store: the kernel equals its numpy reference with and
+without the detail, and two flashing red lamps stay red, where the projection alone tints
+them cyan (lds) or pink (mixture), on both backends."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from dynatex.analyzer import load_clip, metrics
+from dynatex.analyzer.lds import learn_lds
+from dynatex.analyzer.metrics.gamut import colour_bins
+from dynatex.analyzer.mixture import learn_mixture
+from dynatex.player import open_player
+from dynatex.player.engines.projection import open_projector, snap_colours
+from dynatex.player.opencl.selftest import random_colour_set
+from dynatex.player.pixels import FORMATS
+from dynatex.tiledb import DatabaseWriter
+from dynatex.tiledb.gamut import GamutModel
+
+from .test_detail import _model, exact_projection
+
+ON, OFF, WALL = (230, 25, 20), (175, 170, 165), (90, 95, 100)
+
+
+def lamps(t: int = 100, h: int = 24, w: int = 40, seed: int = 0) -> np.ndarray:
+    """Two round lamps on a grey wall, red when on, grey glass when off, flashing every 5 and 7
+    frames, with sensor noise. A state past "off" (the negative of red on grey) is cyan; a lamp
+    half on is a pink the clip never shows."""
+    rng = np.random.default_rng(seed)
+    f = np.empty((t, h, w, 3), np.float32)
+    f[:] = WALL
+    yy, xx = np.mgrid[:h, :w]
+    for cx, period in ((w // 4, 5), (3 * w // 4, 7)):
+        disc = (yy - h // 2) ** 2 + (xx - cx) ** 2 <= 36
+        on = (np.arange(t) // period) % 2 == 0
+        f[:, disc] = np.where(on[:, None, None], np.float32(ON), np.float32(OFF))
+    f += rng.normal(0, 2, f.shape)
+    return np.clip(np.rint(f), 0, 255).astype(np.uint8)
+
+
+def cyan_share(frames: np.ndarray) -> float:
+    """Share of pixels whose green and blue both exceed red by 3 colour bins (24 levels)."""
+    f = frames[..., :3].astype(np.int16)
+    return float(((f[..., 1] > f[..., 0] + 24) & (f[..., 2] > f[..., 0] + 24)).mean())
+
+
+def red_share(frames: np.ndarray) -> float:
+    f = frames[..., :3].astype(np.int16)
+    return float(((f[..., 0] > 180) & (f[..., 1] < 80) & (f[..., 2] < 80)).mean())
+
+
+def test_snap_clamps_into_the_nearest_bin():
+    nearest = np.arange(32**3, dtype=np.uint16)
+    cyan = (1 * 32 + 25) * 32 + 25
+    grey = (21 * 32 + 21) * 32 + 20
+    nearest[cyan] = grey
+    px = np.array([[[13, 201, 207], [13, 205, 99]]], np.uint8)
+    snap_colours(px, nearest)
+    assert px.tolist() == [[[168, 175, 167], [13, 205, 99]]]  # the other pixel's bin is its own
+
+
+@pytest.mark.parametrize("format", ["RGB", "RGBA", "BGRA"])
+@pytest.mark.parametrize("detail", [False, True], ids=["alone", "with-detail"])
+@pytest.mark.parametrize("size", [(23, 41), (20, 64)], ids=["pixel-by-pixel", "vectors"])
+def test_kernel_equals_numpy_reference(cl_context, format, detail, size):
+    """With a colour set the projection kernel moves exactly the pixels its reference moves, to
+    the same values, k frames per pass and one at a time."""
+    rng = np.random.default_rng(7)
+    h, w = size
+    fmt = FORMATS[format]
+    basis, mean = exact_projection(rng, h, w, 3)
+    shape = (h, w, fmt.bytes)
+    gamut = GamutModel(random_colour_set(rng))
+    kw = dict(shape=shape, channels=3, format=format, frames=4, detail=_model(rng, h, w, 3) if detail else None)
+    engine = open_projector(basis, mean, ctx=cl_context, queue=cl.CommandQueue(cl_context), gamut=gamut, **kw)
+    ref = open_projector(basis, mean, gamut=gamut, **kw)
+    bare = open_projector(basis, mean, **kw)
+    try:
+        coefs = rng.integers(-4, 5, (4, 5)).astype(np.float32)
+        engine.coefs[:] = ref.coefs[:] = bare.coefs[:] = coefs
+        lay = [ref.detail.layers(3, k, 1.5) for k in (0, 4, 9, 30)] if detail else None
+        got, want, plain = (np.empty((4, *shape), np.uint8) for _ in range(3))
+        engine.run(got, count=4, layers=lay)
+        ref.run(want, count=4, layers=lay)
+        bare.run(plain, count=4, layers=lay)
+        np.testing.assert_array_equal(got, want)
+        moved = (want != plain).any(axis=-1)
+        assert 0.1 < moved.mean() < 0.9  # about half the bins are outside the set
+        bins = colour_bins(want[..., list(fmt.rgb)])
+        assert (gamut.nearest[bins] == bins).all()
+        single = np.empty(shape, np.uint8)
+        engine.coef[:] = coefs[2]
+        engine.run(single, layers=None if lay is None else [lay[2]])
+        np.testing.assert_array_equal(single, want[2])
+    finally:
+        engine.close()
+
+
+@pytest.fixture(scope="module")
+def lamps_db(tmp_path_factory):
+    src = lamps()
+    clip = load_clip(src)
+    path = tmp_path_factory.mktemp("lamps") / "lamps.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("lamps", clip.source_info())
+        w.put_method("lamps", "lds", learn_lds(clip))
+        w.put_method("lamps", "mixture", learn_mixture(clip, components=2, dim=3, pca_dim=12, neighbors=6, pmax=3))
+    old = path.with_name("old.h5")
+    old.write_bytes(path.read_bytes())
+    with h5py.File(old, "a") as f:
+        for method in ("lds", "mixture"):
+            del f[f"textures/lamps/{method}/gamut"]
+    return path, old, src
+
+
+def _play(path, mode, frames=120, **kw):
+    with open_player(path, mode=mode, seed=3, **kw) as p:
+        p.intensity = 4.0  # the driving noise pushes states past the clip's: overshoots show
+        return np.stack([p.next_frame() for _ in range(frames)])
+
+
+@pytest.mark.parametrize("mode", ["lds", "mixture"])
+def test_flashing_lamps_stay_red(lamps_db, mode):
+    path, old, src = lamps_db
+    out, before = _play(path, mode, backend="numpy"), _play(old, mode, backend="numpy")
+    assert cyan_share(src) == 0.0
+    # the projection alone: colours the clip never had (lds: cyan tints past "off")
+    assert metrics.out_of_gamut_share(before, src) > 0.01
+    if mode == "lds":
+        assert cyan_share(before) > 1e-3
+    assert cyan_share(out) == 0.0
+    assert metrics.out_of_gamut_share(out, src) <= metrics.source_gamut_share(src)
+    assert red_share(out) > 0.5 * red_share(src)  # the lamps still light up red
+
+
+@pytest.mark.parametrize("mode", ["lds", "mixture"])
+def test_lamps_on_both_backends(lamps_db, mode, cl_device):
+    path, _, src = lamps_db
+    a = _play(path, mode, frames=40, backend="opencl", device=cl_device)
+    b = _play(path, mode, frames=40, backend="numpy")
+    diff = np.abs(a.astype(int) - b)
+    assert (diff > 0).mean() <= 1e-3  # the projection's documented tolerance, then the same colour set
+    assert cyan_share(a) == 0.0 and metrics.out_of_gamut_share(a, src) == 0.0
+
+
+def test_older_database_plays_without_it(lamps_db):
+    _, old, _ = lamps_db
+    with open_player(old, mode="lds", seed=3, backend="numpy") as p:
+        assert p.engine.nearest is None
+        assert p.next_frame().shape == (24, 40, 3)

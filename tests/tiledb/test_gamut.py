@@ -1,0 +1,127 @@
+"""The optional ``gamut`` part of ``lds`` and ``mixture``: what the analysis learns, round trip,
+older databases without it, a newer version and grey sources ignored, damaged maps refused."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from dynatex.analyzer import load_clip
+from dynatex.analyzer.gamut import learn_gamut
+from dynatex.analyzer.lds import learn_lds
+from dynatex.analyzer.metrics.gamut import colour_bins
+from dynatex.analyzer.mixture import learn_mixture
+from dynatex.tiledb import DatabaseWriter, TileDB, TileDBFormatError
+
+from ..conftest import wave_clip
+
+
+@pytest.fixture(scope="module")
+def db(tmp_path_factory):
+    clip = load_clip(wave_clip(60, h=20, w=28))
+    path = tmp_path_factory.mktemp("gamut") / "g.h5"
+    lds = learn_lds(clip, n=5)
+    mix = learn_mixture(clip, components=2, dim=3, pca_dim=12, neighbors=6, pmax=3)
+    with DatabaseWriter(path) as w:
+        w.put_texture("w", clip.source_info())
+        w.put_method("w", "lds", lds)
+        w.put_method("w", "mixture", mix)
+    return path, {"lds": lds, "mixture": mix}, clip.frames
+
+
+def test_the_set_is_the_bins_the_clip_holds_and_each_bin_maps_to_its_nearest(db):
+    _, _, frames = db
+    g = learn_gamut(frames)
+    counts = np.bincount(colour_bins(frames), minlength=32**3)
+    inside = g.nearest == np.arange(32**3)
+    np.testing.assert_array_equal(inside, counts >= 4)
+    rgb = lambda b: np.stack([b >> 10, (b >> 5) & 31, b & 31], axis=-1).astype(float)  # noqa: E731
+    members = rgb(np.flatnonzero(inside))
+    for b in np.random.default_rng(0).integers(0, 32**3, 50):
+        best = np.sqrt(((members - rgb(np.array(b))) ** 2).sum(axis=1)).min()
+        assert np.sqrt(((rgb(g.nearest[b]) - rgb(np.array(b))) ** 2).sum()) == pytest.approx(best)
+    assert learn_gamut(frames[..., :1]) is None  # grey: a projection cannot take a hue
+
+
+def test_a_clip_of_rare_colours_keeps_its_commonest():
+    one = np.zeros((1, 1, 3, 3), np.uint8)
+    one[0, 0] = [(0, 0, 0), (100, 0, 0), (0, 0, 200)]
+    g = learn_gamut(one)
+    assert g.colours == 3  # no bin holds 4 pixels: the set is every bin the clip holds
+
+
+@pytest.mark.parametrize("method", ["lds", "mixture"])
+def test_round_trip(db, method):
+    path, models, _ = db
+    want = models[method].gamut
+    with TileDB(path) as t:
+        got = t.texture("w").read(method).gamut
+    np.testing.assert_array_equal(got.nearest, want.nearest)
+    assert got.nearest.dtype == np.uint16 and got.info["min_pixels"] == 4
+    assert got.colours == want.colours == got.info["colours"]
+
+
+def _copy(db, tmp_path, edit, method="lds"):
+    path = db[0]
+    out = tmp_path / "c.h5"
+    out.write_bytes(path.read_bytes())
+    with h5py.File(out, "a") as f:
+        edit(f[f"textures/w/{method}"])
+    return out
+
+
+def _read(path, method="lds"):
+    with TileDB(path) as t:
+        return t.texture("w").read(method)
+
+
+@pytest.mark.parametrize("method", ["lds", "mixture"])
+def test_older_database_reads_without_it(db, tmp_path, method):
+    model = _read(_copy(db, tmp_path, lambda g: g.__delitem__("gamut"), method), method)
+    assert model.gamut is None and model.detail is not None
+    assert model.describe()["gamut"] is False
+
+
+def test_newer_version_is_ignored(db, tmp_path):
+    def newer(g):
+        g["gamut"].attrs["version"] = 99
+
+    assert _read(_copy(db, tmp_path, newer)).gamut is None
+
+
+def test_grey_source_ignores_it(tmp_path):
+    # a grey texture written with a colour set (by hand) plays without it
+    clip = load_clip(wave_clip(30, h=12, w=16, channels=1), color=False)
+    lds = learn_lds(clip, n=3)
+    assert lds.gamut is None
+    lds.gamut = learn_gamut(wave_clip(30, h=12, w=16))
+    grey_db = tmp_path / "grey.h5"
+    with DatabaseWriter(grey_db) as w:
+        w.put_texture("w", clip.source_info())
+        w.put_method("w", "lds", lds)
+    assert _read(grey_db).gamut is None
+
+
+def _replace(fn):
+    def edit(g):
+        data = fn(g["gamut"]["nearest"][()])
+        del g["gamut"]["nearest"]
+        g["gamut"].create_dataset("nearest", data=data)
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    ("fn", "match"),
+    [
+        (lambda a: a.astype(np.uint32), "not uint16"),
+        (lambda a: a.astype(np.int16), "unsigned integer"),
+        (lambda a: a[:-1], "expected"),
+        (lambda a: np.full_like(a, 40000), "a bin outside 0..32767"),
+        (lambda a: np.roll(np.arange(32**3, dtype=np.uint16), 1), "must map to itself"),
+    ],
+)
+def test_damaged_map_is_refused(db, tmp_path, fn, match):
+    with pytest.raises(TileDBFormatError, match=match):
+        _read(_copy(db, tmp_path, _replace(fn)))
