@@ -13,6 +13,14 @@
 4. AR(p) on the global coordinates, ``p = 1..pmax`` fitted by least squares on a common
    sample (Neumaier & Schneider) and chosen by Schwarz's criterion; an unstable fit is
    pulled back by scaling ``A_i -> c^i A_i``, which scales every pole by ``c``.
+5. Switching dynamics (:func:`fit_switching`), which the player prefers: the AR process on the
+   global coordinates is one Gaussian; the components' training coordinates are thin, separate
+   clouds in that space, so its draws fall off every component's subspace and it can neither
+   stay on them nor visit them as the clip does. Instead a Markov chain over the components
+   (reversible, its stationary distribution the clip's occupancy) and, per component, an AR(2)
+   process on its local coordinates along their principal axes (Yule-Walker on the component's
+   own consecutive frames, its noise such that the stationary covariance is the component's
+   ``local_cov``).
 """
 
 from __future__ import annotations
@@ -20,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InvalidArgumentError
-from ..tiledb import MixtureModel
+from ..tiledb import MixtureModel, SwitchingDynamics
 from ..tiledb.mixture import companion_radius
 from .detail import learn_detail
 from .gamut import learn_gamut
@@ -36,6 +44,8 @@ DEFAULT_PCA_DIM = 50
 DEFAULT_NEIGHBORS = 12
 DEFAULT_PMAX = 5
 DEFAULT_MAX_RADIUS = 0.995
+#: Order of each component's AR process on its local coordinates (switching dynamics).
+LOCAL_ORDER = 2
 LLE_REG = 1e-3
 
 
@@ -244,6 +254,7 @@ def learn_mixture(
         ar_noise_cov=ar["C"],
         sbc=ar["sbc"],
         info=info,
+        switching=fit_switching(r, z, dec_off, loc_cov, max_radius=max_radius),
     )
     if not streamed:
         u32, stacked32 = u.astype(np.float32), model.stacked_basis
@@ -397,17 +408,22 @@ def coordinate(u: np.ndarray, idx: np.ndarray, w: np.ndarray, out_dim: int) -> t
     c = u.sum(axis=0)
     qmat, _ = np.linalg.qr(np.concatenate([c[:, None], np.eye(j)], axis=1))
     null = qmat[:, 1:j]
-    an = null.T @ a @ null
+    # Only directions U does not send to zero: on those (hard responsibilities can leave a few,
+    # e.g. a component with barely more frames than dimensions) the cost is zero too, and they
+    # would be chosen as global axes that are identically zero.
     bn = null.T @ b @ null
-    bn = (bn + bn.T) / 2
-    bn += 1e-10 * np.trace(bn) / bn.shape[0] * np.eye(bn.shape[0])
-    chol = np.linalg.cholesky(bn)
-    ci = np.linalg.inv(chol)
-    m = ci @ ((an + an.T) / 2) @ ci.T
-    ev, vec = np.linalg.eigh((m + m.T) / 2)
-    v = ci.T @ vec[:, :out_dim]
-    lmap = null @ v
-    # Undo the ridge's tiny effect so that L^T B L = I holds exactly.
+    ev_b, vec_b = np.linalg.eigh((bn + bn.T) / 2)
+    keep = ev_b > 1e-9 * ev_b.max()
+    if keep.sum() < out_dim:
+        raise InvalidArgumentError(
+            f"the mixture's coefficients span only {int(keep.sum())} dimensions, fewer than "
+            f"global_dim={out_dim}; use a smaller global_dim or dim"
+        )
+    basis = null @ (vec_b[:, keep] / np.sqrt(ev_b[keep]))  # B-orthonormal
+    an = basis.T @ a @ basis
+    ev, vec = np.linalg.eigh((an + an.T) / 2)
+    lmap = basis @ vec[:, :out_dim]
+    # L^T B L = I to rounding; made exact.
     ev_b, vec_b = np.linalg.eigh(lmap.T @ b @ lmap)
     lmap = lmap @ (vec_b / np.sqrt(ev_b)) @ vec_b.T
     # Each global axis turned by the analyzer's one sign rule, on its coordinates over the clip.
@@ -461,6 +477,101 @@ def _local_extent(resp: np.ndarray, z: np.ndarray, means: np.ndarray) -> tuple[n
         own = resp[:, s] >= min(0.5, resp[:, s].max())
         radii[s] = max(float(rad[own].max()), 1e-6)
     return covs, radii
+
+
+# -- switching dynamics --------------------------------------------------------------------
+
+
+def fit_switching(
+    resp: np.ndarray,
+    z: np.ndarray,
+    offset: np.ndarray,
+    local_cov: np.ndarray,
+    *,
+    order: int = LOCAL_ORDER,
+    max_radius: float = DEFAULT_MAX_RADIUS,
+) -> SwitchingDynamics:
+    """Component-switching dynamics from the training responsibilities ``resp`` (N, S) and local
+    coordinates ``z`` (N, S, d), around ``offset`` (S, d) with covariances ``local_cov`` (S, d, d).
+
+    Transitions: the expected counts ``sum_t r_t r_{t+1}^T`` made symmetric (a reversible chain,
+    whose stationary distribution is each component's share of the frames, even where the clip
+    passes through its components once) plus ``1 / S`` of a count in every cell, so that no
+    component is a trap. Per component and principal axis of ``local_cov`` (variance ``l``): an
+    AR(``order``) process by Yule-Walker on the axis's correlations at lags ``1..order``, each
+    over the windows of frames the component holds throughout (weights: the product of their
+    responsibilities), the order lowered where those correlations are not a valid sequence; poles
+    held within ``max_radius``; the noise scaled so that the stationary variance is ``l``. Order 2
+    reproduces both how long the clip's motion persists and how smooth it is (AR(1) puts the
+    excess of a random walk's power at the highest temporal frequencies: whole-frame flicker).
+
+    Examples
+    --------
+    >>> r = np.repeat(np.eye(2), 50, axis=0)
+    >>> z = np.random.default_rng(0).standard_normal((100, 2, 1))
+    >>> dyn = fit_switching(r, z, np.zeros((2, 1)), np.ones((2, 1, 1)))
+    >>> np.round(dyn.transitions, 3)
+    array([[0.98, 0.02],
+           [0.02, 0.98]])
+    >>> dyn.local_ar.shape
+    (2, 2, 1, 1)
+    """
+    n, s_count, d = z.shape
+    counts = resp[:-1].T @ resp[1:]
+    counts = (counts + counts.T) / 2 + 1.0 / s_count
+    trans = counts / counts.sum(axis=1, keepdims=True)
+    order = max(1, min(order, n - 1))
+    ar = np.zeros((s_count, order, d, d))
+    noise = np.empty((s_count, d, d))
+    for s in range(s_count):
+        lam, vec = np.linalg.eigh(local_cov[s])
+        lam = np.maximum(lam, 0.0)
+        y = (z[:, s] - offset[s]) @ vec
+        rho = np.ones((order + 1, d))
+        for k in range(1, order + 1):
+            w = np.prod([resp[j : n - k + j, s] for j in range(k + 1)], axis=0)[:, None]
+            num = (w * y[k:] * y[:-k]).sum(axis=0)
+            den = (w * (y[k:] ** 2 + y[:-k] ** 2)).sum(axis=0) / 2
+            rho[k] = np.clip(num / np.maximum(den, 1e-300), -max_radius, max_radius)
+        phi = np.zeros((order, d))
+        gain = np.ones(d)
+        for a in range(d):
+            phi[:, a] = _yule_walker(rho[:, a], max_radius)
+            gain[a] = _stationary_gain(phi[:, a])
+        for i in range(order):
+            ar[s, i] = (vec * phi[i]) @ vec.T
+        noise[s] = vec * np.sqrt(lam / gain)
+    return SwitchingDynamics(transitions=trans, local_ar=ar, local_noise=noise)
+
+
+def _yule_walker(rho: np.ndarray, max_radius: float) -> np.ndarray:
+    """AR coefficients (p,) from correlations ``rho`` (p + 1,) at lags 0..p, the order lowered
+    until the correlations are positive definite, the poles scaled within ``max_radius``."""
+    p = rho.size - 1
+    phi = np.zeros(p)
+    for q in range(p, 0, -1):
+        toe = rho[np.abs(np.subtract.outer(np.arange(q + 1), np.arange(q + 1)))]
+        if np.linalg.eigvalsh(toe).min() > 1e-6:
+            phi[:q] = np.linalg.solve(toe[:q, :q], rho[1 : q + 1])
+            break
+    if not phi.any():
+        return phi
+    radius = float(np.abs(np.roots(np.concatenate([[1.0], -phi]))).max())
+    if radius > max_radius:
+        phi = phi * (max_radius / radius) ** np.arange(1, p + 1)
+    return phi
+
+
+def _stationary_gain(phi: np.ndarray) -> float:
+    """Stationary variance of the scalar AR process with coefficients ``phi`` driven by unit noise."""
+    p = phi.size
+    comp = np.zeros((p, p))
+    comp[0] = phi
+    comp[1:, :-1] = np.eye(p - 1)
+    q = np.zeros((p, p))
+    q[0, 0] = 1.0
+    cov = np.linalg.solve(np.eye(p * p) - np.kron(comp, comp), q.ravel()).reshape(p, p)
+    return float(cov[0, 0])
 
 
 # -- AR(p) by Schwarz's criterion -----------------------------------------------------------

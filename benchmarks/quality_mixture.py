@@ -7,8 +7,9 @@
    dimension d, and, for reference, of S (d + 1) - 1 (the stacked basis's size: a single
    PCA of that size is the optimal affine subspace, so no mixture can beat it on the
    training frames).
-2. Long-run synthesis: ``--frames`` global coordinates from the mixture player (draws =
-   16, its default, and 1 = the plain AR process) and states from the plain LDS of the same
+2. Long-run synthesis: ``--frames`` global coordinates from the mixture player with its
+   switching dynamics (format 1.6) and, as analysed before them, the AR process on the global
+   coordinates (draws = 16, its default, and 1 = the plain AR process), and states from the plain LDS of the same
    clip (``learn_lds(n=50)``, ``LDSPlayer.advance``): distance of each global coordinate to
    the nearest training coordinate, distance of each synthesized frame to the nearest
    training frame (relative to the RMS training frame), and energy ratio against the source
@@ -22,6 +23,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import tempfile
@@ -77,6 +79,8 @@ def evaluate(path: Path, frames: int, tmp: str) -> dict:
         w.put_texture("t", clip.source_info())
         w.put_method("t", "mixture", m)
         w.put_method("t", "lds", lds)
+        w.put_texture("ar", clip.source_info())  # the same model as analysed before format 1.6
+        w.put_method("ar", "mixture", dataclasses.replace(m, switching=None))
     yc = clip.frames.reshape(t, -1).astype(np.float64) - m.mean
     ynorm = (yc**2).sum(axis=1)
     src = float(ynorm.mean())
@@ -103,13 +107,17 @@ def evaluate(path: Path, frames: int, tmp: str) -> dict:
     row["train_frame_nn"] = float(np.median(np.sqrt(np.maximum(yd.min(axis=1), 0)))) / scale
     row["train_coord_nn_median"], row["train_coord_nn_max"] = float(np.median(loo)), float(loo.max())
     row["train_coord_rms"] = float(np.sqrt((g0**2).sum(axis=1).mean()))
-    for draws in (16, 1):
-        with MixturePlayer(db, backend="numpy", seed=0, draws=draws) as p:
-            g = p.advance(frames, record=True)
-            u = p.decoder.coefficients(g)
+    for name, texture, draws in (("switching", "t", 1), ("mix16", "ar", 16), ("mix1", "ar", 1)):
+        with MixturePlayer(db, texture, backend="numpy", seed=0, draws=draws) as p:
+            if p.switching is not None:
+                u = p.advance(frames, record=True)  # the coefficients themselves
+                g = u @ m.coord_map
+            else:
+                g = p.advance(frames, record=True)
+                u = p.decoder.coefficients(g)
         gd = nearest_distance(g0, g)
         fd, e = frame_stats(u)
-        row[f"mix{draws}"] = {
+        row[name] = {
             "coord_dist_median": float(np.median(gd)),
             "coord_dist_p99": float(np.percentile(gd, 99)),
             "coord_dist_max": float(gd.max()),
@@ -120,8 +128,9 @@ def evaluate(path: Path, frames: int, tmp: str) -> dict:
             "finite": bool(np.isfinite(g).all()),
         }
     with MixturePlayer(db, seed=0) as p:  # OpenCL: rendered frames carry the predicted energy
-        p.advance(frames)
-        u = p.decoder.coefficients(np.stack([p.global_coord]))
+        p.advance(frames - 1)
+        v = p.advance(1, record=True)  # the next frame's vector
+        u = v if p.switching is not None else p.decoder.coefficients(v)
         f = p.next_frame().reshape(-1).astype(np.float64) - m.mean
         row["rendered_energy_check"] = (float((f**2).sum() / src), float(frame_stats(u)[1][0]))
     with LDSPlayer(db, backend="numpy", seed=0) as p:
@@ -168,14 +177,18 @@ def main() -> int:
         "energy: mean ratio to the source [min, max of 1000-frame blocks]"
     )
     print(
-        "| clip | train coord NN (med/max) | mixture draws=16 coord | frame | energy | draws=1 coord | frame | energy "
-        "| LDS n=50 frame | energy | training frame NN |"
+        "| clip | train coord NN (med/max) | switching coord | frame | energy | global AR draws=16 coord | frame "
+        "| energy | draws=1 coord | frame | energy | LDS n=50 frame | energy | training frame NN |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        a, b, c = r["mix16"], r["mix1"], r["lds"]
+        a, b, c, w = r["mix16"], r["mix1"], r["lds"], r["switching"]
         print(
             f"| {r['clip']} | {r['train_coord_nn_median']:.2f} / {r['train_coord_nn_max']:.2f} "
+            f"| {w['coord_dist_median']:.2f} / {w['coord_dist_p99']:.2f} / {w['coord_dist_max']:.2f} "
+            f"| {w['frame_dist_median']:.2f} / {w['frame_dist_max']:.2f} "
+            f"| {w['energy']:.2f} ({w['energy'] / r['mix_own']:.2f}) "
+            f"[{w['energy_blocks'][0]:.2f}, {w['energy_blocks'][1]:.2f}] "
             f"| {a['coord_dist_median']:.2f} / {a['coord_dist_p99']:.2f} / {a['coord_dist_max']:.2f} "
             f"| {a['frame_dist_median']:.2f} / {a['frame_dist_max']:.2f} "
             f"| {a['energy']:.2f} ({a['energy'] / r['mix_own']:.2f}) "
@@ -193,7 +206,7 @@ def main() -> int:
         print(
             f"{r['clip']}: rendered-frame energy {r['rendered_energy_check'][0]:.3f} vs from coefficients "
             f"{r['rendered_energy_check'][1]:.3f}; AR order {r['p']}; all finite: "
-            f"{r['mix16']['finite'] and r['mix1']['finite'] and r['lds']['finite']}"
+            f"{r['switching']['finite'] and r['mix16']['finite'] and r['mix1']['finite'] and r['lds']['finite']}"
         )
     return 0
 

@@ -2,7 +2,9 @@
 frame step ratio, energy after a long run and the out-of-gamut share against the source's own.
 
 Per clip: the default analysis, 50 frames of warm-up, 300 frames measured; then the state
-advanced ``--long`` steps and 100 frames for the energy ratio; a contact sheet of the source
+advanced ``--long`` steps and 100 frames for the energy ratio (``energy_long``), and its mean over
+20 more windows of 100 frames, 1,000 steps apart (``energy_long_mean``: a process that switches
+components every few dozen frames makes one window's figure noisy); a contact sheet of the source
 beside the output after 1,000 frames. Any dynatex checkout's interpreter can play (so the
 same script measures before and after); the out-of-gamut share needs this checkout's metrics.
 
@@ -30,7 +32,13 @@ CASES = {
     "ocean64": ("small_64px/ocean_dyntex_64px.avi", "mixture"),
     "waterfall64": ("small_64px/waterfall1_dyntex_64px.avi", "mixture"),
     "smoke64": ("small_64px/fire_smoke_dyntex_64px.avi", "mixture", "--mix-dim", "5"),
+    "waterfall3_64": ("small_64px/waterfall3_dyntex_64px.avi", "mixture"),
+    "snow64": ("small_64px/snow_dyntex_64px.avi", "mixture"),
+    "golden64": ("small_64px/goldenlines_dyntex_64px.avi", "mixture"),
 }
+
+
+WINDOWS, WINDOW_GAP = 20, 1000  # energy_long_mean: 100-frame windows this far apart after the long run
 
 
 def run_case(name: str, outdir: str, long_steps: int, backend: str) -> dict:
@@ -57,6 +65,10 @@ def run_case(name: str, outdir: str, long_steps: int, backend: str) -> dict:
         late = np.stack(more[-3:] + [p.next_frame() for _ in range(3)])
         p.advance(long_steps)
         tail = np.stack([p.next_frame() for _ in range(100)])
+        windows = []
+        for _ in range(WINDOWS):
+            p.advance(WINDOW_GAP)
+            windows.append(np.stack([p.next_frame() for _ in range(100)]))
     np.save(os.path.join(outdir, f"{name}_out.npy"), out)
     rep = metrics.evaluate(out, src)
     mean = src.reshape(len(src), -1).mean(axis=0)
@@ -69,6 +81,7 @@ def run_case(name: str, outdir: str, long_steps: int, backend: str) -> dict:
         "step_ratio": rep["frame_step_ratio"],
         "energy_300": rep["stability"]["final_ratio"],
         "energy_long": e_tail / e_src,
+        "energy_long_mean": float(np.mean([((w.reshape(len(w), -1) - mean) ** 2).mean() for w in windows])) / e_src,
     }
     if hasattr(metrics, "out_of_gamut_share"):
         row["gamut_out"] = metrics.out_of_gamut_share(out, src)

@@ -5,6 +5,12 @@ reduced PCA space), coordinated into one ``D``-dimensional global coordinate sys
 linear map ``L``. Dynamics: an AR(p) process on the global coordinates. A frame is
 ``mean + sum_j u_j stacked_basis[j]`` with ``u = (r_s, r_s z_s)`` per component, so the
 player decodes a global coordinate to ``u`` and projects it like an LDS state.
+
+The optional ``switching`` subgroup (format 1.6) holds dynamics the player prefers when present:
+a Markov chain over the components and, per component, an AR(1) process on its local
+coordinates whose stationary covariance is the component's own (``local_cov``), so the
+synthesis stays on each component's subspace and visits the components as the clip does.
+Databases written without it play the AR process on the global coordinates.
 """
 
 from __future__ import annotations
@@ -26,8 +32,35 @@ MAX_SPECTRAL_RADIUS = 1.0 - 1e-9
 MAX_COMPONENTS = 64
 MAX_DIM = 512
 MAX_ORDER = 64
+#: Version of the ``switching`` part this reader understands; a newer part is ignored (it is optional).
+SWITCHING_VERSION = 1
+SWITCHING_GROUP = "switching"
 #: How far past the pixel range a component's ellipsoid of decoded coordinates may reach.
 ELLIPSOID_SLACK = 4.0
+
+
+@dataclass
+class SwitchingDynamics:
+    """Component-switching dynamics of a mixture (the optional ``switching`` subgroup).
+
+    The component ``s_t`` follows a Markov chain; each component's local coordinates evolve,
+    all the time, as ``z_t - c = sum_i A_i (z_{t-i} - c) + F e_t`` (``c`` the model's
+    ``decode_offset``, ``e_t`` standard normal). A switch cross-fades the responsibilities from
+    the old component to the new one.
+
+    Attributes
+    ----------
+    transitions : (S, S) float64
+        ``transitions[i, j]``: probability of component ``j`` after component ``i`` (rows sum to 1).
+    local_ar : (S, p, d, d) float64
+        ``A_1 .. A_p`` of each component (companion spectral radius < 1).
+    local_noise : (S, d, d) float64
+        ``F`` of each component (the driving noise's covariance is ``F F^T``).
+    """
+
+    transitions: np.ndarray
+    local_ar: np.ndarray
+    local_noise: np.ndarray
 
 
 @dataclass
@@ -81,6 +114,9 @@ class MixtureModel(Described):
     gamut : GamutModel, optional
         The source's colour set, which the projected frames are held to (the optional ``gamut``
         subgroup, :mod:`.gamut`); None in databases written without it and for grey sources.
+    switching : SwitchingDynamics, optional
+        Component-switching dynamics on the local coordinates (the optional ``switching``
+        subgroup); None in databases written without it.
     """
 
     mean: np.ndarray
@@ -105,6 +141,7 @@ class MixtureModel(Described):
     info: dict = field(default_factory=dict)
     detail: _detail.DetailModel | None = None
     gamut: _gamut.GamutModel | None = None
+    switching: SwitchingDynamics | None = None
 
     def describe(self) -> dict:
         """Facts as plain values: the ``info`` attributes, the detail part's and the colour set's."""
@@ -129,8 +166,13 @@ class MixtureModel(Described):
     def summary(self) -> str:
         """One line: sizes, AR order, reconstruction error against a single PCA."""
         info = self.info
+        dynamics = (
+            f"AR({self.order}) by Schwarz"
+            if self.switching is None
+            else f"switching, AR({self.switching.local_ar.shape[1]}) per component"
+        )
         return (
-            f"S={self.components} d={self.dim} D={self.global_dim}, AR({self.order}) by Schwarz, "
+            f"S={self.components} d={self.dim} D={self.global_dim}, {dynamics}, "
             f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
             f"{info.get('recon_error_pca_dim', 0):.3f})"
         )
@@ -181,6 +223,11 @@ def write(group: h5py.Group, model: MixtureModel) -> None:
             group.attrs[key] = value
     _detail.write(group, model.detail)
     _gamut.write(group, model.gamut)
+    if model.switching is not None:
+        g = group.create_group(SWITCHING_GROUP)
+        g.attrs["version"] = SWITCHING_VERSION
+        for name in ("transitions", "local_ar", "local_noise"):
+            g.create_dataset(name, data=np.asarray(getattr(model.switching, name), np.float64))
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
@@ -228,6 +275,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         detail=_detail.read(group, check, source),
         gamut=_gamut.read(group, check, source),
     )
+    model.switching = _read_switching(group, check, model)
     t = model.global_coords.shape[0]
     if t < 2 or model.responsibilities.shape[0] != t or model.local_coords.shape[0] != t:
         check.fail(path + "/global_coords", "training arrays disagree on the number of frames (or fewer than 2)")
@@ -256,6 +304,34 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
     with np.errstate(all="ignore"):  # huge values overflow to inf, which every test below refuses
         _check_extent(path, model, check, 256.0 * np.sqrt(p))
     return model
+
+
+def _read_switching(group: h5py.Group, check: Checker, model: MixtureModel) -> SwitchingDynamics | None:
+    """The validated ``switching`` part, or None when absent or of a newer version."""
+    s, d = model.components, model.dim
+    if SWITCHING_GROUP not in group:
+        return None
+    g = check.group(group, SWITCHING_GROUP)
+    if check.attr(g, "version", int) > SWITCHING_VERSION:
+        return None
+    ds = check.dataset
+    dyn = SwitchingDynamics(
+        transitions=ds(g, "transitions", kind="f", shape=(s, s)),
+        local_ar=ds(g, "local_ar", kind="f", shape=(s, range(1, MAX_ORDER + 1), d, d)),
+        local_noise=ds(g, "local_noise", kind="f", shape=(s, d, d)),
+    )
+    t = dyn.transitions
+    if not (np.isfinite(t).all() and t.min() >= 0 and np.abs(t.sum(axis=1) - 1).max() <= 1e-6):
+        check.fail(g.name + "/transitions", "rows must be probabilities summing to 1")
+    for k in range(s):
+        rho = companion_radius(dyn.local_ar[k])
+        if not rho < MAX_SPECTRAL_RADIUS:
+            check.fail(g.name + "/local_ar", f"component {k}'s process is not stable (spectral radius {rho:.6g} >= 1)")
+    var = np.einsum("sij,sij->s", dyn.local_noise, dyn.local_noise)
+    own = np.trace(model.local_cov, axis1=1, axis2=2)
+    if not (np.isfinite(var).all() and (var <= own * (1 + 1e-6)).all()):
+        check.fail(g.name + "/local_noise", "the driving noise's variance exceeds the component's own (local_cov)")
+    return dyn
 
 
 def _check_extent(path: str, model: MixtureModel, check: Checker, bound: float) -> None:

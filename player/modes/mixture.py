@@ -10,6 +10,14 @@ then decodes it to responsibilities ``r_s`` and local coordinates
 projection of ``u = (r_s, r_s z_s)`` onto the stacked basis (component means and loadings)
 with the LDS mode's ``project`` kernel (:mod:`dynatex.player.engines.projection`): one launch per frame,
 memory-bound on the stacked basis.
+
+A model with switching dynamics (``model.switching``, analysed since format 1.6) is played by
+them instead: the component follows the learned Markov chain, every component's local
+coordinates run their own AR(1) process (on the component's subspace, with its covariance),
+and a switch cross-fades the responsibilities from the old component to the new one over
+as many frames as keep each frame's step within the clip's typical one (``FADE_QUANTILE`` of
+its steps), so a switch changes the frame no faster than the clip's own motion; ``draws`` then
+has no effect.
 """
 
 from __future__ import annotations
@@ -29,6 +37,8 @@ DEFAULT_DRAWS = 16
 MAX_DRAWS = 1024
 STEP_QUANTILE = 0.99
 STEP_PIXELS = 1 << 16  # pixels (basis columns) the frame-step measure averages over
+MAX_FADE = 32  # frames a switch's cross-fade may last
+FADE_QUANTILE = 0.5
 
 
 class GlobalDecoder:
@@ -134,20 +144,37 @@ class MixturePlayer(ProjectionPlayer):
         self._noise = np.linalg.cholesky(model.ar_noise_cov)
         p = self.order
         self._gram = step_gram(model.stacked_basis)
-        self._step_limit = float(
-            np.quantile(
-                step_sizes(self._gram, np.diff(self.decoder.coefficients(self.train_coords), axis=0)), STEP_QUANTILE
-            )
-        )
+        self._coord_map = model.coord_map
+        self.switching = model.switching
+        if self.switching is not None:
+            z = model.local_coords
+            ext = np.concatenate([np.ones(z.shape[:2] + (1,)), z], axis=2)
+            train = (ext * model.responsibilities[:, :, None]).reshape(len(z), -1)
+        else:
+            train = self.decoder.coefficients(self.train_coords)
+        steps = step_sizes(self._gram, np.diff(train, axis=0))
+        self._step_limit = float(np.quantile(steps, STEP_QUANTILE))
+        self._fade_step = float(np.quantile(steps, FADE_QUANTILE))
         self._hist0 = self.train_coords[p - 1 :: -1].copy()  # hist[i] = g_{t-i}
         self._hist = self._hist0.copy()
+        if self.switching is not None:
+            self._dim = self.components * (self.dim + 1)
+            self._offset = model.decode_offset
+            self._label = int(model.responsibilities[0].argmax())
+            self._chain = np.cumsum(self.switching.transitions, axis=1)
+            order = self.switching.local_ar.shape[1]
+            self._zh = np.repeat(model.local_coords[:1] - self._offset[None], order, axis=0)  # z_{t-i} - c
+            self._r = np.eye(self.components)[self._label]
+            self._fade = (self._r.copy(), 0, 0)  # responsibilities at the switch, frames done, frames in all
+            self._u = self._switch_coefficients()
 
     # -- controls ----------------------------------------------------------------
     draws = Control(
         Range(int, 1, MAX_DRAWS),
         DEFAULT_DRAWS,
         "Noise draws per step; the candidate nearest the learned manifold is kept among those whose frame "
-        "step stays within the clip's own (1: the plain AR process).",
+        "step stays within the clip's own (1: the plain AR process). No effect on textures with switching "
+        "dynamics (analysed since format 1.6), whose process stays on the components by itself.",
     )
 
     # -- synthesis -----------------------------------------------------------------
@@ -155,9 +182,53 @@ class MixturePlayer(ProjectionPlayer):
     def global_coord(self) -> np.ndarray:
         """The global coordinate of the next frame (a copy)."""
         self._settle()
+        if self.switching is not None:
+            return self._u @ self._coord_map
         return self._hist[0].copy()
 
+    def _switch_coefficients(self) -> np.ndarray:
+        """The coefficients of the current local coordinates, each component's pulled back into the
+        ellipsoid of its training coordinates (as :class:`GlobalDecoder` does; the process runs on)."""
+        dz = self._zh[0]
+        rad = np.sqrt((np.einsum("sij,sj->si", self.decoder.local_whiten, dz) ** 2).sum(axis=1))
+        dz = dz * np.minimum(1.0, self.decoder.radius / np.maximum(rad, 1e-300))[:, None]
+        # Mean images mix by the responsibilities; the components' independent fluctuations by
+        # weights whose squares sum to one, so that a cross-fade keeps their variance.
+        r = self._r
+        w = r / np.sqrt(r @ r)
+        ext = np.concatenate([r[:, None], r[:, None] * self._offset + w[:, None] * dz], axis=1)
+        return ext.reshape(-1)
+
+    def _switch_step(self) -> None:
+        dyn, s_count = self.switching, self.components
+        new = min(int(np.searchsorted(self._chain[self._label], self._rng.random(), side="right")), s_count - 1)
+        eps = self._rng.standard_normal(self._zh.shape[1:])
+        dz = np.einsum("spij,psj->si", dyn.local_ar, self._zh)
+        dz += np.sqrt(self._intensity) * np.einsum("sij,sj->si", dyn.local_noise, eps)
+        self._zh[1:] = self._zh[:-1]
+        self._zh[0] = dz
+        start, done, total = self._fade
+        if new != self._label:
+            r, self._r = self._r, np.eye(s_count)[new]
+            jump = self._switch_coefficients()
+            self._r = r
+            jump -= self._switch_coefficients()
+            size = step_sizes(self._gram, jump[None])[0]
+            total = int(min(MAX_FADE, np.ceil(np.sqrt(size / max(self._fade_step, 1e-300)))))
+            start, done, self._label = self._r.copy(), 0, new
+        one = np.eye(s_count)[self._label]
+        if done < total:
+            done += 1
+            self._r = (1 - done / total) * start + (done / total) * one
+        else:
+            self._r = one
+        self._fade = (start, done, total)
+        self._u = self._switch_coefficients()
+
     def _step(self) -> None:
+        if self.switching is not None:
+            self._switch_step()
+            return
         pred = self._w + np.einsum("pij,pj->i", self._A, self._hist)
         eps = self._rng.standard_normal((self._draws, self.global_dim))
         cand = pred + np.sqrt(self._intensity) * (eps @ self._noise.T)
@@ -180,7 +251,8 @@ class MixturePlayer(ProjectionPlayer):
         self._hist[0] = best
 
     def _vector(self) -> np.ndarray:
-        return self._hist[0]
+        """The global coordinate; with switching dynamics, the projection coefficients themselves."""
+        return self._u if self.switching is not None else self._hist[0]
 
     def _decoded(self, g: np.ndarray) -> np.ndarray:
         """The coefficients of ``g``, from the last step's decode when it drew ``g`` (a cache only)."""
@@ -189,15 +261,33 @@ class MixturePlayer(ProjectionPlayer):
             return last[1]
         return self.decoder.coefficients(g)
 
-    def _coefficients(self, g: np.ndarray, coef: np.ndarray) -> None:
-        coef[:] = self.decoder.coefficients(g)
+    def _coefficients(self, v: np.ndarray, coef: np.ndarray) -> None:
+        coef[:] = v if self.switching is not None else self.decoder.coefficients(v)
 
     def render_coord(self, g: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Decode and project an arbitrary global coordinate; the player does not advance."""
-        return self._render_vector("g", g, out)
+        if self.switching is None:
+            return self._render_vector("g", g, out)
+        g = np.asarray(g, dtype=float)
+        if g.shape != (self.global_dim,) or not np.isfinite(g).all():
+            raise InvalidArgumentError(f"g must be a finite vector of shape ({self.global_dim},)")
+        return self._render_vector("coefficients", self.decoder.coefficients(g), out)
 
     # -- state ---------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:
+        if self.switching is not None:
+            start, done, total = self._fade
+            return {
+                "component": self._label,
+                "local": self._zh.copy(),
+                "responsibilities": self._r.copy(),
+                "fade_from": start.copy(),
+                "fade_done": done,
+                "fade_frames": total,
+                "rng": self._rng.bit_generator.state,
+                "seed": self.seed,
+                **self._detail_state(),
+            }
         return {
             "history": self._hist.copy(),
             "rng": self._rng.bit_generator.state,
@@ -206,11 +296,40 @@ class MixturePlayer(ProjectionPlayer):
         }
 
     def _set_state(self, state: dict[str, Any]) -> None:
+        if self.switching is not None:
+            self._set_switch_state(state)
+            return
         hist = np.asarray(state["history"], dtype=float)
         if hist.shape != self._hist.shape or not np.isfinite(hist).all():
             raise InvalidArgumentError(f"state history must be finite with shape {self._hist.shape}")
         rng = rng_from_state(state["rng"])
         self._restore_detail(state)
         self._hist = hist.copy()
+        self._rng = rng
+        self.seed = int(state.get("seed", self.seed))
+
+    def _set_switch_state(self, state: dict[str, Any]) -> None:
+        s_count = self.components
+        try:
+            label = int(state["component"])
+            z = np.asarray(state["local"], dtype=float)
+            r = np.asarray(state["responsibilities"], dtype=float)
+            start = np.asarray(state["fade_from"], dtype=float)
+            done, total = int(state["fade_done"]), int(state["fade_frames"])
+        except (KeyError, TypeError, ValueError) as e:
+            raise InvalidArgumentError(f"state of a switching mixture is missing or malformed: {e}") from None
+        if not 0 <= label < s_count or z.shape != self._zh.shape or r.shape != (s_count,) or start.shape != (s_count,):
+            raise InvalidArgumentError(
+                f"state must have component in 0..{s_count - 1}, local of shape {self._zh.shape} and "
+                f"responsibilities and fade_from of shape ({s_count},)"
+            )
+        if not (np.isfinite(z).all() and np.isfinite(r).all() and np.isfinite(start).all()) or not 0 <= done <= total:
+            raise InvalidArgumentError(
+                "state local, responsibilities and fade_from must be finite, with 0 <= fade_done <= fade_frames"
+            )
+        rng = rng_from_state(state["rng"])
+        self._restore_detail(state)
+        self._label, self._zh, self._r, self._fade = label, z.copy(), r.copy(), (start.copy(), done, total)
+        self._u = self._switch_coefficients()
         self._rng = rng
         self.seed = int(state.get("seed", self.seed))

@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from dynatex.analyzer import load_clip
-from dynatex.analyzer.mixture import coefficient_matrix, coordinate, fit_ar, fit_mppca, learn_mixture, lle_weights
+from dynatex.analyzer.mixture import (
+    coefficient_matrix,
+    coordinate,
+    fit_ar,
+    fit_mppca,
+    fit_switching,
+    learn_mixture,
+    lle_weights,
+)
 from dynatex.tiledb.mixture import companion_radius
 
 from ..conftest import wave_clip
@@ -61,6 +69,65 @@ def test_coordination_solves_the_constrained_generalized_eigenproblem():
         q = np.linalg.cholesky(gm.T @ gm / 80)
         m2 = np.linalg.lstsq(u, gm @ np.linalg.inv(q).T, rcond=None)[0]
         assert np.trace(m2.T @ resid.T @ resid @ m2) >= cost - 1e-9
+
+
+def test_coordination_leaves_out_directions_the_coefficients_never_take():
+    """Coefficients with exact linear dependencies (hard responsibilities, a component with few
+    frames: the 64 px golden lines) once gave zero global axes and NaN coordinates."""
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(60, 6))
+    p = fit_mppca(x, 2, 2, seed=0)
+    u = coefficient_matrix(p["resp"], p["z"])
+    u = np.concatenate([u, u[:, :2] - u[:, 2:4]], axis=1)  # two columns that add nothing
+    idx, w = lle_weights(x, 6)
+    lmap, _ = coordinate(u, idx, w, 4)
+    g = u @ lmap
+    assert np.isfinite(g).all() and np.allclose(g.T @ g / 60, np.eye(4), atol=1e-8)
+    with pytest.raises(ValueError, match="span only 5 dimensions, fewer than global_dim=6"):
+        coordinate(u, idx, w, 6)
+
+
+def _stationary_cov(ar: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    """Stationary covariance of ``x_t = sum_i ar[i] x_{t-1-i} + noise e_t`` (companion Lyapunov)."""
+    p, d, _ = ar.shape
+    comp = np.zeros((p * d, p * d))
+    comp[:d] = np.concatenate(list(ar), axis=1)
+    comp[d:, :-d] = np.eye((p - 1) * d)
+    q = np.zeros((p * d, p * d))
+    q[:d, :d] = noise @ noise.T
+    cov = np.linalg.solve(np.eye((p * d) ** 2) - np.kron(comp, comp), q.ravel()).reshape(p * d, p * d)
+    return cov[:d, :d]
+
+
+def test_switching_dynamics_keep_each_components_covariance_and_the_clips_occupancy(model):
+    dyn = model.switching
+    s, d = model.components, model.dim
+    assert dyn.transitions.shape == (s, s) and dyn.local_ar.shape == (s, 2, d, d)
+    assert np.allclose(dyn.transitions.sum(axis=1), 1) and dyn.transitions.min() > 0
+    for k in range(s):
+        assert companion_radius(dyn.local_ar[k]) < 1
+        assert np.allclose(_stationary_cov(dyn.local_ar[k], dyn.local_noise[k]), model.local_cov[k], atol=1e-8)
+    # a clip that passes through its components once: the chain still spends the clip's share in each
+    r = np.repeat(np.eye(3), [50, 30, 20], axis=0)
+    z = np.random.default_rng(0).normal(size=(100, 3, 2))
+    chain = fit_switching(r, z, np.zeros((3, 2)), np.tile(np.eye(2), (3, 1, 1))).transitions
+    ev, vec = np.linalg.eig(chain.T)
+    share = np.real(vec[:, np.argmax(np.real(ev))])
+    assert np.allclose(share / share.sum(), [0.5, 0.3, 0.2], atol=0.02)
+    stay = 1 / (1 - np.diag(chain))  # mean stay, frames: about the clip's (with a pseudo-count's doubt)
+    assert (0.6 < stay / [50, 30, 20]).all() and (stay / [50, 30, 20] < 1.2).all()
+
+
+def test_switching_recovers_a_smooth_ar2():
+    """Order 2 holds how smooth the motion is, which a lag-1 correlation alone cannot."""
+    rng = np.random.default_rng(3)
+    y = np.zeros(4000)
+    for t in range(2, 4000):
+        y[t] = 1.6 * y[t - 1] - 0.8 * y[t - 2] + rng.standard_normal()
+    r = np.ones((4000, 1))
+    dyn = fit_switching(r, y[:, None, None], np.zeros((1, 1)), np.full((1, 1, 1), y.var()))
+    assert np.allclose(dyn.local_ar[0, :, 0, 0], [1.6, -0.8], atol=0.05)
+    assert np.isclose(dyn.local_noise[0, 0, 0] ** 2, 1.0, rtol=0.15)
 
 
 def test_mppca_beats_a_single_subspace_on_a_union_of_subspaces():

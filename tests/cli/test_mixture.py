@@ -37,7 +37,7 @@ def test_analyze_then_play(tmp_path, capsys):
     )
     assert rc == 0
     err = capsys.readouterr().err
-    assert "mixture: S=2 d=3 D=3, AR(" in err
+    assert "mixture: S=2 d=3 D=3, switching, AR(2) per component" in err
     with TileDB(db) as d:
         assert set(d.texture("w").methods) == {"lds", "mixture"}
     out = tmp_path / "frames"

@@ -43,6 +43,17 @@ def test_round_trip(db_path):
         assert np.array_equal(getattr(back, name), getattr(model, name).astype(getattr(back, name).dtype)), name
     assert (back.components, back.dim, back.global_dim, back.order) == (2, 3, 3, model.order)
     assert back.info["recon_error"] == model.info["recon_error"]
+    for name in ("transitions", "local_ar", "local_noise"):
+        assert np.array_equal(getattr(back.switching, name), getattr(model.switching, name)), name
+
+
+def test_switching_part_is_optional_and_versioned(db_path, tmp_path):
+    """A database written before format 1.6 (no ``switching``) reads with none; a newer part is ignored."""
+    for edit in (lambda g: g.__delitem__("switching"), lambda g: g["switching"].attrs.__setitem__("version", 2)):
+        path = _damaged(db_path, tmp_path, edit)
+        with TileDB(path) as db:
+            model = db.texture("waves").read("mixture")
+        assert model.switching is None and model.ar_coefs.shape[1:] == (3, 3)
 
 
 def _damaged(src, tmp_path, edit):
@@ -81,6 +92,13 @@ def _replace(name, fn):
         (_replace("local_radius", lambda a: -a), r"/local_radius: radii must be > 0"),
         (lambda g: g.attrs.__setitem__("components", 1000), r"@components: 1000 out of range"),
         (lambda g: g.attrs.__setitem__("global_dim", 50), r"@global_dim: 50 exceeds"),
+        (
+            _replace("switching/transitions", lambda a: a + 0.5),
+            r"/switching/transitions: rows must be probabilities",
+        ),
+        (_replace("switching/local_ar", lambda a: a * 0 + np.eye(a.shape[-1])), r"/switching/local_ar: component 0's"),
+        (_replace("switching/local_noise", lambda a: a * 10), r"/switching/local_noise: the driving noise's variance"),
+        (_replace("switching/local_ar", lambda a: a[:, :, :2]), r"/switching/local_ar: has shape"),
     ],
 )
 def test_damaged_groups_are_refused(db_path, tmp_path, edit, match):
