@@ -29,9 +29,15 @@
 // v = first + a (second - first) for a blend, v *= gain, rounded to nearest even and
 // saturated.
 //
-// Defines: INTERP, GAIN (per-byte gain), PIXEL_BYTES (3 or 4: the stack, codes, gains and
-// output all hold pixels of that many bytes; a fourth byte is alpha, 255 in the stack, gain 1). The end mode, the rate map and the jitter live in
-// the host's per-frame slot table, so no control needs another kernel.
+// The stack, codes and gains hold RGB pixels (3 bytes) whatever the output. A four-byte output
+// (RGBA, BGRA) goes by chunks of 16 pixels instead: 48 stack bytes computed as three 16-byte
+// vectors, exactly as above, then spread to 64 output bytes as uint lanes (colours at R_AT,
+// G_AT, B_AT, alpha 255 at A_AT) and stored as one vector; the spill and alignment rules are
+// those of the 16-byte chunks, in pixels (the host flags spills by 48-byte chunks).
+//
+// Defines: INTERP, GAIN (per stack byte), PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (the output
+// pixel). The end mode, the rate map and the jitter live in the host's per-frame slot table,
+// so no control needs another kernel.
 //
 // Run tables: runs[r] = (first output pixel, pixel of stream A at it, block of A, length |
 // blend << 31 | spill << 30), runs_b[r] = (pixel of stream B at the first output pixel,
@@ -83,6 +89,7 @@ inline float16 blend16(float16 a, float16 b, ushort16 code)
 // PoCL's vstore16 of uchar stores byte by byte (4x slower than the whole kernel's other
 // work); an under-aligned vector type gives one unaligned 16-byte store.
 typedef uchar16 __attribute__((aligned(1))) uchar16_u;
+typedef uint16 __attribute__((aligned(1))) uint16_u;
 
 inline void store16(uchar16 v, __global uchar *p)
 {
@@ -146,6 +153,77 @@ __attribute__((always_inline)) inline void run_const(__global const ushort *rest
     }
 }
 
+#if PIXEL_BYTES == 4
+
+#define PLACE(v) ((((v) & 0xFFu) << (8 * R_AT)) | ((((v) >> 8) & 0xFFu) << (8 * G_AT)) | \
+                  ((((v) >> 16) & 0xFFu) << (8 * B_AT)) | (0xFFu << (8 * A_AT)))
+
+// 16 RGB pixels (48 bytes in c0, c1, c2) as 16 four-byte pixels at p.
+inline void put16(uchar16 c0, uchar16 c1, uchar16 c2, __global uchar *p)
+{
+#ifdef __ENDIAN_LITTLE__
+    const uint16 w = (uint16)(as_uint4(c0), as_uint4(c1), as_uint4(c2), (uint4)(0));
+    // pixel k starts at RGB byte 3k: word 3k / 4, bit 8 * (3k % 4); its last bytes spill into the next word
+    const uint16 lo = w.s00123345667899ab, hi = w.s112344567789aabc;
+    const uint16 s = (uint16)(0, 24, 16, 8, 0, 24, 16, 8, 0, 24, 16, 8, 0, 24, 16, 8);
+    const uint16 v = (lo >> s) | ((hi << 1) << (31 - s));  // (hi << 1) << 31 is 0 where s is 0
+    *(__global uint16_u *)p = PLACE(v);
+#else
+    uchar rgb[48];
+    vstore16(c0, 0, rgb); vstore16(c1, 1, rgb); vstore16(c2, 2, rgb);
+    for (int k = 0; k < 16; ++k) {
+        p[4 * k + R_AT] = rgb[3 * k]; p[4 * k + G_AT] = rgb[3 * k + 1]; p[4 * k + B_AT] = rgb[3 * k + 2];
+        p[4 * k + A_AT] = 255;
+    }
+#endif
+}
+
+// 16 stack bytes at byte o of the run (ob: the run's first stack byte in the code and gain tables).
+inline uchar16 chunk16(__global const ushort *restrict code, __global const float *restrict gain,
+                       size_t ob, int o, bool blend, stream_t a, stream_t b)
+{
+    float16 v = load16(a, o);
+    if (blend)
+        v = blend16(v, load16(b, o), vload16(0, code + ob + o));
+#if GAIN
+    v *= vload16(0, gain + ob + o);
+#endif
+    return to_uchar16(v);
+}
+
+// Output pixels [px, px + n) of a run, by chunks of 16 pixels (run_const's rules, in pixels).
+__attribute__((always_inline)) inline void run_wide(__global const ushort *restrict code, __global const float *restrict gain,
+                     __global uchar *restrict out, size_t px, int n, bool blend, bool may_spill,
+                     stream_t a, stream_t b)
+{
+    const size_t ob = px * 3;
+    if (may_spill || n >= 16) {
+        const int last = may_spill ? n : n - 16;
+        for (int o0 = 0; o0 < n; o0 += 16) {
+            const int o = 3 * min(o0, last);
+            put16(chunk16(code, gain, ob, o, blend, a, b), chunk16(code, gain, ob, o + 16, blend, a, b),
+                  chunk16(code, gain, ob, o + 32, blend, a, b), out + (px + o / 3) * 4);
+        }
+    } else {
+        for (int i = 0; i < n; ++i) {
+            __global uchar *p = out + (px + i) * 4;
+            for (int c = 0; c < 3; ++c) {
+                const int o = 3 * i + c;
+                float v = load1(a, o);
+                if (blend)
+                    v = blend1(v, load1(b, o), code[ob + o]);
+#if GAIN
+                v *= gain[ob + o];
+#endif
+                p[c == 0 ? R_AT : c == 1 ? G_AT : B_AT] = to_uchar(v);
+            }
+            p[A_AT] = 255;
+        }
+    }
+}
+
+#endif
+
 __kernel void evolve(__global const uchar *restrict stack,
                      __global const int4 *restrict runs,
                      __global const int2 *restrict runs_b,
@@ -173,8 +251,12 @@ __kernel void evolve(__global const uchar *restrict stack,
         // the stream times of the run's slots: byte offsets of the two frames and the fraction
         const int4 fa = bframe[slot.x], fb = bframe[slot.y];
         stream_t a, b;
-        a.p0 = stack + (uint)fa.x + pa * PIXEL_BYTES; a.p1 = stack + (uint)fa.y + pa * PIXEL_BYTES; a.f = as_float(fa.z);
-        b.p0 = stack + (uint)fb.x + pb * PIXEL_BYTES; b.p1 = stack + (uint)fb.y + pb * PIXEL_BYTES; b.f = as_float(fb.z);
-        run_const(code, gain, out, (size_t)px * PIXEL_BYTES, npx * PIXEL_BYTES, blend, spill, a, b);
+        a.p0 = stack + (uint)fa.x + pa * 3; a.p1 = stack + (uint)fa.y + pa * 3; a.f = as_float(fa.z);
+        b.p0 = stack + (uint)fb.x + pb * 3; b.p1 = stack + (uint)fb.y + pb * 3; b.f = as_float(fb.z);
+#if PIXEL_BYTES == 3
+        run_const(code, gain, out, (size_t)px * 3, npx * 3, blend, spill, a, b);
+#else
+        run_wide(code, gain, out, px, npx, blend, spill, a, b);
+#endif
     }
 }
