@@ -25,8 +25,7 @@ import numpy as np
 from ...errors import InvalidArgumentError
 from ..pixels import pixel_format
 
-SPILL = 16  # bytes a kernel chunk may read past a run (RGB output)
-WIDE_CHUNK = 48  # stack bytes of a four-byte output's kernel chunk (16 pixels), read past a run alike
+SPILL = 16  # bytes a kernel chunk may read past a run
 RATE_STEP = 1.0 / 512  # rate maps are quantized to this step (see quantize_rate)
 
 #: ``(rate or None, blocks, t) -> float32`` source times (module docstring)
@@ -119,7 +118,6 @@ def build_runs(
     merge: bool = True,
     n_pixels: int | None = None,
     pixel_bytes: int = 3,
-    chunk: int = SPILL,
 ) -> dict[str, np.ndarray]:
     """Cut the quilt's rows into runs, the unit of work of kernel ``evolve``.
 
@@ -135,7 +133,7 @@ def build_runs(
 
     Returns ``starts`` (first output pixel, row-major index, int64), ``lengths``, and the
     kernel tables: ``runs`` ``(n, 4)`` int32 (first pixel, stream A's source pixel there,
-    block of A, length | blend << 31 | spill << 30: the run's last ``chunk``-byte chunk may run
+    block of A, length | blend << 31 | spill << 30: the run's last 16-byte chunk may run
     past its end and stays within the row), ``runs_b`` ``(n, 2)`` int32 (stream B's source pixel
     and block), ``row_start`` ``(H + 1,)`` int32, and ``code`` ``(H * W * pixel_bytes,)`` uint16 per
     stack byte: weight of the second source in 1/256 (bits 0-8), bit 9 set when the
@@ -178,7 +176,7 @@ def build_runs(
     runs[:, 1] = ka % span - w + col
     runs[:, 2] = ka // span
     pb = pixel_bytes
-    may_spill = col * pb + -(-lengths * pb // chunk) * chunk <= w * pb  # the last chunk stays in the row
+    may_spill = col * pb + -(-lengths * pb // SPILL) * SPILL <= w * pb  # the last chunk stays in the row
     runs[:, 3] = lengths | (is_blend.astype(np.int64) << 31) | (may_spill.astype(np.int64) << 30)
     runs_b = np.stack([kb % span - w + col, kb // span], axis=1)
     code = swap.astype(np.uint16) << 9
@@ -212,13 +210,7 @@ def check_runs(runs: dict[str, np.ndarray], n_pixels: int, n_blocks: int) -> Non
 
 
 def cut_runs(
-    base: dict[str, np.ndarray],
-    rate: np.ndarray | None,
-    shape: tuple[int, int],
-    n_blocks: int,
-    *,
-    pixel_bytes: int = 3,
-    chunk: int = SPILL,
+    base: dict[str, np.ndarray], rate: np.ndarray | None, shape: tuple[int, int], n_blocks: int, *, pixel_bytes: int = 3
 ):
     """The run tables of :func:`build_runs`'s runs ``base`` for a rate map (None: uniform rate 1):
     the runs cut where the quantized rate changes along a row, and their time slots.
@@ -243,7 +235,7 @@ def cut_runs(
     col = starts % w
     flags = runs[parent, 3].view(np.uint32).astype(np.int64) & (1 << 31)
     pb = pixel_bytes
-    may_spill = col * pb + -(-lengths * pb // chunk) * chunk <= w * pb
+    may_spill = col * pb + -(-lengths * pb // SPILL) * SPILL <= w * pb
     r = np.empty((len(starts), 4), np.int64)
     r[:, 0] = starts
     r[:, 1] = runs[parent, 1] + off
@@ -408,27 +400,26 @@ class RunsOpenCL(Runs):
 
         h, w = self.shape
         pb = self.format.bytes
-        # the stack, codes and gains stay RGB (3 bytes a pixel) whatever the format; a four-byte
-        # output's chunk is 16 pixels (48 stack bytes), placed as the kernel stores them
-        self._chunk = SPILL if pb == 3 else WIDE_CHUNK
+        # the stack, codes and gains stay RGB (3 bytes a pixel) whatever the format: a four-byte
+        # output's row is drawn as RGB, then spread to its pixels (kernels/runs.cl)
         if self.blend is not None:
             wq, pix2, labels2 = self.blend
-            runs = build_runs(pix, labels, wq, pix2, labels2, n_pixels=self.n_pixels, chunk=self._chunk)
+            runs = build_runs(pix, labels, wq, pix2, labels2, n_pixels=self.n_pixels)
         else:
-            runs = build_runs(pix, labels, n_pixels=self.n_pixels, chunk=self._chunk)
+            runs = build_runs(pix, labels, n_pixels=self.n_pixels)
         check_runs(runs, self.n_pixels, self.n_blocks)
         self.ctx, self.queue = ctx, queue
         self._n_blend_bytes = int(3 * runs["lengths"][runs["runs"][:, 3] < 0].sum())
         self._base = runs
         mf = cl.mem_flags
         ro = mf.READ_ONLY | mf.COPY_HOST_PTR
-        pad = WIDE_CHUNK  # a spilling chunk may read past the ends (values unused)
+        pad = SPILL  # a spilling chunk may read past the ends (values unused)
         self._d_stack = cl.Buffer(ctx, ro, hostbuf=np.concatenate([frames.reshape(-1), np.zeros(pad, np.uint8)]))
         self._stack_bytes = frames.nbytes
         self._d_code = cl.Buffer(ctx, ro, hostbuf=np.concatenate([runs["code"], np.zeros(pad, np.uint16)]))
         gain = np.zeros(4, np.float32) if self.gain is None else self.gain.astype(np.float32).reshape(-1)
         self._d_gain = cl.Buffer(ctx, ro, hostbuf=np.concatenate([gain, np.zeros(pad, np.float32)]))
-        defines = {"INTERP": self.interpolate, "GAIN": self.gain is not None, **self.format.defines}
+        defines = {"INTERP": self.interpolate, "GAIN": self.gain is not None, "WIDTH": w, **self.format.defines}
         self._kernel = Kernel(build_program(ctx, "runs.cl", defines), "evolve")
         self._kernel.set(stack=self._d_stack, code=self._d_code, gain=self._d_gain, height=np.int32(h))
         #: the kernel's frame destination (writes straight into callers' arrays where the device shares host memory)
@@ -445,7 +436,7 @@ class RunsOpenCL(Runs):
 
         super().set_rate(rate)
         runs, runs_b, row_start, pair, self._slot_block, self._slot_rate = cut_runs(
-            self._base, rate, self.shape, self.n_blocks, chunk=self._chunk
+            self._base, rate, self.shape, self.n_blocks
         )
         self.n_runs = len(runs)
         self._bframe = np.zeros((len(self._slot_block), 4), np.int32)

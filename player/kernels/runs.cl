@@ -30,13 +30,14 @@
 // saturated.
 //
 // The stack, codes and gains hold RGB pixels (3 bytes) whatever the output. A four-byte output
-// (RGBA, BGRA) goes by chunks of 16 pixels instead: 48 stack bytes computed as three 16-byte
-// vectors, exactly as above, then spread to 64 output bytes as uint lanes (colours at R_AT,
-// G_AT, B_AT, alpha 255 at A_AT) and stored as one vector; the spill and alignment rules are
-// those of the 16-byte chunks, in pixels (the host flags spills by 48-byte chunks).
+// (RGBA, BGRA) row is drawn exactly so, as RGB bytes into the first 3/4 of its own output row
+// (still in cache), then spread in place to its pixels by 16-pixel chunks, 48 bytes to 64 as
+// uint lanes (colours at R_AT, G_AT, B_AT, alpha 255 at A_AT), stored as one vector. Chunks of
+// whole pixels per run would do: the runs average about 13 pixels, and rounding each up to a
+// chunk cost more than the spread.
 //
-// Defines: INTERP, GAIN (per stack byte), PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (the output
-// pixel). The end mode, the rate map and the jitter live in the host's per-frame slot table,
+// Defines: INTERP, GAIN (per stack byte), WIDTH (output pixels per row), PIXEL_BYTES, R_AT,
+// G_AT, B_AT, A_AT (the output pixel). The end mode, the rate map and the jitter live in the host's per-frame slot table,
 // so no control needs another kernel.
 //
 // Run tables: runs[r] = (first output pixel, pixel of stream A at it, block of A, length |
@@ -178,47 +179,22 @@ inline void put16(uchar16 c0, uchar16 c1, uchar16 c2, __global uchar *p)
 #endif
 }
 
-// 16 stack bytes at byte o of the run (ob: the run's first stack byte in the code and gain tables).
-inline uchar16 chunk16(__global const ushort *restrict code, __global const float *restrict gain,
-                       size_t ob, int o, bool blend, stream_t a, stream_t b)
+// Spread row y's RGB bytes, drawn at the start of its four-byte output row, to its pixels, in
+// place: right to left, a chunk's 48 bytes are read before its 64 are stored, and every store
+// lies at or right of what it read (4k >= 3k), so nothing is overwritten before it is read.
+inline void spread_row(__global uchar *restrict row)
 {
-    float16 v = load16(a, o);
-    if (blend)
-        v = blend16(v, load16(b, o), vload16(0, code + ob + o));
-#if GAIN
-    v *= vload16(0, gain + ob + o);
-#endif
-    return to_uchar16(v);
-}
-
-// Output pixels [px, px + n) of a run, by chunks of 16 pixels (run_const's rules, in pixels).
-__attribute__((always_inline)) inline void run_wide(__global const ushort *restrict code, __global const float *restrict gain,
-                     __global uchar *restrict out, size_t px, int n, bool blend, bool may_spill,
-                     stream_t a, stream_t b)
-{
-    const size_t ob = px * 3;
-    if (may_spill || n >= 16) {
-        const int last = may_spill ? n : n - 16;
-        for (int o0 = 0; o0 < n; o0 += 16) {
-            const int o = 3 * min(o0, last);
-            put16(chunk16(code, gain, ob, o, blend, a, b), chunk16(code, gain, ob, o + 16, blend, a, b),
-                  chunk16(code, gain, ob, o + 32, blend, a, b), out + (px + o / 3) * 4);
-        }
-    } else {
-        for (int i = 0; i < n; ++i) {
-            __global uchar *p = out + (px + i) * 4;
-            for (int c = 0; c < 3; ++c) {
-                const int o = 3 * i + c;
-                float v = load1(a, o);
-                if (blend)
-                    v = blend1(v, load1(b, o), code[ob + o]);
-#if GAIN
-                v *= gain[ob + o];
-#endif
-                p[c == 0 ? R_AT : c == 1 ? G_AT : B_AT] = to_uchar(v);
-            }
-            p[A_AT] = 255;
-        }
+    int k = WIDTH;
+    for (; k >= 16; k -= 16)
+        put16(vload16(0, row + 3 * (k - 16)), vload16(0, row + 3 * (k - 16) + 16), vload16(0, row + 3 * (k - 16) + 32),
+              row + 4 * (k - 16));
+    while (k > 0) {
+        --k;
+        const uchar r = row[3 * k], g = row[3 * k + 1], b = row[3 * k + 2];
+        row[4 * k + R_AT] = r;
+        row[4 * k + G_AT] = g;
+        row[4 * k + B_AT] = b;
+        row[4 * k + A_AT] = 255;
     }
 }
 
@@ -256,7 +232,11 @@ __kernel void evolve(__global const uchar *restrict stack,
 #if PIXEL_BYTES == 3
         run_const(code, gain, out, (size_t)px * 3, npx * 3, blend, spill, a, b);
 #else
-        run_wide(code, gain, out, px, npx, blend, spill, a, b);
+        // RGB bytes at the start of the row's four-byte output: out + 4 W y + 3 x
+        run_const(code, gain, out + (size_t)y * WIDTH, (size_t)px * 3, npx * 3, blend, spill, a, b);
 #endif
     }
+#if PIXEL_BYTES == 4
+    spread_row(out + (size_t)y * WIDTH * 4);
+#endif
 }
