@@ -107,8 +107,8 @@ class BlendOpenCL(Blend):
     """Kernels ``blend1``/``blend2``/``blend4`` of ``kernels/blend.cl`` over the stack, put on the device once.
 
     The stack stays RGB on the device whatever the format: four-byte formats (RGBA, BGRA) read
-    3/4 of their bytes and are spread to the output's pixels as the kernel stores them,
-    straight into the caller's array where the device shares host memory; an RGB one-term
+    3/4 of their bytes and are spread to the output's pixels as the kernel stores them. Frames
+    go straight into the caller's array where the device shares host memory; an RGB one-term
     frame is a plain copy. ``ctx`` and ``queue`` belong to the caller (the mode's player); the
     engine owns its buffers.
     """
@@ -139,10 +139,8 @@ class BlendOpenCL(Blend):
         rgb = self.format.bytes == 3
         for terms in (2, 4) if rgb else (1, 2, 4):
             kernel = Kernel(prog, f"blend{terms}")
-            kernel.set(frames=self._d_frames, params=self._d_params)
-            # the RGB kernels store whole vectors past the frame's end: always through the device buffer
-            nbytes = self._vecs * VEC if rgb else self.frame_bytes
-            self._outs[terms] = FrameOut(ctx, queue, kernel, "out", nbytes, direct=False if rgb else None)
+            kernel.set(frames=self._d_frames, **({} if terms == 1 else {"params": self._d_params}))
+            self._outs[terms] = FrameOut(ctx, queue, kernel, "out", self.frame_bytes)
         self._gsize = (self._vecs // ITEMS,) if rgb else (-(-h * w // PIXELS_PER_ITEM),)
         self._queue = queue
         self._upload = None
@@ -150,8 +148,11 @@ class BlendOpenCL(Blend):
     def _render(self, sources, out, wait):
         import pyopencl as cl
 
-        if len(sources) == 1 and self.format.bytes == 3:
-            return self._outs[2].copy_from(self._d_frames, out, offset=sources[0][0] * self._vecs * VEC, wait=wait)
+        if len(sources) == 1:
+            if self.format.bytes == 3:
+                return self._outs[2].copy_from(self._d_frames, out, offset=sources[0][0] * self._vecs * VEC, wait=wait)
+            self._outs[1].kernel.set(first=np.int32(sources[0][0]))
+            return self._outs[1].launch(out, self._gsize, wait=wait)
         params = np.zeros(2 * MAX_TERMS, np.int32)  # a new array per frame: the last upload may still wait
         for k, (frame, w) in enumerate(sources):
             params[k], params[MAX_TERMS + k] = frame, w

@@ -9,21 +9,42 @@
 // term count keeps the inner loop free of branches and parameter loads, which made a generic
 // loop 3-5x slower on PoCL.
 //
-// RGB output (PIXEL_BYTES 3): one work-item writes ITEMS consecutive uchar16, past the frame's
-// end into a padded buffer (a one-term frame is a plain copy, no kernel). Four-byte output
-// (RGBA, BGRA): the stack stays RGB (3/4 of the bytes to read) and one work-item writes 16
-// whole pixels, 48 RGB bytes blended as above, then spread to 64 bytes as uint lanes (colours
-// at R_AT, G_AT, B_AT, alpha 255 at A_AT) and stored as one vector; the last work-item's
-// partial group goes pixel by pixel, so the frame can be written straight into the caller's
-// array. blend1 is the one-term frame (a copy that spreads the pixels).
+// RGB output (PIXEL_BYTES 3): one work-item writes ITEMS consecutive uchar16 (a one-term frame
+// is a plain copy, no kernel). Four-byte output (RGBA, BGRA): the stack stays RGB (3/4 of the
+// bytes to read) and one work-item writes 16 whole pixels, 48 RGB bytes blended as above, then
+// spread to 64 bytes as uint lanes (colours at R_AT, G_AT, B_AT, alpha 255 at A_AT) and stored
+// as one vector. Either way the work-item across the frame's end goes byte (pixel) by byte, so
+// the frame can be written straight into the caller's array. blend1 is the one-term frame (a copy that spreads the pixels; its frame index is an
+// argument, so a frame is one command).
 //
 // Defines: FRAME_VECS (uchar16 per frame, a multiple of ITEMS), ITEMS (uchar16 per work-item of
 // the RGB kernels), PIXELS (per frame), PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT.
 
 #define FRAME(i) (frames + (size_t)params[i] * FRAME_VECS * 16)
-#define TERM(p, w) (convert_ushort16(vload16(g, p)) * (w))
+
+// An under-aligned vector type: one unaligned store into any caller's array (PoCL's vstore16 of
+// uchar stores byte by byte).
+typedef uchar16 __attribute__((aligned(1))) uchar16_u;
+typedef uint16 __attribute__((aligned(1))) uint16_u;
 
 #if PIXEL_BYTES == 3
+
+// Frames are 16-byte aligned in the stack: whole vectors load as such.
+#define TERM(p, w) (convert_ushort16(((__global const uchar16 *)(p))[g]) * (w))
+#define FRAME_BYTES (PIXELS * 3)
+
+// Work-items wholly inside the frame store whole vectors; the one across its end goes byte by byte.
+#define RGB_KERNEL(sum, byte)                                                   \
+    const size_t g0 = get_global_id(0) * ITEMS;                                 \
+    if ((g0 + ITEMS) * 16 <= FRAME_BYTES) {                                     \
+        for (int k = 0; k < ITEMS; ++k) {                                       \
+            const size_t g = g0 + k;                                            \
+            *(__global uchar16_u *)(out + g * 16) = convert_uchar16(((ushort16)(128) + sum) >> (ushort)8); \
+        }                                                                       \
+    } else {                                                                    \
+        for (size_t e = g0 * 16; e < FRAME_BYTES; ++e)                          \
+            out[e] = (uchar)((128 + byte) >> 8);                                \
+    }
 
 __kernel void blend2(__global const uchar *restrict frames,
                      __constant int *restrict params,
@@ -31,12 +52,7 @@ __kernel void blend2(__global const uchar *restrict frames,
 {
     __global const uchar *a = FRAME(0), *b = FRAME(1);
     const ushort wa = (ushort)params[4], wb = (ushort)params[5];
-    const size_t g0 = get_global_id(0) * ITEMS;
-    for (int k = 0; k < ITEMS; ++k) {
-        const size_t g = g0 + k;
-        ushort16 acc = (ushort16)(128) + TERM(a, wa) + TERM(b, wb);
-        vstore16(convert_uchar16(acc >> (ushort)8), g, out);
-    }
+    RGB_KERNEL(TERM(a, wa) + TERM(b, wb), wa * a[e] + wb * b[e])
 }
 
 __kernel void blend4(__global const uchar *restrict frames,
@@ -45,19 +61,10 @@ __kernel void blend4(__global const uchar *restrict frames,
 {
     __global const uchar *a = FRAME(0), *b = FRAME(1), *c = FRAME(2), *d = FRAME(3);
     const ushort wa = (ushort)params[4], wb = (ushort)params[5], wc = (ushort)params[6], wd = (ushort)params[7];
-    const size_t g0 = get_global_id(0) * ITEMS;
-    for (int k = 0; k < ITEMS; ++k) {
-        const size_t g = g0 + k;
-        ushort16 acc = (ushort16)(128) + TERM(a, wa) + TERM(b, wb) + TERM(c, wc) + TERM(d, wd);
-        vstore16(convert_uchar16(acc >> (ushort)8), g, out);
-    }
+    RGB_KERNEL(TERM(a, wa) + TERM(b, wb) + TERM(c, wc) + TERM(d, wd), wa * a[e] + wb * b[e] + wc * c[e] + wd * d[e])
 }
 
 #else
-
-// An under-aligned vector type: one unaligned 64-byte store into any caller's array (PoCL's
-// vstore16 of uchar stores byte by byte).
-typedef uint16 __attribute__((aligned(1))) uint16_u;
 
 #define PLACE(v) ((((v) & 0xFFu) << (8 * R_AT)) | ((((v) >> 8) & 0xFFu) << (8 * G_AT)) | \
                   ((((v) >> 16) & 0xFFu) << (8 * B_AT)) | (0xFFu << (8 * A_AT)))
@@ -99,10 +106,10 @@ inline void put16(uchar16 c0, uchar16 c1, uchar16 c2, __global uchar *p)
     }
 
 __kernel void blend1(__global const uchar *restrict frames,
-                     __constant int *restrict params,
+                     const int first,
                      __global uchar *restrict out)
 {
-    __global const uchar *a = FRAME(0);
+    __global const uchar *a = frames + (size_t)first * FRAME_VECS * 16;
     const int q = get_global_id(0);
     if (16 * q + 16 <= PIXELS)
         put16(LOAD(a, 0), LOAD(a, 1), LOAD(a, 2), out + (size_t)q * 64);

@@ -43,11 +43,12 @@ def test_opencl_equals_the_reference(cl_context, sources):
     assert not hasattr(b, "_d_frames")
 
 
-@pytest.mark.parametrize("fmt", ["RGBA", "BGRA"])
+@pytest.mark.parametrize("fmt", ["RGB", "RGBA", "BGRA"])
 @pytest.mark.parametrize("size", [(7, 11), (4, 8)], ids=["77 px", "32 px"])
-def test_four_byte_formats_equal_the_reference(cl_context, fmt, size):
-    """RGBA and BGRA from the RGB stack: whole 16-pixel groups, a partial last group (77 pixels),
-    every term count, into an array that is not 4-byte aligned (the kernels write it directly)."""
+def test_every_format_equals_the_reference(cl_context, fmt, size):
+    """Every format from the RGB stack: whole vectors (16 pixels for RGBA and BGRA), a partial
+    last work-item (77 pixels), every term count, into an array that is not 4-byte aligned
+    (the kernels write it directly where the device shares host memory)."""
     import pyopencl as cl
 
     from dynatex.player.pixels import pixel_format
