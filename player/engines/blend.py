@@ -145,6 +145,11 @@ class BlendOpenCL(Blend):
         self._queue = queue
         self._upload = None
 
+    @property
+    def bytes_per_frame(self) -> int:
+        """Bytes a one-term frame moves: one stored RGB frame read, the output written."""
+        return self.shape[0] * self.shape[1] * 3 + self.frame_bytes
+
     def _render(self, sources, out, wait):
         import pyopencl as cl
 

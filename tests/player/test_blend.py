@@ -64,7 +64,9 @@ def test_every_format_equals_the_reference(cl_context, fmt, size):
         b.render(sources, out)
         assert np.array_equal(out, ref), sources
     assert raw[0] == raw[-1] == 0  # nothing written outside the frame
-    assert b.memory_bytes == 5 * -(-size[0] * size[1] * 3 // 64) * 64  # the stack stays RGB
+    px = size[0] * size[1]
+    assert b.memory_bytes == 5 * -(-px * 3 // 64) * 64  # the stack stays RGB
+    assert b.bytes_per_frame == px * (3 + stack.shape[-1])
     b.close()
 
 
