@@ -43,34 +43,54 @@ def _write(path: Path, frames: np.ndarray, method: str, model) -> str:
     return str(path)
 
 
-def databases(folder: Path) -> list[tuple[str, str, dict]]:
-    """(label, database, player options) of the benchmarked cases, 1280x720 but mixture and evolve."""
-    import cv2
+def _lds(folder: Path) -> str:
+    return synthetic_lds_db(folder / "lds.h5", 1280, 720)
 
-    lds = synthetic_lds_db(folder / "lds.h5", 1280, 720)
+
+def _mixture(folder: Path) -> str:
+    sea = CLIPS / "water_sea_waves_dyntex.avi"  # as bench_mixture
+    waves = load_clip(str(sea)).frames[:100] if sea.exists() else generated_clip(100, 288, 352)
+    return _write(folder / "mixture.h5", waves, "mixture", learn_mixture(load_clip(waves)))
+
+
+def _tiles(folder: Path) -> str:
     tiles = str(folder / "tiles.h5")
     grass = CLIPS / "grass_straw_wind_dyntex.avi"  # as bench_tiles: the README's tiles figures
     clip = load_clip(str(grass)).frames if grass.exists() else generated_clip(250, 288, 352)
     write_tiles_db(tiles, clip, learn_tiles(clip))
+    return tiles
+
+
+def _turnpoints(folder: Path) -> str:
+    import cv2
+
     pend = pendulum_clip(72, 96)[0]
     pend = np.stack([cv2.resize(f, (1280, 720), interpolation=cv2.INTER_LINEAR) for f in pend])
-    turn = _write(folder / "turn.h5", pend, "turnpoints", learn_turnpoints(load_clip(pend)))
-    sea = CLIPS / "water_sea_waves_dyntex.avi"  # as bench_mixture
-    waves = load_clip(str(sea)).frames[:100] if sea.exists() else generated_clip(100, 288, 352)
-    mixture = _write(folder / "mixture.h5", waves, "mixture", learn_mixture(load_clip(waves)))
+    return _write(folder / "turn.h5", pend, "turnpoints", learn_turnpoints(load_clip(pend)))
+
+
+def _evolve(folder: Path) -> str:
     spread = spreading_clip(24, 64, 64)
-    quilt = _write(folder / "quilt.h5", spread, "quilt", learn_quilt(spread, size=(512, 512), seed=1))
-    return [
-        ("lds 1280x720", lds, {"mode": "lds"}),
-        ("mixture 352x288", mixture, {"mode": "mixture"}),
-        (
-            "tiles 1280x720",
-            tiles,
-            {"mode": "tiles", "size": (720, 1280), "tone": "consensus", "controls": {"sigma": 64.0}},
-        ),
-        ("turnpoints 1280x720", turn, {"mode": "turnpoints", "playback": "hybrid"}),
-        ("evolve 512x512", quilt, {"mode": "evolve", "jitter": 2.0}),
-    ]
+    return _write(folder / "quilt.h5", spread, "quilt", learn_quilt(spread, size=(512, 512), seed=1))
+
+
+#: (label, database writer, player options) of the benchmarked cases, 1280x720 but mixture and evolve
+CASES = [
+    ("lds 1280x720", _lds, {"mode": "lds"}),
+    ("mixture 352x288", _mixture, {"mode": "mixture"}),
+    (
+        "tiles 1280x720",
+        _tiles,
+        {"mode": "tiles", "size": (720, 1280), "tone": "consensus", "controls": {"sigma": 64.0}},
+    ),
+    ("turnpoints 1280x720", _turnpoints, {"mode": "turnpoints", "playback": "hybrid"}),
+    ("evolve 512x512", _evolve, {"mode": "evolve", "jitter": 2.0}),
+]
+
+
+def databases(folder: Path, modes: list[str] | None = None) -> list[tuple[str, str, dict]]:
+    """(label, database, player options) of the benchmarked cases whose mode is in ``modes`` (None: all)."""
+    return [(label, write(folder), options) for label, write, options in CASES if not modes or options["mode"] in modes]
 
 
 def bench(db: str, options: dict, frames: int, rounds: int, backend: str = "opencl") -> dict:
@@ -128,9 +148,7 @@ def main() -> None:
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         rows = []
-        for label, db, options in databases(Path(tmp)):
-            if args.modes and options["mode"] not in args.modes:
-                continue
+        for label, db, options in databases(Path(tmp), args.modes):
             row = {"case": label, **bench(db, options, args.frames, args.rounds, args.backend)}
             rows.append(row)
             if not args.json:

@@ -1,6 +1,7 @@
 """Gather modes against the memory roofline, per OpenCL CPU implementation, in one run.
 
-    python benchmarks/roofline_gather.py [--devices skylake,Intel] [--rounds 5] [--frames 40] [--json]
+    python benchmarks/roofline_gather.py [--devices skylake,Intel] [--formats RGB,BGRA] [--rounds 5]
+        [--frames 40] [--json]
 
 For each device named (a substring of its name, as ``device=``): mode tiles (quilted, the
 default construction for one texture, on the real grass clip; smoothed offsets, 1280x720)
@@ -51,10 +52,10 @@ def databases(folder: str) -> tuple[str, str]:
     return tiles, evolve
 
 
-def players(tiles: str, evolve: str, device: str) -> dict:
-    t = TilesPlayer(tiles, backend="opencl", device=device, size=(720, 1280), seed=1)
+def players(tiles: str, evolve: str, device: str, format: str = "RGB") -> dict:
+    t = TilesPlayer(tiles, backend="opencl", device=device, size=(720, 1280), seed=1, format=format)
     t.sigma = 64.0
-    e = EvolvePlayer(evolve, backend="opencl", device=device, seed=1, jitter=4.0)
+    e = EvolvePlayer(evolve, backend="opencl", device=device, seed=1, jitter=4.0, format=format)
     e.speed = 0.37
     buf = np.empty(t.shape, np.uint8)
     t.next_frame(out=buf)
@@ -71,6 +72,7 @@ def players(tiles: str, evolve: str, device: str) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--devices", default="skylake,Intel", help="comma-separated device name substrings")
+    ap.add_argument("--formats", default="RGB", help="comma-separated pixel formats of the players (RGB, RGBA, BGRA)")
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--frames", type=int, default=40, help="timed kernels per round")
     ap.add_argument("--json", action="store_true")
@@ -78,13 +80,13 @@ def main() -> None:
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         tiles, evolve = databases(tmp)
-        opened = {d: players(tiles, evolve, d) for d in a.devices.split(",")}
+        opened = {(d, f): players(tiles, evolve, d, f) for d in a.devices.split(",") for f in a.formats.split(",")}
         for _ in range(a.rounds):
             gbs = copy_bandwidth(mbytes=128, repeats=3)["gbs"]
-            for d, ps in opened.items():
+            for (d, f), ps in opened.items():
                 for what, (p, kernel, nbytes) in ps.items():
                     ms = float(np.median(time_calls(kernel, frames=a.frames, warmup=3))) * 1e3
-                    row = rows.setdefault(f"{what} on {p.ctx.devices[0].platform.name.split()[0]} {d}", [])
+                    row = rows.setdefault(f"{what} {f} on {p.ctx.devices[0].platform.name.split()[0]} {d}", [])
                     row.append((ms, nbytes / (gbs * 1e9) * 1e3 / ms, gbs))
         for ps in opened.values():
             for p, _, _ in ps.values():
@@ -104,7 +106,7 @@ def main() -> None:
     for k, r in out.items():
         lo, hi = r["fraction_range"]
         print(
-            f"{k:52s} kernel {r['kernel_ms']:6.2f} ms  {r['fraction']:.2f} of roofline "
+            f"{k:58s} kernel {r['kernel_ms']:6.2f} ms  {r['fraction']:.2f} of roofline "
             f"({lo:.2f}-{hi:.2f}) at {r['gbs']:.1f} GB/s"
         )
 

@@ -28,6 +28,7 @@ from ..pixels import pixel_format
 VEC = 16
 ITEMS = 4  # uchar16 per work-item of the blend kernels
 MAX_TERMS = 4
+PIXELS_PER_ITEM = 16  # of the four-byte kernels
 
 
 class Blend:
@@ -35,9 +36,10 @@ class Blend:
 
     The interface of both blend engines (:func:`open_blend` picks one): :meth:`render`
     takes ``((frame, weight), ...)`` with 1 to 4 terms, frames in the stack and weights in
-    256ths summing to 256, checked before anything reads a frame. The stack is kept in the
-    output's pixel ``format`` (:data:`~dynatex.player.pixels.FORMATS`; alpha 255 blends to
-    255), so every format blends byte by byte alike.
+    256ths summing to 256, checked before anything reads a frame. Frames come out in the pixel
+    ``format`` (:data:`~dynatex.player.pixels.FORMATS`): the reference keeps its stack in it
+    (alpha 255 blends to 255, so every byte blends alike), the OpenCL engine keeps RGB and
+    places each pixel's bytes as it stores them.
     """
 
     backend = ""
@@ -102,9 +104,13 @@ class BlendReference(Blend):
 
 
 class BlendOpenCL(Blend):
-    """Kernels ``blend2``/``blend4`` of ``kernels/blend.cl`` over the stack, put on the device once.
+    """Kernels ``blend1``/``blend2``/``blend4`` of ``kernels/blend.cl`` over the stack, put on the device once.
 
-    ``ctx`` and ``queue`` belong to the caller (the mode's player); the engine owns its buffers.
+    The stack stays RGB on the device whatever the format: four-byte formats (RGBA, BGRA) read
+    3/4 of their bytes and are spread to the output's pixels as the kernel stores them. Frames
+    go straight into the caller's array where the device shares host memory; an RGB one-term
+    frame is a plain copy. ``ctx`` and ``queue`` belong to the caller (the mode's player); the
+    engine owns its buffers.
     """
 
     backend = "opencl"
@@ -117,36 +123,47 @@ class BlendOpenCL(Blend):
         from .base import FrameOut, Kernel
 
         frames = np.asarray(frames)
-        self._vecs = -(-self.frame_bytes // (VEC * ITEMS)) * ITEMS
+        h, w = self.shape[:2]
+        rgb_bytes = h * w * 3
+        self._vecs = -(-rgb_bytes // (VEC * ITEMS)) * ITEMS
         self.memory_bytes = self.n_frames * self._vecs * VEC
         padded = np.zeros((self.n_frames, self._vecs * VEC), np.uint8)  # every frame padded to whole work-items
-        padded[:, : self.frame_bytes] = self.format.from_rgb(frames).reshape(self.n_frames, -1)
+        padded[:, :rgb_bytes] = frames.reshape(self.n_frames, -1)
         mf = cl.mem_flags
         self._d_frames = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded)
         del padded
         self._d_params = cl.Buffer(ctx, mf.READ_ONLY, 2 * MAX_TERMS * 4)
-        prog = build_program(ctx, "blend.cl", {"FRAME_VECS": self._vecs, "ITEMS": ITEMS})
-        # the kernels store whole vectors past the frame's end: always through the device buffer
+        defines = {"FRAME_VECS": self._vecs, "ITEMS": ITEMS, "PIXELS": h * w, **self.format.defines}
+        prog = build_program(ctx, "blend.cl", defines)
         self._outs = {}
-        for terms in (2, 4):
+        rgb = self.format.bytes == 3
+        for terms in (2, 4) if rgb else (1, 2, 4):
             kernel = Kernel(prog, f"blend{terms}")
-            kernel.set(frames=self._d_frames, params=self._d_params)
-            self._outs[terms] = FrameOut(ctx, queue, kernel, "out", self._vecs * VEC, direct=False)
-        self._gsize = (self._vecs // ITEMS,)
+            kernel.set(frames=self._d_frames, **({} if terms == 1 else {"params": self._d_params}))
+            self._outs[terms] = FrameOut(ctx, queue, kernel, "out", self.frame_bytes)
+        self._gsize = (self._vecs // ITEMS,) if rgb else (-(-h * w // PIXELS_PER_ITEM),)
         self._queue = queue
         self._upload = None
+
+    @property
+    def bytes_per_frame(self) -> int:
+        """Bytes a one-term frame moves: one stored RGB frame read, the output written."""
+        return self.shape[0] * self.shape[1] * 3 + self.frame_bytes
 
     def _render(self, sources, out, wait):
         import pyopencl as cl
 
         if len(sources) == 1:
-            return self._outs[2].copy_from(self._d_frames, out, offset=sources[0][0] * self._vecs * VEC, wait=wait)
+            if self.format.bytes == 3:
+                return self._outs[2].copy_from(self._d_frames, out, offset=sources[0][0] * self._vecs * VEC, wait=wait)
+            self._outs[1].kernel.set(first=np.int32(sources[0][0]))
+            return self._outs[1].launch(out, self._gsize, wait=wait)
         params = np.zeros(2 * MAX_TERMS, np.int32)  # a new array per frame: the last upload may still wait
         for k, (frame, w) in enumerate(sources):
             params[k], params[MAX_TERMS + k] = frame, w
         # the event is kept: dropping it would wait for the copy (and the frame queued before it)
         self._upload = cl.enqueue_copy(self._queue, self._d_params, params, is_blocking=False)
-        return self._outs[2 if len(sources) == 2 else 4].launch(out, self._gsize, wait=wait)
+        return self._outs[min(k for k in self._outs if k >= len(sources))].launch(out, self._gsize, wait=wait)
 
     def close(self) -> None:
         self._queue.finish()

@@ -136,7 +136,7 @@ def build_runs(
     block of A, length | blend << 31 | spill << 30: the run's last 16-byte chunk may run
     past its end and stays within the row), ``runs_b`` ``(n, 2)`` int32 (stream B's source pixel
     and block), ``row_start`` ``(H + 1,)`` int32, and ``code`` ``(H * W * pixel_bytes,)`` uint16 per
-    output byte: weight of the second source in 1/256 (bits 0-8), bit 9 set when the
+    stack byte: weight of the second source in 1/256 (bits 0-8), bit 9 set when the
     primary source is stream B (0 outside bands).
 
     Examples
@@ -400,27 +400,26 @@ class RunsOpenCL(Runs):
 
         h, w = self.shape
         pb = self.format.bytes
+        # the stack, codes and gains stay RGB (3 bytes a pixel) whatever the format: a four-byte
+        # output's row is drawn as RGB, then spread to its pixels (kernels/runs.cl)
         if self.blend is not None:
             wq, pix2, labels2 = self.blend
-            runs = build_runs(pix, labels, wq, pix2, labels2, n_pixels=self.n_pixels, pixel_bytes=pb)
+            runs = build_runs(pix, labels, wq, pix2, labels2, n_pixels=self.n_pixels)
         else:
-            runs = build_runs(pix, labels, n_pixels=self.n_pixels, pixel_bytes=pb)
+            runs = build_runs(pix, labels, n_pixels=self.n_pixels)
         check_runs(runs, self.n_pixels, self.n_blocks)
         self.ctx, self.queue = ctx, queue
-        self._n_blend_bytes = int(pb * runs["lengths"][runs["runs"][:, 3] < 0].sum())
+        self._n_blend_bytes = int(3 * runs["lengths"][runs["runs"][:, 3] < 0].sum())
         self._base = runs
         mf = cl.mem_flags
         ro = mf.READ_ONLY | mf.COPY_HOST_PTR
-        pad = np.zeros(SPILL, np.uint8)  # a spilling chunk may read past the ends (values unused)
-        # the stack, codes and gains hold output pixels (alpha 255, gain 1): the kernel moves bytes
-        stack = self.format.from_rgb(frames)
-        self._d_stack = cl.Buffer(ctx, ro, hostbuf=np.concatenate([stack.reshape(-1), pad]))
-        self._stack_bytes = stack.nbytes
-        del stack
-        self._d_code = cl.Buffer(ctx, ro, hostbuf=np.concatenate([runs["code"], np.zeros(SPILL, np.uint16)]))
-        gain = np.zeros(4, np.float32) if self.gain is None else _gain_bytes(self.gain, self.format).reshape(-1)
-        self._d_gain = cl.Buffer(ctx, ro, hostbuf=np.concatenate([gain, np.zeros(SPILL, np.float32)]))
-        defines = {"INTERP": self.interpolate, "GAIN": self.gain is not None, "PIXEL_BYTES": pb}
+        pad = SPILL  # a spilling chunk may read past the ends (values unused)
+        self._d_stack = cl.Buffer(ctx, ro, hostbuf=np.concatenate([frames.reshape(-1), np.zeros(pad, np.uint8)]))
+        self._stack_bytes = frames.nbytes
+        self._d_code = cl.Buffer(ctx, ro, hostbuf=np.concatenate([runs["code"], np.zeros(pad, np.uint16)]))
+        gain = np.zeros(4, np.float32) if self.gain is None else self.gain.astype(np.float32).reshape(-1)
+        self._d_gain = cl.Buffer(ctx, ro, hostbuf=np.concatenate([gain, np.zeros(pad, np.float32)]))
+        defines = {"INTERP": self.interpolate, "GAIN": self.gain is not None, "WIDTH": w, **self.format.defines}
         self._kernel = Kernel(build_program(ctx, "runs.cl", defines), "evolve")
         self._kernel.set(stack=self._d_stack, code=self._d_code, gain=self._d_gain, height=np.int32(h))
         #: the kernel's frame destination (writes straight into callers' arrays where the device shares host memory)
@@ -437,7 +436,7 @@ class RunsOpenCL(Runs):
 
         super().set_rate(rate)
         runs, runs_b, row_start, pair, self._slot_block, self._slot_rate = cut_runs(
-            self._base, rate, self.shape, self.n_blocks, pixel_bytes=self.format.bytes
+            self._base, rate, self.shape, self.n_blocks
         )
         self.n_runs = len(runs)
         self._bframe = np.zeros((len(self._slot_block), 4), np.int32)
@@ -460,7 +459,7 @@ class RunsOpenCL(Runs):
             self._stack_bytes
             + self._base["code"].nbytes
             + h * w * self.format.bytes
-            + (self.gain.nbytes * self.format.bytes // 3 if self.gain is not None else 0)
+            + (self.gain.nbytes if self.gain is not None else 0)
             + runs.nbytes
             + runs_b.nbytes
             + row_start.nbytes
@@ -474,7 +473,7 @@ class RunsOpenCL(Runs):
         s = np.asarray(source_time(self._slot_rate, self._slot_block, np.float32(t)), np.float32)
         si = np.floor(s)
         i0 = si.astype(np.int32)
-        n, fb = self.n_frames, self.n_pixels * self.format.bytes
+        n, fb = self.n_frames, self.n_pixels * 3
         i1 = i0 + 1
         if loop:
             i0, i1 = np.mod(i0, n), np.mod(i1, n)
@@ -512,14 +511,14 @@ class RunsOpenCL(Runs):
 
     @property
     def bytes_per_frame(self) -> int:
-        """Run tables, time slots, blend codes, gain, source pixels (two frames per source
+        """Run tables, time slots, blend codes, gain, source pixels (RGB; two frames per source
         when interpolating), and the output (copied to the caller unless written directly)."""
         h, w = self.shape
         px = h * w
         pb = self.format.bytes
         per_src = 2 if self.interpolate else 1
-        gain = 4 * pb * px if self.gain is not None else 0
-        src = per_src * (pb * px + self._n_blend_bytes)
+        gain = 12 * px if self.gain is not None else 0
+        src = per_src * (3 * px + self._n_blend_bytes)
         out = pb * px if self.direct else 2 * pb * px
         return int(32 * self.n_runs + 16 * len(self._slot_block) + 2 * self._n_blend_bytes + gain + src + out)
 
@@ -530,14 +529,6 @@ class RunsOpenCL(Runs):
             buf = self.__dict__.pop(name, None)
             if buf is not None:
                 buf.release()
-
-
-def _gain_bytes(gain: np.ndarray, fmt) -> np.ndarray:
-    """A per-pixel RGB gain ``(H, W, 3)`` as one gain per output byte (alpha's 1)."""
-    out = np.ones(gain.shape[:2] + (fmt.bytes,), np.float32)
-    for c, at in enumerate(fmt.rgb):
-        out[..., at] = gain[..., c]
-    return out
 
 
 def open_runs(

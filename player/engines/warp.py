@@ -107,7 +107,7 @@ class WarpBlend:
 
 
 class _WarpOpenCL:
-    """Kernel ``warp2`` of ``kernels/warp.cl`` over an OpenCL blend engine's frames."""
+    """Kernel ``warp2`` of ``kernels/warp.cl`` over an OpenCL blend engine's (RGB) frames."""
 
     def __init__(self, blend: BlendOpenCL, flows: np.ndarray, step_log2: int, grid, ctx, queue) -> None:
         import pyopencl as cl
@@ -115,11 +115,12 @@ class _WarpOpenCL:
         from ..opencl.programs import build_program
         from .base import FrameOut, Kernel
 
-        h, w, ch = blend.shape
+        h, w = blend.shape[:2]
         mf = cl.mem_flags
         host = flows if flows.size else np.zeros(2, np.int16)
         self._d_flows = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=host)
-        defines = {"W": w, "H": h, "CH": ch, "FRAME_STRIDE": blend._vecs * 16, "GH": grid[0], "GW": grid[1]}
+        defines = {"W": w, "H": h, "FRAME_STRIDE": blend._vecs * 16, "GH": grid[0], "GW": grid[1]}
+        defines.update(blend.format.defines)  # the blend engine's stack is RGB: the kernel places the pixels
         prog = build_program(ctx, "warp.cl", {**defines, "STEP_LOG2": step_log2})
         self._kernel = Kernel(prog, "warp2")
         self._kernel.set(frames=blend._d_frames, flows=self._d_flows)

@@ -29,9 +29,16 @@
 // v = first + a (second - first) for a blend, v *= gain, rounded to nearest even and
 // saturated.
 //
-// Defines: INTERP, GAIN (per-byte gain), PIXEL_BYTES (3 or 4: the stack, codes, gains and
-// output all hold pixels of that many bytes; a fourth byte is alpha, 255 in the stack, gain 1). The end mode, the rate map and the jitter live in
-// the host's per-frame slot table, so no control needs another kernel.
+// The stack, codes and gains hold RGB pixels (3 bytes) whatever the output. A four-byte output
+// (RGBA, BGRA) row is drawn exactly so, as RGB bytes into the first 3/4 of its own output row
+// (still in cache), then spread in place to its pixels by 16-pixel chunks, 48 bytes to 64 as
+// uint lanes (colours at R_AT, G_AT, B_AT, alpha 255 at A_AT), stored as one vector. Chunks of
+// whole pixels per run would do: the runs average about 13 pixels, and rounding each up to a
+// chunk cost more than the spread.
+//
+// Defines: INTERP, GAIN (per stack byte), WIDTH (output pixels per row), PIXEL_BYTES, R_AT,
+// G_AT, B_AT, A_AT (the output pixel). The end mode, the rate map and the jitter live in the host's per-frame slot table,
+// so no control needs another kernel.
 //
 // Run tables: runs[r] = (first output pixel, pixel of stream A at it, block of A, length |
 // blend << 31 | spill << 30), runs_b[r] = (pixel of stream B at the first output pixel,
@@ -83,6 +90,7 @@ inline float16 blend16(float16 a, float16 b, ushort16 code)
 // PoCL's vstore16 of uchar stores byte by byte (4x slower than the whole kernel's other
 // work); an under-aligned vector type gives one unaligned 16-byte store.
 typedef uchar16 __attribute__((aligned(1))) uchar16_u;
+typedef uint16 __attribute__((aligned(1))) uint16_u;
 
 inline void store16(uchar16 v, __global uchar *p)
 {
@@ -146,6 +154,52 @@ __attribute__((always_inline)) inline void run_const(__global const ushort *rest
     }
 }
 
+#if PIXEL_BYTES == 4
+
+#define PLACE(v) ((((v) & 0xFFu) << (8 * R_AT)) | ((((v) >> 8) & 0xFFu) << (8 * G_AT)) | \
+                  ((((v) >> 16) & 0xFFu) << (8 * B_AT)) | (0xFFu << (8 * A_AT)))
+
+// 16 RGB pixels (48 bytes in c0, c1, c2) as 16 four-byte pixels at p.
+inline void put16(uchar16 c0, uchar16 c1, uchar16 c2, __global uchar *p)
+{
+#ifdef __ENDIAN_LITTLE__
+    const uint16 w = (uint16)(as_uint4(c0), as_uint4(c1), as_uint4(c2), (uint4)(0));
+    // pixel k starts at RGB byte 3k: word 3k / 4, bit 8 * (3k % 4); its last bytes spill into the next word
+    const uint16 lo = w.s00123345667899ab, hi = w.s112344567789aabc;
+    const uint16 s = (uint16)(0, 24, 16, 8, 0, 24, 16, 8, 0, 24, 16, 8, 0, 24, 16, 8);
+    const uint16 v = (lo >> s) | ((hi << 1) << (31 - s));  // (hi << 1) << 31 is 0 where s is 0
+    *(__global uint16_u *)p = PLACE(v);
+#else
+    uchar rgb[48];
+    vstore16(c0, 0, rgb); vstore16(c1, 1, rgb); vstore16(c2, 2, rgb);
+    for (int k = 0; k < 16; ++k) {
+        p[4 * k + R_AT] = rgb[3 * k]; p[4 * k + G_AT] = rgb[3 * k + 1]; p[4 * k + B_AT] = rgb[3 * k + 2];
+        p[4 * k + A_AT] = 255;
+    }
+#endif
+}
+
+// Spread row y's RGB bytes, drawn at the start of its four-byte output row, to its pixels, in
+// place: right to left, a chunk's 48 bytes are read before its 64 are stored, and every store
+// lies at or right of what it read (4k >= 3k), so nothing is overwritten before it is read.
+inline void spread_row(__global uchar *restrict row)
+{
+    int k = WIDTH;
+    for (; k >= 16; k -= 16)
+        put16(vload16(0, row + 3 * (k - 16)), vload16(0, row + 3 * (k - 16) + 16), vload16(0, row + 3 * (k - 16) + 32),
+              row + 4 * (k - 16));
+    while (k > 0) {
+        --k;
+        const uchar r = row[3 * k], g = row[3 * k + 1], b = row[3 * k + 2];
+        row[4 * k + R_AT] = r;
+        row[4 * k + G_AT] = g;
+        row[4 * k + B_AT] = b;
+        row[4 * k + A_AT] = 255;
+    }
+}
+
+#endif
+
 __kernel void evolve(__global const uchar *restrict stack,
                      __global const int4 *restrict runs,
                      __global const int2 *restrict runs_b,
@@ -173,8 +227,16 @@ __kernel void evolve(__global const uchar *restrict stack,
         // the stream times of the run's slots: byte offsets of the two frames and the fraction
         const int4 fa = bframe[slot.x], fb = bframe[slot.y];
         stream_t a, b;
-        a.p0 = stack + (uint)fa.x + pa * PIXEL_BYTES; a.p1 = stack + (uint)fa.y + pa * PIXEL_BYTES; a.f = as_float(fa.z);
-        b.p0 = stack + (uint)fb.x + pb * PIXEL_BYTES; b.p1 = stack + (uint)fb.y + pb * PIXEL_BYTES; b.f = as_float(fb.z);
-        run_const(code, gain, out, (size_t)px * PIXEL_BYTES, npx * PIXEL_BYTES, blend, spill, a, b);
+        a.p0 = stack + (uint)fa.x + pa * 3; a.p1 = stack + (uint)fa.y + pa * 3; a.f = as_float(fa.z);
+        b.p0 = stack + (uint)fb.x + pb * 3; b.p1 = stack + (uint)fb.y + pb * 3; b.f = as_float(fb.z);
+#if PIXEL_BYTES == 3
+        run_const(code, gain, out, (size_t)px * 3, npx * 3, blend, spill, a, b);
+#else
+        // RGB bytes at the start of the row's four-byte output: out + 4 W y + 3 x
+        run_const(code, gain, out + (size_t)y * WIDTH, (size_t)px * 3, npx * 3, blend, spill, a, b);
+#endif
     }
+#if PIXEL_BYTES == 4
+    spread_row(out + (size_t)y * WIDTH * 4);
+#endif
 }

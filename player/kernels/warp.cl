@@ -6,10 +6,11 @@
 // point, and wa + wb = 256. Every shift of a possibly negative value floors (FLOOR_SHIFT), so the
 // result does not depend on how a device shifts negative integers.
 //
-// One work-item per output pixel, global size (W, H). frames: T frames FRAME_STRIDE bytes apart
-// (CH bytes per pixel, rows of W pixels); flows: grid (GH, GW, 2) shorts (x, y) per pair.
+// One work-item per output pixel, global size (W, H). frames: T RGB frames FRAME_STRIDE bytes
+// apart (rows of W pixels); flows: grid (GH, GW, 2) shorts (x, y) per pair. Output pixels of
+// PIXEL_BYTES bytes, the colours at R_AT, G_AT, B_AT, alpha 255 at A_AT (-1: none).
 //
-// Defines: W, H, CH, FRAME_STRIDE, GH, GW, STEP_LOG2.
+// Defines: W, H, FRAME_STRIDE, GH, GW, STEP_LOG2, PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT.
 
 #define FLOOR_SHIFT(v, k) ((v) >= 0 ? (v) >> (k) : -((-(v) + (1 << (k)) - 1) >> (k)))
 
@@ -19,8 +20,8 @@ inline int sample(__global const uchar *f, int px, int py, int c)
     const int fx = px - x0 * 16, fy = py - y0 * 16;
     const int xa = clamp(x0, 0, W - 1), xb = clamp(x0 + 1, 0, W - 1);
     const int ya = clamp(y0, 0, H - 1), yb = clamp(y0 + 1, 0, H - 1);
-    const int p00 = f[(ya * W + xa) * CH + c], p01 = f[(ya * W + xb) * CH + c];
-    const int p10 = f[(yb * W + xa) * CH + c], p11 = f[(yb * W + xb) * CH + c];
+    const int p00 = f[(ya * W + xa) * 3 + c], p01 = f[(ya * W + xb) * 3 + c];
+    const int p10 = f[(yb * W + xa) * 3 + c], p11 = f[(yb * W + xb) * 3 + c];
     return (p00 * (16 - fx) + p01 * fx) * (16 - fy) + (p10 * (16 - fx) + p11 * fx) * fy;
 }
 
@@ -46,9 +47,12 @@ __kernel void warp2(__global const uchar *restrict frames,
     const int ax = x * 16 - FLOOR_SHIFT(dax, 8), ay = y * 16 - FLOOR_SHIFT(day, 8);
     const int bx = x * 16 + FLOOR_SHIFT(dbx, 8), by = y * 16 + FLOOR_SHIFT(dby, 8);
     __global const uchar *a = frames + (size_t)ia * FRAME_STRIDE, *b = frames + (size_t)ib * FRAME_STRIDE;
-    __global uchar *o = out + ((size_t)y * W + x) * CH;
-    for (int c = 0; c < CH; ++c) {
+    __global uchar *o = out + ((size_t)y * W + x) * PIXEL_BYTES;
+    for (int c = 0; c < 3; ++c) {
         const int v = wa * sample(a, ax, ay, c) + wb * sample(b, bx, by, c) + 32768;
-        o[c] = (uchar)(v >> 16);
+        o[c == 0 ? R_AT : c == 1 ? G_AT : B_AT] = (uchar)(v >> 16);
     }
+#if A_AT >= 0
+    o[A_AT] = 255;
+#endif
 }

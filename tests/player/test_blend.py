@@ -22,11 +22,10 @@ def test_reference_is_the_rounded_weighted_sum():
     assert np.array_equal(blend_reference(f, ((4, 256),), out), f[4])
 
 
-@pytest.mark.parametrize(
-    "sources",
-    [((2, 256),), ((0, 200), (4, 56)), ((1, 100), (2, 100), (3, 56)), ((0, 64), (1, 64), (2, 64), (3, 64))],
-    ids=["1", "2", "3", "4"],
-)
+SOURCES = [((2, 256),), ((0, 200), (4, 56)), ((1, 100), (2, 100), (3, 56)), ((0, 64), (1, 64), (2, 64), (3, 64))]
+
+
+@pytest.mark.parametrize("sources", SOURCES, ids=["1", "2", "3", "4"])
 def test_opencl_equals_the_reference(cl_context, sources):
     import pyopencl as cl
 
@@ -42,6 +41,33 @@ def test_opencl_equals_the_reference(cl_context, sources):
     assert b.memory_bytes == 5 * 256 and b.bytes_per_frame == 2 * 231
     b.close()
     assert not hasattr(b, "_d_frames")
+
+
+@pytest.mark.parametrize("fmt", ["RGB", "RGBA", "BGRA"])
+@pytest.mark.parametrize("size", [(7, 11), (4, 8)], ids=["77 px", "32 px"])
+def test_every_format_equals_the_reference(cl_context, fmt, size):
+    """Every format from the RGB stack: whole vectors (16 pixels for RGBA and BGRA), a partial
+    last work-item (77 pixels), every term count, into an array that is not 4-byte aligned
+    (the kernels write it directly where the device shares host memory)."""
+    import pyopencl as cl
+
+    from dynatex.player.pixels import pixel_format
+
+    f = _frames(h=size[0], w=size[1], seed=1)
+    b = open_blend(f, ctx=cl_context, queue=cl.CommandQueue(cl_context), format=fmt)
+    stack = pixel_format(fmt).from_rgb(f)
+    raw = np.zeros(stack[0].size + 2, np.uint8)
+    out = raw[1:-1].reshape(stack.shape[1:])  # one byte off the array's start
+    for sources in SOURCES:
+        ref = blend_reference(stack, sources, np.empty(stack.shape[1:], np.uint8))
+        out[...] = 0
+        b.render(sources, out)
+        assert np.array_equal(out, ref), sources
+    assert raw[0] == raw[-1] == 0  # nothing written outside the frame
+    px = size[0] * size[1]
+    assert b.memory_bytes == 5 * -(-px * 3 // 64) * 64  # the stack stays RGB
+    assert b.bytes_per_frame == px * (3 + stack.shape[-1])
+    b.close()
 
 
 def test_bad_inputs_are_clear_errors():
