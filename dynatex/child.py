@@ -58,6 +58,8 @@ MEMORY_STATUS = 3
 REAP_S = 10.0
 #: what a user sends to stop a run: held back while a child starts, ignored by the child
 STOPS = (signal.SIGINT, signal.SIGTERM)
+#: set by :func:`call` in the child's environment: its stdin is the lifeline (:func:`end_with_parent`)
+LIFELINE = "DYNATEX_CHILD_LIFELINE"
 _VALUE, _RAISED = "dynatex-child-value\t", "dynatex-child-raised\t"
 
 __all__ = ["MEMORY_STATUS", "Outcome", "call", "ignore_stops", "interpreter"]
@@ -118,6 +120,7 @@ def call(target: str, *args: Any, timeout: float) -> Outcome:
         )
     env = dict(os.environ)
     env.pop("PYTHONFAULTHANDLER", None)  # any value turns it on: its dump is not our protocol
+    env[LIFELINE] = "1"
     cmd = [python, "-m", "dynatex.child", target, json.dumps(list(args))]
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         start = time.monotonic()
@@ -219,8 +222,9 @@ def ignore_stops() -> None:
 
 
 def end_with_parent() -> None:
-    """In a child: when the parent is gone (the lifeline on stdin closes, however the parent
-    ended), kill this child's session (itself and what it started; only itself off POSIX)."""
+    """In a child that :func:`call` started: when the parent is gone (the lifeline on stdin
+    closes, however the parent ended), kill this child's session (itself and what it started;
+    only itself where it leads no session of its own)."""
 
     def watch() -> None:
         try:
@@ -228,7 +232,7 @@ def end_with_parent() -> None:
                 pass
         except OSError:
             return
-        if os.name == "posix":
+        if os.name == "posix" and os.getsid(0) == os.getpid():
             os.killpg(0, signal.SIGKILL)
         os._exit(1)
 
@@ -247,7 +251,8 @@ def _main(argv: list[str]) -> int:
         print("usage: python -m dynatex.child MODULE:FUNCTION JSON_ARGS  (run by dynatex.child.call)", file=sys.stderr)
         return 2
     ignore_stops()
-    end_with_parent()
+    if os.environ.pop(LIFELINE, None) == "1":  # not when run by hand or by another program
+        end_with_parent()
     module, _, function = argv[0].partition(":")
     try:
         value = getattr(importlib.import_module(module), function)(*json.loads(argv[1]))
