@@ -137,42 +137,6 @@ def test_opencl_engine_matches_reference(quilt, cl_context, loop, fmt):
     assert not hasattr(dev, "_d_stack")
 
 
-@pytest.mark.parametrize("with_gain", [False, True])
-def test_reference_fixed_point_is_within_a_level_of_the_real_blend(quilt, with_gain):
-    """The fixed point (fraction and weight in 1/256) draws the real-valued formula, rounded,
-    within one level, and exactly where no frame blend or band is involved."""
-    frames, q = quilt
-    flat, pix, blend, gain = _engine_inputs(frames, q)
-    h, w = q.labels.shape
-    g = gain if with_gain else None
-    ref = open_runs(flat, (h, w), pix, q.labels.astype(np.int64), n_blocks=q.n_blocks, blend=blend, gain=g)
-    source_time = _times(np.random.default_rng(1).uniform(-2, 2, q.n_blocks).astype(np.float32))
-    wq, pix2, labels2 = blend
-    n_whole = 0
-    for t in (0.0, 3.3, 7.61, 15.5):
-        s1 = source_time(None, q.labels.astype(np.int64), np.float32(t)).astype(np.float64)
-        s2 = source_time(None, labels2, np.float32(t)).astype(np.float64)
-
-        def real(p, s):
-            i = np.floor(s).astype(np.int64)
-            v0, v1 = flat[np.clip(i, 0, 23), p].astype(float), flat[np.clip(i + 1, 0, 23), p].astype(float)
-            return v0 + (s - i)[..., None] * (v1 - v0)
-
-        a = (wq / 256.0)[..., None]
-        v = (1 - a) * real(pix, s1) + a * real(pix2, s2)
-        if g is not None:
-            v = v * g
-        want = np.clip(v, 0, 255)
-        got = np.empty((h, w, 3), np.uint8)
-        ref.start(t, got, source_time=source_time, loop=False)
-        err = np.abs(got - want)
-        assert err.max() <= 1.0, t
-        whole = (wq == 0) & (s1 == np.floor(s1))
-        assert np.array_equal(got[whole], np.rint(want[whole])), t
-        n_whole += int(whole.sum())
-    assert n_whole > 0
-
-
 def test_rate_cuts_keep_every_pixel_and_name_each_rate_once(quilt):
     """Cutting the runs where the rate changes covers the same pixels, and every run's time
     slots are the (rate, block) pairs of its streams."""
