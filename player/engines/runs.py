@@ -7,7 +7,7 @@ a *source time* function; the engine owns the frame stack, the run tables and th
 reference); :class:`RunsOpenCL` cuts the quilt's rows once into *runs* (:func:`build_runs`)
 that read one or two contiguous source rows, so that the kernel moves whole runs with
 16-byte vectors, and evaluates the source time once per (rate, block) *time slot* per frame
-on the host. Both compute the same fixed-point formulas; :func:`open_runs` picks one.
+on the host. Both compute the same float32 formulas; :func:`open_runs` picks one.
 
 A source time function ``source_time(rate, blocks, t)`` returns float32 source times (in
 source frames) for clock ``t`` of pixels or slots of the given blocks, at the given rates
@@ -251,31 +251,17 @@ def cut_runs(
     return cut, cut_b, row_start, pair, uniq % n_blocks, ((uniq // n_blocks) * RATE_STEP).astype(np.float32)
 
 
-def fraction(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Source times ``s`` (float32) as the frame before them (int64) and the fraction to the next
-    in 1/256 (0..256, int32, rounded to nearest even): the fixed point both engines blend in.
-
-    Examples
-    --------
-    >>> [a.tolist() for a in fraction(np.array([2.25, -0.5, 3.999], np.float32))]
-    [[2, -1, 3], [64, 128, 256]]
-    """
-    s = np.asarray(s, np.float32)
-    si = np.floor(s)
-    return si.astype(np.int64), np.rint((s - si) * np.float32(256)).astype(np.int32)
-
-
 def sample(flat: np.ndarray, pix: np.ndarray, s: np.ndarray, *, loop: bool, interpolate: bool) -> np.ndarray:
     """Pixels ``pix`` of a stack ``(N, P, 3)`` at source times ``s`` (float32; frames folded by
-    ``loop``, else held at the ends) in 1/256 of a level (int32), linearly between frames
-    when ``interpolate``: ``v0 (256 - f) + v1 f`` with the fraction ``f`` of :func:`fraction`."""
+    ``loop``, else held at the ends), linearly between frames when ``interpolate``."""
     n = flat.shape[0]
-    si, f = fraction(s)
+    si = np.floor(s).astype(np.int64)
     fold = (lambda i: np.mod(i, n)) if loop else (lambda i: np.clip(i, 0, n - 1))
-    v = flat[fold(si), pix].astype(np.int32) << 8
+    v = flat[fold(si), pix].astype(np.float32)
     if interpolate:
-        v1 = flat[fold(si + 1), pix].astype(np.int32)
-        v += (v1 - (v >> 8)) * f[..., None]
+        f = (s - si.astype(np.float32))[..., None].astype(np.float32)
+        v1 = flat[fold(si + 1), pix].astype(np.float32)
+        v = v + f * (v1 - v)
     return v
 
 
@@ -353,9 +339,7 @@ class Runs:
 
 
 class RunsReference(Runs):
-    """The numpy reference: every pixel's source time, sample, blend and gain, in the kernel's
-    fixed point (``kernels/runs.cl``): a frame blend in 1/256, a band's blend in 1/65536 of a level,
-    rounded half up; with a gain, ``v / 65536 * gain`` in float32, rounded to nearest even."""
+    """The numpy reference: every pixel's source time, sample, blend and gain, in float32."""
 
     backend = "numpy"
 
@@ -369,15 +353,11 @@ class RunsReference(Runs):
             sel = wq > 0
             s2 = source_time(None if self.rate is None else self.rate[sel], labels2[sel], t32)
             v2 = sample(self.flat, pix2[sel], s2, loop=loop, interpolate=self.interpolate)
-            v = v << 8
-            v[sel] += (v2 - v[sel] // 256) * wq[sel].astype(np.int32)[:, None]
-        else:
-            v = v << 8
+            a = (wq[sel].astype(np.float32) * np.float32(1.0 / 256.0))[:, None]
+            v[sel] = v[sel] + a * (v2 - v[sel])
         if self.gain is not None:
-            g = v.astype(np.float32) * np.float32(1.0 / 65536.0) * self.gain.reshape(v.shape)
-            rgb = np.clip(np.rint(g), 0, 255).astype(np.uint8).reshape(*self.shape, 3)
-        else:
-            rgb = ((v + 32768) >> 16).astype(np.uint8).reshape(*self.shape, 3)
+            v = v * self.gain
+        rgb = np.clip(np.rint(v), 0, 255).astype(np.uint8).reshape(*self.shape, 3)
         self.format.from_rgb(rgb, out)
 
     @property
@@ -489,8 +469,9 @@ class RunsOpenCL(Runs):
 
     def slot_frames(self, t: float, source_time: SourceTime, loop: bool) -> np.ndarray:
         """Per time slot, what the kernel reads for clock ``t``: the byte offsets of the two
-        source frames and the fraction in 1/256 (:func:`fraction`, as :func:`sample`)."""
-        si, f = fraction(source_time(self._slot_rate, self._slot_block, np.float32(t)))
+        source frames and the fraction (the float32 formulas of :func:`sample`)."""
+        s = np.asarray(source_time(self._slot_rate, self._slot_block, np.float32(t)), np.float32)
+        si = np.floor(s)
         i0 = si.astype(np.int32)
         n, fb = self.n_frames, self.n_pixels * 3
         i1 = i0 + 1
@@ -501,7 +482,7 @@ class RunsOpenCL(Runs):
         b = self._bframe
         b[:, 0] = i0 * fb
         b[:, 1] = (i1 if self.interpolate else i0) * fb
-        b[:, 2] = f
+        b[:, 2] = (s - si).astype(np.float32).view(np.int32)
         return b
 
     def _upload(self, t: float, source_time: SourceTime, loop: bool) -> None:

@@ -17,7 +17,7 @@
 // 1/512 and, when a rate map is set, cuts the runs further where the quantized rate
 // changes. So are the stream times: the host computes, once per frame, for every *time
 // slot* (a pair of rate and block that some run reads) the byte offsets of the two source
-// frames and the fraction in 1/256 (bframe; run_pair[r] names the slots of streams A and B, with a
+// frames and the fraction (bframe; run_pair[r] names the slots of streams A and B, with a
 // uniform rate the slot of a block is the block itself), and the run is copied or blended
 // as a byte stream (colour channels are just bytes: every operation is per byte) with 16-byte
 // vector loads and stores. The last chunk of a run spills up to 15 bytes into the next
@@ -25,10 +25,9 @@
 // the row), or else is aligned to the run's end (rewriting a few bytes with the same
 // values); a run shorter than a chunk that may not spill goes byte by byte.
 //
-// Arithmetic is that of the numpy reference, in fixed point: per source, with the fraction f
-// in 1/256, v = v0 (256 - f) + v1 f (16 bits, in 1/256 of a level); for a blend, with the
-// weight a in 1/256, v = first (256 - a) + second a (24 bits); rounded half up by a shift.
-// With a gain, the float32 v / 2^16 * gain, rounded to nearest even and saturated.
+// Arithmetic is that of the numpy reference, in float32: v = v0 + f (v1 - v0) per source,
+// v = first + a (second - first) for a blend, v *= gain, rounded to nearest even and
+// saturated.
 //
 // The stack, codes and gains hold RGB pixels (3 bytes) whatever the output. A four-byte output
 // (RGBA, BGRA) row is drawn exactly so, as RGB bytes into the first 3/4 of its own output row
@@ -49,49 +48,43 @@
 #define BLEND_FLAG 0x80000000u
 #define SPILL_FLAG 0x40000000u
 
-typedef struct { __global const uchar *p0, *p1; ushort f; } stream_t;
+typedef struct { __global const uchar *p0, *p1; float f; } stream_t;
 
-// A source byte in 1/256 of a level: v0 (256 - f) + v1 f, as v0 << 8 + (v1 - v0) f modulo
-// 2^16 (the true value, at most 255 * 256, fits).
-inline ushort16 load16(stream_t st, int o)
+inline float16 load16(stream_t st, int o)
 {
-    const ushort16 v0 = convert_ushort16(vload16(0, st.p0 + o));
+    float16 v = convert_float16(vload16(0, st.p0 + o));
 #if INTERP
-    return (v0 << (ushort)8) + (convert_ushort16(vload16(0, st.p1 + o)) - v0) * st.f;
-#else
-    return v0 << (ushort)8;
+    v = v + st.f * (convert_float16(vload16(0, st.p1 + o)) - v);
 #endif
+    return v;
 }
 
-inline ushort load1(stream_t st, int o)
+inline float load1(stream_t st, int o)
 {
-    const ushort v0 = st.p0[o];
+    float v = (float)st.p0[o];
 #if INTERP
-    return (ushort)((v0 << 8) + ((ushort)st.p1[o] - v0) * st.f);
-#else
-    return (ushort)(v0 << 8);
+    v = v + st.f * ((float)st.p1[o] - v);
 #endif
+    return v;
 }
 
-// The blend of a byte in 1/65536 of a level: its primary source first, times 256, plus the
-// weight of the other one times their difference (modulo 2^32; the true value fits in 24 bits).
-inline uint blend1(ushort a, ushort b, uint code)
+// The blend of a byte: its primary source first, the weight of the other one.
+inline float blend1(float a, float b, uint code)
 {
-    const uint w = code & 0x1FFu;
-    const uint first = (code & 0x200u) ? b : a;
-    const uint second = (code & 0x200u) ? a : b;
-    return (first << 8) + (second - first) * w;
+    const float w = (float)(code & 0x1FFu) * (1.0f / 256.0f);
+    const float first = (code & 0x200u) ? b : a;
+    const float second = (code & 0x200u) ? a : b;
+    return first + w * (second - first);
 }
 
-inline uint16 blend16(ushort16 a, ushort16 b, ushort16 code)
+inline float16 blend16(float16 a, float16 b, ushort16 code)
 {
-    const uint16 c = convert_uint16(code);
-    const uint16 w = c & 0x1FFu;
-    const int16 swap = (c & 0x200u) != 0;          // -1 where the primary source is B
-    const uint16 ua = convert_uint16(a), ub = convert_uint16(b);
-    const uint16 first = select(ua, ub, swap);
-    const uint16 second = select(ub, ua, swap);
-    return (first << 8u) + (second - first) * w;
+    const int16 c = convert_int16(code);
+    const float16 w = convert_float16(c & 0x1FF) * (1.0f / 256.0f);
+    const int16 swap = (c & 0x200) != 0;           // -1 where the primary source is B
+    const float16 first = select(a, b, swap);
+    const float16 second = select(b, a, swap);
+    return first + w * (second - first);
 }
 
 // PoCL's vstore16 of uchar stores byte by byte (4x slower than the whole kernel's other
@@ -104,23 +97,18 @@ inline void store16(uchar16 v, __global uchar *p)
     *(__global uchar16_u *)p = v;
 }
 
-#if GAIN
-// A gained byte: v / 65536 * gain, rounded to nearest even and saturated, as
-// convert_uchar16_sat_rte but faster on PoCL (CHANGELOG.md): clamping first makes rounding and
-// saturating commute, and adding 1.5 * 2^23 leaves the rounded integer (current rounding mode:
-// nearest even) in the low mantissa bits. v < 2^24 converts exactly.
-inline uchar16 gained16(uint16 v, float16 gain)
+// Round to nearest even and saturate to 0..255, as convert_uchar16_sat_rte but faster on
+// PoCL (CHANGELOG.md): clamping first makes rounding and saturating commute, and adding 1.5 * 2^23 leaves
+// the rounded integer (current rounding mode: nearest even) in the low mantissa bits.
+inline uchar16 to_uchar16(float16 v)
 {
-    const float16 x = convert_float16(v) * (1.0f / 65536.0f) * gain;
-    return convert_uchar16(as_uint16(clamp(x, 0.0f, 255.0f) + 12582912.0f));
+    return convert_uchar16(as_uint16(clamp(v, 0.0f, 255.0f) + 12582912.0f));
 }
 
-inline uchar gained1(uint v, float gain)
+inline uchar to_uchar(float v)
 {
-    const float x = (float)v * (1.0f / 65536.0f) * gain;
-    return (uchar)as_uint(clamp(x, 0.0f, 255.0f) + 12582912.0f);
+    return (uchar)as_uint(clamp(v, 0.0f, 255.0f) + 12582912.0f);
 }
-#endif
 
 // Output bytes [ob, ob + n) of a run whose streams have constant times. With may_spill
 // (its last chunk ends within the row: the runs of a row are done in order, left to right,
@@ -137,33 +125,31 @@ __attribute__((always_inline)) inline void run_const(__global const ushort *rest
         if (blend) {
             for (int o0 = 0; o0 < n; o0 += 16) {
                 const int o = min(o0, last);
-                const uint16 v = blend16(load16(a, o), load16(b, o), vload16(0, code + ob + o));
+                float16 v = blend16(load16(a, o), load16(b, o), vload16(0, code + ob + o));
 #if GAIN
-                store16(gained16(v, vload16(0, gain + ob + o)), out + ob + o);
-#else
-                store16(convert_uchar16((v + 32768u) >> 16), out + ob + o);
+                v *= vload16(0, gain + ob + o);
 #endif
+                store16(to_uchar16(v), out + ob + o);
             }
         } else {
             for (int o0 = 0; o0 < n; o0 += 16) {
                 const int o = min(o0, last);
-                const ushort16 v = load16(a, o);
+                float16 v = load16(a, o);
 #if GAIN
-                store16(gained16(convert_uint16(v) << 8u, vload16(0, gain + ob + o)), out + ob + o);
-#else
-                store16(convert_uchar16((v + (ushort)128) >> (ushort)8), out + ob + o);
+                v *= vload16(0, gain + ob + o);
 #endif
+                store16(to_uchar16(v), out + ob + o);
             }
         }
     } else {
         for (int o = 0; o < n; ++o) {
-            const ushort va = load1(a, o);
-            const uint v = blend ? blend1(va, load1(b, o), code[ob + o]) : (uint)va << 8;
+            float v = load1(a, o);
+            if (blend)
+                v = blend1(v, load1(b, o), code[ob + o]);
 #if GAIN
-            out[ob + o] = gained1(v, gain[ob + o]);
-#else
-            out[ob + o] = (uchar)((v + 32768u) >> 16);
+            v *= gain[ob + o];
 #endif
+            out[ob + o] = to_uchar(v);
         }
     }
 }
@@ -241,8 +227,8 @@ __kernel void evolve(__global const uchar *restrict stack,
         // the stream times of the run's slots: byte offsets of the two frames and the fraction
         const int4 fa = bframe[slot.x], fb = bframe[slot.y];
         stream_t a, b;
-        a.p0 = stack + (uint)fa.x + pa * 3; a.p1 = stack + (uint)fa.y + pa * 3; a.f = (ushort)fa.z;
-        b.p0 = stack + (uint)fb.x + pb * 3; b.p1 = stack + (uint)fb.y + pb * 3; b.f = (ushort)fb.z;
+        a.p0 = stack + (uint)fa.x + pa * 3; a.p1 = stack + (uint)fa.y + pa * 3; a.f = as_float(fa.z);
+        b.p0 = stack + (uint)fb.x + pb * 3; b.p1 = stack + (uint)fb.y + pb * 3; b.f = as_float(fb.z);
 #if PIXEL_BYTES == 3
         run_const(code, gain, out, (size_t)px * 3, npx * 3, blend, spill, a, b);
 #else

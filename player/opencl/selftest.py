@@ -350,13 +350,13 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
     "turn-point warp, RGB": _warp_check("RGB", 4),
     "turn-point warp, BGRA, step 16": _warp_check("BGRA", 16),
     "mode tiles": _mode_check(*_TILES),
-    "mode evolve": _mode_check("evolve", {"seed": 3, "jitter": 2.0}, frames=6, max_abs=0),
-    "mode evolve, BGRA": _mode_check("evolve", {"seed": 3, "jitter": 2.0, "format": "BGRA"}, frames=6, max_abs=0),
+    "mode evolve": _mode_check("evolve", {"seed": 3, "jitter": 2.0}, frames=6, max_share=1.0),
+    "mode evolve, BGRA": _mode_check("evolve", {"seed": 3, "jitter": 2.0, "format": "BGRA"}, frames=6, max_share=1.0),
     "mode evolve, rate map": _mode_check(
         "evolve",
         {"seed": 3, "rate_sigma": 4.0, "rate_map": np.linspace(0.5, 2, 48 * 64).reshape(48, 64)},
         frames=6,
-        max_abs=0,
+        max_share=1.0,
     ),
 }
 

@@ -95,9 +95,10 @@ def test_runs_describe_the_quilt(quilt):
 @pytest.mark.parametrize("fmt", ["RGB", "RGBA", "BGRA"])
 @pytest.mark.parametrize("loop", [False, True])
 def test_opencl_engine_matches_reference(quilt, cl_context, loop, fmt):
-    """The engine pair on its own, through its interface: the same frames, byte for byte (the
-    same fixed point both sides), with and without a rate map (short runs), the frame left in
-    flight; a four-byte format's frames are the RGB engine's, placed (16-pixel chunks)."""
+    """The engine pair on its own, through its interface: same frames (float32 both sides, at
+    most one grey level apart where a device contracts a multiply-add), with and without a
+    rate map (short runs), the frame left in flight, the reference's pixels exact on most
+    frames; a four-byte format's frames are the RGB engine's, placed (16-pixel chunks)."""
     import pyopencl as cl
 
     from dynatex.player.pixels import pixel_format
@@ -117,6 +118,7 @@ def test_opencl_engine_matches_reference(quilt, cl_context, loop, fmt):
     assert isinstance(ref, RunsReference) and isinstance(dev, RunsOpenCL)
     source_time = _times(np.random.default_rng(0).uniform(-2, 2, n_blocks).astype(np.float32))
     rate = quantize_rate(np.tile(np.linspace(0.5, 2.5, w, dtype=np.float32), (h, 1)))
+    exact = total = 0
     try:
         for r in (None, rate):
             for e in (ref, dev, rgb):
@@ -126,10 +128,14 @@ def test_opencl_engine_matches_reference(quilt, cl_context, loop, fmt):
                 assert ref.start(t, a, source_time=source_time, loop=loop) is None
                 event = dev.start(t, b, source_time=source_time, loop=loop, wait=False)
                 event.wait()
-                assert np.array_equal(a, b), (r is None, t)
+                diff = np.abs(a.astype(int) - b)
+                assert diff.max() <= 1, (r is None, t)
                 c = np.empty((h, w, 3), np.uint8)
                 rgb.start(t, c, source_time=source_time, loop=loop, wait=True)
                 assert np.array_equal(b, pixel_format(fmt).from_rgb(c)), (r is None, t)
+                exact += bool(diff.max() == 0)
+                total += 1
+        assert exact >= total - 2
         assert dev.n_runs > len(build_runs(pix, q.labels, *blend[:1], blend[1], blend[2])["starts"]) - 1
     finally:
         dev.close()
