@@ -134,7 +134,7 @@ class BlendOpenCL(Blend):
         del padded
         self._d_params = cl.Buffer(ctx, mf.READ_ONLY, 2 * MAX_TERMS * 4)
         defines = {"FRAME_VECS": self._vecs, "ITEMS": ITEMS, "PIXELS": h * w, **self.format.defines}
-        prog = build_program(ctx, "blend.cl", defines)
+        prog = build_program(ctx, ("pixels.cl", "blend.cl"), defines)
         self._outs = {}
         rgb = self.format.bytes == 3
         for terms in (2, 4) if rgb else (1, 2, 4):

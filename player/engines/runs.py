@@ -420,7 +420,7 @@ class RunsOpenCL(Runs):
         gain = np.zeros(4, np.float32) if self.gain is None else self.gain.astype(np.float32).reshape(-1)
         self._d_gain = cl.Buffer(ctx, ro, hostbuf=np.concatenate([gain, np.zeros(pad, np.float32)]))
         defines = {"INTERP": self.interpolate, "GAIN": self.gain is not None, "WIDTH": w, **self.format.defines}
-        self._kernel = Kernel(build_program(ctx, "runs.cl", defines), "evolve")
+        self._kernel = Kernel(build_program(ctx, ("pixels.cl", "runs.cl"), defines), "evolve")
         self._kernel.set(stack=self._d_stack, code=self._d_code, gain=self._d_gain, height=np.int32(h))
         #: the kernel's frame destination (writes straight into callers' arrays where the device shares host memory)
         self.out = FrameOut(ctx, queue, self._kernel, "out", h * w * pb)

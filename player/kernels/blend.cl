@@ -22,10 +22,6 @@
 
 #define FRAME(i) (frames + (size_t)params[i] * FRAME_VECS * 16)
 
-// An under-aligned vector type: one unaligned store into any caller's array (PoCL's vstore16 of
-// uchar stores byte by byte).
-typedef uchar16 __attribute__((aligned(1))) uchar16_u;
-typedef uint16 __attribute__((aligned(1))) uint16_u;
 
 #if PIXEL_BYTES == 3
 
@@ -66,28 +62,6 @@ __kernel void blend4(__global const uchar *restrict frames,
 
 #else
 
-#define PLACE(v) ((((v) & 0xFFu) << (8 * R_AT)) | ((((v) >> 8) & 0xFFu) << (8 * G_AT)) | \
-                  ((((v) >> 16) & 0xFFu) << (8 * B_AT)) | (0xFFu << (8 * A_AT)))
-
-// 16 RGB pixels (48 bytes in c0, c1, c2) as 16 four-byte pixels at p.
-inline void put16(uchar16 c0, uchar16 c1, uchar16 c2, __global uchar *p)
-{
-#ifdef __ENDIAN_LITTLE__
-    const uint16 w = (uint16)(as_uint4(c0), as_uint4(c1), as_uint4(c2), (uint4)(0));
-    // pixel k starts at RGB byte 3k: word 3k / 4, bit 8 * (3k % 4); its last bytes spill into the next word
-    const uint16 lo = w.s00123345667899ab, hi = w.s112344567789aabc;
-    const uint16 s = (uint16)(0, 24, 16, 8, 0, 24, 16, 8, 0, 24, 16, 8, 0, 24, 16, 8);
-    const uint16 v = (lo >> s) | ((hi << 1) << (31 - s));  // (hi << 1) << 31 is 0 where s is 0
-    *(__global uint16_u *)p = PLACE(v);
-#else
-    uchar rgb[48];
-    vstore16(c0, 0, rgb); vstore16(c1, 1, rgb); vstore16(c2, 2, rgb);
-    for (int k = 0; k < 16; ++k) {
-        p[4 * k + R_AT] = rgb[3 * k]; p[4 * k + G_AT] = rgb[3 * k + 1]; p[4 * k + B_AT] = rgb[3 * k + 2];
-        p[4 * k + A_AT] = 255;
-    }
-#endif
-}
 
 // Whole groups of 16 pixels: the 48-byte group g of every term is 16-byte aligned.
 #define LOAD(p, j) (((__global const uchar16 *)(p))[3 * q + (j)])

@@ -87,10 +87,7 @@ inline float16 blend16(float16 a, float16 b, ushort16 code)
     return first + w * (second - first);
 }
 
-// PoCL's vstore16 of uchar stores byte by byte (4x slower than the whole kernel's other
-// work); an under-aligned vector type gives one unaligned 16-byte store.
-typedef uchar16 __attribute__((aligned(1))) uchar16_u;
-typedef uint16 __attribute__((aligned(1))) uint16_u;
+// uchar16_u (pixels.cl): one unaligned 16-byte store where PoCL's vstore16 of uchar stores byte by byte.
 
 inline void store16(uchar16 v, __global uchar *p)
 {
@@ -156,28 +153,6 @@ __attribute__((always_inline)) inline void run_const(__global const ushort *rest
 
 #if PIXEL_BYTES == 4
 
-#define PLACE(v) ((((v) & 0xFFu) << (8 * R_AT)) | ((((v) >> 8) & 0xFFu) << (8 * G_AT)) | \
-                  ((((v) >> 16) & 0xFFu) << (8 * B_AT)) | (0xFFu << (8 * A_AT)))
-
-// 16 RGB pixels (48 bytes in c0, c1, c2) as 16 four-byte pixels at p.
-inline void put16(uchar16 c0, uchar16 c1, uchar16 c2, __global uchar *p)
-{
-#ifdef __ENDIAN_LITTLE__
-    const uint16 w = (uint16)(as_uint4(c0), as_uint4(c1), as_uint4(c2), (uint4)(0));
-    // pixel k starts at RGB byte 3k: word 3k / 4, bit 8 * (3k % 4); its last bytes spill into the next word
-    const uint16 lo = w.s00123345667899ab, hi = w.s112344567789aabc;
-    const uint16 s = (uint16)(0, 24, 16, 8, 0, 24, 16, 8, 0, 24, 16, 8, 0, 24, 16, 8);
-    const uint16 v = (lo >> s) | ((hi << 1) << (31 - s));  // (hi << 1) << 31 is 0 where s is 0
-    *(__global uint16_u *)p = PLACE(v);
-#else
-    uchar rgb[48];
-    vstore16(c0, 0, rgb); vstore16(c1, 1, rgb); vstore16(c2, 2, rgb);
-    for (int k = 0; k < 16; ++k) {
-        p[4 * k + R_AT] = rgb[3 * k]; p[4 * k + G_AT] = rgb[3 * k + 1]; p[4 * k + B_AT] = rgb[3 * k + 2];
-        p[4 * k + A_AT] = 255;
-    }
-#endif
-}
 
 // Spread row y's RGB bytes, drawn at the start of its four-byte output row, to its pixels, in
 // place: right to left, a chunk's 48 bytes are read before its 64 are stored, and every store

@@ -58,10 +58,10 @@ PROGRAMS = [
         },
     ),
     ("projection.cl", {"HALF": 0, "CHANNELS": 3, "DETAIL": 1, "VH": 9, "VW": 14, **RGB}),
-    ("blend.cl", {"FRAME_VECS": 4, "ITEMS": 4, "PIXELS": 21, **RGB}),
-    ("blend.cl", {"FRAME_VECS": 4, "ITEMS": 4, "PIXELS": 21, **BGRA}),
-    ("runs.cl", {"INTERP": 1, "GAIN": 0, "WIDTH": 24, **RGB}),
-    ("runs.cl", {"INTERP": 1, "GAIN": 1, "WIDTH": 24, **BGRA}),
+    (("pixels.cl", "blend.cl"), {"FRAME_VECS": 4, "ITEMS": 4, "PIXELS": 21, **RGB}),
+    (("pixels.cl", "blend.cl"), {"FRAME_VECS": 4, "ITEMS": 4, "PIXELS": 21, **BGRA}),
+    (("pixels.cl", "runs.cl"), {"INTERP": 1, "GAIN": 0, "WIDTH": 24, **RGB}),
+    (("pixels.cl", "runs.cl"), {"INTERP": 1, "GAIN": 1, "WIDTH": 24, **BGRA}),
     ("copy.cl", {}),
 ]
 
@@ -95,7 +95,7 @@ def test_frames_reach_the_callers_array_directly_or_by_copy(cl_context, direct):
     if direct and not writes_through(cl_context):
         pytest.skip("this device does not share host memory")
     queue = cl.CommandQueue(cl_context)
-    prog = build_program(cl_context, "blend.cl", {"FRAME_VECS": 4, "ITEMS": 1, "PIXELS": 16, **RGB})
+    prog = build_program(cl_context, ("pixels.cl", "blend.cl"), {"FRAME_VECS": 4, "ITEMS": 1, "PIXELS": 16, **RGB})
     frames = np.arange(3 * 64, dtype=np.uint8).reshape(3, 64)  # frames of 48 bytes, 64 apart
     d_frames = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=frames)
     d_params = cl.Buffer(cl_context, cl.mem_flags.READ_ONLY, 32)
