@@ -6,11 +6,11 @@ linear map ``L``. Dynamics: an AR(p) process on the global coordinates. A frame 
 ``mean + sum_j u_j stacked_basis[j]`` with ``u = (r_s, r_s z_s)`` per component, so the
 player decodes a global coordinate to ``u`` and projects it like an LDS state.
 
-The optional ``switching`` subgroup (format 1.6) holds dynamics the player prefers when present:
-a Markov chain over the components and, per component, an AR(1) process on its local
-coordinates whose stationary covariance is the component's own (``local_cov``), so the
-synthesis stays on each component's subspace and visits the components as the clip does.
-Databases written without it play the AR process on the global coordinates.
+The optional ``switching`` subgroup (format 1.6) holds dynamics the player prefers when present: a
+Markov chain over the components and, per component, an AR process (its order the length of
+``local_ar``'s second axis) on its local coordinates whose stationary covariance is the component's
+own (``local_cov``), so the synthesis stays on each component's subspace and visits the components
+as the clip does. Databases written without it play the AR process on the global coordinates.
 """
 
 from __future__ import annotations

@@ -97,8 +97,8 @@ DEMO_STEPS: list[DemoStep] = [
     DemoStep("lds: slow, calm", "lds", {"speed": 0.5, "intensity": 0.5}),
     DemoStep("lds: fine scales up", "lds", {"scales": (0.5, 1.0, 2.5)}),
     DemoStep("lds: float16 basis", "lds", options={"precision": "float16"}),
-    DemoStep("mixture: 16 draws", "mixture"),
-    DemoStep("mixture: plain AR, calm", "mixture", {"draws": 1, "intensity": 0.5}),
+    DemoStep("mixture: as learned", "mixture"),
+    DemoStep("mixture: calm", "mixture", {"intensity": 0.5}),
     DemoStep("turnpoints: turns + jumps", "turnpoints", texture="pendulum"),
     DemoStep("turnpoints: jumps, speed 1.5", "turnpoints", {"speed": 1.5}, {"playback": "jumps"}, texture="pendulum"),
     DemoStep(

@@ -11,13 +11,13 @@ projection of ``u = (r_s, r_s z_s)`` onto the stacked basis (component means and
 with the LDS mode's ``project`` kernel (:mod:`dynatex.player.engines.projection`): one launch per frame,
 memory-bound on the stacked basis.
 
-A model with switching dynamics (``model.switching``, analysed since format 1.6) is played by
-them instead: the component follows the learned Markov chain, every component's local
-coordinates run their own AR(1) process (on the component's subspace, with its covariance),
-and a switch cross-fades the responsibilities from the old component to the new one over
-as many frames as keep each frame's step within the clip's typical one (``FADE_QUANTILE`` of
-its steps), so a switch changes the frame no faster than the clip's own motion; ``draws`` then
-has no effect.
+A model with switching dynamics (``model.switching``, analysed since format 1.6) is played by them
+instead: the component follows the learned Markov chain, every component's local coordinates run
+their own AR process (``local_ar``, order 2 as analysed; on the component's subspace, with its
+covariance), and a switch cross-fades the responsibilities from the old component to the new one
+over as many frames as keep each frame's step within the clip's typical one (``FADE_QUANTILE`` of
+its steps), so a switch changes the frame no faster than the clip's own motion; ``draws`` then has
+no effect.
 """
 
 from __future__ import annotations
