@@ -151,13 +151,28 @@ def _smoother(n: int, sigma: float) -> tuple[np.ndarray, np.ndarray]:
 
 def _low_pass(x: np.ndarray, smoother: tuple[np.ndarray, np.ndarray], weight: np.ndarray) -> np.ndarray:
     """``x (L, B, B, 3)`` smoothed in space (:func:`_smoother`) over the pixels of ``weight (B, B)``
-    1 only (a normalised convolution: the torus not yet filled does not count)."""
+    1 only (a normalised convolution: the torus not yet filled does not count).
+
+    Batched matrix products on contiguous views: only the first product reads ``x`` at full size
+    and only the last writes it; the middle ones work on ``(L, k, 3, B)`` cells."""
     up, down = smoother
-    y = x * weight[None, :, :, None]
-    for m in (down, up):
-        y = np.tensordot(m, y, axes=(1, 1))  # along rows: (., L, B, 3)
-        y = np.tensordot(m, y, axes=(1, 2)).transpose(2, 1, 0, 3)  # along columns, back to (L, ., ., 3)
-    return y / np.maximum(up @ down @ weight @ down.T @ up.T, 1e-6)[None, :, :, None]
+    n, b = x.shape[:2]
+    k = down.shape[0]
+    y = np.matmul(down, (x * weight[None, :, :, None]).reshape(n, b, b * 3))  # rows: (L, k, B 3)
+    y = np.ascontiguousarray(y.reshape(n, k, b, 3).transpose(0, 1, 3, 2))  # (L, k, 3, B)
+    y = np.matmul(np.matmul(y, down.T), up.T)  # columns down and up: (L, k, 3, B)
+    y = np.matmul(up, np.ascontiguousarray(y.transpose(0, 1, 3, 2)).reshape(n, k, b * 3)).reshape(n, b, b, 3)
+    y /= np.maximum(up @ down @ weight @ down.T @ up.T, 1e-6)[None, :, :, None]
+    return y
+
+
+def _window(y: int, x: int, b: int, period: tuple[int, int]) -> tuple:
+    """Index of the ``b x b`` torus window at ``(y, x)`` (its last two axes): slices (a view,
+    no gather) where it does not wrap, index arrays where it does."""
+    ax = [slice(v, v + b) if v + b <= p else (v + np.arange(b)) % p for v, p in zip((y, x), period)]
+    if all(isinstance(a, np.ndarray) for a in ax):
+        return ax[0][:, None], ax[1][None, :]
+    return tuple(ax)
 
 
 QUILT_REUSE = 4
@@ -248,8 +263,7 @@ def quilted_torus(
     src[:] = -1
     for i in range(nby):
         for j in range(nbx):
-            rows = (i * step + np.arange(b)) % py
-            cols = (j * step + np.arange(b)) % px
+            win = _window(i * step, j * step, b, (py, px))
             sides = [
                 s
                 for s, on in (
@@ -272,13 +286,14 @@ def quilted_torus(
                 ] = True
             if not sides:
                 y0, x0 = int(rng.integers(0, h - b + 1)), int(rng.integers(0, w - b + 1))
-                torus[:, rows[:, None], cols[None, :]] = tx.block(y0, x0, b, b)
-                filled[rows[:, None], cols[None, :]] = True
+                torus[(slice(None), *win)] = tx.block(y0, x0, b, b)
+                filled[win] = True
                 src[i, j] = (y0, x0)
                 if step_done:
                     step_done()
                 continue
-            old_feat = torus[u_feat[:, None, None], rows[None, :, None], cols[None, None, :]].astype(np.float32)
+            old = torus[(slice(None), *win)]
+            old_feat = old[u_feat].astype(np.float32)
             template = np.ascontiguousarray(
                 ((old_feat.transpose(1, 2, 0, 3).reshape(b * b, -1) - mean) @ basis).reshape(b, b, -1)
             )
@@ -312,7 +327,6 @@ def quilted_torus(
                 cand = cand[np.argsort(e.ravel()[cand], kind="stable")[:8]]
             y0, x0 = (int(v) for v in np.unravel_index(int(cand[rng.integers(0, cand.size)]), e.shape))
             new = tx.block(y0, x0, b, b)
-            old = torus[:, rows[:, None], cols[None, :]]
             d = new[u_cut].astype(np.float32) - old[u_cut].astype(np.float32)
             perr = (d * d).sum(axis=(0, 3)) / len(u_cut)
             band = {"left": perr[:, :o], "right": perr[:, b - o :], "top": perr[:o, :], "bottom": perr[b - o :, :]}
@@ -325,12 +339,14 @@ def quilted_torus(
             a = sharp.astype(np.float32)[None, :, :, None]
             oldf = old.astype(np.float32)
             d = new - oldf
-            out = oldf + a * d
+            out = a * d
+            out += oldf
             if smoother is not None:  # the coarse difference fades across the whole overlap
-                aw = wide.astype(np.float32)[None, :, :, None]
-                out += (aw - a) * _low_pass(d, smoother, filled[rows[:, None], cols[None, :]].astype(np.float32))
-            torus[:, rows[:, None], cols[None, :]] = np.clip(np.rint(out), 0, 255).astype(np.uint8)
-            filled[rows[:, None], cols[None, :]] = True
+                coarse = _low_pass(d, smoother, filled[win].astype(np.float32))
+                coarse *= wide.astype(np.float32)[None, :, :, None] - a
+                out += coarse
+            torus[(slice(None), *win)] = np.clip(np.rint(out, out=out), 0, 255, out=out)
+            filled[win] = True
             src[i, j] = (y0, x0)
             if j > 0 and (y0, x0) == tuple(src[i, j - 1] + (0, step)):
                 run_x[i, j] = run_x[i, j - 1] + 1
