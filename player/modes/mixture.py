@@ -16,8 +16,8 @@ instead: the component follows the learned Markov chain, every component's local
 their own AR process (``local_ar``, order 2 as analysed; on the component's subspace, with its
 covariance), and a switch cross-fades the responsibilities from the old component to the new one
 over as many frames as keep each frame's step within the clip's typical one (``FADE_QUANTILE`` of
-its steps), so a switch changes the frame no faster than the clip's own motion; ``draws`` then has
-no effect.
+its steps), so a switch changes the frame no faster than the clip's own motion; such a texture does
+not offer ``draws``.
 """
 
 from __future__ import annotations
@@ -173,8 +173,11 @@ class MixturePlayer(ProjectionPlayer):
         Range(int, 1, MAX_DRAWS),
         DEFAULT_DRAWS,
         "Noise draws per step; the candidate nearest the learned manifold is kept among those whose frame "
-        "step stays within the clip's own (1: the plain AR process). No effect on textures with switching "
-        "dynamics (analysed since format 1.6), whose process stays on the components by itself.",
+        "step stays within the clip's own (1: the plain AR process). Offered only by textures analysed "
+        "without switching dynamics (before format 1.6).",
+        offered=lambda player: player.switching is None,
+        unoffered="it has no effect on a texture with switching dynamics (analysed since format 1.6), whose "
+        "process stays on the components by itself",
     )
 
     # -- synthesis -----------------------------------------------------------------

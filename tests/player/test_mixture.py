@@ -99,20 +99,36 @@ def test_seed_determinism_and_state_round_trip(any_db):
     ):
         a = [p.next_frame() for _ in range(5)]
         assert all(np.array_equal(x, q.next_frame()) for x in a)
-        p.draws = 4
+        p.intensity = 0.5
+        if p.switching is None:
+            p.draws = 4
         state = p.get_state()
         ahead = [p.next_frame() for _ in range(5)]
         q.set_state(state)
-        assert q.draws == 4 and q.frame_index == 5
+        assert q.intensity == 0.5 and q.frame_index == 5
+        assert q.switching is not None or q.draws == 4
         assert all(np.array_equal(x, q.next_frame()) for x in ahead)
 
 
-def test_controls_are_validated(mix_db, ar_db):
+def test_draws_is_offered_only_without_switching_dynamics(mix_db, ar_db):
+    """``draws`` has no effect on the switching process: such a texture leaves it out of its controls and
+    state and refuses it; the older model offers it."""
+    assert "draws" in MixturePlayer.controls()
     with MixturePlayer(mix_db, backend="numpy") as p:
+        assert "draws" not in p.controls() and "draws" not in p.get_state()
+        with pytest.raises(ValueError, match="does not offer the control draws: it has no effect"):
+            p.draws = 4
+    with MixturePlayer(ar_db, backend="numpy") as p:
+        assert "draws" in p.controls() and p.get_state()["draws"] == 16
+
+
+def test_controls_are_validated(mix_db, ar_db):
+    with MixturePlayer(ar_db, backend="numpy") as p:
         with pytest.raises(ValueError, match=r"draws must be an integer in 1\.\.1024, not 0"):
             p.draws = 0
         with pytest.raises(TypeError, match="draws must be an integer"):
             p.draws = 2.5
+    with MixturePlayer(mix_db, backend="numpy") as p:
         with pytest.raises(ValueError, match="intensity must be a finite number"):
             p.intensity = -1
         with pytest.raises(ValueError, match="g must be a finite vector"):
