@@ -127,6 +127,8 @@ class MixturePlayer(ProjectionPlayer):
 
     def _open(self, *, seed: int, precision: str, lookahead: int | None, draws: int = DEFAULT_DRAWS) -> None:
         super()._open(seed=seed, precision=precision, lookahead=lookahead)
+        if self.switching is not None and draws != DEFAULT_DRAWS:
+            raise InvalidArgumentError(f"this texture does not offer the control draws: {type(self).draws.unoffered}")
         self._draws = draws
 
     def _setup(self, model: MixtureModel) -> None:

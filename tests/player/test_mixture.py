@@ -118,8 +118,10 @@ def test_draws_is_offered_only_without_switching_dynamics(mix_db, ar_db):
         assert "draws" not in p.controls() and "draws" not in p.get_state()
         with pytest.raises(ValueError, match="does not offer the control draws: it has no effect"):
             p.draws = 4
-    with MixturePlayer(ar_db, backend="numpy") as p:
-        assert "draws" in p.controls() and p.get_state()["draws"] == 16
+    with pytest.raises(ValueError, match="does not offer the control draws"):
+        MixturePlayer(mix_db, backend="numpy", draws=4)
+    with MixturePlayer(ar_db, backend="numpy", draws=4) as p:
+        assert "draws" in p.controls() and p.get_state()["draws"] == 4
 
 
 def test_controls_are_validated(mix_db, ar_db):
