@@ -161,6 +161,17 @@ def check_options(cls: type, options: dict[str, Any]) -> None:
     raise ArgumentTypeError(f"mode {cls.mode!r} takes no option {name!r}{hint}; its options: {', '.join(known[1:])}")
 
 
+class _either:
+    """A method bound to the instance when called on one, else to the class."""
+
+    def __init__(self, func: Callable[..., Any]) -> None:
+        self.func = func
+        functools.update_wrapper(self, func)
+
+    def __get__(self, obj: Any, owner: type) -> Callable[[], Any]:
+        return functools.partial(self.func, owner if obj is None else obj)
+
+
 class Player:
     """Base class of the player modes.
 
@@ -219,10 +230,12 @@ class Player:
         if cls.__dict__.get("mode"):
             document(cls, COMMON_OPTIONS)
 
-    @classmethod
-    def controls(cls) -> dict[str, Control]:
-        """The mode's live controls by name, in declaration order."""
-        return cls._controls
+    @_either
+    def controls(self_or_cls) -> dict[str, Control]:
+        """The mode's live controls by name, in declaration order: on the class every control it
+        declares, on an open player those its texture offers (see ``Control.offered``)."""
+        offered = self_or_cls.__dict__.get("_offered") if isinstance(self_or_cls, Player) else None
+        return self_or_cls._controls if offered is None else offered
 
     def __setattr__(self, name: str, value: Any) -> None:
         """Once the player is open, setting an attribute it does not have (``player.sped = 2``)
@@ -292,6 +305,7 @@ class Player:
         except BaseException:
             self.close()
             raise
+        self._offered = {n: c for n, c in type(self)._controls.items() if c.offered is None or c.offered(self)}
 
     def _open(self, **options: Any) -> None:
         """The mode's part of opening: read its model, open its engine, warm it. It takes the

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..checks import Kind
+from ..errors import InvalidArgumentError
 from ..params import Param
 
 
@@ -65,6 +66,10 @@ class Control:
     ``flag`` is the ``dynatex play`` option (``""``: ``--speed``; None: not on the command
     line). A player starts every control at its declared default (a mode whose default is
     computed from the model, ``None`` here, sets it in its setup); ``get_state`` saves every control.
+
+    ``offered(player) -> bool``, when given, says whether the opened texture offers the control
+    (a control that has no effect on some models); ``unoffered`` says why not. A player whose texture
+    does not offer it leaves it out of ``player.controls()`` and its state, and refuses to set it.
     """
 
     def __init__(
@@ -76,8 +81,12 @@ class Control:
         flag: str | None = "",
         optional: bool = False,
         default_doc: str | None = None,
+        offered: Callable[[Any], bool] | None = None,
+        unoffered: str = "",
     ) -> None:
         self._spec = dict(kind=kind, default=default, doc=doc, flag=flag, optional=optional, default_doc=default_doc)
+        self.offered = offered
+        self.unoffered = unoffered
         self.param: Param = Param("", **self._spec)
         self.name = ""
         self.attr = ""
@@ -106,6 +115,9 @@ class Control:
         return getattr(obj, self.attr)
 
     def __set__(self, obj: Any, value: Any) -> None:
+        offered = getattr(obj, "__dict__", {}).get("_offered")
+        if offered is not None and self.name not in offered:
+            raise InvalidArgumentError(f"this texture does not offer the control {self.name}: {self.unoffered}")
         value = self.param.check(value)
         if self._fset is None:
             setattr(obj, self.attr, value)

@@ -151,8 +151,8 @@ def known_count(cls: type, opts: dict[str, Any]) -> dict[str, Any]:
 
 
 def apply_controls(player: Any, args: argparse.Namespace) -> None:
-    """Set every control the command line gave on ``player``."""
-    for name, control in player.controls().items():
+    """Set every control the command line gave on ``player`` (one its texture does not offer is refused)."""
+    for name, control in type(player).controls().items():
         if control.param.flag_name and hasattr(args, name):
             setattr(player, name, getattr(args, name))
 

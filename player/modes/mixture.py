@@ -16,8 +16,11 @@ instead: the component follows the learned Markov chain, every component's local
 their own AR process (``local_ar``, order 2 as analysed; on the component's subspace, with its
 covariance), and a switch cross-fades the responsibilities from the old component to the new one
 over as many frames as keep each frame's step within the clip's typical one (``FADE_QUANTILE`` of
-its steps), so a switch changes the frame no faster than the clip's own motion; ``draws`` then has
-no effect.
+its steps), so a switch changes the frame no faster than the clip's own motion. The chain waits for a
+fade to end (a component the clip holds for fewer frames than a fade lasts is still reached) and then
+leaves that much sooner, so a visit lasts as long as the chain's on average and the long-run shares
+stay the clip's; during a fade the components' fluctuations make up the energy that the blend of two
+mean images lacks, so a fade keeps the frame's expected energy. Such a texture does not offer ``draws``.
 """
 
 from __future__ import annotations
@@ -124,6 +127,8 @@ class MixturePlayer(ProjectionPlayer):
 
     def _open(self, *, seed: int, precision: str, lookahead: int | None, draws: int = DEFAULT_DRAWS) -> None:
         super()._open(seed=seed, precision=precision, lookahead=lookahead)
+        if self.switching is not None and draws != DEFAULT_DRAWS:
+            raise InvalidArgumentError(f"this texture does not offer the control draws: {type(self).draws.unoffered}")
         self._draws = draws
 
     def _setup(self, model: MixtureModel) -> None:
@@ -161,7 +166,15 @@ class MixturePlayer(ProjectionPlayer):
             self._dim = self.components * (self.dim + 1)
             self._offset = model.decode_offset
             self._label = int(model.responsibilities[0].argmax())
-            self._chain = np.cumsum(self.switching.transitions, axis=1)
+            self._stay = np.diag(self.switching.transitions).copy()
+            j = self.dim + 1
+            means = np.concatenate([np.ones((self.components, 1)), self._offset], axis=1)  # (S, d + 1)
+            blocks = [self._gram[s * j : (s + 1) * j, s * j : (s + 1) * j] for s in range(self.components)]
+            rows = np.zeros((self.components, self.components * j))
+            for s in range(self.components):
+                rows[s, s * j : (s + 1) * j] = means[s]
+            self._mean_gram = rows @ self._gram @ rows.T  # (S, S): mean images' products, per pixel
+            self._fluct = np.array([np.trace(model.local_cov[s] @ b[1:, 1:]) for s, b in enumerate(blocks)])
             order = self.switching.local_ar.shape[1]
             self._zh = np.repeat(model.local_coords[:1] - self._offset[None], order, axis=0)  # z_{t-i} - c
             self._r = np.eye(self.components)[self._label]
@@ -173,8 +186,11 @@ class MixturePlayer(ProjectionPlayer):
         Range(int, 1, MAX_DRAWS),
         DEFAULT_DRAWS,
         "Noise draws per step; the candidate nearest the learned manifold is kept among those whose frame "
-        "step stays within the clip's own (1: the plain AR process). No effect on textures with switching "
-        "dynamics (analysed since format 1.6), whose process stays on the components by itself.",
+        "step stays within the clip's own (1: the plain AR process). Offered only by textures analysed "
+        "without switching dynamics (before format 1.6).",
+        offered=lambda player: player.switching is None,
+        unoffered="it has no effect on a texture with switching dynamics (analysed since format 1.6), whose "
+        "process stays on the components by itself",
     )
 
     # -- synthesis -----------------------------------------------------------------
@@ -196,18 +212,28 @@ class MixturePlayer(ProjectionPlayer):
         # weights whose squares sum to one, so that a cross-fade keeps their variance.
         r = self._r
         w = r / np.sqrt(r @ r)
+        if r.max() < 1.0:
+            # the blend of two mean images lacks sum r_s |m_s|^2 - |sum r_s m_s|^2 of the energy the
+            # components hold on average: the fluctuations make it up
+            lost = r @ np.diag(self._mean_gram) - r @ self._mean_gram @ r
+            have = (w * w) @ self._fluct
+            w = w * np.sqrt(1.0 + max(lost, 0.0) / max(have, 1e-300))
         ext = np.concatenate([r[:, None], r[:, None] * self._offset + w[:, None] * dz], axis=1)
         return ext.reshape(-1)
 
     def _switch_step(self) -> None:
         dyn, s_count = self.switching, self.components
-        new = min(int(np.searchsorted(self._chain[self._label], self._rng.random(), side="right")), s_count - 1)
+        draw = self._rng.random()
+        start, done, total = self._fade
+        if done < total:
+            new = self._label
+        else:
+            new = self._leave(draw, total)
         eps = self._rng.standard_normal(self._zh.shape[1:])
         dz = np.einsum("spij,psj->si", dyn.local_ar, self._zh)
         dz += np.sqrt(self._intensity) * np.einsum("sij,sj->si", dyn.local_noise, eps)
         self._zh[1:] = self._zh[:-1]
         self._zh[0] = dz
-        start, done, total = self._fade
         if new != self._label:
             r, self._r = self._r, np.eye(s_count)[new]
             jump = self._switch_coefficients()
@@ -224,6 +250,21 @@ class MixturePlayer(ProjectionPlayer):
             self._r = one
         self._fade = (start, done, total)
         self._u = self._switch_coefficients()
+
+    def _leave(self, draw: float, fade: int) -> int:
+        """The component after this frame, past a fade of ``fade`` frames: the chain's own choice,
+        leaving more often so that a visit (fade included) lasts as long as the chain's on average."""
+        i = self._label
+        leave = 1.0 - self._stay[i]
+        if leave <= 0.0:
+            return i
+        raised = leave / max(1.0 - fade * leave, leave)
+        if draw >= raised:
+            return i
+        row = self.switching.transitions[i].copy()
+        row[i] = 0.0
+        cum = np.cumsum(row) / leave
+        return min(int(np.searchsorted(cum, draw / raised, side="right")), self.components - 1)
 
     def _step(self) -> None:
         if self.switching is not None:

@@ -49,8 +49,6 @@ def test_analyze_then_play(tmp_path, capsys):
             "mixture",
             "--frames",
             "4",
-            "--draws",
-            "4",
             "--intensity",
             "0.5",
             "-o",
@@ -59,6 +57,11 @@ def test_analyze_then_play(tmp_path, capsys):
     )
     assert rc == 0
     assert len(list(out.glob("*.png"))) == 4
+    capsys.readouterr()
+    # draws has no effect on the switching process this analysis stores: refused in one line
+    rc = main(["play", str(db), "--mode", "mixture", "--frames", "2", "--draws", "4", "-o", str(tmp_path / "x") + "/"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "does not offer the control draws" in err and len(err.strip().splitlines()) == 1
 
 
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
