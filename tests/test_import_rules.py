@@ -93,6 +93,22 @@ def test_a_command_loads_its_own_module_and_play_or_info_no_analyzer(lds_db, tmp
     assert commands == ["_common", "analyze"] and "--methods" in out, commands
 
 
+def test_info_loads_no_opencl(lds_db):
+    """``dynatex info`` reads the file and the modes' declarations: it loads neither pyopencl nor the
+    player's OpenCL plumbing (a machine without an OpenCL driver lists a database all the same)."""
+    code = textwrap.dedent("""
+        import json, sys
+        from dynatex.cli import main
+        code = main(sys.argv[1:])
+        opencl = sorted(m for m in sys.modules if m.split(".")[0] == "pyopencl" or ".opencl" in m)
+        print(json.dumps([code, opencl]))
+    """)
+    r = subprocess.run([sys.executable, "-c", code, "info", str(lds_db)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "speed" in r.stdout  # the lds mode's controls were described
+    assert json.loads(r.stdout.splitlines()[-1]) == [0, []]
+
+
 def test_tiledb_imports_nothing_above_it():
     code = textwrap.dedent("""
         import sys
