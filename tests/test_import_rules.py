@@ -63,8 +63,8 @@ LOADED = textwrap.dedent("""
 
 def test_a_command_loads_its_own_module_and_play_or_info_no_analyzer(lds_db, tmp_path):
     """``dynatex --help`` names every command without importing one; ``dynatex CMD`` imports
-    CMD's module (and its helpers) alone, so ``play`` and ``info`` load no analyzer, OpenCV,
-    SciPy or Dask, and ``analyze`` no player command."""
+    CMD's module (and its helpers) alone, so ``play`` (``--loop`` too, which reports the wrap)
+    and ``info`` load no analyzer, OpenCV, SciPy or Dask, and ``analyze`` no player command."""
     from dynatex.commands import COMMANDS
 
     def loaded(*argv) -> tuple[str, list[str], list[str]]:
@@ -85,6 +85,7 @@ def test_a_command_loads_its_own_module_and_play_or_info_no_analyzer(lds_db, tmp
         (("info", lds_db), ["info"]),
         (("play", "--help"), player_side),
         (("play", lds_db, "--frames", "2", "-o", video), player_side),
+        (("play", lds_db, "--loop", "--frames", "8", "-o", tmp_path / "loop.mp4"), player_side),
     ):
         out, commands, heavy = loaded(*argv)
         assert (commands, heavy) == (own, []), argv
