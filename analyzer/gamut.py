@@ -20,8 +20,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from ..framestats import CHUNK
 from ..tiledb.gamut import BIN_BITS, GamutModel
-from .framestats import CHUNK
 from .metrics.gamut import colour_bins
 
 #: Pixels of the clip a colour bin must hold to be in the set.

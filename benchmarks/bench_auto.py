@@ -18,9 +18,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from _clips import CLIPS
+
 from dynatex.tiledb import open_db
 
-CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 NAMES = (
     "water_sea_waves_dyntex.avi",
     "steam_vapour_pot_128px.avi",

@@ -33,8 +33,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
+from _clips import CLIPS
 
 #: The methods that suit each clip of the shared folder (by file-name prefix).
 METHODS = {

@@ -13,15 +13,13 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
+from _clips import SEA as CLIP
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.benchmark import bench_lds_sizes
-
-CLIP = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips" / "water_sea_waves_dyntex.avi"
 
 
 def analysis_time(repeats: int = 3) -> dict:

@@ -17,10 +17,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _clips import SEA as DEFAULT_CLIP
 
 from dynatex.analyzer import metrics as m
-
-DEFAULT_CLIP = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "clips" / "water_sea_waves_dyntex.avi"
 
 
 def generated(t: int = 250, h: int = 288, w: int = 352, seed: int = 0) -> np.ndarray:

@@ -18,13 +18,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _clips import SEA as CLIP
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.mixture import learn_mixture
 from dynatex.benchmark import bench_player, copy_bandwidth, format_result
 from dynatex.tiledb import DatabaseWriter
 
-CLIP = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips" / "water_sea_waves_dyntex.avi"
 ANALYSIS_FLOOR_S = 60.0
 ROOFLINE_FLOOR = 0.7
 

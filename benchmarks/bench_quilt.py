@@ -27,9 +27,9 @@ import os
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
+from _clips import CLIPS
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import seam_visibility
@@ -39,7 +39,6 @@ from dynatex.player.modes import ratemap
 from dynatex.player.modes.evolve import EvolvePlayer
 from dynatex.tiledb import DatabaseWriter
 
-CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 NAMES = ("rusting_steel", "melting_honey")
 RANKS = (1, 2, 3, 5, 10, 15, 20, 30, 50)
 ROUNDS = 10

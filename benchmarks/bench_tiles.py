@@ -30,17 +30,15 @@ import os
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
+from _clips import CLIPS
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.tiles import learn_tiles
 from dynatex.benchmark import copy_bandwidth, summarize, time_calls
 from dynatex.player.modes.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter
-
-CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 
 
 def generated_clip(t: int, h: int, w: int, seed: int = 0) -> np.ndarray:

@@ -19,9 +19,9 @@ import os
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
+from _clips import CLIPS
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import frame_step_ratio, index_coverage, spectrum_distance, temporal_discontinuity
@@ -30,7 +30,6 @@ from dynatex.benchmark import copy_bandwidth, summarize, time_calls
 from dynatex.player.modes.turnpoints import PLAYBACKS, TurnPointPlayer
 from dynatex.tiledb import DatabaseWriter
 
-CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 COMPARE = ("pendulum_clock_schoedl.mov", "small_64px/fire_dyntex_64px.avi")
 
 

@@ -12,15 +12,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 import numpy as np
+from _clips import CLIPS
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.metrics import evaluate
 from dynatex.analyzer.verdicts import judge
 
-CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 NAMES = (
     "water_sea_waves_dyntex.avi",
     "fountain_dyntex_6486110.avi",

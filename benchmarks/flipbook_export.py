@@ -24,12 +24,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from _clips import CLIPS
 
 from dynatex.analyzer import flipbook as fb
 from dynatex.analyzer import load_clip
 from dynatex.player import open_player
-
-CLIPS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "clips"
 
 
 def dynatex(*argv: str) -> None:

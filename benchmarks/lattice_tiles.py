@@ -33,9 +33,9 @@ import os
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
+from _clips import CLIPS
 
 from dynatex.analyzer import load_clip, metrics
 from dynatex.analyzer.sheet import contact_sheet
@@ -44,7 +44,6 @@ from dynatex.player.modes.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter
 from dynatex.tiledb.tiles import CONSTRUCTIONS
 
-CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 FILES = {
     "grass": ("grass_straw_wind_dyntex.avi", {}),
     "sea": ("water_sea_waves_dyntex.avi", {}),

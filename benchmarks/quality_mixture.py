@@ -30,6 +30,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from _clips import CLIPS
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
@@ -38,7 +39,6 @@ from dynatex.player.modes.lds import LDSPlayer
 from dynatex.player.modes.mixture import MixturePlayer, nearest_distance
 from dynatex.tiledb import DatabaseWriter
 
-CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 NAMES = (
     "water_sea_waves_dyntex.avi",
     "flag_wind_dyntex_571c110.avi",

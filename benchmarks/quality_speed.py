@@ -32,13 +32,13 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from _clips import CLIPS
 
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.player import open_player
 from dynatex.tiledb import DatabaseWriter
 
-CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 NAMES = ("water_sea_waves_dyntex.avi", "fountain_dyntex_6486110.avi", "flag_wind_dyntex_571c110.avi")
 SEGMENT = 1024
 WARMUP = 50

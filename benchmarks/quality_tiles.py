@@ -31,17 +31,15 @@ import os
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
+from _clips import CLIPS
 
 from dynatex.analyzer import load_clip, metrics
 from dynatex.analyzer.tiles import learn_tiles
 from dynatex.player.modes.tiles import TilesPlayer
 from dynatex.tiledb import DatabaseWriter
 from dynatex.tiledb.tiles import CONSTRUCTIONS
-
-CLIPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "clips"
 
 
 def generated_clip(t: int = 250, h: int = 288, w: int = 352, seed: int = 0) -> np.ndarray:

@@ -28,12 +28,12 @@ import sys
 import tempfile
 
 import numpy as np
+from _clips import CLIPS
 
 from dynatex.analyzer.metrics import index_coverage
 from dynatex.player import open_player
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-CLIPS = os.path.join(HERE, "..", "..", "shared", "data", "clips")
 #: analysis options for clips with fewer than two turn points at the defaults (rows marked *)
 LOOSE = ["--tp-min-symmetry", "0.05", "--tp-r", "2"]
 

@@ -12,6 +12,7 @@ Examples
 from __future__ import annotations
 
 import os
+from typing import TYPE_CHECKING, Any
 
 from ..tiledb import TileDB
 from .base import BACKENDS, Player
@@ -24,7 +25,12 @@ from .errors import (
     UnknownControlError,
 )
 from .modes import MODE_ALIASES, MODE_METHOD, MODE_ORDER, MODES, default_mode, describe, mode_for, player_class
-from .opencl.devices import devices, list_devices
+
+if TYPE_CHECKING:  # what static tools see; at run time __getattr__ imports on first use
+    from .opencl.devices import devices, list_devices
+
+#: the names loaded with the OpenCL plumbing, on first use
+_OPENCL = ("devices", "list_devices")
 
 
 def open_player(
@@ -76,6 +82,22 @@ def open_player(
     if mode is None:
         mode = mode_for(db, texture)
     return player_class(mode)(db, texture, **options)
+
+
+def __getattr__(name: str) -> Any:
+    """``devices`` and ``list_devices`` load the OpenCL plumbing (and pyopencl) on first use, so that
+    what needs no device (``dynatex info``, the modes' declarations) loads none."""
+    if name not in _OPENCL:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from .opencl import devices as _devices
+
+    value = getattr(_devices, name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_OPENCL))
 
 
 __all__ = [

@@ -19,9 +19,12 @@ whatever pace that takes.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..errors import InvalidArgumentError
+from ..framestats import median_step
 
 
 def loop_frames(
@@ -101,3 +104,26 @@ def crossfade_loop(frames: np.ndarray, n: int, blend: int) -> np.ndarray:
 
 
 __all__ = ["crossfade_loop", "loop_frames", "render", "repeats"]
+
+
+def wrap_report(frames: np.ndarray, source: np.ndarray | None) -> dict:
+    """The wrap of the closed loop ``frames`` (last frame -> first) as ``{"ratio", "reference"}``:
+    their RMS difference over the median frame step of ``source`` (of ``frames`` when None or one
+    frame), as :func:`dynatex.analyzer.metrics.temporal_discontinuity` measures a jump; the ratio
+    is None, the reference saying why, for one frame or a reference that never changes.
+
+    >>> ramp = np.repeat(np.arange(0, 40, 2, dtype=np.uint8), 4).reshape(20, 2, 2)
+    >>> wrap_report(ramp[:10], ramp)
+    {'ratio': 9.0, 'reference': 'median frame step of the source'}
+    """
+    if len(frames) < 2:
+        return {"ratio": None, "reference": "one frame: no wrap"}
+    name = "export" if source is None or len(source) < 2 else "source"
+    step = median_step(frames if name == "export" else source)
+    if not step > 0:
+        return {
+            "ratio": None,
+            "reference": f"the {name} does not change from frame to frame (median frame difference is 0)",
+        }
+    d = frames[0].astype(np.float64) - frames[-1].astype(np.float64)
+    return {"ratio": round(math.sqrt(float(np.mean(d * d))) / step, 4), "reference": f"median frame step of the {name}"}

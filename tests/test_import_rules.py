@@ -63,8 +63,8 @@ LOADED = textwrap.dedent("""
 
 def test_a_command_loads_its_own_module_and_play_or_info_no_analyzer(lds_db, tmp_path):
     """``dynatex --help`` names every command without importing one; ``dynatex CMD`` imports
-    CMD's module (and its helpers) alone, so ``play`` and ``info`` load no analyzer, OpenCV,
-    SciPy or Dask, and ``analyze`` no player command."""
+    CMD's module (and its helpers) alone, so ``play`` (``--loop`` too, which reports the wrap)
+    and ``info`` load no analyzer, OpenCV, SciPy or Dask, and ``analyze`` no player command."""
     from dynatex.commands import COMMANDS
 
     def loaded(*argv) -> tuple[str, list[str], list[str]]:
@@ -85,12 +85,29 @@ def test_a_command_loads_its_own_module_and_play_or_info_no_analyzer(lds_db, tmp
         (("info", lds_db), ["info"]),
         (("play", "--help"), player_side),
         (("play", lds_db, "--frames", "2", "-o", video), player_side),
+        (("play", lds_db, "--loop", "--frames", "8", "-o", tmp_path / "loop.mp4"), player_side),
     ):
         out, commands, heavy = loaded(*argv)
         assert (commands, heavy) == (own, []), argv
     assert video.stat().st_size > 0
     out, commands, heavy = loaded("analyze", "--help")
     assert commands == ["_common", "analyze"] and "--methods" in out, commands
+
+
+def test_info_loads_no_opencl(lds_db):
+    """``dynatex info`` reads the file and the modes' declarations: it loads neither pyopencl nor the
+    player's OpenCL plumbing (a machine without an OpenCL driver lists a database all the same)."""
+    code = textwrap.dedent("""
+        import json, sys
+        from dynatex.cli import main
+        code = main(sys.argv[1:])
+        opencl = sorted(m for m in sys.modules if m.split(".")[0] == "pyopencl" or ".opencl" in m)
+        print(json.dumps([code, opencl]))
+    """)
+    r = subprocess.run([sys.executable, "-c", code, "info", str(lds_db)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "speed" in r.stdout  # the lds mode's controls were described
+    assert json.loads(r.stdout.splitlines()[-1]) == [0, []]
 
 
 def test_tiledb_imports_nothing_above_it():

@@ -16,6 +16,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
+from ._parts import exact_dtype, open_part, write_part
 from .source import SourceInfo
 
 #: Version of the ``detail`` part this reader understands; a newer part is ignored (it is optional).
@@ -77,30 +78,27 @@ def write(parent: h5py.Group, model: DetailModel | None) -> None:
     """Store ``model`` as ``parent/detail`` (nothing when None)."""
     if model is None:
         return
-    g = parent.create_group(GROUP)
-    g.attrs["version"] = DETAIL_VERSION
-    g.create_dataset("volume", data=np.asarray(model.volume, np.int8), chunks=(1,) + model.volume.shape[1:])
-    g.create_dataset("gain", data=np.asarray(model.gain, np.float32))
-    g.create_dataset("low", data=np.asarray(model.low, np.uint8))
-    g.create_dataset("high", data=np.asarray(model.high, np.uint8))
-    g.create_dataset("colours", data=np.asarray(model.colours, np.uint8))
-    for key, value in model.info.items():
-        if key != "version":
-            g.attrs[key] = value
+    arrays = {
+        "volume": np.asarray(model.volume, np.int8),
+        "gain": np.asarray(model.gain, np.float32),
+        "low": np.asarray(model.low, np.uint8),
+        "high": np.asarray(model.high, np.uint8),
+        "colours": np.asarray(model.colours, np.uint8),
+    }
+    write_part(parent, GROUP, DETAIL_VERSION, arrays, attrs=model.info, rows=("volume",))
 
 
 def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> DetailModel | None:
     """The validated ``parent/detail`` part, or None when absent or of a newer version."""
-    if GROUP not in parent:
-        return None
-    g = check.group(parent, GROUP)
-    if check.attr(g, "version", int) > DETAIL_VERSION:
+    g = open_part(parent, GROUP, DETAIL_VERSION, check)
+    if g is None:
         return None
     h, w, c = source.height, source.width, source.channels
     ds = check.dataset
     vol = ds(
         g, "volume", kind="i", shape=(range(1, MAX_VOLUME_FRAMES + 1), range(1, h + 1), range(1, w + 1), c), read=False
     )
+    exact_dtype(check, vol.name, vol, np.int8)
     tv, hv, wv = vol.shape[:3]
     model = DetailModel(
         volume=ds(g, "volume", kind="i", shape=(tv, hv, wv, c)),
@@ -110,11 +108,9 @@ def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> DetailModel 
         colours=ds(g, "colours", kind="u", shape=(COLOUR_BINS,)),
         info=check.info(g, skip=("version",)),
     )
-    if model.volume.dtype != np.int8:
-        check.fail(vol.name, f"dtype {model.volume.dtype} is not int8")
-    if model.low.dtype != np.uint8 or model.high.dtype != np.uint8:
-        check.fail(g.name + "/low", "low and high must be uint8")
-    if model.colours.dtype != np.uint8 or model.colours.max() > 1:
+    for name in ("low", "high", "colours"):
+        exact_dtype(check, f"{g.name}/{name}", getattr(model, name), np.uint8)
+    if model.colours.max() > 1:
         check.fail(g.name + "/colours", "must be uint8 flags, 0 or 1")
     if not (model.gain.min() >= 0 and model.gain.max() <= MAX_GAIN):
         check.fail(g.name + "/gain", f"values outside 0..{MAX_GAIN:g}")

@@ -18,6 +18,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
+from ._parts import exact_dtype, open_part, write_part
 from .source import SourceInfo
 
 #: Version of the ``gamut`` part this reader understands; a newer part is ignored (it is optional).
@@ -62,25 +63,17 @@ def write(parent: h5py.Group, model: GamutModel | None) -> None:
     """Store ``model`` as ``parent/gamut`` (nothing when None)."""
     if model is None:
         return
-    g = parent.create_group(GROUP)
-    g.attrs["version"] = GAMUT_VERSION
-    g.create_dataset("nearest", data=np.asarray(model.nearest, np.uint16))
-    for key, value in model.info.items():
-        if key != "version":
-            g.attrs[key] = value
+    write_part(parent, GROUP, GAMUT_VERSION, {"nearest": np.asarray(model.nearest, np.uint16)}, attrs=model.info)
 
 
 def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> GamutModel | None:
     """The validated ``parent/gamut`` part, or None when absent, of a newer version or on a grey source."""
-    if GROUP not in parent:
-        return None
-    g = check.group(parent, GROUP)
-    if check.attr(g, "version", int) > GAMUT_VERSION or source.channels != 3:
+    g = open_part(parent, GROUP, GAMUT_VERSION, check)
+    if g is None or source.channels != 3:
         return None
     nearest = check.dataset(g, "nearest", kind="u", shape=(COLOUR_BINS,))
     path = g.name + "/nearest"
-    if nearest.dtype != np.uint16:
-        check.fail(path, f"dtype {nearest.dtype} is not uint16")
+    exact_dtype(check, path, nearest, np.uint16)
     if int(nearest.max()) >= COLOUR_BINS:
         check.fail(path, f"a bin outside 0..{COLOUR_BINS - 1}")
     if (nearest[nearest] != nearest).any():

@@ -24,6 +24,7 @@ from . import detail as _detail
 from . import gamut as _gamut
 from ._check import Checker
 from ._describe import Described
+from ._parts import open_part, write_part
 from .source import SourceInfo
 
 #: Largest spectral radius the stored AR process's companion matrix may have.
@@ -198,6 +199,7 @@ _F64 = (
     "sbc",
 )
 _SIZES = ("components", "dim", "global_dim", "order")
+_SWITCHING = ("transitions", "local_ar", "local_noise")
 
 
 def companion_radius(ar_coefs: np.ndarray) -> float:
@@ -224,10 +226,8 @@ def write(group: h5py.Group, model: MixtureModel) -> None:
     _detail.write(group, model.detail)
     _gamut.write(group, model.gamut)
     if model.switching is not None:
-        g = group.create_group(SWITCHING_GROUP)
-        g.attrs["version"] = SWITCHING_VERSION
-        for name in ("transitions", "local_ar", "local_noise"):
-            g.create_dataset(name, data=np.asarray(getattr(model.switching, name), np.float64))
+        arrays = {name: np.asarray(getattr(model.switching, name), np.float64) for name in _SWITCHING}
+        write_part(group, SWITCHING_GROUP, SWITCHING_VERSION, arrays)
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
@@ -309,10 +309,8 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
 def _read_switching(group: h5py.Group, check: Checker, model: MixtureModel) -> SwitchingDynamics | None:
     """The validated ``switching`` part, or None when absent or of a newer version."""
     s, d = model.components, model.dim
-    if SWITCHING_GROUP not in group:
-        return None
-    g = check.group(group, SWITCHING_GROUP)
-    if check.attr(g, "version", int) > SWITCHING_VERSION:
+    g = open_part(group, SWITCHING_GROUP, SWITCHING_VERSION, check)
+    if g is None:
         return None
     ds = check.dataset
     dyn = SwitchingDynamics(

@@ -16,6 +16,7 @@ import numpy as np
 
 from ._check import Checker
 from ._describe import Described
+from ._parts import exact_dtype, open_part, write_part
 from .source import SourceInfo
 
 _PER_FRAME = ("sym_raw", "symmetry", "reduced", "p_max")
@@ -140,12 +141,11 @@ def write(group: h5py.Group, model: TurnPointModel) -> None:
         if key not in ("n_frames", "exit_frame"):
             group.attrs[key] = value
     if model.flow is not None:
-        g = group.create_group(FLOW_GROUP)
-        g.attrs["version"] = FLOW_VERSION
-        g.attrs["step"] = int(model.flow.step)
-        g.create_dataset("pairs", data=np.asarray(model.flow.pairs, np.int32).reshape(-1, 2))
-        flows = np.asarray(model.flow.flows, np.int16)
-        g.create_dataset("flows", data=flows, chunks=(1,) + flows.shape[1:] if len(flows) else None)
+        arrays = {
+            "pairs": np.asarray(model.flow.pairs, np.int32).reshape(-1, 2),
+            "flows": np.asarray(model.flow.flows, np.int16),
+        }
+        write_part(group, FLOW_GROUP, FLOW_VERSION, arrays, attrs={"step": int(model.flow.step)}, rows=("flows",))
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TurnPointModel:
@@ -205,10 +205,8 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> TurnPointMode
 
 def _read_flow(group: h5py.Group, check: Checker, source: SourceInfo) -> FlowModel | None:
     """The validated ``flow`` part, or None when absent or of a newer version."""
-    if FLOW_GROUP not in group:
-        return None
-    g = check.group(group, FLOW_GROUP)
-    if check.attr(g, "version", int) > FLOW_VERSION:
+    g = open_part(group, FLOW_GROUP, FLOW_VERSION, check)
+    if g is None:
         return None
     step = check.attr(g, "step", int)
     if step < 1 or step > MAX_FLOW_STEP or step & (step - 1):
@@ -217,8 +215,7 @@ def _read_flow(group: h5py.Group, check: Checker, source: SourceInfo) -> FlowMod
     gh, gw = flow_grid(h, w, step)
     pairs = check.dataset(g, "pairs", kind="iu", shape=(range(t * (t - 1) // 2 + 1), 2))
     flows = check.dataset(g, "flows", kind="i", shape=(pairs.shape[0], gh, gw, 2))
-    if flows.dtype != np.int16:
-        check.fail(g.name + "/flows", f"dtype {flows.dtype} is not int16")
+    exact_dtype(check, g.name + "/flows", flows, np.int16)
     check.index_range(g.name + "/pairs", pairs, t)
     pairs = pairs.astype(np.int64)
     if np.any(pairs[:, 0] == pairs[:, 1]):

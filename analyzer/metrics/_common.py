@@ -9,7 +9,7 @@ import numpy as np
 
 from ...checks import Range, check_int
 from ...errors import ArgumentTypeError, InvalidArgumentError
-from ..framestats import float_chunks, median_step
+from ...framestats import float_chunks, median_step
 
 LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 THUMB = 32  # longer side of the thumbnails used by coverage and repetition
@@ -68,7 +68,7 @@ def thumb_size(shape: tuple[int, ...]) -> tuple[int, int]:
 
 
 def reference_step(frames: np.ndarray, name: str) -> float:
-    """The typical frame step of ``frames`` (:func:`~dynatex.analyzer.framestats.median_step`), which
+    """The typical frame step of ``frames`` (:func:`~dynatex.framestats.median_step`), which
     measures divide by: an error naming ``name`` when it is 0 (the clip is still)."""
     ref = median_step(frames)
     if ref <= 0:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...checks import check_frames
-from ..framestats import CHUNK
+from ...framestats import CHUNK
 
 # -- colours the source never had -----------------------------------------------------------
 #: bits per channel of the colour bins (bins 8 levels wide)

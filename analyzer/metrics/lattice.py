@@ -8,7 +8,7 @@ import numpy as np
 
 from ...checks import check_frames, check_int
 from ...errors import InvalidArgumentError
-from ..framestats import float_chunks
+from ...framestats import float_chunks
 from ._common import int_pair, luma
 
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from ...checks import check_frames, check_int
 from ...errors import ArgumentTypeError, InvalidArgumentError
-from ..framestats import CHUNK, float_chunks
+from ...framestats import CHUNK, float_chunks
 from ._common import json_float
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ...checks import check_frames
 from ...errors import ArgumentTypeError, InvalidArgumentError
-from ..framestats import float_chunks, step_rms
+from ...framestats import float_chunks, step_rms
 from ._common import POSITIVE, int_pair, reference_step
 
 

@@ -10,8 +10,8 @@ import numpy as np
 
 from ...checks import check_int
 from ...errors import InvalidArgumentError
+from ...framestats import median_step
 from ...tiledb.tiles import TilesModel
-from ..framestats import median_step
 from ..quilt import block_errors, min_cut_path
 from ..video import Progress
 from .cuts import path_alpha, smooth_path

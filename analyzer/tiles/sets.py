@@ -10,8 +10,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ...errors import InvalidArgumentError
+from ...framestats import median_step
 from ...tiledb.tiles import TilesModel
-from ..framestats import median_step
 from ..video import Progress
 from .cuts import primary_tile
 from .loop import STEP_PAIRS, Texture, find_loop, flow_magnitude, progress_steps, tile_period, transition_map

@@ -11,8 +11,8 @@ with ``--layout array`` one raw layer per frame. ``--loop`` makes the frames a c
   crossfaded into the first ``BLEND``, so the frame after the last is the sequence's own
   next frame.
 
-The wrap (last frame -> first) is measured with
-:func:`dynatex.analyzer.metrics.temporal_discontinuity` against the source's median frame step.
+The wrap (last frame -> first) is measured against the source's median frame step
+(:func:`dynatex.player.loop.wrap_report`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import sys
 import numpy as np
 
 from ..player import MODES, open_player
-from ..player.loop import loop_frames
+from ..player.loop import loop_frames, wrap_report
 from ..player.loop import render as render_frames
 from ..player.modes import player_class
 from . import COMMANDS
@@ -155,24 +155,6 @@ def render(args: argparse.Namespace) -> tuple[np.ndarray, str, float, np.ndarray
 
 
 # -- the bundle ---------------------------------------------------------------------------------------
-def wrap_report(frames: np.ndarray, source: np.ndarray | None) -> dict:
-    """Wrap discontinuity: the last->first frame difference over the median source frame step."""
-    from ..analyzer.metrics import temporal_discontinuity
-
-    if len(frames) < 2:
-        return {"ratio": None, "reference": "one frame: no wrap"}
-    seq = np.concatenate([frames, frames[:1]])
-    ref = source if source is not None and len(source) >= 2 else frames
-    try:
-        ratio = float(temporal_discontinuity(seq, [len(frames)], source=ref)[0])
-    except ValueError as exc:  # a reference that never changes
-        return {"ratio": None, "reference": str(exc)}
-    return {
-        "ratio": round(ratio, 4),
-        "reference": "median frame step of the source" if ref is source else "median frame step of the export",
-    }
-
-
 def _write_png(path: str, image: np.ndarray) -> None:
     import cv2
 

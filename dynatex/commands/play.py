@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from ..player import open_player
-from ..player.loop import loop_frames
+from ..player.loop import loop_frames, wrap_report
 from ..player.modes import player_class
 from ..player.modes import ratemap as _ratemap
 from . import COMMANDS
@@ -209,8 +209,6 @@ def _run_inpaint(args: argparse.Namespace, player, writer: FrameWriter, fps: flo
 
 def _run_loop(args: argparse.Namespace, writer: FrameWriter) -> int:
     """``--loop``: the frames of :func:`dynatex.player.loop.loop_frames`, and the wrap reported."""
-    from .export import wrap_report
-
     if player_class(args.mode).capabilities.native_loop and getattr(args, "speed", None) is not None:
         raise UsageError(f"--speed is set by --loop with mode {args.mode} (whole loops at the source's pace)")
     t0 = time.perf_counter()

@@ -45,16 +45,28 @@ LOCAL = 32
 SPEED_SIZES = ((288, 352), (720, 1280))
 #: frames per pass of the self-test's look-ahead figures (any look-ahead above 1 takes them)
 SPEED_PER_PASS = 8
+#: basis rows of the self-test's figures: numpy's cost a frame has a part that grows with the
+#: pixels alone (the mean, the rounding to bytes), OpenCL's grows with rows x pixels, so which is
+#: faster changes with the rows; a player takes the count nearest its own (log scale). The
+#: self-test itself measures :data:`SPEED_ROWS_SELFTEST` (lds's default), the others the first
+#: player that needs them.
+SPEED_ROWS = (16, 50, 150)
+SPEED_ROWS_SELFTEST = 50
 
 
-def speed_case(precision: str, values: int, per_pass: int, detail: bool = False) -> str:
+def speed_case(
+    precision: str, values: int, per_pass: int, detail: bool = False, rows: int = SPEED_ROWS_SELFTEST
+) -> str:
     """The self-test's speed figure that decides ``backend="auto"`` for a projection of ``values``
-    values a frame in ``precision`` with ``per_pass`` frames per pass, with the fine detail or
-    without (the numpy reference adds it in passes of its own): the measured size nearest in log
-    scale (``"projection float32 1280x720, 8 per pass, detail"``)."""
+    values a frame through ``rows`` basis rows in ``precision`` with ``per_pass`` frames per pass,
+    with the fine detail or without (the numpy reference adds it in passes of its own): the
+    measured size and row count nearest in log scale
+    (``"projection float32 1280x720, 150 rows, 8 per pass, detail"``; 50 rows go unnamed)."""
     h, w = min(SPEED_SIZES, key=lambda s: abs(math.log(max(values, 1) / (s[0] * s[1] * 3))))
+    n = min(SPEED_ROWS, key=lambda r: abs(math.log(max(rows, 1) / r)))
     return (
         f"projection {precision} {w}x{h}"
+        + (f", {n} rows" if n != SPEED_ROWS_SELFTEST else "")
         + (f", {SPEED_PER_PASS} per pass" if per_pass > 1 else "")
         + (", detail" if detail else "")
     )

@@ -91,7 +91,8 @@ class ProjectionPlayer(Player):
         self.precision = precision
         self._setup(model)
         basis = getattr(model, self.basis_name)
-        self._prefer_faster(*self._asked, speed_case(precision, basis.shape[1], lookahead, model.detail is not None))
+        case = speed_case(precision, basis.shape[1], lookahead, model.detail is not None, basis.shape[0])
+        self._prefer_faster(*self._asked, case)
         if precision == "float16":
             basis = basis.astype(np.float16)
         self.engine = open_engine(

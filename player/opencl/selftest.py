@@ -458,15 +458,15 @@ def _child(expected: DeviceInfo) -> int:
     return 0
 
 
-def _projection_speed(precision: str, size: tuple[int, int], per_pass: int = 1, detail: bool = False):
-    """The projection engine (lds, mixture) at ``size`` with ``per_pass`` frames per pass (a
-    look-ahead), with a fine detail or without, OpenCL against numpy: the per-round ratios of
-    :func:`measure_rounds`."""
+def _projection_speed(precision: str, size: tuple[int, int], per_pass: int, detail: bool, rows: int):
+    """The projection engine (lds, mixture) at ``size`` through ``rows`` basis rows with
+    ``per_pass`` frames per pass (a look-ahead), with a fine detail or without, OpenCL against
+    numpy: the per-round ratios of :func:`measure_rounds`."""
 
     def measure(device: str) -> list[float]:
         from ..engines.projection import SPEED_PER_PASS
 
-        engines = _speed_engines(device, precision, size, SPEED_PER_PASS, detail)
+        engines = _speed_engines(device, precision, size, SPEED_PER_PASS, detail, rows)
         h, w = size
         out = np.empty((per_pass, h, w, 3), np.uint8)
         d = engines[1].detail
@@ -484,7 +484,7 @@ _speed_held: list = []  # (key, engines): the last pair of engines measured, sha
 
 
 def _speed_engines(device: str, precision: str, size: tuple[int, int], frames: int, detail: bool, n: int = 50) -> list:
-    """The OpenCL engine and its numpy reference on a basis of ``size`` (n=50), with a detail
+    """The OpenCL engine and its numpy reference on a basis of ``n`` rows at ``size``, with a detail
     model of the analyser's shape (a 32 x 128 x 128 volume) or none, held until other ones are asked."""
     import pyopencl as cl
 
@@ -492,7 +492,7 @@ def _speed_engines(device: str, precision: str, size: tuple[int, int], frames: i
     from ..engines.projection import open_projector
     from .context import get_context
 
-    key = (device, precision, size, frames, detail)
+    key = (device, precision, size, frames, detail, n)
     if _speed_held and _speed_held[0][0] == key:
         return _speed_held[0][1]
     _release_speed_engines()
@@ -568,37 +568,44 @@ def measure_rounds(
 
 
 def _speed_cases() -> dict[str, Callable[[str], list[float]]]:
-    from ..engines.projection import SPEED_PER_PASS, SPEED_SIZES, speed_case
+    from ..engines.projection import SPEED_PER_PASS, SPEED_ROWS, SPEED_SIZES, speed_case
 
     cases = {}
     for h, w in SPEED_SIZES:
-        for precision in ("float32", "float16"):
-            for detail in (False, True):
-                for per_pass in (1, SPEED_PER_PASS):
-                    cases[speed_case(precision, h * w * 3, per_pass, detail)] = _projection_speed(
-                        precision, (h, w), per_pass, detail
-                    )
+        for rows in SPEED_ROWS:
+            for precision in ("float32", "float16"):
+                for detail in (False, True):
+                    for per_pass in (1, SPEED_PER_PASS):
+                        cases[speed_case(precision, h * w * 3, per_pass, detail, rows)] = _projection_speed(
+                            precision, (h, w), per_pass, detail, rows
+                        )
     return cases
 
 
 #: engine -> measure(device): its OpenCL rate over its numpy reference's, one ratio per round
 #: (:func:`measure_rounds`; :func:`.verify.speed_figure` sums them up in the verdict)
 SPEED_CASES: dict[str, Callable[[str], list[float]]] = _speed_cases()
-#: the cases the self-test measures after its checks (the smallest size: a few seconds); the
-#: others are measured by ``--check`` or by the first player that needs one (:func:`.verify.speed`)
-SELFTEST_SPEED_CASES = tuple(e for e in SPEED_CASES if " 352x288" in e)
+#: the cases the self-test measures after its checks (the smallest size, lds's default rows: a few
+#: seconds); the others are measured by ``--check`` or by the first player that needs one
+#: (:func:`.verify.speed`)
+SELFTEST_SPEED_CASES = tuple(e for e in SPEED_CASES if " 352x288" in e and " rows" not in e)
 
 
 def speed_main(info: dict, engines: list[str] | None, figures: dict | None = None) -> dict[str, list[float]]:
     """What a re-measurement's child runs (:func:`.verify.refresh_speeds`): the rounds of each of
     ``engines`` (None: those of :data:`SPEED_CASES` whose figure in ``figures`` is due,
-    :func:`.verify.speed_stale`) on the device ``info`` describes, which passed its checks."""
+    :func:`.verify.speed_stale`, other basis rows than the self-test's only where a player has
+    measured them before) on the device ``info`` describes, which passed its checks."""
     import warnings
 
     warnings.simplefilter("ignore")
     if engines is None:
-        now, config = time.time(), verify.speed_config()
-        engines = [e for e in SPEED_CASES if verify.speed_stale((figures or {}).get(e), now=now, config=config)]
+        now, config, figures = time.time(), verify.speed_config(), figures or {}
+        engines = [
+            e
+            for e in SPEED_CASES
+            if (e in figures or " rows" not in e) and verify.speed_stale(figures.get(e), now=now, config=config)
+        ]
         if not engines:
             return {}
     expected = DeviceInfo(**info)

@@ -15,6 +15,7 @@ import pytest
 
 from dynatex.player import open_player
 from dynatex.player.base import Player
+from dynatex.player.engines.projection import SPEED_ROWS, speed_case
 from dynatex.player.opencl import context as opencl
 from dynatex.player.opencl import selftest, verify
 
@@ -220,9 +221,10 @@ def test_auto_takes_numpy_for_an_engine_the_self_test_measured_slower(device, mo
     info = opencl.device_info(opencl.get_context().devices[0])
     v = verify.verdict(info)
     at, config = time.time(), verify.speed_config()
-    slow = {
-        "projection float32 352x288": verify.speed_figure([0.5] * 7, at=at, config=config),
-        "projection float16 352x288": verify.speed_figure([2.0] * 7, at=at, config=config),
+    slow = {  # at every basis rows the figures are keyed by: the self-test's textures are small
+        speed_case(precision, 288 * 352 * 3, 1, rows=n): verify.speed_figure([ratio] * 7, at=at, config=config)
+        for precision, ratio in (("float32", 0.5), ("float16", 2.0))
+        for n in SPEED_ROWS
     }
     monkeypatch.setitem(verify._verdicts, verify.cache_key(info), dataclasses.replace(v, speed=slow))
     db = selftest._db_path()

@@ -95,18 +95,25 @@ def test_a_figure_is_measured_again_when_unsettled_old_or_from_another_configura
     assert stale(dict(close, measures=verify.MAX_MEASURES)) is None  # pooled enough: it decides as it is
 
 
-def test_a_player_takes_the_figure_of_the_nearest_measured_size():
+def test_a_player_takes_the_figure_of_the_nearest_measured_size_and_rows():
     assert speed_case("float32", 24 * 32 * 3, 1) == "projection float32 352x288"
     assert speed_case("float16", 288 * 352, 1) == "projection float16 352x288"  # grey
     assert speed_case("float32", 720 * 1280 * 3, 4) == f"projection float32 1280x720, {SPEED_PER_PASS} per pass"
     assert speed_case("float32", 1080 * 1920 * 3, 1) == "projection float32 1280x720"
     assert speed_case("float32", 288 * 352 * 3, 1, detail=True) == "projection float32 352x288, detail"
+    # and the nearest measured basis rows: the stand-in's 50 go unnamed
+    assert speed_case("float32", 288 * 352 * 3, 1, rows=40) == "projection float32 352x288"
+    assert speed_case("float32", 288 * 352 * 3, 1, rows=6) == "projection float32 352x288, 16 rows"
+    assert speed_case("float16", 720 * 1280 * 3, 8, True, 400) == (
+        f"projection float16 1280x720, 150 rows, {SPEED_PER_PASS} per pass, detail"
+    )
     assert set(selftest.SPEED_CASES) == {
-        speed_case(p, h * w * 3, k, d)
+        speed_case(p, h * w * 3, k, d, n)
         for p in ("float32", "float16")
         for h, w in ((288, 352), (720, 1280))
         for k in (1, 8)
         for d in (False, True)
+        for n in (16, 50, 150)
     }
     assert len(selftest.SELFTEST_SPEED_CASES) == 8 and all("352x288" in e for e in selftest.SELFTEST_SPEED_CASES)
 
@@ -190,13 +197,17 @@ def test_a_stale_figure_is_measured_again_in_a_child_and_pooled(tmp_path, monkey
 
 def test_check_leaves_the_choice_of_what_is_due_to_the_child(tmp_path, monkeypatch):
     """``--check`` measures every engine due: the plumbing does not import the self-test's cases,
-    so the child finds them from the figures it is given, and starts nothing when none is due."""
+    so the child finds them from the figures it is given, and starts nothing when none is due
+    (a case of other basis rows than the self-test's is due only once a player measured it)."""
     monkeypatch.setenv("DYNATEX_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(verify, "_verdicts", {})
     monkeypatch.setattr(verify, "_sources_hash", lambda: "0" * 16)
     info = DeviceInfo("9:0", "Test platform", "Test 1.0", "dev", "vendor", "1.0", True)
     fresh = {e: figure([1.6] * 7, at=time.time(), config=verify.speed_config()) for e in selftest.SPEED_CASES}
     assert selftest.speed_main(dataclasses.asdict(info), None, fresh) == {}  # the device is not even looked for
+    # other basis rows than the self-test's are measured by a player that needs them, not by --check
+    rows50 = {e: f for e, f in fresh.items() if " rows" not in e}
+    assert len(rows50) == len(fresh) // 3 and selftest.speed_main(dataclasses.asdict(info), None, rows50) == {}
     verify._write_cache(verify.cache_key(info), verify.Verdict(True, device=info.describe(), speed=fresh))
     asked = []
 
@@ -207,3 +218,19 @@ def test_check_leaves_the_choice_of_what_is_due_to_the_child(tmp_path, monkeypat
     monkeypatch.setattr(verify, "call", fake_call)
     assert verify.refresh_speeds(info).speed == fresh
     assert asked == [(None, fresh)]
+
+
+def test_a_projection_player_asks_for_the_figure_of_its_own_basis_rows(lds_db, monkeypatch):
+    """``backend="auto"`` decides an lds player by the figure nearest its basis (12 rows: the 16-row one)."""
+    from dynatex.player import open_player
+    from dynatex.player.opencl import context
+
+    from ..conftest import verified_devices
+
+    if not verified_devices():
+        pytest.skip("no verified OpenCL device here: auto decides between OpenCL and numpy only with one")
+    asked = []
+    monkeypatch.setattr(context, "engine_speed", lambda device, engine: asked.append(engine))  # never measured
+    with open_player(lds_db, mode="lds") as p:
+        assert p.backend == "opencl"
+    assert len(asked) == 1 and asked[0].startswith("projection float32 352x288, 16 rows"), asked

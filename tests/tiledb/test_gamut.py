@@ -3,7 +3,6 @@ older databases without it, a newer version and grey sources ignored, damaged ma
 
 from __future__ import annotations
 
-import h5py
 import numpy as np
 import pytest
 
@@ -11,27 +10,14 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.gamut import learn_gamut
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.metrics.gamut import colour_bins
-from dynatex.analyzer.mixture import learn_mixture
 from dynatex.tiledb import DatabaseWriter, TileDB, TileDBFormatError
 
 from ..conftest import wave_clip
+from .conftest import edited_copy, replace_dataset
 
 
-@pytest.fixture(scope="module")
-def db(tmp_path_factory):
-    clip = load_clip(wave_clip(60, h=20, w=28))
-    path = tmp_path_factory.mktemp("gamut") / "g.h5"
-    lds = learn_lds(clip, n=5)
-    mix = learn_mixture(clip, components=2, dim=3, pca_dim=12, neighbors=6, pmax=3)
-    with DatabaseWriter(path) as w:
-        w.put_texture("w", clip.source_info())
-        w.put_method("w", "lds", lds)
-        w.put_method("w", "mixture", mix)
-    return path, {"lds": lds, "mixture": mix}, clip.frames
-
-
-def test_the_set_is_the_bins_the_clip_holds_and_each_bin_maps_to_its_nearest(db):
-    _, _, frames = db
+def test_the_set_is_the_bins_the_clip_holds_and_each_bin_maps_to_its_nearest(projection_db):
+    frames = projection_db.frames
     g = learn_gamut(frames)
     counts = np.bincount(colour_bins(frames), minlength=32**3)
     inside = g.nearest == np.arange(32**3)
@@ -52,8 +38,8 @@ def test_a_clip_of_rare_colours_keeps_its_commonest():
 
 
 @pytest.mark.parametrize("method", ["lds", "mixture"])
-def test_round_trip(db, method):
-    path, models, _ = db
+def test_round_trip(projection_db, method):
+    path, models = projection_db.path, projection_db.models
     want = models[method].gamut
     with TileDB(path) as t:
         got = t.texture("w").read(method).gamut
@@ -62,13 +48,8 @@ def test_round_trip(db, method):
     assert got.colours == want.colours == got.info["colours"]
 
 
-def _copy(db, tmp_path, edit, method="lds"):
-    path = db[0]
-    out = tmp_path / "c.h5"
-    out.write_bytes(path.read_bytes())
-    with h5py.File(out, "a") as f:
-        edit(f[f"textures/w/{method}"])
-    return out
+def _copy(projection_db, tmp_path, edit, method="lds"):
+    return edited_copy(projection_db.path, tmp_path, f"textures/w/{method}", edit)
 
 
 def _read(path, method="lds"):
@@ -77,17 +58,17 @@ def _read(path, method="lds"):
 
 
 @pytest.mark.parametrize("method", ["lds", "mixture"])
-def test_older_database_reads_without_it(db, tmp_path, method):
-    model = _read(_copy(db, tmp_path, lambda g: g.__delitem__("gamut"), method), method)
+def test_older_database_reads_without_it(projection_db, tmp_path, method):
+    model = _read(_copy(projection_db, tmp_path, lambda g: g.__delitem__("gamut"), method), method)
     assert model.gamut is None and model.detail is not None
     assert model.describe()["gamut"] is False
 
 
-def test_newer_version_is_ignored(db, tmp_path):
+def test_newer_version_is_ignored(projection_db, tmp_path):
     def newer(g):
         g["gamut"].attrs["version"] = 99
 
-    assert _read(_copy(db, tmp_path, newer)).gamut is None
+    assert _read(_copy(projection_db, tmp_path, newer)).gamut is None
 
 
 def test_grey_source_ignores_it(tmp_path):
@@ -103,15 +84,6 @@ def test_grey_source_ignores_it(tmp_path):
     assert _read(grey_db).gamut is None
 
 
-def _replace(fn):
-    def edit(g):
-        data = fn(g["gamut"]["nearest"][()])
-        del g["gamut"]["nearest"]
-        g["gamut"].create_dataset("nearest", data=data)
-
-    return edit
-
-
 @pytest.mark.parametrize(
     ("fn", "match"),
     [
@@ -123,6 +95,6 @@ def _replace(fn):
         (np.zeros_like, r"holds 1 colours where the part says \d+"),  # every frame would go black
     ],
 )
-def test_damaged_map_is_refused(db, tmp_path, fn, match):
+def test_damaged_map_is_refused(projection_db, tmp_path, fn, match):
     with pytest.raises(TileDBFormatError, match=match):
-        _read(_copy(db, tmp_path, _replace(fn)))
+        _read(_copy(projection_db, tmp_path, replace_dataset("gamut/nearest", fn)))

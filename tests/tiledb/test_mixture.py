@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import h5py
 import numpy as np
 import pytest
 
@@ -11,6 +10,7 @@ from dynatex.analyzer.mixture import learn_mixture
 from dynatex.tiledb import DatabaseWriter, TileDB, TileDBFormatError
 
 from ..conftest import wave_clip
+from .conftest import edited_copy, replace_dataset
 
 
 @pytest.fixture(scope="module")
@@ -57,48 +57,41 @@ def test_switching_part_is_optional_and_versioned(db_path, tmp_path):
 
 
 def _damaged(src, tmp_path, edit):
-    path = tmp_path / "bad.h5"
-    path.write_bytes(src.read_bytes())
-    with h5py.File(path, "r+") as f:
-        edit(f["textures/waves/mixture"])
-    return path
-
-
-def _replace(name, fn):
-    def edit(g):
-        data = fn(g[name][()])
-        del g[name]
-        g.create_dataset(name, data=data)
-
-    return edit
+    return edited_copy(src, tmp_path, "textures/waves/mixture", edit)
 
 
 @pytest.mark.parametrize(
     "edit, match",
     [
-        (_replace("ar_coefs", lambda a: a * 50), r"/ar_coefs: the AR process is not stable"),
+        (replace_dataset("ar_coefs", lambda a: a * 50), r"/ar_coefs: the AR process is not stable"),
         (
-            _replace("global_coords", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 3, np.nan, a)),
+            replace_dataset("global_coords", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 3, np.nan, a)),
             r"/global_coords: contains NaN",
         ),
-        (_replace("weights", lambda a: a * 2), r"/weights: mixing proportions"),
+        (replace_dataset("weights", lambda a: a * 2), r"/weights: mixing proportions"),
         (
-            _replace("gauss_cov", lambda a: -a),
+            replace_dataset("gauss_cov", lambda a: -a),
             r"/gauss_cov: covariance of component 0 is not symmetric positive definite",
         ),
-        (_replace("local_cov", lambda a: a[:, :2, :2]), r"/local_cov: has shape"),
-        (_replace("stacked_basis", lambda a: a[:-1]), r"/stacked_basis: has shape"),
-        (_replace("responsibilities", lambda a: a * 3), r"/responsibilities: rows must be probabilities"),
-        (_replace("local_radius", lambda a: -a), r"/local_radius: radii must be > 0"),
+        (replace_dataset("local_cov", lambda a: a[:, :2, :2]), r"/local_cov: has shape"),
+        (replace_dataset("stacked_basis", lambda a: a[:-1]), r"/stacked_basis: has shape"),
+        (replace_dataset("responsibilities", lambda a: a * 3), r"/responsibilities: rows must be probabilities"),
+        (replace_dataset("local_radius", lambda a: -a), r"/local_radius: radii must be > 0"),
         (lambda g: g.attrs.__setitem__("components", 1000), r"@components: 1000 out of range"),
         (lambda g: g.attrs.__setitem__("global_dim", 50), r"@global_dim: 50 exceeds"),
         (
-            _replace("switching/transitions", lambda a: a + 0.5),
+            replace_dataset("switching/transitions", lambda a: a + 0.5),
             r"/switching/transitions: rows must be probabilities",
         ),
-        (_replace("switching/local_ar", lambda a: a * 0 + np.eye(a.shape[-1])), r"/switching/local_ar: component 0's"),
-        (_replace("switching/local_noise", lambda a: a * 10), r"/switching/local_noise: the driving noise's variance"),
-        (_replace("switching/local_ar", lambda a: a[:, :, :2]), r"/switching/local_ar: has shape"),
+        (
+            replace_dataset("switching/local_ar", lambda a: a * 0 + np.eye(a.shape[-1])),
+            r"/switching/local_ar: component 0's",
+        ),
+        (
+            replace_dataset("switching/local_noise", lambda a: a * 10),
+            r"/switching/local_noise: the driving noise's variance",
+        ),
+        (replace_dataset("switching/local_ar", lambda a: a[:, :, :2]), r"/switching/local_ar: has shape"),
     ],
 )
 def test_damaged_groups_are_refused(db_path, tmp_path, edit, match):
@@ -106,4 +99,4 @@ def test_damaged_groups_are_refused(db_path, tmp_path, edit, match):
     with TileDB(bad) as db:
         with pytest.raises(TileDBFormatError, match=match) as info:
             db.texture("waves").read("mixture")
-    assert "bad.h5" in str(info.value) and "\n" not in str(info.value)
+    assert str(bad) in str(info.value) and "\n" not in str(info.value)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import h5py
 import numpy as np
 import pytest
 
@@ -10,6 +9,8 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.quilt import learn_quilt
 from dynatex.tiledb import DatabaseWriter, QuiltModel, TileDBFormatError, open_db
 from tests.conftest import wave_clip
+
+from .conftest import edited_copy
 
 
 @pytest.fixture(scope="module")
@@ -47,12 +48,7 @@ def test_round_trip(quilt_db):
 
 
 def _damaged(quilt_db, tmp_path, edit):
-    path, _ = quilt_db
-    bad = tmp_path / "bad.h5"
-    bad.write_bytes(path.read_bytes())
-    with h5py.File(bad, "r+") as f:
-        edit(f["textures/w/quilt"])
-    return bad
+    return edited_copy(quilt_db[0], tmp_path, "textures/w/quilt", edit)
 
 
 def _replace(group, name, data):

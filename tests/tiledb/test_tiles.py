@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import h5py
 import numpy as np
 import pytest
 
@@ -11,6 +10,7 @@ from dynatex.analyzer.tiles import learn_tiles
 from dynatex.tiledb import DatabaseWriter, TileDB, TileDBFormatError, TilesModel
 
 from ..conftest import wave_clip
+from .conftest import edited_copy, replace_dataset
 
 
 @pytest.fixture(scope="module")
@@ -61,20 +61,7 @@ def test_round_trip(db_path, model):
 
 
 def _damaged(src, tmp_path, edit):
-    path = tmp_path / "bad.h5"
-    path.write_bytes(src.read_bytes())
-    with h5py.File(path, "r+") as f:
-        edit(f["textures/waves/tiles"])
-    return path
-
-
-def _replace(name, fn):
-    def edit(g):
-        data = fn(g[name][()])
-        del g[name]
-        g.create_dataset(name, data=data)
-
-    return edit
+    return edited_copy(src, tmp_path, "textures/waves/tiles", edit)
 
 
 def _attr(name, value):
@@ -87,24 +74,24 @@ def _attr(name, value):
 @pytest.mark.parametrize(
     "edit, match",
     [
-        (_replace("tile_class", lambda a: a + 5), r"/tile_class: holds indices outside \[0, 2\)"),
-        (_replace("ring_class", lambda a: np.full_like(a, 1)), r"class 0 \('calm'\) has no tile of its own"),
-        (_replace("tiles", lambda a: a[:, :, :8]), r"/tiles: has shape"),
-        (_replace("tiles", lambda a: a.astype(np.float32)), r"/tiles: dtype float32 is not unsigned integer"),
-        (_replace("mean_rgb", lambda a: a * np.nan), r"/mean_rgb: contains NaN"),
-        (_replace("border_side", lambda a: np.full_like(a, -1)), r"/border_side: must be 0..3 for border tiles"),
+        (replace_dataset("tile_class", lambda a: a + 5), r"/tile_class: holds indices outside \[0, 2\)"),
+        (replace_dataset("ring_class", lambda a: np.full_like(a, 1)), r"class 0 \('calm'\) has no tile of its own"),
+        (replace_dataset("tiles", lambda a: a[:, :, :8]), r"/tiles: has shape"),
+        (replace_dataset("tiles", lambda a: a.astype(np.float32)), r"/tiles: dtype float32 is not unsigned integer"),
+        (replace_dataset("mean_rgb", lambda a: a * np.nan), r"/mean_rgb: contains NaN"),
+        (replace_dataset("border_side", lambda a: np.full_like(a, -1)), r"/border_side: must be 0..3 for border tiles"),
         (_attr("loop_length", 1), r"@loop_length: loop length 1 outside"),
         (_attr("n_tiles", 10**6), r"@n_tiles"),
         (lambda g: g.__delitem__("masks"), r"/masks: missing dataset"),
         (
-            _replace("edges", lambda a: np.full_like(a, 1)),
+            replace_dataset("edges", lambda a: np.full_like(a, 1)),
             r"/edges: tiles have edge colours but construction is 'ring'",
         ),
         (
-            lambda g: (_replace("edges", lambda a: np.full_like(a, 1))(g), _attr("construction", "wang")(g)),
+            lambda g: (replace_dataset("edges", lambda a: np.full_like(a, 1))(g), _attr("construction", "wang")(g)),
             r"/edges: a Wang set must be every tile of a single class",
         ),
-        (_replace("edges", lambda a: np.full((len(a), 3), -1, np.int8)), r"/edges: has shape"),
+        (replace_dataset("edges", lambda a: np.full((len(a), 3), -1, np.int8)), r"/edges: has shape"),
     ],
 )
 def test_damaged_group_is_refused(db_path, tmp_path, edit, match):
@@ -148,15 +135,15 @@ def test_tile_set_without_edges_reads_as_ring(db_path, tmp_path):
     "edit, match",
     [
         (
-            _replace("edges", lambda a: np.where(np.arange(4) == 0, -1, a).astype(np.int8)),
+            replace_dataset("edges", lambda a: np.where(np.arange(4) == 0, -1, a).astype(np.int8)),
             "some edges and -1 on others",
         ),
         (
-            _replace("edges", lambda a: np.stack([a[:, 0], 1 - a[:, 1], a[:, 2], a[:, 3]], 1)),
+            replace_dataset("edges", lambda a: np.stack([a[:, 0], 1 - a[:, 1], a[:, 2], a[:, 3]], 1)),
             "one tile per \\(left, top, bottom\\)",
         ),
-        (_replace("edges", lambda a: np.concatenate([a[:1], a[:-1]])), "one tile per \\(left, top, bottom\\)"),
-        (_replace("edges", lambda a: a.astype(np.int32) + 256), "values must be -1 or edge colours 0..7"),
+        (replace_dataset("edges", lambda a: np.concatenate([a[:1], a[:-1]])), "one tile per \\(left, top, bottom\\)"),
+        (replace_dataset("edges", lambda a: a.astype(np.int32) + 256), "values must be -1 or edge colours 0..7"),
         (lambda g: g.__delitem__("edges"), "construction is 'wang' but no tile has edge colours"),
         (_attr("construction", "ring"), "tiles have edge colours but construction is 'ring'"),
         (_attr("construction", "hex"), "@construction: must be one of"),

@@ -1,9 +1,12 @@
-"""Statistics of a clip's frames that the analysis and the metrics share: the step between frames.
+"""Statistics of a clip's frames that the analysis, the metrics and the player's loops share: the
+step between frames (numpy alone, so the player may use it).
 
 The median RMS difference of consecutive frames is the clip's typical frame step: the metrics
-measure jumps against it (:func:`~dynatex.analyzer.metrics.temporal_discontinuity`) and the tiles
-analysis stores it (``median_frame_step``). Frames are ``(T, H, W, C)`` arrays, uint8 or floats
-on the 0..255 scale, converted to float32 a chunk at a time so that long clips need little memory.
+measure jumps against it (:func:`~dynatex.analyzer.metrics.temporal_discontinuity`), the tiles
+analysis stores it (``median_frame_step``) and ``dynatex play --loop`` and ``dynatex export
+--loop`` report a loop's wrap against it (:func:`~dynatex.player.loop.wrap_report`). Frames are
+``(T, H, W, C)`` arrays, uint8 or floats on the 0..255 scale, converted to float32 a chunk at a
+time so that long clips need little memory.
 """
 
 from __future__ import annotations
