@@ -8,6 +8,14 @@ nearest bin of the source's colour set (itself for a bin in the set); the player
 pixel whose bin is outside into that one, channel by channel (the bin's closest colour).
 Colour (three-channel) sources only: a grey projection cannot take a hue. Databases written
 before it play without it.
+
+The optional ``local`` subgroup (format 1.7, versioned on its own) holds a colour set per region
+of the frame (squares of ``block`` pixels): a projection's low-rank mix can put a colour of the
+clip where the clip never showed it (the flag's green-and-white mix as a teal haze over the
+stone tower). A pixel whose bin its region never held moves into the region's bin that
+``nearest[region, cell]`` names for its 16-level cell ``(r >> 4) * 256 + (g >> 4) * 16 +
+(b >> 4)``. Each region's set lies within the clip's, so the player applies it instead of the
+global map; a reader that predates it plays the global map alone.
 """
 
 from __future__ import annotations
@@ -23,9 +31,39 @@ from .source import SourceInfo
 #: Version of the ``gamut`` part this reader understands; a newer part is ignored (it is optional).
 GAMUT_VERSION = 1
 GROUP = "gamut"
+#: Version of the ``local`` subgroup this reader understands; a newer one is ignored.
+LOCAL_VERSION = 1
+LOCAL = "local"
+#: Cells of 16 levels per channel a region's nearest map is indexed by.
+CELLS = 1 << 12
 #: Bits per channel of a colour bin, and the number of bins.
 BIN_BITS = 5
 COLOUR_BINS = 1 << (3 * BIN_BITS)
+
+
+@dataclass
+class LocalGamut:
+    """Per region of the frame, its colour set and each 16-level cell's nearest bin in it.
+
+    Attributes
+    ----------
+    block : int
+        Side in pixels of a region (squares, row-major; the last row and column may be narrower).
+    inside : (regions, 4096) uint8
+        The region's set, one bit per colour bin: bin ``b`` is in it when bit ``b & 7`` of
+        ``inside[region, b >> 3]`` is set.
+    nearest : (regions, 4096) uint16
+        For each cell ``(r >> 4) * 256 + (g >> 4) * 16 + (b >> 4)``, a bin of the region's set
+        (the set's nearest to the cell's lowest bin).
+    """
+
+    block: int
+    inside: np.ndarray
+    nearest: np.ndarray
+
+    def regions(self, height: int, width: int) -> tuple[int, int]:
+        """(rows, columns) of regions over a ``height`` x ``width`` frame."""
+        return -(-height // self.block), -(-width // self.block)
 
 
 @dataclass
@@ -40,10 +78,13 @@ class GamutModel:
     info : dict
         Scalars (``colours``: bins in the set; ``min_pixels``: the pixels of the clip a bin held
         to be in it).
+    local : LocalGamut, optional
+        The colour set of each region of the frame (None: databases without it).
     """
 
     nearest: np.ndarray
     info: dict = field(default_factory=dict)
+    local: LocalGamut | None = None
 
     @property
     def colours(self) -> int:
@@ -55,7 +96,10 @@ def describe(model: GamutModel | None) -> dict:
     """Facts for a model's ``describe()``."""
     if model is None:
         return {"gamut": False}
-    return {"gamut": True, "gamut_colours": model.colours}
+    facts = {"gamut": True, "gamut_colours": model.colours}
+    if model.local is not None:
+        facts["gamut_local_block"] = model.local.block
+    return facts
 
 
 def write(parent: h5py.Group, model: GamutModel | None) -> None:
@@ -68,6 +112,12 @@ def write(parent: h5py.Group, model: GamutModel | None) -> None:
     for key, value in model.info.items():
         if key != "version":
             g.attrs[key] = value
+    if model.local is not None:
+        loc = g.create_group(LOCAL)
+        loc.attrs["version"] = LOCAL_VERSION
+        loc.attrs["block"] = int(model.local.block)
+        loc.create_dataset("inside", data=np.asarray(model.local.inside, np.uint8), compression="gzip")
+        loc.create_dataset("nearest", data=np.asarray(model.local.nearest, np.uint16), compression="gzip")
 
 
 def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> GamutModel | None:
@@ -90,4 +140,37 @@ def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> GamutModel |
     if colours != stated:  # a damaged map (zeroed, say) would snap every frame to a few colours
         check.fail(path, f"holds {colours} colours where the part says {stated}")
     info = check.info(g, skip=("version",))
-    return GamutModel(nearest=np.ascontiguousarray(nearest), info=info)
+    return GamutModel(nearest=np.ascontiguousarray(nearest), info=info, local=_read_local(g, check, source, nearest))
+
+
+def _read_local(g: h5py.Group, check: Checker, source: SourceInfo, nearest: np.ndarray) -> LocalGamut | None:
+    """The validated ``gamut/local`` subgroup, or None when absent or of a newer version."""
+    if LOCAL not in g:
+        return None
+    loc = check.group(g, LOCAL)
+    if check.attr(loc, "version", int) > LOCAL_VERSION:
+        return None
+    block = check.attr(loc, "block", int)
+    if not 1 <= block <= max(source.height, source.width):
+        check.fail(loc.name + "@block", f"{block} is not a region side within the {source.height}x{source.width} frame")
+    model = LocalGamut(block=block, inside=np.empty(0), nearest=np.empty(0))
+    rows, cols = model.regions(source.height, source.width)
+    model.inside = check.dataset(loc, "inside", kind="u", shape=(rows * cols, CELLS))
+    model.nearest = check.dataset(loc, "nearest", kind="u", shape=(rows * cols, CELLS))
+    for name, dtype in (("inside", np.uint8), ("nearest", np.uint16)):
+        if getattr(model, name).dtype != dtype:
+            check.fail(f"{loc.name}/{name}", f"dtype {getattr(model, name).dtype} is not {np.dtype(dtype).name}")
+    if int(model.nearest.max()) >= COLOUR_BINS:
+        check.fail(loc.name + "/nearest", f"a bin outside 0..{COLOUR_BINS - 1}")
+    bits = local_bits(model)
+    if not bits[np.arange(rows * cols)[:, None], model.nearest].all():
+        check.fail(loc.name + "/nearest", "a cell maps to a bin outside its region's set")
+    if (bits & (nearest != np.arange(COLOUR_BINS))).any():
+        check.fail(loc.name + "/inside", "a region holds a bin outside the clip's colour set")
+    model.inside, model.nearest = np.ascontiguousarray(model.inside), np.ascontiguousarray(model.nearest)
+    return model
+
+
+def local_bits(model: LocalGamut) -> np.ndarray:
+    """``model.inside`` unpacked: bool ``(regions, 32768)``, True where the region holds the bin."""
+    return np.unpackbits(model.inside, axis=1, bitorder="little").astype(bool)
