@@ -16,15 +16,16 @@ output's pixels outside, against the source's own 3e-7).
 
 The local sets (:class:`~dynatex.tiledb.gamut.LocalGamut`): the same rule per square region of
 :data:`LOCAL_BLOCK` pixels (doubled until there are at most :data:`MAX_REGIONS`), intersected
-with the clip's set; each 16-level cell maps to the region's bin nearest to the cell's lowest
-bin (the cell's own bins differ from it by at most one per channel, so a finer map, 64 KiB per
-region, would move a colour no more than a bin less far).
+with the clip's set; each 16-level cell maps to the region's bin nearest to the cell's centre
+(its eight bins lie within a bin's diagonal of it, so a finer map, 64 KiB per region, would
+move a colour less than a bin less far).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from ..tiledb.gamut import BIN_BITS, GamutModel, LocalGamut
 from .framestats import CHUNK
@@ -67,6 +68,10 @@ def _nearest(inside: np.ndarray) -> np.ndarray:
     return ((idx[0] * n + idx[1]) * n + idx[2]).astype(np.uint16)
 
 
+#: The centre of each 16-level cell, in bins (a cell spans two bins per channel).
+CENTRES = np.stack(np.meshgrid(*[np.arange(16) * 2 + 0.5] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
 def learn_local(frames: np.ndarray, clip_set: np.ndarray, *, min_pixels: int = MIN_PIXELS) -> LocalGamut:
     """The colour set of each region of ``frames`` ``(T, H, W, 3)`` uint8 within ``clip_set``
     (bool per bin), as :class:`~dynatex.tiledb.gamut.LocalGamut` (module docstring)."""
@@ -90,5 +95,7 @@ def learn_local(frames: np.ndarray, clip_set: np.ndarray, *, min_pixels: int = M
             if not held.any():
                 held = clip_set
             inside.append(np.packbits(held, bitorder="little"))
-            nearest.append(_nearest(held)[::2, ::2, ::2].reshape(-1))
+            members = np.flatnonzero(held)
+            _, k = cKDTree(np.stack([members >> 10, (members >> 5) & 31, members & 31], axis=1)).query(CENTRES)
+            nearest.append(members[k].astype(np.uint16))
     return LocalGamut(block=block, inside=np.stack(inside), nearest=np.stack(nearest))

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...checks import check_frames
-from ...errors import DynatexError
+from ...errors import InvalidArgumentError
 from ..framestats import CHUNK
 
 # -- colours the source never had -----------------------------------------------------------
@@ -146,7 +146,9 @@ def local_out_of_gamut_share(output: np.ndarray, source: np.ndarray, *, block: i
     output = check_frames(output, name="output", min_frames=1)
     source = check_frames(source, name="source", min_frames=2)
     if output.shape[1:3] != source.shape[1:3]:
-        raise DynatexError(f"output frames {output.shape[1:3]} and source frames {source.shape[1:3]} differ in size")
+        raise InvalidArgumentError(
+            f"output frames {output.shape[1:3]} and source frames {source.shape[1:3]} differ in size"
+        )
     half = len(source) // 2
     return 0.5 * sum(
         _local_share_outside(output, local_colour_sets(part, block), block) for part in (source[:half], source[half:])
