@@ -10,11 +10,11 @@ import pyopencl as cl
 import pytest
 
 from dynatex.analyzer import load_clip, metrics
+from dynatex.analyzer.gamut import learn_gamut
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.metrics.gamut import colour_bins
 from dynatex.analyzer.mixture import learn_mixture
 from dynatex.player import open_player
-from dynatex.analyzer.gamut import learn_gamut
 from dynatex.player.engines.projection import open_projector, snap_colours
 from dynatex.player.opencl.selftest import random_colour_set
 from dynatex.player.pixels import FORMATS
