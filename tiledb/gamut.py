@@ -34,6 +34,8 @@ GROUP = "gamut"
 #: Version of the ``local`` subgroup this reader understands; a newer one is ignored.
 LOCAL_VERSION = 1
 LOCAL = "local"
+#: The largest region side a reader accepts (a region larger than the frame is the whole frame).
+MAX_BLOCK = 1 << 16
 #: Cells of 16 levels per channel a region's nearest map is indexed by.
 CELLS = 1 << 12
 #: Bits per channel of a colour bin, and the number of bins.
@@ -151,8 +153,8 @@ def _read_local(g: h5py.Group, check: Checker, source: SourceInfo, nearest: np.n
     if check.attr(loc, "version", int) > LOCAL_VERSION:
         return None
     block = check.attr(loc, "block", int)
-    if not 1 <= block <= max(source.height, source.width):
-        check.fail(loc.name + "@block", f"{block} is not a region side within the {source.height}x{source.width} frame")
+    if not 1 <= block <= MAX_BLOCK:
+        check.fail(loc.name + "@block", f"{block} is not a region side (1..{MAX_BLOCK})")
     model = LocalGamut(block=block, inside=np.empty(0), nearest=np.empty(0))
     rows, cols = model.regions(source.height, source.width)
     model.inside = check.dataset(loc, "inside", kind="u", shape=(rows * cols, CELLS))

@@ -24,6 +24,7 @@ colour set (integers alone) is applied exactly.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -86,7 +87,7 @@ def snap_colours(frames: np.ndarray, nearest: np.ndarray, rgb: tuple[int, int, i
 
 class LocalColours:
     """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
-    ``height`` x ``width`` frame: each pixel's region, and the sets unpacked for numpy."""
+    ``height`` x ``width`` frame: each pixel's region, and (numpy, on first use) the sets unpacked."""
 
     def __init__(self, model, height: int, width: int) -> None:
         self.model = model
@@ -97,8 +98,12 @@ class LocalColours:
         self.base = ((y * self.cols + x) * 32768).astype(np.int32).reshape(-1)
         #: each pixel's region, times the cells per region
         self.cell_base = (self.base >> 3).astype(np.int32)
-        self.bits = local_bits(model).reshape(-1)
         self.nearest = model.nearest.reshape(-1)
+
+    @functools.cached_property
+    def bits(self) -> np.ndarray:
+        """The sets as one bool per region and bin, flat (8 times the packed bytes: numpy's alone)."""
+        return local_bits(self.model).reshape(-1)
 
 
 def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:

@@ -171,6 +171,7 @@ def _edit_local(name, fn):
     ("name", "fn", "match"),
     [
         ("@block", lambda b: 0, "not a region side"),
+        ("@block", lambda b: 1 << 17, "not a region side"),
         ("@block", lambda b: 8, "expected"),  # 3 x 4 regions, not 2 x 2
         ("inside", lambda a: a.astype(np.uint16), "not uint8"),
         ("nearest", lambda a: a[:, :-1], "expected"),
@@ -182,3 +183,14 @@ def _edit_local(name, fn):
 def test_damaged_local_sets_are_refused(db, tmp_path, name, fn, match):
     with pytest.raises(TileDBFormatError, match=match):
         _read(_copy(db, tmp_path, _edit_local(name, fn)))
+
+
+def test_a_frame_smaller_than_a_region_is_one_region(tmp_path):
+    clip = load_clip(wave_clip(30, h=8, w=12))
+    lds = learn_lds(clip, n=3)
+    assert lds.gamut.local.block == 16 and lds.gamut.local.inside.shape == (1, 4096)
+    path = tmp_path / "small.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("w", clip.source_info())
+        w.put_method("w", "lds", lds)
+    np.testing.assert_array_equal(_read(path).gamut.local.nearest, lds.gamut.local.nearest)
