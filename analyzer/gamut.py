@@ -13,19 +13,29 @@ The set is the occupied bins, not the metric's set grown by a bin: a colour move
 of the grown set of the whole clip is still outside the grown set of the half of the clip that
 lacks the bin next to it, which the metric counts (on the flag clip that keeps 5e-4 of the
 output's pixels outside, against the source's own 3e-7).
+
+The local sets (:class:`~dynatex.tiledb.gamut.LocalGamut`): the same rule per square region of
+:data:`LOCAL_BLOCK` pixels (doubled until there are at most :data:`MAX_REGIONS`), intersected
+with the clip's set; each 16-level cell maps to the region's bin nearest to the cell's centre
+(its eight bins lie within a bin's diagonal of it, so a finer map, 64 KiB per region, would
+move a colour less than a bin less far).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from ..framestats import CHUNK
-from ..tiledb.gamut import BIN_BITS, GamutModel
+from ..tiledb.gamut import BIN_BITS, GamutModel, LocalGamut
 from .metrics.gamut import colour_bins
 
 #: Pixels of the clip a colour bin must hold to be in the set.
 MIN_PIXELS = 4
+#: Side in pixels of a region of the local colour sets, and the most regions a frame gets.
+LOCAL_BLOCK = 16
+MAX_REGIONS = 1024
 
 
 def learn_gamut(frames: np.ndarray, *, min_pixels: int = MIN_PIXELS) -> GamutModel | None:
@@ -46,6 +56,46 @@ def learn_gamut(frames: np.ndarray, *, min_pixels: int = MIN_PIXELS) -> GamutMod
     for lo in range(0, len(frames), CHUNK):
         counts += np.bincount(colour_bins(frames[lo : lo + CHUNK]), minlength=n**3)
     inside = counts >= min(min_pixels, int(counts.max()))
+    nearest = _nearest(inside).reshape(-1)
+    info = {"min_pixels": int(min_pixels), "colours": int(inside.sum())}
+    return GamutModel(nearest=nearest, info=info, local=learn_local(frames, inside, min_pixels=min_pixels))
+
+
+def _nearest(inside: np.ndarray) -> np.ndarray:
+    """Each bin's nearest bin (Euclidean) where ``inside`` ``(32768,)`` holds: uint16 ``(32, 32, 32)``."""
+    n = 1 << BIN_BITS
     idx = ndimage.distance_transform_edt(~inside.reshape(n, n, n), return_distances=False, return_indices=True)
-    nearest = ((idx[0] * n + idx[1]) * n + idx[2]).astype(np.uint16).reshape(-1)
-    return GamutModel(nearest=nearest, info={"min_pixels": int(min_pixels), "colours": int(inside.sum())})
+    return ((idx[0] * n + idx[1]) * n + idx[2]).astype(np.uint16)
+
+
+#: The centre of each 16-level cell, in bins (a cell spans two bins per channel).
+CENTRES = np.stack(np.meshgrid(*[np.arange(16) * 2 + 0.5] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def learn_local(frames: np.ndarray, clip_set: np.ndarray, *, min_pixels: int = MIN_PIXELS) -> LocalGamut:
+    """The colour set of each region of ``frames`` ``(T, H, W, 3)`` uint8 within ``clip_set``
+    (bool per bin), as :class:`~dynatex.tiledb.gamut.LocalGamut` (module docstring)."""
+    t, h, w = frames.shape[:3]
+    block = LOCAL_BLOCK
+    while -(-h // block) * -(-w // block) > MAX_REGIONS:
+        block *= 2
+    cols = -(-w // block)
+    bins = 1 << (3 * BIN_BITS)
+    region = np.arange(w) // block
+    inside, nearest = [], []
+    for y0 in range(0, h, block):  # one row of regions at a time: counts of a row's regions alone
+        counts = np.zeros(cols * bins, np.int64)
+        strip = frames[:, y0 : y0 + block]
+        ids = np.broadcast_to(region, strip.shape[1:3]).reshape(-1)
+        for lo in range(0, t, CHUNK):
+            part = strip[lo : lo + CHUNK]
+            counts += np.bincount(np.tile(ids, len(part)) * bins + colour_bins(part), minlength=cols * bins)
+        for c in counts.reshape(cols, bins):
+            held = (c >= min(min_pixels, int(c.max()))) & clip_set
+            if not held.any():
+                held = clip_set
+            inside.append(np.packbits(held, bitorder="little"))
+            members = np.flatnonzero(held)
+            _, k = cKDTree(np.stack([members >> 10, (members >> 5) & 31, members & 31], axis=1)).query(CENTRES)
+            nearest.append(members[k].astype(np.uint16))
+    return LocalGamut(block=block, inside=np.stack(inside), nearest=np.stack(nearest))

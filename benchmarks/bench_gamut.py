@@ -1,7 +1,8 @@
 """Cost of the colour set (the ``gamut`` part) per frame of ``lds`` / ``mixture``: CPU time and
-frame rate of ``next_frame`` on a database with the part and on a copy without it, on numpy and
-OpenCL, for look-ahead k, in alternating rounds (medians kept: the machine is shared), so that
-every ratio comes from one run. The detail plays in both.
+frame rate of ``next_frame`` on a database with the part, on a copy without it and on a copy
+with the clip's set alone (no ``gamut/local``: ``global``), on numpy and OpenCL, for look-ahead
+k, in alternating rounds (medians kept: the machine is shared), so that every ratio comes from
+one run. The detail plays in all.
 
     python benchmarks/bench_gamut.py DB.h5 [--mode lds] [--lookahead 1,8] [--frames 48]
         [--rounds 5] [--device 0:0] [--backends numpy,opencl]
@@ -20,15 +21,16 @@ import numpy as np
 from bench_lookahead import measure
 
 
-def without_gamut(db: str, folder: str) -> str:
-    """A copy of ``db`` whose textures' lds and mixture models have no ``gamut`` part."""
-    out = os.path.join(folder, "without_gamut.h5")
+def without_gamut(db: str, folder: str, part: str = "gamut") -> str:
+    """A copy of ``db`` whose textures' lds and mixture models have no ``part`` (``gamut``, or
+    ``gamut/local``)."""
+    out = os.path.join(folder, f"without_{part.replace('/', '_')}.h5")
     shutil.copy(db, out)
     with h5py.File(out, "a") as f:
         for texture in f["textures"].values():
             for method in ("lds", "mixture"):
-                if method in texture and "gamut" in texture[method]:
-                    del texture[method]["gamut"]
+                if method in texture and part in texture[method]:
+                    del texture[method][part]
     return out
 
 
@@ -43,7 +45,11 @@ def main() -> None:
     ap.add_argument("--backends", default="numpy,opencl")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="dynatex-gamut-") as tmp:
-        dbs = {"with": args.db, "without": without_gamut(args.db, tmp)}
+        dbs = {
+            "with": args.db,
+            "without": without_gamut(args.db, tmp),
+            "global": without_gamut(args.db, tmp, "gamut/local"),
+        }
         runs: dict[tuple, list] = {}
         for _ in range(args.rounds):
             for backend in args.backends.split(","):
@@ -56,6 +62,7 @@ def main() -> None:
         if variant != "with":
             continue
         w, wo = np.median(vals, axis=0), np.median(runs[(backend, k, "without")], axis=0)
+        gl = np.median(runs[(backend, k, "global")], axis=0)
         print(
             json.dumps(
                 {
@@ -63,10 +70,14 @@ def main() -> None:
                     "lookahead": k,
                     "cpu_ms_with": round(w[0], 3),
                     "cpu_ms_without": round(wo[0], 3),
+                    "cpu_ms_global": round(gl[0], 3),
                     "cpu_ratio": round(w[0] / wo[0], 3),
+                    "cpu_ratio_to_global": round(w[0] / gl[0], 3),
                     "fps_with": round(w[1], 1),
                     "fps_without": round(wo[1], 1),
+                    "fps_global": round(gl[1], 1),
                     "fps_ratio": round(w[1] / wo[1], 3),
+                    "fps_ratio_to_global": round(w[1] / gl[1], 3),
                 }
             )
         )

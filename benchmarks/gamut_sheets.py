@@ -6,9 +6,11 @@ colours the clip never had: ``{clip}_gamut.png``, rows of the source frame, the 
 the output after and the before with those pixels marked magenta, at 1:1; ``{clip}_crop.png``,
 the same for a region (``--crop``, default the flag's top edge), at 1:1 and at 4x; and
 ``{clip}_1080_{before,after}.png``, the worst frame scaled to 1080 rows on a 1920x1080 canvas,
-as a full-screen play shows it. Prints the share of such pixels before and after.
+as a full-screen play shows it. Prints the share of such pixels before and after. ``--local``:
+colours that the pixel's 16 x 16 region of the source never had
+(:func:`~dynatex.analyzer.metrics.gamut.local_colour_sets` of the whole clip) instead.
 
-    python benchmarks/gamut_sheets.py BEFORE AFTER OUTDIR [--clips flag,sea] [--crop Y0,Y1,X0,X1]
+    python benchmarks/gamut_sheets.py BEFORE AFTER OUTDIR [--clips flag,sea] [--crop Y0,Y1,X0,X1] [--local]
 """
 
 from __future__ import annotations
@@ -34,19 +36,29 @@ def play(db: str, method: str) -> np.ndarray:
         return np.stack([p.next_frame() for _ in range(64)])
 
 
-def run_case(name: str, before: str, after: str, outdir: str, crop: tuple[int, int, int, int]) -> dict:
+def outside_of(frames: np.ndarray, src: np.ndarray, local: bool) -> np.ndarray:
+    """Per pixel of ``frames``: its colour is outside the source's set (or its region's, ``local``)."""
+    from dynatex.analyzer.metrics import colour_set
+    from dynatex.analyzer.metrics.gamut import LOCAL_BLOCK, _region_ids, colour_bins, local_colour_sets
+
+    if not local:
+        return ~colour_set(src)[colour_bins(frames)].reshape(frames.shape[:3])
+    ids, _ = _region_ids(src.shape[1:3], LOCAL_BLOCK)
+    keys = np.tile(ids, len(frames)) * 32**3 + colour_bins(frames)
+    return ~local_colour_sets(src).reshape(-1)[keys].reshape(frames.shape[:3])
+
+
+def run_case(
+    name: str, before: str, after: str, outdir: str, crop: tuple[int, int, int, int], local: bool = False
+) -> dict:
     from PIL import Image
 
-    from dynatex.analyzer.metrics import colour_set
-    from dynatex.analyzer.metrics.gamut import colour_bins
     from dynatex.analyzer.video import load_clip_path
 
     clip_file, method, *_ = CASES[name]
     src = load_clip_path(os.path.join(CLIPS, clip_file)).frames
     a, b = play(os.path.join(before, f"{name}.h5"), method), play(os.path.join(after, f"{name}.h5"), method)
-    inside = colour_set(src)
-    outside_a = ~inside[colour_bins(a)].reshape(a.shape[:3])
-    outside_b = ~inside[colour_bins(b)].reshape(b.shape[:3])
+    outside_a, outside_b = outside_of(a, src, local), outside_of(b, src, local)
     worst = np.argsort(outside_a.reshape(len(a), -1).sum(axis=1))[::-1][:3]
     marked = a.copy()
     marked[outside_a] = MAGENTA
@@ -80,11 +92,12 @@ def main() -> None:
     ap.add_argument("outdir")
     ap.add_argument("--clips", default="flag")
     ap.add_argument("--crop", default="20,140,60,300", help="Y0,Y1,X0,X1 of the region sheet")
+    ap.add_argument("--local", action="store_true", help="colours the pixel's region never had")
     args = ap.parse_args()
     os.makedirs(args.outdir, exist_ok=True)
     crop = tuple(int(v) for v in args.crop.split(","))
     for name in args.clips.split(","):
-        print(json.dumps(run_case(name, args.before, args.after, args.outdir, crop)), flush=True)
+        print(json.dumps(run_case(name, args.before, args.after, args.outdir, crop, args.local)), flush=True)
 
 
 if __name__ == "__main__":

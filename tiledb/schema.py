@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 FORMAT_NAME = "dynatex-tiledb"
 #: (major, minor). A reader refuses another major and accepts any minor.
-FORMAT_VERSION = (1, 6)
+FORMAT_VERSION = (1, 7)
 
 # Root attributes.
 ATTR_FORMAT = "format"

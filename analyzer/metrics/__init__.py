@@ -16,14 +16,22 @@ for the definition, units, range and good/bad values of each measure. One module
 - Repetition in space (:mod:`.lattice`): :func:`lattice_prominence` (a cell lattice standing out),
   :func:`lattice_correlation`.
 - Colours the source never had (:mod:`.gamut`): :func:`out_of_gamut_share`, calibrated by
-  :func:`source_gamut_share`.
+  :func:`source_gamut_share`; in places that never had them: :func:`local_out_of_gamut_share`,
+  calibrated by :func:`source_local_gamut_share`.
 - All of them at once (:mod:`.report`): :func:`evaluate`.
 """
 
 from __future__ import annotations
 
 from ...checks import check_frames
-from .gamut import GAMUT_BITS, colour_set, out_of_gamut_share, source_gamut_share
+from .gamut import (
+    GAMUT_BITS,
+    colour_set,
+    local_out_of_gamut_share,
+    out_of_gamut_share,
+    source_gamut_share,
+    source_local_gamut_share,
+)
 from .ghosts import DoubleImages, crossfade_double_image, double_image, double_image_level
 from .lattice import lattice_correlation, lattice_lags, lattice_prominence
 from .likeness import patch_coherence, patch_completeness, patch_distances, spectrum_distance, st_power_spectrum
@@ -50,6 +58,7 @@ __all__ = [
     "lattice_correlation",
     "lattice_lags",
     "lattice_prominence",
+    "local_out_of_gamut_share",
     "out_of_gamut_share",
     "patch_coherence",
     "patch_completeness",
@@ -58,6 +67,7 @@ __all__ = [
     "repetition_profile",
     "seam_visibility",
     "source_gamut_share",
+    "source_local_gamut_share",
     "spectrum_distance",
     "st_power_spectrum",
     "stability",

@@ -24,13 +24,14 @@ colour set (integers alone) is applied exactly.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
 import numpy as np
 
 from ...tiledb.detail import DetailModel
-from ...tiledb.gamut import GamutModel
+from ...tiledb.gamut import GamutModel, local_bits
 from ..pixels import pixel_format
 from .detail import Detail, DetailReference
 
@@ -94,6 +95,55 @@ def snap_colours(frames: np.ndarray, nearest: np.ndarray, rgb: tuple[int, int, i
         ch = frames[..., i]
         lo = ((t >> shift) & 31).astype(np.uint8) << 3
         ch[away] = np.clip(ch[away], lo, lo + 7)
+
+
+class LocalColours:
+    """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
+    ``height`` x ``width`` frame: each pixel's region, and (numpy, on first use) the sets unpacked."""
+
+    def __init__(self, model, height: int, width: int) -> None:
+        self.model = model
+        self.block = model.block
+        self.cols = model.regions(height, width)[1]
+        y, x = np.arange(height)[:, None] // self.block, np.arange(width)[None, :] // self.block
+        #: each pixel's region, times the bins per region (a key's base)
+        self.base = ((y * self.cols + x) * 32768).astype(np.int32).reshape(-1)
+        #: each pixel's region, times the cells per region
+        self.cell_base = (self.base >> 3).astype(np.int32)
+        self.nearest = model.nearest.reshape(-1)
+
+    @functools.cached_property
+    def bits(self) -> np.ndarray:
+        """The sets as one bool per region and bin, flat (8 times the packed bytes: numpy's alone)."""
+        return local_bits(self.model).reshape(-1)
+
+
+def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
+    """Clamp, in place, each pixel of ``frame`` (H, W, bytes) uint8 whose colour bin its region
+    never held into the bin the region's map names for its 16-level cell, channel by channel.
+
+    >>> from dynatex.tiledb.gamut import LocalGamut
+    >>> held = np.zeros(32768, bool); held[(25 * 32 + 0) * 32 + 0] = True  # red alone
+    >>> near = np.full((1, 4096), 25 * 1024, np.uint16)
+    >>> loc = LocalColours(LocalGamut(1, np.packbits(held, bitorder="little")[None], near), 1, 1)
+    >>> px = np.array([[[3, 201, 202]]], np.uint8); snap_local(px, loc); px.tolist()
+    [[[200, 7, 7]]]
+    """
+    flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
+    r, g, b = (flat[:, i] for i in rgb)
+    keys = (r >> 3).astype(np.int32) << 10
+    keys |= (g >> 3).astype(np.int32) << 5
+    keys |= b >> 3
+    keys += local.base
+    away = np.flatnonzero(~local.bits[keys])
+    if not len(away):
+        return
+    ra, ga, ba = r[away], g[away], b[away]
+    cells = ((ra >> 4).astype(np.int32) << 8) | ((ga >> 4).astype(np.int32) << 4) | (ba >> 4)
+    t = local.nearest[local.cell_base[away] + cells]
+    for i, ch, shift in zip(rgb, (ra, ga, ba), (10, 5, 0)):
+        lo = ((t >> shift) & 31).astype(np.uint8) << 3
+        flat[away, i] = np.clip(ch, lo, lo + 7)
 
 
 def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:
@@ -165,8 +215,12 @@ class Projector:
             self.detail = DetailReference(detail, shape=self.shape, channels=channels, format=format)
         #: each colour bin's nearest bin of the source's colour set (None: the model has none)
         self.nearest: np.ndarray | None = None
+        #: the source's colour set per region of the frame, applied instead of :attr:`nearest` (None: none)
+        self.local: LocalColours | None = None
         if gamut is not None and channels == 3:
             self.nearest = np.ascontiguousarray(gamut.nearest, np.uint16)
+            if gamut.local is not None:
+                self.local = LocalColours(gamut.local, *self.shape[:2])
 
     @property
     def bytes_per_frame(self) -> int:
@@ -222,7 +276,9 @@ class ProjectorReference(Projector):
                 self.format.from_rgb(np.broadcast_to(frame.reshape(h, w, self.channels), (h, w, 3)), o)
             if layers is not None:
                 self.detail.apply(o, layers[j])
-            if self.nearest is not None:
+            if self.local is not None:
+                snap_local(o, self.local, self.format.rgb)
+            elif self.nearest is not None:
                 snap_colours(o, self.nearest, self.format.rgb)
 
 
@@ -265,6 +321,9 @@ class ProjectorOpenCL(Projector):
             gain = np.repeat(d.gain.reshape(-1), self.channels)  # once per value: the kernel reads it as vectors
             arrays = {"vol": d.volume, "gain": gain, "low": d.low, "high": d.high, "colours": d.colours}
         arrays["nearest"] = np.zeros(1, np.uint16) if self.nearest is None else self.nearest
+        loc = self.local
+        arrays["local_inside"] = np.zeros(1, np.uint8) if loc is None else loc.model.inside
+        arrays["local_nearest"] = np.zeros(1, np.uint16) if loc is None else loc.model.nearest
         for name, a in arrays.items():
             self._bufs[name] = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
         self._kernels: dict[bool, tuple[Any, Any]] = {}
@@ -283,6 +342,10 @@ class ProjectorOpenCL(Projector):
             vh, vw = (self.detail.vh, self.detail.vw) if detail else (1, 1)
             defines = {"HALF": self.half, "CHANNELS": self.channels, "DETAIL": detail, "VH": vh, "VW": vw}
             defines["GAMUT"] = self.nearest is not None
+            defines["LOCAL"] = self.local is not None
+            defines["LOCAL_BLOCK"], defines["LOCAL_COLS"] = (
+                (self.local.block, self.local.cols) if self.local else (1, 1)
+            )
             prog = build_program(self.ctx, "projection.cl", {**defines, **self.format.defines})
             k = Kernel(prog, "project")
             k.set(

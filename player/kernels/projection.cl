@@ -21,11 +21,16 @@
 // nearest bin of the source's colour set) is clamped into that bin, channel by channel
 // (integers alone: exact).
 //
+// LOCAL (with GAMUT): instead, a pixel whose bin its region (squares of LOCAL_BLOCK pixels,
+// LOCAL_COLS to a row) never held (bit bin & 7 of local_inside[region * 4096 + (bin >> 3)]
+// clear) is clamped into bin local_nearest[region * 4096 + cell], cell its 16-level one
+// ((r >> 4) * 256 + (g >> 4) * 16 + (b >> 4)); each region's set lies within the clip's.
+//
 // Defines: HALF (1: basis stored as half floats), CHANNELS (1 or 3: values per pixel of the
 // basis; grey is replicated), PIXEL_BYTES (3 or 4: bytes per output pixel), R_AT, G_AT, B_AT
 // (the byte of each colour in an output pixel), A_AT (alpha's, 255; -1: none), DETAIL (0 or
 // 1), VH and VW (the detail volume's rows and columns; constants, so that the wrap is cheap),
-// GAMUT (0 or 1).
+// GAMUT (0 or 1), LOCAL (0 or 1), LOCAL_BLOCK and LOCAL_COLS.
 
 #define PIXELS 16
 #define GROUP (PIXELS * CHANNELS)
@@ -63,6 +68,30 @@ void snap_colours(uchar *v, const int count, __global const ushort *restrict nea
         }
     }
 }
+
+#if LOCAL
+// The `count` pixels of v, the first at (x, y), moved into their regions' colour sets (LOCAL).
+void snap_local(uchar *v, const int count, int x, int y, const int width, __global const uchar *restrict inside,
+                __global const ushort *restrict targets)
+{
+    for (int q = 0; q < count; ++q) {
+        uchar *p = v + 3 * q;
+        const int region = (y / LOCAL_BLOCK) * LOCAL_COLS + x / LOCAL_BLOCK;
+        const int bin = BIN(p, 0);
+        if (((inside[region * 4096 + (bin >> 3)] >> (bin & 7)) & 1) == 0) {
+            const int t = targets[region * 4096 + (((p[0] >> 4) << 8) | ((p[1] >> 4) << 4) | (p[2] >> 4))];
+            const int r = (t >> 10) << 3, g = ((t >> 5) & 31) << 3, b = (t & 31) << 3;
+            p[0] = (uchar)clamp((int)p[0], r, r + 7);
+            p[1] = (uchar)clamp((int)p[1], g, g + 7);
+            p[2] = (uchar)clamp((int)p[2], b, b + 7);
+        }
+        if (++x == width) {
+            x = 0;
+            ++y;
+        }
+    }
+}
+#endif
 #endif
 
 #if DETAIL
@@ -137,7 +166,9 @@ __kernel void project(__global const basis_t *restrict basis,
                       __global const uchar *restrict colours,
                       __global const int *restrict layer_at,
                       __global const float *restrict layer_w,
-                      __global const ushort *restrict nearest)
+                      __global const ushort *restrict nearest,
+                      __global const uchar *restrict local_inside,
+                      __global const ushort *restrict local_nearest)
 {
     const size_t g = get_global_id(0);
     const size_t first = g * GROUP;
@@ -173,7 +204,9 @@ __kernel void project(__global const basis_t *restrict basis,
 #if DETAIL
         add_detail(v, count, x0, y0, first, vol, gain, low, high, colours, layer_at + 6 * f, layer_w + 2 * f, width);
 #endif
-#if GAMUT
+#if LOCAL
+        snap_local(v, count, x0, y0, width, local_inside, local_nearest);
+#elif GAMUT
         snap_colours(v, count, nearest);
 #endif
         __global uchar *o = out + (size_t)f * pixels * PIXEL_BYTES;

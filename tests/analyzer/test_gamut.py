@@ -61,3 +61,37 @@ def test_calibrated_on_real_sources(clips_dir, name):
     assert own < 0.02
     swapped = src[..., ::-1]
     assert m.out_of_gamut_share(swapped, src) > max(0.05, 5 * own)
+
+
+def _two_halves(t=20, seed=0):
+    """Red on the left half of the frame, grey on the right, with sensor noise."""
+    rng = np.random.default_rng(seed)
+    f = np.empty((t, 32, 32, 3), np.float32)
+    f[:, :, :16] = (200, 30, 30)
+    f[:, :, 16:] = (150, 150, 145)
+    f += rng.normal(0, 2, f.shape)
+    return np.clip(np.rint(f), 0, 255).astype(np.uint8)
+
+
+def test_local_share_counts_a_clip_colour_out_of_its_place():
+    src = _two_halves()
+    assert m.source_local_gamut_share(src) < 0.01
+    assert m.local_out_of_gamut_share(src, src) < 0.01
+    moved = src[:, :, ::-1]  # grey on the left, red on the right: colours of the clip, each out of place
+    assert m.out_of_gamut_share(moved, src) < 0.01
+    assert m.local_out_of_gamut_share(moved, src) > 0.95
+    half = src.copy()
+    half[:, :16, 16:] = src[:, :16, :16]  # red over the top of the grey half
+    assert m.local_out_of_gamut_share(half, src) == pytest.approx(0.25, abs=0.02)
+    with pytest.raises(ValueError, match="differ in size"):
+        m.local_out_of_gamut_share(src[:, :16], src)
+
+
+@pytest.mark.parametrize("name", ["flag_wind_dyntex_571c110.avi", "fountain_dyntex_6486110.avi"])
+def test_local_share_calibrated_on_real_sources(clips_dir, name):
+    """A source's own local level (its halves against each other) is small, and its frames
+    mirrored left to right (its colours, in other places) lie far above it."""
+    src = load_clip_path(str(clips_dir / name), stop=60).frames
+    own = m.source_local_gamut_share(src)
+    assert own < 0.02
+    assert m.local_out_of_gamut_share(src[:, :, ::-1], src) > max(0.02, 3 * own)

@@ -10,6 +10,7 @@ import pyopencl as cl
 import pytest
 
 from dynatex.analyzer import load_clip, metrics
+from dynatex.analyzer.gamut import learn_gamut
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.metrics.gamut import colour_bins
 from dynatex.analyzer.mixture import learn_mixture
@@ -18,7 +19,7 @@ from dynatex.player.engines.projection import open_projector, snap_colours
 from dynatex.player.opencl.selftest import random_colour_set
 from dynatex.player.pixels import FORMATS
 from dynatex.tiledb import DatabaseWriter
-from dynatex.tiledb.gamut import GamutModel
+from dynatex.tiledb.gamut import GamutModel, LocalGamut, local_bits
 
 from .test_detail import _model, exact_projection
 
@@ -97,6 +98,77 @@ def test_kernel_equals_numpy_reference(cl_context, format, detail, size):
         np.testing.assert_array_equal(single, want[2])
     finally:
         engine.close()
+
+
+def random_local(rng: np.random.Generator, nearest: np.ndarray, h: int, w: int, block: int) -> LocalGamut:
+    """Per region, a random half of the clip's set and each cell mapped to a random bin of it."""
+    regions = -(-h // block) * -(-w // block)
+    clip_set = np.flatnonzero(nearest == np.arange(32**3))
+    held = np.zeros((regions, 32**3), bool)
+    targets = np.empty((regions, 4096), np.uint16)
+    for r in range(regions):
+        mine = clip_set[rng.random(clip_set.size) < 0.5]
+        held[r, mine] = True
+        targets[r] = rng.choice(mine, 4096)
+    return LocalGamut(block=block, inside=np.packbits(held, axis=1, bitorder="little"), nearest=targets)
+
+
+@pytest.mark.parametrize("format", ["RGB", "BGRA"])
+@pytest.mark.parametrize("detail", [False, True], ids=["alone", "with-detail"])
+@pytest.mark.parametrize("size", [(23, 41), (20, 64)], ids=["pixel-by-pixel", "vectors"])
+def test_local_kernel_equals_numpy_reference(cl_context, format, detail, size):
+    """With local colour sets (regions of 8 pixels: a work-item's 16 pixels span two, the last
+    row and column of regions are narrower) the kernel moves exactly the pixels its reference
+    moves, to the same values, k frames per pass and one at a time; each pixel ends in its
+    region's set."""
+    rng = np.random.default_rng(11)
+    h, w = size
+    fmt = FORMATS[format]
+    basis, mean = exact_projection(rng, h, w, 3)
+    shape = (h, w, fmt.bytes)
+    nearest = random_colour_set(rng)
+    gamut = GamutModel(nearest, local=random_local(rng, nearest, h, w, 8))
+    kw = dict(shape=shape, channels=3, format=format, frames=3, detail=_model(rng, h, w, 3) if detail else None)
+    engine = open_projector(basis, mean, ctx=cl_context, queue=cl.CommandQueue(cl_context), gamut=gamut, **kw)
+    ref = open_projector(basis, mean, gamut=gamut, **kw)
+    glob = open_projector(basis, mean, gamut=GamutModel(nearest), **kw)
+    try:
+        coefs = rng.integers(-4, 5, (3, 5)).astype(np.float32)
+        engine.coefs[:] = ref.coefs[:] = glob.coefs[:] = coefs
+        lay = [ref.detail.layers(3, k, 1.5) for k in (0, 4, 9)] if detail else None
+        got, want, other = (np.empty((3, *shape), np.uint8) for _ in range(3))
+        engine.run(got, count=3, layers=lay)
+        ref.run(want, count=3, layers=lay)
+        glob.run(other, count=3, layers=lay)
+        np.testing.assert_array_equal(got, want)
+        assert (want != other).any(axis=-1).mean() > 0.1  # the regions' sets, not the clip's
+        bins = colour_bins(want[..., list(fmt.rgb)]).reshape(3, h, w)
+        region = (np.arange(h)[:, None] // 8) * -(-w // 8) + np.arange(w)[None, :] // 8
+        assert local_bits(gamut.local)[np.broadcast_to(region, bins.shape), bins].all()
+        single = np.empty(shape, np.uint8)
+        engine.coef[:] = coefs[1]
+        engine.run(single, layers=None if lay is None else [lay[1]])
+        np.testing.assert_array_equal(single, want[1])
+    finally:
+        engine.close()
+
+
+def test_a_clip_colour_leaves_the_places_that_never_had_it():
+    """Red on the left, grey on the right: red projected over the right half becomes grey there
+    (clamped into the grey bin, 144..151 per channel),
+    and stays red on the left (the clip's set alone keeps both)."""
+    src = np.empty((8, 16, 32, 3), np.uint8)
+    src[:, :, :16], src[:, :, 16:] = (200, 30, 30), (150, 150, 145)
+    gamut = learn_gamut(src)
+    assert gamut.local.block == 16
+    frame = np.full((16, 32, 3), (200, 30, 30), np.uint8)
+    basis = np.zeros((1, frame.size), np.float32)
+    for model, want_right in ((gamut, (151, 144, 144)), (GamutModel(gamut.nearest), (200, 30, 30))):
+        p = open_projector(basis, frame.reshape(-1).astype(np.float32), shape=frame.shape, channels=3, gamut=model)
+        out = np.empty_like(frame)
+        p.run(out)
+        assert out[:, :16].reshape(-1, 3).tolist() == [[200, 30, 30]] * 256
+        assert out[:, 16:].reshape(-1, 3).tolist() == [list(want_right)] * 256
 
 
 @pytest.fixture(scope="module")

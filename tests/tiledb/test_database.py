@@ -21,7 +21,7 @@ from dynatex.tiledb import (
 def test_open_lists_textures_and_reads_lds(lds_db):
     with open_db(lds_db) as db:
         assert db.textures == ("waves",)
-        assert db.version == FORMAT_VERSION == (1, 6)
+        assert db.version == FORMAT_VERSION == (1, 7)
         tex = db.texture()  # the only one
         assert tex.methods == ("lds",)
         m = tex.read("lds")

@@ -11,6 +11,7 @@ from dynatex.analyzer.gamut import learn_gamut
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.metrics.gamut import colour_bins
 from dynatex.tiledb import DatabaseWriter, TileDB, TileDBFormatError
+from dynatex.tiledb.gamut import local_bits
 
 from ..conftest import wave_clip
 from .conftest import edited_copy, replace_dataset
@@ -98,3 +99,68 @@ def test_grey_source_ignores_it(tmp_path):
 def test_damaged_map_is_refused(projection_db, tmp_path, fn, match):
     with pytest.raises(TileDBFormatError, match=match):
         _read(_copy(projection_db, tmp_path, replace_dataset("gamut/nearest", fn)))
+
+
+def test_local_sets_round_trip_and_lie_within_the_clip_set(projection_db):
+    path, models, frames = projection_db.path, projection_db.models, projection_db.frames
+    want = models["lds"].gamut.local
+    got = _read(path).gamut.local
+    assert got.block == want.block == 16 and got.inside.shape == (2 * 2, 4096)
+    np.testing.assert_array_equal(got.inside, want.inside)
+    np.testing.assert_array_equal(got.nearest, want.nearest)
+    bits = local_bits(got)
+    clip_set = models["lds"].gamut.nearest == np.arange(32**3)
+    assert not (bits & ~clip_set).any()
+    region = (np.arange(20)[:, None] // 16) * 2 + np.arange(28)[None, :] // 16
+    held = bits[np.broadcast_to(region, frames.shape[:3]).reshape(-1), colour_bins(frames)]
+    assert held.mean() > 0.95  # the clip's own pixels lie in their regions' sets (but lone colours)
+
+
+def test_older_gamut_reads_without_local_sets(projection_db, tmp_path):
+    model = _read(_copy(projection_db, tmp_path, lambda g: g["gamut"].__delitem__("local")))
+    assert model.gamut is not None and model.gamut.local is None
+
+    def newer(g):
+        g["gamut/local"].attrs["version"] = 99
+
+    assert _read(_copy(projection_db, tmp_path, newer)).gamut.local is None
+
+
+def _edit_local(name, fn):
+    if not name.startswith("@"):
+        return replace_dataset(f"gamut/local/{name}", fn)
+
+    def edit(g):
+        loc = g["gamut/local"]
+        loc.attrs[name[1:]] = fn(loc.attrs[name[1:]])
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    ("name", "fn", "match"),
+    [
+        ("@block", lambda b: 0, "not a region side"),
+        ("@block", lambda b: 1 << 17, "not a region side"),
+        ("@block", lambda b: 8, "expected"),  # 3 x 4 regions, not 2 x 2
+        ("inside", lambda a: a.astype(np.uint16), "not uint8"),
+        ("nearest", lambda a: a[:, :-1], "expected"),
+        ("nearest", lambda a: np.full_like(a, 40000), "a bin outside 0..32767"),
+        ("nearest", lambda a: (a + 1).astype(np.uint16), "outside its region's set"),
+        ("inside", lambda a: np.full_like(a, 255), "outside the clip's colour set"),
+    ],
+)
+def test_damaged_local_sets_are_refused(projection_db, tmp_path, name, fn, match):
+    with pytest.raises(TileDBFormatError, match=match):
+        _read(_copy(projection_db, tmp_path, _edit_local(name, fn)))
+
+
+def test_a_frame_smaller_than_a_region_is_one_region(tmp_path):
+    clip = load_clip(wave_clip(30, h=8, w=12))
+    lds = learn_lds(clip, n=3)
+    assert lds.gamut.local.block == 16 and lds.gamut.local.inside.shape == (1, 4096)
+    path = tmp_path / "small.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("w", clip.source_info())
+        w.put_method("w", "lds", lds)
+    np.testing.assert_array_equal(_read(path).gamut.local.nearest, lds.gamut.local.nearest)
