@@ -18,17 +18,18 @@ edges (18% of the pixels at the default 0.1). Windows span at most the torus, so
 shows the torus's period.
 
 What is fixed at open: the torus and its Gaussianized copy (each channel through ``T``, stored
-as bytes as the paper stores it: 32 levels a standard deviation; both in the output's pixel
-layout), the pattern of weights of one grid cell, cut into pieces of at most ``RUN`` pixels of a
-row that one window shows alone or that blend the same windows (:func:`cell_pieces`), the window
-offsets (from the seed). Per frame the host computes each vertex's stored frame and blend weight
-(a few hundred vertices at 4K) and uploads them without waiting; one kernel
-(``kernels/stochastic.cl``) draws every piece of every cell once, as whole vectors: a copy piece
-from the torus, a blend piece in integers from the Gaussianized copy with one inverse lookup per
-byte. The numpy reference :func:`~.stochastic_reference.stochastic_reference` computes the same
-integers, so the two backends agree exactly (tested on every verified device); the 8-bit
-Gaussianized copy gives a value back within one level (98-99%; within 4 in a sparse tail), in
-the blend bands only.
+as bytes as the paper stores it: 32 levels a standard deviation; both RGB whatever the output's
+pixel format), the pattern of weights of one grid cell, cut into pieces of at most ``RUN`` pixels
+of a row that one window shows alone or that blend the same windows (:func:`cell_pieces`), the
+window offsets (from the seed). Per frame the host computes each vertex's stored frame and blend
+weight (a few hundred vertices at 4K) and uploads them without waiting; one kernel
+(``kernels/stochastic.cl``) draws every piece of every cell once, as whole vectors of RGB bytes: a
+copy piece from the torus, a blend piece in integers from the Gaussianized copy with one inverse
+lookup per byte; a four-byte format gets them placed as it stores its pixels
+(``kernels/pixels.cl``). The numpy reference :func:`~.stochastic_reference.stochastic_reference`
+computes the same integers, so the two backends agree exactly (tested on every verified
+device); the 8-bit Gaussianized copy gives a value back within one level (98-99%; within 4 in a
+sparse tail), in the blend bands only.
 
 Examples
 --------
@@ -281,7 +282,6 @@ class StochasticOpenCL(Stochastic):
         h, w = self.out_shape[:2]
         th, tw = self.torus.shape[1:3]
         ch, cw = self.cell
-        pb = self.format.bytes
         pieces, bweights = cell_pieces(self.weights, RUN)
         self._cells = ((h - 1) // ch + 1, (w - 1 + cw) // cw + 1)
         defines = {
@@ -296,28 +296,25 @@ class StochasticOpenCL(Stochastic):
             "NPIECES": len(pieces),
             "RUN": RUN,
             "N_INVERSE": N_INVERSE,
-            "PIXEL_BYTES": pb,
+            **self.format.defines,
         }
-        prog = build_program(self.ctx, "stochastic.cl", defines)
-        # in the output's layout, every torus row carrying its first RUN pixels again (no piece wraps)
+        prog = build_program(self.ctx, ("pixels.cl", "stochastic.cl"), defines)
+        # RGB, every torus row carrying its first RUN pixels again (no piece wraps)
         pad = np.arange(tw + RUN) % tw
         for name, frames in (("_d_torus", self.torus), ("_d_gauss", self.gauss_torus)):
-            padded = self.format.from_rgb(np.take(frames, pad, axis=2))
+            padded = np.ascontiguousarray(np.take(frames, pad, axis=2))
             setattr(self, name, cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded))
-        # the RGB channel of each byte of a piece (3: alpha)
-        channel = np.full(pb, 3, np.int64)
-        channel[list(self.format.rgb)] = np.arange(3)
-        self._byte_channel = np.tile(channel, RUN)
+        self._byte_channel = np.tile(np.arange(3), RUN)  # the channel of each RGB byte of a piece
 
         def table(rows: np.ndarray, dtype) -> Any:
             rows = rows if len(rows) else np.zeros((1,) + rows.shape[1:], rows.dtype)  # no empty buffer
             return cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(rows, dtype))
 
         self._d_pieces = table(pieces, np.int32)
-        self._d_wbytes = table(np.repeat(bweights, pb, axis=-1), np.uint16)  # (blend pieces, 3, PIECE_BYTES)
+        self._d_wbytes = table(np.repeat(bweights, 3, axis=-1), np.uint16)  # (blend pieces, 3, 3 RUN)
         self._d_chan = table(self._byte_channel * N_INVERSE, np.int32)
-        self._d_gains = cl.Buffer(self.ctx, mf.READ_ONLY, pb * RUN * 4)
-        self._d_inverse = cl.Buffer(self.ctx, mf.READ_ONLY, 4 * N_INVERSE)
+        self._d_gains = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * RUN * 4)
+        self._d_inverse = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * N_INVERSE)
         self._vtab = np.zeros(self.tmap_shape + (4,), np.int32)
         self._d_vertices = cl.Buffer(self.ctx, mf.READ_ONLY, self._vtab.nbytes)
         self._k = Kernel(prog, "stochastic")
@@ -333,7 +330,7 @@ class StochasticOpenCL(Stochastic):
             width=np.int32(w),
             height=np.int32(h),
         )
-        self._out = FrameOut(self.ctx, self.queue, self._k, "out", h * w * pb)
+        self._out = FrameOut(self.ctx, self.queue, self._k, "out", h * w * self.format.bytes)
         self.direct = self._out.direct
         self._local = (GROUP, 1)
         self._size = (_round_up(max(1, len(pieces)), GROUP), self._cells[0] * self._cells[1])
@@ -345,8 +342,7 @@ class StochasticOpenCL(Stochastic):
         import pyopencl as cl
 
         _, inverse, _ = self._tables
-        inverse = np.concatenate([inverse, np.full((1, N_INVERSE), 255, np.uint8)])  # alpha: 255
-        gains = np.append(tone_gains(self._gain), 256)[self._byte_channel].astype(np.uint32)
+        gains = tone_gains(self._gain)[self._byte_channel].astype(np.uint32)
         for buf, host in ((self._d_inverse, inverse), (self._d_gains, gains)):
             cl.enqueue_copy(self.queue, buf, np.ascontiguousarray(host), is_blocking=True)
         self._k.set(toned=np.int32((gains != 256).any()))
