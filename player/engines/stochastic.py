@@ -382,36 +382,64 @@ def cell_pieces(weights: np.ndarray, run: int) -> tuple[np.ndarray, np.ndarray]:
     c, length, blend, code0, code1, code2, row)``; ``blend`` 0: pixels that one window (vertex
     ``code0``) shows alone; 1: pixels that blend at most windows ``code0..2`` (a code repeated
     where fewer take part), weighted by ``bweights[row]``: ``(m, 3, run)`` int, each window's
-    weight (``WQ``-ths) at each pixel of the piece (0 past its length and where it takes no part)."""
+    weight (``WQ``-ths) at each pixel of the piece (0 past its length and where it takes no part).
+
+    A copy piece is a stretch of one window alone (cut every ``run`` pixels); a blend piece grows
+    from its first pixel over the blend pixels after it while at most three windows take part.
+    Pixels are grouped into stretches of one key (the window shown alone, or the set of windows
+    blending) with numpy; the cut walks the stretches, a few per row."""
     wq = blend_weights(weights)
     ch, cw = wq.shape[:2]
     single = wq[..., 3] >> 2
-    codes = TRIANGLE_CODES[wq[..., 3] & 3]  # (ch, cw, 3)
+    codes = TRIANGLE_CODES[wq[..., 3] & 3]  # (ch, cw, 3), a triangle's codes distinct
     copy_code = np.take_along_axis(codes, np.maximum(single - 1, 0)[..., None], -1)[..., 0]
-    pieces, bweights = [], []
-    for r in range(ch):
-        c = 0
-        while c < cw:
-            n = 1
-            if single[r, c]:
-                while n < run and c + n < cw and single[r, c + n] and copy_code[r, c + n] == copy_code[r, c]:
-                    n += 1
-                pieces.append((r, c, n, 0, copy_code[r, c], 0, 0, 0))
-            else:
-                taking = {int(v) for v, q in zip(codes[r, c], wq[r, c, :3]) if q > 0}
-                while n < run and c + n < cw and not single[r, c + n]:
-                    more = taking | {int(v) for v, q in zip(codes[r, c + n], wq[r, c + n, :3]) if q > 0}
-                    if len(more) > 3:
-                        break
-                    taking, n = more, n + 1
-                slots = sorted(taking) + [max(taking)] * (3 - len(taking))
-                w = np.zeros((3, run), np.int64)
-                for k, code in enumerate(sorted(taking)):
-                    w[k, :n] = (wq[r, c : c + n, :3] * (codes[r, c : c + n] == code)).sum(-1)
-                pieces.append((r, c, n, 1, *slots, len(bweights)))
-                bweights.append(w)
-            c += n
-    return np.array(pieces, np.int32).reshape(-1, 8), np.array(bweights, np.int64).reshape(-1, 3, run)
+    # key: the code shown alone (0..4), or 8 + the bit set of the codes taking part in a blend
+    key = np.where(single > 0, copy_code, 8 + ((wq[..., :3] > 0) << codes).sum(-1))
+    start = np.ones((ch, cw), bool)
+    start[:, 1:] = key[:, 1:] != key[:, :-1]
+    rows, cols = np.nonzero(start)
+    ends = np.append(cols[1:], cw)
+    ends[np.append(rows[1:] != rows[:-1], True)] = cw
+    stretches = list(zip(rows.tolist(), cols.tolist(), ends.tolist(), key[rows, cols].tolist()))
+    pieces: list[tuple[int, ...]] = []
+    k, pos = 0, -1  # the stretch and the pixel the next piece starts at (-1: the stretch's first)
+    while k < len(stretches):
+        r, c, e, kk = stretches[k]
+        pos = c if pos < 0 else pos
+        if kk < 8:
+            n = min(run, e - pos)
+            pieces.append((r, pos, n, 0, kk, 0, 0, 0))
+            pos += n
+            k, pos = (k + 1, -1) if pos == e else (k, pos)
+            continue
+        first, mask = pos, kk - 8
+        while True:
+            pos = min(e, first + run)
+            if pos < e:
+                break
+            k, pos = k + 1, -1
+            if e - first == run or k == len(stretches):
+                break
+            r2, c2, e2, k2 = stretches[k]
+            if r2 != r or k2 < 8 or bin(mask | (k2 - 8)).count("1") > 3:
+                break
+            mask, e = mask | (k2 - 8), e2
+        n = (e if pos < 0 else pos) - first
+        taking = [b for b in range(5) if mask >> b & 1]
+        pieces.append((r, first, n, 1, *(taking + taking[-1:] * (3 - len(taking))), len(taking)))
+    table = np.array(pieces, np.int64).reshape(-1, 8)
+    blend = table[:, 3] == 1
+    b = table[blend]
+    # each code's weight at each pixel, gathered for each blend piece's windows (0 past the
+    # piece's length and in the slots that repeat a code)
+    code_w = np.zeros((ch, cw, 5), np.int64)
+    np.put_along_axis(code_w, codes, wq[..., :3], -1)
+    at = np.arange(run)
+    cols = np.minimum(b[:, 1:2] + at, cw - 1)
+    bweights = code_w[b[:, 0, None, None], cols[:, None, :], b[:, 4:7, None]]
+    bweights *= (at < b[:, 2:3])[:, None, :] & (np.arange(3) < b[:, 7:8])[:, :, None]
+    table[blend, 7] = np.arange(len(b))
+    return table.astype(np.int32), bweights.astype(np.int64).reshape(-1, 3, run)
 
 
 def _round_up(v: int, m: int) -> int:
