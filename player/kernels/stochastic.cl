@@ -21,7 +21,7 @@
 // piece reads and computes 3/4 of the bytes it writes.
 //
 // One window alone (a copy piece): byte = min(255, (((255 - w) a + w b + 127) / 255 gain + 128) >> 8),
-// the gain in 256ths per byte (gains; alpha 256), the division by 255 as (n + 1 + (n >> 8)) >> 8.
+// the gain in 256ths per byte (gains), the division by 255 as (n + 1 + (n >> 8)) >> 8.
 // A blend (a blend piece): d_k = (255 - w_k) a_k + w_k b_k - 128 255 per window from the
 // Gaussianized torus (bytes, 128 the mean, 32 levels a standard deviation), byte =
 // inverse[chan][inverse_index(W0 d0 + W1 d1 + W2 d2)] (W in 256ths; the inverse table holds the
