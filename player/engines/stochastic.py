@@ -18,17 +18,18 @@ edges (18% of the pixels at the default 0.1). Windows span at most the torus, so
 shows the torus's period.
 
 What is fixed at open: the torus and its Gaussianized copy (each channel through ``T``, stored
-as bytes as the paper stores it: 32 levels a standard deviation; both in the output's pixel
-layout), the pattern of weights of one grid cell, cut into pieces of at most ``RUN`` pixels of a
-row that one window shows alone or that blend the same windows (:func:`cell_pieces`), the window
-offsets (from the seed). Per frame the host computes each vertex's stored frame and blend weight
-(a few hundred vertices at 4K) and uploads them without waiting; one kernel
-(``kernels/stochastic.cl``) draws every piece of every cell once, as whole vectors: a copy piece
-from the torus, a blend piece in integers from the Gaussianized copy with one inverse lookup per
-byte. The numpy reference :func:`~.stochastic_reference.stochastic_reference` computes the same
-integers, so the two backends agree exactly (tested on every verified device); the 8-bit
-Gaussianized copy gives a value back within one level (98-99%; within 4 in a sparse tail), in
-the blend bands only.
+as bytes as the paper stores it: 32 levels a standard deviation; both RGB whatever the output's
+pixel format), the pattern of weights of one grid cell, cut into pieces of at most ``RUN`` pixels
+of a row that one window shows alone or that blend the same windows (:func:`cell_pieces`), the
+window offsets (from the seed). Per frame the host computes each vertex's stored frame and blend
+weight (a few hundred vertices at 4K) and uploads them without waiting; one kernel
+(``kernels/stochastic.cl``) draws every piece of every cell once, as whole vectors of RGB bytes: a
+copy piece from the torus, a blend piece in integers from the Gaussianized copy with one inverse
+lookup per byte; a four-byte format gets them placed as it stores its pixels
+(``kernels/pixels.cl``). The numpy reference :func:`~.stochastic_reference.stochastic_reference`
+computes the same integers, so the two backends agree exactly (tested on every verified
+device); the 8-bit Gaussianized copy gives a value back within one level (98-99%; within 4 in a
+sparse tail), in the blend bands only.
 
 Examples
 --------
@@ -281,7 +282,6 @@ class StochasticOpenCL(Stochastic):
         h, w = self.out_shape[:2]
         th, tw = self.torus.shape[1:3]
         ch, cw = self.cell
-        pb = self.format.bytes
         pieces, bweights = cell_pieces(self.weights, RUN)
         self._cells = ((h - 1) // ch + 1, (w - 1 + cw) // cw + 1)
         defines = {
@@ -296,28 +296,25 @@ class StochasticOpenCL(Stochastic):
             "NPIECES": len(pieces),
             "RUN": RUN,
             "N_INVERSE": N_INVERSE,
-            "PIXEL_BYTES": pb,
+            **self.format.defines,
         }
-        prog = build_program(self.ctx, "stochastic.cl", defines)
-        # in the output's layout, every torus row carrying its first RUN pixels again (no piece wraps)
+        prog = build_program(self.ctx, ("pixels.cl", "stochastic.cl"), defines)
+        # RGB, every torus row carrying its first RUN pixels again (no piece wraps)
         pad = np.arange(tw + RUN) % tw
         for name, frames in (("_d_torus", self.torus), ("_d_gauss", self.gauss_torus)):
-            padded = self.format.from_rgb(np.take(frames, pad, axis=2))
+            padded = np.ascontiguousarray(np.take(frames, pad, axis=2))
             setattr(self, name, cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=padded))
-        # the RGB channel of each byte of a piece (3: alpha)
-        channel = np.full(pb, 3, np.int64)
-        channel[list(self.format.rgb)] = np.arange(3)
-        self._byte_channel = np.tile(channel, RUN)
+        self._byte_channel = np.tile(np.arange(3), RUN)  # the channel of each RGB byte of a piece
 
         def table(rows: np.ndarray, dtype) -> Any:
             rows = rows if len(rows) else np.zeros((1,) + rows.shape[1:], rows.dtype)  # no empty buffer
             return cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(rows, dtype))
 
         self._d_pieces = table(pieces, np.int32)
-        self._d_wbytes = table(np.repeat(bweights, pb, axis=-1), np.uint16)  # (blend pieces, 3, PIECE_BYTES)
+        self._d_wbytes = table(np.repeat(bweights, 3, axis=-1), np.uint16)  # (blend pieces, 3, 3 RUN)
         self._d_chan = table(self._byte_channel * N_INVERSE, np.int32)
-        self._d_gains = cl.Buffer(self.ctx, mf.READ_ONLY, pb * RUN * 4)
-        self._d_inverse = cl.Buffer(self.ctx, mf.READ_ONLY, 4 * N_INVERSE)
+        self._d_gains = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * RUN * 4)
+        self._d_inverse = cl.Buffer(self.ctx, mf.READ_ONLY, 3 * N_INVERSE)
         self._vtab = np.zeros(self.tmap_shape + (4,), np.int32)
         self._d_vertices = cl.Buffer(self.ctx, mf.READ_ONLY, self._vtab.nbytes)
         self._k = Kernel(prog, "stochastic")
@@ -333,7 +330,7 @@ class StochasticOpenCL(Stochastic):
             width=np.int32(w),
             height=np.int32(h),
         )
-        self._out = FrameOut(self.ctx, self.queue, self._k, "out", h * w * pb)
+        self._out = FrameOut(self.ctx, self.queue, self._k, "out", h * w * self.format.bytes)
         self.direct = self._out.direct
         self._local = (GROUP, 1)
         self._size = (_round_up(max(1, len(pieces)), GROUP), self._cells[0] * self._cells[1])
@@ -345,8 +342,7 @@ class StochasticOpenCL(Stochastic):
         import pyopencl as cl
 
         _, inverse, _ = self._tables
-        inverse = np.concatenate([inverse, np.full((1, N_INVERSE), 255, np.uint8)])  # alpha: 255
-        gains = np.append(tone_gains(self._gain), 256)[self._byte_channel].astype(np.uint32)
+        gains = tone_gains(self._gain)[self._byte_channel].astype(np.uint32)
         for buf, host in ((self._d_inverse, inverse), (self._d_gains, gains)):
             cl.enqueue_copy(self.queue, buf, np.ascontiguousarray(host), is_blocking=True)
         self._k.set(toned=np.int32((gains != 256).any()))
@@ -386,36 +382,64 @@ def cell_pieces(weights: np.ndarray, run: int) -> tuple[np.ndarray, np.ndarray]:
     c, length, blend, code0, code1, code2, row)``; ``blend`` 0: pixels that one window (vertex
     ``code0``) shows alone; 1: pixels that blend at most windows ``code0..2`` (a code repeated
     where fewer take part), weighted by ``bweights[row]``: ``(m, 3, run)`` int, each window's
-    weight (``WQ``-ths) at each pixel of the piece (0 past its length and where it takes no part)."""
+    weight (``WQ``-ths) at each pixel of the piece (0 past its length and where it takes no part).
+
+    A copy piece is a stretch of one window alone (cut every ``run`` pixels); a blend piece grows
+    from its first pixel over the blend pixels after it while at most three windows take part.
+    Pixels are grouped into stretches of one key (the window shown alone, or the set of windows
+    blending) with numpy; the cut walks the stretches, a few per row."""
     wq = blend_weights(weights)
     ch, cw = wq.shape[:2]
     single = wq[..., 3] >> 2
-    codes = TRIANGLE_CODES[wq[..., 3] & 3]  # (ch, cw, 3)
+    codes = TRIANGLE_CODES[wq[..., 3] & 3]  # (ch, cw, 3), a triangle's codes distinct
     copy_code = np.take_along_axis(codes, np.maximum(single - 1, 0)[..., None], -1)[..., 0]
-    pieces, bweights = [], []
-    for r in range(ch):
-        c = 0
-        while c < cw:
-            n = 1
-            if single[r, c]:
-                while n < run and c + n < cw and single[r, c + n] and copy_code[r, c + n] == copy_code[r, c]:
-                    n += 1
-                pieces.append((r, c, n, 0, copy_code[r, c], 0, 0, 0))
-            else:
-                taking = {int(v) for v, q in zip(codes[r, c], wq[r, c, :3]) if q > 0}
-                while n < run and c + n < cw and not single[r, c + n]:
-                    more = taking | {int(v) for v, q in zip(codes[r, c + n], wq[r, c + n, :3]) if q > 0}
-                    if len(more) > 3:
-                        break
-                    taking, n = more, n + 1
-                slots = sorted(taking) + [max(taking)] * (3 - len(taking))
-                w = np.zeros((3, run), np.int64)
-                for k, code in enumerate(sorted(taking)):
-                    w[k, :n] = (wq[r, c : c + n, :3] * (codes[r, c : c + n] == code)).sum(-1)
-                pieces.append((r, c, n, 1, *slots, len(bweights)))
-                bweights.append(w)
-            c += n
-    return np.array(pieces, np.int32).reshape(-1, 8), np.array(bweights, np.int64).reshape(-1, 3, run)
+    # key: the code shown alone (0..4), or 8 + the bit set of the codes taking part in a blend
+    key = np.where(single > 0, copy_code, 8 + ((wq[..., :3] > 0) << codes).sum(-1))
+    start = np.ones((ch, cw), bool)
+    start[:, 1:] = key[:, 1:] != key[:, :-1]
+    rows, cols = np.nonzero(start)
+    ends = np.append(cols[1:], cw)
+    ends[np.append(rows[1:] != rows[:-1], True)] = cw
+    stretches = list(zip(rows.tolist(), cols.tolist(), ends.tolist(), key[rows, cols].tolist()))
+    pieces: list[tuple[int, ...]] = []
+    k, pos = 0, -1  # the stretch and the pixel the next piece starts at (-1: the stretch's first)
+    while k < len(stretches):
+        r, c, e, kk = stretches[k]
+        pos = c if pos < 0 else pos
+        if kk < 8:
+            n = min(run, e - pos)
+            pieces.append((r, pos, n, 0, kk, 0, 0, 0))
+            pos += n
+            k, pos = (k + 1, -1) if pos == e else (k, pos)
+            continue
+        first, mask = pos, kk - 8
+        while True:
+            pos = min(e, first + run)
+            if pos < e:
+                break
+            k, pos = k + 1, -1
+            if e - first == run or k == len(stretches):
+                break
+            r2, c2, e2, k2 = stretches[k]
+            if r2 != r or k2 < 8 or bin(mask | (k2 - 8)).count("1") > 3:
+                break
+            mask, e = mask | (k2 - 8), e2
+        n = (e if pos < 0 else pos) - first
+        taking = [b for b in range(5) if mask >> b & 1]
+        pieces.append((r, first, n, 1, *(taking + taking[-1:] * (3 - len(taking))), len(taking)))
+    table = np.array(pieces, np.int64).reshape(-1, 8)
+    blend = table[:, 3] == 1
+    b = table[blend]
+    # each code's weight at each pixel, gathered for each blend piece's windows (0 past the
+    # piece's length and in the slots that repeat a code)
+    code_w = np.zeros((ch, cw, 5), np.int64)
+    np.put_along_axis(code_w, codes, wq[..., :3], -1)
+    at = np.arange(run)
+    cols = np.minimum(b[:, 1:2] + at, cw - 1)
+    bweights = code_w[b[:, 0, None, None], cols[:, None, :], b[:, 4:7, None]]
+    bweights *= (at < b[:, 2:3])[:, None, :] & (np.arange(3) < b[:, 7:8])[:, :, None]
+    table[blend, 7] = np.arange(len(b))
+    return table.astype(np.int32), bweights.astype(np.int64).reshape(-1, 3, run)
 
 
 def _round_up(v: int, m: int) -> int:

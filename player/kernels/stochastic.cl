@@ -14,31 +14,34 @@
 // vertices[v] = (oy, ox, frame, w): the window of vertex v is the torus shifted by (oy, ox),
 // played at stored frame `frame` blended with the next one by w / 255.
 //
-// The torus and its Gaussianized copy are stored in the output's pixel layout (PIXEL_BYTES per
-// pixel, alpha 255), every row carrying its first RUN pixels again (TORUS_WP = TORUS_W + RUN), so
-// every operation is per byte and a piece never wraps.
+// The torus and its Gaussianized copy are stored as RGB bytes, every row carrying its first RUN
+// pixels again (TORUS_WP = TORUS_W + RUN), so every operation is per byte and a piece never wraps.
+// A piece is computed as RGB bytes; a four-byte output (RGBA, BGRA) gets them placed as it
+// stores them (pixels.cl's put16, 16 whole pixels a vector; built in front of this file), so a
+// piece reads and computes 3/4 of the bytes it writes.
 //
 // One window alone (a copy piece): byte = min(255, (((255 - w) a + w b + 127) / 255 gain + 128) >> 8),
-// the gain in 256ths per byte (gains; alpha 256), the division by 255 as (n + 1 + (n >> 8)) >> 8.
+// the gain in 256ths per byte (gains), the division by 255 as (n + 1 + (n >> 8)) >> 8.
 // A blend (a blend piece): d_k = (255 - w_k) a_k + w_k b_k - 128 255 per window from the
 // Gaussianized torus (bytes, 128 the mean, 32 levels a standard deviation), byte =
 // inverse[chan][inverse_index(W0 d0 + W1 d1 + W2 d2)] (W in 256ths; the inverse table holds the
-// tone too, its alpha table 255).
+// tone too).
 //
 // Work: one cell's pixels are cut once at open into pieces of at most RUN pixels of a row, in row
 // order, each either shown by one window alone (a copy piece) or blending the same three windows
 // (a blend piece; a code repeated with weight 0 where two windows blend), so every output pixel
 // is written once, by one kernel: one work-item per piece (dimension 0), dimension 1 the cell
-// (band j = id / CELLS_X, cell i = id - j CELLS_X). A piece is computed as whole 16-byte vectors;
-// its bytes are stored as vectors where all RUN pixels lie in the output, else byte by byte.
+// (band j = id / CELLS_X, cell i = id - j CELLS_X). A piece is computed as whole 16-byte vectors
+// of RGB bytes; they are stored as vectors where all RUN pixels lie in the output, else pixel by
+// pixel.
 //
 // Defines: TORUS_H, TORUS_W, TORUS_WP, NFRAMES (the stored torus), CELL_H, CELL_W (triangle rows
 // and width, CELL_W even, at most TORUS_W), VCOLS (vertex columns per row), CELLS_X (cells per
-// band), NPIECES (pieces per cell), RUN (pixels per piece at most; PIXEL_BYTES RUN a multiple of
-// 16), N_INVERSE, PIXEL_BYTES.
+// band), NPIECES (pieces per cell), RUN (pixels per piece at most, a multiple of 16), N_INVERSE,
+// PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (pixels.cl).
 
-#define PIECE_BYTES (PIXEL_BYTES * RUN)
-#define FRAME_BYTES ((size_t)TORUS_H * TORUS_WP * PIXEL_BYTES)
+#define PIECE_BYTES (3 * RUN)
+#define FRAME_BYTES ((size_t)TORUS_H * TORUS_WP * 3)
 
 // the vertex that code names for cell i of band j
 inline int vertex_index(const int code, const int j, const int i)
@@ -59,7 +62,7 @@ inline size_t window_byte(const int4 v, const int ym, const int xm)
     int ty = ym + v.x, tx = xm + v.y;
     ty -= ty >= TORUS_H ? TORUS_H : 0;
     tx -= tx >= TORUS_W ? TORUS_W : 0;
-    return ((size_t)ty * TORUS_WP + tx) * PIXEL_BYTES;
+    return ((size_t)ty * TORUS_WP + tx) * 3;
 }
 
 // the time-interpolated byte of window v at byte p of a frame, from the stored torus t
@@ -74,11 +77,20 @@ inline ushort16 div255(const ushort16 n)
     return (n + (ushort16)1 + (n >> (ushort16)8)) >> (ushort16)8;
 }
 
-// the bytes of a piece from private memory to the output, those of pixels lo .. hi - 1 only
+// the RGB bytes of a piece from private memory to the output, those of pixels lo .. hi - 1 only
 inline void store_part(__global uchar *o, const uchar *bytes, const int lo, const int hi)
 {
-    for (int b = lo * PIXEL_BYTES; b < hi * PIXEL_BYTES; ++b)
+#if PIXEL_BYTES == 3
+    for (int b = lo * 3; b < hi * 3; ++b)
         o[b] = bytes[b];
+#else
+    for (int k = lo; k < hi; ++k) {
+        o[4 * k + R_AT] = bytes[3 * k];
+        o[4 * k + G_AT] = bytes[3 * k + 1];
+        o[4 * k + B_AT] = bytes[3 * k + 2];
+        o[4 * k + A_AT] = 255;
+    }
+#endif
 }
 
 // 16 bytes (vector q) of window v alone, a and c its two frames: ((255 - w) a + w c + 127) / 255, toned
@@ -99,8 +111,14 @@ inline void copy_piece(__global const uchar *torus, const int4 v, __global const
     __global const uchar *a = torus + (size_t)v.z * FRAME_BYTES + p;
     __global const uchar *c = torus + next_frame(v.z) * FRAME_BYTES + p;
     if (lo == 0 && hi == RUN) {
+#if PIXEL_BYTES == 3
         for (int q = 0; q < PIECE_BYTES / 16; ++q)
             vstore16(copy16(a, c, v.w, gains, toned, q), q, o);
+#else
+        for (int g = 0; g < RUN / 16; ++g)
+            put16(copy16(a, c, v.w, gains, toned, 3 * g), copy16(a, c, v.w, gains, toned, 3 * g + 1),
+                  copy16(a, c, v.w, gains, toned, 3 * g + 2), o + 64 * g);
+#endif
         return;
     }
     uchar bytes[PIECE_BYTES];
@@ -142,24 +160,33 @@ inline void blend_piece(__global const uchar *gauss, const int4 v0, const int4 v
         vstore16(e, 0, at);
         for (int l = 0; l < 16; ++l)
             bytes[16 * q + l] = inverse[at[l]];
+#if PIXEL_BYTES == 3
         if (whole)
             vstore16(vload16(q, bytes), q, o);
+#endif
     }
+#if PIXEL_BYTES == 4
+    if (whole) {
+        for (int g = 0; g < RUN / 16; ++g)
+            put16(vload16(3 * g, bytes), vload16(3 * g + 1, bytes), vload16(3 * g + 2, bytes), o + 64 * g);
+        return;
+    }
+#endif
     if (!whole)
         store_part(o, bytes, lo, hi);
 }
 
 // One work-item per piece (dimension 0, NPIECES of a cell in row order), dimension 1 the cell.
 __kernel void stochastic(
-    __global const uchar *torus,      // NFRAMES x TORUS_H x TORUS_WP x PIXEL_BYTES
+    __global const uchar *torus,      // NFRAMES x TORUS_H x TORUS_WP x 3 (RGB)
     __global const uchar *gauss,      // the same, Gaussianized
     __global const int8 *pieces,      // NPIECES: (r, c, n, blend, code0, code1, code2, its row of wbytes)
-    __global const ushort *wbytes,    // blend pieces x 3 x PIECE_BYTES: W of each window at each byte
-    __global const int *chan,         // PIECE_BYTES: the inverse table's offset of each byte
-    __global const uint *gains,       // PIECE_BYTES: the tone gain (256ths) of each byte of a piece
+    __global const ushort *wbytes,    // blend pieces x 3 x PIECE_BYTES: W of each window at each RGB byte
+    __global const int *chan,         // PIECE_BYTES: the inverse table's offset of each RGB byte
+    __global const uint *gains,       // PIECE_BYTES: the tone gain (256ths) of each RGB byte of a piece
     const int toned,                  // 0: every gain is 256 (one window's bytes are m itself)
     __global const int4 *vertices,    // rows x VCOLS
-    __global const uchar *inverse,    // 4 x N_INVERSE: the Gaussianizing table's inverse, toned (alpha 255)
+    __global const uchar *inverse,    // 3 x N_INVERSE: the Gaussianizing table's inverse, toned
     __global uchar *out,
     const int width,
     const int height)

@@ -101,6 +101,53 @@ def test_pieces_cover_a_cell_once(cell, band):
     assert (seen == 1).all()
 
 
+def _pieces_pixel_by_pixel(weights: np.ndarray, run: int) -> tuple[np.ndarray, np.ndarray]:
+    """cell_pieces as first written: a walk over every pixel of the cell (the cut it must keep)."""
+    wq = blend_weights(weights)
+    ch, cw = wq.shape[:2]
+    single = wq[..., 3] >> 2
+    codes = TRIANGLE_CODES[wq[..., 3] & 3]
+    copy_code = np.take_along_axis(codes, np.maximum(single - 1, 0)[..., None], -1)[..., 0]
+    pieces, bweights = [], []
+    for r in range(ch):
+        c = 0
+        while c < cw:
+            n = 1
+            if single[r, c]:
+                while n < run and c + n < cw and single[r, c + n] and copy_code[r, c + n] == copy_code[r, c]:
+                    n += 1
+                pieces.append((r, c, n, 0, copy_code[r, c], 0, 0, 0))
+            else:
+                taking = {int(v) for v, q in zip(codes[r, c], wq[r, c, :3]) if q > 0}
+                while n < run and c + n < cw and not single[r, c + n]:
+                    more = taking | {int(v) for v, q in zip(codes[r, c + n], wq[r, c + n, :3]) if q > 0}
+                    if len(more) > 3:
+                        break
+                    taking, n = more, n + 1
+                slots = sorted(taking) + [max(taking)] * (3 - len(taking))
+                w = np.zeros((3, run), np.int64)
+                for k, code in enumerate(sorted(taking)):
+                    w[k, :n] = (wq[r, c : c + n, :3] * (codes[r, c : c + n] == code)).sum(-1)
+                pieces.append((r, c, n, 1, *slots, len(bweights)))
+                bweights.append(w)
+            c += n
+    return np.array(pieces, np.int32).reshape(-1, 8), np.array(bweights, np.int64).reshape(-1, 3, run)
+
+
+@pytest.mark.parametrize(
+    "cell, band, run",
+    [((11, 18), 0.3, RUN), ((24, 96), 0.5, RUN), ((249, 288), BAND, RUN), ((24, 64), 0.5, 16), ((13, 40), 0.2, 16)],
+)
+def test_pieces_are_the_pixel_walks(cell, band, run):
+    """The cut grouped by stretches is the pixel-by-pixel walk's, piece for piece and weight for weight."""
+    weights = weight_table(cell, band)
+    pieces, bweights = cell_pieces(weights, run)
+    want_pieces, want_weights = _pieces_pixel_by_pixel(weights, run)
+    assert pieces.dtype == want_pieces.dtype and np.array_equal(pieces, want_pieces)
+    assert bweights.dtype == want_weights.dtype and np.array_equal(bweights, want_weights)
+    assert pieces[:, 3].any() and not pieces[:, 3].all()
+
+
 def test_selftest_checks_the_kernel():
     assert {"stochastic tiling, RGB", "stochastic tiling, RGB, toned", "stochastic tiling, BGRA, toned"} <= set(
         selftest.CHECKS
