@@ -26,11 +26,10 @@ def write_part(
     *,
     attrs: Mapping[str, Any] | None = None,
     rows: Collection[str] = (),
-    compress: bool = False,
 ) -> None:
     """Store ``parent/name`` at ``version``: its ``datasets`` (already of their stored dtype) and
     scalar ``attrs`` (a ``version`` among them is dropped); a dataset named in ``rows`` is chunked a
-    leading-axis entry at a time, for reads of one row; ``compress``: every dataset gzip-compressed."""
+    leading-axis entry at a time, for reads of one row."""
     g = parent.create_group(name)
     g.attrs["version"] = version
     for key, value in (attrs or {}).items():
@@ -38,7 +37,7 @@ def write_part(
             g.attrs[key] = value
     for key, data in datasets.items():
         chunks = (1,) + data.shape[1:] if key in rows and len(data) else None
-        g.create_dataset(key, data=data, chunks=chunks, compression="gzip" if compress else None)
+        g.create_dataset(key, data=data, chunks=chunks)
 
 
 def open_part(parent: h5py.Group, name: str, version: int, check: Checker) -> h5py.Group | None:

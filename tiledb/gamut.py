@@ -113,7 +113,7 @@ def write(parent: h5py.Group, model: GamutModel | None) -> None:
     if model.local is not None:
         loc = model.local
         data = {"inside": np.asarray(loc.inside, np.uint8), "nearest": np.asarray(loc.nearest, np.uint16)}
-        write_part(parent[GROUP], LOCAL, LOCAL_VERSION, data, attrs={"block": int(loc.block)}, compress=True)
+        write_part(parent[GROUP], LOCAL, LOCAL_VERSION, data, attrs={"block": int(loc.block)})
 
 
 def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> GamutModel | None:
