@@ -250,8 +250,9 @@ class ProjectorOpenCL(Projector):
             arrays = {name: dummy for name in ("vol", "low", "high", "colours")}
             arrays["gain"] = np.zeros(1, np.float32)
         else:
-            gain = np.repeat(d.gain.reshape(-1), self.channels)  # once per value: the kernel reads it as vectors
-            arrays = {"vol": d.volume, "gain": gain, "low": d.low, "high": d.high, "colours": d.colours}
+            # each volume row's first PIXELS - 1 pixels repeated after its end (the kernel's header)
+            vol = np.ascontiguousarray(d.volume[:, :, np.arange(d.vw + PIXELS - 1) % d.vw])
+            arrays = {"vol": vol, "gain": d.gain.reshape(-1), "low": d.low, "high": d.high, "colours": d.colours}
         arrays["nearest"] = np.zeros(1, np.uint16) if self.nearest is None else self.nearest
         for name, a in arrays.items():
             self._bufs[name] = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
