@@ -32,7 +32,7 @@ import numpy as np
 from ...tiledb.detail import DetailModel
 from ...tiledb.gamut import GamutModel
 from ..pixels import pixel_format
-from .detail import Detail, DetailReference
+from .detail import Detail, DetailReference, colour_bins
 
 #: Pixels per work-item of ``project`` (``PIXELS`` in the kernel): a group is ``16 * channels`` values.
 PIXELS = 16
@@ -60,28 +60,29 @@ def speed_case(precision: str, values: int, per_pass: int, detail: bool = False)
     )
 
 
-def snap_colours(frames: np.ndarray, nearest: np.ndarray, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
+def snap_colours(
+    frames: np.ndarray, nearest: np.ndarray, rgb: tuple[int, int, int] = (0, 1, 2), away: np.ndarray | None = None
+) -> None:
     """Clamp, in place, each pixel of ``frames`` (..., bytes) uint8 whose colour bin
     (``(r >> 3) * 1024 + (g >> 3) * 32 + (b >> 3)``) is not its own ``nearest`` entry into that
-    bin, channel by channel (the closest colour of the bin); ``rgb``: the bytes of r, g, b.
+    bin, channel by channel (the closest colour of the bin); ``rgb``: the bytes of r, g, b;
+    ``away``: ``nearest != arange(32**3)``, where the caller keeps it.
 
     >>> nearest = np.arange(32**3, dtype=np.uint16); nearest[(0 * 32 + 25) * 32 + 25] = 25 * 1024
     >>> px = np.array([[[3, 201, 202]]], np.uint8); snap_colours(px, nearest); px.tolist()
     [[[200, 7, 7]]]
     """
-    r, g, b = (frames[..., i] for i in rgb)
-    bins = (r >> 3).astype(np.uint16) << 10
-    bins |= (g >> 3).astype(np.uint16) << 5
-    bins |= b >> 3
-    target = nearest[bins]
-    away = target != bins
-    if not away.any():
+    if away is None:
+        away = nearest != np.arange(len(nearest), dtype=nearest.dtype)
+    bins = colour_bins(frames, rgb)
+    out = away.take(bins)
+    if not out.any():
         return
-    t = target[away]
+    at = np.nonzero(out)
+    t = nearest.take(bins[at])
     for i, shift in zip(rgb, (10, 5, 0)):
-        ch = frames[..., i]
         lo = ((t >> shift) & 31).astype(np.uint8) << 3
-        ch[away] = np.clip(ch[away], lo, lo + 7)
+        frames[(*at, i)] = np.clip(frames[(*at, i)], lo, lo + 7)
 
 
 def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:
@@ -155,6 +156,7 @@ class Projector:
         self.nearest: np.ndarray | None = None
         if gamut is not None and channels == 3:
             self.nearest = np.ascontiguousarray(gamut.nearest, np.uint16)
+            self._away = self.nearest != np.arange(len(self.nearest), dtype=np.uint16)
 
     @property
     def bytes_per_frame(self) -> int:
@@ -204,14 +206,15 @@ class ProjectorReference(Projector):
         np.clip(frames, 0, 255, out=frames)
         for j, frame in enumerate(frames):
             o = outs[j]
-            if self.format.name == "RGB":
-                o[...] = frame.reshape(h, w, self.channels)
+            frame = frame.reshape(h, w, self.channels)
+            if layers is not None:  # the detail reads the projected integers from the float frame
+                self.detail.apply(o, layers[j], projected=frame)
+            elif self.format.name == "RGB":
+                o[...] = frame
             else:
-                self.format.from_rgb(np.broadcast_to(frame.reshape(h, w, self.channels), (h, w, 3)), o)
-            if layers is not None:
-                self.detail.apply(o, layers[j])
+                self.format.from_rgb(np.broadcast_to(frame, (h, w, 3)), o)
             if self.nearest is not None:
-                snap_colours(o, self.nearest, self.format.rgb)
+                snap_colours(o, self.nearest, self.format.rgb, self._away)
 
 
 class ProjectorOpenCL(Projector):
