@@ -88,7 +88,7 @@ def colour_bins(frames: np.ndarray, rgb: tuple[int, int, int] = (0, 1, 2)) -> np
     ``frames`` (..., bytes) uint8 whose r, g, b are the bytes ``rgb``.
 
     >>> colour_bins(np.array([[8, 16, 255]], np.uint8)).tolist()
-    [1087]
+    [1119]
     """
     q = frames >> 3
     bins = np.left_shift(q[..., rgb[0]], 10, dtype=np.uint16)
