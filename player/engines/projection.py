@@ -36,6 +36,8 @@ from .detail import Detail, DetailReference, colour_bins
 
 #: Pixels per work-item of ``project`` (``PIXELS`` in the kernel): a group is ``16 * channels`` values.
 PIXELS = 16
+#: Values after each frame's coefficients in the kernel's upload: its detail layers (``LAYER_FLOATS``)
+LAYER_FLOATS = 8
 #: Work-group size: left to choose, PoCL may make few large groups that leave a core idle
 #: (CHANGELOG.md has the measurement).
 LOCAL = 32
@@ -231,6 +233,11 @@ class ProjectorOpenCL(Projector):
         import pyopencl as cl
 
         self.ctx, self.queue = ctx, queue
+        # a pass's one upload, a row per frame: the coefficients, then the detail's layers
+        width = self.coefs.shape[1]
+        self._upload = np.zeros((self.frames, width + LAYER_FLOATS), np.float32)
+        self.coefs = self._upload[:, :width]
+        self.coef = self.coefs[0]
         group = PIXELS * self.channels
         blocked = blocked_basis(basis, group)
         groups = blocked.shape[0]
@@ -240,13 +247,9 @@ class ProjectorOpenCL(Projector):
         self._bufs: dict[str, Any] = {
             "basis": cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blocked),
             "mean": cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p),
-            "coef": cl.Buffer(ctx, mf.READ_ONLY, self.coefs.nbytes),
+            "coef": cl.Buffer(ctx, mf.READ_ONLY, self._upload.nbytes),
         }
         del blocked
-        self._layer_at = np.zeros((self.frames, 6), np.int32)
-        self._layer_w = np.zeros((self.frames, 2), np.float32)
-        self._bufs["layer_at"] = cl.Buffer(ctx, mf.READ_ONLY, self._layer_at.nbytes)
-        self._bufs["layer_w"] = cl.Buffer(ctx, mf.READ_ONLY, self._layer_w.nbytes)
         d = self.detail
         if d is None:
             dummy = np.zeros(1, np.uint8)
@@ -280,7 +283,7 @@ class ProjectorOpenCL(Projector):
             k.set(
                 n=np.int32(self.n),
                 values=np.int32(self.values),
-                stride=np.int32(self.coefs.shape[1]),
+                stride=np.int32(self._upload.shape[1]),
                 width=np.int32(self.shape[1]),
                 **self._bufs,
             )
@@ -300,15 +303,12 @@ class ProjectorOpenCL(Projector):
         k = self._kernel(layers is not None)
         frames = 1 if count is None else count
         k.set(frames=np.int32(frames))
-        if layers is not None:
+        if layers is not None:  # the layers' integers (volume sizes) are exact in float32
             for j, ((t0, oy0, ox0, w0), (t1, oy1, ox1, w1)) in enumerate(layers[:frames]):
-                self._layer_at[j] = (t0, oy0, ox0, t1, oy1, ox1)
-                self._layer_w[j] = (w0, w1)
-            cl.enqueue_copy(self.queue, self._bufs["layer_at"], self._layer_at, is_blocking=False)
-            cl.enqueue_copy(self.queue, self._bufs["layer_w"], self._layer_w, is_blocking=False)
-        # the queue is in order: once this copy is done the layers' are too, and the caller
-        # may change the coefficients (a frame it waits for is done with them anyway)
-        cl.enqueue_copy(self.queue, self._bufs["coef"], self.coefs[:frames], is_blocking=not wait)
+                self._upload[j, -LAYER_FLOATS:] = (t0, oy0, ox0, t1, oy1, ox1, w0, w1)
+        # once this copy is done the caller may change the coefficients (a frame it waits for
+        # is done with them anyway)
+        cl.enqueue_copy(self.queue, self._bufs["coef"], self._upload[:frames], is_blocking=not wait)
         return k
 
     def run(self, out: np.ndarray, *, count: int | None = None, layers: list | None = None, wait: bool = True):

@@ -15,9 +15,10 @@
 // the detail sees the integers a separate pass would. The volume (Tv, VH, VW, CHANNELS) int8
 // wraps in y and x, and is stored with each row's first PIXELS - 1 pixels repeated after its
 // end (rows of VWP pixels), so that any PIXELS consecutive pixels of a row are one contiguous
-// run; layer k of frame f reads volume frame layer_at[6 f + 3 k] at offset
-// (layer_at[6 f + 3 k + 1], layer_at[6 f + 3 k + 2]) with weight layer_w[2 f + k]. gain holds
-// one value per pixel (spread over a pixel's channels with shuffles).
+// run. Frame f's layers are the last LAYER_FLOATS values of its coefficient row (one upload
+// per pass): t0, oy0, ox0, t1, oy1, ox1 (small integers, exact as floats), w0, w1; layer k
+// reads volume frame tk at offset (oyk, oxk) with weight wk. gain holds one value per pixel
+// (spread over a pixel's channels with shuffles).
 // Contraction is off there so that the result equals the numpy reference bit for bit.
 //
 // GAMUT (CHANNELS 3 only): last, a pixel whose colour bin is not its own nearest[bin] (the
@@ -33,6 +34,7 @@
 #define PIXELS 16
 #define GROUP (PIXELS * CHANNELS)
 #define VWP (VW + PIXELS - 1)
+#define LAYER_FLOATS 8
 
 #if HALF
 typedef half basis_t;
@@ -79,11 +81,12 @@ void add_detail(uchar *v, const int count, int x, int y, const size_t p0, const 
                 __global const char *restrict vol,
                 __global const float *restrict gain, __global const uchar *restrict low,
                 __global const uchar *restrict high, __global const uchar *restrict colours,
-                __global const int *restrict at, __global const float *restrict w, const int width)
+                __global const float *lay, const int width)
 {
 #pragma OPENCL FP_CONTRACT OFF
-    const int t0 = at[0] * VH, oy0 = at[1], ox0 = at[2], t1 = at[3] * VH, oy1 = at[4], ox1 = at[5];
-    const float w0 = w[0], w1 = w[1];
+    const int t0 = (int)lay[0] * VH, oy0 = (int)lay[1], ox0 = (int)lay[2];
+    const int t1 = (int)lay[3] * VH, oy1 = (int)lay[4], ox1 = (int)lay[5];
+    const float w0 = lay[6], w1 = lay[7];
     int row0 = (t0 + (y + oy0) % VH) * VWP, row1 = (t1 + (y + oy1) % VH) * VWP;
     uchar d[GROUP];
     uchar a[GROUP];
@@ -147,8 +150,6 @@ __kernel void project(__global const basis_t *restrict basis,
                       __global const uchar *restrict low,
                       __global const uchar *restrict high,
                       __global const uchar *restrict colours,
-                      __global const int *restrict layer_at,
-                      __global const float *restrict layer_w,
                       __global const ushort *restrict nearest)
 {
     const size_t g = get_global_id(0);
@@ -183,7 +184,7 @@ __kernel void project(__global const basis_t *restrict basis,
         vstore16(convert_uchar16_sat_rte(a2), 2, v);
 #endif
 #if DETAIL
-        add_detail(v, count, x0, y0, p0, first, vol, gain, low, high, colours, layer_at + 6 * f, layer_w + 2 * f, width);
+        add_detail(v, count, x0, y0, p0, first, vol, gain, low, high, colours, c + stride - LAYER_FLOATS, width);
 #endif
 #if GAMUT
         snap_colours(v, count, nearest);
