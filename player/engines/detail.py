@@ -10,8 +10,8 @@ the volume's own spatio-temporal spectrum moves the detail, and no loop of the v
 shows. The schedule is a function of the seed and the frame index alone (nothing to save).
 
 OpenCL: the projection kernel adds it in the same pass as it projects (:mod:`.projection`,
-``kernels/lds.cl``), to the projected uint8 values, bit-exact with the numpy reference
-:class:`DetailReference` (the kernel turns contraction off there).
+``kernels/projection.cl``; one frame a pass as k), to the projected uint8 values, bit-exact
+with the numpy reference :class:`DetailReference` (the kernel turns contraction off there).
 """
 
 from __future__ import annotations
