@@ -10,8 +10,8 @@ the volume's own spatio-temporal spectrum moves the detail, and no loop of the v
 shows. The schedule is a function of the seed and the frame index alone (nothing to save).
 
 OpenCL: the projection kernel adds it in the same pass as it projects (:mod:`.projection`,
-``kernels/lds.cl``), to the projected uint8 values, bit-exact with the numpy reference
-:class:`DetailReference` (the kernel turns contraction off there).
+``kernels/projection.cl``; one frame a pass as k), to the projected uint8 values, bit-exact
+with the numpy reference :class:`DetailReference` (the kernel turns contraction off there).
 """
 
 from __future__ import annotations
@@ -83,49 +83,71 @@ class Detail:
         return layers(self.frames, (self.vh, self.vw), seed, frame, amount)
 
 
+def colour_bins(frames: np.ndarray, rgb: tuple[int, int, int] = (0, 1, 2)) -> np.ndarray:
+    """Each pixel's colour bin ``(r >> 3) * 1024 + (g >> 3) * 32 + (b >> 3)`` (uint16) of
+    ``frames`` (..., bytes) uint8 whose r, g, b are the bytes ``rgb``.
+
+    >>> colour_bins(np.array([[8, 16, 255]], np.uint8)).tolist()
+    [1119]
+    """
+    q = frames >> 3
+    bins = np.left_shift(q[..., rgb[0]], 10, dtype=np.uint16)
+    bins |= np.left_shift(q[..., rgb[1]], 5, dtype=np.uint16)
+    bins |= q[..., rgb[2]]
+    return bins
+
+
 class DetailReference(Detail):
     """The numpy reference, in float32 in the kernel's order of operations."""
 
     backend = "numpy"
 
-    def apply(self, frame: np.ndarray, layers: tuple, out: np.ndarray | None = None) -> np.ndarray:
-        """``frame`` (H, W, bytes) uint8 in the output format with the detail added, into ``out``
-        (``frame`` itself when None)."""
-        out = frame if out is None else out
+    def __init__(self, model: DetailModel, **kwargs) -> None:
+        super().__init__(model, **kwargs)
+        self._outside = self.colours == 0
+        # once per value: a product with a broadcast last axis of 1 is several times slower
+        self._gain = np.ascontiguousarray(np.repeat(self.gain[..., None], self.channels, axis=2))
+
+    def _layer(self, t: int, oy: int, ox: int) -> np.ndarray:
+        """Volume frame ``t`` read at offset ``(oy, ox)``, wrapping: an (H, W, channels) int8 view."""
         h, w = self.shape[:2]
-        noise = np.empty((h, w, self.channels), np.float32)
-        for k, (t, oy, ox, wt) in enumerate(layers):
-            rows = (np.arange(h) + oy) % self.vh
-            cols = (np.arange(w) + ox) % self.vw
-            v = self.volume[t].take(rows, axis=0).take(cols, axis=1).astype(np.float32)
-            v *= np.float32(wt)
-            if k == 0:
-                noise[...] = v
-            else:
-                noise += v
-        noise *= self.gain[..., None]
+        rows = self.volume[t].take((np.arange(h) + oy) % self.vh, axis=0)
+        reps = -(-(ox + w) // self.vw)
+        return (np.tile(rows, (1, reps, 1)) if reps > 1 else rows)[:, ox : ox + w]
+
+    def apply(
+        self, frame: np.ndarray, layers: tuple, out: np.ndarray | None = None, projected: np.ndarray | None = None
+    ) -> np.ndarray:
+        """``frame`` (H, W, bytes) uint8 in the output format with the detail added, into ``out``
+        (``frame`` itself when None); ``projected``: the frame's values as (H, W, channels)
+        float32 integers in 0..255, read instead of ``frame`` (which is then written alone)."""
+        out = frame if out is None else out
         at = self.format.rgb
         rgb_in_place = self.channels == 3 and self.format.name == "RGB"
-        val = frame.astype(np.float32) if rgb_in_place else frame[..., list(at[: self.channels])].astype(np.float32)
-        val += noise
+        if projected is None:
+            projected = frame if rgb_in_place else frame[..., list(at[: self.channels])]
+        (t0, oy0, ox0, w0), (t1, oy1, ox1, w1) = layers
+        val = np.multiply(self._layer(t0, oy0, ox0), np.float32(w0), dtype=np.float32)
+        val += np.multiply(self._layer(t1, oy1, ox1), np.float32(w1), dtype=np.float32)
+        val *= self._gain
+        val += projected
         np.rint(val, out=val)
-        np.clip(val, self.low, self.high, out=val)  # within 0..255 already: low and high are uint8
-        val = val.astype(np.uint8)
-        q = (val >> 3).astype(np.int32)
-        r, g, b = (0, 1, 2) if self.channels == 3 else (0, 0, 0)
-        bins = (q[..., r] << 10) | (q[..., g] << 5) | q[..., b]
-        outside = self.colours[bins] == 0
+        np.clip(val, 0, 255, out=val)
+        u = val.astype(np.uint8)
+        np.maximum(u, self.low, out=u)  # np.clip with array bounds is an order of magnitude slower
+        np.minimum(u, self.high, out=u)
+        outside = self._outside.take(colour_bins(u, (0, 1, 2) if self.channels == 3 else (0, 0, 0)))
         if outside.any():
-            plain = frame[..., list(at[: self.channels])][outside]
-            val[outside] = np.clip(plain, self.low[outside], self.high[outside])
+            plain = projected[outside]  # the projected values of those pixels, uint8 or float32 integers
+            u[outside] = np.clip(plain, self.low[outside], self.high[outside])
         if rgb_in_place:
-            out[...] = val
+            out[...] = u
         elif self.channels == 3:
             for c in range(3):
-                out[..., at[c]] = val[..., c]
+                out[..., at[c]] = u[..., c]
         else:
             for a in at:
-                out[..., a] = val[..., 0]
+                out[..., a] = u[..., 0]
         if self.format.alpha is not None:
             out[..., self.format.alpha] = 255
         return out

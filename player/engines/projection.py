@@ -33,10 +33,12 @@ import numpy as np
 from ...tiledb.detail import DetailModel
 from ...tiledb.gamut import GamutModel, local_bits
 from ..pixels import pixel_format
-from .detail import Detail, DetailReference
+from .detail import Detail, DetailReference, colour_bins
 
 #: Pixels per work-item of ``project`` (``PIXELS`` in the kernel): a group is ``16 * channels`` values.
 PIXELS = 16
+#: Values after each frame's coefficients in the kernel's upload: its detail layers (``LAYER_FLOATS``)
+LAYER_FLOATS = 8
 #: Work-group size: left to choose, PoCL may make few large groups that leave a core idle
 #: (CHANGELOG.md has the measurement).
 LOCAL = 32
@@ -73,28 +75,29 @@ def speed_case(
     )
 
 
-def snap_colours(frames: np.ndarray, nearest: np.ndarray, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
+def snap_colours(
+    frames: np.ndarray, nearest: np.ndarray, rgb: tuple[int, int, int] = (0, 1, 2), away: np.ndarray | None = None
+) -> None:
     """Clamp, in place, each pixel of ``frames`` (..., bytes) uint8 whose colour bin
     (``(r >> 3) * 1024 + (g >> 3) * 32 + (b >> 3)``) is not its own ``nearest`` entry into that
-    bin, channel by channel (the closest colour of the bin); ``rgb``: the bytes of r, g, b.
+    bin, channel by channel (the closest colour of the bin); ``rgb``: the bytes of r, g, b;
+    ``away``: ``nearest != arange(32**3)``, where the caller keeps it.
 
     >>> nearest = np.arange(32**3, dtype=np.uint16); nearest[(0 * 32 + 25) * 32 + 25] = 25 * 1024
     >>> px = np.array([[[3, 201, 202]]], np.uint8); snap_colours(px, nearest); px.tolist()
     [[[200, 7, 7]]]
     """
-    r, g, b = (frames[..., i] for i in rgb)
-    bins = (r >> 3).astype(np.uint16) << 10
-    bins |= (g >> 3).astype(np.uint16) << 5
-    bins |= b >> 3
-    target = nearest[bins]
-    away = target != bins
-    if not away.any():
+    if away is None:
+        away = nearest != np.arange(len(nearest), dtype=nearest.dtype)
+    bins = colour_bins(frames, rgb)
+    out = away.take(bins)
+    if not out.any():
         return
-    t = target[away]
+    at = np.nonzero(out)
+    t = nearest.take(bins[at])
     for i, shift in zip(rgb, (10, 5, 0)):
-        ch = frames[..., i]
         lo = ((t >> shift) & 31).astype(np.uint8) << 3
-        ch[away] = np.clip(ch[away], lo, lo + 7)
+        frames[(*at, i)] = np.clip(frames[(*at, i)], lo, lo + 7)
 
 
 class LocalColours:
@@ -219,6 +222,7 @@ class Projector:
         self.local: LocalColours | None = None
         if gamut is not None and channels == 3:
             self.nearest = np.ascontiguousarray(gamut.nearest, np.uint16)
+            self._away = self.nearest != np.arange(len(self.nearest), dtype=np.uint16)
             if gamut.local is not None:
                 self.local = LocalColours(gamut.local, *self.shape[:2])
 
@@ -270,16 +274,17 @@ class ProjectorReference(Projector):
         np.clip(frames, 0, 255, out=frames)
         for j, frame in enumerate(frames):
             o = outs[j]
-            if self.format.name == "RGB":
-                o[...] = frame.reshape(h, w, self.channels)
+            frame = frame.reshape(h, w, self.channels)
+            if layers is not None:  # the detail reads the projected integers from the float frame
+                self.detail.apply(o, layers[j], projected=frame)
+            elif self.format.name == "RGB":
+                o[...] = frame
             else:
-                self.format.from_rgb(np.broadcast_to(frame.reshape(h, w, self.channels), (h, w, 3)), o)
-            if layers is not None:
-                self.detail.apply(o, layers[j])
+                self.format.from_rgb(np.broadcast_to(frame, (h, w, 3)), o)
             if self.local is not None:
                 snap_local(o, self.local, self.format.rgb)
             elif self.nearest is not None:
-                snap_colours(o, self.nearest, self.format.rgb)
+                snap_colours(o, self.nearest, self.format.rgb, self._away)
 
 
 class ProjectorOpenCL(Projector):
@@ -296,6 +301,11 @@ class ProjectorOpenCL(Projector):
         import pyopencl as cl
 
         self.ctx, self.queue = ctx, queue
+        # a pass's one upload, a row per frame: the coefficients, then the detail's layers
+        width = self.coefs.shape[1]
+        self._upload = np.zeros((self.frames, width + LAYER_FLOATS), np.float32)
+        self.coefs = self._upload[:, :width]
+        self.coef = self.coefs[0]
         group = PIXELS * self.channels
         blocked = blocked_basis(basis, group)
         groups = blocked.shape[0]
@@ -305,21 +315,18 @@ class ProjectorOpenCL(Projector):
         self._bufs: dict[str, Any] = {
             "basis": cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blocked),
             "mean": cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p),
-            "coef": cl.Buffer(ctx, mf.READ_ONLY, self.coefs.nbytes),
+            "coef": cl.Buffer(ctx, mf.READ_ONLY, self._upload.nbytes),
         }
         del blocked
-        self._layer_at = np.zeros((self.frames, 6), np.int32)
-        self._layer_w = np.zeros((self.frames, 2), np.float32)
-        self._bufs["layer_at"] = cl.Buffer(ctx, mf.READ_ONLY, self._layer_at.nbytes)
-        self._bufs["layer_w"] = cl.Buffer(ctx, mf.READ_ONLY, self._layer_w.nbytes)
         d = self.detail
         if d is None:
             dummy = np.zeros(1, np.uint8)
             arrays = {name: dummy for name in ("vol", "low", "high", "colours")}
             arrays["gain"] = np.zeros(1, np.float32)
         else:
-            gain = np.repeat(d.gain.reshape(-1), self.channels)  # once per value: the kernel reads it as vectors
-            arrays = {"vol": d.volume, "gain": gain, "low": d.low, "high": d.high, "colours": d.colours}
+            # each volume row's first PIXELS - 1 pixels repeated after its end (the kernel's header)
+            vol = np.ascontiguousarray(d.volume[:, :, np.arange(d.vw + PIXELS - 1) % d.vw])
+            arrays = {"vol": vol, "gain": d.gain.reshape(-1), "low": d.low, "high": d.high, "colours": d.colours}
         arrays["nearest"] = np.zeros(1, np.uint16) if self.nearest is None else self.nearest
         loc = self.local
         arrays["local_inside"] = np.zeros(1, np.uint8) if loc is None else loc.model.inside
@@ -351,7 +358,7 @@ class ProjectorOpenCL(Projector):
             k.set(
                 n=np.int32(self.n),
                 values=np.int32(self.values),
-                stride=np.int32(self.coefs.shape[1]),
+                stride=np.int32(self._upload.shape[1]),
                 width=np.int32(self.shape[1]),
                 **self._bufs,
             )
@@ -371,15 +378,12 @@ class ProjectorOpenCL(Projector):
         k = self._kernel(layers is not None)
         frames = 1 if count is None else count
         k.set(frames=np.int32(frames))
-        if layers is not None:
+        if layers is not None:  # the layers' integers (volume sizes) are exact in float32
             for j, ((t0, oy0, ox0, w0), (t1, oy1, ox1, w1)) in enumerate(layers[:frames]):
-                self._layer_at[j] = (t0, oy0, ox0, t1, oy1, ox1)
-                self._layer_w[j] = (w0, w1)
-            cl.enqueue_copy(self.queue, self._bufs["layer_at"], self._layer_at, is_blocking=False)
-            cl.enqueue_copy(self.queue, self._bufs["layer_w"], self._layer_w, is_blocking=False)
-        # the queue is in order: once this copy is done the layers' are too, and the caller
-        # may change the coefficients (a frame it waits for is done with them anyway)
-        cl.enqueue_copy(self.queue, self._bufs["coef"], self.coefs[:frames], is_blocking=not wait)
+                self._upload[j, -LAYER_FLOATS:] = (t0, oy0, ox0, t1, oy1, ox1, w0, w1)
+        # once this copy is done the caller may change the coefficients (a frame it waits for
+        # is done with them anyway)
+        cl.enqueue_copy(self.queue, self._bufs["coef"], self._upload[:frames], is_blocking=not wait)
         return k
 
     def run(self, out: np.ndarray, *, count: int | None = None, layers: list | None = None, wait: bool = True):

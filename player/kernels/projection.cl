@@ -13,8 +13,12 @@
 // or clamp(p, low, high) where that colour's bin ((r >> 3) * 1024 + (g >> 3) * 32 + (b >> 3))
 // is not in the source's colour set (colours[bin] == 0); p is the projected uint8 value, so
 // the detail sees the integers a separate pass would. The volume (Tv, VH, VW, CHANNELS) int8
-// wraps in y and x; layer k of frame f reads volume frame layer_at[6 f + 3 k] at offset
-// (layer_at[6 f + 3 k + 1], layer_at[6 f + 3 k + 2]) with weight layer_w[2 f + k].
+// wraps in y and x, and is stored with each row's first PIXELS - 1 pixels repeated after its
+// end (rows of VWP pixels), so that any PIXELS consecutive pixels of a row are one contiguous
+// run. Frame f's layers are the last LAYER_FLOATS values of its coefficient row (one upload
+// per pass): t0, oy0, ox0, t1, oy1, ox1 (small integers, exact as floats), w0, w1; layer k
+// reads volume frame tk at offset (oyk, oxk) with weight wk. gain holds one value per pixel
+// (spread over a pixel's channels with shuffles).
 // Contraction is off there so that the result equals the numpy reference bit for bit.
 //
 // GAMUT (CHANNELS 3 only): last, a pixel whose colour bin is not its own nearest[bin] (the
@@ -34,6 +38,8 @@
 
 #define PIXELS 16
 #define GROUP (PIXELS * CHANNELS)
+#define VWP (VW + PIXELS - 1)
+#define LAYER_FLOATS 8
 
 #if HALF
 typedef half basis_t;
@@ -97,27 +103,36 @@ void snap_local(uchar *v, const int count, int x, int y, const int width, __glob
 #if DETAIL
 
 // The detail of frame f added to the projected values v (GROUP values: `count` pixels, the
-// first at (x, y), value `first` of the frame). gain holds each pixel's gain once per channel.
-// A work-item whose pixels lie in one row and read each layer without a wrap works on whole
-// vectors; the others (the end of a row, a wrap) pixel by pixel, with the same operations.
-void add_detail(uchar *v, const int count, int x, int y, const size_t first, __global const char *restrict vol,
+// first at (x, y), pixel p0 and value `first` of the frame). A work-item whose pixels lie in
+// one row works on whole vectors; the others (a row's end inside the group) pixel by pixel,
+// with the same operations.
+void add_detail(uchar *v, const int count, int x, int y, const size_t p0, const size_t first,
+                __global const char *restrict vol,
                 __global const float *restrict gain, __global const uchar *restrict low,
                 __global const uchar *restrict high, __global const uchar *restrict colours,
-                __global const int *restrict at, __global const float *restrict w, const int width)
+                __global const float *lay, const int width)
 {
 #pragma OPENCL FP_CONTRACT OFF
-    const int t0 = at[0] * VH, oy0 = at[1], ox0 = at[2], t1 = at[3] * VH, oy1 = at[4], ox1 = at[5];
-    const float w0 = w[0], w1 = w[1];
-    int row0 = (t0 + (y + oy0) % VH) * VW, row1 = (t1 + (y + oy1) % VH) * VW;
-    const int c0 = (x + ox0) % VW, c1 = (x + ox1) % VW;
+    const int t0 = (int)lay[0] * VH, oy0 = (int)lay[1], ox0 = (int)lay[2];
+    const int t1 = (int)lay[3] * VH, oy1 = (int)lay[4], ox1 = (int)lay[5];
+    const float w0 = lay[6], w1 = lay[7];
+    int row0 = (t0 + (y + oy0) % VH) * VWP, row1 = (t1 + (y + oy1) % VH) * VWP;
     uchar d[GROUP];
     uchar a[GROUP];
-    if (count == PIXELS && x + PIXELS <= width && c0 + PIXELS <= VW && c1 + PIXELS <= VW) {
-        __global const char *v0 = vol + (row0 + c0) * CHANNELS;
-        __global const char *v1 = vol + (row1 + c1) * CHANNELS;
+    if (count == PIXELS && x + PIXELS <= width) {
+        __global const char *v0 = vol + (row0 + (x + ox0) % VW) * CHANNELS;
+        __global const char *v1 = vol + (row1 + (x + ox1) % VW) * CHANNELS;
+        const float16 gp = vload16(0, gain + p0);
+#if CHANNELS == 3
+        const float16 gs[3] = {shuffle(gp, (uint16)(0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5)),
+                               shuffle(gp, (uint16)(5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9, 9, 10, 10)),
+                               shuffle(gp, (uint16)(10, 11, 11, 11, 12, 12, 12, 13, 13, 13, 14, 14, 14, 15, 15, 15))};
+#else
+        const float16 gs[1] = {gp};
+#endif
         for (int j = 0; j < CHANNELS; ++j) {
             const float16 n = w0 * convert_float16(vload16(j, v0)) + w1 * convert_float16(vload16(j, v1));
-            const float16 val = convert_float16(vload16(j, v)) + vload16(j, gain + first) * n;
+            const float16 val = convert_float16(vload16(j, v)) + gs[j] * n;
             const uchar16 lo = vload16(j, low + first), hi = vload16(j, high + first);
             vstore16(clamp(convert_uchar16_sat_rte(val), lo, hi), j, d);
             vstore16(clamp(vload16(j, v), lo, hi), j, a);
@@ -129,15 +144,15 @@ void add_detail(uchar *v, const int count, int x, int y, const size_t first, __g
             for (int c = 0; c < CHANNELS; ++c) {
                 const size_t k = first + q * CHANNELS + c;
                 const float n = w0 * (float)vol[i0 + c] + w1 * (float)vol[i1 + c];
-                const uchar u = convert_uchar_sat_rte((float)v[q * CHANNELS + c] + gain[k] * n);
+                const uchar u = convert_uchar_sat_rte((float)v[q * CHANNELS + c] + gain[p0 + q] * n);
                 d[q * CHANNELS + c] = clamp(u, low[k], high[k]);
                 a[q * CHANNELS + c] = clamp(v[q * CHANNELS + c], low[k], high[k]);
             }
             if (++x == width) {
                 x = 0;
                 ++y;
-                row0 = (t0 + (y + oy0) % VH) * VW;
-                row1 = (t1 + (y + oy1) % VH) * VW;
+                row0 = (t0 + (y + oy0) % VH) * VWP;
+                row1 = (t1 + (y + oy1) % VH) * VWP;
             }
         }
     }
@@ -164,8 +179,6 @@ __kernel void project(__global const basis_t *restrict basis,
                       __global const uchar *restrict low,
                       __global const uchar *restrict high,
                       __global const uchar *restrict colours,
-                      __global const int *restrict layer_at,
-                      __global const float *restrict layer_w,
                       __global const ushort *restrict nearest,
                       __global const uchar *restrict local_inside,
                       __global const ushort *restrict local_nearest)
@@ -202,7 +215,7 @@ __kernel void project(__global const basis_t *restrict basis,
         vstore16(convert_uchar16_sat_rte(a2), 2, v);
 #endif
 #if DETAIL
-        add_detail(v, count, x0, y0, first, vol, gain, low, high, colours, layer_at + 6 * f, layer_w + 2 * f, width);
+        add_detail(v, count, x0, y0, p0, first, vol, gain, low, high, colours, c + stride - LAYER_FLOATS, width);
 #endif
 #if LOCAL
         snap_local(v, count, x0, y0, width, local_inside, local_nearest);

@@ -44,8 +44,8 @@ def exact_projection(rng, h, w, channels, n=5):
 @pytest.mark.parametrize("size", [(23, 41, 9, 14), (20, 64, 24, 40)], ids=["pixel-by-pixel", "vectors"])
 def test_fused_kernel_equals_numpy_reference(cl_context, channels, format, size):
     """The projection kernel adds the detail in its own pass, k frames at a time, bit for bit as
-    the reference projects and then adds it (rows of whole vectors and a volume wider than
-    them take the kernel's vector path, the others its pixel-by-pixel path)."""
+    the reference projects and then adds it (rows of whole vectors take the kernel's vector
+    path, wrapping in the volume or not, the others its pixel-by-pixel path)."""
     rng = np.random.default_rng(channels)
     h, w, vh, vw = size
     fmt = FORMATS[format]
