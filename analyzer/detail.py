@@ -46,6 +46,10 @@ GAIN_BOX = 9
 CLIP_SIGMAS = 5.0
 #: Frames of residual computed at once.
 CHUNK = 16
+#: A residual with more of its power than this at wavelengths over a quarter of the noise
+#: volume's side is structure, not fine detail: played over a frame larger than the volume its
+#: blobs repeat across the frame (a flame clip's leopard spots), so such a model gets no detail.
+COARSE_SHARE = 0.5
 
 Reconstruct = Callable[[int, int], np.ndarray]
 
@@ -139,6 +143,7 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     gain = np.clip(norm_gain * scale, 0, MAX_GAIN).astype(np.float32)
     info = {
         "residual_energy": resid_energy / total if total > 0 else 0.0,
+        "coarse_share": coarse_share(power),
         "volume_scale": float(scale),
         "colour_share": float(eig[-1] / eig.sum()) if eig.sum() > 0 else 1.0,
         "seed": int(seed),
@@ -146,6 +151,40 @@ def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0)
     low, high = _dilate(low, np.minimum), _dilate(high, np.maximum)
     colours = colour_set(frames).astype(np.uint8)
     return DetailModel(volume=volume, gain=gain, low=low, high=high, colours=colours, info=info)
+
+
+def coarse_share(power: np.ndarray) -> float:
+    """Share of ``power`` (a ``(Tv, Hv, Wv // 2 + 1)`` real-FFT power spectrum) at spatial
+    wavelengths over a quarter of the volume's shorter side.
+
+    >>> p = np.zeros((2, 16, 9)); p[:, 1, 0] = 1.0; p[:, 0, 8] = 3.0  # 16 px across, 2 px along rows
+    >>> coarse_share(p)
+    0.25
+    """
+    _, hv, half = power.shape
+    wv = 2 * (half - 1)
+    k = np.hypot(np.fft.fftfreq(hv)[:, None], np.fft.rfftfreq(wv)[None, :])
+    weight = np.full(half, 2.0)  # a real FFT's inner columns stand for two frequencies
+    weight[0] = 1.0
+    weight[-1] = 1.0
+    p = power.sum(axis=0) * weight[None, :]
+    total = float(p.sum())
+    return float(p[k < 4.0 / min(hv, wv)].sum() / total) if total > 0 else 0.0
+
+
+def attach_detail(model, frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0) -> None:
+    """Set ``model.detail`` (an lds or mixture model) to :func:`learn_detail` of ``frames``, unless
+    the residual is coarse (:data:`COARSE_SHARE`) and the frame larger than the noise volume: then
+    leave it None and record the share as ``model.info["detail_coarse_share"]``, which
+    :func:`~dynatex.tiledb.detail.describe` turns into a warning."""
+    detail = learn_detail(frames, reconstruct, seed=seed)
+    _, h, w, _ = frames.shape
+    _, hv, wv, _ = detail.volume.shape
+    share = float(detail.info["coarse_share"])
+    if share > COARSE_SHARE and (h > hv or w > wv):
+        model.info["detail_coarse_share"] = share
+        return
+    model.detail = detail
 
 
 def _residual_chunks(frames: np.ndarray, reconstruct: Reconstruct, offset: int = 0):

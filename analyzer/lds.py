@@ -24,7 +24,7 @@ import numpy as np
 from ..checks import check_int
 from ..errors import InvalidArgumentError
 from ..tiledb import LDSModel
-from .detail import learn_detail
+from .detail import attach_detail
 from .gamut import learn_gamut
 from .methods import check_params
 from .signs import canonical_signs, orient_rows
@@ -138,7 +138,7 @@ def learn_lds(
         model.info["column_blocks"] = int(blocks)
     else:
         basis32, x32 = model.basis, x.T.astype(np.float32)
-        model.detail = learn_detail(frames, lambda t0, t1: x32[t0:t1] @ basis32 + mean, seed=seed)
+        attach_detail(model, frames, lambda t0, t1: x32[t0:t1] @ basis32 + mean, seed=seed)
         model.gamut = learn_gamut(frames)
     return model
 

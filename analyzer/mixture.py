@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import InvalidArgumentError
 from ..tiledb import MixtureModel, SwitchingDynamics
 from ..tiledb.mixture import companion_radius
-from .detail import learn_detail
+from .detail import attach_detail
 from .gamut import learn_gamut
 from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
 from .methods import check_params
@@ -258,7 +258,7 @@ def learn_mixture(
     )
     if not streamed:
         u32, stacked32 = u.astype(np.float32), model.stacked_basis
-        model.detail = learn_detail(frames, lambda t0, t1: u32[t0:t1] @ stacked32 + mean, seed=seed)
+        attach_detail(model, frames, lambda t0, t1: u32[t0:t1] @ stacked32 + mean, seed=seed)
         model.gamut = learn_gamut(frames)
     step()
     return model

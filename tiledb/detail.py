@@ -59,10 +59,19 @@ class DetailModel:
     info: dict = field(default_factory=dict)
 
 
-def describe(model: DetailModel | None) -> dict:
-    """Facts for a model's ``describe()``: the residual's share, and a warning where it is large."""
+def describe(model: DetailModel | None, info: dict | None = None) -> dict:
+    """Facts for a model's ``describe()``: the residual's share, and a warning where it is large or
+    where the analysis left the detail out (the model's ``info`` says so: ``detail_coarse_share``)."""
     if model is None:
-        return {"detail": False}
+        coarse = (info or {}).get("detail_coarse_share")
+        if coarse is None:
+            return {"detail": False}
+        return {
+            "detail": False,
+            "warning": f"no detail part: {float(coarse):.0%} of what the projection leaves out lies at "
+            "wavelengths over a quarter of the noise volume's side (structure, not fine detail), which "
+            "would repeat across the frame as blobs; the output stays smoother than the clip",
+        }
     share = float(model.info.get("residual_energy", 0.0))
     out = {"detail": True, "detail_residual_energy": round(share, 4)}
     if share > WARN_RESIDUAL:

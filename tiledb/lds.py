@@ -83,7 +83,7 @@ class LDSModel(Described):
             "n": self.n,
             "k": self.k,
             "basis_mb": round(self.basis.nbytes / 2**20, 2),
-            **_detail.describe(self.detail),
+            **_detail.describe(self.detail, self.info),
             **_gamut.describe(self.gamut),
         }
 

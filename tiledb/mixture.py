@@ -146,7 +146,7 @@ class MixtureModel(Described):
 
     def describe(self) -> dict:
         """Facts as plain values: the ``info`` attributes, the detail part's and the colour set's."""
-        return {**super().describe(), **_detail.describe(self.detail), **_gamut.describe(self.gamut)}
+        return {**super().describe(), **_detail.describe(self.detail, self.info), **_gamut.describe(self.gamut)}
 
     @property
     def components(self) -> int:

@@ -82,3 +82,45 @@ def test_volume_carries_the_residual_energy():
         np.mean(d.gain.astype(np.float64) ** 2) * (d.volume.astype(np.float64) ** 2).mean(axis=(0, 1, 2)).sum()
     )
     assert carried == pytest.approx(per_pixel, rel=0.05)  # the levelled estimate: 0.9
+
+
+def _blob_clip(t, h, w, sigma, seed=0):
+    """Random blobs about ``sigma`` pixels across that change at random from frame to frame."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(seed)
+    field = ndimage.gaussian_filter(rng.normal(0, 1, (t, h, w)), (0, sigma, sigma), mode="wrap")
+    field *= 40 / field.std()
+    return np.clip(np.rint(128 + field), 0, 255).astype(np.uint8)[..., None].repeat(3, axis=-1)
+
+
+@pytest.mark.parametrize(("sigma", "kept"), [(1.0, True), (16.0, False)])
+def test_a_coarse_residual_over_a_frame_larger_than_the_volume_gets_no_detail(tmp_path, sigma, kept):
+    from dynatex.tiledb import DatabaseWriter, TileDB
+
+    clip = _blob_clip(12, 144, 160, sigma)  # larger than the 128-pixel volume
+    model = learn_lds(clip, n=2)
+    assert (model.detail is not None) is kept
+    if kept:
+        assert model.detail.info["coarse_share"] < 0.5 and "detail_coarse_share" not in model.info
+        return
+    assert model.info["detail_coarse_share"] > 0.5
+    path = tmp_path / "coarse.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("b", _source_info(clip))
+        w.put_method("b", "lds", model)
+    with TileDB(path) as db:
+        facts = db.texture("b").read("lds").describe()
+    assert facts["detail"] is False and facts["warning"].startswith("no detail part")
+
+
+def test_a_coarse_residual_keeps_its_detail_where_the_volume_covers_the_frame():
+    clip = _blob_clip(12, 64, 64, 16.0)  # the volume is the frame: nothing repeats
+    model = learn_lds(clip, n=2)
+    assert model.detail is not None and model.detail.info["coarse_share"] > 0.5
+
+
+def _source_info(frames):
+    from dynatex.analyzer import load_clip
+
+    return load_clip(frames).source_info()
