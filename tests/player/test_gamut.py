@@ -63,6 +63,32 @@ def test_snap_clamps_into_the_nearest_bin():
     assert px.tolist() == [[[168, 175, 167], [13, 205, 99]]]  # the other pixel's bin is its own
 
 
+def _kernel_and_references(cl_context, rng, basis, mean, shape, format, detail, frames, gamut, other):
+    """Frames ``(got, want, plain)`` of ``frames`` coefficient rows, k per pass: the kernel and its
+    reference with colour set ``gamut``, the reference with ``other`` (None: none); and checks
+    that the kernel one frame at a time gives the reference's frame."""
+    h, w = shape[:2]
+    kw = dict(shape=shape, channels=3, format=format, frames=frames, detail=_model(rng, h, w, 3) if detail else None)
+    engine = open_projector(basis, mean, ctx=cl_context, queue=cl.CommandQueue(cl_context), gamut=gamut, **kw)
+    ref = open_projector(basis, mean, gamut=gamut, **kw)
+    bare = open_projector(basis, mean, gamut=other, **kw)
+    try:
+        coefs = rng.integers(-4, 5, (frames, 5)).astype(np.float32)
+        engine.coefs[:] = ref.coefs[:] = bare.coefs[:] = coefs
+        lay = [ref.detail.layers(3, k, 1.5) for k in (0, 4, 9, 30)[:frames]] if detail else None
+        got, want, plain = (np.empty((frames, *shape), np.uint8) for _ in range(3))
+        engine.run(got, count=frames, layers=lay)
+        ref.run(want, count=frames, layers=lay)
+        bare.run(plain, count=frames, layers=lay)
+        single = np.empty(shape, np.uint8)
+        engine.coef[:] = coefs[frames // 2]
+        engine.run(single, layers=None if lay is None else [lay[frames // 2]])
+        np.testing.assert_array_equal(single, want[frames // 2])
+        return got, want, plain
+    finally:
+        engine.close()
+
+
 @pytest.mark.parametrize("format", ["RGB", "RGBA", "BGRA"])
 @pytest.mark.parametrize("detail", [False, True], ids=["alone", "with-detail"])
 @pytest.mark.parametrize("size", [(23, 41), (20, 64)], ids=["pixel-by-pixel", "vectors"])
@@ -75,29 +101,12 @@ def test_kernel_equals_numpy_reference(cl_context, format, detail, size):
     basis, mean = exact_projection(rng, h, w, 3)
     shape = (h, w, fmt.bytes)
     gamut = GamutModel(random_colour_set(rng))
-    kw = dict(shape=shape, channels=3, format=format, frames=4, detail=_model(rng, h, w, 3) if detail else None)
-    engine = open_projector(basis, mean, ctx=cl_context, queue=cl.CommandQueue(cl_context), gamut=gamut, **kw)
-    ref = open_projector(basis, mean, gamut=gamut, **kw)
-    bare = open_projector(basis, mean, **kw)
-    try:
-        coefs = rng.integers(-4, 5, (4, 5)).astype(np.float32)
-        engine.coefs[:] = ref.coefs[:] = bare.coefs[:] = coefs
-        lay = [ref.detail.layers(3, k, 1.5) for k in (0, 4, 9, 30)] if detail else None
-        got, want, plain = (np.empty((4, *shape), np.uint8) for _ in range(3))
-        engine.run(got, count=4, layers=lay)
-        ref.run(want, count=4, layers=lay)
-        bare.run(plain, count=4, layers=lay)
-        np.testing.assert_array_equal(got, want)
-        moved = (want != plain).any(axis=-1)
-        assert 0.1 < moved.mean() < 0.9  # about half the bins are outside the set
-        bins = colour_bins(want[..., list(fmt.rgb)])
-        assert (gamut.nearest[bins] == bins).all()
-        single = np.empty(shape, np.uint8)
-        engine.coef[:] = coefs[2]
-        engine.run(single, layers=None if lay is None else [lay[2]])
-        np.testing.assert_array_equal(single, want[2])
-    finally:
-        engine.close()
+    got, want, plain = _kernel_and_references(cl_context, rng, basis, mean, shape, format, detail, 4, gamut, None)
+    np.testing.assert_array_equal(got, want)
+    moved = (want != plain).any(axis=-1)
+    assert 0.1 < moved.mean() < 0.9  # about half the bins are outside the set
+    bins = colour_bins(want[..., list(fmt.rgb)])
+    assert (gamut.nearest[bins] == bins).all()
 
 
 def random_local(rng: np.random.Generator, nearest: np.ndarray, h: int, w: int, block: int) -> LocalGamut:
@@ -128,29 +137,14 @@ def test_local_kernel_equals_numpy_reference(cl_context, format, detail, size):
     shape = (h, w, fmt.bytes)
     nearest = random_colour_set(rng)
     gamut = GamutModel(nearest, local=random_local(rng, nearest, h, w, 8))
-    kw = dict(shape=shape, channels=3, format=format, frames=3, detail=_model(rng, h, w, 3) if detail else None)
-    engine = open_projector(basis, mean, ctx=cl_context, queue=cl.CommandQueue(cl_context), gamut=gamut, **kw)
-    ref = open_projector(basis, mean, gamut=gamut, **kw)
-    glob = open_projector(basis, mean, gamut=GamutModel(nearest), **kw)
-    try:
-        coefs = rng.integers(-4, 5, (3, 5)).astype(np.float32)
-        engine.coefs[:] = ref.coefs[:] = glob.coefs[:] = coefs
-        lay = [ref.detail.layers(3, k, 1.5) for k in (0, 4, 9)] if detail else None
-        got, want, other = (np.empty((3, *shape), np.uint8) for _ in range(3))
-        engine.run(got, count=3, layers=lay)
-        ref.run(want, count=3, layers=lay)
-        glob.run(other, count=3, layers=lay)
-        np.testing.assert_array_equal(got, want)
-        assert (want != other).any(axis=-1).mean() > 0.1  # the regions' sets, not the clip's
-        bins = colour_bins(want[..., list(fmt.rgb)]).reshape(3, h, w)
-        region = (np.arange(h)[:, None] // 8) * -(-w // 8) + np.arange(w)[None, :] // 8
-        assert local_bits(gamut.local)[np.broadcast_to(region, bins.shape), bins].all()
-        single = np.empty(shape, np.uint8)
-        engine.coef[:] = coefs[1]
-        engine.run(single, layers=None if lay is None else [lay[1]])
-        np.testing.assert_array_equal(single, want[1])
-    finally:
-        engine.close()
+    got, want, other = _kernel_and_references(
+        cl_context, rng, basis, mean, shape, format, detail, 3, gamut, GamutModel(nearest)
+    )
+    np.testing.assert_array_equal(got, want)
+    assert (want != other).any(axis=-1).mean() > 0.1  # the regions' sets, not the clip's
+    bins = colour_bins(want[..., list(fmt.rgb)]).reshape(3, h, w)
+    region = (np.arange(h)[:, None] // 8) * -(-w // 8) + np.arange(w)[None, :] // 8
+    assert local_bits(gamut.local)[np.broadcast_to(region, bins.shape), bins].all()
 
 
 def test_a_clip_colour_leaves_the_places_that_never_had_it():

@@ -22,6 +22,13 @@ class ProjectionDB:
     models: dict
     frames: np.ndarray
 
+    def read(self, method: str):
+        """The ``method`` model as read back from :attr:`path`."""
+        from dynatex.tiledb import TileDB
+
+        with TileDB(self.path) as t:
+            return t.texture("w").read(method)
+
 
 @pytest.fixture(scope="session")
 def projection_db(tmp_path_factory) -> ProjectionDB:
