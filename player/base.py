@@ -473,7 +473,10 @@ class Player:
     def _prefer_faster(self, backend: str, device: str | None, engine: str) -> None:
         """Under ``backend="auto"`` with no device named, take the numpy reference for
         ``engine`` unless the self-test measured OpenCL clearly faster on this device
-        (:func:`.opencl.verify.prefers_opencl` on Verdict.speed; an engine never measured stays on OpenCL)."""
+        (:func:`.opencl.verify.prefers_opencl` on Verdict.speed). A figure missing, unsettled, old or
+        from another configuration is measured first, in a child (:func:`.opencl.context.engine_speed`:
+        seconds, once, on the first player of a size the self-test did not time); an engine that
+        cannot be measured stays on OpenCL."""
         if backend != "auto" or device is not None or os.environ.get("PYOPENCL_CTX") or self.ctx is None:
             return
         from .opencl.context import engine_speed

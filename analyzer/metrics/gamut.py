@@ -9,10 +9,11 @@ import numpy as np
 from ...checks import check_frames
 from ...errors import InvalidArgumentError
 from ...framestats import CHUNK
+from ...tiledb.gamut import BIN_BITS
 
 # -- colours the source never had -----------------------------------------------------------
-#: bits per channel of the colour bins (bins 8 levels wide)
-GAMUT_BITS = 5
+#: bits per channel of the colour bins (bins 8 levels wide): the stored gamut part's
+GAMUT_BITS = BIN_BITS
 
 
 def colour_bins(frames: np.ndarray) -> np.ndarray:

@@ -134,9 +134,7 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     """
     flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
     r, g, b = (flat[:, i] for i in rgb)
-    keys = (r >> 3).astype(np.int32) << 10
-    keys |= (g >> 3).astype(np.int32) << 5
-    keys |= b >> 3
+    keys = colour_bins(flat, rgb).astype(np.int32)
     keys += local.base
     away = np.flatnonzero(~local.bits[keys])
     if not len(away):

@@ -59,6 +59,15 @@ typedef float basis_t;
 #if CHANNELS != 3
 #error "GAMUT needs CHANNELS 3"
 #endif
+// Pixel p (3 values) clamped, channel by channel, into colour bin t.
+void into_bin(uchar *p, const int t)
+{
+    const int r = (t >> 10) << 3, g = ((t >> 5) & 31) << 3, b = (t & 31) << 3;
+    p[0] = (uchar)clamp((int)p[0], r, r + 7);
+    p[1] = (uchar)clamp((int)p[1], g, g + 7);
+    p[2] = (uchar)clamp((int)p[2], b, b + 7);
+}
+
 // The `count` pixels of v moved into the source's colour set (the header's GAMUT).
 void snap_colours(uchar *v, const int count, __global const ushort *restrict nearest)
 {
@@ -67,10 +76,7 @@ void snap_colours(uchar *v, const int count, __global const ushort *restrict nea
         const int bin = BIN(p, 0);
         const int t = nearest[bin];
         if (t != bin) {
-            const int r = (t >> 10) << 3, g = ((t >> 5) & 31) << 3, b = (t & 31) << 3;
-            p[0] = (uchar)clamp((int)p[0], r, r + 7);
-            p[1] = (uchar)clamp((int)p[1], g, g + 7);
-            p[2] = (uchar)clamp((int)p[2], b, b + 7);
+            into_bin(p, t);
         }
     }
 }
@@ -86,10 +92,7 @@ void snap_local(uchar *v, const int count, int x, int y, const int width, __glob
         const int bin = BIN(p, 0);
         if (((inside[region * 4096 + (bin >> 3)] >> (bin & 7)) & 1) == 0) {
             const int t = targets[region * 4096 + (((p[0] >> 4) << 8) | ((p[1] >> 4) << 4) | (p[2] >> 4))];
-            const int r = (t >> 10) << 3, g = ((t >> 5) & 31) << 3, b = (t & 31) << 3;
-            p[0] = (uchar)clamp((int)p[0], r, r + 7);
-            p[1] = (uchar)clamp((int)p[1], g, g + 7);
-            p[2] = (uchar)clamp((int)p[2], b, b + 7);
+            into_bin(p, t);
         }
         if (++x == width) {
             x = 0;

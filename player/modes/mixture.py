@@ -177,9 +177,10 @@ class MixturePlayer(ProjectionPlayer):
             self._fluct = np.array([np.trace(model.local_cov[s] @ b[1:, 1:]) for s, b in enumerate(blocks)])
             order = self.switching.local_ar.shape[1]
             self._zh = np.repeat(model.local_coords[:1] - self._offset[None], order, axis=0)  # z_{t-i} - c
-            self._r = np.eye(self.components)[self._label]
+            self._eye = np.eye(self.components)
+            self._r = self._eye[self._label].copy()
             self._fade = (self._r.copy(), 0, 0)  # responsibilities at the switch, frames done, frames in all
-            self._u = self._switch_coefficients()
+            self._u = self._switch_coefficients(self._r)
 
     # -- controls ----------------------------------------------------------------
     draws = Control(
@@ -202,15 +203,15 @@ class MixturePlayer(ProjectionPlayer):
             return self._u @ self._coord_map
         return self._hist[0].copy()
 
-    def _switch_coefficients(self) -> np.ndarray:
-        """The coefficients of the current local coordinates, each component's pulled back into the
-        ellipsoid of its training coordinates (as :class:`GlobalDecoder` does; the process runs on)."""
+    def _switch_coefficients(self, r: np.ndarray) -> np.ndarray:
+        """The coefficients of the current local coordinates under responsibilities ``r``, each
+        component's pulled back into the ellipsoid of its training coordinates (as
+        :class:`GlobalDecoder` does; the process runs on)."""
         dz = self._zh[0]
         rad = np.sqrt((np.einsum("sij,sj->si", self.decoder.local_whiten, dz) ** 2).sum(axis=1))
         dz = dz * np.minimum(1.0, self.decoder.radius / np.maximum(rad, 1e-300))[:, None]
         # Mean images mix by the responsibilities; the components' independent fluctuations by
         # weights whose squares sum to one, so that a cross-fade keeps their variance.
-        r = self._r
         w = r / np.sqrt(r @ r)
         if r.max() < 1.0:
             # the blend of two mean images lacks sum r_s |m_s|^2 - |sum r_s m_s|^2 of the energy the
@@ -222,7 +223,7 @@ class MixturePlayer(ProjectionPlayer):
         return ext.reshape(-1)
 
     def _switch_step(self) -> None:
-        dyn, s_count = self.switching, self.components
+        dyn = self.switching
         draw = self._rng.random()
         start, done, total = self._fade
         if done < total:
@@ -235,21 +236,18 @@ class MixturePlayer(ProjectionPlayer):
         self._zh[1:] = self._zh[:-1]
         self._zh[0] = dz
         if new != self._label:
-            r, self._r = self._r, np.eye(s_count)[new]
-            jump = self._switch_coefficients()
-            self._r = r
-            jump -= self._switch_coefficients()
+            jump = self._switch_coefficients(self._eye[new]) - self._switch_coefficients(self._r)
             size = step_sizes(self._gram, jump[None])[0]
             total = int(min(MAX_FADE, np.ceil(np.sqrt(size / max(self._fade_step, 1e-300)))))
             start, done, self._label = self._r.copy(), 0, new
-        one = np.eye(s_count)[self._label]
+        one = self._eye[self._label].copy()
         if done < total:
             done += 1
             self._r = (1 - done / total) * start + (done / total) * one
         else:
             self._r = one
         self._fade = (start, done, total)
-        self._u = self._switch_coefficients()
+        self._u = self._switch_coefficients(self._r)
 
     def _leave(self, draw: float, fade: int) -> int:
         """The component after this frame, past a fade of ``fade`` frames: the chain's own choice,
@@ -371,6 +369,6 @@ class MixturePlayer(ProjectionPlayer):
         rng = rng_from_state(state["rng"])
         self._restore_detail(state)
         self._label, self._zh, self._r, self._fade = label, z.copy(), r.copy(), (start.copy(), done, total)
-        self._u = self._switch_coefficients()
+        self._u = self._switch_coefficients(self._r)
         self._rng = rng
         self.seed = int(state.get("seed", self.seed))
