@@ -29,6 +29,8 @@ from .gamut import learn_gamut
 from .methods import check_params
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
+from .tone import choose as choose_tone
+from .tone import levels_of, to_tone
 from .video import Clip, Progress, clip_frames
 
 DEFAULT_N = 50
@@ -48,6 +50,7 @@ def learn_lds(
     svd: str = "auto",
     max_radius: float = DEFAULT_MAX_RADIUS,
     calibrate: bool = True,
+    tone: str = "auto",
     seed: int = 0,
     max_memory: int | None = None,
     progress: Progress | None = None,
@@ -75,6 +78,10 @@ def learn_lds(
     calibrate : bool
         Scale ``Q`` so that the stationary state variance equals the training states'
         (stability clipping otherwise changes the texture's energy).
+    tone : {"auto", "on", "off"}
+        Learn on the clip's levels Gaussianised per channel (:mod:`.tone`; the model's ``tone``
+        part maps them back): "auto" where a Gaussian model would saturate many values. A
+        streamed clip is learned on its levels ("on" is refused).
     seed : int
         Seed of the randomized SVD.
     max_memory : int, optional
@@ -102,9 +109,12 @@ def learn_lds(
     tau = clip.n_frames if streamed else frames.shape[0]
     if tau < 3:
         raise InvalidArgumentError(f"clip has {tau} frames; learning an LDS needs at least 3")
-    n, k, energy, svd, max_radius, calibrate, seed = check_params(
-        "lds", n=n, k=k, energy=energy, svd=svd, max_radius=max_radius, calibrate=calibrate, seed=seed
+    n, k, energy, svd, max_radius, calibrate, tone, seed = check_params(
+        "lds", n=n, k=k, energy=energy, svd=svd, max_radius=max_radius, calibrate=calibrate, tone=tone, seed=seed
     )
+    tone_map = None if streamed else choose_tone(frames, tone)
+    if streamed and tone == "on":
+        raise InvalidArgumentError("tone='on' needs the clip in memory; a streamed clip is learned on its levels")
     auto = n == "auto"
     if not auto:
         if n > tau - 1:
@@ -117,7 +127,9 @@ def learn_lds(
         )
         method = "gram-streamed"
     else:
-        mean, basis, sv, states, total_energy, method = _learn_subspace(frames, svd, auto, rank_cap, seed, step)
+        values = frames if tone_map is None else to_tone(frames, tone_map)
+        mean, basis, sv, states, total_energy, method = _learn_subspace(values, svd, auto, rank_cap, seed, step)
+        del values
         blocks = 0
     if auto:
         cum = np.cumsum(sv**2) / total_energy
@@ -138,16 +150,18 @@ def learn_lds(
         model.info["column_blocks"] = int(blocks)
     else:
         basis32, x32 = model.basis, x.T.astype(np.float32)
-        attach_detail(model, frames, lambda t0, t1: x32[t0:t1] @ basis32 + mean, seed=seed)
+        attach_detail(model, frames, levels_of(lambda t0, t1: x32[t0:t1] @ basis32 + mean, tone_map), seed=seed)
         model.gamut = learn_gamut(frames)
+        model.tone = tone_map
     return model
 
 
 def _learn_subspace(frames: np.ndarray, svd: str, auto: bool, rank_cap: int, seed: int, step):
-    """In memory: mean, basis, singular values, states and total energy of the clip."""
+    """In memory: mean, basis, singular values, states and total energy of the clip (``(T, H, W, C)``
+    uint8, or float32 tone values ``(T, P)``, which are used up: mean-subtracted in place)."""
     tau = frames.shape[0]
     # One float32 copy of the clip, mean-subtracted in place.
-    y = frames.reshape(tau, -1).astype(np.float32)
+    y = frames.reshape(tau, -1).astype(np.float32, copy=False)
     mean = y.mean(axis=0, dtype=np.float64).astype(np.float32)
     y -= mean
     total_energy = float(np.einsum("ij,ij->", y, y, dtype=np.float64))

@@ -25,6 +25,7 @@ from ..checks import MAX_COUNT, MAX_SEED, MAX_SIDE, Choice, Either, Flag, Kind, 
 from ..errors import ArgumentTypeError, InvalidArgumentError
 from ..params import Param
 from ..tiledb.tiles import CONSTRUCTIONS as TILE_CONSTRUCTIONS
+from .tone import SATURATION_SHARE
 
 
 class Clips(Kind):
@@ -77,6 +78,13 @@ _COUNT = Range(int, 1, MAX_COUNT)
 _SIDE_OR_SIZE = Either(Range(int, 1, MAX_SIDE), Size(MAX_SIDE), metavar="N or WxH")
 _OPEN_UNIT = Range(float, 0.0, 1.0, low_open=True)
 _SEED = Range(int, 0, MAX_SEED)
+#: learn a projection model on Gaussianised values (analyzer/tone.py)
+_TONE = Choice("auto", "on", "off")
+_TONE_DOC = (
+    "Learn on each channel's levels Gaussianised (a tone map the player maps back): keeps the energy of "
+    "clips whose values pile at 0 and 255. auto: where a Gaussian per value would saturate over "
+    f"{SATURATION_SHARE:.0%} of them."
+)
 #: largest pole magnitude of a projection model's dynamics
 _MAX_RADIUS = Range(float, 0.0, 1.0, low_open=True, high_open=True)
 
@@ -102,6 +110,7 @@ LDS_PARAMS = (
         "SVD of the frames: gram (exact), randomized (long clips), auto (gram up to 1500 frames).",
     ),
     Param("max_radius", _MAX_RADIUS, 0.995, "Largest pole magnitude."),
+    Param("tone", _TONE, "auto", _TONE_DOC),
     Param("calibrate", Flag(), True, "Scale the noise so that the states keep the training variance.", None),
     Param("seed", _SEED, 0, "Seed of the randomized SVD and of the detail's phases.", None),
 )
@@ -159,6 +168,7 @@ MIXTURE_PARAMS = (
         optional=True,
         default_doc="5, or less when the clip is short",
     ),
+    Param("tone", _TONE, "auto", _TONE_DOC, "--mix-tone"),
     # Python only
     Param("max_radius", _MAX_RADIUS, 0.995, "Largest pole magnitude of the AR dynamics.", None),
     _count("max_iter", 200, "Most EM iterations.", None),

@@ -36,6 +36,8 @@ from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
 from .methods import check_params
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
+from .tone import choose as choose_tone
+from .tone import levels_of, to_tone
 from .video import Clip, Progress, clip_frames
 
 DEFAULT_COMPONENTS = 3
@@ -61,6 +63,7 @@ def learn_mixture(
     max_radius: float = DEFAULT_MAX_RADIUS,
     max_iter: int = 200,
     tol: float = 1e-6,
+    tone: str = "auto",
     seed: int = 0,
     max_memory: int | None = None,
     progress: Progress | None = None,
@@ -90,6 +93,9 @@ def learn_mixture(
     max_iter, tol : int, float
         EM stops after ``max_iter`` iterations or when the log-likelihood gains less than
         ``tol`` (relative).
+    tone : {"auto", "on", "off"}
+        Learn on the clip's levels Gaussianised per channel, as :func:`~dynatex.analyzer.lds.learn_lds`
+        does.
     seed : int
         Seed of the EM initialisation (k-means++) and the randomized SVD.
     max_memory : int, optional
@@ -114,7 +120,7 @@ def learn_mixture(
     streamed = isinstance(clip, DiskClip)
     frames = None if streamed else clip_frames(clip)
     tau = clip.n_frames if streamed else frames.shape[0]
-    components, dim, global_dim, pca_dim, neighbors, pmax, max_radius, max_iter, tol, seed = check_params(
+    components, dim, global_dim, pca_dim, neighbors, pmax, max_radius, max_iter, tol, tone, seed = check_params(
         "mixture",
         components=components,
         dim=dim,
@@ -125,8 +131,12 @@ def learn_mixture(
         max_radius=max_radius,
         max_iter=max_iter,
         tol=tol,
+        tone=tone,
         seed=seed,
     )
+    if streamed and tone == "on":
+        raise InvalidArgumentError("tone='on' needs the clip in memory; a streamed clip is learned on its levels")
+    tone_map = None if streamed else choose_tone(frames, tone)
     global_dim = dim if global_dim is None else global_dim
     if tau < 4:
         raise InvalidArgumentError(f"clip has {tau} frames; a subspace mixture needs at least 4")
@@ -161,7 +171,7 @@ def learn_mixture(
         )
         constant = total <= 1e-6 * clip.pixels
     else:
-        y = frames.reshape(tau, -1).astype(np.float32)
+        y = frames.reshape(tau, -1).astype(np.float32) if tone_map is None else to_tone(frames, tone_map)
         mean = y.mean(axis=0, dtype=np.float64).astype(np.float32)
         y -= mean
         total = float(np.einsum("ij,ij->", y, y, dtype=np.float64))
@@ -258,8 +268,9 @@ def learn_mixture(
     )
     if not streamed:
         u32, stacked32 = u.astype(np.float32), model.stacked_basis
-        attach_detail(model, frames, lambda t0, t1: u32[t0:t1] @ stacked32 + mean, seed=seed)
+        attach_detail(model, frames, levels_of(lambda t0, t1: u32[t0:t1] @ stacked32 + mean, tone_map), seed=seed)
         model.gamut = learn_gamut(frames)
+        model.tone = tone_map
     step()
     return model
 

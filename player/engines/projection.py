@@ -19,7 +19,10 @@ GEMM). :func:`open_projector` picks one.
 Tolerance: the two backends, and k frames against one at a time, sum in different orders in
 float32, so a value may round to the neighbouring integer (at most 1 apart, on a small share
 of values); the detail then sees those integers exactly as a separate pass would, and the
-colour set (integers alone) is applied exactly.
+colour set (integers alone) is applied exactly. A model learned on tone values
+(:mod:`dynatex.tiledb.tone`) maps each sum to a level through its lookup instead of rounding it;
+the lookup's bins are finer than its levels' steps, so a sum that differs in its last bit gives a
+level at most 1 apart there too.
 """
 
 from __future__ import annotations
@@ -32,8 +35,11 @@ import numpy as np
 
 from ...tiledb.detail import DetailModel
 from ...tiledb.gamut import GamutModel, local_bits
+from ...tiledb.tone import BINS as TONE_BINS
+from ...tiledb.tone import ToneModel
 from ..pixels import pixel_format
 from .detail import Detail, DetailReference, colour_bins
+from .tone import ToneLookup
 
 #: Pixels per work-item of ``project`` (``PIXELS`` in the kernel): a group is ``16 * channels`` values.
 PIXELS = 16
@@ -185,6 +191,9 @@ class Projector:
     gamut : GamutModel, optional
         The source's colour set (``channels`` 3 only): every frame's pixels outside it are moved
         to the nearest colour in it (:func:`snap_colours`), after the detail.
+    tone : ToneModel, optional
+        The model was learned on tone values: the projected values are mapped to levels by its
+        lookup (:class:`~.tone.ToneLookup`) instead of rounded and saturated.
     """
 
     backend = ""
@@ -200,6 +209,7 @@ class Projector:
         frames: int = 1,
         detail: DetailModel | None = None,
         gamut: GamutModel | None = None,
+        tone: ToneModel | None = None,
     ) -> None:
         self.format = pixel_format(format)
         self.n, self.values = basis.shape
@@ -214,6 +224,8 @@ class Projector:
         self.detail: Detail | None = None
         if detail is not None:
             self.detail = DetailReference(detail, shape=self.shape, channels=channels, format=format)
+        #: the map from tone values to levels (None: the model was learned on levels)
+        self.tone = None if tone is None else ToneLookup(tone)
         #: each colour bin's nearest bin of the source's colour set (None: the model has none)
         self.nearest: np.ndarray | None = None
         #: the source's colour set per region of the frame, applied instead of :attr:`nearest` (None: none)
@@ -268,8 +280,11 @@ class ProjectorReference(Projector):
             frames = self.coefs[:count, : self.n] @ self._basis
             outs = out
         frames += self._mean
-        np.rint(frames, out=frames)
-        np.clip(frames, 0, 255, out=frames)
+        if self.tone is not None:
+            frames = self.tone.levels(frames.reshape(len(frames), -1, self.channels)).reshape(frames.shape)
+        else:
+            np.rint(frames, out=frames)
+            np.clip(frames, 0, 255, out=frames)
         for j, frame in enumerate(frames):
             o = outs[j]
             frame = frame.reshape(h, w, self.channels)
@@ -329,6 +344,9 @@ class ProjectorOpenCL(Projector):
         loc = self.local
         arrays["local_inside"] = np.zeros(1, np.uint8) if loc is None else loc.model.inside
         arrays["local_nearest"] = np.zeros(1, np.uint16) if loc is None else loc.model.nearest
+        t = self.tone
+        arrays["tone"] = np.zeros(1, np.float32) if t is None else np.concatenate([t.lo, t.scale])
+        arrays["tone_table"] = np.zeros(1, np.uint8) if t is None else t.table
         for name, a in arrays.items():
             self._bufs[name] = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
         self._kernels: dict[bool, tuple[Any, Any]] = {}
@@ -347,6 +365,7 @@ class ProjectorOpenCL(Projector):
             vh, vw = (self.detail.vh, self.detail.vw) if detail else (1, 1)
             defines = {"HALF": self.half, "CHANNELS": self.channels, "DETAIL": detail, "VH": vh, "VW": vw}
             defines["GAMUT"] = self.nearest is not None
+            defines["TONE"], defines["TONE_BINS"] = self.tone is not None, TONE_BINS
             defines["LOCAL"] = self.local is not None
             defines["LOCAL_BLOCK"], defines["LOCAL_COLS"] = (
                 (self.local.block, self.local.cols) if self.local else (1, 1)
@@ -413,9 +432,10 @@ def open_projector(
     frames: int = 1,
     detail: DetailModel | None = None,
     gamut: GamutModel | None = None,
+    tone: ToneModel | None = None,
 ) -> Projector:
     """The OpenCL projection engine on ``ctx``/``queue``, or the numpy reference when ``ctx`` is None."""
-    kwargs = dict(shape=shape, channels=channels, format=format, frames=frames, detail=detail, gamut=gamut)
+    kwargs = dict(shape=shape, channels=channels, format=format, frames=frames, detail=detail, gamut=gamut, tone=tone)
     if ctx is None:
         return ProjectorReference(basis, mean, **kwargs)
     return ProjectorOpenCL(basis, mean, ctx=ctx, queue=queue, **kwargs)

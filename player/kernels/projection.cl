@@ -21,6 +21,11 @@
 // (spread over a pixel's channels with shuffles).
 // Contraction is off there so that the result equals the numpy reference bit for bit.
 //
+// TONE: the model was learned on tone values (the `tone` part): each sum y of channel c becomes
+// the level table[c * TONE_BINS + b], b = (int)clamp((y - lo[c]) * scale[c], 0, TONE_BINS - 1)
+// (tone holds lo[0..CHANNELS-1], then scale[0..CHANNELS-1]), instead of the sum rounded and
+// saturated; contraction is off so that b equals the numpy reference's for the same y.
+//
 // GAMUT (CHANNELS 3 only): last, a pixel whose colour bin is not its own nearest[bin] (the
 // nearest bin of the source's colour set) is clamped into that bin, channel by channel
 // (integers alone: exact).
@@ -32,8 +37,8 @@
 //
 // Defines: HALF (1: basis stored as half floats), CHANNELS (1 or 3: values per pixel of the
 // basis; grey is replicated), PIXEL_BYTES (3 or 4: bytes per output pixel), R_AT, G_AT, B_AT
-// (the byte of each colour in an output pixel), A_AT (alpha's, 255; -1: none), DETAIL (0 or
-// 1), VH and VW (the detail volume's rows and columns; constants, so that the wrap is cheap),
+// (the byte of each colour in an output pixel), A_AT (alpha's, 255; -1: none), TONE (0 or 1) and
+// TONE_BINS, DETAIL (0 or 1), VH and VW (the detail volume's rows and columns; constants, so that the wrap is cheap),
 // GAMUT (0 or 1), LOCAL (0 or 1), LOCAL_BLOCK and LOCAL_COLS.
 
 #define PIXELS 16
@@ -53,6 +58,34 @@ typedef float basis_t;
 #define BIN(d, i) ((((d)[i] >> 3) << 10) | (((d)[(i) + 1] >> 3) << 5) | ((d)[(i) + 2] >> 3))
 #else
 #define BIN(d, i) ((((d)[i] >> 3) << 10) | (((d)[i] >> 3) << 5) | ((d)[i] >> 3))
+#endif
+
+#if TONE
+#if CHANNELS == 3
+// the channel of each lane of the j-th vector of a group (a group starts at channel 0)
+#define LANE_CHANNELS(j)                                                                                    \
+    ((j) == 0   ? (uint16)(0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0)                                  \
+     : (j) == 1 ? (uint16)(1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1)                                  \
+                : (uint16)(2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2))
+#else
+#define LANE_CHANNELS(j) ((uint16)(0))
+#endif
+
+// The 16 tone values y, values 16 j .. 16 j + 15 of a group, as levels into v (the header's TONE).
+void to_levels(uchar *v, const float16 y, const int j, __global const float *restrict tone,
+               __global const uchar *restrict table)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    const uint16 ch = LANE_CHANNELS(j);
+    const float4 lo = (float4)(tone[0], tone[min(1, CHANNELS - 1)], tone[min(2, CHANNELS - 1)], 0.0f);
+    const float4 scale = (float4)(tone[CHANNELS], tone[CHANNELS + min(1, CHANNELS - 1)],
+                                  tone[CHANNELS + min(2, CHANNELS - 1)], 0.0f);
+    const float16 t = clamp((y - shuffle(lo, ch)) * shuffle(scale, ch), 0.0f, (float)(TONE_BINS - 1));
+    int b[16];
+    vstore16(convert_int16_rtz(t) + convert_int16(ch) * TONE_BINS, 0, b);
+    for (int i = 0; i < 16; ++i)
+        v[16 * j + i] = table[b[i]];
+}
 #endif
 
 #if GAMUT
@@ -184,7 +217,9 @@ __kernel void project(__global const basis_t *restrict basis,
                       __global const uchar *restrict colours,
                       __global const ushort *restrict nearest,
                       __global const uchar *restrict local_inside,
-                      __global const ushort *restrict local_nearest)
+                      __global const ushort *restrict local_nearest,
+                      __global const float *restrict tone,
+                      __global const uchar *restrict tone_table)
 {
     const size_t g = get_global_id(0);
     const size_t first = g * GROUP;
@@ -212,10 +247,18 @@ __kernel void project(__global const basis_t *restrict basis,
 #endif
         }
         uchar v[GROUP];
+#if TONE
+        to_levels(v, a0, 0, tone, tone_table);
+#if CHANNELS == 3
+        to_levels(v, a1, 1, tone, tone_table);
+        to_levels(v, a2, 2, tone, tone_table);
+#endif
+#else
         vstore16(convert_uchar16_sat_rte(a0), 0, v);
 #if CHANNELS == 3
         vstore16(convert_uchar16_sat_rte(a1), 1, v);
         vstore16(convert_uchar16_sat_rte(a2), 2, v);
+#endif
 #endif
 #if DETAIL
         add_detail(v, count, x0, y0, p0, first, vol, gain, low, high, colours, c + stride - LAYER_FLOATS, width);

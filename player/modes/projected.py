@@ -107,6 +107,7 @@ class ProjectionPlayer(Player):
             frames=lookahead,
             detail=model.detail,
             gamut=model.gamut,
+            tone=model.tone,
         )
         self.basis_bytes = self.engine.basis_bytes
         #: the detail's arrays and schedule (None: the model has none, or set so to project alone)

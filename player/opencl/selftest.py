@@ -193,10 +193,22 @@ def random_colour_set(rng: np.random.Generator, share: float = 0.5) -> np.ndarra
     return np.where(inside, bins, rng.choice(bins[inside], bins.size)).astype(np.uint16)
 
 
-def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
+def random_tone(rng: np.random.Generator, channels: int):
+    """A valid tone map (:mod:`dynatex.tiledb.tone`): per channel a random increasing curve from
+    -100 to about 650, its steps at least two lookup bins wide."""
+    from ...tiledb.tone import BINS, ToneModel
+
+    steps = rng.exponential(1.0, (channels, 255)) ** 3 + 0.01
+    curves = np.concatenate([np.zeros((channels, 1)), np.cumsum(steps, axis=1)], axis=1)
+    curves = -100 + 500 * curves / curves[:, -1:] + np.arange(256) * (2.0 * 500 / BINS)
+    return ToneModel(forward=curves.astype(np.float32))
+
+
+def _detail_check(channels: int, format: str, tone: bool = False) -> Callable[[str], str | None]:
     """The projection kernel with the detail fused, 3 frames per pass and one at a time, against
     its reference, exactly: a basis and coefficients whose sums are exact in float32 in any
-    order, and a random volume, gain and colour range (and, in colour, a random colour set)."""
+    order, and a random volume, gain and colour range (and, in colour, a random colour set;
+    with ``tone``, a random tone map)."""
 
     def check(device: str) -> str | None:
         import pyopencl as cl
@@ -224,6 +236,8 @@ def _detail_check(channels: int, format: str) -> Callable[[str], str | None]:
         kw = {"shape": shape, "channels": channels, "format": format, "frames": 3, "detail": model}
         if channels == 3:
             kw["gamut"] = GamutModel(random_colour_set(rng))
+        if tone:
+            kw["tone"] = random_tone(rng, channels)
         engine = open_projector(basis, mean, ctx=ctx, queue=cl.CommandQueue(ctx), **kw)
         ref = open_projector(basis, mean, **kw)
         try:
@@ -326,6 +340,7 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
     "stochastic tiling, BGRA, toned": _stochastic_check("BGRA", True, small=False),
     "projection with detail, RGB": _detail_check(3, "RGB"),
     "projection with detail, grey to BGRA": _detail_check(1, "BGRA"),
+    "projection with detail and tone map, RGB": _detail_check(3, "RGB", tone=True),
     "mode lds, float32": _mode_check("lds", {"seed": 3}),
     "mode lds, 3 frames per pass": _mode_check("lds", {"seed": 3, "lookahead": 3}, frames=5),
     "mode lds, float16": _mode_check("lds", {"seed": 3, "precision": "float16"}),

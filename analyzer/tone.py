@@ -1,0 +1,137 @@
+"""Learning a projection model's tone map (the ``tone`` part of ``lds`` and ``mixture``,
+:mod:`dynatex.tiledb.tone`): each channel's levels Gaussianised, so that a Gaussian model of a
+clip whose values pile at the ends of the range keeps its energy.
+
+A Gaussian state spreads every pixel's values symmetrically about its mean. Where a clip's values
+pile at 0 and 255 (flames on a black background: the background at 0, the cores at 255), much of
+that spread lies beyond the range and is cut off at the store: on a 720p flame clip 14% of the
+output's values saturate and the output keeps 0.65 of the clip's energy where the unclipped
+values hold 0.81. Learned on ``forward[c, level]`` instead (the channel's mean plus its standard
+deviation times the normal quantile of the level's mid-rank in the channel's histogram, the
+quantile held to +-:data:`Z_MAX`), the model's values are about Gaussian, and the player maps
+them back through the same curve (:class:`~dynatex.player.engines.tone.ToneLookup`): a state far
+out lands on the clip's brightest or darkest levels instead of past them.
+
+:func:`choose` learns a map where a Gaussian with each value's own mean and variance over the clip
+would put more than :data:`SATURATION_SHARE` of the values outside 0..255 (:func:`saturation_share`);
+on clips that are not so skewed the values stay as they are.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from scipy.special import ndtr, ndtri
+
+from ..framestats import CHUNK
+from ..player.engines.tone import ToneLookup
+from ..tiledb.tone import BINS, LEVELS, ToneModel
+
+#: A model is learned on tone values where a Gaussian per value would saturate more than this share.
+SATURATION_SHARE = 0.05
+#: The normal quantiles of the map are held to +-Z_MAX standard deviations.
+Z_MAX = 4.0
+#: Bins the ramp that keeps the map's steps at least a lookup bin wide is sized for (< BINS: a margin).
+_RAMP_BINS = BINS - 512
+
+
+def saturation_share(frames: np.ndarray) -> float:
+    """Share of the values of ``frames`` ``(T, H, W, C)`` uint8 that a Gaussian with each value's
+    own mean and variance over the clip puts outside ``-0.5 .. 255.5``.
+
+    >>> flat = np.full((4, 2, 2, 3), 128, np.uint8); flat[::2] = 130
+    >>> saturation_share(flat)
+    0.0
+    >>> ends = np.zeros((4, 2, 2, 3), np.uint8); ends[::2] = 255
+    >>> round(saturation_share(ends), 3)
+    0.315
+    """
+    t = frames.shape[0]
+    flat = frames.reshape(t, -1)
+    total = np.zeros(flat.shape[1])
+    squares = np.zeros(flat.shape[1])
+    for lo in range(0, t, CHUNK):
+        block = flat[lo : lo + CHUNK].astype(np.float64)
+        total += block.sum(axis=0)
+        squares += np.einsum("ij,ij->j", block, block)
+    mean = total / t
+    sd = np.sqrt(np.maximum(squares / t - mean**2, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        below = np.where(sd > 0, ndtr((-0.5 - mean) / sd), 0.0)
+        above = np.where(sd > 0, ndtr((mean - 255.5) / sd), 0.0)
+    return float(np.mean(below + above))
+
+
+def learn_tone(frames: np.ndarray) -> ToneModel:
+    """The tone map of ``frames`` ``(T, H, W, C)`` uint8: per channel, ``forward[c, level]``
+    strictly increasing, its steps at least ``span / BINS`` (the part's rule).
+
+    Two levels alone, half the values each, lie at the quartiles of a Gaussian (+-0.67 standard
+    deviations), so that the model's spread about them reaches the ends of the range:
+
+    >>> clip = np.zeros((10, 4, 4, 1), np.uint8); clip[5:] = 255
+    >>> fwd = learn_tone(clip).forward[0]
+    >>> bool(np.all(np.diff(fwd) > 0)), round(float(fwd[0])), round(float(fwd[255]))
+    (True, 35, 220)
+    """
+    c = frames.shape[-1]
+    counts = np.zeros((c, LEVELS), np.int64)
+    for lo in range(0, frames.shape[0], CHUNK):
+        block = frames[lo : lo + CHUNK].reshape(-1, c)
+        for ch in range(c):
+            counts[ch] += np.bincount(block[:, ch], minlength=LEVELS)
+    levels = np.arange(LEVELS, dtype=np.float64)
+    forward = np.empty((c, LEVELS))
+    for ch in range(c):
+        h = counts[ch].astype(np.float64)
+        n = h.sum()
+        mean = float(h @ levels / n)
+        sd = max(float(np.sqrt(h @ (levels - mean) ** 2 / n)), 1.0)
+        rank = (np.cumsum(h) - h / 2) / n
+        z = np.clip(ndtri(np.clip(rank, 0.5 / n, 1 - 0.5 / n)), -Z_MAX, Z_MAX)
+        curve = mean + sd * z
+        step = (curve[-1] - curve[0]) / _RAMP_BINS
+        forward[ch] = curve + step * (levels - 127.5)
+    info = {"saturation_share": saturation_share(frames)}
+    return ToneModel(forward=forward.astype(np.float32), info=info)
+
+
+def choose(frames: np.ndarray, tone: str) -> ToneModel | None:
+    """The tone map to learn ``frames`` on for the ``tone`` parameter: "on" always, "off" never,
+    "auto" where :func:`saturation_share` exceeds :data:`SATURATION_SHARE`."""
+    if tone == "off":
+        return None
+    if tone == "auto":
+        share = saturation_share(frames)
+        if share <= SATURATION_SHARE:
+            return None
+    return learn_tone(frames)
+
+
+def to_tone(frames: np.ndarray, tone: ToneModel) -> np.ndarray:
+    """``frames`` ``(T, H, W, C)`` uint8 as tone values, float32 ``(T, H * W * C)``."""
+    t, c = frames.shape[0], frames.shape[-1]
+    out = np.empty((t, frames[0].size), np.float32)
+    view = out.reshape(t, -1, c)
+    src = frames.reshape(t, -1, c)
+    for ch in range(c):
+        np.take(tone.forward[ch], src[..., ch], out=view[..., ch])
+    return out
+
+
+Reconstruct = Callable[[int, int], np.ndarray]
+
+
+def levels_of(reconstruct: Reconstruct, tone: ToneModel | None) -> Reconstruct:
+    """A model's reconstruction ``reconstruct(t0, t1)`` (float32 ``(t1 - t0, P)``) in levels, as the
+    player stores them: through ``tone``'s lookup (``reconstruct`` itself when None)."""
+    if tone is None:
+        return reconstruct
+    lookup = ToneLookup(tone)
+
+    def levels(t0: int, t1: int) -> np.ndarray:
+        values = reconstruct(t0, t1)
+        return lookup.levels(values.reshape(len(values), -1, lookup.channels)).reshape(values.shape)
+
+    return levels

@@ -1,0 +1,76 @@
+"""Tone maps: a clip whose values pile at 0 and 255 is learned on Gaussianised values and keeps
+its energy; other clips are learned on their levels as before."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynatex.analyzer.lds import learn_lds
+from dynatex.analyzer.mixture import learn_mixture
+from dynatex.analyzer.tone import SATURATION_SHARE, saturation_share
+from dynatex.errors import InvalidArgumentError
+from dynatex.player.engines.projection import open_projector
+
+from ..conftest import wave_clip
+
+
+def flames(t: int = 80, h: int = 24, w: int = 32, seed: int = 0) -> np.ndarray:
+    """Bright tongues on a dark background: a travelling wave through a steep sigmoid, with sensor
+    noise, so that most values lie near 0 or near 255 and only the edges between."""
+    wave = wave_clip(t, h, w, channels=1, seed=seed, periods=(13.0, 7.0))[..., 0].astype(np.float64)
+    v = 255 / (1 + np.exp(-(wave - 128) / 4)) + np.random.default_rng(seed).normal(0, 3, wave.shape)
+    return np.clip(np.stack([v, 0.8 * v + 10, 0.5 * v + 5], axis=-1), 0, 255).astype(np.uint8)
+
+
+def stationary_energy(model, frames: np.ndarray, samples: int = 300) -> float:
+    """Energy about the clip's mean of frames drawn from the lds model's stationary state
+    distribution (projected as the player does), against the clip's own."""
+    t, h, w, c = frames.shape
+    rng = np.random.default_rng(1)
+    states = rng.multivariate_normal(np.zeros(model.n), model.stationary_cov, samples)
+    engine = open_projector(model.basis, model.mean, shape=(h, w, c), channels=c, frames=samples, tone=model.tone)
+    engine.coefs[:] = states
+    out = np.empty((samples, h, w, c), np.uint8)
+    engine.run(out, count=samples)
+    src = frames.reshape(t, -1).astype(np.float64)
+    mean = src.mean(axis=0)
+    return float(((out.reshape(samples, -1) - mean) ** 2).mean() / ((src - mean) ** 2).mean())
+
+
+def test_saturation_share_tells_piled_up_clips():
+    assert saturation_share(flames()) > 3 * SATURATION_SHARE
+    assert saturation_share(wave_clip()) < SATURATION_SHARE / 10
+
+
+def test_flames_keep_their_energy_on_tone_values():
+    """A Gaussian model of the levels loses a third of the flames' energy at the store; the same
+    model on tone values keeps nine tenths."""
+    clip = flames()
+    plain = learn_lds(clip, n=10, tone="off")
+    toned = learn_lds(clip, n=10)
+    assert plain.tone is None and toned.tone is not None
+    assert toned.tone.info["saturation_share"] > SATURATION_SHARE
+    assert stationary_energy(plain, clip) < 0.7
+    assert 0.85 < stationary_energy(toned, clip) < 1.2
+
+
+def test_other_clips_stay_on_their_levels():
+    clip = wave_clip()
+    assert learn_lds(clip, n=8).tone is None
+    model = learn_lds(clip, n=8, tone="on")
+    assert model.tone is not None
+    assert 0.9 < stationary_energy(model, clip) < 1.1
+
+
+def test_mixture_learns_on_tone_values_where_the_clip_piles_up():
+    kw = dict(components=2, dim=3, pca_dim=8, neighbors=6, pmax=2)
+    assert learn_mixture(flames(), **kw).tone is not None
+    assert learn_mixture(flames(), tone="off", **kw).tone is None
+    assert learn_mixture(wave_clip(), **kw).tone is None
+
+
+@pytest.mark.parametrize("tone", ["sometimes", 1])
+def test_a_bad_tone_is_named(tone):
+    with pytest.raises(InvalidArgumentError, match="tone"):
+        learn_lds(wave_clip(), n=4, tone=tone)
