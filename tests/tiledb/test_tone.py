@@ -14,6 +14,7 @@ from dynatex.tiledb.schema import COMPATIBLE_VERSION, FORMAT_VERSION
 from dynatex.tiledb.tone import BINS, LEVELS, forward_problem, lookup
 
 from .conftest import edited_copy, replace_dataset
+from .test_format_doc import FORMAT_MD, _sections
 
 METHODS = ("lds", "mixture")
 
@@ -238,6 +239,16 @@ def test_the_state_bounds_follow_the_tone_range(projection_db, tmp_path, method)
     without = edited_copy(path, tmp_path, f"textures/w/{method}", lambda g: g.__delitem__("tone"))
     where = "/states" if method == "lds" else "/decode_offset"
     _refused(without, method, "outside the pixel range", where=where)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_the_format_documents_what_is_written(tone_db, method):
+    doc = _sections()["tone"]
+    with h5py.File(tone_db, "r") as f:
+        g = f[f"textures/w/{method}/tone"]
+        assert set(g.attrs) <= set(doc["attributes"]) and set(g) == set(doc["datasets"]) == {"forward"}
+        assert doc["datasets"]["forward"] == "float32" == g["forward"].dtype
+    assert f"`BINS = {BINS}`" in FORMAT_MD.read_text(encoding="utf-8")
 
 
 def test_the_rule_names_each_defect():
