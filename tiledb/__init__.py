@@ -32,6 +32,7 @@ from .quilt import QuiltModel
 from .schema import FORMAT_NAME, FORMAT_VERSION
 from .source import SourceInfo
 from .tiles import TilesModel
+from .tone import ToneModel
 from .turnpoints import TurnPointModel
 from .writer import DatabaseWriter
 
@@ -57,6 +58,7 @@ __all__ = [
     "TileDBVersionError",
     "TileDBWriteError",
     "TilesModel",
+    "ToneModel",
     "TurnPointModel",
     "open_db",
 ]

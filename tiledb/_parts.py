@@ -1,10 +1,15 @@
-"""Optional, versioned parts of a model group: ``detail`` and ``gamut`` (of ``lds`` and
-``mixture``), ``switching`` (of ``mixture``) and ``flow`` (of ``turnpoints``).
+"""Versioned parts of a model group: the optional ``detail`` and ``gamut`` (of ``lds`` and
+``mixture``), ``switching`` (of ``mixture``) and ``flow`` (of ``turnpoints``), and the required
+``tone`` (of ``lds`` and ``mixture``).
 
-A part is a subgroup with an integer ``version`` attribute. A database written before the part
-plays without it, and a reader that meets a newer version than it understands plays without it
-too (a part is optional, so a newer analyzer never locks older players out); a part of a version
-the reader knows is validated like the rest of the file.
+A part is a subgroup with an integer ``version`` attribute. An optional part (:func:`open_part`)
+changes how a model plays, not what its values mean: a database written before the part plays
+without it, and a reader that meets a newer version than it understands plays without it too (so
+a newer analyzer never locks older players out). A required part (:func:`open_required_part`)
+gives the model's values their meaning, so a model is garbage without it: a reader refuses a newer
+version with :class:`~.errors.TileDBVersionError`, and a file holding one is of a format major
+version older readers refuse (``schema.REQUIRED_PARTS``). A part of a version the reader knows is
+validated like the rest of the file.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import h5py
 import numpy as np
 
 from ._check import Checker
+from .errors import TileDBVersionError
 
 
 def write_part(
@@ -47,6 +53,27 @@ def open_part(parent: h5py.Group, name: str, version: int, check: Checker) -> h5
     g = check.group(parent, name)
     if check.attr(g, "version", int) > version:
         return None
+    return g
+
+
+def open_required_part(parent: h5py.Group, name: str, version: int, check: Checker) -> h5py.Group | None:
+    """The group ``parent/name`` to validate, or None when absent; a version newer than ``version``
+    is refused (:class:`~.errors.TileDBVersionError`): the model ``parent`` cannot play without it."""
+    if name not in parent:
+        return None
+    g = check.group(parent, name)
+    got = check.attr(g, "version", int)
+    if got < 1:
+        check.fail(g.name + "@version", f"{got} is not a part version (1 or more)")
+    if got > version:
+        model = parent.name.rstrip("/").split("/")
+        what = f"the {model[-1]} model of texture {model[-2]!r}" if len(model) >= 3 else f"the model {parent.name}"
+        raise TileDBVersionError(
+            f"{what} needs its {name} part, of version {got}, which this dynatex does not read (it reads "
+            f"up to {version}); upgrade dynatex",
+            filename=check.filename,
+            objpath=g.name,
+        )
     return g
 
 

@@ -67,6 +67,7 @@ class Texture:
         self.methods: tuple[str, ...] = tuple(m for m in CODECS if m in group)
         #: the mode the analysis chose to play this texture (attribute ``default_mode``), or None
         self.default_mode: str | None = self._read_default_mode(check)
+        self._check_required_parts(check)
         if self.has_frames:
             self.frames()  # the frame store's structure (dtype, shape, count); its data is read lazily
 
@@ -87,6 +88,21 @@ class Texture:
         if MODE_METHOD[mode] not in self.methods:
             check.fail(where, f"mode {mode!r} plays {MODE_METHOD[mode]!r} data, which the texture lacks")
         return mode
+
+    def _check_required_parts(self, check: Checker) -> None:
+        """Refuse a required part (``schema.REQUIRED_PARTS``) in a file of a major version whose
+        readers do not know it: they would play the model without it."""
+        version = self._db.version
+        if version[0] >= schema.FORMAT_VERSION[0]:
+            return
+        for method in self.methods:
+            for part in schema.REQUIRED_PARTS.get(method, ()):
+                if part in check.group(self._group, method):
+                    check.fail(
+                        f"{self._group.name}/{method}/{part}",
+                        f"a format {version[0]}.{version[1]} file cannot hold this part (its readers would play "
+                        f"the model without it; a file with it is format {schema.FORMAT_VERSION[0]}.x)",
+                    )
 
     @property
     def objpath(self) -> str:
@@ -217,10 +233,11 @@ class TileDB:
             )
         major, minor = self._check.ints(f, schema.ATTR_VERSION, 2)
         self.version = (major, minor)
-        if self.version[0] != schema.FORMAT_VERSION[0]:
+        if major not in schema.READ_MAJORS:
+            majors = schema.READ_MAJORS
             raise TileDBVersionError(
-                f"format version {self.version[0]}.{self.version[1]} is not supported by this dynatex "
-                f"(it reads major version {schema.FORMAT_VERSION[0]}); upgrade dynatex or re-run the analysis",
+                f"format version {major}.{minor} is not supported by this dynatex "
+                f"(it reads major versions {majors[0]}-{majors[-1]}); upgrade dynatex or re-run the analysis",
                 filename=self.filename,
                 objpath="/",
             )

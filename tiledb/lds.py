@@ -1,6 +1,7 @@
 """The learned linear dynamical system of a texture (the ``lds`` group).
 
-Model: ``x(t+1) = A x(t) + B v(t)``, ``v ~ N(0, I_k)``; ``frame = basis.T @ x + mean``.
+Model: ``x(t+1) = A x(t) + B v(t)``, ``v ~ N(0, I_k)``; ``frame = basis.T @ x + mean``, in
+pixel values, or in tone values that the model's ``tone`` map takes back to pixels.
 Everything the player needs is stored ready to use: opening a player costs at most
 ``n x n`` work (an eigendecomposition of ``A``), never a decomposition of the frames.
 """
@@ -14,6 +15,7 @@ import numpy as np
 
 from . import detail as _detail
 from . import gamut as _gamut
+from . import tone as _tone
 from ._check import Checker
 from ._describe import Described
 from .source import SourceInfo
@@ -31,7 +33,8 @@ class LDSModel(Described):
     Attributes
     ----------
     mean : (P,) float32
-        Mean frame, values on the 0..255 scale, pixels in ``(H, W, C)`` row-major order.
+        Mean frame, values on the 0..255 scale (in tone units with a ``tone`` map), pixels in
+        ``(H, W, C)`` row-major order.
     basis : (n, P) float32
         Orthonormal rows: the first ``n`` principal components (the columns of ``C``).
     singular_values : (r,) float64
@@ -54,6 +57,9 @@ class LDSModel(Described):
     gamut : GamutModel, optional
         The source's colour set, which the projected frames are held to (the optional ``gamut``
         subgroup, :mod:`.gamut`); None in databases written without it and for grey sources.
+    tone : ToneModel, optional
+        The per-channel map from levels to the tone values the model was learned on (the
+        required ``tone`` subgroup, :mod:`.tone`); None for a model learned on pixel values.
     """
 
     mean: np.ndarray
@@ -67,6 +73,7 @@ class LDSModel(Described):
     info: dict = field(default_factory=dict)
     detail: _detail.DetailModel | None = None
     gamut: _gamut.GamutModel | None = None
+    tone: _tone.ToneModel | None = None
 
     @property
     def n(self) -> int:
@@ -85,6 +92,7 @@ class LDSModel(Described):
             "basis_mb": round(self.basis.nbytes / 2**20, 2),
             **_detail.describe(self.detail, self.info),
             **_gamut.describe(self.gamut),
+            **_tone.describe(self.tone),
         }
 
     def summary(self) -> str:
@@ -110,6 +118,7 @@ def write(group: h5py.Group, model: LDSModel) -> None:
             group.attrs[key] = value
     _detail.write(group, model.detail)
     _gamut.write(group, model.gamut)
+    _tone.write(group, model.tone)
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
@@ -134,9 +143,9 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
         info=check.info(group),
         detail=_detail.read(group, check, source),
         gamut=_gamut.read(group, check, source),
+        tone=_tone.read(group, check, source),
     )
-    if model.mean.min() < -1 or model.mean.max() > 256:
-        check.fail(group.name + "/mean", "values outside the 0..255 pixel range")
+    _tone.check_mean(group.name + "/mean", model.mean, model.tone, check)
     _check_dynamics(group.name, model, check, p)
     return model
 
@@ -144,19 +153,21 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> LDSModel:
 def _check_dynamics(path: str, model: LDSModel, check: Checker, pixels: int) -> None:
     """Reject models that cannot make frames: a basis that is not orthonormal (a zero basis), a
     transition matrix that is unstable or not diagonalisable (the player edits its poles), no
-    driving noise, or states that leave the pixel range.
+    driving noise, or states that leave the range of the frames' values.
 
     With orthonormal basis rows ``||frame - mean|| = ||x||``, and a frame and the mean both lie
-    in the 0..255 cube, so the state of any frame has ``||x|| <= 256 sqrt(P)``. The stored
+    in the 0..255 cube, so the state of any frame has ``||x|| <= 256 sqrt(P)`` (with a tone map
+    the cube of its values: ``256`` becomes :func:`.tone.value_span`). The stored
     states, the expected state ``A^t x0`` of every frame to come and the stationary spread
     ``trace(P)`` must respect that bound; beyond it the state only saturates pixels, and far
     beyond it (an ``x0`` of 1e308) it overflows to a black screen.
     """
+    bound = _tone.value_span(model.tone) * np.sqrt(pixels)
     with np.errstate(all="ignore"):  # huge values overflow to inf, which every test below refuses
         _check_basis(path, model, check)
         _check_poles(path, model, check)
-        _check_noise(path, model, check, 256.0 * np.sqrt(pixels))
-        _check_states(path, model, check, 256.0 * np.sqrt(pixels))
+        _check_noise(path, model, check, bound)
+        _check_states(path, model, check, bound)
 
 
 def _check_basis(path: str, model: LDSModel, check: Checker) -> None:

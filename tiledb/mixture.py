@@ -22,6 +22,7 @@ import numpy as np
 
 from . import detail as _detail
 from . import gamut as _gamut
+from . import tone as _tone
 from ._check import Checker
 from ._describe import Described
 from ._parts import open_part, write_part
@@ -71,10 +72,10 @@ class MixtureModel(Described):
     Attributes
     ----------
     mean : (P,) float32
-        Mean frame, 0..255.
+        Mean frame, 0..255 (in tone units with a ``tone`` map).
     stacked_basis : (S * (d + 1), P) float32
         Component ``s`` owns rows ``s*(d+1) .. s*(d+1)+d``: its mean offset from ``mean``,
-        then its ``d`` orthonormal loadings, all in pixel space.
+        then its ``d`` orthonormal loadings, all in pixel space (tone units with a ``tone`` map).
     weights : (S,) float64
         Mixing proportions ``pi_s`` (sum 1).
     sigma2 : (S,) float64
@@ -118,6 +119,9 @@ class MixtureModel(Described):
     switching : SwitchingDynamics, optional
         Component-switching dynamics on the local coordinates (the optional ``switching``
         subgroup); None in databases written without it.
+    tone : ToneModel, optional
+        The per-channel map from levels to the tone values the model was learned on (the
+        required ``tone`` subgroup, :mod:`.tone`); None for a model learned on pixel values.
     """
 
     mean: np.ndarray
@@ -143,10 +147,16 @@ class MixtureModel(Described):
     detail: _detail.DetailModel | None = None
     gamut: _gamut.GamutModel | None = None
     switching: SwitchingDynamics | None = None
+    tone: _tone.ToneModel | None = None
 
     def describe(self) -> dict:
-        """Facts as plain values: the ``info`` attributes, the detail part's and the colour set's."""
-        return {**super().describe(), **_detail.describe(self.detail, self.info), **_gamut.describe(self.gamut)}
+        """Facts as plain values: the ``info`` attributes, the detail part's, the colour set's and the tone map's."""
+        return {
+            **super().describe(),
+            **_detail.describe(self.detail, self.info),
+            **_gamut.describe(self.gamut),
+            **_tone.describe(self.tone),
+        }
 
     @property
     def components(self) -> int:
@@ -228,6 +238,7 @@ def write(group: h5py.Group, model: MixtureModel) -> None:
     if model.switching is not None:
         arrays = {name: np.asarray(getattr(model.switching, name), np.float64) for name in _SWITCHING}
         write_part(group, SWITCHING_GROUP, SWITCHING_VERSION, arrays)
+    _tone.write(group, model.tone)
 
 
 def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
@@ -274,6 +285,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         info=check.info(group, skip=_SIZES),
         detail=_detail.read(group, check, source),
         gamut=_gamut.read(group, check, source),
+        tone=_tone.read(group, check, source),
     )
     model.switching = _read_switching(group, check, model)
     t = model.global_coords.shape[0]
@@ -299,10 +311,9 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
     rho = companion_radius(model.ar_coefs)
     if not rho < MAX_SPECTRAL_RADIUS:
         check.fail(path + "/ar_coefs", f"the AR process is not stable (spectral radius {rho:.6g} >= 1)")
-    if model.mean.min() < -1 or model.mean.max() > 256:
-        check.fail(path + "/mean", "values outside the 0..255 pixel range")
+    _tone.check_mean(path + "/mean", model.mean, model.tone, check)
     with np.errstate(all="ignore"):  # huge values overflow to inf, which every test below refuses
-        _check_extent(path, model, check, 256.0 * np.sqrt(p))
+        _check_extent(path, model, check, _tone.value_span(model.tone) * np.sqrt(p))
     return model
 
 
@@ -341,7 +352,8 @@ def _check_extent(path: str, model: MixtureModel, check: Checker, bound: float) 
     Loadings are orthonormal vectors of the reduced PCA space mapped into pixels by its
     orthonormal basis (rows past the clip's rank are zero), so they never lengthen; a frame's
     deviation from the mean, hence each
-    component's offset and decoded local coordinate, is at most ``256 sqrt(P)``; the decoded
+    component's offset and decoded local coordinate, is at most ``256 sqrt(P)`` (with a tone map,
+    :func:`.tone.value_span` for 256); the decoded
     coordinates are pulled back into each component's ellipsoid, whose semi-axes may exceed its
     frames' extent but not that bound by more than ``ELLIPSOID_SLACK``. ``T`` centred points of
     unit covariance in ``D`` dimensions lie within ``sqrt(T D)`` of the origin; so do their

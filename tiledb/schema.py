@@ -11,8 +11,13 @@ import unicodedata
 from collections.abc import Sequence
 
 FORMAT_NAME = "dynatex-tiledb"
-#: (major, minor). A reader refuses another major and accepts any minor.
-FORMAT_VERSION = (1, 7)
+#: (major, minor) of a file that holds a required part (:data:`REQUIRED_PARTS`): older readers,
+#: which would play its models without the part, refuse its major.
+FORMAT_VERSION = (2, 0)
+#: (major, minor) of a file without a required part: every 1.x reader reads it.
+COMPATIBLE_VERSION = (1, 7)
+#: The major versions a reader reads; it refuses any other and accepts any minor of these.
+READ_MAJORS = (1, 2)
 
 # Root attributes.
 ATTR_FORMAT = "format"
@@ -31,6 +36,13 @@ METHOD_TILES = "tiles"
 METHOD_QUILT = "quilt"
 METHOD_MIXTURE = "mixture"
 METHODS = (METHOD_LDS, METHOD_TURNPOINTS, METHOD_TILES, METHOD_QUILT, METHOD_MIXTURE)
+
+#: The per-channel tone map of a projection model (``tone.py``).
+PART_TONE = "tone"
+#: Parts of a method group that no reader may play without (their models' values mean nothing
+#: without them): a file holding one is written as :data:`FORMAT_VERSION`, else as
+#: :data:`COMPATIBLE_VERSION`.
+REQUIRED_PARTS = {METHOD_LDS: (PART_TONE,), METHOD_MIXTURE: (PART_TONE,)}
 
 #: Longest texture name, in characters.
 MAX_TEXTURE_NAME = 64

@@ -97,7 +97,7 @@ class DatabaseWriter:
                 self._tmp, self._lock = _create_temp(self.path)
                 self._file = _open_for_writing(self._tmp, self._lock)
                 self._file.attrs[schema.ATTR_FORMAT] = schema.FORMAT_NAME
-                self._file.attrs[schema.ATTR_VERSION] = np.asarray(schema.FORMAT_VERSION, np.int32)
+                self._file.attrs[schema.ATTR_VERSION] = np.asarray(schema.COMPATIBLE_VERSION, np.int32)  # see commit
                 from . import __version__
 
                 self._file.attrs[schema.ATTR_CREATED_BY] = f"dynatex {__version__}"
@@ -192,7 +192,8 @@ class DatabaseWriter:
 
     # -- commit / abort ----------------------------------------------------------
     def commit(self) -> None:
-        """Carry over untouched textures, validate the new file, and rename it onto ``path``."""
+        """Carry over untouched textures, stamp the format version their content needs
+        (:func:`format_version`), validate the new file, and rename it onto ``path``."""
         self._check_open()
         lock = None
         try:
@@ -204,6 +205,7 @@ class DatabaseWriter:
                         for name in current.textures:
                             if name not in self._textures and name not in self._removed:
                                 self._carry(current, name)
+                self._file.attrs[schema.ATTR_VERSION] = np.asarray(format_version(self._textures), np.int32)
                 self._file.close()
                 self._file = None
             with TileDB(self._tmp, probe=False, max_bytes=float("inf")) as db:  # written here, just now
@@ -303,6 +305,17 @@ def _discard(file: h5py.File) -> None:
         file.close()
     except Exception:  # noqa: BLE001, S110 - discarded anyway; closing was what mattered
         pass
+
+
+def format_version(textures: h5py.Group) -> tuple[int, int]:
+    """The version a file with these ``textures`` is: :data:`~.schema.FORMAT_VERSION` where one holds
+    a required part (``schema.REQUIRED_PARTS``, which older readers must refuse), else
+    :data:`~.schema.COMPATIBLE_VERSION`, which every reader of its major reads."""
+    for texture in textures.values():
+        for method, parts in schema.REQUIRED_PARTS.items():
+            if method in texture and any(part in texture[method] for part in parts):
+                return schema.FORMAT_VERSION
+    return schema.COMPATIBLE_VERSION
 
 
 def _nfc(name: str) -> str:

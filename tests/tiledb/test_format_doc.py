@@ -24,7 +24,7 @@ def _sections() -> dict[str, dict[str, dict[str, str]]]:
     out: dict[str, dict[str, dict[str, str]]] = {}
     for block in re.split(r"^## ", text, flags=re.M)[1:]:
         title = block.splitlines()[0]
-        m = re.match(r"(?:Method group: )?`(\w+)`", title)
+        m = re.match(r"(?:Method group: |Required subgroup )?`(\w+)`", title)
         if not m:
             continue
         doc = out.setdefault(m.group(1), {"datasets": {}, "attributes": {}})
