@@ -52,7 +52,8 @@ class ToneModel:
         ``forward[c, l]``: the tone value of level ``l`` of channel ``c``, strictly increasing in
         ``l``, each step at least ``(forward[c, 255] - forward[c, 0]) / BINS``.
     info : dict
-        Scalars (``saturation_share``: the share of the clip's values at 0 or 255, ...).
+        Scalars (``saturation_share``: the share of the clip's values a Gaussian with each value's
+        own mean and variance puts outside 0..255, what made the analysis learn on tone values).
     """
 
     forward: np.ndarray

@@ -3,24 +3,23 @@
 
 A model learned on Gaussianised values projects to tone values; each value ``y`` of channel
 ``c`` becomes the level ``table[c, bin]``, ``bin = floor((y - lo[c]) * scale[c])`` clamped to
-``0 .. BINS - 1``, where the bins split ``[forward[c, 0], forward[c, 255]]`` into ``BINS`` equal
-parts and each bin's level is the level whose tone value lies nearest the bin's centre (midpoint
-thresholds). Values beyond the ends saturate to levels 0 and 255, as a projection's values
-beyond 0..255 do. The bin index is computed in float32 by both backends; the stored table's
-steps are at least a bin wide, so a value's bin, off by one where the two backends' sums differ
-in their last bit, gives a level at most one apart (the projection's tolerance).
+``0 .. BINS - 1`` (the format's lookup, ``tiledb/FORMAT.md``). Values beyond the ends saturate to
+levels 0 and 255, as a projection's values beyond 0..255 do. The bin index is computed in
+float32 by both backends; the stored table's steps are at least a bin wide, so a value's bin,
+off by one where the two backends' sums differ in their last bit, gives a level at most one
+apart (the projection's tolerance).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ...tiledb.tone import BINS, ToneModel
+from ...tiledb.tone import BINS, ToneModel, lookup
 
 
 class ToneLookup:
-    """``lo``, ``scale`` (float32, one per channel) and ``table`` ``(channels, BINS)`` uint8 of
-    ``tone``; :meth:`levels` maps tone values to levels.
+    """``lo``, ``scale`` (float32, one per channel) and ``table`` ``(channels, BINS)`` uint8
+    (:func:`~dynatex.tiledb.tone.lookup`) of ``tone``; :meth:`levels` maps tone values to levels.
 
     >>> fwd = np.tile(np.linspace(-40.0, 300.0, 256, dtype=np.float32), (1, 1))
     >>> t = ToneLookup(ToneModel(fwd))
@@ -33,10 +32,7 @@ class ToneLookup:
         self.channels = fwd.shape[0]
         self.lo = fwd[:, 0].astype(np.float32)
         self.scale = (BINS / (fwd[:, -1] - fwd[:, 0])).astype(np.float32)
-        thresholds = (fwd[:, :-1] + fwd[:, 1:]) / 2
-        centres = fwd[:, :1] + (np.arange(BINS) + 0.5) * ((fwd[:, -1:] - fwd[:, :1]) / BINS)
-        self.table = np.stack([np.searchsorted(thresholds[c], centres[c]) for c in range(self.channels)])
-        self.table = self.table.astype(np.uint8)
+        self.table = lookup(tone)
         self._flat = self.table.reshape(-1).astype(np.float32)
         self._offset = np.arange(self.channels, dtype=np.int32) * BINS
 
