@@ -69,3 +69,65 @@ def test_lookup_returns_each_level_from_its_tone_value():
     assert ends.tolist() == [[0, 0, 0], [255, 255, 255]]
     values = to_tone(clip, tone).reshape(20, -1, 3)
     np.testing.assert_array_equal(lookup.levels(values), clip.reshape(20, -1, 3))
+
+
+@pytest.fixture(scope="module")
+def flames_db(tmp_path_factory):
+    """lds and mixture of the flames clip, learned on tone values (the default) and on levels."""
+    from dynatex.analyzer import load_clip
+    from dynatex.analyzer.lds import learn_lds
+    from dynatex.analyzer.mixture import learn_mixture
+    from dynatex.tiledb import DatabaseWriter
+
+    from ..analyzer.test_tone import flames
+
+    src = flames()
+    clip = load_clip(src)
+    paths = {}
+    for tone in ("auto", "off"):
+        paths[tone] = tmp_path_factory.mktemp("flames") / f"{tone}.h5"
+        with DatabaseWriter(paths[tone]) as w:
+            w.put_texture("flames", clip.source_info())
+            w.put_method("flames", "lds", learn_lds(clip, n=10, tone=tone))
+            mix = learn_mixture(clip, components=2, dim=3, pca_dim=10, neighbors=6, pmax=2, tone=tone)
+            w.put_method("flames", "mixture", mix)
+    return paths, src
+
+
+def _energy(path, mode, src, frames=300, **kw):
+    from dynatex.player import open_player
+
+    with open_player(path, mode=mode, seed=3, **kw) as p:
+        p.advance(200)
+        out = np.stack([p.next_frame() for _ in range(frames)])
+    flat = src.reshape(len(src), -1).astype(np.float64)
+    mean = flat.mean(axis=0)
+    return float(((out.reshape(frames, -1) - mean) ** 2).mean() / ((flat - mean) ** 2).mean()), out
+
+
+@pytest.mark.parametrize("mode", ["lds", "mixture"])
+def test_flames_played_from_the_database_keep_their_energy(flames_db, mode):
+    """The tone part round-trips through the database (format 2.0) and the player maps through
+    it: the flames keep more of their energy than the same model learned on levels."""
+    import h5py
+
+    from dynatex.player import open_player
+
+    paths, src = flames_db
+    with h5py.File(paths["auto"]) as f:
+        assert tuple(f.attrs["format_version"]) == (2, 0)
+    with open_player(paths["auto"], mode=mode, backend="numpy") as p:
+        assert p.engine.tone is not None
+    toned, _ = _energy(paths["auto"], mode, src, backend="numpy")
+    plain, _ = _energy(paths["off"], mode, src, backend="numpy")
+    assert toned > plain + 0.1
+    assert 0.75 < toned < 1.3
+
+
+@pytest.mark.parametrize("mode", ["lds", "mixture"])
+def test_flames_on_both_backends(flames_db, mode, cl_device):
+    paths, src = flames_db
+    _, a = _energy(paths["auto"], mode, src, frames=40, backend="opencl", device=cl_device)
+    _, b = _energy(paths["auto"], mode, src, frames=40, backend="numpy")
+    diff = np.abs(a.astype(int) - b)
+    assert diff.max() <= 1 and (diff > 0).mean() <= 1e-3  # the projection's documented tolerance
