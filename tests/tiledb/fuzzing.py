@@ -79,8 +79,9 @@ TEXTURE = "t"
 # -- the databases ----------------------------------------------------------------------------
 def build_bases(folder: str | os.PathLike, *, detail: bool = True) -> dict[str, Path]:
     """One small database per method (texture ``t``, frames stored where the method plays them);
-    ``detail=False`` leaves out the lds and mixture models' detail and gamut parts (the layout of
-    the bases before they existed, which fixed byte-flip mutants of the regression tests refer to)."""
+    the lds and mixture models are learned on tone values (their ``tone`` part fuzzed too).
+    ``detail=False`` leaves out the lds and mixture models' detail, gamut and tone parts (the layout
+    of the bases before they existed, which fixed byte-flip mutants of the regression tests refer to)."""
     from dynatex.analyzer import load_clip
     from dynatex.analyzer.lds import learn_lds
     from dynatex.analyzer.mixture import learn_mixture
@@ -91,9 +92,10 @@ def build_bases(folder: str | os.PathLike, *, detail: bool = True) -> dict[str, 
 
     folder = Path(folder)
     waves = load_clip(_waves(40, 16, 20))
+    tone = "on" if detail else "off"
     learners = {
-        "lds": (waves, lambda c: learn_lds(c, n=6), False),
-        "mixture": (waves, lambda c: learn_mixture(c, components=2, dim=3), False),
+        "lds": (waves, lambda c: learn_lds(c, n=6, tone=tone), False),
+        "mixture": (waves, lambda c: learn_mixture(c, components=2, dim=3, tone=tone), False),
         "quilt": (
             load_clip(spreading_clip(12, 16, 16)),
             lambda c: learn_quilt(c, size=(32, 24), block=8, rank=4, seed=0),
