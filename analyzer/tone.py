@@ -129,9 +129,4 @@ def levels_of(reconstruct: Reconstruct, tone: ToneModel | None) -> Reconstruct:
     if tone is None:
         return reconstruct
     lookup = ToneLookup(tone)
-
-    def levels(t0: int, t1: int) -> np.ndarray:
-        values = reconstruct(t0, t1)
-        return lookup.levels(values.reshape(len(values), -1, lookup.channels)).reshape(values.shape)
-
-    return levels
+    return lambda t0, t1: lookup.levels(reconstruct(t0, t1))

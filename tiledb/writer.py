@@ -97,7 +97,7 @@ class DatabaseWriter:
                 self._tmp, self._lock = _create_temp(self.path)
                 self._file = _open_for_writing(self._tmp, self._lock)
                 self._file.attrs[schema.ATTR_FORMAT] = schema.FORMAT_NAME
-                self._file.attrs[schema.ATTR_VERSION] = np.asarray(schema.COMPATIBLE_VERSION, np.int32)  # see commit
+                self._file.attrs[schema.ATTR_VERSION] = np.asarray(schema.COMPATIBLE_VERSION, np.int32)  # and at commit
                 from . import __version__
 
                 self._file.attrs[schema.ATTR_CREATED_BY] = f"dynatex {__version__}"

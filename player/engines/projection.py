@@ -281,7 +281,7 @@ class ProjectorReference(Projector):
             outs = out
         frames += self._mean
         if self.tone is not None:
-            frames = self.tone.levels(frames.reshape(len(frames), -1, self.channels)).reshape(frames.shape)
+            frames = self.tone.levels(frames)
         else:
             np.rint(frames, out=frames)
             np.clip(frames, 0, 255, out=frames)

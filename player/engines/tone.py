@@ -21,10 +21,10 @@ class ToneLookup:
     """``lo``, ``scale`` (float32, one per channel) and ``table`` ``(channels, BINS)`` uint8
     (:func:`~dynatex.tiledb.tone.lookup`) of ``tone``; :meth:`levels` maps tone values to levels.
 
-    >>> fwd = np.tile(np.linspace(-40.0, 300.0, 256, dtype=np.float32), (1, 1))
+    >>> fwd = np.linspace(-40.0, 300.0, 256, dtype=np.float32)[None]
     >>> t = ToneLookup(ToneModel(fwd))
-    >>> t.levels(np.array([[-100.0], [-40.0], [300.0], [130.0]], np.float32)).ravel().tolist()
-    [0.0, 0.0, 255.0, 128.0]
+    >>> t.levels(np.array([[-100.0, -40.0, 300.0, 130.0]], np.float32)).tolist()
+    [[0.0, 0.0, 255.0, 128.0]]
     """
 
     def __init__(self, tone: ToneModel) -> None:
@@ -34,13 +34,28 @@ class ToneLookup:
         self.scale = (BINS / (fwd[:, -1] - fwd[:, 0])).astype(np.float32)
         self.table = lookup(tone)
         self._flat = self.table.reshape(-1).astype(np.float32)
-        self._offset = np.arange(self.channels, dtype=np.int32) * BINS
+        self._rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._index: np.ndarray | None = None
+
+    def _per_value(self, values: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``lo``, ``scale`` and each channel's table offset repeated along a row of ``values``
+        interleaved values: numpy combines rows of one length far faster than it broadcasts a
+        trailing axis of 3."""
+        if self._rows is None or len(self._rows[0]) != values:
+            pixels = values // self.channels
+            offset = np.arange(self.channels, dtype=np.int32) * BINS
+            self._rows = tuple(np.tile(a, pixels) for a in (self.lo, self.scale, offset))
+        return self._rows
 
     def levels(self, values: np.ndarray) -> np.ndarray:
-        """The levels, as float32, of tone values ``(..., channels)`` float32 (a new array)."""
-        t = values - self.lo
-        t *= self.scale
-        np.clip(t, 0, BINS - 1, out=t)
-        index = t.astype(np.int32)
-        index += self._offset
-        return self._flat[index]
+        """Tone values ``(k, P)`` float32 (``P`` interleaved values of ``channels`` channels a row)
+        replaced by their levels, in place; returns ``values``."""
+        lo, scale, offset = self._per_value(values.shape[-1])
+        values -= lo
+        values *= scale
+        np.clip(values, 0, BINS - 1, out=values)
+        if self._index is None or self._index.shape != values.shape:
+            self._index = np.empty(values.shape, np.int32)
+        np.copyto(self._index, values, casting="unsafe")  # truncation, as astype
+        self._index += offset
+        return np.take(self._flat, self._index, out=values)
