@@ -101,7 +101,7 @@ class LDSModel(Described):
         return (
             f"n={self.n} k={self.k}, energy {info.get('energy_captured', 0):.3f}, "
             f"spectral radius {info.get('spectral_radius_raw', 0):.4f} -> {info.get('spectral_radius', 0):.4f} "
-            f"({info.get('poles_clipped', 0)} poles clipped)"
+            f"({info.get('poles_clipped', 0)} poles clipped)" + _tone.summary(self.tone)
         )
 
 

@@ -185,7 +185,7 @@ class MixtureModel(Described):
         return (
             f"S={self.components} d={self.dim} D={self.global_dim}, {dynamics}, "
             f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
-            f"{info.get('recon_error_pca_dim', 0):.3f})"
+            f"{info.get('recon_error_pca_dim', 0):.3f})" + _tone.summary(self.tone)
         )
 
 

@@ -74,6 +74,11 @@ def describe(tone: ToneModel | None) -> dict:
     return facts
 
 
+def summary(tone: ToneModel | None) -> str:
+    """What a model's one-line summary adds for its tone map ("" without one)."""
+    return "" if tone is None else ", learned on Gaussianised levels (tone map)"
+
+
 def write(parent: h5py.Group, tone: ToneModel | None) -> None:
     """Store ``tone`` as ``parent/tone`` (nothing when None)."""
     if tone is None:
