@@ -564,11 +564,10 @@ class GatherOpenCL(Gather):
         }
         defines.update(self.format.defines)
         if self.wide:
-            prog = build_program(
-                self.ctx, ("gather.cl", "variants/gather_wide.cl"), {**defines, "STACK_SIGNED": True, "BANDS": BANDS}
-            )
+            files = ("pixels.cl", "gather.cl", "variants/gather_wide.cl")
+            prog = build_program(self.ctx, files, {**defines, "STACK_SIGNED": True, "BANDS": BANDS})
         else:
-            prog = build_program(self.ctx, "gather.cl", {**defines, "STACK_SIGNED": False})
+            prog = build_program(self.ctx, ("pixels.cl", "gather.cl"), {**defines, "STACK_SIGNED": False})
         # STACK_PAD bytes on both sides: vector loads of a run may read a few bytes past the
         # frame stack's ends (lanes that a bytewise merge then drops). The wide variant
         # reads bytes value ^ 0x80: value - 128 as a signed byte, what its blend multiplies.

@@ -370,7 +370,7 @@ class ProjectorOpenCL(Projector):
             defines["LOCAL_BLOCK"], defines["LOCAL_COLS"] = (
                 (self.local.block, self.local.cols) if self.local else (1, 1)
             )
-            prog = build_program(self.ctx, "projection.cl", {**defines, **self.format.defines})
+            prog = build_program(self.ctx, ("pixels.cl", "projection.cl"), {**defines, **self.format.defines})
             k = Kernel(prog, "project")
             k.set(
                 n=np.int32(self.n),

@@ -121,7 +121,7 @@ class _WarpOpenCL:
         self._d_flows = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=host)
         defines = {"W": w, "H": h, "FRAME_STRIDE": blend._vecs * 16, "GH": grid[0], "GW": grid[1]}
         defines.update(blend.format.defines)  # the blend engine's stack is RGB: the kernel places the pixels
-        prog = build_program(ctx, "warp.cl", {**defines, "STEP_LOG2": step_log2})
+        prog = build_program(ctx, ("pixels.cl", "warp.cl"), {**defines, "STEP_LOG2": step_log2})
         self._kernel = Kernel(prog, "warp2")
         self._kernel.set(frames=blend._d_frames, flows=self._d_flows)
         self._out = FrameOut(ctx, queue, self._kernel, "out", blend.frame_bytes)

@@ -71,12 +71,12 @@ __kernel void blend4(__global const uchar *restrict frames,
 // The partial last group, pixel by pixel (each byte's weighted sum as in the vector path).
 #define TAIL(expr)                                                              \
     for (int i = 16 * q; i < PIXELS; ++i) {                                     \
-        __global uchar *o = out + (size_t)i * 4;                                \
+        uchar rgb[3]; /* not c: a frame's name in blend4 */                     \
         for (int ch = 0; ch < 3; ++ch) {                                        \
             const size_t e = (size_t)i * 3 + ch;                                \
-            o[ch == 0 ? R_AT : ch == 1 ? G_AT : B_AT] = (uchar)(expr);          \
+            rgb[ch] = (uchar)(expr);                                            \
         }                                                                       \
-        o[A_AT] = 255;                                                          \
+        put1(rgb[0], rgb[1], rgb[2], out + (size_t)i * 4);                      \
     }
 
 __kernel void blend1(__global const uchar *restrict frames,

@@ -140,12 +140,9 @@ inline void pixel(__global const uchar *restrict stack, __global const short *re
 #endif
     __global const short *tn = tones + tone * TONE_STRIDE;
     // scalar channels on purpose: PoCL's 3-vectors are an order of magnitude slower
-    o[R_AT] = tone1((255 - w) * SVAL(p0[0]) + w * SVAL(p1[0]), tn[0], tn[TONE_OB]);
-    o[G_AT] = tone1((255 - w) * SVAL(p0[1]) + w * SVAL(p1[1]), tn[1], tn[TONE_OB + 1]);
-    o[B_AT] = tone1((255 - w) * SVAL(p0[2]) + w * SVAL(p1[2]), tn[2], tn[TONE_OB + 2]);
-#if A_AT >= 0
-    o[A_AT] = 255;
-#endif
+    put1(tone1((255 - w) * SVAL(p0[0]) + w * SVAL(p1[0]), tn[0], tn[TONE_OB]),
+         tone1((255 - w) * SVAL(p0[1]) + w * SVAL(p1[1]), tn[1], tn[TONE_OB + 1]),
+         tone1((255 - w) * SVAL(p0[2]) + w * SVAL(p1[2]), tn[2], tn[TONE_OB + 2]), o);
 }
 
 

@@ -1,6 +1,17 @@
-// Unaligned vector stores and RGB bytes placed as four-byte pixels: shared by the kernels that
-// keep RGB stacks and write any pixel format (built in front of blend.cl and runs.cl).
-// Defines: PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (the byte of each channel in a four-byte pixel).
+// RGB bytes placed as pixels of the output format, and unaligned vector stores: shared by the
+// kernels that write any pixel format (built in front of each of them).
+// Defines: PIXEL_BYTES, R_AT, G_AT, B_AT, A_AT (the byte of each channel in a pixel; A_AT -1: none).
+
+// One RGB pixel as a pixel of the output format at o.
+inline void put1(const uchar r, const uchar g, const uchar b, __global uchar *o)
+{
+    o[R_AT] = r;
+    o[G_AT] = g;
+    o[B_AT] = b;
+#if A_AT >= 0
+    o[A_AT] = 255;
+#endif
+}
 
 // Under-aligned vector types: one unaligned store into any caller's array (PoCL's vstore16 of
 // uchar stores byte by byte).
@@ -25,10 +36,8 @@ inline void put16(uchar16 c0, uchar16 c1, uchar16 c2, __global uchar *p)
 #else
     uchar rgb[48];
     vstore16(c0, 0, rgb); vstore16(c1, 1, rgb); vstore16(c2, 2, rgb);
-    for (int k = 0; k < 16; ++k) {
-        p[4 * k + R_AT] = rgb[3 * k]; p[4 * k + G_AT] = rgb[3 * k + 1]; p[4 * k + B_AT] = rgb[3 * k + 2];
-        p[4 * k + A_AT] = 255;
-    }
+    for (int k = 0; k < 16; ++k)
+        put1(rgb[3 * k], rgb[3 * k + 1], rgb[3 * k + 2], p + 4 * k);
 #endif
 }
 

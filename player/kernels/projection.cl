@@ -278,18 +278,10 @@ __kernel void project(__global const basis_t *restrict basis,
         }
 #endif
         for (int q = 0; q < count; ++q) {
-            __global uchar *px = o + (p0 + q) * PIXEL_BYTES;
 #if CHANNELS == 3
-            px[R_AT] = v[3 * q];
-            px[G_AT] = v[3 * q + 1];
-            px[B_AT] = v[3 * q + 2];
+            put1(v[3 * q], v[3 * q + 1], v[3 * q + 2], o + (p0 + q) * PIXEL_BYTES);
 #else
-            px[R_AT] = v[q];
-            px[G_AT] = v[q];
-            px[B_AT] = v[q];
-#endif
-#if A_AT >= 0
-            px[A_AT] = 255;
+            put1(v[q], v[q], v[q], o + (p0 + q) * PIXEL_BYTES);
 #endif
         }
     }

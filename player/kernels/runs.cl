@@ -165,11 +165,7 @@ inline void spread_row(__global uchar *restrict row)
               row + 4 * (k - 16));
     while (k > 0) {
         --k;
-        const uchar r = row[3 * k], g = row[3 * k + 1], b = row[3 * k + 2];
-        row[4 * k + R_AT] = r;
-        row[4 * k + G_AT] = g;
-        row[4 * k + B_AT] = b;
-        row[4 * k + A_AT] = 255;
+        put1(row[3 * k], row[3 * k + 1], row[3 * k + 2], row + 4 * k);  // reads all three before it writes
     }
 }
 

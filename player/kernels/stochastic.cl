@@ -84,12 +84,8 @@ inline void store_part(__global uchar *o, const uchar *bytes, const int lo, cons
     for (int b = lo * 3; b < hi * 3; ++b)
         o[b] = bytes[b];
 #else
-    for (int k = lo; k < hi; ++k) {
-        o[4 * k + R_AT] = bytes[3 * k];
-        o[4 * k + G_AT] = bytes[3 * k + 1];
-        o[4 * k + B_AT] = bytes[3 * k + 2];
-        o[4 * k + A_AT] = 255;
-    }
+    for (int k = lo; k < hi; ++k)
+        put1(bytes[3 * k], bytes[3 * k + 1], bytes[3 * k + 2], o + 4 * k);
 #endif
 }
 

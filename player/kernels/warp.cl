@@ -48,11 +48,8 @@ __kernel void warp2(__global const uchar *restrict frames,
     const int bx = x * 16 + FLOOR_SHIFT(dbx, 8), by = y * 16 + FLOOR_SHIFT(dby, 8);
     __global const uchar *a = frames + (size_t)ia * FRAME_STRIDE, *b = frames + (size_t)ib * FRAME_STRIDE;
     __global uchar *o = out + ((size_t)y * W + x) * PIXEL_BYTES;
-    for (int c = 0; c < 3; ++c) {
-        const int v = wa * sample(a, ax, ay, c) + wb * sample(b, bx, by, c) + 32768;
-        o[c == 0 ? R_AT : c == 1 ? G_AT : B_AT] = (uchar)(v >> 16);
-    }
-#if A_AT >= 0
-    o[A_AT] = 255;
-#endif
+    uchar v[3];
+    for (int c = 0; c < 3; ++c)
+        v[c] = (uchar)((wa * sample(a, ax, ay, c) + wb * sample(b, bx, by, c) + 32768) >> 16);
+    put1(v[0], v[1], v[2], o);
 }

@@ -30,7 +30,8 @@ MODES = [
 
 
 def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
-    k = Kernel(build_program(cl_context, "projection.cl", {"HALF": 0, "CHANNELS": 3, "DETAIL": 0, **RGB}), "project")
+    defines = {"HALF": 0, "CHANNELS": 3, "DETAIL": 0, **RGB}
+    k = Kernel(build_program(cl_context, ("pixels.cl", "projection.cl"), defines), "project")
     assert k.args[:9] == ("basis", "mean", "coef", "out", "n", "values", "stride", "frames", "width")
     with pytest.raises(TypeError, match=r"kernel 'project' has no argument 'weights' \(it has basis, mean"):
         k.set(weights=np.int32(1))
@@ -38,7 +39,7 @@ def test_kernel_arguments_are_the_names_of_the_signature(cl_context):
 
 PROGRAMS = [
     (
-        "gather.cl",
+        ("pixels.cl", "gather.cl"),
         {
             "FRAME_W": 8,
             "FRAME_PIXELS": 64,
@@ -57,7 +58,7 @@ PROGRAMS = [
             **RGB,
         },
     ),
-    ("projection.cl", {"HALF": 0, "CHANNELS": 3, "DETAIL": 1, "VH": 9, "VW": 14, **RGB}),
+    (("pixels.cl", "projection.cl"), {"HALF": 0, "CHANNELS": 3, "DETAIL": 1, "VH": 9, "VW": 14, **RGB}),
     (("pixels.cl", "blend.cl"), {"FRAME_VECS": 4, "ITEMS": 4, "PIXELS": 21, **RGB}),
     (("pixels.cl", "blend.cl"), {"FRAME_VECS": 4, "ITEMS": 4, "PIXELS": 21, **BGRA}),
     (("pixels.cl", "runs.cl"), {"INTERP": 1, "GAIN": 0, "WIDTH": 24, **RGB}),
