@@ -362,6 +362,17 @@ def format_table(report: dict[str, Any]) -> str:
                 "frame_coverage",
             )
         )
+        nov = report.get("local_novelty")
+        rows.append(
+            (
+                "local novelty (mixed positions)",
+                (same if report["output_size"] != report["source_size"] else "n/a: no moving region")
+                if nov is None
+                else _fmt(nov, 2),
+                "",
+                "local_novelty",
+            )
+        )
         lag = report["repetition_lag"]
         rows.append(
             ("repetition lag (frames)", "none found" if lag is None else str(lag), "none, or long", "repetition_lag")
