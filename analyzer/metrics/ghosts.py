@@ -108,14 +108,14 @@ def local_novelty(output: np.ndarray, source: np.ndarray) -> float | None:
     over the same figure for the source's second half against its first half (about 1 for an
     unseen stretch of the same texture; 0 for the source's own frames).
 
-    Per 8x8 patch of the moving region (luma, longer side 192 pixels; the quarter of the pixels
-    with the largest temporal deviation, patches at least half in it): the RMS distance to the
+    Per 8x8 patch of the moving region (luma, longer side 192 pixels; the quarter of the patches
+    with the largest temporal deviation): the RMS distance to the
     nearest source patch at that place, shifted up to 4 pixels either way, over the source's
     median frame step; the median over patches, then over up to 60 evenly spaced output frames.
     A Gaussian model that mixes positions the source never shows together (ghosted flag stripes)
     makes patches no source frame has; a crossfade of two frames of a texture whose patches
     come in a continuum of contrasts (water, fire) stays near it. None when no patch fits the
-    moving region. The reference is at least 0.25 frame steps.
+    frame (under 16 pixels). The reference is at least 0.25 frame steps.
 
     Examples
     --------
@@ -139,20 +139,19 @@ def local_novelty(output: np.ndarray, source: np.ndarray) -> float | None:
     size = max(1, round(h * s)), max(1, round(w * s))
     g = luma(source, size=size)
     o = luma(output[:: max(1, -(-len(output) // _LOCAL_FRAMES))], size=size)
+    p, r = _LOCAL_PATCH, _LOCAL_REACH
+    grid = [(y, x) for y in range(r, size[0] - p - r + 1, p) for x in range(r, size[1] - p - r + 1, p)]
+    if not grid:
+        return None
     dev = g.std(axis=0)
-    moving = dev >= np.quantile(dev, _GHOST_MOVING)
+    patch_dev = np.array([dev[y : y + p, x : x + p].mean() for y, x in grid])
+    cells = [c for c, d in zip(grid, patch_dev) if d >= np.quantile(patch_dev, _GHOST_MOVING)]
+    moving = np.zeros(size, bool)
+    for y, x in cells:
+        moving[y : y + p, x : x + p] = True
     step = float(np.median(np.sqrt(np.mean(np.diff(g[:, moving], axis=0) ** 2, axis=1))))
     if step <= 0:
         raise InvalidArgumentError("source does not change from frame to frame (median frame difference is 0)")
-    p, r = _LOCAL_PATCH, _LOCAL_REACH
-    cells = [
-        (y, x)
-        for y in range(r, size[0] - p - r + 1, p)
-        for x in range(r, size[1] - p - r + 1, p)
-        if moving[y : y + p, x : x + p].mean() >= 0.5
-    ]
-    if not cells:
-        return None
     half = len(g) // 2
     later = g[half:][:: max(1, -(-(len(g) - half) // _LOCAL_FRAMES))]
     shifts = [(dy, dx) for dy in range(-r, r + 1, 2) for dx in range(-r, r + 1, 2)]
