@@ -27,7 +27,8 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "evaluate",
         help=COMMANDS["evaluate"],
         description="Compare OUTPUT with SOURCE: long-run stability, seam visibility, temporal "
-        "discontinuity at events, spectrum and patch likeness, coverage and repetition "
+        "discontinuity at events, spectrum and patch likeness, mixed positions (local novelty), "
+        "coverage and repetition "
         "(see analyzer/METRICS.md). OUTPUT is a video, a folder of images or a .npy array, "
         "or a tile database (.h5) played with --texture/--mode/--frames/--seed/--size.",
     )
