@@ -31,6 +31,10 @@ CASES = {
     "fire64": ("small_64px/fire_dyntex_64px.avi", "mixture,turnpoints"),
     "ocean64": ("small_64px/ocean_dyntex_64px.avi", "mixture"),
     "waterfall64": ("small_64px/waterfall1_dyntex_64px.avi", "mixture"),
+    "fountain": ("fountain_dyntex_6486110.avi", "lds"),
+    "steam": ("steam_vapour_pot_128px.avi", "mixture", "--mix-dim", "5"),  # 64 frames: d=10 fails
+    "smoke64": ("small_64px/fire_smoke_dyntex_64px.avi", "mixture", "--mix-dim", "5"),
+    "snow64": ("small_64px/snow_dyntex_64px.avi", "mixture"),
 }
 
 
@@ -44,17 +48,15 @@ def main() -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = []
     for case in args.cases.split(","):
-        name, methods = CASES[case]
+        name, methods, *extra = CASES[case]
         clip = CLIPS / name
         if not clip.exists():
             print(f"skipping {name}: not in {CLIPS}", file=sys.stderr)
             continue
         db = out_dir / f"{case}.h5"
         if not db.exists():
-            subprocess.run(
-                [sys.executable, "-m", "dynatex.cli", "analyze", str(clip), "-o", str(db), "--methods", methods, "-q"],
-                check=True,
-            )
+            cmd = [sys.executable, "-m", "dynatex.cli", "analyze", str(clip), "-o", str(db), "--methods", methods]
+            subprocess.run([*cmd, "-q", *extra], check=True)
         src = load_clip(clip).frames
         t, half = len(src), len(src) // 2
         first = np.arange(t - t // 3)
