@@ -69,6 +69,7 @@ BANDS: dict[str, Band] = {
         Band("seam_visibility", "seam visibility mean", good_hi=1.5, bad_hi=2.0),
         Band("temporal_discontinuity", "temporal discontinuity max", good_hi=2.0, bad_hi=3.0),
         Band("frame_coverage", "frame coverage", good_lo=0.5, bad_lo=0.25),
+        Band("local_novelty", "local novelty (mixed positions)", good_hi=1.15, bad_hi=1.35),
         Band("repetition_lag", "repetition lag (frames)", good_lo=100, bad_lo=25),
         Band("lattice_prominence", "lattice prominence", good_hi=0.03, bad_hi=0.1),
     )

@@ -10,7 +10,8 @@ for the definition, units, range and good/bad values of each measure. One module
 - Likeness to the source (:mod:`.likeness`): :func:`spectrum_distance` (:func:`st_power_spectrum`),
   :func:`patch_coherence`, :func:`patch_completeness` (both at once: :func:`patch_distances`).
 - Double images, a crossfade showing two objects (:mod:`.ghosts`): :func:`double_image`,
-  :func:`double_image_level` (the source's own level), :func:`crossfade_double_image`.
+  :func:`double_image_level` (the source's own level), :func:`crossfade_double_image`;
+  structure the source never shows at that place: :func:`local_novelty`.
 - Coverage and repetition in time (:mod:`.repetition`): :func:`frame_coverage`, :func:`index_coverage`,
   :func:`repetition_lag` (:func:`repetition_profile`).
 - Repetition in space (:mod:`.lattice`): :func:`lattice_prominence` (a cell lattice standing out),
@@ -32,7 +33,7 @@ from .gamut import (
     source_gamut_share,
     source_local_gamut_share,
 )
-from .ghosts import DoubleImages, crossfade_double_image, double_image, double_image_level
+from .ghosts import DoubleImages, crossfade_double_image, double_image, double_image_level, local_novelty
 from .lattice import lattice_correlation, lattice_lags, lattice_prominence
 from .likeness import patch_coherence, patch_completeness, patch_distances, spectrum_distance, st_power_spectrum
 from .longrun import StabilityReport, count_nonfinite, stability
@@ -50,6 +51,7 @@ __all__ = [
     "crossfade_double_image",
     "double_image",
     "double_image_level",
+    "local_novelty",
     "evaluate",
     "frame_coverage",
     "frame_step_ratio",

@@ -12,6 +12,11 @@ from ._common import luma
 
 _GHOST_SIDE = 96  # longer side of the luma frames the double-image measure compares
 _GHOST_MOVING = 0.75  # the moving region: pixels whose temporal deviation is above this quantile
+_LOCAL_SIDE = 192  # longer side of the luma frames local_novelty compares
+_LOCAL_PATCH = 8  # side of its patches
+_LOCAL_REACH = 4  # it searches source patches this many pixels either way (in steps of 2)
+_LOCAL_FRAMES = 60  # output frames it measures at most (evenly spaced)
+_LOCAL_FLOOR = 0.25  # least reference level, in frame steps (a clip whose halves repeat each other)
 
 
 class DoubleImages:
@@ -96,6 +101,75 @@ def double_image(output: np.ndarray, source: np.ndarray) -> np.ndarray:
     (1.5, [0.0, 0.0, 0.0])
     """
     return DoubleImages(source).of(output)
+
+
+def local_novelty(output: np.ndarray, source: np.ndarray) -> float | None:
+    """How far the output's local structure lies from anything the source shows at that place,
+    over the same figure for the source's second half against its first half (about 1 for an
+    unseen stretch of the same texture; 0 for the source's own frames).
+
+    Per 8x8 patch of the moving region (luma, longer side 192 pixels; the quarter of the patches
+    with the largest temporal deviation): the RMS distance to the
+    nearest source patch at that place, shifted up to 4 pixels either way, over the source's
+    median frame step; the median over patches, then over up to 60 evenly spaced output frames.
+    A Gaussian model that mixes positions the source never shows together (ghosted flag stripes)
+    makes patches no source frame has; a crossfade of two frames of a texture whose patches
+    come in a continuum of contrasts (water, fire) stays near it. None when no patch fits the
+    frame (under 16 pixels). The reference is at least 0.25 frame steps.
+
+    Examples
+    --------
+    >>> x = np.arange(64)
+    >>> stripes = np.where((x[None, :] - np.arange(48)[:, None]) % 16 < 8, 220, 30)
+    >>> clip = np.repeat(stripes[:, None, :], 32, axis=1).astype(np.uint8)   # stripes moving 1 px a frame
+    >>> local_novelty(clip, clip)
+    0.0
+    >>> ghost = ((clip.astype(float) + np.roll(clip, 4, axis=2)) / 2).astype(np.uint8)
+    >>> round(local_novelty(ghost, clip), 1)                                   # stripes at two places
+    4.0
+    """
+    source = check_frames(source, name="source", min_frames=4)
+    output = check_frames(output, name="output")
+    if output.shape[1:3] != source.shape[1:3]:
+        raise InvalidArgumentError(
+            f"local_novelty needs output and source of one frame size: {output.shape[1:3]} vs {source.shape[1:3]}"
+        )
+    h, w = source.shape[1:3]
+    s = min(1.0, _LOCAL_SIDE / max(h, w))
+    size = max(1, round(h * s)), max(1, round(w * s))
+    g = luma(source, size=size)
+    o = luma(output[:: max(1, -(-len(output) // _LOCAL_FRAMES))], size=size)
+    p, r = _LOCAL_PATCH, _LOCAL_REACH
+    grid = [(y, x) for y in range(r, size[0] - p - r + 1, p) for x in range(r, size[1] - p - r + 1, p)]
+    if not grid:
+        return None
+    dev = g.std(axis=0)
+    patch_dev = np.array([dev[y : y + p, x : x + p].mean() for y, x in grid])
+    cells = [c for c, d in zip(grid, patch_dev) if d >= np.quantile(patch_dev, _GHOST_MOVING)]
+    moving = np.zeros(size, bool)
+    for y, x in cells:
+        moving[y : y + p, x : x + p] = True
+    step = float(np.median(np.sqrt(np.mean(np.diff(g[:, moving], axis=0) ** 2, axis=1))))
+    if step <= 0:
+        raise InvalidArgumentError("source does not change from frame to frame (median frame difference is 0)")
+    half = len(g) // 2
+    later = g[half:][:: max(1, -(-(len(g) - half) // _LOCAL_FRAMES))]
+    shifts = [(dy, dx) for dy in range(-r, r + 1, 2) for dx in range(-r, r + 1, 2)]
+    out = np.empty((len(o), len(cells)))
+    ref = np.empty((len(later), len(cells)))
+    for k, (y, x) in enumerate(cells):
+        bank = np.stack([g[:, y + dy : y + dy + p, x + dx : x + dx + p].reshape(len(g), -1) for dy, dx in shifts], 1)
+        out[:, k] = _nearest(o[:, y : y + p, x : x + p].reshape(len(o), -1), bank.reshape(-1, p * p))
+        ref[:, k] = _nearest(later[:, y : y + p, x : x + p].reshape(len(later), -1), bank[:half].reshape(-1, p * p))
+    level = max(float(np.median(np.median(ref, axis=1))) / step, _LOCAL_FLOOR)
+    return float(np.median(np.median(out, axis=1))) / step / level
+
+
+def _nearest(q: np.ndarray, bank: np.ndarray) -> np.ndarray:
+    """RMS distance of each row of ``q`` to its nearest row of ``bank``."""
+    q, bank = q.astype(np.float64), bank.astype(np.float64)
+    d2 = np.einsum("ij,ij->i", q, q)[:, None] + np.einsum("ij,ij->i", bank, bank)[None, :] - 2.0 * (q @ bank.T)
+    return np.sqrt(np.maximum(d2.min(axis=1), 0.0) / q.shape[1])
 
 
 def double_image_level(source: np.ndarray, *, quantile: float = 0.9) -> float:

@@ -10,6 +10,7 @@ import numpy as np
 from ...checks import check_frames
 from ._common import int_pair
 from .gamut import out_of_gamut_share, source_gamut_share
+from .ghosts import local_novelty
 from .lattice import lattice_correlation, lattice_prominence
 from .likeness import patch_distances, spectrum_distance
 from .longrun import stability
@@ -34,7 +35,7 @@ def evaluate(
     """Every metric of this module for one output against its source, as a JSON-ready dict.
 
     ``output_size`` and ``source_size`` are ``[height, width]``. Size-bound metrics
-    (stability, frame coverage) are None when the frame sizes differ;
+    (stability, frame coverage, local novelty) are None when the frame sizes differ;
     when the output holds NaN/inf, only stability is computed. With ``period`` ``(py, px)``
     (a tile lattice) the lattice correlation of the output and of the source (None where
     a frame is not larger than the period) at those lags. With ``lattice`` ``(th, tw)`` (the
@@ -82,6 +83,7 @@ def evaluate(
     report["patch_coherence"] = coh
     report["patch_completeness"] = comp
     report["frame_coverage"] = frame_coverage(output, source) if same else None
+    report["local_novelty"] = local_novelty(output, source) if same and source.shape[0] >= 4 else None
     report["repetition_lag"] = repetition_lag(output, source=source)
     report["out_of_gamut_share"] = out_of_gamut_share(output, source)
     report["source_out_of_gamut_share"] = source_gamut_share(source)

@@ -27,7 +27,8 @@ def add_parser(sub, argv: list[str] | None = None) -> argparse.ArgumentParser:
         "evaluate",
         help=COMMANDS["evaluate"],
         description="Compare OUTPUT with SOURCE: long-run stability, seam visibility, temporal "
-        "discontinuity at events, spectrum and patch likeness, coverage and repetition "
+        "discontinuity at events, spectrum and patch likeness, mixed positions (local novelty), "
+        "coverage and repetition "
         "(see analyzer/METRICS.md). OUTPUT is a video, a folder of images or a .npy array, "
         "or a tile database (.h5) played with --texture/--mode/--frames/--seed/--size.",
     )
@@ -360,6 +361,17 @@ def format_table(report: dict[str, Any]) -> str:
                 same if cov is None else _fmt(cov),
                 "near 1 for a player of frames",
                 "frame_coverage",
+            )
+        )
+        nov = report.get("local_novelty")
+        rows.append(
+            (
+                "local novelty (mixed positions)",
+                (same if report["output_size"] != report["source_size"] else "n/a: no moving region")
+                if nov is None
+                else _fmt(nov, 2),
+                "",
+                "local_novelty",
             )
         )
         lag = report["repetition_lag"]

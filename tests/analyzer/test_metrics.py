@@ -326,3 +326,29 @@ def test_crossfade_double_image_matches_the_formed_frames():
         m.crossfade_double_image(clip, [1], [2], [1.5])
     with pytest.raises(ValueError, match="does not change"):
         m.double_image_level(np.zeros((4, 8, 8), np.uint8))
+
+
+def _stripes(seed: int, t: int = 64) -> np.ndarray:
+    """Stripes 8 pixels wide moving 1 pixel a frame under a little noise (its own noise per seed)."""
+    rng = np.random.default_rng(seed)
+    x = np.arange(64)
+    bars = np.where((x[None, :] - np.arange(t)[:, None]) % 16 < 8, 200.0, 40.0)
+    return np.clip(np.repeat(bars[:, None, :], 48, axis=1) + rng.normal(0, 8, (t, 48, 64)), 0, 255).astype(np.uint8)
+
+
+def test_local_novelty_zero_on_the_source_low_on_the_same_texture_high_on_two_displaced_copies():
+    src = _stripes(0)
+    assert m.local_novelty(src, src) == 0.0
+    fresh = m.local_novelty(_stripes(1), src)  # the same stripes, other noise: nothing the source lacks
+    assert 0.3 < fresh < 1.15
+    ghost = ((src.astype(np.float32) + np.roll(src, 5, axis=2)) / 2).astype(np.uint8)  # stripes at two places
+    assert m.local_novelty(ghost, src) > 3
+    with pytest.raises(ValueError, match="one frame size"):
+        m.local_novelty(src[:, :32], src)
+    assert m.local_novelty(src[:, :12, :12], src[:, :12, :12]) is None  # no 8x8 patch fits with its reach
+
+
+def test_evaluate_reports_local_novelty_only_at_the_source_size():
+    src = _stripes(0, t=32)
+    assert m.evaluate(_stripes(1, t=32), src, n_samples=100)["local_novelty"] < 1.15
+    assert m.evaluate(src[:, :40], src, n_samples=100)["local_novelty"] is None

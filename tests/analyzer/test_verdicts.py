@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from dynatex.analyzer.verdicts import BANDS, Band, judge, score, worst
@@ -41,6 +42,30 @@ def test_judge_reads_nested_figures_and_missing_ones():
     assert "spectrum_distance_db" not in v  # not in the report: not judged
     assert worst(list(v.values())) == "bad" and score(list(v.values())) == 3 + 1 + 1
     assert worst([]) == "n/a"
+
+
+def test_local_novelty_band():
+    v = {x["figure"]: x for x in judge({"local_novelty": 1.47})}  # the flag's lds output
+    assert v["local_novelty"]["verdict"] == "bad"
+    assert [BANDS["local_novelty"].judge(x) for x in (0.0, 1.01, 1.2, None)] == ["good", "good", "poor", "n/a"]
+
+
+def test_a_ghosted_output_ranks_below_a_clean_one():
+    from dynatex.analyzer.auto import _order
+    from dynatex.analyzer.metrics import evaluate
+
+    from .test_metrics import _stripes
+
+    src = _stripes(0, t=48)
+    ghost = ((src.astype(float) + np.roll(src, 5, axis=2)) / 2).astype(np.uint8)  # stripes at two places
+    entries = []
+    for name, out in (("ghost", ghost), ("clean", _stripes(1, t=48))):
+        report = evaluate(out, src, n_samples=100)
+        v = {x["figure"]: x["verdict"] for x in judge(report)}
+        entries.append({"mode": name, "score": score(judge(report)), "novelty": v["local_novelty"], **report})
+    ghosted, clean = entries
+    assert ghosted["novelty"] == "bad" and clean["novelty"] == "good"
+    assert [e["mode"] for e in sorted(entries, key=_order)] == ["clean", "ghost"]
 
 
 def test_every_band_is_ordered():
