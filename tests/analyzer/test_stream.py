@@ -11,6 +11,7 @@ from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.mixture import learn_mixture
 from dynatex.analyzer.stream import ClipError, parse_bytes, spill_clip
+from dynatex.errors import InvalidArgumentError
 
 from .subspace import alignment, assert_same_lds
 
@@ -125,3 +126,13 @@ def test_parse_bytes(text, value):
 def test_parse_bytes_refuses(text):
     with pytest.raises(ValueError, match="memory size"):
         parse_bytes(text)
+
+
+def test_a_streamed_clip_is_learned_on_its_levels(waves_npy):
+    """Out of core there is no tone map: "auto" learns on levels, "on" is refused in one line."""
+    path, _ = waves_npy
+    assert learn_lds(spill_clip(path), n=4).tone is None
+    with pytest.raises(InvalidArgumentError, match="tone='on' needs the clip in memory"):
+        learn_lds(spill_clip(path), n=4, tone="on")
+    with pytest.raises(InvalidArgumentError, match="tone='on' needs the clip in memory"):
+        learn_mixture(spill_clip(path), components=2, dim=3, pca_dim=8, neighbors=8, pmax=2, tone="on")

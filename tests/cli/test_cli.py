@@ -170,3 +170,22 @@ def _write(path, data):
 def _npy(path, arr):
     np.save(path, arr)
     return path
+
+
+def test_analyze_tone_option(tmp_path, capsys):
+    """--tone on stores a tone map (format 2.0, shown by info), --tone off none; a bad value is one line."""
+    from ..analyzer.test_tone import flames
+
+    clip = tmp_path / "flames.npy"
+    np.save(clip, flames(t=40))
+    db = tmp_path / "t.h5"
+    assert _run(capsys, "analyze", clip, "-o", db, "--n", "6", "-q")[0] == 0
+    code, out, _ = _run(capsys, "info", db)
+    assert code == 0 and "gaussianised per channel" in out and "v2.0" in out
+    assert _run(capsys, "analyze", clip, "-o", db, "--n", "6", "--tone", "off", "-q")[0] == 0
+    with h5py.File(db) as f:
+        assert "tone" not in f["textures/flames/lds"] and tuple(f.attrs["format_version"]) == (1, 7)
+    with pytest.raises(SystemExit) as e:
+        main(["analyze", str(clip), "-o", str(db), "--tone", "sometimes", "-q"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and err.count("\n") == 1 and "argument --tone: expected one of 'auto', 'on', 'off'" in err
