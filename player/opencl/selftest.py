@@ -468,7 +468,7 @@ def _child(expected: DeviceInfo) -> int:
                 print(f"fail\tspeed {engine}\t{_one_line(exc)}", flush=True)
             else:
                 print(f"pass\tspeed {engine}", flush=True)
-        _release_speed_engines()
+        _speed_held.release()
     v.seconds = time.perf_counter() - start
     print(f"verdict\t{json.dumps(asdict(v))}", flush=True)
     return 0
@@ -496,7 +496,28 @@ def _projection_speed(precision: str, size: tuple[int, int], per_pass: int, deta
     return measure
 
 
-_speed_held: list = []  # (key, engines): the last pair of engines measured, shared by 1 and 8 per pass
+class _HeldEngines:
+    """The last pair of speed engines made (OpenCL, numpy) and the case they were made for: the
+    cases of 1 and 8 frames per pass of one size share them."""
+
+    def __init__(self) -> None:
+        self.key: tuple | None = None
+        self.engines: list | None = None
+
+    def get(self, key: tuple) -> list | None:
+        return self.engines if key == self.key else None
+
+    def hold(self, key: tuple, engines: list) -> None:
+        self.release()
+        self.key, self.engines = key, engines
+
+    def release(self) -> None:
+        if self.engines is not None:
+            self.engines[0].close()  # the numpy reference holds nothing on a device
+        self.key = self.engines = None
+
+
+_speed_held = _HeldEngines()
 
 
 def _speed_engines(device: str, precision: str, size: tuple[int, int], frames: int, detail: bool, n: int = 50) -> list:
@@ -509,9 +530,10 @@ def _speed_engines(device: str, precision: str, size: tuple[int, int], frames: i
     from .context import get_context
 
     key = (device, precision, size, frames, detail, n)
-    if _speed_held and _speed_held[0][0] == key:
-        return _speed_held[0][1]
-    _release_speed_engines()
+    held = _speed_held.get(key)
+    if held is not None:
+        return held
+    _speed_held.release()
     h, w = size
     rng = np.random.default_rng(0)
     # speed does not depend on the values: a random block repeated is as good and quick to make
@@ -543,7 +565,7 @@ def _speed_engines(device: str, precision: str, size: tuple[int, int], frames: i
     ]
     for e in engines:
         e.coefs[:] = rng.standard_normal(e.coefs.shape)
-    _speed_held.append((key, engines))
+    _speed_held.hold(key, engines)
     return engines
 
 
@@ -632,12 +654,7 @@ def speed_main(info: dict, engines: list[str] | None, figures: dict | None = Non
     try:
         return {e: SPEED_CASES[e](found.index) for e in engines if e in SPEED_CASES}
     finally:
-        _release_speed_engines()
-
-
-def _release_speed_engines() -> None:
-    while _speed_held:
-        _speed_held.pop()[1][0].close()
+        _speed_held.release()
 
 
 def _all(checks: dict[str, Callable[[str], str | None]], device: str) -> str | None:
