@@ -142,6 +142,8 @@ class BlendOpenCL(Blend):
             kernel.set(frames=self._d_frames, **({} if terms == 1 else {"params": self._d_params}))
             self._outs[terms] = FrameOut(ctx, queue, kernel, "out", self.frame_bytes)
         self._gsize = (self._vecs // ITEMS,) if rgb else (-(-h * w // PIXELS_PER_ITEM),)
+        #: the kernel a frame of n terms takes: the smallest that has room for them
+        self._for_terms = {n: self._outs[min(k for k in self._outs if k >= n)] for n in range(2, MAX_TERMS + 1)}
         self._queue = queue
         self._upload = None
 
@@ -163,7 +165,7 @@ class BlendOpenCL(Blend):
             params[k], params[MAX_TERMS + k] = frame, w
         # the event is kept: dropping it would wait for the copy (and the frame queued before it)
         self._upload = cl.enqueue_copy(self._queue, self._d_params, params, is_blocking=False)
-        return self._outs[min(k for k in self._outs if k >= len(sources))].launch(out, self._gsize, wait=wait)
+        return self._for_terms[len(sources)].launch(out, self._gsize, wait=wait)
 
     def close(self) -> None:
         self._queue.finish()
