@@ -3,8 +3,12 @@
 
 The set: the colour bins (8 levels per channel, those of
 :func:`~dynatex.analyzer.metrics.out_of_gamut_share`) that at least :data:`MIN_PIXELS` pixels
-of the clip hold; a bin fewer pixels hold is a colour of a lone pixel or two (coding noise),
-which the rest of the clip need not show. Each bin maps to its nearest bin of the set in
+of the clip hold, and :data:`MIN_SHARE` of them in a large clip; a bin fewer pixels hold is a
+colour of a lone pixel or two (coding noise), which the rest of the clip need not show. The
+share matters where the set's edge is: a colour the player moves into the set lands in its
+nearest bin, which lies at the edge, where bins are rarest; on a 720p clip of 116 frames the
+bins held by 4 or 5 of its 1e8 pixels appear in one half of the clip alone, and output moved
+into them counted as colours that half never had. Each bin maps to its nearest bin of the set in
 Euclidean distance (an exact distance transform over the ``32**3`` cube), so the player moves
 a colour the clip never had to the closest one it had: a cyan overshoot on a red-on-sky edge
 becomes the sky's blue, a red lamp's overshoot past off its grey glass.
@@ -23,6 +27,8 @@ move a colour less than a bin less far).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
@@ -31,15 +37,19 @@ from ..framestats import CHUNK
 from ..tiledb.gamut import BIN_BITS, GamutModel, LocalGamut
 from .metrics.gamut import colour_bins
 
-#: Pixels of the clip a colour bin must hold to be in the set.
+#: Pixels of the clip a colour bin must hold to be in the set, and the share of the clip's pixels
+#: it must hold where that is more (a large clip).
 MIN_PIXELS = 4
+MIN_SHARE = 1e-7
 #: Side in pixels of a region of the local colour sets, and the most regions a frame gets.
 LOCAL_BLOCK = 16
 MAX_REGIONS = 1024
 
 
-def learn_gamut(frames: np.ndarray, *, min_pixels: int = MIN_PIXELS) -> GamutModel | None:
-    """The nearest-colour map of ``frames`` ``(T, H, W, 3)`` uint8 (None for grey frames).
+def learn_gamut(frames: np.ndarray, *, min_pixels: int | None = None) -> GamutModel | None:
+    """The nearest-colour map of ``frames`` ``(T, H, W, 3)`` uint8 (None for grey frames); a bin
+    is in the set where ``min_pixels`` of the clip's pixels hold it (default :data:`MIN_PIXELS`,
+    or :data:`MIN_SHARE` of the pixels where that is more), each region's where as many of its own do.
 
     Examples
     --------
@@ -55,6 +65,8 @@ def learn_gamut(frames: np.ndarray, *, min_pixels: int = MIN_PIXELS) -> GamutMod
     counts = np.zeros(n**3, np.int64)
     for lo in range(0, len(frames), CHUNK):
         counts += np.bincount(colour_bins(frames[lo : lo + CHUNK]), minlength=n**3)
+    if min_pixels is None:
+        min_pixels = max(MIN_PIXELS, math.ceil(MIN_SHARE * int(counts.sum())))
     inside = counts >= min(min_pixels, int(counts.max()))
     nearest = _nearest(inside).reshape(-1)
     info = {"min_pixels": int(min_pixels), "colours": int(inside.sum())}

@@ -95,3 +95,20 @@ def test_local_share_calibrated_on_real_sources(clips_dir, name):
     own = m.source_local_gamut_share(src)
     assert own < 0.02
     assert m.local_out_of_gamut_share(src[:, :, ::-1], src) > max(0.02, 3 * own)
+
+
+def test_a_large_clip_leaves_its_rarest_colours_out_of_the_set(monkeypatch):
+    """A bin held by a few pixels of a clip of many is noise at the set's edge, where the player
+    moves colours the clip never had: the set takes MIN_SHARE of the clip's pixels where that is
+    more than MIN_PIXELS (here a share made large, so that a small clip shows it)."""
+    from dynatex.analyzer import gamut
+
+    clip = np.zeros((10, 20, 20, 3), np.uint8)
+    clip[..., 0] = 200
+    clip[0, 0, :6] = (0, 0, 200)  # blue: 6 of the clip's 4,000 pixels
+    blue = (0 * 32 + 0) * 32 + 25
+    assert gamut.learn_gamut(clip).nearest[blue] == blue  # 6 >= MIN_PIXELS
+    monkeypatch.setattr(gamut, "MIN_SHARE", 0.002)  # 8 pixels of 4,000
+    model = gamut.learn_gamut(clip)
+    assert model.info["min_pixels"] == 8 and model.nearest[blue] != blue
+    assert gamut.learn_gamut(clip, min_pixels=4).nearest[blue] == blue  # an explicit count wins
