@@ -63,9 +63,10 @@ def saturation_share(frames: np.ndarray) -> float:
     return float(np.mean(below + above))
 
 
-def learn_tone(frames: np.ndarray) -> ToneModel:
+def learn_tone(frames: np.ndarray, share: float | None = None) -> ToneModel:
     """The tone map of ``frames`` ``(T, H, W, C)`` uint8: per channel, ``forward[c, level]``
-    strictly increasing, its steps at least ``span / BINS`` (the part's rule).
+    strictly increasing, its steps at least ``span / BINS`` (the part's rule); ``share``: the
+    clip's :func:`saturation_share`, when the caller has it.
 
     Two levels alone, half the values each, lie at the quartiles of a Gaussian (+-0.67 standard
     deviations), so that the model's spread about them reaches the ends of the range:
@@ -93,7 +94,7 @@ def learn_tone(frames: np.ndarray) -> ToneModel:
         curve = mean + sd * z
         step = (curve[-1] - curve[0]) / _RAMP_BINS
         forward[ch] = curve + step * (levels - 127.5)
-    info = {"saturation_share": saturation_share(frames)}
+    info = {"saturation_share": saturation_share(frames) if share is None else float(share)}
     return ToneModel(forward=forward.astype(np.float32), info=info)
 
 
@@ -102,11 +103,10 @@ def choose(frames: np.ndarray, tone: str) -> ToneModel | None:
     "auto" where :func:`saturation_share` exceeds :data:`SATURATION_SHARE`."""
     if tone == "off":
         return None
-    if tone == "auto":
-        share = saturation_share(frames)
-        if share <= SATURATION_SHARE:
-            return None
-    return learn_tone(frames)
+    share = saturation_share(frames)
+    if tone == "auto" and share <= SATURATION_SHARE:
+        return None
+    return learn_tone(frames, share)
 
 
 def to_tone(frames: np.ndarray, tone: ToneModel) -> np.ndarray:

@@ -40,6 +40,9 @@ LEVELS = 256
 BINS = 4096
 #: Largest magnitude of a tone value: far past any clipped Gaussian of levels, far below overflow.
 MAX_VALUE = 1e4
+#: Least span of a channel's map (the analysis makes 8 at least): a tinier one overflows the
+#: lookup's scale ``BINS / span`` in float32.
+MIN_SPAN = 1.0
 
 
 @dataclass
@@ -114,6 +117,9 @@ def forward_problem(forward: np.ndarray) -> str | None:
     if not steps.min() > 0:
         c, level = np.unravel_index(int(np.argmin(steps)), steps.shape)
         return f"is not strictly increasing in the level (channel {c}, levels {level} -> {level + 1})"
+    span = f[:, -1] - f[:, 0]
+    if not span.min() >= MIN_SPAN:
+        return f"channel {int(np.argmin(span))} spans {span.min():.3g}, under {MIN_SPAN:g}"
     low = steps.min(axis=1) * BINS / (f[:, -1] - f[:, 0])
     if not low.min() >= 1:
         c = int(np.argmin(low))

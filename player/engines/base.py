@@ -47,7 +47,7 @@ HELD_ARRAYS = 4
 class Kernel:
     """One kernel object of ``program`` with its arguments set by name.
 
-    >>> k = Kernel(build_program(ctx, "projection.cl", defines), "project")   # doctest: +SKIP
+    >>> k = Kernel(build_program(ctx, ("pixels.cl", "projection.cl"), defines), "project")   # doctest: +SKIP
     >>> k.set(coef=d_coef, n=np.int32(12))                             # doctest: +SKIP
     """
 

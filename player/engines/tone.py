@@ -53,7 +53,8 @@ class ToneLookup:
         lo, scale, offset = self._per_value(values.shape[-1])
         values -= lo
         values *= scale
-        np.clip(values, 0, BINS - 1, out=values)
+        np.fmax(values, 0, out=values)  # fmax/fmin as OpenCL's clamp: NaN (no valid map makes one) -> 0
+        np.fmin(values, BINS - 1, out=values)
         if self._index is None or self._index.shape != values.shape:
             self._index = np.empty(values.shape, np.int32)
         np.copyto(self._index, values, casting="unsafe")  # truncation, as astype

@@ -129,3 +129,13 @@ def test_flames_on_both_backends(flames_db, mode, cl_device):
     _, b = _energy(paths["auto"], mode, src, frames=40, backend="numpy")
     diff = np.abs(a.astype(int) - b)
     assert diff.max() <= 1 and (diff > 0).mean() <= 1e-3  # the projection's documented tolerance
+
+
+def test_a_not_a_number_becomes_level_zero_as_on_opencl():
+    """OpenCL's clamp (fmin of fmax) takes NaN to the lower bound; the reference does the same
+    instead of failing on an index far outside its table."""
+    lookup = ToneLookup(random_tone(np.random.default_rng(4), 3))
+    values = np.array([[np.nan, 0.0, np.inf, -np.inf, 1e30, -1e30]], np.float32)
+    assert lookup.levels(values).tolist() == [
+        [0.0, lookup.levels(np.zeros((1, 3), np.float32))[0, 1], 255.0, 0.0, 255.0, 0.0]
+    ]

@@ -167,6 +167,8 @@ HOSTILE = [
     ("step below a bin", _step_below_a_bin, "channel 0 has a step of .* below its span over 4096 bins"),
     ("huge top", _set((2, 255), 1e6), "values reach 1e\\+06, beyond \\+-10000"),
     ("huge everywhere", lambda a: (a.astype(np.float64) * 1e36).astype(np.float32), "beyond \\+-10000"),
+    # steps a bin wide, but BINS / span overflows float32: the lookup's scale would be infinite
+    ("tiny span", lambda a: (np.arange(256) * 1e-38)[None].repeat(3, 0).astype(np.float32), "spans .* under 1"),
 ]
 
 
