@@ -112,13 +112,11 @@ def learn_lds(
     n, k, energy, svd, max_radius, calibrate, tone, seed = check_params(
         "lds", n=n, k=k, energy=energy, svd=svd, max_radius=max_radius, calibrate=calibrate, tone=tone, seed=seed
     )
-    if streamed and tone == "on":
-        raise InvalidArgumentError("tone='on' needs the clip in memory; a streamed clip is learned on its levels")
     auto = n == "auto"
     if not auto:
         if n > tau - 1:
             raise InvalidArgumentError(f"n={n} is larger than the clip allows: it has {tau} frames, so n <= {tau - 1}")
-    tone_map = None if streamed else choose_tone(frames, tone)
+    tone_map = choose_tone(frames, tone)
     step = _stepper(progress, 5)
     rank_cap = min(tau - 1, DEFAULT_N) if auto else int(n)
     if streamed:

@@ -134,8 +134,6 @@ def learn_mixture(
         tone=tone,
         seed=seed,
     )
-    if streamed and tone == "on":
-        raise InvalidArgumentError("tone='on' needs the clip in memory; a streamed clip is learned on its levels")
     global_dim = dim if global_dim is None else global_dim
     if tau < 4:
         raise InvalidArgumentError(f"clip has {tau} frames; a subspace mixture needs at least 4")
@@ -160,7 +158,7 @@ def learn_mixture(
             f"pmax={pmax} is too large for {tau} frames of {global_dim}-dimensional global "
             f"coordinates (needs T - pmax > (pmax + 1) * global_dim + 1); use a smaller pmax"
         )
-    tone_map = None if streamed else choose_tone(frames, tone)
+    tone_map = choose_tone(frames, tone)
     step = _stepper(progress, 5)
 
     # 1. Reduced PCA space.

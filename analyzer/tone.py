@@ -24,6 +24,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy.special import ndtr, ndtri
 
+from ..errors import InvalidArgumentError
 from ..framestats import CHUNK
 from ..player.engines.tone import ToneLookup
 from ..tiledb.tone import BINS, LEVELS, ToneModel
@@ -98,9 +99,14 @@ def learn_tone(frames: np.ndarray, share: float | None = None) -> ToneModel:
     return ToneModel(forward=forward.astype(np.float32), info=info)
 
 
-def choose(frames: np.ndarray, tone: str) -> ToneModel | None:
+def choose(frames: np.ndarray | None, tone: str) -> ToneModel | None:
     """The tone map to learn ``frames`` on for the ``tone`` parameter: "on" always, "off" never,
-    "auto" where :func:`saturation_share` exceeds :data:`SATURATION_SHARE`."""
+    "auto" where :func:`saturation_share` exceeds :data:`SATURATION_SHARE`. ``frames`` None (a
+    streamed clip, never in memory): no map, and "on" is refused."""
+    if frames is None:
+        if tone == "on":
+            raise InvalidArgumentError("tone='on' needs the clip in memory; a streamed clip is learned on its levels")
+        return None
     if tone == "off":
         return None
     share = saturation_share(frames)
