@@ -104,16 +104,16 @@ def _block_alpha(err: np.ndarray, side: str, margin: int, fade: float) -> tuple[
     b, o = err.shape
     lo, hi = margin, max(margin + 1, o - margin)
     err[:, :lo], err[:, hi:] = 1e30, 1e30
-    cut = min_cut_path(err)
-    p = np.clip(smooth_path(cut), lo, hi)[:, None]  # the band's first pixel past the cut, smoothed
+    smoothed = smooth_path(min_cut_path(err))  # the band's first pixel past the cut
+    p = np.clip(smoothed, lo, hi)[:, None]
     x = np.arange(o)[None, :] + 0.5
     u = np.where(x < p, 0.5 * x / p, 0.5 + 0.5 * (x - p) / np.maximum(o - p, 1e-6))
     wide = np.ones((b, b))
     if side in ("left", "top"):  # the band's first pixel past the cut starts the new block
-        sharp = 1.0 - path_alpha(cut, b, fade=fade, lo=lo, hi=hi)
+        sharp = 1.0 - path_alpha(smoothed, b, fade=fade, lo=lo, hi=hi, sigma=0.0)
         wide[:, :o] = u * u * (3 - 2 * u)
     else:  # the band sits at the far edge: the new block is before the cut
-        sharp = path_alpha(b - o + cut + 1, b, fade=fade, lo=b - o + lo, hi=b - o + hi)
+        sharp = path_alpha(b - o + smoothed + 1, b, fade=fade, lo=b - o + lo, hi=b - o + hi, sigma=0.0)
         wide[:, b - o :] = 1.0 - u * u * (3 - 2 * u)
     if side in ("left", "right"):
         return sharp, wide
