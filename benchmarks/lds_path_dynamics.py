@@ -52,7 +52,8 @@ class KernelProcess:
         self.x0, self.x1 = x[:-1], x[1:]
         d2 = _sq(self.x0, self.x0)
         np.fill_diagonal(d2, np.inf)
-        self.h2 = 2 * (bandwidth * float(np.median(np.sqrt(d2.min(1))))) ** 2
+        # a clip with repeated frames has training states at distance 0: keep the kernel finite
+        self.h2 = max(2 * (bandwidth * float(np.median(np.sqrt(d2.min(1))))) ** 2, 1e-12 * float(d2[d2 < np.inf].max()))
         w = np.exp(-(d2 - d2.min(1, keepdims=True)) / self.h2)
         w /= w.sum(1, keepdims=True)
         resid = self.x1 - w @ self.x1
