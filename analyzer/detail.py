@@ -34,7 +34,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..checks import check_seed
-from ..tiledb.detail import MAX_GAIN, WARN_RESIDUAL, DetailModel
+from ..tiledb.detail import MAX_GAIN, DetailModel
 from .metrics import colour_set
 
 #: Frames, rows and columns of the noise volume (capped by the clip's own).
@@ -48,42 +48,32 @@ CLIP_SIGMAS = 5.0
 CHUNK = 16
 #: A residual with more of its power than this at wavelengths over a quarter of the noise
 #: volume's side is structure, not fine detail: played over a frame larger than the volume its
-#: blobs repeat across the frame (a flame clip's leopard spots), so such a residual is learned
-#: again on a volume that covers the frame, where nothing repeats (see :func:`attach_detail`).
+#: blobs repeat across the frame (a flame clip's leopard spots), so such a model gets no detail.
 COARSE_SHARE = 0.5
-#: Largest frame-covering volume (int8 bytes, frames x frame pixels x channels): over it a coarse
-#: residual gets no detail (1280 x 720 RGB: 88 MB; 1920 x 1080: 199 MB).
-MAX_COVER_BYTES = 256 * 2**20
 
 Reconstruct = Callable[[int, int], np.ndarray]
 
 
-def volume_shape(t: int, h: int, w: int, side: int = VOLUME_SIDE) -> tuple[int, int, int]:
-    """Frames, rows and columns of the noise volume of a ``t``-frame clip of ``h x w`` pixels
-    (``side``: the volume's largest side)."""
+def volume_shape(t: int, h: int, w: int) -> tuple[int, int, int]:
+    """Frames, rows and columns of the noise volume of a ``t``-frame clip of ``h x w`` pixels."""
     tv = min(VOLUME_FRAMES, max(2, t // 2))
-    return tv - tv % 2, min(side, h), min(side, w)  # even: the layers are half a volume apart
+    return tv - tv % 2, min(VOLUME_SIDE, h), min(VOLUME_SIDE, w)  # even: the layers are half a volume apart
 
 
 def workspace_bytes(shape: tuple[int, ...]) -> int:
     """Bytes :func:`learn_detail` needs beyond the clip and the model, for frames ``(T, H, W, C)``:
-    the volume's FFTs (32 x 128 x 128 values, or a frame-covering volume's, at most
-    :data:`MAX_COVER_BYTES`), one volume of the levelled residual and a few chunks of residual frames."""
+    the volume's FFTs (at most 32 x 128 x 128 values, so bounded), one volume of the levelled
+    residual and a few chunks of residual frames."""
     t, h, w, c = shape
     tv, hv, wv = volume_shape(t, h, w)
-    if tv * h * w * c <= MAX_COVER_BYTES:
-        hv, wv = h, w
     return 48 * tv * hv * wv + 4 * tv * h * w + 3 * 4 * CHUNK * h * w * c
 
 
-def learn_detail(
-    frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0, side: int = VOLUME_SIDE
-) -> DetailModel:
+def learn_detail(frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0) -> DetailModel:
     """The detail part of a projection model of ``frames`` ``(T, H, W, C)`` uint8.
 
     ``reconstruct(t0, t1)`` returns the model's own frames ``t0:t1`` as float32 ``(t1 - t0, H*W*C)``
-    (mean included); the residual is the clip minus them. ``seed`` draws the volume's phases;
-    ``side`` is the volume's largest side (its spectrum is measured on cuboids of that side).
+    (mean included); the residual is the clip minus them. ``seed`` draws the volume's phases.
 
     Examples
     --------
@@ -96,7 +86,7 @@ def learn_detail(
     """
     seed = check_seed("seed", seed)
     t, h, w, c = frames.shape
-    tv, hv, wv = volume_shape(t, h, w, side)
+    tv, hv, wv = volume_shape(t, h, w)
 
     # Pass 1: colour covariance, per-pixel energy and colour range.
     cov = np.zeros((c, c))
@@ -183,25 +173,17 @@ def coarse_share(power: np.ndarray) -> float:
 
 
 def attach_detail(model, frames: np.ndarray, reconstruct: Reconstruct, *, seed: int = 0) -> None:
-    """Set ``model.detail`` (an lds or mixture model) to :func:`learn_detail` of ``frames``. Where
-    the residual is coarse (:data:`COARSE_SHARE`) and the frame larger than the noise volume, it is
-    learned again on a volume that covers the frame (nothing repeats; its share is then
-    ``info["coarse_share"]`` and the small volume's ``info["coarse_share_small"]``). Where that
-    volume would exceed :data:`MAX_COVER_BYTES`, or the residual holds over
-    :data:`~dynatex.tiledb.detail.WARN_RESIDUAL` of the clip's variance (coarse structure the model
-    misses, which random blobs do not stand in for: a mottled overlay), leave ``model.detail`` None
-    and record the share as ``model.info["detail_coarse_share"]``, which
+    """Set ``model.detail`` (an lds or mixture model) to :func:`learn_detail` of ``frames``, unless
+    the residual is coarse (:data:`COARSE_SHARE`) and the frame larger than the noise volume: then
+    leave it None and record the share as ``model.info["detail_coarse_share"]``, which
     :func:`~dynatex.tiledb.detail.describe` turns into a warning."""
     detail = learn_detail(frames, reconstruct, seed=seed)
-    t, h, w, c = frames.shape
-    tv, hv, wv, _ = detail.volume.shape
+    _, h, w, _ = frames.shape
+    _, hv, wv, _ = detail.volume.shape
     share = float(detail.info["coarse_share"])
     if share > COARSE_SHARE and (h > hv or w > wv):
-        if tv * h * w * c > MAX_COVER_BYTES or detail.info["residual_energy"] > WARN_RESIDUAL:
-            model.info["detail_coarse_share"] = share
-            return
-        detail = learn_detail(frames, reconstruct, seed=seed, side=max(h, w))
-        detail.info["coarse_share_small"] = share
+        model.info["detail_coarse_share"] = share
+        return
     model.detail = detail
 
 

@@ -69,9 +69,8 @@ def describe(model: DetailModel | None, info: dict | None = None) -> dict:
         return {
             "detail": False,
             "warning": f"no detail part: {float(coarse):.0%} of what the projection leaves out lies at "
-            "wavelengths over a quarter of the noise volume's side, which would repeat across the frame as "
-            "blobs, and a volume covering the frame is kept for a residual under "
-            f"{WARN_RESIDUAL:.0%} of the clip's variance within 256 MB; the output stays smoother than the clip",
+            "wavelengths over a quarter of the noise volume's side (structure, not fine detail), which "
+            "would repeat across the frame as blobs; the output stays smoother than the clip",
         }
     share = float(model.info.get("residual_energy", 0.0))
     out = {"detail": True, "detail_residual_energy": round(share, 4)}
