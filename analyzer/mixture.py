@@ -141,20 +141,22 @@ def learn_mixture(
     streamed = isinstance(clip, DiskClip)
     frames = None if streamed else clip_frames(clip)
     tau = clip.n_frames if streamed else frames.shape[0]
-    components, dim, global_dim, pca_dim, neighbors, pmax, max_radius, max_iter, tol, tone, residual, seed = check_params(
-        "mixture",
-        components=components,
-        dim=dim,
-        global_dim=global_dim,
-        pca_dim=pca_dim,
-        neighbors=neighbors,
-        pmax=pmax,
-        max_radius=max_radius,
-        max_iter=max_iter,
-        tol=tol,
-        tone=tone,
-        residual=residual,
-        seed=seed,
+    components, dim, global_dim, pca_dim, neighbors, pmax, max_radius, max_iter, tol, tone, residual, seed = (
+        check_params(
+            "mixture",
+            components=components,
+            dim=dim,
+            global_dim=global_dim,
+            pca_dim=pca_dim,
+            neighbors=neighbors,
+            pmax=pmax,
+            max_radius=max_radius,
+            max_iter=max_iter,
+            tol=tol,
+            tone=tone,
+            residual=residual,
+            seed=seed,
+        )
     )
     global_dim = dim if global_dim is None else global_dim
     if tau < 4:

@@ -390,7 +390,9 @@ def _read_switching(group: h5py.Group, check: Checker, model: MixtureModel) -> S
     return dyn
 
 
-def _read_residual(group: h5py.Group, check: Checker, model: MixtureModel, source: SourceInfo) -> ResidualProcess | None:
+def _read_residual(
+    group: h5py.Group, check: Checker, model: MixtureModel, source: SourceInfo
+) -> ResidualProcess | None:
     """The validated ``residual`` part, or None when absent or of a newer version."""
     g = open_part(group, RESIDUAL_GROUP, RESIDUAL_VERSION, check)
     if g is None:

@@ -115,7 +115,10 @@ def _damaged(src, tmp_path, edit):
             r"/switching/local_noise: the driving noise's variance",
         ),
         (replace_dataset("switching/local_ar", lambda a: a[:, :, :2]), r"/switching/local_ar: has shape"),
-        (replace_dataset("residual/ar", lambda a: a * 0 + [2.0, -0.1]), r"/residual/ar: axis 0's process is not stable"),
+        (
+            replace_dataset("residual/ar", lambda a: a * 0 + [2.0, -0.1]),
+            r"/residual/ar: axis 0's process is not stable",
+        ),
         (replace_dataset("residual/ar", lambda a: a[:-1]), r"/residual/ar: gain, ar and noise must have one row"),
         (replace_dataset("residual/noise", lambda a: -a), r"/residual/noise: standard deviations must be >= 0"),
         (replace_dataset("residual/noise", lambda a: a * 1e9), r"/residual/noise: an axis reaches"),
