@@ -171,11 +171,12 @@ MIXTURE_PARAMS = (
     Param("tone", _TONE, "auto", _TONE_DOC, "--mix-tone"),
     Param(
         "residual",
-        Choice("on", "off"),
-        "on",
+        Choice("auto", "on", "off"),
+        "auto",
         "Play what the components leave out of each frame inside the reduced PCA space as a process of "
-        "its own (principal axes of the residual, AR(2) each; at most 30% more basis rows), instead of "
-        "dropping it.",
+        "its own (principal axes of the residual, AR(2) each; at most 30% more basis rows) instead of "
+        "dropping it: auto where the detail part is refused (a coarse residual) or not learned (a "
+        "streamed clip), on always (the detail then models what is left), off never.",
         "--mix-residual",
     ),
     # Python only

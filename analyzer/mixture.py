@@ -21,11 +21,12 @@
    process on its local coordinates along their principal axes (Yule-Walker on the component's
    own consecutive frames, its noise such that the stationary covariance is the component's
    ``local_cov``).
-6. A residual process (:func:`fit_residual`): what the components leave out of each training
-   frame inside the PCA space (the PPCA noise: structured motion, not white) is kept where it is
-   cheap to play: its part inside the span of the stacked basis, which the player projects through
-   anyway, and along up to ``RESIDUAL_ROW_SHARE`` of the stacked rows' count of extra directions
-   (the completion of that span holding most of what is left). Within that span the residual's
+6. A residual process (:func:`fit_residual`), by default where the detail part is refused (a
+   coarse truncation residual): what the components leave out of each training frame inside the
+   PCA space (the PPCA noise: structured motion, not white) is kept where it is cheap to play:
+   its part inside the span of the loadings, which the player projects through anyway, and along
+   up to ``RESIDUAL_ROW_SHARE`` of the stacked rows' count of extra directions (the completion of
+   that span holding most of what is left). Within that span the residual's
    principal axes each run an AR(2) process fitted on the training frames' residual coordinates,
    with the residual's variance, so that energy moves with the clip's own pace instead of being
    dropped.
@@ -80,7 +81,7 @@ def learn_mixture(
     max_iter: int = 200,
     tol: float = 1e-6,
     tone: str = "auto",
-    residual: str = "on",
+    residual: str = "auto",
     seed: int = 0,
     max_memory: int | None = None,
     progress: Progress | None = None,
@@ -113,10 +114,12 @@ def learn_mixture(
     tone : {"auto", "on", "off"}
         Learn on the clip's levels Gaussianised per channel, as :func:`~dynatex.analyzer.lds.learn_lds`
         does.
-    residual : {"on", "off"}
+    residual : {"auto", "on", "off"}
         Model what the components leave out of each frame inside the reduced PCA space as a process
-        of its own (:func:`fit_residual`; the player adds it to each frame). ``off``: dropped, as
-        before.
+        of its own (:func:`fit_residual`; the player adds it to each frame): ``auto`` where the
+        model has no detail part (the truncation residual is coarse structure, which the detail's
+        noise texture refuses, or the clip is streamed), ``on`` always (the detail then learned on
+        what is left), ``off`` never (dropped, as before).
     seed : int
         Seed of the EM initialisation (k-means++) and the randomized SVD.
     max_memory : int, optional
@@ -292,9 +295,13 @@ def learn_mixture(
     )
     step()
 
-    # 6. The residual process inside the PCA space.
-    res_coords = None
-    if residual == "on":
+    # 6. The detail, and the residual process inside the PCA space: with "auto" where the model has
+    # no detail part (its residual coarse, or the clip streamed); with "on" first, the detail then
+    # learned on what both leave out.
+    u32, rows32 = u.astype(np.float32), model.stacked_basis
+    if not streamed and residual != "on":
+        attach_detail(model, frames, levels_of(lambda t0, t1: u32[t0:t1] @ rows32 + mean, tone_map), seed=seed)
+    if residual == "on" or (residual == "auto" and model.detail is None):
         res_model, res_coords, res_info = fit_residual(x - rec, rows_q, dim, max_radius=max_radius)
         if res_model is not None:
             res_model.rows = np.ascontiguousarray(res_model.rows.astype(np.float32) @ basis)
@@ -302,15 +309,12 @@ def learn_mixture(
             res_info["energy_model"] = 1.0 - err_soft + res_info["residual_energy"] / total
             res_info["residual_energy"] /= total
             model.info.update(res_info)
+            u32 = np.concatenate([u32, np.zeros((tau, len(res_model.rows)), np.float32)], axis=1)
+            u32 += (res_coords @ res_model.gain).astype(np.float32)
+            rows32 = np.concatenate([rows32, res_model.rows])
+        if not streamed and residual == "on":
+            attach_detail(model, frames, levels_of(lambda t0, t1: u32[t0:t1] @ rows32 + mean, tone_map), seed=seed)
     if not streamed:
-        u32 = u.astype(np.float32)
-        if model.residual is not None:
-            u32 = np.concatenate([u32, np.zeros((tau, model.residual.rows.shape[0]), np.float32)], axis=1)
-            u32 += (res_coords @ model.residual.gain).astype(np.float32)
-            rows32 = np.concatenate([model.stacked_basis, model.residual.rows])
-        else:
-            rows32 = model.stacked_basis
-        attach_detail(model, frames, levels_of(lambda t0, t1: u32[t0:t1] @ rows32 + mean, tone_map), seed=seed)
         model.gamut = learn_gamut(frames)
         model.tone = tone_map
     step()

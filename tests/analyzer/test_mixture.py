@@ -259,12 +259,19 @@ def test_residual_process_keeps_the_residual_in_its_span_with_its_variance_and_p
         assert np.allclose(proc.ar[a], phi[i], atol=0.08), (i, proc.ar[a])
 
 
-def test_residual_is_learned_and_its_training_part_leaves_the_rest_to_the_detail(model):
-    assert model.residual is not None and model.info["residual_axes"] == model.residual.ar.shape[0]
-    assert model.info["residual_rows"] == model.residual.rows.shape[0] <= 0.3 * len(model.stacked_basis)
-    assert model.info["energy_model"] > 1 - model.info["recon_error"]
-    off = learn_mixture(
-        wave_clip(90, periods=(17.0, 11.0, 7.0)), components=3, dim=4, pca_dim=20, neighbors=8, pmax=4, residual="off"
-    )
-    assert off.residual is None and "residual_axes" not in off.info
-    assert np.array_equal(off.stacked_basis, model.stacked_basis)
+def test_residual_is_learned_where_the_detail_is_refused_or_when_asked(model, monkeypatch):
+    """``auto``: a model with a detail part (this wave's residual is fine) has none; one whose detail
+    is refused (a coarse residual) has it, as ``on`` always does; ``off`` never."""
+    kw = dict(components=3, dim=4, pca_dim=20, neighbors=8, pmax=4)
+    clip = wave_clip(90, periods=(17.0, 11.0, 7.0))
+    assert model.detail is not None and model.residual is None and "residual_axes" not in model.info
+    on = learn_mixture(clip, residual="on", **kw)
+    assert on.residual is not None and on.info["residual_axes"] == on.residual.ar.shape[0]
+    assert on.info["residual_rows"] == on.residual.rows.shape[0] <= 0.3 * len(on.stacked_basis)
+    assert on.info["energy_model"] > 1 - on.info["recon_error"]
+    assert np.array_equal(on.stacked_basis, model.stacked_basis) and on.detail is not None
+    assert learn_mixture(clip, residual="off", **kw).residual is None
+    monkeypatch.setattr("dynatex.analyzer.mixture.attach_detail", lambda *a, **k: None)  # as refused
+    refused = learn_mixture(clip, **kw)
+    assert refused.detail is None and refused.residual is not None
+    assert np.array_equal(refused.residual.gain, on.residual.gain)

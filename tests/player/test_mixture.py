@@ -19,9 +19,10 @@ from ..conftest import wave_clip
 
 
 def _db(path, frames, *, switching=True, **kw):
-    """A database of ``frames``; ``switching=False`` writes it as before format 1.6 (no switching dynamics)."""
+    """A database of ``frames``; ``switching=False`` writes it as before format 1.6 (no switching
+    dynamics). The residual process is learned whether the detail is refused or not."""
     clip = load_clip(frames)
-    model = learn_mixture(clip, **kw)
+    model = learn_mixture(clip, residual="on", **kw)
     if not switching:
         model.switching = None
     with DatabaseWriter(path) as w:

@@ -95,7 +95,7 @@ def build_bases(folder: str | os.PathLike, *, detail: bool = True) -> dict[str, 
     tone = "on" if detail else "off"
     learners = {
         "lds": (waves, lambda c: learn_lds(c, n=6, tone=tone), False),
-        "mixture": (waves, lambda c: learn_mixture(c, components=2, dim=3, tone=tone), False),
+        "mixture": (waves, lambda c: learn_mixture(c, components=2, dim=3, tone=tone, residual="on"), False),
         "quilt": (
             load_clip(spreading_clip(12, 16, 16)),
             lambda c: learn_quilt(c, size=(32, 24), block=8, rank=4, seed=0),

@@ -19,12 +19,14 @@ def db_path(tmp_path_factory):
     path = tmp_path_factory.mktemp("mix") / "mix.h5"
     with DatabaseWriter(path) as w:
         w.put_texture("waves", clip.source_info())
-        w.put_method("waves", "mixture", learn_mixture(clip, components=2, dim=3, pca_dim=12, neighbors=6, pmax=3))
+        w.put_method(
+            "waves", "mixture", learn_mixture(clip, components=2, dim=3, pca_dim=12, neighbors=6, pmax=3, residual="on")
+        )
     return path
 
 
 def test_round_trip(db_path):
-    model = learn_mixture(load_clip(wave_clip(60)), components=2, dim=3, pca_dim=12, neighbors=6, pmax=3)
+    model = learn_mixture(load_clip(wave_clip(60)), components=2, dim=3, pca_dim=12, neighbors=6, pmax=3, residual="on")
     with TileDB(db_path) as db:
         tex = db.texture("waves")
         assert "mixture" in tex.methods
