@@ -262,6 +262,16 @@ def test_residual_process_adds_the_residuals_energy_at_its_pace(mix_db, tmp_path
         assert p.advance(3, record=True).shape == (3, j) and "residual" not in p.get_state()
 
 
+def test_residual_plays_the_same_frames_with_lookahead(mix_db):
+    with (
+        MixturePlayer(mix_db, backend="numpy", seed=8) as a,
+        MixturePlayer(mix_db, backend="numpy", seed=8, lookahead=4) as b,
+    ):
+        for i in range(11):
+            assert np.abs(a.next_frame().astype(int) - b.next_frame()).max() <= 1, i
+        assert np.array_equal(a.get_state()["residual"], b.get_state()["residual"])
+
+
 def test_residual_state_is_checked(mix_db):
     with MixturePlayer(mix_db, backend="numpy", seed=2) as p, MixturePlayer(mix_db, backend="numpy", seed=2) as q:
         p.advance(10)
