@@ -169,6 +169,16 @@ MIXTURE_PARAMS = (
         default_doc="5, or less when the clip is short",
     ),
     Param("tone", _TONE, "auto", _TONE_DOC, "--mix-tone"),
+    Param(
+        "residual",
+        Choice("auto", "on", "off"),
+        "auto",
+        "Play what the components leave out of each frame inside the reduced PCA space as a process of "
+        "its own (principal axes of the residual, AR(2) each; at most 30% more basis rows) instead of "
+        "dropping it: auto where the detail part is refused (a coarse residual) or not learned (a "
+        "streamed clip), on always (the detail then models what is left), off never.",
+        "--mix-residual",
+    ),
     # Python only
     Param("max_radius", _MAX_RADIUS, 0.995, "Largest pole magnitude of the AR dynamics.", None),
     _count("max_iter", 200, "Most EM iterations.", None),

@@ -21,6 +21,15 @@
    process on its local coordinates along their principal axes (Yule-Walker on the component's
    own consecutive frames, its noise such that the stationary covariance is the component's
    ``local_cov``).
+6. A residual process (:func:`fit_residual`), by default where the detail part is refused (a
+   coarse truncation residual): what the components leave out of each training frame inside the
+   PCA space (the PPCA noise: structured motion, not white) is kept where it is cheap to play:
+   its part inside the span of the loadings, which the player projects through anyway, and along
+   up to ``RESIDUAL_ROW_SHARE`` of the stacked rows' count of extra directions (the completion of
+   that span holding most of what is left). Within that span the residual's
+   principal axes each run an AR(2) process fitted on the training frames' residual coordinates,
+   with the residual's variance, so that energy moves with the clip's own pace instead of being
+   dropped.
 """
 
 from __future__ import annotations
@@ -28,8 +37,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InvalidArgumentError
-from ..tiledb import MixtureModel, SwitchingDynamics
-from ..tiledb.mixture import companion_radius
+from ..tiledb import MixtureModel, ResidualProcess, SwitchingDynamics
+from ..tiledb.mixture import companion_radius, scalar_ar_gain
 from .detail import attach_detail
 from .gamut import learn_gamut
 from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
@@ -49,6 +58,14 @@ DEFAULT_MAX_RADIUS = 0.995
 #: Order of each component's AR process on its local coordinates (switching dynamics).
 LOCAL_ORDER = 2
 LLE_REG = 1e-3
+#: Extra basis rows the residual process may add, as a share of the stacked rows (the player's
+#: cost a frame grows with its rows: at most 1.3 times today's).
+RESIDUAL_ROW_SHARE = 0.3
+#: A completion direction is kept only while it holds this share of the residual's energy or more.
+RESIDUAL_MIN_SHARE = 1e-3
+#: Least singular value of the loadings along a direction the residual process uses them for (each
+#: axis then needs coefficients of at most 1 / RESIDUAL_REACH per unit).
+RESIDUAL_REACH = 0.1
 
 
 def learn_mixture(
@@ -64,6 +81,7 @@ def learn_mixture(
     max_iter: int = 200,
     tol: float = 1e-6,
     tone: str = "auto",
+    residual: str = "auto",
     seed: int = 0,
     max_memory: int | None = None,
     progress: Progress | None = None,
@@ -96,12 +114,18 @@ def learn_mixture(
     tone : {"auto", "on", "off"}
         Learn on the clip's levels Gaussianised per channel, as :func:`~dynatex.analyzer.lds.learn_lds`
         does.
+    residual : {"auto", "on", "off"}
+        Model what the components leave out of each frame inside the reduced PCA space as a process
+        of its own (:func:`fit_residual`; the player adds it to each frame): ``auto`` where the
+        model has no detail part (the truncation residual is coarse structure, which the detail's
+        noise texture refuses, or the clip is streamed), ``on`` always (the detail then learned on
+        what is left), ``off`` never (dropped, as before).
     seed : int
         Seed of the EM initialisation (k-means++) and the randomized SVD.
     max_memory : int, optional
         Bytes an out-of-core PCA stage may use (default 2 GiB).
     progress : callable(done, total), optional
-        Called after each of the 5 stages.
+        Called after each of the 6 stages.
 
     Returns
     -------
@@ -120,19 +144,22 @@ def learn_mixture(
     streamed = isinstance(clip, DiskClip)
     frames = None if streamed else clip_frames(clip)
     tau = clip.n_frames if streamed else frames.shape[0]
-    components, dim, global_dim, pca_dim, neighbors, pmax, max_radius, max_iter, tol, tone, seed = check_params(
-        "mixture",
-        components=components,
-        dim=dim,
-        global_dim=global_dim,
-        pca_dim=pca_dim,
-        neighbors=neighbors,
-        pmax=pmax,
-        max_radius=max_radius,
-        max_iter=max_iter,
-        tol=tol,
-        tone=tone,
-        seed=seed,
+    components, dim, global_dim, pca_dim, neighbors, pmax, max_radius, max_iter, tol, tone, residual, seed = (
+        check_params(
+            "mixture",
+            components=components,
+            dim=dim,
+            global_dim=global_dim,
+            pca_dim=pca_dim,
+            neighbors=neighbors,
+            pmax=pmax,
+            max_radius=max_radius,
+            max_iter=max_iter,
+            tol=tol,
+            tone=tone,
+            residual=residual,
+            seed=seed,
+        )
     )
     global_dim = dim if global_dim is None else global_dim
     if tau < 4:
@@ -159,7 +186,7 @@ def learn_mixture(
             f"coordinates (needs T - pmax > (pmax + 1) * global_dim + 1); use a smaller pmax"
         )
     tone_map = choose_tone(frames, tone)
-    step = _stepper(progress, 5)
+    step = _stepper(progress, 6)
 
     # 1. Reduced PCA space.
     cap = min(pca_dim, tau - 1)
@@ -216,9 +243,11 @@ def learn_mixture(
     for s in range(components):
         rows.append(ppca["mu"][s][None, :])
         rows.append(ppca["U"][s].T)
-    stacked = np.concatenate(rows, axis=0).astype(np.float32) @ basis
+    rows_q = np.concatenate(rows, axis=0)
+    stacked = rows_q.astype(np.float32) @ basis
     inside = float(np.sum(x**2))
-    err_soft = (total - inside + float(np.sum((x - reconstruct(ppca, r, z)) ** 2))) / total
+    rec = reconstruct(ppca, r, z)
+    err_soft = (total - inside + float(np.sum((x - rec) ** 2))) / total
     hard = np.zeros_like(r)
     hard[np.arange(tau), r.argmax(axis=1)] = 1
     err_hard = (total - inside + float(np.sum((x - reconstruct(ppca, hard, z)) ** 2))) / total
@@ -264,13 +293,116 @@ def learn_mixture(
         info=info,
         switching=fit_switching(r, z, dec_off, loc_cov, max_radius=max_radius),
     )
+    step()
+
+    # 6. The detail, and the residual process inside the PCA space: with "auto" where the model has
+    # no detail part (its residual coarse, or the clip streamed); with "on" first, the detail then
+    # learned on what both leave out.
+    u32, rows32 = u.astype(np.float32), model.stacked_basis
+    if not streamed and residual != "on":
+        attach_detail(model, frames, levels_of(lambda t0, t1: u32[t0:t1] @ rows32 + mean, tone_map), seed=seed)
+    if residual == "on" or (residual == "auto" and model.detail is None):
+        res_model, res_coords, res_info = fit_residual(x - rec, rows_q, dim, max_radius=max_radius)
+        if res_model is not None:
+            res_model.rows = np.ascontiguousarray(res_model.rows.astype(np.float32) @ basis)
+            model.residual = res_model
+            res_info["energy_model"] = 1.0 - err_soft + res_info["residual_energy"] / total
+            res_info["residual_energy"] /= total
+            model.info.update(res_info)
+            u32 = np.concatenate([u32, np.zeros((tau, len(res_model.rows)), np.float32)], axis=1)
+            u32 += (res_coords @ res_model.gain).astype(np.float32)
+            rows32 = np.concatenate([rows32, res_model.rows])
+        if not streamed and residual == "on":
+            attach_detail(model, frames, levels_of(lambda t0, t1: u32[t0:t1] @ rows32 + mean, tone_map), seed=seed)
     if not streamed:
-        u32, stacked32 = u.astype(np.float32), model.stacked_basis
-        attach_detail(model, frames, levels_of(lambda t0, t1: u32[t0:t1] @ stacked32 + mean, tone_map), seed=seed)
         model.gamut = learn_gamut(frames)
         model.tone = tone_map
     step()
     return model
+
+
+# -- the residual process ------------------------------------------------------------------
+
+
+def fit_residual(
+    res: np.ndarray,
+    rows: np.ndarray,
+    dim: int,
+    *,
+    row_share: float = RESIDUAL_ROW_SHARE,
+    order: int = LOCAL_ORDER,
+    max_radius: float = DEFAULT_MAX_RADIUS,
+) -> tuple[ResidualProcess | None, np.ndarray | None, dict]:
+    """The residual process of the training frames' reduced-space residuals ``res`` (T, q) beside
+    the stacked rows ``rows`` (S (dim + 1), q) (per component its mean offset, then its ``dim``
+    orthonormal loadings, in reduced coordinates).
+
+    The span the process lives in: the loadings' own (free: the player projects through them; only
+    directions the loadings reach with singular value ``RESIDUAL_REACH`` or more, so that no axis
+    needs large, cancelling coefficients) plus the ``k <= row_share * len(rows)`` orthonormal
+    directions orthogonal to it that hold most of the residual (each at least
+    ``RESIDUAL_MIN_SHARE`` of it). The residual projected on that span has ``m`` principal axes;
+    each axis's coordinate runs an AR(``order``) process by Yule-Walker on its correlations over
+    consecutive frames (the order lowered where they are not a valid sequence, poles within
+    ``max_radius``), its noise such that the stationary variance is the axis's.
+
+    Returns the process (its ``rows`` the ``k`` extra directions in reduced coordinates, for the
+    caller to map into pixels; None when the span holds none of the residual), the training
+    frames' axis coordinates ``(T, m)``, and facts for the model's info: ``residual_rows`` (``k``),
+    ``residual_axes`` (``m``) and ``residual_energy`` (the energy kept, in the units of ``res``).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> res = rng.standard_normal((200, 6)) * [3, 2, 1, 0, 0, 0]
+    >>> rows = np.array([[0, 0, 0, 0, 9, 0], [1, 0, 0, 0, 0, 0]])  # a mean offset, one loading
+    >>> proc, coords, info = fit_residual(res, rows, 1, row_share=1.0)
+    >>> info["residual_rows"], info["residual_axes"], coords.shape, proc.gain.shape
+    (2, 3, (200, 3), (3, 4))
+    """
+    t, q = res.shape
+    j = rows.shape[0]
+    loading = np.ones(j, bool)
+    loading[:: dim + 1] = False
+    u, sv, _ = np.linalg.svd(rows[loading].T, full_matrices=False)
+    own = u[:, sv >= RESIDUAL_REACH]  # (q, r): the span the loadings reach with bounded coefficients
+    perp = res - (res @ own) @ own.T
+    ev, vec = np.linalg.eigh(perp.T @ perp)
+    ev, vec = ev[::-1], vec[:, ::-1]
+    whole = float(np.sum(res * res))
+    budget = min(int(row_share * j), q - own.shape[1])
+    k = int(np.sum(ev[:budget] >= RESIDUAL_MIN_SHARE * whole)) if whole > 0 else 0
+    extra = vec[:, :k]  # (q, k)
+    span = np.concatenate([own, extra], axis=1)
+    e = res @ span
+    lam, axes = np.linalg.eigh(e.T @ e / t)
+    lam, axes = lam[::-1], axes[:, ::-1]
+    if not lam.size or lam[0] <= 0:
+        return None, None, {"residual_rows": 0, "residual_axes": 0, "residual_energy": 0.0}
+    keep = lam > lam[0] * 1e-9
+    lam, axes = lam[keep], axes[:, keep]
+    coords = e @ axes  # (T, m)
+    m = coords.shape[1]
+    order = max(1, min(order, t - 1))
+    ar = np.zeros((m, order))
+    noise = np.empty(m)
+    for a in range(m):
+        y = coords[:, a]
+        rho = np.ones(order + 1)
+        for lag in range(1, order + 1):
+            num = float(y[lag:] @ y[:-lag])
+            den = float(y[lag:] @ y[lag:] + y[:-lag] @ y[:-lag]) / 2
+            rho[lag] = np.clip(num / max(den, 1e-300), -max_radius, max_radius)
+        ar[a] = _yule_walker(rho, max_radius)
+        noise[a] = np.sqrt(lam[a] / scalar_ar_gain(ar[a]))
+    # Each axis as coefficients over the loadings (the mean offsets take none) and the extra rows.
+    both = np.concatenate([rows[loading], extra.T], axis=0)
+    coef = (span @ axes).T @ np.linalg.pinv(both, rcond=RESIDUAL_REACH / max(float(sv[0]), 1.0))
+    gain = np.zeros((m, j + k))
+    gain[:, np.concatenate([loading, np.ones(k, bool)])] = coef
+    proc = ResidualProcess(rows=np.ascontiguousarray(extra.T), gain=gain, ar=ar, noise=noise)
+    info = {"residual_rows": k, "residual_axes": m, "residual_energy": float(lam.sum() * t)}
+    return proc, coords, info
 
 
 # -- mixture of probabilistic PCA -----------------------------------------------------------
@@ -546,7 +678,7 @@ def fit_switching(
         gain = np.ones(d)
         for a in range(d):
             phi[:, a] = _yule_walker(rho[:, a], max_radius)
-            gain[a] = _stationary_gain(phi[:, a])
+            gain[a] = scalar_ar_gain(phi[:, a])
         for i in range(order):
             ar[s, i] = (vec * phi[i]) @ vec.T
         noise[s] = vec * np.sqrt(lam / gain)
@@ -569,18 +701,6 @@ def _yule_walker(rho: np.ndarray, max_radius: float) -> np.ndarray:
     if radius > max_radius:
         phi = phi * (max_radius / radius) ** np.arange(1, p + 1)
     return phi
-
-
-def _stationary_gain(phi: np.ndarray) -> float:
-    """Stationary variance of the scalar AR process with coefficients ``phi`` driven by unit noise."""
-    p = phi.size
-    comp = np.zeros((p, p))
-    comp[0] = phi
-    comp[1:, :-1] = np.eye(p - 1)
-    q = np.zeros((p, p))
-    q[0, 0] = 1.0
-    cov = np.linalg.solve(np.eye(p * p) - np.kron(comp, comp), q.ravel()).reshape(p, p)
-    return float(cov[0, 0])
 
 
 # -- AR(p) by Schwarz's criterion -----------------------------------------------------------

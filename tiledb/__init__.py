@@ -27,7 +27,7 @@ from .errors import (
 )
 from .frames import FrameStore
 from .lds import LDSModel
-from .mixture import MixtureModel, SwitchingDynamics
+from .mixture import MixtureModel, ResidualProcess, SwitchingDynamics
 from .quilt import QuiltModel
 from .schema import FORMAT_NAME, FORMAT_VERSION
 from .source import SourceInfo
@@ -46,6 +46,7 @@ __all__ = [
     "MethodNotFoundError",
     "MixtureModel",
     "QuiltModel",
+    "ResidualProcess",
     "SourceInfo",
     "SwitchingDynamics",
     "Texture",

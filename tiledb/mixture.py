@@ -11,6 +11,12 @@ Markov chain over the components and, per component, an AR process (its order th
 ``local_ar``'s second axis) on its local coordinates whose stationary covariance is the component's
 own (``local_cov``), so the synthesis stays on each component's subspace and visits the components
 as the clip does. Databases written without it play the AR process on the global coordinates.
+
+The optional ``residual`` subgroup (played with ``switching`` only) holds what the components
+leave out of each frame inside the reduced PCA space as a process of its own: ``k`` extra basis
+rows and ``m`` axes, each axis a scalar AR process whose coordinate adds ``gain[a]`` to the
+coefficients over the stacked rows and the extra ones. Databases written without it drop that
+residual.
 """
 
 from __future__ import annotations
@@ -37,6 +43,9 @@ MAX_ORDER = 64
 #: Version of the ``switching`` part this reader understands; a newer part is ignored (it is optional).
 SWITCHING_VERSION = 1
 SWITCHING_GROUP = "switching"
+#: Version of the ``residual`` part this reader understands; a newer part is ignored (it is optional).
+RESIDUAL_VERSION = 1
+RESIDUAL_GROUP = "residual"
 #: How far past the pixel range a component's ellipsoid of decoded coordinates may reach.
 ELLIPSOID_SLACK = 4.0
 
@@ -63,6 +72,34 @@ class SwitchingDynamics:
     transitions: np.ndarray
     local_ar: np.ndarray
     local_noise: np.ndarray
+
+
+@dataclass
+class ResidualProcess:
+    """What a mixture's components leave out of each frame, played as a process of its own (the
+    optional ``residual`` subgroup).
+
+    Axis ``a``'s coordinate ``y_a`` follows ``y_a,t = sum_i ar[a, i] y_a,t-1-i + noise[a] e_t``
+    (``e_t`` standard normal), and the frame's coefficients over the stacked rows followed by
+    ``rows`` gain ``sum_a y_a gain[a]``.
+
+    Attributes
+    ----------
+    rows : (k, P) float32
+        Extra basis rows (orthonormal directions of the reduced space in pixels: norm at most 1);
+        ``k`` may be 0.
+    gain : (m, S * (d + 1) + k) float64
+        Each axis as coefficients over the stacked rows and ``rows``.
+    ar : (m, p) float64
+        Each axis's AR coefficients (companion spectral radius < 1).
+    noise : (m,) float64
+        Standard deviation of each axis's driving noise (>= 0).
+    """
+
+    rows: np.ndarray
+    gain: np.ndarray
+    ar: np.ndarray
+    noise: np.ndarray
 
 
 @dataclass
@@ -122,6 +159,9 @@ class MixtureModel(Described):
     tone : ToneModel, optional
         The per-channel map from levels to the tone values the model was learned on (the
         required ``tone`` subgroup, :mod:`.tone`); None for a model learned on pixel values.
+    residual : ResidualProcess, optional
+        What the components leave out of each frame, as a process of its own (the optional
+        ``residual`` subgroup); None in databases written without it.
     """
 
     mean: np.ndarray
@@ -148,6 +188,7 @@ class MixtureModel(Described):
     gamut: _gamut.GamutModel | None = None
     switching: SwitchingDynamics | None = None
     tone: _tone.ToneModel | None = None
+    residual: ResidualProcess | None = None
 
     def describe(self) -> dict:
         """Facts as plain values: the ``info`` attributes, the detail part's, the colour set's and the tone map's."""
@@ -210,6 +251,7 @@ _F64 = (
 )
 _SIZES = ("components", "dim", "global_dim", "order")
 _SWITCHING = ("transitions", "local_ar", "local_noise")
+_RESIDUAL = ("gain", "ar", "noise")
 
 
 def companion_radius(ar_coefs: np.ndarray) -> float:
@@ -238,6 +280,10 @@ def write(group: h5py.Group, model: MixtureModel) -> None:
     if model.switching is not None:
         arrays = {name: np.asarray(getattr(model.switching, name), np.float64) for name in _SWITCHING}
         write_part(group, SWITCHING_GROUP, SWITCHING_VERSION, arrays)
+    if model.residual is not None:
+        arrays = {name: np.asarray(getattr(model.residual, name), np.float64) for name in _RESIDUAL}
+        arrays["rows"] = np.asarray(model.residual.rows, np.float32)
+        write_part(group, RESIDUAL_GROUP, RESIDUAL_VERSION, arrays, rows=("rows",))
     _tone.write(group, model.tone)
 
 
@@ -288,6 +334,7 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         tone=_tone.read(group, check, source),
     )
     model.switching = _read_switching(group, check, model)
+    model.residual = _read_residual(group, check, model, source)
     t = model.global_coords.shape[0]
     if t < 2 or model.responsibilities.shape[0] != t or model.local_coords.shape[0] != t:
         check.fail(path + "/global_coords", "training arrays disagree on the number of frames (or fewer than 2)")
@@ -341,6 +388,63 @@ def _read_switching(group: h5py.Group, check: Checker, model: MixtureModel) -> S
     if not (np.isfinite(var).all() and (var <= own * (1 + 1e-6)).all()):
         check.fail(g.name + "/local_noise", "the driving noise's variance exceeds the component's own (local_cov)")
     return dyn
+
+
+def _read_residual(
+    group: h5py.Group, check: Checker, model: MixtureModel, source: SourceInfo
+) -> ResidualProcess | None:
+    """The validated ``residual`` part, or None when absent or of a newer version."""
+    g = open_part(group, RESIDUAL_GROUP, RESIDUAL_VERSION, check)
+    if g is None:
+        return None
+    ds = check.dataset
+    j = model.components * (model.dim + 1)
+    rows = ds(g, "rows", kind="f", shape=(range(MAX_DIM + 1), source.pixels))
+    k = rows.shape[0]
+    proc = ResidualProcess(
+        rows=rows,
+        gain=ds(g, "gain", kind="f", shape=(range(1, MAX_DIM + 1), j + k)),
+        ar=ds(g, "ar", kind="f", shape=(range(1, MAX_DIM + 1), range(1, MAX_ORDER + 1))),
+        noise=ds(g, "noise", kind="f", shape=(range(1, MAX_DIM + 1),)),
+    )
+    m = proc.gain.shape[0]
+    if proc.ar.shape[0] != m or proc.noise.shape[0] != m:
+        check.fail(g.name + "/ar", f"gain, ar and noise must have one row per axis ({m})")
+    norms = np.sqrt(np.einsum("kp,kp->k", rows, rows, dtype=np.float64))
+    if k and not norms.max() <= 1 + 1e-3:
+        check.fail(g.name + "/rows", f"a row has norm {norms.max():.3g}: rows are orthonormal in the reduced space")
+    if not proc.noise.min() >= 0:
+        check.fail(g.name + "/noise", "standard deviations must be >= 0")
+    gains = np.empty(m)
+    for a in range(m):
+        rho = companion_radius(proc.ar[a][:, None, None])
+        if not rho < MAX_SPECTRAL_RADIUS:
+            check.fail(g.name + "/ar", f"axis {a}'s process is not stable (spectral radius {rho:.6g} >= 1)")
+        gains[a] = scalar_ar_gain(proc.ar[a])
+    # Each axis's stationary spread in pixels, by the triangle inequality over the rows' norms.
+    stacked = np.sqrt(np.einsum("jp,jp->j", model.stacked_basis, model.stacked_basis, dtype=np.float64))
+    with np.errstate(all="ignore"):
+        reach = proc.noise * np.sqrt(gains) * (np.abs(proc.gain) @ np.concatenate([stacked, norms]))
+        bound = ELLIPSOID_SLACK * _tone.value_span(model.tone) * np.sqrt(source.pixels)
+        if not reach.max() <= bound:
+            check.fail(
+                g.name + "/noise",
+                f"an axis reaches {reach.max():.3g} per standard deviation, past {ELLIPSOID_SLACK:g} x the pixel "
+                f"range ({bound:.3g})",
+            )
+    return proc
+
+
+def scalar_ar_gain(phi: np.ndarray) -> float:
+    """Stationary variance of the stable scalar AR process with coefficients ``phi`` driven by unit noise."""
+    p = phi.size
+    comp = np.zeros((p, p))
+    comp[0] = phi
+    comp[1:, :-1] = np.eye(p - 1)
+    q = np.zeros((p, p))
+    q[0, 0] = 1.0
+    cov = np.linalg.solve(np.eye(p * p) - np.kron(comp, comp), q.ravel()).reshape(p, p)
+    return float(cov[0, 0])
 
 
 def _check_extent(path: str, model: MixtureModel, check: Checker, bound: float) -> None:

@@ -21,6 +21,12 @@ fade to end (a component the clip holds for fewer frames than a fade lasts is st
 leaves that much sooner, so a visit lasts as long as the chain's on average and the long-run shares
 stay the clip's; during a fade the components' fluctuations make up the energy that the blend of two
 mean images lacks, so a fade keeps the frame's expected energy. Such a texture does not offer ``draws``.
+
+A switching model with a ``residual`` part (:class:`~dynatex.tiledb.ResidualProcess`) adds what the
+components leave out of each frame: its axes' AR processes run beside the components' (with the
+``intensity``), and each frame's coefficients over the stacked rows and the part's extra rows gain
+their coordinates through its ``gain``; the vector a frame is made of is then the components'
+coefficients followed by the axes' coordinates.
 """
 
 from __future__ import annotations
@@ -151,6 +157,7 @@ class MixturePlayer(ProjectionPlayer):
         self._gram = step_gram(model.stacked_basis)
         self._coord_map = model.coord_map
         self.switching = model.switching
+        self.residual = model.residual if self.switching is not None else None
         if self.switching is not None:
             z = model.local_coords
             ext = np.concatenate([np.ones(z.shape[:2] + (1,)), z], axis=2)
@@ -181,6 +188,14 @@ class MixturePlayer(ProjectionPlayer):
             self._r = self._eye[self._label].copy()
             self._fade = (self._r.copy(), 0, 0)  # responsibilities at the switch, frames done, frames in all
             self._u = self._switch_coefficients(self._r)
+        if self.residual is not None:
+            self._res_hist = np.zeros((self.residual.ar.shape[1], self.residual.ar.shape[0]))  # y_{t-i}
+            self._dim += self.residual.ar.shape[0]
+
+    def _basis(self, model: MixtureModel) -> np.ndarray:
+        if self.residual is None or not len(self.residual.rows):
+            return model.stacked_basis
+        return np.concatenate([model.stacked_basis, self.residual.rows])
 
     # -- controls ----------------------------------------------------------------
     draws = Control(
@@ -248,6 +263,13 @@ class MixturePlayer(ProjectionPlayer):
             self._r = one
         self._fade = (start, done, total)
         self._u = self._switch_coefficients(self._r)
+        if self.residual is not None:
+            res, hist = self.residual, self._res_hist
+            y = np.einsum("ap,pa->a", res.ar, hist) + np.sqrt(self._intensity) * res.noise * self._rng.standard_normal(
+                res.noise.shape[0]
+            )
+            hist[1:] = hist[:-1]
+            hist[0] = y
 
     def _leave(self, draw: float, fade: int) -> int:
         """The component after this frame, past a fade of ``fade`` frames: the chain's own choice,
@@ -290,7 +312,10 @@ class MixturePlayer(ProjectionPlayer):
         self._hist[0] = best
 
     def _vector(self) -> np.ndarray:
-        """The global coordinate; with switching dynamics, the projection coefficients themselves."""
+        """The global coordinate; with switching dynamics, the projection coefficients themselves
+        (followed by the residual's axis coordinates where the model has them)."""
+        if self.residual is not None:
+            return np.concatenate([self._u, self._res_hist[0]])
         return self._u if self.switching is not None else self._hist[0]
 
     def _decoded(self, g: np.ndarray) -> np.ndarray:
@@ -301,6 +326,12 @@ class MixturePlayer(ProjectionPlayer):
         return self.decoder.coefficients(g)
 
     def _coefficients(self, v: np.ndarray, coef: np.ndarray) -> None:
+        if self.residual is not None:
+            j = self.components * (self.dim + 1)
+            full = v[j:] @ self.residual.gain
+            full[:j] += v[:j]
+            coef[:] = full
+            return
         coef[:] = v if self.switching is not None else self.decoder.coefficients(v)
 
     def render_coord(self, g: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -310,7 +341,10 @@ class MixturePlayer(ProjectionPlayer):
         g = np.asarray(g, dtype=float)
         if g.shape != (self.global_dim,) or not np.isfinite(g).all():
             raise InvalidArgumentError(f"g must be a finite vector of shape ({self.global_dim},)")
-        return self._render_vector("coefficients", self.decoder.coefficients(g), out)
+        u = self.decoder.coefficients(g)
+        if self.residual is not None:
+            u = np.concatenate([u, np.zeros(self.residual.ar.shape[0])])
+        return self._render_vector("coefficients", u, out)
 
     # -- state ---------------------------------------------------------------------
     def _get_state(self) -> dict[str, Any]:
@@ -323,6 +357,7 @@ class MixturePlayer(ProjectionPlayer):
                 "fade_from": start.copy(),
                 "fade_done": done,
                 "fade_frames": total,
+                **({"residual": self._res_hist.copy()} if self.residual is not None else {}),
                 "rng": self._rng.bit_generator.state,
                 "seed": self.seed,
                 **self._detail_state(),
@@ -366,8 +401,15 @@ class MixturePlayer(ProjectionPlayer):
             raise InvalidArgumentError(
                 "state local, responsibilities and fade_from must be finite, with 0 <= fade_done <= fade_frames"
             )
+        res_hist = None
+        if self.residual is not None:
+            res_hist = np.asarray(state.get("residual", np.zeros_like(self._res_hist)), dtype=float)
+            if res_hist.shape != self._res_hist.shape or not np.isfinite(res_hist).all():
+                raise InvalidArgumentError(f"state residual must be finite with shape {self._res_hist.shape}")
         rng = rng_from_state(state["rng"])
         self._restore_detail(state)
+        if res_hist is not None:
+            self._res_hist = res_hist.copy()
         self._label, self._zh, self._r, self._fade = label, z.copy(), r.copy(), (start.copy(), done, total)
         self._u = self._switch_coefficients(self._r)
         self._rng = rng

@@ -90,7 +90,7 @@ class ProjectionPlayer(Player):
         self.model_info = dict(model.info)
         self.precision = precision
         self._setup(model)
-        basis = getattr(model, self.basis_name)
+        basis = self._basis(model)
         case = speed_case(precision, basis.shape[1], lookahead, model.detail is not None, basis.shape[0])
         self._prefer_faster(*self._asked, case)
         if precision == "float16":
@@ -130,6 +130,10 @@ class ProjectionPlayer(Player):
 
     def _setup(self, model) -> None:
         raise NotImplementedError
+
+    def _basis(self, model) -> np.ndarray:
+        """The rows the frames project through: the model's ``basis_name`` attribute."""
+        return getattr(model, self.basis_name)
 
     def _vector(self) -> np.ndarray:
         raise NotImplementedError

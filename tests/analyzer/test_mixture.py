@@ -11,11 +11,12 @@ from dynatex.analyzer.mixture import (
     coordinate,
     fit_ar,
     fit_mppca,
+    fit_residual,
     fit_switching,
     learn_mixture,
     lle_weights,
 )
-from dynatex.tiledb.mixture import companion_radius
+from dynatex.tiledb.mixture import companion_radius, scalar_ar_gain
 
 from ..conftest import wave_clip
 
@@ -173,7 +174,7 @@ def test_progress_is_reported():
         pmax=2,
         progress=lambda done, total: calls.append((done, total)),
     )
-    assert calls == [(i, 5) for i in range(1, 6)]
+    assert calls == [(i, 6) for i in range(1, 7)]
 
 
 @pytest.mark.parametrize(
@@ -223,3 +224,54 @@ def test_mixture_reconstructs_better_than_single_pca_of_same_dimension(clips_dir
     m = learn_mixture(clip, components=3, dim=8)
     assert m.info["recon_error"] < m.info["recon_error_pca_dim"]
     assert m.info["recon_error_hard"] < m.info["recon_error_pca_dim"]
+
+
+def test_residual_process_keeps_the_residual_in_its_span_with_its_variance_and_pace():
+    """Rows: two components' mean offsets and loadings in an 8-dimensional space; the residual has
+    energy along a loading of the other component (free), along two directions no loading reaches
+    (extra rows, within the budget) and along one more that the budget leaves out."""
+    rng = np.random.default_rng(3)
+    t, q = 4000, 8
+    eye = np.eye(q)
+    rows = np.stack([5 * eye[7], eye[0], eye[1], -4 * eye[7], eye[2], eye[3]])  # S=2, d=2
+    y = np.zeros((t, 4))
+    phi = np.array([[0.9, 0.0], [1.2, -0.5], [0.3, 0.0], [0.0, 0.0]])
+    for i in range(2, t):
+        y[i] = phi[:, 0] * y[i - 1] + phi[:, 1] * y[i - 2] + rng.standard_normal(4)
+    res = y * [1.0, 1.0, 1.0, 0.5] @ np.stack([eye[1], eye[4], eye[5], eye[6]])
+    proc, coords, info = fit_residual(res, rows, 2, row_share=2 / 6)
+    assert info["residual_rows"] == 2 and info["residual_axes"] == 3 and coords.shape == (t, 3)
+    assert proc.rows.shape == (2, q) and np.allclose((proc.rows[:, 4:6] ** 2).sum(axis=1), 1)  # they span e4, e5
+    kept = (res[:, :6] ** 2).sum()  # all but the direction past the budget
+    assert np.isclose(info["residual_energy"], kept, rtol=1e-3)
+    # each axis's coefficients over the loadings and the extra rows rebuild the residual on their
+    # span; the mean offsets take none
+    span = np.concatenate([eye[:4], proc.rows])
+    rebuilt = coords @ proc.gain @ np.concatenate([rows, proc.rows])
+    assert np.allclose(rebuilt, res @ span.T @ span, atol=1e-9)
+    assert np.all(proc.gain[:, [0, 3]] == 0) and np.abs(proc.gain).max() <= 10 + 1e-9
+    # stationary variance is the axis's own; the AR(2) along the free loading is recovered
+    for a in range(3):
+        assert np.isclose(proc.noise[a] ** 2 * scalar_ar_gain(proc.ar[a]), coords[:, a].var(), rtol=0.05)
+        assert companion_radius(proc.ar[a][:, None, None]) < 1
+    for i in range(3):  # each axis found its source's process (AR(1) 0.9 on the free loading, AR(2), AR(1) 0.3)
+        a = int(np.argmax([abs(np.corrcoef(coords[:, a], y[:, i])[0, 1]) for a in range(3)]))
+        assert np.allclose(proc.ar[a], phi[i], atol=0.08), (i, proc.ar[a])
+
+
+def test_residual_is_learned_where_the_detail_is_refused_or_when_asked(model, monkeypatch):
+    """``auto``: a model with a detail part (this wave's residual is fine) has none; one whose detail
+    is refused (a coarse residual) has it, as ``on`` always does; ``off`` never."""
+    kw = dict(components=3, dim=4, pca_dim=20, neighbors=8, pmax=4)
+    clip = wave_clip(90, periods=(17.0, 11.0, 7.0))
+    assert model.detail is not None and model.residual is None and "residual_axes" not in model.info
+    on = learn_mixture(clip, residual="on", **kw)
+    assert on.residual is not None and on.info["residual_axes"] == on.residual.ar.shape[0]
+    assert on.info["residual_rows"] == on.residual.rows.shape[0] <= 0.3 * len(on.stacked_basis)
+    assert on.info["energy_model"] > 1 - on.info["recon_error"]
+    assert np.array_equal(on.stacked_basis, model.stacked_basis) and on.detail is not None
+    assert learn_mixture(clip, residual="off", **kw).residual is None
+    monkeypatch.setattr("dynatex.analyzer.mixture.attach_detail", lambda *a, **k: None)  # as refused
+    refused = learn_mixture(clip, **kw)
+    assert refused.detail is None and refused.residual is not None
+    assert np.array_equal(refused.residual.gain, on.residual.gain)

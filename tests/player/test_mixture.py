@@ -3,6 +3,7 @@ stability; with the switching dynamics (format 1.6) and as analysed before them.
 
 from __future__ import annotations
 
+import h5py
 import numpy as np
 import pytest
 
@@ -12,14 +13,16 @@ from dynatex.analyzer.mixture import learn_mixture
 from dynatex.player import open_player
 from dynatex.player.modes.mixture import MixturePlayer, nearest_distance, step_gram, step_sizes
 from dynatex.tiledb import DatabaseWriter
+from dynatex.tiledb.mixture import scalar_ar_gain
 
 from ..conftest import wave_clip
 
 
 def _db(path, frames, *, switching=True, **kw):
-    """A database of ``frames``; ``switching=False`` writes it as before format 1.6 (no switching dynamics)."""
+    """A database of ``frames``; ``switching=False`` writes it as before format 1.6 (no switching
+    dynamics). The residual process is learned whether the detail is refused or not."""
     clip = load_clip(frames)
-    model = learn_mixture(clip, **kw)
+    model = learn_mixture(clip, residual="on", **kw)
     if not switching:
         model.switching = None
     with DatabaseWriter(path) as w:
@@ -203,9 +206,11 @@ def test_switching_long_run_keeps_the_clips_occupancy_and_energy(mix_db):
     each step up to twice the typical one, so the mean step may reach 1.7 times the clip's)."""
     with MixturePlayer(mix_db, backend="numpy", seed=4) as p:
         m = p.texture.read("mixture")
+        j = m.components * (m.dim + 1)
         u = p.advance(20000, record=True)
         gram = p._gram
-    assert u.shape == (20000, m.components * (m.dim + 1)) and np.isfinite(u).all()
+    assert u.shape == (20000, j + m.residual.ar.shape[0]) and np.isfinite(u).all()
+    u = u[:, :j]  # the components' coefficients (the residual's axes follow)
     r = u.reshape(len(u), m.components, -1)[:, :, 0]
     assert np.allclose(r.sum(axis=1), 1) and r.min() >= 0
     occupancy = np.bincount(r.argmax(axis=1), minlength=m.components) / len(r)
@@ -228,11 +233,62 @@ def test_switching_long_run_keeps_the_clips_occupancy_and_energy(mix_db):
             assert np.allclose(r[a + 1 : b], ra + t[:, None] * (rb - ra)), (a, b)
 
 
+def test_residual_process_adds_the_residuals_energy_at_its_pace(mix_db, tmp_path):
+    """Each residual axis keeps its stationary variance; the frames' coefficients are the components'
+    plus the axes' through the part's gain, over the stacked rows and the extra ones; a database
+    without the part (as written before it) plays the components alone."""
+    with MixturePlayer(mix_db, backend="numpy", seed=6) as p:
+        m = p.texture.read("mixture")
+        res, j = m.residual, len(m.stacked_basis)
+        assert p.engine._basis.shape[0] == j + len(res.rows)
+        v = p.advance(20000, record=True)
+        coef = np.empty(p.engine._basis.shape[0])
+        p._coefficients(v[-1], coef)
+        p.intensity = 0.0
+        still = p.advance(50, record=True)[:, j:]
+    y = v[:, j:]
+    stationary = res.noise**2 * np.array([scalar_ar_gain(a) for a in res.ar])
+    assert np.allclose(y.var(axis=0), stationary, rtol=0.1)
+    assert np.allclose(coef, np.concatenate([v[-1, :j], np.zeros(len(res.rows))]) + v[-1, j:] @ res.gain)
+    lag1 = (y[1:] * y[:-1]).mean(axis=0) / y.var(axis=0)
+    assert np.allclose(lag1, res.ar[:, 0] / (1 - res.ar[:, 1]), atol=0.05)  # AR(2)'s lag-1 correlation
+    assert np.abs(still[-1]).max() < 1e-3 * np.sqrt(stationary.max())  # intensity 0: the axes decay
+    path = tmp_path / "no_residual.h5"
+    path.write_bytes(mix_db.read_bytes())
+    with h5py.File(path, "r+") as f:
+        del f["textures/waves/mixture/residual"]
+    with MixturePlayer(path, backend="numpy", seed=6) as p:
+        assert p.residual is None and p.engine._basis.shape[0] == j
+        assert p.advance(3, record=True).shape == (3, j) and "residual" not in p.get_state()
+
+
+def test_residual_plays_the_same_frames_with_lookahead(mix_db):
+    with (
+        MixturePlayer(mix_db, backend="numpy", seed=8) as a,
+        MixturePlayer(mix_db, backend="numpy", seed=8, lookahead=4) as b,
+    ):
+        for i in range(11):
+            assert np.abs(a.next_frame().astype(int) - b.next_frame()).max() <= 1, i
+        assert np.array_equal(a.get_state()["residual"], b.get_state()["residual"])
+
+
+def test_residual_state_is_checked(mix_db):
+    with MixturePlayer(mix_db, backend="numpy", seed=2) as p, MixturePlayer(mix_db, backend="numpy", seed=2) as q:
+        p.advance(10)
+        state = p.get_state()
+        assert state["residual"].shape == (2, p.residual.ar.shape[0])
+        q.set_state({**state, "residual": state["residual"] * 0})
+        assert np.array_equal(q.get_state()["residual"], state["residual"] * 0)
+        for bad in (state["residual"][:1], state["residual"] * np.nan):
+            with pytest.raises(ValueError, match=r"state residual must be finite with shape \(2, \d+\)"):
+                q.set_state({**state, "residual": bad})
+
+
 def test_database_without_switching_dynamics_plays_the_global_ar(ar_db, mix_db):
     with MixturePlayer(ar_db, backend="numpy", seed=1) as a, MixturePlayer(mix_db, backend="numpy", seed=1) as b:
         assert a.switching is None and b.switching is not None
         assert a.advance(5, record=True).shape == (5, a.global_dim)
-        assert b.advance(5, record=True).shape == (5, b.components * (b.dim + 1))
+        assert b.advance(5, record=True).shape == (5, b.components * (b.dim + 1) + b.residual.ar.shape[0])
         assert "history" in a.get_state() and "local" in b.get_state()
         assert a.global_coord.shape == b.global_coord.shape == (a.global_dim,)
 
@@ -249,7 +305,7 @@ def test_real_clip_long_run_beside_the_lds(clips_dir, tmp_path):
     src = clip.frames.reshape(150, -1).astype(np.float64) - m.mean
     src_energy = (src**2).sum(axis=1).mean()
     with MixturePlayer(path, backend="numpy", seed=0) as p:
-        u = p.advance(5000, record=True)
+        u = p.advance(5000, record=True)[:, : len(m.stacked_basis)]  # the components' coefficients
         frames = [p.next_frame() for _ in range(3)]
     basis = m.stacked_basis.astype(np.float64)
     energy = np.einsum("ni,ij,nj->n", u, basis @ basis.T, u)
@@ -269,10 +325,11 @@ def test_real_clip_frames_step_like_the_clip(clips_dir, tmp_path):
     with DatabaseWriter(path) as w:
         w.put_texture("o", clip.source_info())
         w.put_method("o", "mixture", model)
+    j = len(model.stacked_basis)
     with MixturePlayer(path, backend="numpy", seed=0) as p:
-        gram = step_gram(p.engine._basis)
+        gram = step_gram(p.engine._basis[:j])
         train = np.quantile(np.sqrt(step_sizes(gram, np.diff(_train_coefficients(model), axis=0))), 0.99)
-        played = np.quantile(np.sqrt(step_sizes(gram, np.diff(p.advance(2000, record=True), axis=0))), 0.99)
+        played = np.quantile(np.sqrt(step_sizes(gram, np.diff(p.advance(2000, record=True)[:, :j], axis=0))), 0.99)
     assert played < 1.25 * train
     model.switching = None  # as analysed before format 1.6
     with DatabaseWriter(path) as w:

@@ -80,7 +80,7 @@ TEXTURE = "t"
 def build_bases(folder: str | os.PathLike, *, detail: bool = True) -> dict[str, Path]:
     """One small database per method (texture ``t``, frames stored where the method plays them);
     the lds and mixture models are learned on tone values (their ``tone`` part fuzzed too).
-    ``detail=False`` leaves out the lds and mixture models' detail, gamut and tone parts (the layout
+    ``detail=False`` leaves out the lds and mixture models' detail, gamut, tone and residual parts (the layout
     of the bases before they existed, which fixed byte-flip mutants of the regression tests refer to)."""
     from dynatex.analyzer import load_clip
     from dynatex.analyzer.lds import learn_lds
@@ -95,7 +95,7 @@ def build_bases(folder: str | os.PathLike, *, detail: bool = True) -> dict[str, 
     tone = "on" if detail else "off"
     learners = {
         "lds": (waves, lambda c: learn_lds(c, n=6, tone=tone), False),
-        "mixture": (waves, lambda c: learn_mixture(c, components=2, dim=3, tone=tone), False),
+        "mixture": (waves, lambda c: learn_mixture(c, components=2, dim=3, tone=tone, residual="on"), False),
         "quilt": (
             load_clip(spreading_clip(12, 16, 16)),
             lambda c: learn_quilt(c, size=(32, 24), block=8, rank=4, seed=0),
@@ -118,6 +118,8 @@ def build_bases(folder: str | os.PathLike, *, detail: bool = True) -> dict[str, 
             model = learn(clip)
             if not detail and hasattr(model, "detail"):
                 model.detail = model.gamut = None
+            if not detail and hasattr(model, "residual"):
+                model.residual = None
             w.put_method(TEXTURE, method, model)
         out[method] = path
     return out

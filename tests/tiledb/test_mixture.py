@@ -19,12 +19,14 @@ def db_path(tmp_path_factory):
     path = tmp_path_factory.mktemp("mix") / "mix.h5"
     with DatabaseWriter(path) as w:
         w.put_texture("waves", clip.source_info())
-        w.put_method("waves", "mixture", learn_mixture(clip, components=2, dim=3, pca_dim=12, neighbors=6, pmax=3))
+        w.put_method(
+            "waves", "mixture", learn_mixture(clip, components=2, dim=3, pca_dim=12, neighbors=6, pmax=3, residual="on")
+        )
     return path
 
 
 def test_round_trip(db_path):
-    model = learn_mixture(load_clip(wave_clip(60)), components=2, dim=3, pca_dim=12, neighbors=6, pmax=3)
+    model = learn_mixture(load_clip(wave_clip(60)), components=2, dim=3, pca_dim=12, neighbors=6, pmax=3, residual="on")
     with TileDB(db_path) as db:
         tex = db.texture("waves")
         assert "mixture" in tex.methods
@@ -45,6 +47,29 @@ def test_round_trip(db_path):
     assert back.info["recon_error"] == model.info["recon_error"]
     for name in ("transitions", "local_ar", "local_noise"):
         assert np.array_equal(getattr(back.switching, name), getattr(model.switching, name)), name
+    assert back.residual is not None
+    for name in ("rows", "gain", "ar", "noise"):
+        assert np.array_equal(getattr(back.residual, name), getattr(model.residual, name)), name
+
+
+def test_residual_part_is_optional_and_versioned(db_path, tmp_path):
+    """A database written without ``residual`` reads with none; a newer part is ignored; no extra rows is fine."""
+    for edit in (lambda g: g.__delitem__("residual"), lambda g: g["residual"].attrs.__setitem__("version", 2)):
+        with TileDB(_damaged(db_path, tmp_path, edit)) as db:
+            model = db.texture("waves").read("mixture")
+        assert model.residual is None and model.switching is not None
+
+    def no_rows(g):
+        res = g["residual"]
+        k = res["rows"].shape[0]
+        gain = res["gain"][()][:, : res["gain"].shape[1] - k]
+        for name, data in (("rows", res["rows"][()][:0]), ("gain", gain)):
+            del res[name]
+            res.create_dataset(name, data=data)
+
+    with TileDB(_damaged(db_path, tmp_path, no_rows)) as db:
+        model = db.texture("waves").read("mixture")
+    assert model.residual.rows.shape == (0, model.stacked_basis.shape[1])
 
 
 def test_switching_part_is_optional_and_versioned(db_path, tmp_path):
@@ -92,6 +117,17 @@ def _damaged(src, tmp_path, edit):
             r"/switching/local_noise: the driving noise's variance",
         ),
         (replace_dataset("switching/local_ar", lambda a: a[:, :, :2]), r"/switching/local_ar: has shape"),
+        (
+            replace_dataset("residual/ar", lambda a: a * 0 + [2.0, -0.1]),
+            r"/residual/ar: axis 0's process is not stable",
+        ),
+        (replace_dataset("residual/ar", lambda a: a[:-1]), r"/residual/ar: gain, ar and noise must have one row"),
+        (replace_dataset("residual/noise", lambda a: -a), r"/residual/noise: standard deviations must be >= 0"),
+        (replace_dataset("residual/noise", lambda a: a * 1e9), r"/residual/noise: an axis reaches"),
+        (replace_dataset("residual/noise", lambda a: a * np.nan), r"/residual/noise: contains NaN"),
+        (replace_dataset("residual/rows", lambda a: a * 3), r"/residual/rows: a row has norm"),
+        (replace_dataset("residual/gain", lambda a: a[:, :-1]), r"/residual/gain: has shape"),
+        (replace_dataset("residual/rows", lambda a: a.astype(np.float16)), r"/residual/rows: .*float16"),
     ],
 )
 def test_damaged_groups_are_refused(db_path, tmp_path, edit, match):
