@@ -13,9 +13,9 @@ from collections.abc import Sequence
 FORMAT_NAME = "dynatex-tiledb"
 #: (major, minor) of a file that holds a required part (:data:`REQUIRED_PARTS`): older readers,
 #: which would play its models without the part, refuse its major.
-FORMAT_VERSION = (2, 0)
+FORMAT_VERSION = (2, 1)
 #: (major, minor) of a file without a required part: every 1.x reader reads it.
-COMPATIBLE_VERSION = (1, 7)
+COMPATIBLE_VERSION = (1, 8)
 #: The major versions a reader reads; it refuses any other and accepts any minor of these.
 READ_MAJORS = (1, 2)
 

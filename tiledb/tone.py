@@ -14,7 +14,7 @@ neighbouring ``forward`` values; :func:`lookup` builds the table).
 Unlike the optional parts (``detail``, ``gamut``: a reader that meets a newer version plays
 without them), the tone part cannot be left out: a model learned on tone values is garbage
 without its map. A reader refuses a part of a version newer than :data:`TONE_VERSION`
-(:class:`~.errors.TileDBVersionError`), and a file holding one is format 2.0, whose major
+(:class:`~.errors.TileDBVersionError`), and a file holding one is format 2.x, whose major
 1.x readers refuse.
 """
 

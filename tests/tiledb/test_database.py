@@ -22,7 +22,7 @@ from dynatex.tiledb.schema import COMPATIBLE_VERSION
 def test_open_lists_textures_and_reads_lds(lds_db):
     with open_db(lds_db) as db:
         assert db.textures == ("waves",)
-        assert db.version == COMPATIBLE_VERSION == (1, 7)  # no tone part: every 1.x reader reads it
+        assert db.version == COMPATIBLE_VERSION == (1, 8)  # no tone part: every 1.x reader reads it
         tex = db.texture()  # the only one
         assert tex.methods == ("lds",)
         m = tex.read("lds")
