@@ -306,8 +306,8 @@ def learn_mixture(
         if res_model is not None:
             res_model.rows = np.ascontiguousarray(res_model.rows.astype(np.float32) @ basis)
             model.residual = res_model
-            res_info["energy_model"] = 1.0 - err_soft + res_info["residual_energy"] / total
-            res_info["residual_energy"] /= total
+            res_info["energy_model"] = 1.0 - err_soft + res_info["residual_process_energy"] / total
+            res_info["residual_process_energy"] /= total
             model.info.update(res_info)
             u32 = np.concatenate([u32, np.zeros((tau, len(res_model.rows)), np.float32)], axis=1)
             u32 += (res_coords @ res_model.gain).astype(np.float32)
@@ -349,7 +349,7 @@ def fit_residual(
     Returns the process (its ``rows`` the ``k`` extra directions in reduced coordinates, for the
     caller to map into pixels; None when the span holds none of the residual), the training
     frames' axis coordinates ``(T, m)``, and facts for the model's info: ``residual_rows`` (``k``),
-    ``residual_axes`` (``m``) and ``residual_energy`` (the energy kept, in the units of ``res``).
+    ``residual_axes`` (``m``) and ``residual_process_energy`` (the energy kept, in the units of ``res``).
 
     Examples
     --------
@@ -378,7 +378,7 @@ def fit_residual(
     lam, axes = np.linalg.eigh(e.T @ e / t)
     lam, axes = lam[::-1], axes[:, ::-1]
     if not lam.size or lam[0] <= 0:
-        return None, None, {"residual_rows": 0, "residual_axes": 0, "residual_energy": 0.0}
+        return None, None, {"residual_rows": 0, "residual_axes": 0, "residual_process_energy": 0.0}
     keep = lam > lam[0] * 1e-9
     lam, axes = lam[keep], axes[:, keep]
     coords = e @ axes  # (T, m)
@@ -401,7 +401,7 @@ def fit_residual(
     gain = np.zeros((m, j + k))
     gain[:, np.concatenate([loading, np.ones(k, bool)])] = coef
     proc = ResidualProcess(rows=np.ascontiguousarray(extra.T), gain=gain, ar=ar, noise=noise)
-    info = {"residual_rows": k, "residual_axes": m, "residual_energy": float(lam.sum() * t)}
+    info = {"residual_rows": k, "residual_axes": m, "residual_process_energy": float(lam.sum() * t)}
     return proc, coords, info
 
 

@@ -12,7 +12,8 @@ part on and off:
   training states near the current one (Gaussian kernel, bandwidth ``--bandwidth`` times the
   median distance of a training state to its nearest other one), plus Gaussian noise with the
   regression's leave-one-out residual covariance;
-- ``replay``: the clip's own states in order, the floor any state process can reach.
+- ``replay``: the clip's own states in order, the floor any state process can reach (all ``T`` of
+  them from the first, not 300 after 50: the clip has no more).
 
 Figures on 300 frames after 50: ``local_novelty`` (the ghosting figure; good <= 1.15, bad >
 1.35), the spectrum distance and frame step ratio; over 3,000 state steps after 200, the state

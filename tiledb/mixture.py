@@ -435,16 +435,33 @@ def _read_residual(
     return proc
 
 
+def scalar_ar_autocov(phi: np.ndarray, lags: int) -> np.ndarray:
+    """Autocovariances ``gamma_0 .. gamma_lags`` of the stable scalar AR process with coefficients
+    ``phi`` driven by unit noise: the ``p + 1`` Yule-Walker equations, then their recursion (a
+    system of side ``p + 1``, so an order a damaged file states costs nothing to check).
+
+    Examples
+    --------
+    >>> scalar_ar_autocov(np.array([0.5]), 2).round(4).tolist()   # 1 / (1 - 0.25), then x 0.5 a lag
+    [1.3333, 0.6667, 0.3333]
+    """
+    phi = np.asarray(phi, dtype=np.float64).ravel()
+    p = phi.size
+    m = np.eye(p + 1)
+    for k in range(p + 1):
+        for i in range(1, p + 1):
+            m[k, abs(k - i)] -= phi[i - 1]
+    rhs = np.zeros(p + 1)
+    rhs[0] = 1.0
+    gamma = list(np.linalg.solve(m, rhs))
+    for k in range(p + 1, lags + 1):
+        gamma.append(float(sum(phi[i - 1] * gamma[k - i] for i in range(1, p + 1))))
+    return np.array(gamma[: lags + 1])
+
+
 def scalar_ar_gain(phi: np.ndarray) -> float:
     """Stationary variance of the stable scalar AR process with coefficients ``phi`` driven by unit noise."""
-    p = phi.size
-    comp = np.zeros((p, p))
-    comp[0] = phi
-    comp[1:, :-1] = np.eye(p - 1)
-    q = np.zeros((p, p))
-    q[0, 0] = 1.0
-    cov = np.linalg.solve(np.eye(p * p) - np.kron(comp, comp), q.ravel()).reshape(p, p)
-    return float(cov[0, 0])
+    return float(scalar_ar_autocov(phi, 0)[0])
 
 
 def _check_extent(path: str, model: MixtureModel, check: Checker, bound: float) -> None:

@@ -38,6 +38,7 @@ import numpy as np
 from ...checks import Range
 from ...errors import InvalidArgumentError
 from ...tiledb import MixtureModel
+from ...tiledb.mixture import scalar_ar_autocov
 from ..base import rng_from_state
 from ..controls import Control
 from .projected import ProjectionPlayer
@@ -136,6 +137,8 @@ class MixturePlayer(ProjectionPlayer):
         if self.switching is not None and draws != DEFAULT_DRAWS:
             raise InvalidArgumentError(f"this texture does not offer the control draws: {type(self).draws.unoffered}")
         self._draws = draws
+        if self.residual is not None:
+            self._res_hist = self._stationary_residual()
 
     def _setup(self, model: MixtureModel) -> None:
         src = self.texture.source
@@ -191,6 +194,18 @@ class MixturePlayer(ProjectionPlayer):
         if self.residual is not None:
             self._res_hist = np.zeros((self.residual.ar.shape[1], self.residual.ar.shape[0]))  # y_{t-i}
             self._dim += self.residual.ar.shape[0]
+
+    def _stationary_residual(self) -> np.ndarray:
+        """The residual axes' last ``order`` values drawn from each axis's stationary distribution, so
+        the first frames carry the residual's energy as the components' training start carries theirs."""
+        res = self.residual
+        order = res.ar.shape[1]
+        hist = np.empty((order, res.ar.shape[0]))
+        for a in range(res.ar.shape[0]):
+            gamma = scalar_ar_autocov(res.ar[a], order - 1) * res.noise[a] ** 2
+            lam, vec = np.linalg.eigh(gamma[np.abs(np.subtract.outer(np.arange(order), np.arange(order)))])
+            hist[:, a] = vec @ (np.sqrt(np.maximum(lam, 0.0)) * self._rng.standard_normal(order))
+        return hist
 
     def _basis(self, model: MixtureModel) -> np.ndarray:
         if self.residual is None or not len(self.residual.rows):
@@ -390,6 +405,9 @@ class MixturePlayer(ProjectionPlayer):
             r = np.asarray(state["responsibilities"], dtype=float)
             start = np.asarray(state["fade_from"], dtype=float)
             done, total = int(state["fade_done"]), int(state["fade_frames"])
+            res_hist = None
+            if self.residual is not None:
+                res_hist = np.asarray(state.get("residual", np.zeros_like(self._res_hist)), dtype=float)
         except (KeyError, TypeError, ValueError) as e:
             raise InvalidArgumentError(f"state of a switching mixture is missing or malformed: {e}") from None
         if not 0 <= label < s_count or z.shape != self._zh.shape or r.shape != (s_count,) or start.shape != (s_count,):
@@ -401,9 +419,7 @@ class MixturePlayer(ProjectionPlayer):
             raise InvalidArgumentError(
                 "state local, responsibilities and fade_from must be finite, with 0 <= fade_done <= fade_frames"
             )
-        res_hist = None
-        if self.residual is not None:
-            res_hist = np.asarray(state.get("residual", np.zeros_like(self._res_hist)), dtype=float)
+        if res_hist is not None:
             if res_hist.shape != self._res_hist.shape or not np.isfinite(res_hist).all():
                 raise InvalidArgumentError(f"state residual must be finite with shape {self._res_hist.shape}")
         rng = rng_from_state(state["rng"])

@@ -243,7 +243,7 @@ def test_residual_process_keeps_the_residual_in_its_span_with_its_variance_and_p
     assert info["residual_rows"] == 2 and info["residual_axes"] == 3 and coords.shape == (t, 3)
     assert proc.rows.shape == (2, q) and np.allclose((proc.rows[:, 4:6] ** 2).sum(axis=1), 1)  # they span e4, e5
     kept = (res[:, :6] ** 2).sum()  # all but the direction past the budget
-    assert np.isclose(info["residual_energy"], kept, rtol=1e-3)
+    assert np.isclose(info["residual_process_energy"], kept, rtol=1e-3)
     # each axis's coefficients over the loadings and the extra rows rebuild the residual on their
     # span; the mean offsets take none
     span = np.concatenate([eye[:4], proc.rows])

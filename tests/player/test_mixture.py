@@ -282,6 +282,23 @@ def test_residual_state_is_checked(mix_db):
         for bad in (state["residual"][:1], state["residual"] * np.nan):
             with pytest.raises(ValueError, match=r"state residual must be finite with shape \(2, \d+\)"):
                 q.set_state({**state, "residual": bad})
+        with pytest.raises(ValueError, match="state of a switching mixture is missing or malformed") as e:
+            q.set_state({**state, "residual": "much"})
+        assert "\n" not in str(e.value)
+        q.set_state({k: v for k, v in state.items() if k != "residual"})  # a state saved before the part
+        assert not q.get_state()["residual"].any()
+
+
+def test_residual_starts_from_its_stationary_distribution(mix_db):
+    """The axes' first history is a draw of their stationary process (no warm-up from zero)."""
+    with MixturePlayer(mix_db, backend="numpy", seed=3) as p:
+        res = p.residual
+        assert p.get_state()["residual"].any()
+        draws = np.stack([p._stationary_residual() for _ in range(4000)])  # (N, order, m)
+    stationary = res.noise**2 * np.array([scalar_ar_gain(a) for a in res.ar])
+    assert np.allclose(draws[:, 0].var(axis=0), stationary, rtol=0.1)
+    lag1 = (draws[:, 0] * draws[:, 1]).mean(axis=0) / stationary
+    assert np.allclose(lag1, res.ar[:, 0] / (1 - res.ar[:, 1]), atol=0.06)
 
 
 def test_database_without_switching_dynamics_plays_the_global_ar(ar_db, mix_db):

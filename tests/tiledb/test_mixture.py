@@ -8,6 +8,7 @@ import pytest
 from dynatex.analyzer import load_clip
 from dynatex.analyzer.mixture import learn_mixture
 from dynatex.tiledb import DatabaseWriter, TileDB, TileDBFormatError
+from dynatex.tiledb.mixture import scalar_ar_autocov, scalar_ar_gain
 
 from ..conftest import wave_clip
 from .conftest import edited_copy, replace_dataset
@@ -136,3 +137,25 @@ def test_damaged_groups_are_refused(db_path, tmp_path, edit, match):
         with pytest.raises(TileDBFormatError, match=match) as info:
             db.texture("waves").read("mixture")
     assert str(bad) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_scalar_ar_gain_is_the_stationary_variance():
+    """The Yule-Walker solve against the Kronecker (Lyapunov) form for low orders and the impulse
+    response's energy for a long one (an order a damaged file may state: side p + 1, not p^2)."""
+    rng = np.random.default_rng(4)
+    for p in range(1, 7):
+        phi = -np.poly(rng.uniform(-0.9, 0.9, p))[1:]
+        comp = np.zeros((p, p))
+        comp[0], comp[1:, :-1] = phi, np.eye(p - 1)
+        e0 = np.zeros(p * p)
+        e0[0] = 1.0
+        kron = np.linalg.solve(np.eye(p * p) - np.kron(comp, comp), e0)[0]
+        assert np.isclose(scalar_ar_gain(phi), kron, rtol=1e-9)
+    phi = np.zeros(64)
+    phi[0], phi[63] = 0.5, 0.2
+    h = np.zeros(4000)
+    h[0] = 1.0
+    for k in range(1, len(h)):
+        h[k] = phi[: min(64, k)] @ h[k - 1 :: -1][: min(64, k)]
+    assert np.isclose(scalar_ar_gain(phi), float(h @ h), rtol=1e-6)
+    assert np.allclose(scalar_ar_autocov(np.array([0.5]), 3), np.array([4, 2, 1, 0.5]) / 3)
