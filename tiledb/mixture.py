@@ -191,13 +191,21 @@ class MixtureModel(Described):
     residual: ResidualProcess | None = None
 
     def describe(self) -> dict:
-        """Facts as plain values: the ``info`` attributes, the detail part's, the colour set's and the tone map's."""
+        """Facts as plain values: the ``info`` attributes, the detail part's, the colour set's, the tone
+        map's and the residual process's."""
         return {
             **super().describe(),
             **_detail.describe(self.detail, self.info),
             **_gamut.describe(self.gamut),
             **_tone.describe(self.tone),
+            **self._residual_facts(),
         }
+
+    def _residual_facts(self) -> dict:
+        if self.residual is None:
+            return {}
+        res = self.residual
+        return {"residual": f"{res.ar.shape[0]} axes, AR({res.ar.shape[1]}) each, {len(res.rows)} extra rows"}
 
     @property
     def components(self) -> int:
@@ -226,7 +234,13 @@ class MixtureModel(Described):
         return (
             f"S={self.components} d={self.dim} D={self.global_dim}, {dynamics}, "
             f"reconstruction error {info.get('recon_error', 0):.3f} (single PCA of d: "
-            f"{info.get('recon_error_pca_dim', 0):.3f})" + _tone.summary(self.tone)
+            f"{info.get('recon_error_pca_dim', 0):.3f})"
+            + (
+                ""
+                if self.residual is None
+                else f", what the components leave out played by {self.residual.ar.shape[0]} axes"
+            )
+            + _tone.summary(self.tone)
         )
 
 

@@ -51,6 +51,9 @@ def test_round_trip(db_path):
     assert back.residual is not None
     for name in ("rows", "gain", "ar", "noise"):
         assert np.array_equal(getattr(back.residual, name), getattr(model.residual, name)), name
+    m, k = back.residual.ar.shape[0], len(back.residual.rows)
+    assert back.describe()["residual"] == f"{m} axes, AR({back.residual.ar.shape[1]}) each, {k} extra rows"
+    assert f"played by {m} axes" in back.summary()
 
 
 def test_residual_part_is_optional_and_versioned(db_path, tmp_path):
@@ -59,6 +62,7 @@ def test_residual_part_is_optional_and_versioned(db_path, tmp_path):
         with TileDB(_damaged(db_path, tmp_path, edit)) as db:
             model = db.texture("waves").read("mixture")
         assert model.residual is None and model.switching is not None
+        assert "residual" not in model.describe() and "axes" not in model.summary()
 
     def no_rows(g):
         res = g["residual"]
