@@ -348,7 +348,6 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         tone=_tone.read(group, check, source),
     )
     model.switching = _read_switching(group, check, model)
-    model.residual = _read_residual(group, check, model, source)
     t = model.global_coords.shape[0]
     if t < 2 or model.responsibilities.shape[0] != t or model.local_coords.shape[0] != t:
         check.fail(path + "/global_coords", "training arrays disagree on the number of frames (or fewer than 2)")
@@ -374,7 +373,9 @@ def read(group: h5py.Group, check: Checker, source: SourceInfo) -> MixtureModel:
         check.fail(path + "/ar_coefs", f"the AR process is not stable (spectral radius {rho:.6g} >= 1)")
     _tone.check_mean(path + "/mean", model.mean, model.tone, check)
     with np.errstate(all="ignore"):  # huge values overflow to inf, which every test below refuses
-        _check_extent(path, model, check, _tone.value_span(model.tone) * np.sqrt(p))
+        row_norms = np.sqrt(np.einsum("jp,jp->j", model.stacked_basis, model.stacked_basis, dtype=np.float64))
+        _check_extent(path, model, check, _tone.value_span(model.tone) * np.sqrt(p), row_norms)
+    model.residual = _read_residual(group, check, model, source, row_norms)
     return model
 
 
@@ -405,9 +406,10 @@ def _read_switching(group: h5py.Group, check: Checker, model: MixtureModel) -> S
 
 
 def _read_residual(
-    group: h5py.Group, check: Checker, model: MixtureModel, source: SourceInfo
+    group: h5py.Group, check: Checker, model: MixtureModel, source: SourceInfo, stacked: np.ndarray
 ) -> ResidualProcess | None:
-    """The validated ``residual`` part, or None when absent or of a newer version."""
+    """The validated ``residual`` part, or None when absent or of a newer version (``stacked``: the
+    norms of the model's stacked rows, already checked)."""
     g = open_part(group, RESIDUAL_GROUP, RESIDUAL_VERSION, check)
     if g is None:
         return None
@@ -436,7 +438,6 @@ def _read_residual(
             check.fail(g.name + "/ar", f"axis {a}'s process is not stable (spectral radius {rho:.6g} >= 1)")
         gains[a] = scalar_ar_gain(proc.ar[a])
     # Each axis's stationary spread in pixels, by the triangle inequality over the rows' norms.
-    stacked = np.sqrt(np.einsum("jp,jp->j", model.stacked_basis, model.stacked_basis, dtype=np.float64))
     with np.errstate(all="ignore"):
         reach = proc.noise * np.sqrt(gains) * (np.abs(proc.gain) @ np.concatenate([stacked, norms]))
         bound = ELLIPSOID_SLACK * _tone.value_span(model.tone) * np.sqrt(source.pixels)
@@ -478,11 +479,11 @@ def scalar_ar_gain(phi: np.ndarray) -> float:
     return float(scalar_ar_autocov(phi, 0)[0])
 
 
-def _check_extent(path: str, model: MixtureModel, check: Checker, bound: float) -> None:
+def _check_extent(path: str, model: MixtureModel, check: Checker, bound: float, row_norms: np.ndarray) -> None:
     """Reject values that take synthesis out of the pixel range or to inf: loadings longer than
     1 (or all zero), component offsets and local ellipsoids beyond the pixel
     range, global coordinates that are not the stated centred unit-covariance cloud, and AR
-    means, noise and Gaussians far outside that cloud.
+    means, noise and Gaussians far outside that cloud (``row_norms``: the stacked rows' norms).
 
     Loadings are orthonormal vectors of the reduced PCA space mapped into pixels by its
     orthonormal basis (rows past the clip's rank are zero), so they never lengthen; a frame's
@@ -495,8 +496,7 @@ def _check_extent(path: str, model: MixtureModel, check: Checker, bound: float) 
     weighted means, and least-squares innovations have at most their total variance.
     """
     s, d = model.components, model.dim
-    rows = model.stacked_basis.reshape(s, d + 1, -1)
-    norms = np.sqrt(np.einsum("sjp,sjp->sj", rows, rows, dtype=np.float64))
+    norms = row_norms.reshape(s, d + 1)
     if not norms[:, 1:].max() <= 1 + 1e-3:
         check.fail(
             path + "/stacked_basis",
