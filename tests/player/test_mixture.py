@@ -167,8 +167,8 @@ def test_zero_intensity_follows_the_ar_prediction(ar_db):
         p.intensity = 0.0
         h = p.get_state()["history"]
         p.advance(1)
-        a = p._A
-        want = p._w + sum(a[i] @ h[i] for i in range(p.order))
+        a = p.process.ar
+        want = p.process.intercept + sum(a[i] @ h[i] for i in range(p.order))
         assert np.allclose(p.global_coord, want)
 
 
@@ -208,7 +208,7 @@ def test_switching_long_run_keeps_the_clips_occupancy_and_energy(mix_db):
         m = p.texture.read("mixture")
         j = m.components * (m.dim + 1)
         u = p.advance(20000, record=True)
-        gram = p._gram
+        gram = p.process.gram
     assert u.shape == (20000, j + m.residual.ar.shape[0]) and np.isfinite(u).all()
     u = u[:, :j]  # the components' coefficients (the residual's axes follow)
     r = u.reshape(len(u), m.components, -1)[:, :, 0]
@@ -276,7 +276,7 @@ def test_residual_state_is_checked(mix_db):
     with MixturePlayer(mix_db, backend="numpy", seed=2) as p, MixturePlayer(mix_db, backend="numpy", seed=2) as q:
         p.advance(10)
         state = p.get_state()
-        assert state["residual"].shape == (2, p.residual.ar.shape[0])
+        assert state["residual"].shape == (2, p.residual.dim)
         q.set_state({**state, "residual": state["residual"] * 0})
         assert np.array_equal(q.get_state()["residual"], state["residual"] * 0)
         for bad in (state["residual"][:1], state["residual"] * np.nan):
@@ -292,9 +292,9 @@ def test_residual_state_is_checked(mix_db):
 def test_residual_starts_from_its_stationary_distribution(mix_db):
     """The axes' first history is a draw of their stationary process (no warm-up from zero)."""
     with MixturePlayer(mix_db, backend="numpy", seed=3) as p:
-        res = p.residual
+        res = p.residual.part
         assert p.get_state()["residual"].any()
-        draws = np.stack([p._stationary_residual() for _ in range(4000)])  # (N, order, m)
+        draws = np.stack([p.residual.stationary(p._rng) for _ in range(4000)])  # (N, order, m)
     stationary = res.noise**2 * np.array([scalar_ar_gain(a) for a in res.ar])
     assert np.allclose(draws[:, 0].var(axis=0), stationary, rtol=0.1)
     lag1 = (draws[:, 0] * draws[:, 1]).mean(axis=0) / stationary
@@ -305,7 +305,7 @@ def test_database_without_switching_dynamics_plays_the_global_ar(ar_db, mix_db):
     with MixturePlayer(ar_db, backend="numpy", seed=1) as a, MixturePlayer(mix_db, backend="numpy", seed=1) as b:
         assert a.switching is None and b.switching is not None
         assert a.advance(5, record=True).shape == (5, a.global_dim)
-        assert b.advance(5, record=True).shape == (5, b.components * (b.dim + 1) + b.residual.ar.shape[0])
+        assert b.advance(5, record=True).shape == (5, b.components * (b.dim + 1) + b.residual.dim)
         assert "history" in a.get_state() and "local" in b.get_state()
         assert a.global_coord.shape == b.global_coord.shape == (a.global_dim,)
 
