@@ -384,17 +384,9 @@ def fit_residual(
     coords = e @ axes  # (T, m)
     m = coords.shape[1]
     order = max(1, min(order, t - 1))
-    ar = np.zeros((m, order))
-    noise = np.empty(m)
-    for a in range(m):
-        y = coords[:, a]
-        rho = np.ones(order + 1)
-        for lag in range(1, order + 1):
-            num = float(y[lag:] @ y[:-lag])
-            den = float(y[lag:] @ y[lag:] + y[:-lag] @ y[:-lag]) / 2
-            rho[lag] = np.clip(num / max(den, 1e-300), -max_radius, max_radius)
-        ar[a] = _yule_walker(rho, max_radius)
-        noise[a] = np.sqrt(lam[a] / scalar_ar_gain(ar[a]))
+    rho = _lag_correlations(coords, order, max_radius)
+    ar = np.stack([_yule_walker(rho[:, a], max_radius) for a in range(m)])
+    noise = np.sqrt(lam / np.array([scalar_ar_gain(phi) for phi in ar]))
     # Each axis as coefficients over the loadings (the mean offsets take none) and the extra rows.
     both = np.concatenate([rows[loading], extra.T], axis=0)
     coef = (span @ axes).T @ np.linalg.pinv(both, rcond=RESIDUAL_REACH / max(float(sv[0]), 1.0))
@@ -667,13 +659,9 @@ def fit_switching(
     for s in range(s_count):
         lam, vec = np.linalg.eigh(local_cov[s])
         lam = np.maximum(lam, 0.0)
-        y = (z[:, s] - offset[s]) @ vec
-        rho = np.ones((order + 1, d))
-        for k in range(1, order + 1):
-            w = np.prod([resp[j : n - k + j, s] for j in range(k + 1)], axis=0)[:, None]
-            num = (w * y[k:] * y[:-k]).sum(axis=0)
-            den = (w * (y[k:] ** 2 + y[:-k] ** 2)).sum(axis=0) / 2
-            rho[k] = np.clip(num / np.maximum(den, 1e-300), -max_radius, max_radius)
+        # a lag-k pair's weight: the component's responsibilities over the window's k + 1 frames
+        weights = [np.prod([resp[j : n - k + j, s] for j in range(k + 1)], axis=0) for k in range(1, order + 1)]
+        rho = _lag_correlations((z[:, s] - offset[s]) @ vec, order, max_radius, weights)
         phi = np.zeros((order, d))
         gain = np.ones(d)
         for a in range(d):
@@ -683,6 +671,21 @@ def fit_switching(
             ar[s, i] = (vec * phi[i]) @ vec.T
         noise[s] = vec * np.sqrt(lam / gain)
     return SwitchingDynamics(transitions=trans, local_ar=ar, local_noise=noise)
+
+
+def _lag_correlations(
+    y: np.ndarray, order: int, max_radius: float, weights: list[np.ndarray] | None = None
+) -> np.ndarray:
+    """The correlations ``(order + 1, d)`` of each column of ``y`` ``(N, d)`` with itself at lags
+    ``0..order``: at lag ``k`` the pairs ``(y_t, y_{t+k})``, weighted by ``weights[k - 1]``
+    ``(N - k,)`` (None: equally), against the mean energy of the two ends, clipped to ``max_radius``."""
+    rho = np.ones((order + 1, y.shape[1]))
+    for k in range(1, order + 1):
+        w = 1.0 if weights is None else weights[k - 1][:, None]
+        num = (w * y[k:] * y[:-k]).sum(axis=0)
+        den = (w * (y[k:] ** 2 + y[:-k] ** 2)).sum(axis=0) / 2
+        rho[k] = np.clip(num / np.maximum(den, 1e-300), -max_radius, max_radius)
+    return rho
 
 
 def _yule_walker(rho: np.ndarray, max_radius: float) -> np.ndarray:
