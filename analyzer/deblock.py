@@ -61,7 +61,7 @@ QUANTILES = np.concatenate([np.linspace(0.0, 0.99, 100), np.linspace(0.991, 1.0,
 #: Luma weights of R, G and B (ITU-R BT.601, the codecs' own).
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 #: The plane-axis pairs, as ``Grid`` keys.
-KEYS = ("luma_x", "luma_y", "chroma_x", "chroma_y")
+KEYS = ("luma16_x", "luma16_y", "luma_x", "luma_y", "chroma_x", "chroma_y")
 #: Quantile maps per class of activity: the classes' edges, the boundaries' excess steps' quantiles
 #: per class, the inside's, the share of the maps' removal taken away.
 Table = tuple[np.ndarray, np.ndarray, np.ndarray, float]
@@ -84,7 +84,7 @@ class Grid:
     def describe(self) -> str:
         """The grid in a few words, e.g. ``luma 8 px x+y (1.72/1.22), chroma 16 px x+y (4.03/3.65)``."""
         parts = []
-        for plane, side in (("luma", PERIOD), ("chroma", 2 * PERIOD)):
+        for plane, side in (("luma16", 2 * PERIOD), ("luma", PERIOD), ("chroma", 2 * PERIOD)):
             axes = [a for a in "xy" if self.found[f"{plane}_{a}"]]
             if axes:
                 ratios = "/".join(f"{self.ratios[f'{plane}_{a}']:.2f}" for a in axes)
@@ -119,14 +119,14 @@ def step_profile(plane: np.ndarray, axis: int) -> np.ndarray:
     return d.reshape(-1, d.shape[-1]).mean(axis=0, dtype=np.float64)
 
 
-def phase_ratios(profile: np.ndarray) -> np.ndarray:
-    """Per phase of :data:`PERIOD`: the median over its pairs of the step there over the median
-    of the :data:`SIDE` steps each side (pairs without a full side left out; 1.0 where none)."""
+def phase_ratios(profile: np.ndarray, period: int = PERIOD) -> np.ndarray:
+    """Per phase of ``period``: the median over its pairs of the step there over the median of
+    the :data:`SIDE` steps each side (pairs without a full side left out; 1.0 where none)."""
     n = len(profile)
-    out = np.ones(PERIOD)
+    out = np.ones(period)
     tiny = 1e-9 + 1e-6 * float(profile.mean())
-    for phase in range(PERIOD):
-        b = np.arange(phase, n, PERIOD)
+    for phase in range(period):
+        b = np.arange(phase, n, period)
         b = b[(b >= SIDE) & (b + SIDE < n)]
         if len(b):
             beside = np.stack([profile[b + k] for k in range(-SIDE, SIDE + 1) if k])
@@ -134,25 +134,32 @@ def phase_ratios(profile: np.ndarray) -> np.ndarray:
     return out
 
 
-def _steps(plane: np.ndarray, phase: int) -> list[np.ndarray]:
-    """The steps ``s(-2) .. s(2)`` along ``plane``'s last axis around the pairs ``(phase + k * PERIOD,
-    phase + k * PERIOD + 1)`` (``s(0)`` theirs), for as many ``k`` as the boundaries (:data:`PHASE`)
-    have two pixels on either side; ``phase`` >= 2."""
-    count = len(range(PHASE, plane.shape[-1] - 3, PERIOD))
-    cols = [plane[..., phase + k :: PERIOD][..., :count] for k in range(-2, 4)]
+def _steps(plane: np.ndarray, phase: int, period: int) -> list[np.ndarray]:
+    """The steps ``s(-2) .. s(2)`` along ``plane``'s last axis around the pairs ``(phase + k *
+    period, phase + k * period + 1)`` (``s(0)`` theirs), for as many ``k`` as the boundaries
+    (``period - 1``) have two pixels on either side; ``phase`` >= 2."""
+    count = len(range(period - 1, plane.shape[-1] - 3, period))
+    cols = [plane[..., phase + k :: period][..., :count] for k in range(-2, 4)]
     return [b - a for a, b in zip(cols, cols[1:])]
 
 
-def excess_activity(plane: np.ndarray, phase: int) -> tuple[np.ndarray, np.ndarray]:
+def excess_activity(plane: np.ndarray, phase: int, period: int = PERIOD) -> tuple[np.ndarray, np.ndarray]:
     """At the pairs of ``phase`` (:func:`_steps`): the excess step ``s(0) - (s(-1) + s(1)) / 2``
     and the activity beside it, the mean of ``|s(-2)|, |s(-1)|, |s(1)|, |s(2)|``."""
-    s = _steps(plane, phase)
+    s = _steps(plane, phase, period)
     return s[2] - (s[1] + s[3]) / 2, (np.abs(s[0]) + np.abs(s[1]) + np.abs(s[3]) + np.abs(s[4])) / 4
 
 
-def detect_grid(frames: np.ndarray) -> Grid:
+def _passes(plane_name: str) -> list[tuple[str, int, int]]:
+    """The smoothing passes of a plane in their order: key, axis of ``(T, H, W[, 2])``, period."""
+    out = [(f"{plane_name}16_{a}", ax, 2 * PERIOD) for a, ax in (("x", 2), ("y", 1))] if plane_name == "luma" else []
+    return out + [(f"{plane_name}_{a}", ax, PERIOD) for a, ax in (("x", 2), ("y", 1))]
+
+
+def detect_grid(frames: np.ndarray, *, every: bool = False) -> Grid:
     """The block grid of ``frames`` ``(T, H, W, C)`` uint8 (:class:`Grid`), measured on up to
-    :data:`SAMPLE_FRAMES` of them.
+    :data:`SAMPLE_FRAMES` of them; each pass's quantile maps are measured on the frames as the
+    passes before it (those of a found grid, or all with ``every``) leave them.
 
     >>> rng = np.random.default_rng(0)
     >>> noise = rng.integers(0, 256, (8, 64, 64, 3)).astype(np.uint8)
@@ -167,17 +174,18 @@ def detect_grid(frames: np.ndarray) -> Grid:
     luma, chroma = planes(frames[pick])
     found, ratios, maps = {}, {}, {}
     identity = (np.array([-np.inf, np.inf]), np.zeros((1, len(QUANTILES))), np.zeros((1, len(QUANTILES))), 0.0)
-    for key in KEYS:
-        plane_name, axis_name = key.split("_")
-        values = luma if plane_name == "luma" else chroma
-        found[key], ratios[key], maps[key] = False, 1.0, identity
-        axis = 2 if axis_name == "x" else 1
-        if values is None or values.shape[axis] < 2 * PERIOD + 2:
-            continue
-        r = phase_ratios(step_profile(values, axis))
-        ratios[key] = float(r[PHASE])
-        found[key] = bool(r[PHASE] >= MIN_RATIO and r[PHASE] >= MARGIN * np.delete(r, PHASE).max())
-        maps[key] = _table(_last(values, axis))
+    for plane_name, values in (("luma", luma), ("chroma", chroma)):
+        current = values
+        for key, axis, period in _passes(plane_name):
+            found[key], ratios[key], maps[key] = False, 1.0, identity
+            if values is None or values.shape[axis] < 2 * period + 2:
+                continue
+            r = phase_ratios(step_profile(values, axis), period)
+            ratios[key] = float(r[period - 1])
+            found[key] = bool(r[-1] >= MIN_RATIO and r[-1] >= MARGIN * r[:-1].max())
+            maps[key] = _table(np.ascontiguousarray(_last(current, axis)), period)
+            if found[key] or every:
+                current = current + np.moveaxis(_smoothing(_last(current, axis), maps[key], period), -1, axis)
     return Grid(found, ratios, maps)
 
 
@@ -196,15 +204,16 @@ def _removal(e: np.ndarray, activity: np.ndarray, table: Table) -> np.ndarray:
     return (share * np.sign(e)) * (mag - np.minimum(kept, mag))
 
 
-def _table(plane: np.ndarray) -> Table:
-    """The quantile maps of the excess steps of ``plane`` (its last axis the one smoothed): per
-    class of activity (:data:`CLASSES`, equally many boundaries each) the boundaries' and the
-    inside's quantiles, and the share of the maps' removal that brings the boundaries' mean
-    absolute step to the inside's (the maps alone overshoot on a fine texture: grass)."""
-    e, act = excess_activity(plane, PHASE)
+def _table(plane: np.ndarray, period: int) -> Table:
+    """The quantile maps of the excess steps of ``plane`` (its last axis the one smoothed) at the
+    boundaries of ``period``: per class of activity (:data:`CLASSES`, equally many boundaries
+    each) the boundaries' and the inside's quantiles, and the share of the maps' removal that
+    brings the boundaries' mean absolute step to the inside's (the maps alone overshoot on a fine
+    texture: grass)."""
+    e, act = excess_activity(plane, period - 1, period)
     edges = np.quantile(act, np.linspace(0.0, 1.0, CLASSES + 1))
     edges[0], edges[-1] = -np.inf, np.inf
-    inside = [excess_activity(plane, p) for p in INSIDE]
+    inside = [excess_activity(plane, p, period) for p in range(2, period) if p % PERIOD in INSIDE]
     e_in = np.concatenate([x.ravel() for x, _ in inside])
     act_in = np.concatenate([a.ravel() for _, a in inside])
     qb, qi = np.zeros((CLASSES, len(QUANTILES))), np.zeros((CLASSES, len(QUANTILES)))
@@ -216,26 +225,28 @@ def _table(plane: np.ndarray) -> Table:
             qi[k] = np.quantile(np.abs(e_in[sel_i]), QUANTILES)
         else:
             qb[k] = qi[k] = np.quantile(np.abs(e), QUANTILES)
-    target = np.mean([np.abs(_steps(plane, p)[2]).mean() for p in range(PERIOD) if p not in (PHASE, 3) and p >= 2])
-    delta = _steps(plane, PHASE)[2]
-    removed = _removal(e, act, (edges, qb, qi, 1.0)) * (1 - 1 / PERIOD)
+    # the inside's pairs: neither a boundary of the grid nor of an H.264 4 x 4 transform
+    target = np.mean([np.abs(_steps(plane, p, period)[2]).mean() for p in range(2, period) if p % 4 != 3])
+    delta = _steps(plane, period - 1, period)[2]
+    removed = _removal(e, act, (edges, qb, qi, 1.0)) * (1 - 1 / period)
     shares = np.linspace(0.0, 1.0, 21)
     gaps = [abs(float(np.abs(delta - a * removed).mean()) - target) for a in shares]
     return edges, qb, qi, float(shares[int(np.argmin(gaps))])
 
 
-def _smoothing(plane: np.ndarray, table: Table) -> np.ndarray:
+def _smoothing(plane: np.ndarray, table: Table, period: int) -> np.ndarray:
     """The correction of ``plane`` (float32, its last axis the one smoothed) that removes
-    :func:`_removal` of its excess steps at the boundaries as ramps over PERIOD / 2 pixels each side."""
-    corr = np.zeros_like(plane)
-    e, act = excess_activity(plane, PHASE)
+    :func:`_removal` of its excess steps at the boundaries of ``period`` as ramps over half a
+    period each side."""
+    corr = np.zeros(plane.shape, np.float32)
+    e, act = excess_activity(plane, period - 1, period)
     if not e.shape[-1]:
         return corr
     removed = _removal(e, act, table)
-    half = PERIOD // 2
+    half = period // 2
     for j in range(-half, half):
         ramp = (j + half + 0.5) / (2 * half) - (1.0 if j >= 0 else 0.0)
-        target = corr[..., PHASE + 1 + j :: PERIOD]
+        target = corr[..., period + j :: period]
         m = min(target.shape[-1], removed.shape[-1])
         target[..., :m] += ramp * removed[..., :m]
     return corr
@@ -269,15 +280,14 @@ def deblock(frames: np.ndarray, grid: Grid, *, every: bool = False) -> np.ndarra
 
 
 def _plane_correction(plane: np.ndarray, grid: Grid, name: str, keys: list[str]) -> np.ndarray | None:
-    """The correction of ``plane`` (``(T, H, W[, 2])``) along the axes of ``keys`` it has, x then
-    y (each measured on the plane as the one before left it), or None where it has none."""
+    """The correction of ``plane`` (``(T, H, W[, 2])``) by its passes among ``keys`` (each
+    measured on the plane as the one before left it), or None where it has none."""
     corr = None
-    for axis_name, axis in (("x", 2), ("y", 1)):
-        key = f"{name}_{axis_name}"
+    for key, axis, period in _passes(name):
         if key not in keys:
             continue
         current = plane if corr is None else plane + corr
-        d = np.moveaxis(_smoothing(np.ascontiguousarray(_last(current, axis)), grid.maps[key]), -1, axis)
+        d = np.moveaxis(_smoothing(_last(current, axis), grid.maps[key], period), -1, axis)
         corr = d if corr is None else corr + d
     return corr
 
@@ -293,7 +303,7 @@ def choose(frames: np.ndarray | None, mode: str) -> tuple[Grid | None, dict]:
         return None, {"codec_grid": "not measured (streamed clip)", "deblocked": False}
     if mode == "off":
         return None, {"codec_grid": "not measured", "deblocked": False}
-    grid = detect_grid(frames)
+    grid = detect_grid(frames, every=mode == "on")
     smooth = mode == "on" or grid.any
     if mode == "on":
         grid = Grid(dict.fromkeys(KEYS, True), grid.ratios, grid.maps)
