@@ -94,17 +94,17 @@ class Grid:
 
 def planes(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """Luma ``(T, H, W)`` and chroma at half resolution ``(T, H // 2, W // 2, 2)`` (B - Y and
-    R - Y averaged over 2 x 2 pixels) of ``frames`` ``(T, H, W, C)``, float32; grey frames have no
-    chroma."""
-    if frames.shape[-1] == 1:
-        return frames[..., 0].astype(np.float32), None
-    r, g, b = (frames[..., c].astype(np.float32) for c in range(3))
-    y = _LUMA[0] * r + _LUMA[1] * g + _LUMA[2] * b
+    R - Y averaged over 2 x 2 pixels) of ``frames`` ``(T, H, W, C)`` (uint8, or float32 on the
+    0..255 scale), float32; grey frames have no chroma."""
+    f = frames if frames.dtype == np.float32 else frames.astype(np.float32)
+    if f.shape[-1] == 1:
+        return f[..., 0], None
+    y = _LUMA[0] * f[..., 0] + _LUMA[1] * f[..., 1] + _LUMA[2] * f[..., 2]
     t, h, w = y.shape
     c = np.empty((t, h // 2, w // 2, 2), np.float32)
-    for k, ch in enumerate((b, r)):
-        ch -= y
-        c[..., k] = ch[:, : h - h % 2, : w - w % 2].reshape(t, h // 2, 2, w // 2, 2).mean(axis=(2, 4))
+    for k, ch in enumerate((2, 0)):
+        diff = f[:, : h - h % 2, : w - w % 2, ch] - y[:, : h - h % 2, : w - w % 2]
+        c[..., k] = diff.reshape(t, h // 2, 2, w // 2, 2).mean(axis=(2, 4))
     return y, c
 
 
@@ -263,7 +263,7 @@ def deblock(frames: np.ndarray, grid: Grid, *, every: bool = False) -> np.ndarra
         return out
     for lo in range(0, len(frames), CHUNK):
         f = out[lo : lo + CHUNK]
-        luma, chroma = planes(frames[lo : lo + CHUNK])
+        luma, chroma = planes(f)
         d_luma = _plane_correction(luma, grid, "luma", keys)
         if d_luma is not None:
             f += d_luma[..., None]
