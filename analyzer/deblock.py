@@ -56,6 +56,8 @@ MIN_RATIO = 1.15
 MARGIN = 1.1
 #: Frames the detection looks at (evenly spread over the clip).
 SAMPLE_FRAMES = 32
+#: Pixels of the sampled frames the quantile maps are measured on (every few frames where there are more).
+TABLE_PIXELS = 8 << 20
 #: Quantiles of the map between the boundaries' excess steps and the inside's.
 QUANTILES = np.concatenate([np.linspace(0.0, 0.99, 100), np.linspace(0.991, 1.0, 10)])
 #: Luma weights of R, G and B (ITU-R BT.601, the codecs' own).
@@ -172,10 +174,12 @@ def detect_grid(frames: np.ndarray, *, every: bool = False) -> Grid:
     t = frames.shape[0]
     pick = np.unique(np.linspace(0, t - 1, min(t, SAMPLE_FRAMES)).round().astype(int))
     luma, chroma = planes(frames[pick])
+    # the quantile maps from every few of those frames, at most TABLE_PIXELS of them
+    sub = slice(None, None, -(-len(pick) * frames[0, ..., 0].size // TABLE_PIXELS))
     found, ratios, maps = {}, {}, {}
     identity = (np.array([-np.inf, np.inf]), np.zeros((1, len(QUANTILES))), np.zeros((1, len(QUANTILES))), 0.0)
     for plane_name, values in (("luma", luma), ("chroma", chroma)):
-        current = values
+        current = None if values is None else values[sub]
         for key, axis, period in _passes(plane_name):
             found[key], ratios[key], maps[key] = False, 1.0, identity
             if values is None or values.shape[axis] < 2 * period + 2:
@@ -193,14 +197,16 @@ def _removal(e: np.ndarray, activity: np.ndarray, table: Table) -> np.ndarray:
     """What the quantile maps ``table`` remove of the excess steps ``e`` at pairs of ``activity``."""
     edges, boundary, inside, share = table
     mag = np.abs(e)
-    kept = np.empty_like(mag)
     which = np.clip(np.searchsorted(edges, activity, side="right") - 1, 0, len(boundary) - 1)
-    for k in range(len(boundary)):
-        sel = which == k
-        m = mag[sel]
-        b, i = boundary[k], inside[k]
-        # past the sample's largest step, the largest removal
-        kept[sel] = np.where(m > b[-1], m - (b[-1] - i[-1]), np.interp(m, b, i))
+    # one interpolation through the classes' maps laid end to end, each class offset past the last
+    offset = 2.0 * float(boundary.max()) + 1.0
+    shift = offset * np.arange(len(boundary))
+    kept = np.interp(
+        np.minimum(mag, boundary[which, -1]) + shift[which], (boundary + shift[:, None]).ravel(), inside.ravel()
+    )
+    # past the sample's largest step, the largest removal
+    over = mag - (boundary[which, -1] - inside[which, -1])
+    kept = np.where(mag > boundary[which, -1], over, kept)
     return (share * np.sign(e)) * (mag - np.minimum(kept, mag))
 
 
@@ -242,13 +248,17 @@ def _smoothing(plane: np.ndarray, table: Table, period: int) -> np.ndarray:
     e, act = excess_activity(plane, period - 1, period)
     if not e.shape[-1]:
         return corr
-    removed = _removal(e, act, table)
+    removed = _removal(e, act, table).astype(np.float32)
     half = period // 2
-    for j in range(-half, half):
-        ramp = (j + half + 0.5) / (2 * half) - (1.0 if j >= 0 else 0.0)
-        target = corr[..., period + j :: period]
-        m = min(target.shape[-1], removed.shape[-1])
-        target[..., :m] += ramp * removed[..., :m]
+    ramp = ((np.arange(-half, half) + half + 0.5) / period - (np.arange(-half, half) >= 0)).astype(np.float32)
+    # boundary k's ramp covers the pixels half + k * period .. half + (k + 1) * period - 1
+    n, count = plane.shape[-1], removed.shape[-1]
+    whole = min(count, (n - half) // period)
+    windows = corr[..., half : half + whole * period].reshape(*corr.shape[:-1], whole, period)
+    windows += removed[..., :whole, None] * ramp
+    for k in range(whole, count):
+        width = n - (half + k * period)
+        corr[..., half + k * period :] += removed[..., k, None] * ramp[:width]
     return corr
 
 
