@@ -56,6 +56,9 @@ MIN_RATIO = 1.15
 MARGIN = 1.1
 #: Frames the detection looks at (evenly spread over the clip).
 SAMPLE_FRAMES = 32
+#: Most of the maps' removal taken away (more than all of it: where the inside's steps are the
+#: smaller, as in an H.264 clip's flat dark, up to the whole excess).
+MAX_SHARE = 2.0
 #: Pixels of the sampled frames the quantile maps are measured on (every few frames where there are more).
 TABLE_PIXELS = 8 << 20
 #: Quantiles of the map between the boundaries' excess steps and the inside's.
@@ -207,7 +210,7 @@ def _removal(e: np.ndarray, activity: np.ndarray, table: Table) -> np.ndarray:
     # past the sample's largest step, the largest removal
     over = mag - (boundary[which, -1] - inside[which, -1])
     kept = np.where(mag > boundary[which, -1], over, kept)
-    return (share * np.sign(e)) * (mag - np.minimum(kept, mag))
+    return np.sign(e) * np.minimum(share * (mag - np.minimum(kept, mag)), mag)
 
 
 def _table(plane: np.ndarray, period: int) -> Table:
@@ -235,7 +238,7 @@ def _table(plane: np.ndarray, period: int) -> Table:
     target = np.mean([np.abs(_steps(plane, p, period)[2]).mean() for p in range(2, period) if p % 4 != 3])
     delta = _steps(plane, period - 1, period)[2]
     removed = _removal(e, act, (edges, qb, qi, 1.0)) * (1 - 1 / period)
-    shares = np.linspace(0.0, 1.0, 21)
+    shares = np.linspace(0.0, MAX_SHARE, 41)
     gaps = [abs(float(np.abs(delta - a * removed).mean()) - target) for a in shares]
     return edges, qb, qi, float(shares[int(np.argmin(gaps))])
 
