@@ -24,13 +24,15 @@ import numpy as np
 from ..checks import check_int
 from ..errors import InvalidArgumentError
 from ..tiledb import LDSModel
+from .deblock import choose as choose_grid
+from .deblock import learning_values
 from .detail import attach_detail
 from .gamut import learn_gamut
 from .methods import check_params
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
 from .tone import choose as choose_tone
-from .tone import levels_of, to_tone
+from .tone import levels_of
 from .video import Clip, Progress, clip_frames
 
 DEFAULT_N = 50
@@ -51,6 +53,7 @@ def learn_lds(
     max_radius: float = DEFAULT_MAX_RADIUS,
     calibrate: bool = True,
     tone: str = "auto",
+    deblock: str = "auto",
     seed: int = 0,
     max_memory: int | None = None,
     progress: Progress | None = None,
@@ -82,6 +85,11 @@ def learn_lds(
         Learn on the clip's levels Gaussianised per channel (:mod:`.tone`; the model's ``tone``
         part maps them back): "auto" where a Gaussian model would saturate many values. A
         streamed clip is learned on its levels ("on" is refused).
+    deblock : {"auto", "on", "off"}
+        Smooth away the block grid of a compressed clip before learning (:mod:`.deblock`): "auto"
+        where one is found, "on" on every plane and axis, "off" never; the model's info records
+        the grid (``codec_grid``) and whether it was smoothed (``deblocked``). A streamed clip is
+        learned as it is ("on" is refused).
     seed : int
         Seed of the randomized SVD.
     max_memory : int, optional
@@ -109,14 +117,24 @@ def learn_lds(
     tau = clip.n_frames if streamed else frames.shape[0]
     if tau < 3:
         raise InvalidArgumentError(f"clip has {tau} frames; learning an LDS needs at least 3")
-    n, k, energy, svd, max_radius, calibrate, tone, seed = check_params(
-        "lds", n=n, k=k, energy=energy, svd=svd, max_radius=max_radius, calibrate=calibrate, tone=tone, seed=seed
+    n, k, energy, svd, max_radius, calibrate, tone, deblock, seed = check_params(
+        "lds",
+        n=n,
+        k=k,
+        energy=energy,
+        svd=svd,
+        max_radius=max_radius,
+        calibrate=calibrate,
+        tone=tone,
+        deblock=deblock,
+        seed=seed,
     )
     auto = n == "auto"
     if not auto:
         if n > tau - 1:
             raise InvalidArgumentError(f"n={n} is larger than the clip allows: it has {tau} frames, so n <= {tau - 1}")
     tone_map = choose_tone(frames, tone)
+    grid, grid_info = choose_grid(frames, deblock)
     step = _stepper(progress, 5)
     rank_cap = min(tau - 1, DEFAULT_N) if auto else int(n)
     if streamed:
@@ -125,7 +143,7 @@ def learn_lds(
         )
         method = "gram-streamed"
     else:
-        values = frames if tone_map is None else to_tone(frames, tone_map)
+        values, learned = learning_values(frames, grid, tone_map)
         mean, basis, sv, states, total_energy, method = _learn_subspace(values, svd, auto, rank_cap, seed, step)
         del values
         blocks = 0
@@ -144,11 +162,12 @@ def learn_lds(
     k = check_int("k", k, 1, n, rule=f"an integer in 1..n={n}")
     step()
     model = _fit_dynamics(mean, basis, sv, x, total_energy, tau, k, max_radius, calibrate, energy, auto, method, step)
+    model.info.update(grid_info)
     if streamed:
         model.info["column_blocks"] = int(blocks)
     else:
         basis32, x32 = model.basis, x.T.astype(np.float32)
-        attach_detail(model, frames, levels_of(lambda t0, t1: x32[t0:t1] @ basis32 + mean, tone_map), seed=seed)
+        attach_detail(model, learned, levels_of(lambda t0, t1: x32[t0:t1] @ basis32 + mean, tone_map), seed=seed)
         model.gamut = learn_gamut(frames)
         model.tone = tone_map
     return model

@@ -85,6 +85,12 @@ _TONE_DOC = (
     "clips whose values pile at 0 and 255. auto: where a Gaussian per value would saturate over "
     f"{SATURATION_SHARE:.0%} of them."
 )
+#: smooth away a compressed clip's block grid before learning (analyzer/deblock.py)
+_DEBLOCK = Choice("auto", "on", "off")
+_DEBLOCK_DOC = (
+    "Smooth away the block grid a compressed clip carries (8 px luma, 16 px chroma blocks) before "
+    "learning, so that the model does not recombine it into mismatched squares. auto: where one is found."
+)
 #: largest pole magnitude of a projection model's dynamics
 _MAX_RADIUS = Range(float, 0.0, 1.0, low_open=True, high_open=True)
 
@@ -111,6 +117,7 @@ LDS_PARAMS = (
     ),
     Param("max_radius", _MAX_RADIUS, 0.995, "Largest pole magnitude."),
     Param("tone", _TONE, "auto", _TONE_DOC),
+    Param("deblock", _DEBLOCK, "auto", _DEBLOCK_DOC),
     Param("calibrate", Flag(), True, "Scale the noise so that the states keep the training variance.", None),
     Param("seed", _SEED, 0, "Seed of the randomized SVD and of the detail's phases.", None),
 )
@@ -169,6 +176,7 @@ MIXTURE_PARAMS = (
         default_doc="5, or less when the clip is short",
     ),
     Param("tone", _TONE, "auto", _TONE_DOC, "--mix-tone"),
+    Param("deblock", _DEBLOCK, "auto", _DEBLOCK_DOC, "--mix-deblock"),
     Param(
         "residual",
         Choice("auto", "on", "off"),

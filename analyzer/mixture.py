@@ -39,6 +39,8 @@ import numpy as np
 from ..errors import InvalidArgumentError
 from ..tiledb import MixtureModel, ResidualProcess, SwitchingDynamics
 from ..tiledb.mixture import companion_radius, scalar_ar_gain
+from .deblock import choose as choose_grid
+from .deblock import learning_values
 from .detail import attach_detail
 from .gamut import learn_gamut
 from .lds import _learn_subspace_streamed, _stepper, _svd_gram, _svd_randomized
@@ -46,7 +48,7 @@ from .methods import check_params
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
 from .tone import choose as choose_tone
-from .tone import levels_of, to_tone
+from .tone import levels_of
 from .video import Clip, Progress, clip_frames
 
 DEFAULT_COMPONENTS = 3
@@ -82,6 +84,7 @@ def learn_mixture(
     tol: float = 1e-6,
     tone: str = "auto",
     residual: str = "auto",
+    deblock: str = "auto",
     seed: int = 0,
     max_memory: int | None = None,
     progress: Progress | None = None,
@@ -120,6 +123,9 @@ def learn_mixture(
         model has no detail part (the truncation residual is coarse structure, which the detail's
         noise texture refuses, or the clip is streamed), ``on`` always (the detail then learned on
         what is left), ``off`` never (dropped, as before).
+    deblock : {"auto", "on", "off"}
+        Smooth away the block grid of a compressed clip before learning, as
+        :func:`~dynatex.analyzer.lds.learn_lds` does.
     seed : int
         Seed of the EM initialisation (k-means++) and the randomized SVD.
     max_memory : int, optional
@@ -144,7 +150,7 @@ def learn_mixture(
     streamed = isinstance(clip, DiskClip)
     frames = None if streamed else clip_frames(clip)
     tau = clip.n_frames if streamed else frames.shape[0]
-    components, dim, global_dim, pca_dim, neighbors, pmax, max_radius, max_iter, tol, tone, residual, seed = (
+    components, dim, global_dim, pca_dim, neighbors, pmax, max_radius, max_iter, tol, tone, residual, deblock, seed = (
         check_params(
             "mixture",
             components=components,
@@ -158,6 +164,7 @@ def learn_mixture(
             tol=tol,
             tone=tone,
             residual=residual,
+            deblock=deblock,
             seed=seed,
         )
     )
@@ -186,6 +193,7 @@ def learn_mixture(
             f"coordinates (needs T - pmax > (pmax + 1) * global_dim + 1); use a smaller pmax"
         )
     tone_map = choose_tone(frames, tone)
+    grid, grid_info = choose_grid(frames, deblock)
     step = _stepper(progress, 6)
 
     # 1. Reduced PCA space.
@@ -196,7 +204,7 @@ def learn_mixture(
         )
         constant = total <= 1e-6 * clip.pixels
     else:
-        y = frames.reshape(tau, -1).astype(np.float32) if tone_map is None else to_tone(frames, tone_map)
+        y, learned = learning_values(frames, grid, tone_map)
         mean = y.mean(axis=0, dtype=np.float64).astype(np.float32)
         y -= mean
         total = float(np.einsum("ij,ij->", y, y, dtype=np.float64))
@@ -269,6 +277,7 @@ def learn_mixture(
         "spectral_radius": float(ar["radius"]),
         "ar_shrink": float(ar["shrink"]),
         "tau": int(tau),
+        **grid_info,
     }
     model = MixtureModel(
         mean=mean,
@@ -300,7 +309,7 @@ def learn_mixture(
     # learned on what both leave out.
     u32, rows32 = u.astype(np.float32), model.stacked_basis
     if not streamed and residual != "on":
-        attach_detail(model, frames, levels_of(lambda t0, t1: u32[t0:t1] @ rows32 + mean, tone_map), seed=seed)
+        attach_detail(model, learned, levels_of(lambda t0, t1: u32[t0:t1] @ rows32 + mean, tone_map), seed=seed)
     if residual == "on" or (residual == "auto" and model.detail is None):
         res_model, res_coords, res_info = fit_residual(x - rec, rows_q, dim, max_radius=max_radius)
         if res_model is not None:
@@ -313,7 +322,7 @@ def learn_mixture(
             u32 += (res_coords @ res_model.gain).astype(np.float32)
             rows32 = np.concatenate([rows32, res_model.rows])
         if not streamed and residual == "on":
-            attach_detail(model, frames, levels_of(lambda t0, t1: u32[t0:t1] @ rows32 + mean, tone_map), seed=seed)
+            attach_detail(model, learned, levels_of(lambda t0, t1: u32[t0:t1] @ rows32 + mean, tone_map), seed=seed)
     if not streamed:
         model.gamut = learn_gamut(frames)
         model.tone = tone_map

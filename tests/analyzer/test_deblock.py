@@ -1,0 +1,148 @@
+"""The codec's block grid: found on block-coded frames and not on smooth or natural ones, smoothed
+away before lds and mixture learn, recorded in the model's info, and the frames of a clip without
+one left as they are."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynatex.analyzer import deblock
+from dynatex.analyzer.lds import learn_lds
+from dynatex.analyzer.mixture import learn_mixture
+from dynatex.analyzer.stream import spill_clip
+from dynatex.analyzer.video import load_clip_path
+from dynatex.errors import InvalidArgumentError
+
+from ..conftest import wave_clip
+
+#: The quantiser step of the synthetic block codec (a coarse MPEG-4 quality).
+STEP = 24.0
+
+
+def _dct_matrix(n: int = 8) -> np.ndarray:
+    k = np.arange(n)
+    d = np.cos(np.pi * (2 * k[None, :] + 1) * k[:, None] / (2 * n)) * np.sqrt(2 / n)
+    d[0] /= np.sqrt(2)
+    return d
+
+
+def block_coded(frames: np.ndarray, step: float = STEP) -> np.ndarray:
+    """``frames`` through a block codec's transform: each channel's 8 x 8 blocks (from the
+    frame's corner) DCT'd, quantised by ``step`` and transformed back, as MPEG-4 intra blocks are."""
+    t, h, w, c = frames.shape
+    d = _dct_matrix()
+    blocks = frames.astype(np.float64).reshape(t, h // 8, 8, w // 8, 8, c).transpose(0, 1, 3, 5, 2, 4)
+    coef = np.round(d @ blocks @ d.T / step) * step
+    out = (d.T @ coef @ d).transpose(0, 1, 4, 2, 5, 3).reshape(t, h, w, c)
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+
+
+def smooth_clip(t: int = 24, h: int = 64, w: int = 96) -> np.ndarray:
+    """Travelling waves with a little noise, no grid."""
+    return wave_clip(t, h, w, seed=3, periods=(13.0, 9.0))
+
+
+def test_a_block_codec_grid_is_found():
+    grid = deblock.detect_grid(block_coded(smooth_clip()))
+    assert grid.found["luma_x"] and grid.found["luma_y"]
+    assert grid.ratios["luma_x"] > 1.3
+    assert grid.describe().startswith("luma 8 px x+y")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_no_grid_is_found_on_smooth_or_noisy_frames(seed):
+    rng = np.random.default_rng(seed)
+    noisy = rng.integers(0, 256, (16, 64, 64, 3)).astype(np.uint8)
+    for frames in (smooth_clip(), noisy):
+        grid = deblock.detect_grid(frames)
+        assert not grid.any, grid.describe()
+        assert grid.describe() == "none"
+
+
+def test_a_grid_off_the_frames_corner_is_not_the_codecs():
+    """A natural texture with a period-8 structure that does not start at the frame's corner (a
+    block grid shifted by 3 pixels) is not taken for the codec's."""
+    shifted = np.roll(block_coded(smooth_clip()), 3, axis=(1, 2))
+    assert not deblock.detect_grid(shifted).found["luma_x"]
+
+
+def test_smoothing_removes_the_grid_and_keeps_a_real_edge():
+    coded = block_coded(smooth_clip())
+    grid = deblock.detect_grid(coded)
+    out = deblock.deblock(coded, grid)
+    after = deblock.detect_grid(np.clip(np.rint(out), 0, 255).astype(np.uint8))
+    assert after.ratios["luma_x"] < 1.15 < grid.ratios["luma_x"]
+    assert after.ratios["luma_y"] < 1.15 < grid.ratios["luma_y"]
+    # a 120-level edge along a block boundary (after column 39) keeps nearly all its step
+    edged = coded.copy()
+    edged[:, :, 40:] = np.clip(edged[:, :, 40:].astype(int) + 120, 0, 255)
+    out = deblock.deblock(edged, grid)
+    step = np.abs(out[:, :, 40].astype(float) - out[:, :, 39]).mean()
+    assert step > 0.9 * np.abs(edged[:, :, 40].astype(float) - edged[:, :, 39]).mean()
+
+
+def test_frames_without_a_grid_are_learned_as_they_are():
+    frames = smooth_clip()
+    grid, info = deblock.choose(frames, "auto")
+    assert grid is None and info == {"codec_grid": "none", "deblocked": False}
+    values, learned = deblock.learning_values(frames, grid, None)
+    assert learned is frames
+    np.testing.assert_array_equal(values, frames.reshape(len(frames), -1).astype(np.float32))
+
+
+def test_smoothing_forced_on_frames_without_a_grid_changes_them_little():
+    """With ``on`` the quantile maps of a grid-free clip are near the identity: its boundaries'
+    steps are distributed as the inside's already."""
+    frames = smooth_clip()
+    grid, info = deblock.choose(frames, "on")
+    assert info["deblocked"] and grid is not None
+    change = np.abs(deblock.deblock(frames, grid) - frames)
+    assert change.mean() < 0.2
+    assert np.quantile(change, 0.99) < 2.0
+
+
+def test_lds_and_mixture_record_the_grid_and_learn_without_it():
+    coded = block_coded(smooth_clip(t=40))
+    on = learn_lds(coded, n=6)
+    off = learn_lds(coded, n=6, deblock="off")
+    assert on.info["deblocked"] and on.info["codec_grid"].startswith("luma 8 px")
+    assert not off.info["deblocked"] and off.info["codec_grid"] == "not measured"
+    # frames drawn from the model's stationary distribution (its components recombined at random)
+    # carry the grid learned without smoothing, and not the one learned with it
+
+    def drawn_ratio(model) -> float:
+        states = np.random.default_rng(1).multivariate_normal(np.zeros(model.n), model.stationary_cov, 40)
+        frames = np.clip(states @ model.basis + model.mean, 0, 255).astype(np.uint8).reshape(coded.shape)
+        return deblock.detect_grid(frames).ratios["luma_x"]
+
+    assert drawn_ratio(on) < 1.15 < drawn_ratio(off)
+    mix = learn_mixture(coded, components=2, dim=2, pca_dim=6, neighbors=6, pmax=2)
+    assert mix.info["deblocked"] and "codec_grid" in mix.describe()
+
+
+def test_a_streamed_clip_is_learned_as_it_is(tmp_path):
+    path = tmp_path / "clip.npy"
+    np.save(path, block_coded(smooth_clip(t=12)))
+    assert learn_lds(spill_clip(path), n=4).info["deblocked"] is False
+    with pytest.raises(InvalidArgumentError, match="deblock='on' needs the clip in memory"):
+        learn_lds(spill_clip(path), n=4, deblock="on")
+
+
+@pytest.mark.parametrize("value", ["yes", 1, None])
+def test_a_bad_deblock_is_named(value):
+    with pytest.raises((InvalidArgumentError, TypeError), match="deblock"):
+        learn_lds(smooth_clip(), n=4, deblock=value)
+
+
+def test_real_compressed_clips_are_found_and_grid_free_ones_are_not(clips_dir):
+    for name in ("water_sea_waves_dyntex.avi", "grass_straw_wind_dyntex.avi"):
+        frames = load_clip_path(str(clips_dir / name)).frames
+        grid = deblock.detect_grid(frames)
+        assert grid.found["luma_x"] and grid.found["chroma_x"], name
+        _, learned = deblock.learning_values(frames, grid, None)
+        after = deblock.detect_grid(learned)
+        # the luma grid's boundary ratio drops to a grid-free clip's level
+        assert after.ratios["luma_x"] < 1.12 < grid.ratios["luma_x"], name
+    for name in ("steam_vapour_pot_128px.avi", "timevarying_rusting_steel.gif", "small_64px/fire_dyntex_64px.avi"):
+        assert not deblock.detect_grid(load_clip_path(str(clips_dir / name)).frames).any, name
