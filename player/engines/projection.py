@@ -3,7 +3,9 @@ whose frames are a linear combination of stored rows (``lds``, ``mixture``), for
 ``frames`` coefficient vectors per pass over the basis, with a model's fine detail
 (:mod:`.detail`) added in the same pass and, where the model has a colour set
 (:mod:`dynatex.tiledb.gamut`), every pixel whose colour the source never had moved to the
-nearest one it had as it is stored (:func:`snap_colours`).
+nearest one it had as it is stored (:func:`snap_colours`), or, where the model has colour sets
+per region of the frame, into the sets of the pixel's four nearest regions, blended by its
+position between their centres so that no region's edge shows (:func:`snap_local`).
 
 Each frame reads the whole basis, so one frame at a time is bound by memory bandwidth; k
 frames per pass read it once (a matrix-matrix product), which is what a caller that knows
@@ -106,20 +108,52 @@ def snap_colours(
         frames[(*at, i)] = np.clip(frames[(*at, i)], lo, lo + 7)
 
 
+#: Fixed-point bits of a pixel's weight along each axis between two region centres (the local
+#: colour sets' blend, :func:`snap_local`): a pixel's four weights are products out of ``2**16``.
+WEIGHT_BITS = 8
+#: Passes of the local colour sets' blend: a blend of colours from different sets can lie in none
+#: of them (CHANGELOG.md has the measurement); a second pass moves it back in.
+LOCAL_PASSES = 2
+
+
+def region_axis(n: int, block: int, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Along an axis of ``n`` pixels and ``count`` regions of ``block`` pixels: each pixel's lower
+    and upper region, the two whose centres it lies between (clamped to ``0..count - 1``), and the
+    upper's weight out of ``2**WEIGHT_BITS`` (integers, as the kernel computes them).
+
+    >>> [a.tolist() for a in region_axis(8, 4, 2)]
+    [[0, 0, 0, 0, 0, 0, 1, 1], [0, 0, 1, 1, 1, 1, 1, 1], [160, 224, 32, 96, 160, 224, 32, 96]]
+    """
+    d = 2 * np.arange(n, dtype=np.int64) + 1 - block  # twice the offset from region 0's centre
+    lower = d // (2 * block)
+    weight = (((d - lower * 2 * block) << WEIGHT_BITS) + block) // (2 * block)
+    return np.clip(lower, 0, count - 1), np.clip(lower + 1, 0, count - 1), weight
+
+
 class LocalColours:
     """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
-    ``height`` x ``width`` frame: each pixel's region, and (numpy, on first use) the sets unpacked."""
+    ``height`` x ``width`` frame: each pixel's four nearest regions and their weights along each
+    axis (:func:`region_axis`), and (numpy, on first use) the sets unpacked."""
 
     def __init__(self, model, height: int, width: int) -> None:
         self.model = model
         self.block = model.block
-        self.cols = model.regions(height, width)[1]
-        y, x = np.arange(height)[:, None] // self.block, np.arange(width)[None, :] // self.block
-        #: each pixel's region, times the bins per region (a key's base)
-        self.base = ((y * self.cols + x) * 32768).astype(np.int32).reshape(-1)
-        #: each pixel's region, times the cells per region
-        self.cell_base = (self.base >> 3).astype(np.int32)
+        self.rows, self.cols = model.regions(height, width)
+        self.width = width
+        y0, y1, self.wy = region_axis(height, self.block, self.rows)
+        x0, x1, self.wx = region_axis(width, self.block, self.cols)
+        #: each pixel's four regions (upper-left, upper-right, lower-left, lower-right), times the
+        #: bins per region (a key's base): int32 ``(4, height * width)``
+        self.base = np.stack(
+            [((ry[:, None] * self.cols + rx[None, :]) * 32768).reshape(-1) for ry in (y0, y1) for rx in (x0, x1)]
+        ).astype(np.int32)
         self.nearest = model.nearest.reshape(-1)
+
+    def weights(self, pixels: np.ndarray) -> np.ndarray:
+        """The four regions' weights (out of ``2**(2 * WEIGHT_BITS)``) of the flat ``pixels``: int32 ``(4, len)``."""
+        one = 1 << WEIGHT_BITS
+        wy, wx = self.wy[pixels // self.width], self.wx[pixels % self.width]
+        return np.stack([(one - wy) * (one - wx), (one - wy) * wx, wy * (one - wx), wy * wx]).astype(np.int32)
 
     @functools.cached_property
     def bits(self) -> np.ndarray:
@@ -128,8 +162,16 @@ class LocalColours:
 
 
 def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
-    """Clamp, in place, each pixel of ``frame`` (H, W, bytes) uint8 whose colour bin its region
-    never held into the bin the region's map names for its 16-level cell, channel by channel.
+    """Move, in place, each pixel of ``frame`` (H, W, bytes) uint8 into the colour sets of its
+    four nearest regions, blended by its position between their centres, so that the sets change
+    smoothly across the frame (no edge where two regions meet).
+
+    For each of the four regions the pixel's colour is kept where the region holds its bin, else
+    clamped, channel by channel, into the bin the region's map names for its 16-level cell; the
+    four colours are blended with the pixel's weights (:meth:`LocalColours.weights`, integers:
+    ``(sum w_k c_k + 2**15) >> 16``). A colour every one of the four holds stays as it is; a pixel
+    at a region's centre (or in the frame's outer half region) takes that region's set alone.
+    :data:`LOCAL_PASSES` passes (a pixel the first pass left alone, the second leaves too).
 
     >>> from dynatex.tiledb.gamut import LocalGamut
     >>> held = np.zeros(32768, bool); held[(25 * 32 + 0) * 32 + 0] = True  # red alone
@@ -139,18 +181,27 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     [[[200, 7, 7]]]
     """
     flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
-    r, g, b = (flat[:, i] for i in rgb)
-    keys = colour_bins(flat, rgb).astype(np.int32)
-    keys += local.base
-    away = np.flatnonzero(~local.bits[keys])
-    if not len(away):
-        return
-    ra, ga, ba = r[away], g[away], b[away]
-    cells = ((ra >> 4).astype(np.int32) << 8) | ((ga >> 4).astype(np.int32) << 4) | (ba >> 4)
-    t = local.nearest[local.cell_base[away] + cells]
-    for i, ch, shift in zip(rgb, (ra, ga, ba), (10, 5, 0)):
-        lo = ((t >> shift) & 31).astype(np.uint8) << 3
-        flat[away, i] = np.clip(ch, lo, lo + 7)
+    keys = local.base + colour_bins(flat, rgb).astype(np.int32)
+    held = local.bits[keys]
+    pixels = np.flatnonzero(~held.all(axis=0))
+    held = held[:, pixels]
+    for step in range(LOCAL_PASSES):
+        if step:
+            keys = local.base[:, pixels] + colour_bins(flat[pixels], rgb).astype(np.int32)
+            held = local.bits[keys]
+            moved = ~held.all(axis=0)
+            pixels, held = pixels[moved], held[:, moved]
+        if not len(pixels):
+            return
+        c = flat[pixels][:, list(rgb)].astype(np.int32)
+        cells = (c[:, 0] >> 4 << 8) | (c[:, 1] >> 4 << 4) | (c[:, 2] >> 4)
+        weights = local.weights(pixels)
+        acc = np.full(c.shape, 1 << (2 * WEIGHT_BITS - 1), np.int32)
+        for k in range(4):
+            t = local.nearest[(local.base[k, pixels] >> 3) + cells].astype(np.int32)
+            lo = np.stack([(t >> shift & 31) << 3 for shift in (10, 5, 0)], axis=1)
+            acc += weights[k][:, None] * np.where(held[k][:, None], c, np.clip(c, lo, lo + 7))
+        flat[pixels[:, None], list(rgb)] = acc >> (2 * WEIGHT_BITS)
 
 
 def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:
@@ -366,10 +417,12 @@ class ProjectorOpenCL(Projector):
             defines = {"HALF": self.half, "CHANNELS": self.channels, "DETAIL": detail, "VH": vh, "VW": vw}
             defines["GAMUT"] = self.nearest is not None
             defines["TONE"], defines["TONE_BINS"] = self.tone is not None, TONE_BINS
-            defines["LOCAL"] = self.local is not None
-            defines["LOCAL_BLOCK"], defines["LOCAL_COLS"] = (
-                (self.local.block, self.local.cols) if self.local else (1, 1)
+            loc = self.local
+            defines["LOCAL"] = loc is not None
+            defines["LOCAL_BLOCK"], defines["LOCAL_ROWS"], defines["LOCAL_COLS"] = (
+                (loc.block, loc.rows, loc.cols) if loc else (1, 1, 1)
             )
+            defines["LOCAL_WEIGHT_BITS"], defines["LOCAL_PASSES"] = WEIGHT_BITS, LOCAL_PASSES
             prog = build_program(self.ctx, ("pixels.cl", "projection.cl"), {**defines, **self.format.defines})
             k = Kernel(prog, "project")
             k.set(

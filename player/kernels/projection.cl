@@ -30,16 +30,21 @@
 // nearest bin of the source's colour set) is clamped into that bin, channel by channel
 // (integers alone: exact).
 //
-// LOCAL (with GAMUT): instead, a pixel whose bin its region (squares of LOCAL_BLOCK pixels,
-// LOCAL_COLS to a row) never held (bit bin & 7 of local_inside[region * 4096 + (bin >> 3)]
-// clear) is clamped into bin local_nearest[region * 4096 + cell], cell its 16-level one
-// ((r >> 4) * 256 + (g >> 4) * 16 + (b >> 4)); each region's set lies within the clip's.
+// LOCAL (with GAMUT): instead, each pixel moves into the colour sets of its four nearest regions
+// (squares of LOCAL_BLOCK pixels, LOCAL_ROWS x LOCAL_COLS), blended: for each region, the pixel
+// as it is where the region holds its bin (bit bin & 7 of local_inside[region * 4096 + (bin >> 3)]
+// set), else clamped into bin local_nearest[region * 4096 + cell], cell its 16-level one
+// ((r >> 4) * 256 + (g >> 4) * 16 + (b >> 4)); the four colours weighted by the pixel's position
+// between the regions' centres (per axis an integer out of 2^LOCAL_WEIGHT_BITS, the four
+// products summing to 2^(2 LOCAL_WEIGHT_BITS)), rounded by a shift: integers alone, exact. A
+// colour all four hold stays; a second pass (LOCAL_PASSES) moves a blend that fell between the
+// sets back in. Each region's set lies within the clip's.
 //
 // Defines: HALF (1: basis stored as half floats), CHANNELS (1 or 3: values per pixel of the
 // basis; grey is replicated), PIXEL_BYTES (3 or 4: bytes per output pixel), R_AT, G_AT, B_AT
 // (the byte of each colour in an output pixel), A_AT (alpha's, 255; -1: none), TONE (0 or 1) and
 // TONE_BINS, DETAIL (0 or 1), VH and VW (the detail volume's rows and columns; constants, so that the wrap is cheap),
-// GAMUT (0 or 1), LOCAL (0 or 1), LOCAL_BLOCK and LOCAL_COLS.
+// GAMUT (0 or 1), LOCAL (0 or 1), LOCAL_BLOCK, LOCAL_ROWS, LOCAL_COLS, LOCAL_WEIGHT_BITS and LOCAL_PASSES.
 
 #define PIXELS 16
 #define GROUP (PIXELS * CHANNELS)
@@ -115,21 +120,66 @@ void snap_colours(uchar *v, const int count, __global const ushort *restrict nea
 }
 
 #if LOCAL
-// The `count` pixels of v, the first at (x, y), moved into their regions' colour sets (LOCAL).
+#define LOCAL_ONE (1 << LOCAL_WEIGHT_BITS)
+#define LOCAL_HALF (1 << (2 * LOCAL_WEIGHT_BITS - 1))
+
+// Along an axis of `count` regions, coordinate u: the lower (.x) and upper (.y) region whose
+// centres it lies between, clamped to the axis, and the upper's weight out of LOCAL_ONE (*w).
+int2 between(const int u, const int count, int *w)
+{
+    const int d = 2 * u + 1 - LOCAL_BLOCK;  // twice the offset from region 0's centre, > -2 LOCAL_BLOCK
+    const int i = d < 0 ? -1 : d / (2 * LOCAL_BLOCK);
+    *w = (((d - i * 2 * LOCAL_BLOCK) << LOCAL_WEIGHT_BITS) + LOCAL_BLOCK) / (2 * LOCAL_BLOCK);
+    return (int2)(clamp(i, 0, count - 1), clamp(i + 1, 0, count - 1));
+}
+
+// One pass of the blend on pixel p (3 values) over regions reg with weights w (LOCAL); false,
+// and p untouched, where all four hold its colour.
+bool blend_sets(uchar *p, const int4 reg, const int4 w, __global const uchar *restrict inside,
+                __global const ushort *restrict targets)
+{
+    const int bin = BIN(p, 0);
+    const int cell = ((p[0] >> 4) << 8) | ((p[1] >> 4) << 4) | (p[2] >> 4);
+    const int r[4] = {reg.s0, reg.s1, reg.s2, reg.s3};
+    const int wk[4] = {w.s0, w.s1, w.s2, w.s3};
+    int acc[3] = {LOCAL_HALF, LOCAL_HALF, LOCAL_HALF};
+    bool moved = false;
+    for (int k = 0; k < 4; ++k) {
+        uchar s[3] = {p[0], p[1], p[2]};
+        if (((inside[r[k] * 4096 + (bin >> 3)] >> (bin & 7)) & 1) == 0) {
+            into_bin(s, targets[r[k] * 4096 + cell]);
+            moved = true;
+        }
+        for (int c = 0; c < 3; ++c)
+            acc[c] += wk[k] * s[c];
+    }
+    if (moved) {
+        for (int c = 0; c < 3; ++c)
+            p[c] = (uchar)(acc[c] >> (2 * LOCAL_WEIGHT_BITS));
+    }
+    return moved;
+}
+
+// The `count` pixels of v, the first at (x, y), moved into their four nearest regions' colour
+// sets, blended (LOCAL).
 void snap_local(uchar *v, const int count, int x, int y, const int width, __global const uchar *restrict inside,
                 __global const ushort *restrict targets)
 {
+    int wy;
+    int2 ry = between(y, LOCAL_ROWS, &wy);
     for (int q = 0; q < count; ++q) {
+        int wx;
+        const int2 rx = between(x, LOCAL_COLS, &wx);
+        const int4 reg = (int4)(ry.x * LOCAL_COLS + rx.x, ry.x * LOCAL_COLS + rx.y, ry.y * LOCAL_COLS + rx.x,
+                                ry.y * LOCAL_COLS + rx.y);
+        const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx, wy * (LOCAL_ONE - wx), wy * wx);
         uchar *p = v + 3 * q;
-        const int region = (y / LOCAL_BLOCK) * LOCAL_COLS + x / LOCAL_BLOCK;
-        const int bin = BIN(p, 0);
-        if (((inside[region * 4096 + (bin >> 3)] >> (bin & 7)) & 1) == 0) {
-            const int t = targets[region * 4096 + (((p[0] >> 4) << 8) | ((p[1] >> 4) << 4) | (p[2] >> 4))];
-            into_bin(p, t);
-        }
+        for (int pass = 0; pass < LOCAL_PASSES && blend_sets(p, reg, w, inside, targets); ++pass)
+            ;
         if (++x == width) {
             x = 0;
             ++y;
+            ry = between(y, LOCAL_ROWS, &wy);
         }
     }
 }
