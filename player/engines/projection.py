@@ -130,6 +130,10 @@ def region_axis(n: int, block: int, count: int) -> tuple[np.ndarray, np.ndarray,
     return np.clip(lower, 0, count - 1), np.clip(lower + 1, 0, count - 1), weight
 
 
+#: ``CLAMP[(t << 8) | v]``: level ``v`` clamped into the 8 levels of colour bin ``t`` (``8 t .. 8 t + 7``).
+CLAMP = np.clip(np.arange(256), 8 * np.arange(32)[:, None], 8 * np.arange(32)[:, None] + 7).astype(np.int32).ravel()
+
+
 class LocalColours:
     """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
     ``height`` x ``width`` frame: each pixel's four nearest regions and their weights along each
@@ -139,21 +143,34 @@ class LocalColours:
         self.model = model
         self.block = model.block
         self.rows, self.cols = model.regions(height, width)
-        self.width = width
-        y0, y1, self.wy = region_axis(height, self.block, self.rows)
-        x0, x1, self.wx = region_axis(width, self.block, self.cols)
+        y0, y1, wy = region_axis(height, self.block, self.rows)
+        x0, x1, wx = region_axis(width, self.block, self.cols)
         #: each pixel's four regions (upper-left, upper-right, lower-left, lower-right), times the
         #: bins per region (a key's base): int32 ``(4, height * width)``
         self.base = np.stack(
             [((ry[:, None] * self.cols + rx[None, :]) * 32768).reshape(-1) for ry in (y0, y1) for rx in (x0, x1)]
         ).astype(np.int32)
+        #: per pixel, packed: its upper-left region << 20, lower row apart << 19, right column
+        #: apart << 18, the weights of the lower row << 9 and of the right column (out of ``2**WEIGHT_BITS``)
+        self.packed = (
+            ((y0[:, None] * self.cols + x0[None, :]) << 20)
+            | ((y1 != y0)[:, None] << 19)
+            | ((x1 != x0)[None, :] << 18)
+            | (wy[:, None] << 9)
+            | wx[None, :]
+        ).reshape(-1)
         self.nearest = model.nearest.reshape(-1)
 
-    def weights(self, pixels: np.ndarray) -> np.ndarray:
-        """The four regions' weights (out of ``2**(2 * WEIGHT_BITS)``) of the flat ``pixels``: int32 ``(4, len)``."""
+    def regions_and_weights(self, pixels: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """The four regions (as :attr:`base`'s rows) of the flat ``pixels`` and their weights, out of
+        ``2**(2 * WEIGHT_BITS)`` (each int32 ``(len,)``)."""
+        p = self.packed[pixels]
+        r = (p >> 20).astype(np.int32)
+        down, right = (p >> 19 & 1).astype(np.int32) * self.cols, (p >> 18 & 1).astype(np.int32)
         one = 1 << WEIGHT_BITS
-        wy, wx = self.wy[pixels // self.width], self.wx[pixels % self.width]
-        return np.stack([(one - wy) * (one - wx), (one - wy) * wx, wy * (one - wx), wy * wx]).astype(np.int32)
+        wy, wx = (p >> 9 & 511).astype(np.int32), (p & 511).astype(np.int32)
+        regions = [r, r + right, r + down, r + down + right]
+        return regions, [(one - wy) * (one - wx), (one - wy) * wx, wy * (one - wx), wy * wx]
 
     @functools.cached_property
     def bits(self) -> np.ndarray:
@@ -168,10 +185,10 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
 
     For each of the four regions the pixel's colour is kept where the region holds its bin, else
     clamped, channel by channel, into the bin the region's map names for its 16-level cell; the
-    four colours are blended with the pixel's weights (:meth:`LocalColours.weights`, integers:
-    ``(sum w_k c_k + 2**15) >> 16``). A colour every one of the four holds stays as it is; a pixel
-    at a region's centre (or in the frame's outer half region) takes that region's set alone.
-    :data:`LOCAL_PASSES` passes (a pixel the first pass left alone, the second leaves too).
+    four colours are blended with the pixel's weights (:meth:`LocalColours.regions_and_weights`,
+    integers: ``(sum w_k c_k + 2**15) >> 16``). A colour every one of the four holds stays as it
+    is; a pixel at a region's centre (or in the frame's outer half region) takes that region's set
+    alone. :data:`LOCAL_PASSES` passes (a pixel the first pass left alone, the second leaves too).
 
     >>> from dynatex.tiledb.gamut import LocalGamut
     >>> held = np.zeros(32768, bool); held[(25 * 32 + 0) * 32 + 0] = True  # red alone
@@ -181,27 +198,28 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     [[[200, 7, 7]]]
     """
     flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
-    keys = local.base + colour_bins(flat, rgb).astype(np.int32)
-    held = local.bits[keys]
+    held = local.bits[local.base + colour_bins(flat, rgb).astype(np.int32)]
     pixels = np.flatnonzero(~held.all(axis=0))
     held = held[:, pixels]
     for step in range(LOCAL_PASSES):
-        if step:
-            keys = local.base[:, pixels] + colour_bins(flat[pixels], rgb).astype(np.int32)
-            held = local.bits[keys]
-            moved = ~held.all(axis=0)
-            pixels, held = pixels[moved], held[:, moved]
         if not len(pixels):
             return
-        c = flat[pixels][:, list(rgb)].astype(np.int32)
-        cells = (c[:, 0] >> 4 << 8) | (c[:, 1] >> 4 << 4) | (c[:, 2] >> 4)
-        weights = local.weights(pixels)
-        acc = np.full(c.shape, 1 << (2 * WEIGHT_BITS - 1), np.int32)
-        for k in range(4):
-            t = local.nearest[(local.base[k, pixels] >> 3) + cells].astype(np.int32)
-            lo = np.stack([(t >> shift & 31) << 3 for shift in (10, 5, 0)], axis=1)
-            acc += weights[k][:, None] * np.where(held[k][:, None], c, np.clip(c, lo, lo + 7))
-        flat[pixels[:, None], list(rgb)] = acc >> (2 * WEIGHT_BITS)
+        ch = [flat[pixels, i].astype(np.int32) for i in rgb]
+        bins = (ch[0] >> 3 << 10) | (ch[1] >> 3 << 5) | (ch[2] >> 3)
+        regions, weights = local.regions_and_weights(pixels)
+        if step:
+            held = [local.bits[(r << 15) + bins] for r in regions]
+            moved = np.flatnonzero(~(held[0] & held[1] & held[2] & held[3]))
+            pixels, bins, ch = pixels[moved], bins[moved], [c[moved] for c in ch]
+            held, regions, weights = ([a[moved] for a in arrays] for arrays in (held, regions, weights))
+        cells = (ch[0] >> 4 << 8) | (ch[1] >> 4 << 4) | (ch[2] >> 4)
+        acc = [np.full(len(pixels), 1 << (2 * WEIGHT_BITS - 1), np.int32) for _ in rgb]
+        for r, w, h in zip(regions, weights, held):
+            t = np.where(h, bins, local.nearest[(r << 12) + cells])  # a held colour's own bin clamps it to itself
+            for a, c, shift in zip(acc, ch, (10, 5, 0)):
+                a += w * CLAMP[(t >> shift & 31) << 8 | c]
+        for i, a in zip(rgb, acc):
+            flat[pixels, i] = a >> (2 * WEIGHT_BITS)
 
 
 def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:

@@ -134,30 +134,24 @@ int2 between(const int u, const int count, int *w)
 }
 
 // One pass of the blend on pixel p (3 values) over regions reg with weights w (LOCAL); false,
-// and p untouched, where all four hold its colour.
+// and p untouched, where all four hold its colour. A region that holds it clamps it into its own
+// bin (no change), so the four are treated alike.
 bool blend_sets(uchar *p, const int4 reg, const int4 w, __global const uchar *restrict inside,
                 __global const ushort *restrict targets)
 {
     const int bin = BIN(p, 0);
-    const int cell = ((p[0] >> 4) << 8) | ((p[1] >> 4) << 4) | (p[2] >> 4);
-    const int r[4] = {reg.s0, reg.s1, reg.s2, reg.s3};
-    const int wk[4] = {w.s0, w.s1, w.s2, w.s3};
-    int acc[3] = {LOCAL_HALF, LOCAL_HALF, LOCAL_HALF};
-    bool moved = false;
-    for (int k = 0; k < 4; ++k) {
-        uchar s[3] = {p[0], p[1], p[2]};
-        if (((inside[r[k] * 4096 + (bin >> 3)] >> (bin & 7)) & 1) == 0) {
-            into_bin(s, targets[r[k] * 4096 + cell]);
-            moved = true;
-        }
-        for (int c = 0; c < 3; ++c)
-            acc[c] += wk[k] * s[c];
+    const int4 byte = reg * 4096 + (bin >> 3);
+    const int4 held = ((int4)(inside[byte.s0], inside[byte.s1], inside[byte.s2], inside[byte.s3]) >> (bin & 7)) & 1;
+    if ((held.s0 & held.s1 & held.s2 & held.s3) != 0)
+        return false;
+    const int4 at = reg * 4096 + (((p[0] >> 4) << 8) | ((p[1] >> 4) << 4) | (p[2] >> 4));
+    const int4 t = select((int4)(targets[at.s0], targets[at.s1], targets[at.s2], targets[at.s3]), (int4)(bin), held != 0);
+    for (int c = 0; c < 3; ++c) {
+        const int4 lo = ((t >> (10 - 5 * c)) & 31) << 3;
+        const int4 m = w * clamp((int4)(p[c]), lo, lo + 7);
+        p[c] = (uchar)((m.s0 + m.s1 + m.s2 + m.s3 + LOCAL_HALF) >> (2 * LOCAL_WEIGHT_BITS));
     }
-    if (moved) {
-        for (int c = 0; c < 3; ++c)
-            p[c] = (uchar)(acc[c] >> (2 * LOCAL_WEIGHT_BITS));
-    }
-    return moved;
+    return true;
 }
 
 // The `count` pixels of v, the first at (x, y), moved into their four nearest regions' colour
