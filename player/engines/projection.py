@@ -137,29 +137,37 @@ CLAMP = np.clip(np.arange(256), 8 * np.arange(32)[:, None], 8 * np.arange(32)[:,
 class LocalColours:
     """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
     ``height`` x ``width`` frame: each pixel's four nearest regions and their weights along each
-    axis (:func:`region_axis`), and (numpy, on first use) the sets unpacked."""
+    axis (:func:`region_axis`), and (numpy, on first use) each pixel's regions and the sets unpacked."""
 
     def __init__(self, model, height: int, width: int) -> None:
         self.model = model
         self.block = model.block
         self.rows, self.cols = model.regions(height, width)
-        y0, y1, wy = region_axis(height, self.block, self.rows)
-        x0, x1, wx = region_axis(width, self.block, self.cols)
-        #: each pixel's four regions (upper-left, upper-right, lower-left, lower-right), times the
-        #: bins per region (a key's base): int32 ``(4, height * width)``
-        self.base = np.stack(
+        self._y = region_axis(height, self.block, self.rows)
+        self._x = region_axis(width, self.block, self.cols)
+        self.nearest = model.nearest.reshape(-1)
+
+    @functools.cached_property
+    def base(self) -> np.ndarray:
+        """Each pixel's four regions (upper-left, upper-right, lower-left, lower-right), times the
+        bins per region (a key's base): int32 ``(4, height * width)`` (numpy's alone, as the rest)."""
+        (y0, y1, _), (x0, x1, _) = self._y, self._x
+        return np.stack(
             [((ry[:, None] * self.cols + rx[None, :]) * 32768).reshape(-1) for ry in (y0, y1) for rx in (x0, x1)]
         ).astype(np.int32)
-        #: per pixel, packed: its upper-left region << 20, lower row apart << 19, right column
-        #: apart << 18, the weights of the lower row << 9 and of the right column (out of ``2**WEIGHT_BITS``)
-        self.packed = (
+
+    @functools.cached_property
+    def packed(self) -> np.ndarray:
+        """Per pixel, packed in an int64: its upper-left region << 20, lower row apart << 19, right
+        column apart << 18, the weight of the lower row << 9 and of the right column."""
+        (y0, y1, wy), (x0, x1, wx) = self._y, self._x
+        return (
             ((y0[:, None] * self.cols + x0[None, :]) << 20)
             | ((y1 != y0)[:, None] << 19)
             | ((x1 != x0)[None, :] << 18)
             | (wy[:, None] << 9)
             | wx[None, :]
         ).reshape(-1)
-        self.nearest = model.nearest.reshape(-1)
 
     def regions_and_weights(self, pixels: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """The four regions (as :attr:`base`'s rows) of the flat ``pixels`` and their weights, out of
