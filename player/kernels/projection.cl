@@ -168,8 +168,10 @@ void snap_local(uchar *v, const int count, int x, int y, const int width, __glob
                                 ry.y * LOCAL_COLS + rx.y);
         const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx, wy * (LOCAL_ONE - wx), wy * wx);
         uchar *p = v + 3 * q;
-        for (int pass = 0; pass < LOCAL_PASSES && blend_sets(p, reg, w, inside, targets); ++pass)
-            ;
+        for (int pass = 0; pass < LOCAL_PASSES; ++pass) {
+            if (!blend_sets(p, reg, w, inside, targets))
+                break;  // all four hold its colour: a further pass leaves it too
+        }
         if (++x == width) {
             x = 0;
             ++y;
