@@ -195,8 +195,9 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     clamped, channel by channel, into the bin the region's map names for its 16-level cell; the
     four colours are blended with the pixel's weights (:meth:`LocalColours.regions_and_weights`,
     integers: ``(sum w_k c_k + 2**15) >> 16``). A colour every one of the four holds stays as it
-    is; a pixel at a region's centre (or in the frame's outer half region) takes that region's set
-    alone. :data:`LOCAL_PASSES` passes (a pixel the first pass left alone, the second leaves too).
+    is; near a region's centre its set weighs most, and past the outermost centres (the frame's
+    edges) the regions along that axis are one. :data:`LOCAL_PASSES` passes (a pixel the first
+    pass left alone, the second leaves too).
 
     >>> from dynatex.tiledb.gamut import LocalGamut
     >>> held = np.zeros(32768, bool); held[(25 * 32 + 0) * 32 + 0] = True  # red alone
