@@ -137,7 +137,12 @@ CLAMP = np.clip(np.arange(256), 8 * np.arange(32)[:, None], 8 * np.arange(32)[:,
 class LocalColours:
     """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
     ``height`` x ``width`` frame: each pixel's four nearest regions and their weights along each
-    axis (:func:`region_axis`), and (numpy, on first use) each pixel's regions and the sets unpacked."""
+    axis (:func:`region_axis`); the sets all four regions of each quad hold (:attr:`quads`, both
+    backends); and (numpy, on first use) each pixel's quad and regions and the sets unpacked.
+
+    A quad is the four regions around one corner where four region centres meet: the pixels
+    between those centres blend those four regions' sets, so a pixel whose colour its quad's
+    regions all hold (one lookup) is left as it is."""
 
     def __init__(self, model, height: int, width: int) -> None:
         self.model = model
@@ -146,15 +151,27 @@ class LocalColours:
         self._y = region_axis(height, self.block, self.rows)
         self._x = region_axis(width, self.block, self.cols)
         self.nearest = model.nearest.reshape(-1)
+        # the quads: (rows + 1) x (cols + 1), quad (qy, qx) between region rows qy - 1 and qy
+        # and columns qx - 1 and qx, each clamped (the frame's edges: the regions along that axis are one)
+        inside = model.inside.reshape(self.rows, self.cols, -1)
+        ry, rx = np.arange(self.rows + 1), np.arange(self.cols + 1)
+        lo_y, hi_y = np.maximum(ry - 1, 0), np.minimum(ry, self.rows - 1)
+        lo_x, hi_x = np.maximum(rx - 1, 0), np.minimum(rx, self.cols - 1)
+        #: per quad, the bins all its four regions hold, packed as ``model.inside``:
+        #: uint8 ``((rows + 1) * (cols + 1), 4096)``
+        self.quads = np.ascontiguousarray(
+            (inside[lo_y][:, lo_x] & inside[lo_y][:, hi_x] & inside[hi_y][:, lo_x] & inside[hi_y][:, hi_x]).reshape(
+                -1, inside.shape[-1]
+            )
+        )
 
     @functools.cached_property
-    def base(self) -> np.ndarray:
-        """Each pixel's four regions (upper-left, upper-right, lower-left, lower-right), times the
-        bins per region (a key's base): int32 ``(4, height * width)`` (numpy's alone, as the rest)."""
+    def quad_base(self) -> np.ndarray:
+        """Each pixel's quad times the bins per quad (a key's base into :attr:`quad_bits`):
+        int32 ``(height * width,)`` (numpy's alone, as the rest)."""
         (y0, y1, _), (x0, x1, _) = self._y, self._x
-        return np.stack(
-            [((ry[:, None] * self.cols + rx[None, :]) * 32768).reshape(-1) for ry in (y0, y1) for rx in (x0, x1)]
-        ).astype(np.int32)
+        qy, qx = y0 + (y1 != 0), x0 + (x1 != 0)  # quad q lies between regions q - 1 and q, clamped
+        return ((qy[:, None] * (self.cols + 1) + qx[None, :]) << 15).astype(np.int32).reshape(-1)
 
     @functools.cached_property
     def packed(self) -> np.ndarray:
@@ -170,8 +187,8 @@ class LocalColours:
         ).reshape(-1)
 
     def regions_and_weights(self, pixels: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """The four regions (as :attr:`base`'s rows) of the flat ``pixels`` and their weights, out of
-        ``2**(2 * WEIGHT_BITS)`` (each int32 ``(len,)``)."""
+        """The four regions (upper-left, upper-right, lower-left, lower-right) of the flat
+        ``pixels`` and their weights, out of ``2**(2 * WEIGHT_BITS)`` (each int32 ``(len,)``)."""
         p = self.packed[pixels]
         r = (p >> 20).astype(np.int32)
         down, right = (p >> 19 & 1).astype(np.int32) * self.cols, (p >> 18 & 1).astype(np.int32)
@@ -185,19 +202,25 @@ class LocalColours:
         """The sets as one bool per region and bin, flat (8 times the packed bytes: numpy's alone)."""
         return local_bits(self.model).reshape(-1)
 
+    @functools.cached_property
+    def quad_bits(self) -> np.ndarray:
+        """:attr:`quads` as one bool per quad and bin, flat (numpy's alone)."""
+        return np.unpackbits(self.quads, axis=1, bitorder="little").astype(bool).reshape(-1)
+
 
 def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
     """Move, in place, each pixel of ``frame`` (H, W, bytes) uint8 into the colour sets of its
     four nearest regions, blended by its position between their centres, so that the sets change
     smoothly across the frame (no edge where two regions meet).
 
-    For each of the four regions the pixel's colour is kept where the region holds its bin, else
-    clamped, channel by channel, into the bin the region's map names for its 16-level cell; the
-    four colours are blended with the pixel's weights (:meth:`LocalColours.regions_and_weights`,
-    integers: ``(sum w_k c_k + 2**15) >> 16``). A colour every one of the four holds stays as it
-    is; near a region's centre its set weighs most, and past the outermost centres (the frame's
-    edges) the regions along that axis are one. :data:`LOCAL_PASSES` passes (a pixel the first
-    pass left alone, the second leaves too).
+    A colour every one of the four holds (its quad's set, :attr:`LocalColours.quads`: one lookup)
+    stays as it is. Otherwise, for each of the four regions the pixel's colour is kept where the
+    region holds its bin, else clamped, channel by channel, into the bin the region's map names
+    for its 16-level cell; the four colours are blended with the pixel's weights
+    (:meth:`LocalColours.regions_and_weights`, integers: ``(sum w_k c_k + 2**15) >> 16``). Near
+    a region's centre its set weighs most, and past the outermost centres (the frame's edges)
+    the regions along that axis are one. :data:`LOCAL_PASSES` passes, each over the pixels the
+    one before moved whose colour their quad does not hold.
 
     >>> from dynatex.tiledb.gamut import LocalGamut
     >>> held = np.zeros(32768, bool); held[(25 * 32 + 0) * 32 + 0] = True  # red alone
@@ -207,24 +230,21 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     [[[200, 7, 7]]]
     """
     flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
-    held = local.bits[local.base + colour_bins(flat, rgb).astype(np.int32)]
-    pixels = np.flatnonzero(~held.all(axis=0))
-    held = held[:, pixels]
+    bins = colour_bins(flat, rgb).astype(np.int32)
+    pixels = np.flatnonzero(~local.quad_bits[local.quad_base + bins])
     for step in range(LOCAL_PASSES):
+        if step:
+            pixels = pixels[~local.quad_bits[local.quad_base[pixels] + colour_bins(flat[pixels], rgb)]]
         if not len(pixels):
             return
         ch = [flat[pixels, i].astype(np.int32) for i in rgb]
         bins = (ch[0] >> 3 << 10) | (ch[1] >> 3 << 5) | (ch[2] >> 3)
-        regions, weights = local.regions_and_weights(pixels)
-        if step:
-            held = [local.bits[(r << 15) + bins] for r in regions]
-            moved = np.flatnonzero(~(held[0] & held[1] & held[2] & held[3]))
-            pixels, bins, ch = pixels[moved], bins[moved], [c[moved] for c in ch]
-            held, regions, weights = ([a[moved] for a in arrays] for arrays in (held, regions, weights))
         cells = (ch[0] >> 4 << 8) | (ch[1] >> 4 << 4) | (ch[2] >> 4)
+        regions, weights = local.regions_and_weights(pixels)
         acc = [np.full(len(pixels), 1 << (2 * WEIGHT_BITS - 1), np.int32) for _ in rgb]
-        for r, w, h in zip(regions, weights, held):
-            t = np.where(h, bins, local.nearest[(r << 12) + cells])  # a held colour's own bin clamps it to itself
+        for r, w in zip(regions, weights):
+            # a held colour's own bin clamps it to itself
+            t = np.where(local.bits[(r << 15) + bins], bins, local.nearest[(r << 12) + cells])
             for a, c, shift in zip(acc, ch, (10, 5, 0)):
                 a += w * CLAMP[(t >> shift & 31) << 8 | c]
         for i, a in zip(rgb, acc):
@@ -422,6 +442,7 @@ class ProjectorOpenCL(Projector):
         loc = self.local
         arrays["local_inside"] = np.zeros(1, np.uint8) if loc is None else loc.model.inside
         arrays["local_nearest"] = np.zeros(1, np.uint16) if loc is None else loc.model.nearest
+        arrays["local_quads"] = np.zeros(1, np.uint8) if loc is None else loc.quads
         t = self.tone
         arrays["tone"] = np.zeros(1, np.float32) if t is None else np.concatenate([t.lo, t.scale])
         arrays["tone_table"] = np.zeros(1, np.uint8) if t is None else t.table

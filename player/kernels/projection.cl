@@ -123,27 +123,32 @@ void snap_colours(uchar *v, const int count, __global const ushort *restrict nea
 #define LOCAL_ONE (1 << LOCAL_WEIGHT_BITS)
 #define LOCAL_HALF (1 << (2 * LOCAL_WEIGHT_BITS - 1))
 
-// Along an axis of `count` regions, coordinate u: the lower (.x) and upper (.y) region whose
-// centres it lies between, clamped to the axis, and the upper's weight out of LOCAL_ONE (*w).
-int2 between(const int u, const int count, int *w)
+// Along an axis of `count` regions, coordinate u: the quad it lies in (0 .. count: between
+// regions quad - 1 and quad, each clamped to the axis) and the upper region's weight out of
+// LOCAL_ONE (*w).
+int between(const int u, int *w)
 {
     const int d = 2 * u + 1 - LOCAL_BLOCK;  // twice the offset from region 0's centre, > -2 LOCAL_BLOCK
     const int i = d < 0 ? -1 : d / (2 * LOCAL_BLOCK);
     *w = (((d - i * 2 * LOCAL_BLOCK) << LOCAL_WEIGHT_BITS) + LOCAL_BLOCK) / (2 * LOCAL_BLOCK);
-    return (int2)(clamp(i, 0, count - 1), clamp(i + 1, 0, count - 1));
+    return i + 1;
 }
 
-// One pass of the blend on pixel p (3 values) over regions reg with weights w (LOCAL); false,
-// and p untouched, where all four hold its colour. A region that holds it clamps it into its own
-// bin (no change), so the four are treated alike.
-bool blend_sets(uchar *p, const int4 reg, const int4 w, __global const uchar *restrict inside,
+// Whether the quad's four regions all hold pixel p's colour (one bit of `quads`).
+bool quad_holds(const uchar *p, __global const uchar *restrict quad)
+{
+    const int bin = BIN(p, 0);
+    return ((quad[bin >> 3] >> (bin & 7)) & 1) != 0;
+}
+
+// One pass of the blend on pixel p (3 values) over regions reg with weights w (LOCAL). A region
+// that holds its colour clamps it into its own bin (no change), so the four are treated alike.
+void blend_sets(uchar *p, const int4 reg, const int4 w, __global const uchar *restrict inside,
                 __global const ushort *restrict targets)
 {
     const int bin = BIN(p, 0);
     const int4 byte = reg * 4096 + (bin >> 3);
     const int4 held = ((int4)(inside[byte.s0], inside[byte.s1], inside[byte.s2], inside[byte.s3]) >> (bin & 7)) & 1;
-    if ((held.s0 & held.s1 & held.s2 & held.s3) != 0)
-        return false;
     const int4 at = reg * 4096 + (((p[0] >> 4) << 8) | ((p[1] >> 4) << 4) | (p[2] >> 4));
     const int4 t = select((int4)(targets[at.s0], targets[at.s1], targets[at.s2], targets[at.s3]), (int4)(bin), held != 0);
     for (int c = 0; c < 3; ++c) {
@@ -151,31 +156,33 @@ bool blend_sets(uchar *p, const int4 reg, const int4 w, __global const uchar *re
         const int4 m = w * clamp((int4)(p[c]), lo, lo + 7);
         p[c] = (uchar)((m.s0 + m.s1 + m.s2 + m.s3 + LOCAL_HALF) >> (2 * LOCAL_WEIGHT_BITS));
     }
-    return true;
 }
 
 // The `count` pixels of v, the first at (x, y), moved into their four nearest regions' colour
 // sets, blended (LOCAL).
 void snap_local(uchar *v, const int count, int x, int y, const int width, __global const uchar *restrict inside,
-                __global const ushort *restrict targets)
+                __global const ushort *restrict targets, __global const uchar *restrict quads)
 {
     int wy;
-    int2 ry = between(y, LOCAL_ROWS, &wy);
+    int qy = between(y, &wy);
     for (int q = 0; q < count; ++q) {
         int wx;
-        const int2 rx = between(x, LOCAL_COLS, &wx);
-        const int4 reg = (int4)(ry.x * LOCAL_COLS + rx.x, ry.x * LOCAL_COLS + rx.y, ry.y * LOCAL_COLS + rx.x,
-                                ry.y * LOCAL_COLS + rx.y);
-        const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx, wy * (LOCAL_ONE - wx), wy * wx);
+        const int qx = between(x, &wx);
         uchar *p = v + 3 * q;
-        for (int pass = 0; pass < LOCAL_PASSES; ++pass) {
-            if (!blend_sets(p, reg, w, inside, targets))
-                break;  // all four hold its colour: a further pass leaves it too
+        __global const uchar *quad = quads + (qy * (LOCAL_COLS + 1) + qx) * 4096;
+        if (!quad_holds(p, quad)) {
+            const int y0 = max(qy - 1, 0) * LOCAL_COLS, y1 = min(qy, LOCAL_ROWS - 1) * LOCAL_COLS;
+            const int x0 = max(qx - 1, 0), x1 = min(qx, LOCAL_COLS - 1);
+            const int4 reg = (int4)(y0 + x0, y0 + x1, y1 + x0, y1 + x1);
+            const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx, wy * (LOCAL_ONE - wx), wy * wx);
+            blend_sets(p, reg, w, inside, targets);
+            for (int pass = 1; pass < LOCAL_PASSES && !quad_holds(p, quad); ++pass)
+                blend_sets(p, reg, w, inside, targets);
         }
         if (++x == width) {
             x = 0;
             ++y;
-            ry = between(y, LOCAL_ROWS, &wy);
+            qy = between(y, &wy);
         }
     }
 }
@@ -264,6 +271,7 @@ __kernel void project(__global const basis_t *restrict basis,
                       __global const ushort *restrict nearest,
                       __global const uchar *restrict local_inside,
                       __global const ushort *restrict local_nearest,
+                      __global const uchar *restrict local_quads,
                       __global const float *restrict tone,
                       __global const uchar *restrict tone_table)
 {
@@ -310,7 +318,7 @@ __kernel void project(__global const basis_t *restrict basis,
         add_detail(v, count, x0, y0, p0, first, vol, gain, low, high, colours, c + stride - LAYER_FLOATS, width);
 #endif
 #if LOCAL
-        snap_local(v, count, x0, y0, width, local_inside, local_nearest);
+        snap_local(v, count, x0, y0, width, local_inside, local_nearest, local_quads);
 #elif GAMUT
         snap_colours(v, count, nearest);
 #endif

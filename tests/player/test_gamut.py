@@ -142,14 +142,34 @@ def test_local_kernel_equals_numpy_reference(cl_context, format, detail, size):
     np.testing.assert_array_equal(got, want)
     loc = LocalColours(gamut.local, h, w)
     bits = local_bits(gamut.local).reshape(-1)
-    held = bits[loc.base[:, None] + colour_bins(raw[..., list(fmt.rgb)]).reshape(3, -1).astype(np.int32)].all(0)
+    base = np.stack(loc.regions_and_weights(np.arange(h * w))[0]) << 15
+    held = bits[base[:, None] + colour_bins(raw[..., list(fmt.rgb)]).reshape(3, -1).astype(np.int32)].all(0)
     same = (want == raw).all(axis=-1).reshape(3, -1)
     assert held.any() and same[held].all()
     assert 0.5 < (~same).mean()  # about a quarter of the bins in each region's set
-    one = (loc.base == loc.base[0]).all(axis=0)  # the frame's outer corners: four regions that are one
+    one = (base == base[0]).all(axis=0)  # the frame's outer corners: four regions that are one
     assert one.sum() >= 16
-    out_keys = loc.base[0] + colour_bins(want[..., list(fmt.rgb)]).reshape(3, -1).astype(np.int32)
+    out_keys = base[0] + colour_bins(want[..., list(fmt.rgb)]).reshape(3, -1).astype(np.int32)
     assert bits[out_keys[:, one]].all()
+
+
+@pytest.mark.parametrize("size", [(23, 41), (16, 64), (5, 7)])
+def test_local_quads_hold_what_all_four_regions_hold(size):
+    """The quad of each pixel (the check that leaves a colour alone with one lookup) holds a bin
+    exactly where each of the pixel's four nearest regions does, at the frame's edges (regions
+    that are one) and inside alike."""
+    rng = np.random.default_rng(5)
+    h, w = size
+    nearest = random_colour_set(rng)
+    loc = LocalColours(random_local(rng, nearest, h, w, 8), h, w)
+    assert loc.quads.shape == ((loc.rows + 1) * (loc.cols + 1), 4096)
+    bits = local_bits(loc.model).reshape(-1)
+    regions = np.stack(loc.regions_and_weights(np.arange(h * w))[0])
+    bins = np.flatnonzero(nearest == np.arange(32**3))[::7]
+    four = bits[(regions[:, :, None] << 15) + bins].all(axis=0)
+    quad = loc.quad_bits[loc.quad_base[:, None] + bins]
+    np.testing.assert_array_equal(quad, four)
+    assert 0 < four.mean() < 0.6  # each region holds about half the clip's set, a random half of it
 
 
 def test_local_sets_blend_across_a_region_border():
