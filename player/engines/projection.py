@@ -157,13 +157,12 @@ class LocalColours:
         ry, rx = np.arange(self.rows + 1), np.arange(self.cols + 1)
         lo_y, hi_y = np.maximum(ry - 1, 0), np.minimum(ry, self.rows - 1)
         lo_x, hi_x = np.maximum(rx - 1, 0), np.minimum(rx, self.cols - 1)
-        #: per quad, the bins all its four regions hold, packed as ``model.inside``:
-        #: uint8 ``((rows + 1) * (cols + 1), 4096)``
-        self.quads = np.ascontiguousarray(
-            (inside[lo_y][:, lo_x] & inside[lo_y][:, hi_x] & inside[hi_y][:, lo_x] & inside[hi_y][:, hi_x]).reshape(
-                -1, inside.shape[-1]
-            )
-        )
+        #: per quad, the bins all its four regions hold ([:, 0]) and those one of them holds
+        #: ([:, 1]), packed as ``model.inside``: uint8 ``((rows + 1) * (cols + 1), 2, 4096)``
+        four = inside[lo_y][:, lo_x], inside[lo_y][:, hi_x], inside[hi_y][:, lo_x], inside[hi_y][:, hi_x]
+        self.quads = np.stack(
+            [four[0] & four[1] & four[2] & four[3], four[0] | four[1] | four[2] | four[3]], axis=2
+        ).reshape(-1, 2, inside.shape[-1])
 
     @functools.cached_property
     def quad_base(self) -> np.ndarray:
@@ -204,8 +203,13 @@ class LocalColours:
 
     @functools.cached_property
     def quad_bits(self) -> np.ndarray:
-        """:attr:`quads` as one bool per quad and bin, flat (numpy's alone)."""
-        return np.unpackbits(self.quads, axis=1, bitorder="little").astype(bool).reshape(-1)
+        """The bins all four regions of each quad hold (:attr:`quads`), one bool per quad and bin,
+        flat (numpy's alone)."""
+        return np.unpackbits(self.quads[:, 0], axis=1, bitorder="little").astype(bool).reshape(-1)
+
+    def quad_any(self, keys: np.ndarray) -> np.ndarray:
+        """Whether one of the four regions holds each key (a pixel's :attr:`quad_base` + its bin)."""
+        return (self.quads[:, 1].reshape(-1)[keys >> 3] >> (keys & 7) & 1).astype(bool)
 
 
 def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
@@ -230,25 +234,36 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     [[[200, 7, 7]]]
     """
     flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
-    bins = colour_bins(flat, rgb).astype(np.int32)
-    pixels = np.flatnonzero(~local.quad_bits[local.quad_base + bins])
+    pixels = np.flatnonzero(~local.quad_bits[local.quad_base + colour_bins(flat, rgb)])
+    if not len(pixels):
+        return
+    quad = local.quad_base[pixels]
+    ch = [flat[pixels, i].astype(np.int32) for i in rgb]
+    regions, weights = local.regions_and_weights(pixels)
     for step in range(LOCAL_PASSES):
-        if step:
-            pixels = pixels[~local.quad_bits[local.quad_base[pixels] + colour_bins(flat[pixels], rgb)]]
-        if not len(pixels):
-            return
-        ch = [flat[pixels, i].astype(np.int32) for i in rgb]
-        bins = (ch[0] >> 3 << 10) | (ch[1] >> 3 << 5) | (ch[2] >> 3)
-        cells = (ch[0] >> 4 << 8) | (ch[1] >> 4 << 4) | (ch[2] >> 4)
-        regions, weights = local.regions_and_weights(pixels)
-        acc = [np.full(len(pixels), 1 << (2 * WEIGHT_BITS - 1), np.int32) for _ in rgb]
-        for r, w in zip(regions, weights):
-            # a held colour's own bin clamps it to itself
+        c, rs, ws = ch, regions, weights
+        bins = (c[0] >> 3 << 10) | (c[1] >> 3 << 5) | (c[2] >> 3)
+        if step:  # the pixels the blend left in none of the four sets
+            todo = np.flatnonzero(~local.quad_any(quad + bins))
+            if not len(todo):
+                break
+            c, rs, ws, bins = ([a[todo] for a in arrays] for arrays in (ch, regions, weights, [bins]))
+            bins = bins[0]
+        cells = (c[0] >> 4 << 8) | (c[1] >> 4 << 4) | (c[2] >> 4)
+        acc = [np.full(len(bins), 1 << (2 * WEIGHT_BITS - 1), np.int32) for _ in rgb]
+        for r, w in zip(rs, ws):
+            # a held colour's own bin clamps it to itself; lo: the target's level (bits 8..12) per channel
             t = np.where(local.bits[(r << 15) + bins], bins, local.nearest[(r << 12) + cells])
-            for a, c, shift in zip(acc, ch, (10, 5, 0)):
-                a += w * CLAMP[(t >> shift & 31) << 8 | c]
-        for i, a in zip(rgb, acc):
-            flat[pixels, i] = a >> (2 * WEIGHT_BITS)
+            for a, v, lo in zip(acc, c, (t >> 2 & 0x1F00, t << 3 & 0x1F00, t << 8 & 0x1F00)):
+                lo |= v
+                a += w * CLAMP[lo]
+        if step:
+            for v, a in zip(ch, acc):
+                v[todo] = a >> (2 * WEIGHT_BITS)
+        else:
+            ch = [a >> (2 * WEIGHT_BITS) for a in acc]
+    for i, v in zip(rgb, ch):
+        flat[pixels, i] = v
 
 
 def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:

@@ -134,11 +134,12 @@ int between(const int u, int *w)
     return i + 1;
 }
 
-// Whether the quad's four regions all hold pixel p's colour (one bit of `quads`).
-bool quad_holds(const uchar *p, __global const uchar *restrict quad)
+// Whether the quad's four regions all hold pixel p's colour (quad[0 .. 4095]), or (any) one of
+// them does (quad[4096 .. 8191]).
+bool quad_holds(const uchar *p, __global const uchar *restrict quad, const int any)
 {
     const int bin = BIN(p, 0);
-    return ((quad[bin >> 3] >> (bin & 7)) & 1) != 0;
+    return ((quad[any * 4096 + (bin >> 3)] >> (bin & 7)) & 1) != 0;
 }
 
 // One pass of the blend on pixel p (3 values) over regions reg with weights w (LOCAL). A region
@@ -159,31 +160,48 @@ void blend_sets(uchar *p, const int4 reg, const int4 w, __global const uchar *re
 }
 
 // The `count` pixels of v, the first at (x, y), moved into their four nearest regions' colour
-// sets, blended (LOCAL).
-void snap_local(uchar *v, const int count, int x, int y, const int width, __global const uchar *restrict inside,
-                __global const ushort *restrict targets, __global const uchar *restrict quads)
+// sets, blended (LOCAL). The pixels each pass works on are listed first (their quads and weights
+// with them) and worked on after, so that the work-items of a vector share loops as short as
+// their longest lists rather than one over every pixel.
+void snap_local(uchar *v, const int count, const int x, const int y, const int width,
+                __global const uchar *restrict inside, __global const ushort *restrict targets,
+                __global const uchar *restrict quads)
 {
-    int wy;
+    int at[PIXELS], quad[PIXELS], weights[PIXELS];  // of the listed pixels: index, quad, wy << 16 | wx
+    int m = 0;
+    int wy, wx;
     int qy = between(y, &wy);
-    for (int q = 0; q < count; ++q) {
-        int wx;
-        const int qx = between(x, &wx);
-        uchar *p = v + 3 * q;
-        __global const uchar *quad = quads + (qy * (LOCAL_COLS + 1) + qx) * 4096;
-        if (!quad_holds(p, quad)) {
-            const int y0 = max(qy - 1, 0) * LOCAL_COLS, y1 = min(qy, LOCAL_ROWS - 1) * LOCAL_COLS;
-            const int x0 = max(qx - 1, 0), x1 = min(qx, LOCAL_COLS - 1);
-            const int4 reg = (int4)(y0 + x0, y0 + x1, y1 + x0, y1 + x1);
+    for (int q = 0, u = x; q < count; ++q, ++u) {
+        if (u == width) {
+            u = 0;
+            qy = between(y + (x + q) / width, &wy);
+        }
+        const int qx = between(u, &wx);
+        const int k = qy * (LOCAL_COLS + 1) + qx;
+        if (!quad_holds(v + 3 * q, quads + k * 8192, 0)) {
+            at[m] = q;
+            quad[m] = k;
+            weights[m++] = (wy << 16) | wx;
+        }
+    }
+    for (int pass = 0; pass < LOCAL_PASSES; ++pass) {
+        int next = 0;
+        for (int j = 0; j < m; ++j) {
+            const int k = quad[j], qy = k / (LOCAL_COLS + 1), qx = k - qy * (LOCAL_COLS + 1);
+            const int ry0 = max(qy - 1, 0) * LOCAL_COLS, ry1 = min(qy, LOCAL_ROWS - 1) * LOCAL_COLS;
+            const int rx0 = max(qx - 1, 0), rx1 = min(qx, LOCAL_COLS - 1);
+            const int4 reg = (int4)(ry0 + rx0, ry0 + rx1, ry1 + rx0, ry1 + rx1);
+            const int wy = weights[j] >> 16, wx = weights[j] & 0xffff;
             const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx, wy * (LOCAL_ONE - wx), wy * wx);
+            uchar *p = v + 3 * at[j];
             blend_sets(p, reg, w, inside, targets);
-            for (int pass = 1; pass < LOCAL_PASSES && !quad_holds(p, quad); ++pass)
-                blend_sets(p, reg, w, inside, targets);
+            if (!quad_holds(p, quads + k * 8192, 1)) {  // in none of the four sets: the next pass
+                at[next] = at[j];
+                quad[next] = k;
+                weights[next++] = weights[j];
+            }
         }
-        if (++x == width) {
-            x = 0;
-            ++y;
-            qy = between(y, &wy);
-        }
+        m = next;
     }
 }
 #endif

@@ -155,20 +155,23 @@ def test_local_kernel_equals_numpy_reference(cl_context, format, detail, size):
 
 @pytest.mark.parametrize("size", [(23, 41), (16, 64), (5, 7)])
 def test_local_quads_hold_what_all_four_regions_hold(size):
-    """The quad of each pixel (the check that leaves a colour alone with one lookup) holds a bin
-    exactly where each of the pixel's four nearest regions does, at the frame's edges (regions
-    that are one) and inside alike."""
+    """The quad of each pixel (the checks that leave a colour alone, or end the blend, with one
+    lookup) holds a bin exactly where each of the pixel's four nearest regions does, and any of
+    them exactly where one does, at the frame's edges (regions that are one) and inside alike."""
     rng = np.random.default_rng(5)
     h, w = size
     nearest = random_colour_set(rng)
     loc = LocalColours(random_local(rng, nearest, h, w, 8), h, w)
-    assert loc.quads.shape == ((loc.rows + 1) * (loc.cols + 1), 4096)
+    assert loc.quads.shape == ((loc.rows + 1) * (loc.cols + 1), 2, 4096)
     bits = local_bits(loc.model).reshape(-1)
     regions = np.stack(loc.regions_and_weights(np.arange(h * w))[0])
     bins = np.flatnonzero(nearest == np.arange(32**3))[::7]
     four = bits[(regions[:, :, None] << 15) + bins].all(axis=0)
     quad = loc.quad_bits[loc.quad_base[:, None] + bins]
     np.testing.assert_array_equal(quad, four)
+    one = bits[(regions[:, :, None] << 15) + bins].any(axis=0)
+    np.testing.assert_array_equal(loc.quad_any(loc.quad_base[:, None] + bins), one)
+    assert (one & ~four).any() == (loc.rows * loc.cols > 1)  # one region alone: the two alike
     assert 0 < four.mean() < 0.6  # each region holds about half the clip's set, a random half of it
 
 
