@@ -112,7 +112,7 @@ def snap_colours(
 #: colour sets' blend, :func:`snap_local`): a pixel's four weights are products out of ``2**16``.
 WEIGHT_BITS = 8
 #: Passes of the local colour sets' blend: a blend of colours from different sets can lie in none
-#: of them (CHANGELOG.md has the measurement); a second pass moves it back in.
+#: of them (CHANGELOG.md has the measurement); a second pass blends such a pixel again.
 LOCAL_PASSES = 2
 
 
@@ -137,12 +137,13 @@ CLAMP = np.clip(np.arange(256), 8 * np.arange(32)[:, None], 8 * np.arange(32)[:,
 class LocalColours:
     """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
     ``height`` x ``width`` frame: each pixel's four nearest regions and their weights along each
-    axis (:func:`region_axis`); the sets all four regions of each quad hold (:attr:`quads`, both
-    backends); and (numpy, on first use) each pixel's quad and regions and the sets unpacked.
+    axis (:func:`region_axis`); per quad, the bins all four of its regions hold and those one of
+    them holds (:attr:`quads`, both backends); and (numpy, on first use) each pixel's quad and
+    regions and the sets unpacked.
 
-    A quad is the four regions around one corner where four region centres meet: the pixels
-    between those centres blend those four regions' sets, so a pixel whose colour its quad's
-    regions all hold (one lookup) is left as it is."""
+    A quad is the four regions around a corner where four region centres meet: the pixels between
+    those centres blend those four regions' sets, so a pixel whose colour its quad's regions all
+    hold is left as it is with one lookup, and one whose blend one of them holds is done."""
 
     def __init__(self, model, height: int, width: int) -> None:
         self.model = model
@@ -223,8 +224,8 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     for its 16-level cell; the four colours are blended with the pixel's weights
     (:meth:`LocalColours.regions_and_weights`, integers: ``(sum w_k c_k + 2**15) >> 16``). Near
     a region's centre its set weighs most, and past the outermost centres (the frame's edges)
-    the regions along that axis are one. :data:`LOCAL_PASSES` passes, each over the pixels the
-    one before moved whose colour their quad does not hold.
+    the regions along that axis are one. Up to :data:`LOCAL_PASSES` passes, each over the pixels
+    the one before left in none of the four sets (:meth:`LocalColours.quad_any`).
 
     >>> from dynatex.tiledb.gamut import LocalGamut
     >>> held = np.zeros(32768, bool); held[(25 * 32 + 0) * 32 + 0] = True  # red alone

@@ -37,8 +37,12 @@
 // ((r >> 4) * 256 + (g >> 4) * 16 + (b >> 4)); the four colours weighted by the pixel's position
 // between the regions' centres (per axis an integer out of 2^LOCAL_WEIGHT_BITS, the four
 // products summing to 2^(2 LOCAL_WEIGHT_BITS)), rounded by a shift: integers alone, exact. A
-// colour all four hold stays; a second pass (LOCAL_PASSES) moves a blend that fell between the
-// sets back in. Each region's set lies within the clip's.
+// colour all four hold stays: the four regions around each corner where region centres meet (a
+// quad, (LOCAL_ROWS + 1) x (LOCAL_COLS + 1), clamped at the frame's edges) have their bins all
+// four hold at local_quads[quad * 8192 + (bin >> 3)], bit bin & 7, so that this costs one
+// lookup, and those one of the four holds at local_quads[quad * 8192 + 4096 + (bin >> 3)]: a
+// blend that fell in none of the four sets is blended again (up to LOCAL_PASSES passes). Each
+// region's set lies within the clip's.
 //
 // Defines: HALF (1: basis stored as half floats), CHANNELS (1 or 3: values per pixel of the
 // basis; grey is replicated), PIXEL_BYTES (3 or 4: bytes per output pixel), R_AT, G_AT, B_AT
@@ -152,11 +156,17 @@ void blend_sets(uchar *p, const int4 reg, const int4 w, __global const uchar *re
     const int4 held = ((int4)(inside[byte.s0], inside[byte.s1], inside[byte.s2], inside[byte.s3]) >> (bin & 7)) & 1;
     const int4 at = reg * 4096 + (((p[0] >> 4) << 8) | ((p[1] >> 4) << 4) | (p[2] >> 4));
     const int4 t = select((int4)(targets[at.s0], targets[at.s1], targets[at.s2], targets[at.s3]), (int4)(bin), held != 0);
-    for (int c = 0; c < 3; ++c) {
-        const int4 lo = ((t >> (10 - 5 * c)) & 31) << 3;
-        const int4 m = w * clamp((int4)(p[c]), lo, lo + 7);
-        p[c] = (uchar)((m.s0 + m.s1 + m.s2 + m.s3 + LOCAL_HALF) >> (2 * LOCAL_WEIGHT_BITS));
-    }
+    // one vector: lane 4 k + c holds channel c (3: unused) of region k
+    const uint16 by_region = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
+    const int16 shift = (int16)(10, 5, 0, 0, 10, 5, 0, 0, 10, 5, 0, 0, 10, 5, 0, 0);
+    const int16 lo = ((shuffle(t, by_region) >> shift) & 31) << 3;
+    const int16 value = shuffle((int4)(p[0], p[1], p[2], 0), (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3));
+    const int16 m = shuffle(w, by_region) * clamp(value, lo, lo + 7);
+    const int8 pairs = m.lo + m.hi;
+    const int4 sum = (pairs.lo + pairs.hi + LOCAL_HALF) >> (2 * LOCAL_WEIGHT_BITS);
+    p[0] = (uchar)sum.s0;
+    p[1] = (uchar)sum.s1;
+    p[2] = (uchar)sum.s2;
 }
 
 // The `count` pixels of v, the first at (x, y), moved into their four nearest regions' colour
