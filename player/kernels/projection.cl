@@ -138,47 +138,46 @@ int between(const int u, int *w)
     return i + 1;
 }
 
-// Whether the quad's four regions all hold pixel p's colour (quad[0 .. 4095]), or (any) one of
-// them does (quad[4096 .. 8191]).
-bool quad_holds(const uchar *p, __global const uchar *restrict quad, const int any)
+// Colour c's bin (c.s0..s2: its levels).
+int bin_of(const int4 c)
 {
-    const int bin = BIN(p, 0);
+    return ((c.s0 >> 3) << 10) | ((c.s1 >> 3) << 5) | (c.s2 >> 3);
+}
+
+// Whether the quad's four regions all hold colour c (quad[0 .. 4095]), or (any) one of them
+// does (quad[4096 .. 8191]).
+bool quad_holds(const int4 c, __global const uchar *restrict quad, const int any)
+{
+    const int bin = bin_of(c);
     return ((quad[any * 4096 + (bin >> 3)] >> (bin & 7)) & 1) != 0;
 }
 
-// One pass of the blend on pixel p (3 values) over regions reg with weights w (LOCAL). A region
-// that holds its colour clamps it into its own bin (no change), so the four are treated alike.
-void blend_sets(uchar *p, const int4 reg, const int4 w, __global const uchar *restrict inside,
+// One pass of the blend on colour c over regions reg with weights w (LOCAL). A region that holds
+// its colour clamps it into its own bin (no change), so the four are treated alike.
+int4 blend_sets(const int4 c, const int4 reg, const int4 w, __global const uchar *restrict inside,
                 __global const ushort *restrict targets)
 {
-    const int bin = BIN(p, 0);
+    const int bin = bin_of(c);
     const int4 byte = reg * 4096 + (bin >> 3);
     const int4 held = ((int4)(inside[byte.s0], inside[byte.s1], inside[byte.s2], inside[byte.s3]) >> (bin & 7)) & 1;
-    const int4 at = reg * 4096 + (((p[0] >> 4) << 8) | ((p[1] >> 4) << 4) | (p[2] >> 4));
+    const int4 at = reg * 4096 + (((c.s0 >> 4) << 8) | ((c.s1 >> 4) << 4) | (c.s2 >> 4));
     const int4 t = select((int4)(targets[at.s0], targets[at.s1], targets[at.s2], targets[at.s3]), (int4)(bin), held != 0);
-    // one vector: lane 4 k + c holds channel c (3: unused) of region k
+    // one vector: lane 4 k + i holds channel i (3: unused) of region k
     const uint16 by_region = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
     const int16 shift = (int16)(10, 5, 0, 0, 10, 5, 0, 0, 10, 5, 0, 0, 10, 5, 0, 0);
     const int16 lo = ((shuffle(t, by_region) >> shift) & 31) << 3;
-    const int16 value = shuffle((int4)(p[0], p[1], p[2], 0), (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3));
+    const int16 value = shuffle(c, (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3));
     const int16 m = shuffle(w, by_region) * clamp(value, lo, lo + 7);
     const int8 pairs = m.lo + m.hi;
-    const int4 sum = (pairs.lo + pairs.hi + LOCAL_HALF) >> (2 * LOCAL_WEIGHT_BITS);
-    p[0] = (uchar)sum.s0;
-    p[1] = (uchar)sum.s1;
-    p[2] = (uchar)sum.s2;
+    return (pairs.lo + pairs.hi + LOCAL_HALF) >> (2 * LOCAL_WEIGHT_BITS);
 }
 
 // The `count` pixels of v, the first at (x, y), moved into their four nearest regions' colour
-// sets, blended (LOCAL). The pixels each pass works on are listed first (their quads and weights
-// with them) and worked on after, so that the work-items of a vector share loops as short as
-// their longest lists rather than one over every pixel.
+// sets, blended (LOCAL).
 void snap_local(uchar *v, const int count, const int x, const int y, const int width,
                 __global const uchar *restrict inside, __global const ushort *restrict targets,
                 __global const uchar *restrict quads)
 {
-    int at[PIXELS], quad[PIXELS], weights[PIXELS];  // of the listed pixels: index, quad, wy << 16 | wx
-    int m = 0;
     int wy, wx;
     int qy = between(y, &wy);
     for (int q = 0, u = x; q < count; ++q, ++u) {
@@ -187,31 +186,23 @@ void snap_local(uchar *v, const int count, const int x, const int y, const int w
             qy = between(y + (x + q) / width, &wy);
         }
         const int qx = between(u, &wx);
-        const int k = qy * (LOCAL_COLS + 1) + qx;
-        if (!quad_holds(v + 3 * q, quads + k * 8192, 0)) {
-            at[m] = q;
-            quad[m] = k;
-            weights[m++] = (wy << 16) | wx;
+        __global const uchar *restrict quad = quads + (qy * (LOCAL_COLS + 1) + qx) * 8192;
+        uchar *p = v + 3 * q;
+        int4 c = (int4)(p[0], p[1], p[2], 0);
+        if (quad_holds(c, quad, 0))
+            continue;  // all four hold it
+        const int ry0 = max(qy - 1, 0) * LOCAL_COLS, ry1 = min(qy, LOCAL_ROWS - 1) * LOCAL_COLS;
+        const int rx0 = max(qx - 1, 0), rx1 = min(qx, LOCAL_COLS - 1);
+        const int4 reg = (int4)(ry0 + rx0, ry0 + rx1, ry1 + rx0, ry1 + rx1);
+        const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx, wy * (LOCAL_ONE - wx), wy * wx);
+        for (int pass = 0; pass < LOCAL_PASSES; ++pass) {
+            c = blend_sets(c, reg, w, inside, targets);
+            if (quad_holds(c, quad, 1))
+                break;  // one of the four holds the blend
         }
-    }
-    for (int pass = 0; pass < LOCAL_PASSES; ++pass) {
-        int next = 0;
-        for (int j = 0; j < m; ++j) {
-            const int k = quad[j], qy = k / (LOCAL_COLS + 1), qx = k - qy * (LOCAL_COLS + 1);
-            const int ry0 = max(qy - 1, 0) * LOCAL_COLS, ry1 = min(qy, LOCAL_ROWS - 1) * LOCAL_COLS;
-            const int rx0 = max(qx - 1, 0), rx1 = min(qx, LOCAL_COLS - 1);
-            const int4 reg = (int4)(ry0 + rx0, ry0 + rx1, ry1 + rx0, ry1 + rx1);
-            const int wy = weights[j] >> 16, wx = weights[j] & 0xffff;
-            const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx, wy * (LOCAL_ONE - wx), wy * wx);
-            uchar *p = v + 3 * at[j];
-            blend_sets(p, reg, w, inside, targets);
-            if (!quad_holds(p, quads + k * 8192, 1)) {  // in none of the four sets: the next pass
-                at[next] = at[j];
-                quad[next] = k;
-                weights[next++] = weights[j];
-            }
-        }
-        m = next;
+        p[0] = (uchar)c.s0;
+        p[1] = (uchar)c.s1;
+        p[2] = (uchar)c.s2;
     }
 }
 #endif
