@@ -257,7 +257,9 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
             t = np.where(local.bits[(r << 15) + bins], bins, local.nearest[(r << 12) + cells])
             for a, v, lo in zip(acc, c, (t >> 2 & 0x1F00, t << 3 & 0x1F00, t << 8 & 0x1F00)):
                 lo |= v
-                a += w * CLAMP[lo]
+                CLAMP.take(lo, out=lo)
+                lo *= w
+                a += lo
         if step:
             for v, a in zip(ch, acc):
                 v[todo] = a >> (2 * WEIGHT_BITS)
