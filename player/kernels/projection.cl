@@ -127,9 +127,9 @@ void snap_colours(uchar *v, const int count, __global const ushort *restrict nea
 #define LOCAL_ONE (1 << LOCAL_WEIGHT_BITS)
 #define LOCAL_HALF (1 << (2 * LOCAL_WEIGHT_BITS - 1))
 
-// Along an axis of `count` regions, coordinate u: the quad it lies in (0 .. count: between
-// regions quad - 1 and quad, each clamped to the axis) and the upper region's weight out of
-// LOCAL_ONE (*w).
+// Along an axis of n regions (LOCAL_ROWS or LOCAL_COLS), coordinate u: the quad it lies in
+// (0 .. n: between regions quad - 1 and quad, each clamped to 0 .. n - 1) and the upper region's
+// weight out of LOCAL_ONE (*w).
 int between(const int u, int *w)
 {
     const int d = 2 * u + 1 - LOCAL_BLOCK;  // twice the offset from region 0's centre, > -2 LOCAL_BLOCK
