@@ -250,11 +250,16 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
                 break
             c, rs, ws, bins = ([a[todo] for a in arrays] for arrays in (ch, regions, weights, [bins]))
             bins = bins[0]
+        # the pixels one of the four holds (none after the first pass)
+        some = np.flatnonzero(local.quad_any(quad + bins)) if not step else bins[:0]
+        held_bins = bins[some]
         cells = (c[0] >> 4 << 8) | (c[1] >> 4 << 4) | (c[2] >> 4)
         acc = [np.full(len(bins), 1 << (2 * WEIGHT_BITS - 1), np.int32) for _ in rgb]
         for r, w in zip(rs, ws):
-            # a held colour's own bin clamps it to itself; lo: the target's level (bits 8..12) per channel
-            t = np.where(local.bits[(r << 15) + bins], bins, local.nearest[(r << 12) + cells])
+            t = local.nearest[(r << 12) + cells].astype(np.int32)
+            # a held colour's own bin clamps it to itself
+            t[some] = np.where(local.bits[(r[some] << 15) + held_bins], held_bins, t[some])
+            # lo: the target's level (bits 8..12) per channel
             for a, v, lo in zip(acc, c, (t >> 2 & 0x1F00, t << 3 & 0x1F00, t << 8 & 0x1F00)):
                 lo |= v
                 CLAMP.take(lo, out=lo)
