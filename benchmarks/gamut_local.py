@@ -6,6 +6,9 @@ Per clip of ``quality_projection.py`` (its databases in DBDIR; analysed there wh
 50 frames of warm-up, 300 measured (numpy), as the issue's tables; ``--variants`` plays the
 texture as stored (``full``), without the detail (``nodetail``: the projection alone, no
 per-pixel colour range) and without the colour clamp (``noclamp``: no ``gamut`` part).
+``border_step`` (x, y): the mean luma step across the borders of the stored local sets' regions
+over that across the lines halfway between them (1: no edge where two regions' sets meet; the
+source's at its side, its codec's block grid alike at both).
 
     python benchmarks/gamut_local.py DBDIR [--clips flag,sea,fountain,grass,steam]
         [--variants full,nodetail,noclamp] [--block 16]
@@ -40,6 +43,28 @@ def play(db: str, method: str, variant: str, warm: int = 50, frames: int = 300) 
         return np.stack([p.next_frame() for _ in range(frames)])
 
 
+def local_block(db: str, method: str) -> int | None:
+    """The side of the local colour sets' regions as the player lays them out (None: none)."""
+    from dynatex.player.modes.lds import LDSPlayer
+    from dynatex.player.modes.mixture import MixturePlayer
+
+    with (LDSPlayer if method == "lds" else MixturePlayer)(db, seed=1, backend="numpy") as p:
+        local = getattr(p.engine, "local", None)
+        return None if local is None else local.block
+
+
+def border_step(frames: np.ndarray, block: int) -> tuple[float, float]:
+    """Mean |step| of luma across the region borders (every ``block`` pixels) over that across
+    the lines halfway between them, along x and along y."""
+    f = frames[..., :3].astype(np.float32).mean(-1)
+    dx, dy = np.abs(np.diff(f, axis=2)), np.abs(np.diff(f, axis=1))
+    half = block // 2
+    return (
+        round(float(dx[:, :, block - 1 :: block].mean() / dx[:, :, half - 1 :: block].mean()), 3),
+        round(float(dy[:, block - 1 :: block].mean() / dy[:, half - 1 :: block].mean()), 3),
+    )
+
+
 def main() -> None:
     from dynatex.analyzer.metrics import out_of_gamut_share, source_gamut_share
     from dynatex.analyzer.metrics.gamut import local_out_of_gamut_share, source_local_gamut_share
@@ -65,12 +90,17 @@ def main() -> None:
             "source_global": source_gamut_share(src),
             "source_local": source_local_gamut_share(src, block=args.block),
         }
+        block = local_block(db, method)
+        if block is not None:
+            row["source_border_step"] = border_step(src, block)
         for variant in args.variants.split(","):
             out = play(db, method, variant)
             if args.save:
                 np.save(os.path.join(args.dbdir, f"{name}_{variant}.npy"), out)
             row[f"{variant}_global"] = out_of_gamut_share(out, src)
             row[f"{variant}_local"] = local_out_of_gamut_share(out, src, block=args.block)
+            if block is not None:
+                row[f"{variant}_border_step"] = border_step(out, block)
         print(json.dumps({k: (float(f"{v:.3g}") if isinstance(v, float) else v) for k, v in row.items()}), flush=True)
 
 

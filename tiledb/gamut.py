@@ -12,10 +12,12 @@ before it play without it.
 The optional ``local`` subgroup (format 1.7, versioned on its own) holds a colour set per region
 of the frame (squares of ``block`` pixels): a projection's low-rank mix can put a colour of the
 clip where the clip never showed it (the flag's green-and-white mix as a teal haze over the
-stone tower). A pixel whose bin its region never held moves into the region's bin that
+stone tower). Where a region never held a pixel's bin, the region's bin for it is the one
 ``nearest[region, cell]`` names for its 16-level cell ``(r >> 4) * 256 + (g >> 4) * 16 +
-(b >> 4)``. Each region's set lies within the clip's, so the player applies it instead of the
-global map; a reader that predates it plays the global map alone.
+(b >> 4)``. Each region's set lies within the clip's, so the player applies the sets instead of
+the global map, each pixel those of its four nearest regions blended by its position between
+their centres (``player/engines/projection.py``, ``snap_local``: no edge where two regions meet);
+a reader that predates them plays the global map alone.
 """
 
 from __future__ import annotations

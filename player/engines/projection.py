@@ -3,7 +3,9 @@ whose frames are a linear combination of stored rows (``lds``, ``mixture``), for
 ``frames`` coefficient vectors per pass over the basis, with a model's fine detail
 (:mod:`.detail`) added in the same pass and, where the model has a colour set
 (:mod:`dynatex.tiledb.gamut`), every pixel whose colour the source never had moved to the
-nearest one it had as it is stored (:func:`snap_colours`).
+nearest one it had as it is stored (:func:`snap_colours`), or, where the model has colour sets
+per region of the frame, into the sets of the pixel's four nearest regions, blended by its
+position between their centres so that no region's edge shows (:func:`snap_local`).
 
 Each frame reads the whole basis, so one frame at a time is bound by memory bandwidth; k
 frames per pass read it once (a matrix-matrix product), which is what a caller that knows
@@ -106,30 +108,124 @@ def snap_colours(
         frames[(*at, i)] = np.clip(frames[(*at, i)], lo, lo + 7)
 
 
+#: Fixed-point bits of a pixel's weight along each axis between two region centres (the local
+#: colour sets' blend, :func:`snap_local`): a pixel's four weights are products out of ``2**16``.
+WEIGHT_BITS = 8
+#: Passes of the local colour sets' blend: a blend of colours from different sets can lie in none
+#: of them (CHANGELOG.md has the measurement); a second pass blends such a pixel again.
+LOCAL_PASSES = 2
+
+
+def region_axis(n: int, block: int, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Along an axis of ``n`` pixels and ``count`` regions of ``block`` pixels: each pixel's lower
+    and upper region, the two whose centres it lies between (clamped to ``0..count - 1``), and the
+    upper's weight out of ``2**WEIGHT_BITS`` (integers, as the kernel computes them).
+
+    >>> [a.tolist() for a in region_axis(8, 4, 2)]
+    [[0, 0, 0, 0, 0, 0, 1, 1], [0, 0, 1, 1, 1, 1, 1, 1], [160, 224, 32, 96, 160, 224, 32, 96]]
+    """
+    d = 2 * np.arange(n, dtype=np.int64) + 1 - block  # twice the offset from region 0's centre
+    lower = d // (2 * block)
+    weight = (((d - lower * 2 * block) << WEIGHT_BITS) + block) // (2 * block)
+    return np.clip(lower, 0, count - 1), np.clip(lower + 1, 0, count - 1), weight
+
+
+#: ``CLAMP[(t << 8) | v]``: level ``v`` clamped into the 8 levels of colour bin ``t`` (``8 t .. 8 t + 7``).
+CLAMP = np.clip(np.arange(256), 8 * np.arange(32)[:, None], 8 * np.arange(32)[:, None] + 7).astype(np.int32).ravel()
+
+
 class LocalColours:
     """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
-    ``height`` x ``width`` frame: each pixel's region, and (numpy, on first use) the sets unpacked."""
+    ``height`` x ``width`` frame: each pixel's four nearest regions and their weights along each
+    axis (:func:`region_axis`); per quad, the bins all four of its regions hold and those one of
+    them holds (:attr:`quads`, both backends); and (numpy, on first use) each pixel's quad and
+    regions and the sets unpacked.
+
+    A quad is the four regions around a corner where four region centres meet: the pixels between
+    those centres blend those four regions' sets, so a pixel whose colour its quad's regions all
+    hold is left as it is with one lookup, and one whose blend one of them holds is done."""
 
     def __init__(self, model, height: int, width: int) -> None:
         self.model = model
         self.block = model.block
-        self.cols = model.regions(height, width)[1]
-        y, x = np.arange(height)[:, None] // self.block, np.arange(width)[None, :] // self.block
-        #: each pixel's region, times the bins per region (a key's base)
-        self.base = ((y * self.cols + x) * 32768).astype(np.int32).reshape(-1)
-        #: each pixel's region, times the cells per region
-        self.cell_base = (self.base >> 3).astype(np.int32)
+        self.rows, self.cols = model.regions(height, width)
+        self._y = region_axis(height, self.block, self.rows)
+        self._x = region_axis(width, self.block, self.cols)
         self.nearest = model.nearest.reshape(-1)
+        # the quads: (rows + 1) x (cols + 1), quad (qy, qx) between region rows qy - 1 and qy
+        # and columns qx - 1 and qx, each clamped (the frame's edges: the regions along that axis are one)
+        inside = model.inside.reshape(self.rows, self.cols, -1)
+        ry, rx = np.arange(self.rows + 1), np.arange(self.cols + 1)
+        lo_y, hi_y = np.maximum(ry - 1, 0), np.minimum(ry, self.rows - 1)
+        lo_x, hi_x = np.maximum(rx - 1, 0), np.minimum(rx, self.cols - 1)
+        #: per quad, the bins all its four regions hold ([:, 0]) and those one of them holds
+        #: ([:, 1]), packed as ``model.inside``: uint8 ``((rows + 1) * (cols + 1), 2, 4096)``
+        four = inside[lo_y][:, lo_x], inside[lo_y][:, hi_x], inside[hi_y][:, lo_x], inside[hi_y][:, hi_x]
+        self.quads = np.stack(
+            [four[0] & four[1] & four[2] & four[3], four[0] | four[1] | four[2] | four[3]], axis=2
+        ).reshape(-1, 2, inside.shape[-1])
+
+    @functools.cached_property
+    def quad_base(self) -> np.ndarray:
+        """Each pixel's quad times the bins per quad (a key's base into :attr:`quad_bits`):
+        int32 ``(height * width,)`` (numpy's alone, as the rest)."""
+        (y0, y1, _), (x0, x1, _) = self._y, self._x
+        qy, qx = y0 + (y1 != 0), x0 + (x1 != 0)  # quad q lies between regions q - 1 and q, clamped
+        return ((qy[:, None] * (self.cols + 1) + qx[None, :]) << 15).astype(np.int32).reshape(-1)
+
+    @functools.cached_property
+    def packed(self) -> np.ndarray:
+        """Per pixel, packed in an int64: its upper-left region << 20, lower row apart << 19, right
+        column apart << 18, the weight of the lower row << 9 and of the right column."""
+        (y0, y1, wy), (x0, x1, wx) = self._y, self._x
+        return (
+            ((y0[:, None] * self.cols + x0[None, :]) << 20)
+            | ((y1 != y0)[:, None] << 19)
+            | ((x1 != x0)[None, :] << 18)
+            | (wy[:, None] << 9)
+            | wx[None, :]
+        ).reshape(-1)
+
+    def regions_and_weights(self, pixels: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """The four regions (upper-left, upper-right, lower-left, lower-right) of the flat
+        ``pixels`` and their weights, out of ``2**(2 * WEIGHT_BITS)`` (each int32 ``(len,)``)."""
+        p = self.packed[pixels]
+        r = (p >> 20).astype(np.int32)
+        down, right = (p >> 19 & 1).astype(np.int32) * self.cols, (p >> 18 & 1).astype(np.int32)
+        one = 1 << WEIGHT_BITS
+        wy, wx = (p >> 9 & 511).astype(np.int32), (p & 511).astype(np.int32)
+        regions = [r, r + right, r + down, r + down + right]
+        return regions, [(one - wy) * (one - wx), (one - wy) * wx, wy * (one - wx), wy * wx]
 
     @functools.cached_property
     def bits(self) -> np.ndarray:
         """The sets as one bool per region and bin, flat (8 times the packed bytes: numpy's alone)."""
         return local_bits(self.model).reshape(-1)
 
+    @functools.cached_property
+    def quad_bits(self) -> np.ndarray:
+        """The bins all four regions of each quad hold (:attr:`quads`), one bool per quad and bin,
+        flat (numpy's alone)."""
+        return np.unpackbits(self.quads[:, 0], axis=1, bitorder="little").astype(bool).reshape(-1)
+
+    def quad_any(self, keys: np.ndarray) -> np.ndarray:
+        """Whether one of the four regions holds each key (a pixel's :attr:`quad_base` + its bin)."""
+        return (self.quads[:, 1].reshape(-1)[keys >> 3] >> (keys & 7) & 1).astype(bool)
+
 
 def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
-    """Clamp, in place, each pixel of ``frame`` (H, W, bytes) uint8 whose colour bin its region
-    never held into the bin the region's map names for its 16-level cell, channel by channel.
+    """Move, in place, each pixel of ``frame`` (H, W, bytes) uint8 into the colour sets of its
+    four nearest regions, blended by its position between their centres, so that the sets change
+    smoothly across the frame (no edge where two regions meet).
+
+    A colour every one of the four holds (its quad's set, :attr:`LocalColours.quads`: one lookup)
+    stays as it is. Otherwise, for each of the four regions the pixel's colour is kept where the
+    region holds its bin, else clamped, channel by channel, into the bin the region's map names
+    for its 16-level cell; the four colours are blended with the pixel's weights
+    (:meth:`LocalColours.regions_and_weights`, integers: ``(sum w_k c_k + 2**15) >> 16``). Near
+    a region's centre its set weighs most, and past the outermost centres (the frame's edges)
+    the regions along that axis are one. Up to :data:`LOCAL_PASSES` passes, each over the pixels
+    the one before left in none of the four sets (:meth:`LocalColours.quad_any`).
 
     >>> from dynatex.tiledb.gamut import LocalGamut
     >>> held = np.zeros(32768, bool); held[(25 * 32 + 0) * 32 + 0] = True  # red alone
@@ -139,18 +235,43 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     [[[200, 7, 7]]]
     """
     flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
-    r, g, b = (flat[:, i] for i in rgb)
-    keys = colour_bins(flat, rgb).astype(np.int32)
-    keys += local.base
-    away = np.flatnonzero(~local.bits[keys])
-    if not len(away):
+    pixels = np.flatnonzero(~local.quad_bits[local.quad_base + colour_bins(flat, rgb)])
+    if not len(pixels):
         return
-    ra, ga, ba = r[away], g[away], b[away]
-    cells = ((ra >> 4).astype(np.int32) << 8) | ((ga >> 4).astype(np.int32) << 4) | (ba >> 4)
-    t = local.nearest[local.cell_base[away] + cells]
-    for i, ch, shift in zip(rgb, (ra, ga, ba), (10, 5, 0)):
-        lo = ((t >> shift) & 31).astype(np.uint8) << 3
-        flat[away, i] = np.clip(ch, lo, lo + 7)
+    quad = local.quad_base[pixels]
+    ch = [flat[pixels, i].astype(np.int32) for i in rgb]
+    regions, weights = local.regions_and_weights(pixels)
+    for step in range(LOCAL_PASSES):
+        c, rs, ws = ch, regions, weights
+        bins = (c[0] >> 3 << 10) | (c[1] >> 3 << 5) | (c[2] >> 3)
+        if step:  # the pixels the blend left in none of the four sets
+            todo = np.flatnonzero(~local.quad_any(quad + bins))
+            if not len(todo):
+                break
+            c, rs, ws, bins = ([a[todo] for a in arrays] for arrays in (ch, regions, weights, [bins]))
+            bins = bins[0]
+        # the pixels one of the four holds (none after the first pass)
+        some = np.flatnonzero(local.quad_any(quad + bins)) if not step else bins[:0]
+        held_bins = bins[some]
+        cells = (c[0] >> 4 << 8) | (c[1] >> 4 << 4) | (c[2] >> 4)
+        acc = [np.full(len(bins), 1 << (2 * WEIGHT_BITS - 1), np.int32) for _ in rgb]
+        for r, w in zip(rs, ws):
+            t = local.nearest[(r << 12) + cells].astype(np.int32)
+            # a held colour's own bin clamps it to itself
+            t[some] = np.where(local.bits[(r[some] << 15) + held_bins], held_bins, t[some])
+            # lo: the target's level (bits 8..12) per channel
+            for a, v, lo in zip(acc, c, (t >> 2 & 0x1F00, t << 3 & 0x1F00, t << 8 & 0x1F00)):
+                lo |= v
+                CLAMP.take(lo, out=lo)
+                lo *= w
+                a += lo
+        if step:
+            for v, a in zip(ch, acc):
+                v[todo] = a >> (2 * WEIGHT_BITS)
+        else:
+            ch = [a >> (2 * WEIGHT_BITS) for a in acc]
+    for i, v in zip(rgb, ch):
+        flat[pixels, i] = v
 
 
 def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:
@@ -344,6 +465,7 @@ class ProjectorOpenCL(Projector):
         loc = self.local
         arrays["local_inside"] = np.zeros(1, np.uint8) if loc is None else loc.model.inside
         arrays["local_nearest"] = np.zeros(1, np.uint16) if loc is None else loc.model.nearest
+        arrays["local_quads"] = np.zeros(1, np.uint8) if loc is None else loc.quads
         t = self.tone
         arrays["tone"] = np.zeros(1, np.float32) if t is None else np.concatenate([t.lo, t.scale])
         arrays["tone_table"] = np.zeros(1, np.uint8) if t is None else t.table
@@ -366,10 +488,12 @@ class ProjectorOpenCL(Projector):
             defines = {"HALF": self.half, "CHANNELS": self.channels, "DETAIL": detail, "VH": vh, "VW": vw}
             defines["GAMUT"] = self.nearest is not None
             defines["TONE"], defines["TONE_BINS"] = self.tone is not None, TONE_BINS
-            defines["LOCAL"] = self.local is not None
-            defines["LOCAL_BLOCK"], defines["LOCAL_COLS"] = (
-                (self.local.block, self.local.cols) if self.local else (1, 1)
+            loc = self.local
+            defines["LOCAL"] = loc is not None
+            defines["LOCAL_BLOCK"], defines["LOCAL_ROWS"], defines["LOCAL_COLS"] = (
+                (loc.block, loc.rows, loc.cols) if loc else (1, 1, 1)
             )
+            defines["LOCAL_WEIGHT_BITS"], defines["LOCAL_PASSES"] = WEIGHT_BITS, LOCAL_PASSES
             prog = build_program(self.ctx, ("pixels.cl", "projection.cl"), {**defines, **self.format.defines})
             k = Kernel(prog, "project")
             k.set(

@@ -30,16 +30,25 @@
 // nearest bin of the source's colour set) is clamped into that bin, channel by channel
 // (integers alone: exact).
 //
-// LOCAL (with GAMUT): instead, a pixel whose bin its region (squares of LOCAL_BLOCK pixels,
-// LOCAL_COLS to a row) never held (bit bin & 7 of local_inside[region * 4096 + (bin >> 3)]
-// clear) is clamped into bin local_nearest[region * 4096 + cell], cell its 16-level one
-// ((r >> 4) * 256 + (g >> 4) * 16 + (b >> 4)); each region's set lies within the clip's.
+// LOCAL (with GAMUT): instead, each pixel moves into the colour sets of its four nearest regions
+// (squares of LOCAL_BLOCK pixels, LOCAL_ROWS x LOCAL_COLS), blended: for each region, the pixel
+// as it is where the region holds its bin (bit bin & 7 of local_inside[region * 4096 + (bin >> 3)]
+// set), else clamped into bin local_nearest[region * 4096 + cell], cell its 16-level one
+// ((r >> 4) * 256 + (g >> 4) * 16 + (b >> 4)); the four colours weighted by the pixel's position
+// between the regions' centres (per axis an integer out of 2^LOCAL_WEIGHT_BITS, the four
+// products summing to 2^(2 LOCAL_WEIGHT_BITS)), rounded by a shift: integers alone, exact. A
+// colour all four hold stays: the four regions around each corner where region centres meet (a
+// quad, (LOCAL_ROWS + 1) x (LOCAL_COLS + 1), clamped at the frame's edges) have their bins all
+// four hold at local_quads[quad * 8192 + (bin >> 3)], bit bin & 7, so that this costs one
+// lookup, and those one of the four holds at local_quads[quad * 8192 + 4096 + (bin >> 3)]: a
+// blend that fell in none of the four sets is blended again (up to LOCAL_PASSES passes). Each
+// region's set lies within the clip's.
 //
 // Defines: HALF (1: basis stored as half floats), CHANNELS (1 or 3: values per pixel of the
 // basis; grey is replicated), PIXEL_BYTES (3 or 4: bytes per output pixel), R_AT, G_AT, B_AT
 // (the byte of each colour in an output pixel), A_AT (alpha's, 255; -1: none), TONE (0 or 1) and
 // TONE_BINS, DETAIL (0 or 1), VH and VW (the detail volume's rows and columns; constants, so that the wrap is cheap),
-// GAMUT (0 or 1), LOCAL (0 or 1), LOCAL_BLOCK and LOCAL_COLS.
+// GAMUT (0 or 1), LOCAL (0 or 1), LOCAL_BLOCK, LOCAL_ROWS, LOCAL_COLS, LOCAL_WEIGHT_BITS and LOCAL_PASSES.
 
 #define PIXELS 16
 #define GROUP (PIXELS * CHANNELS)
@@ -115,22 +124,85 @@ void snap_colours(uchar *v, const int count, __global const ushort *restrict nea
 }
 
 #if LOCAL
-// The `count` pixels of v, the first at (x, y), moved into their regions' colour sets (LOCAL).
-void snap_local(uchar *v, const int count, int x, int y, const int width, __global const uchar *restrict inside,
+#define LOCAL_ONE (1 << LOCAL_WEIGHT_BITS)
+#define LOCAL_HALF (1 << (2 * LOCAL_WEIGHT_BITS - 1))
+
+// Along an axis of n regions (LOCAL_ROWS or LOCAL_COLS), coordinate u: the quad it lies in
+// (0 .. n: between regions quad - 1 and quad, each clamped to 0 .. n - 1) and the upper region's
+// weight out of LOCAL_ONE (*w).
+int between(const int u, int *w)
+{
+    const int d = 2 * u + 1 - LOCAL_BLOCK;  // twice the offset from region 0's centre, > -2 LOCAL_BLOCK
+    const int i = d < 0 ? -1 : d / (2 * LOCAL_BLOCK);
+    *w = (((d - i * 2 * LOCAL_BLOCK) << LOCAL_WEIGHT_BITS) + LOCAL_BLOCK) / (2 * LOCAL_BLOCK);
+    return i + 1;
+}
+
+// Colour c's bin (c.s0..s2: its levels).
+int bin_of(const int4 c)
+{
+    return ((c.s0 >> 3) << 10) | ((c.s1 >> 3) << 5) | (c.s2 >> 3);
+}
+
+// Whether the quad's four regions all hold colour c (quad[0 .. 4095]), or (any) one of them
+// does (quad[4096 .. 8191]).
+bool quad_holds(const int4 c, __global const uchar *restrict quad, const int any)
+{
+    const int bin = bin_of(c);
+    return ((quad[any * 4096 + (bin >> 3)] >> (bin & 7)) & 1) != 0;
+}
+
+// One pass of the blend on colour c over regions reg with weights w (LOCAL). A region that holds
+// its colour clamps it into its own bin (no change), so the four are treated alike.
+int4 blend_sets(const int4 c, const int4 reg, const int4 w, __global const uchar *restrict inside,
                 __global const ushort *restrict targets)
 {
-    for (int q = 0; q < count; ++q) {
+    const int bin = bin_of(c);
+    const int4 byte = reg * 4096 + (bin >> 3);
+    const int4 held = ((int4)(inside[byte.s0], inside[byte.s1], inside[byte.s2], inside[byte.s3]) >> (bin & 7)) & 1;
+    const int4 at = reg * 4096 + (((c.s0 >> 4) << 8) | ((c.s1 >> 4) << 4) | (c.s2 >> 4));
+    const int4 t = select((int4)(targets[at.s0], targets[at.s1], targets[at.s2], targets[at.s3]), (int4)(bin), held != 0);
+    // one vector: lane 4 k + i holds channel i (3: unused) of region k
+    const uint16 by_region = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
+    const int16 shift = (int16)(10, 5, 0, 0, 10, 5, 0, 0, 10, 5, 0, 0, 10, 5, 0, 0);
+    const int16 lo = ((shuffle(t, by_region) >> shift) & 31) << 3;
+    const int16 value = shuffle(c, (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3));
+    const int16 m = shuffle(w, by_region) * clamp(value, lo, lo + 7);
+    const int8 pairs = m.lo + m.hi;
+    return (pairs.lo + pairs.hi + LOCAL_HALF) >> (2 * LOCAL_WEIGHT_BITS);
+}
+
+// The `count` pixels of v, the first at (x, y), moved into their four nearest regions' colour
+// sets, blended (LOCAL).
+void snap_local(uchar *v, const int count, const int x, const int y, const int width,
+                __global const uchar *restrict inside, __global const ushort *restrict targets,
+                __global const uchar *restrict quads)
+{
+    int wy, wx;
+    int qy = between(y, &wy);
+    for (int q = 0, u = x; q < count; ++q, ++u) {
+        if (u == width) {
+            u = 0;
+            qy = between(y + (x + q) / width, &wy);
+        }
+        const int qx = between(u, &wx);
+        __global const uchar *restrict quad = quads + (qy * (LOCAL_COLS + 1) + qx) * 8192;
         uchar *p = v + 3 * q;
-        const int region = (y / LOCAL_BLOCK) * LOCAL_COLS + x / LOCAL_BLOCK;
-        const int bin = BIN(p, 0);
-        if (((inside[region * 4096 + (bin >> 3)] >> (bin & 7)) & 1) == 0) {
-            const int t = targets[region * 4096 + (((p[0] >> 4) << 8) | ((p[1] >> 4) << 4) | (p[2] >> 4))];
-            into_bin(p, t);
+        int4 c = (int4)(p[0], p[1], p[2], 0);
+        if (quad_holds(c, quad, 0))
+            continue;  // all four hold it
+        const int ry0 = max(qy - 1, 0) * LOCAL_COLS, ry1 = min(qy, LOCAL_ROWS - 1) * LOCAL_COLS;
+        const int rx0 = max(qx - 1, 0), rx1 = min(qx, LOCAL_COLS - 1);
+        const int4 reg = (int4)(ry0 + rx0, ry0 + rx1, ry1 + rx0, ry1 + rx1);
+        const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx, wy * (LOCAL_ONE - wx), wy * wx);
+        for (int pass = 0; pass < LOCAL_PASSES; ++pass) {
+            c = blend_sets(c, reg, w, inside, targets);
+            if (quad_holds(c, quad, 1))
+                break;  // one of the four holds the blend
         }
-        if (++x == width) {
-            x = 0;
-            ++y;
-        }
+        p[0] = (uchar)c.s0;
+        p[1] = (uchar)c.s1;
+        p[2] = (uchar)c.s2;
     }
 }
 #endif
@@ -218,6 +290,7 @@ __kernel void project(__global const basis_t *restrict basis,
                       __global const ushort *restrict nearest,
                       __global const uchar *restrict local_inside,
                       __global const ushort *restrict local_nearest,
+                      __global const uchar *restrict local_quads,
                       __global const float *restrict tone,
                       __global const uchar *restrict tone_table)
 {
@@ -264,7 +337,7 @@ __kernel void project(__global const basis_t *restrict basis,
         add_detail(v, count, x0, y0, p0, first, vol, gain, low, high, colours, c + stride - LAYER_FLOATS, width);
 #endif
 #if LOCAL
-        snap_local(v, count, x0, y0, width, local_inside, local_nearest);
+        snap_local(v, count, x0, y0, width, local_inside, local_nearest, local_quads);
 #elif GAMUT
         snap_colours(v, count, nearest);
 #endif

@@ -15,7 +15,7 @@ from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.metrics.gamut import colour_bins
 from dynatex.analyzer.mixture import learn_mixture
 from dynatex.player import open_player
-from dynatex.player.engines.projection import open_projector, snap_colours
+from dynatex.player.engines.projection import LocalColours, open_projector, snap_colours
 from dynatex.player.opencl.selftest import random_colour_set
 from dynatex.player.pixels import FORMATS
 from dynatex.tiledb import DatabaseWriter
@@ -128,8 +128,9 @@ def random_local(rng: np.random.Generator, nearest: np.ndarray, h: int, w: int, 
 def test_local_kernel_equals_numpy_reference(cl_context, format, detail, size):
     """With local colour sets (regions of 8 pixels: a work-item's 16 pixels span two, the last
     row and column of regions are narrower) the kernel moves exactly the pixels its reference
-    moves, to the same values, k frames per pass and one at a time; each pixel ends in its
-    region's set."""
+    moves, to the same values, k frames per pass and one at a time: the blend of the four
+    nearest regions' sets is integers alone. A colour all four hold stays; a corner pixel, whose
+    four regions are one, ends in that region's set."""
     rng = np.random.default_rng(11)
     h, w = size
     fmt = FORMATS[format]
@@ -137,32 +138,68 @@ def test_local_kernel_equals_numpy_reference(cl_context, format, detail, size):
     shape = (h, w, fmt.bytes)
     nearest = random_colour_set(rng)
     gamut = GamutModel(nearest, local=random_local(rng, nearest, h, w, 8))
-    got, want, other = _kernel_and_references(
-        cl_context, rng, basis, mean, shape, format, detail, 3, gamut, GamutModel(nearest)
-    )
+    got, want, raw = _kernel_and_references(cl_context, rng, basis, mean, shape, format, detail, 3, gamut, None)
     np.testing.assert_array_equal(got, want)
-    assert (want != other).any(axis=-1).mean() > 0.1  # the regions' sets, not the clip's
-    bins = colour_bins(want[..., list(fmt.rgb)]).reshape(3, h, w)
-    region = (np.arange(h)[:, None] // 8) * -(-w // 8) + np.arange(w)[None, :] // 8
-    assert local_bits(gamut.local)[np.broadcast_to(region, bins.shape), bins].all()
+    loc = LocalColours(gamut.local, h, w)
+    bits = local_bits(gamut.local).reshape(-1)
+    base = np.stack(loc.regions_and_weights(np.arange(h * w))[0]) << 15
+    held = bits[base[:, None] + colour_bins(raw[..., list(fmt.rgb)]).reshape(3, -1).astype(np.int32)].all(0)
+    same = (want == raw).all(axis=-1).reshape(3, -1)
+    assert held.any() and same[held].all()
+    assert 0.5 < (~same).mean()  # about a quarter of the bins in each region's set
+    one = (base == base[0]).all(axis=0)  # the frame's outer corners: four regions that are one
+    assert one.sum() >= 16
+    out_keys = base[0] + colour_bins(want[..., list(fmt.rgb)]).reshape(3, -1).astype(np.int32)
+    assert bits[out_keys[:, one]].all()
 
 
-def test_a_clip_colour_leaves_the_places_that_never_had_it():
-    """Red on the left, grey on the right: red projected over the right half becomes grey there
-    (clamped into the grey bin, 144..151 per channel),
-    and stays red on the left (the clip's set alone keeps both)."""
+@pytest.mark.parametrize("size", [(23, 41), (16, 64), (5, 7)])
+def test_local_quads_hold_what_all_four_regions_hold(size):
+    """The quad of each pixel (the checks that leave a colour alone, or end the blend, with one
+    lookup) holds a bin exactly where each of the pixel's four nearest regions does, and any of
+    them exactly where one does, at the frame's edges (regions that are one) and inside alike."""
+    rng = np.random.default_rng(5)
+    h, w = size
+    nearest = random_colour_set(rng)
+    loc = LocalColours(random_local(rng, nearest, h, w, 8), h, w)
+    assert loc.quads.shape == ((loc.rows + 1) * (loc.cols + 1), 2, 4096)
+    bits = local_bits(loc.model).reshape(-1)
+    regions = np.stack(loc.regions_and_weights(np.arange(h * w))[0])
+    bins = np.flatnonzero(nearest == np.arange(32**3))[::7]
+    four = bits[(regions[:, :, None] << 15) + bins].all(axis=0)
+    quad = loc.quad_bits[loc.quad_base[:, None] + bins]
+    np.testing.assert_array_equal(quad, four)
+    one = bits[(regions[:, :, None] << 15) + bins].any(axis=0)
+    np.testing.assert_array_equal(loc.quad_any(loc.quad_base[:, None] + bins), one)
+    assert (one & ~four).any() == (loc.rows * loc.cols > 1)  # one region alone: the two alike
+    assert 0 < four.mean() < 0.6  # each region holds about half the clip's set, a random half of it
+
+
+def test_local_sets_blend_across_a_region_border():
+    """Red on the left, grey on the right: red projected over the whole frame stays red in the
+    left region's outer half and becomes the right's grey (clamped into the grey bin, 144..151
+    per channel) in the right's, and between the two regions' centres it turns from one into the
+    other a little at a time (the clip's set alone keeps red everywhere)."""
     src = np.empty((8, 16, 32, 3), np.uint8)
     src[:, :, :16], src[:, :, 16:] = (200, 30, 30), (150, 150, 145)
     gamut = learn_gamut(src)
     assert gamut.local.block == 16
     frame = np.full((16, 32, 3), (200, 30, 30), np.uint8)
     basis = np.zeros((1, frame.size), np.float32)
-    for model, want_right in ((gamut, (151, 144, 144)), (GamutModel(gamut.nearest), (200, 30, 30))):
+    outs = []
+    for model in (gamut, GamutModel(gamut.nearest)):
         p = open_projector(basis, frame.reshape(-1).astype(np.float32), shape=frame.shape, channels=3, gamut=model)
-        out = np.empty_like(frame)
-        p.run(out)
-        assert out[:, :16].reshape(-1, 3).tolist() == [[200, 30, 30]] * 256
-        assert out[:, 16:].reshape(-1, 3).tolist() == [list(want_right)] * 256
+        outs.append(np.empty_like(frame))
+        p.run(outs[-1])
+    out, clip_only = outs
+    assert clip_only.reshape(-1, 3).tolist() == [[200, 30, 30]] * 512
+    assert (out == out[:1]).all()  # every row alike
+    row = out[0].astype(int)
+    assert row[:8].tolist() == [[200, 30, 30]] * 8  # left of the left region's centre (x = 7.5)
+    assert row[24:].tolist() == [[151, 144, 144]] * 8  # right of the right one's (x = 23.5)
+    steps = np.diff(row, axis=0)
+    assert (steps[:, 0] <= 0).all() and (steps[:, 1:] >= 0).all()  # red falls, green and blue rise
+    assert np.abs(steps).max() <= 8  # a hard border would step 114 levels of green at once
 
 
 @pytest.fixture(scope="module")
