@@ -34,16 +34,16 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from ..framestats import CHUNK
-from ..tiledb.gamut import BIN_BITS, GamutModel, LocalGamut
+from ..tiledb.gamut import BIN_BITS, MAX_REGIONS, GamutModel, LocalGamut
 from .metrics.gamut import colour_bins
 
 #: Pixels of the clip a colour bin must hold to be in the set, and the share of the clip's pixels
 #: it must hold where that is more (a large clip).
 MIN_PIXELS = 4
 MIN_SHARE = 1e-7
-#: Side in pixels of a region of the local colour sets, and the most regions a frame gets.
+#: Side in pixels of a region of the local colour sets (doubled until the frame has at most
+#: :data:`~dynatex.tiledb.gamut.MAX_REGIONS`).
 LOCAL_BLOCK = 16
-MAX_REGIONS = 1024
 
 
 def learn_gamut(frames: np.ndarray, *, min_pixels: int | None = None) -> GamutModel | None:

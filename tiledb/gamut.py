@@ -39,6 +39,9 @@ LOCAL_VERSION = 1
 LOCAL = "local"
 #: The largest region side a reader accepts (a region larger than the frame is the whole frame).
 MAX_BLOCK = 1 << 16
+#: The most regions a frame's local sets may have (the analyzer doubles the side until they fit):
+#: the player lays out per region and per group of four what a reader bounds here.
+MAX_REGIONS = 1024
 #: Cells of 16 levels per channel a region's nearest map is indexed by.
 CELLS = 1 << 12
 #: Bits per channel of a colour bin, and the number of bins.
@@ -148,6 +151,11 @@ def _read_local(g: h5py.Group, check: Checker, source: SourceInfo, nearest: np.n
         check.fail(loc.name + "@block", f"{block} is not a region side (1..{MAX_BLOCK})")
     model = LocalGamut(block=block, inside=np.empty(0), nearest=np.empty(0))
     rows, cols = model.regions(source.height, source.width)
+    if rows * cols > MAX_REGIONS:
+        check.fail(
+            loc.name + "@block",
+            f"{block} gives the frame {rows * cols} regions (at most {MAX_REGIONS})",
+        )
     model.inside = check.dataset(loc, "inside", kind="u", shape=(rows * cols, CELLS))
     model.nearest = check.dataset(loc, "nearest", kind="u", shape=(rows * cols, CELLS))
     for name, dtype in (("inside", np.uint8), ("nearest", np.uint16)):

@@ -80,8 +80,9 @@ TEXTURE = "t"
 def build_bases(folder: str | os.PathLike, *, detail: bool = True) -> dict[str, Path]:
     """One small database per method (texture ``t``, frames stored where the method plays them);
     the lds and mixture models are learned on tone values (their ``tone`` part fuzzed too).
-    ``detail=False`` leaves out the lds and mixture models' detail, gamut, tone and residual parts (the layout
-    of the bases before they existed, which fixed byte-flip mutants of the regression tests refer to)."""
+    ``detail=False`` leaves out the lds and mixture models' detail, gamut, tone and residual parts and
+    their codec grid's info keys (the layout of the bases before they existed, which fixed byte-flip
+    mutants of the regression tests refer to)."""
     from dynatex.analyzer import load_clip
     from dynatex.analyzer.lds import learn_lds
     from dynatex.analyzer.mixture import learn_mixture
@@ -120,6 +121,9 @@ def build_bases(folder: str | os.PathLike, *, detail: bool = True) -> dict[str, 
                 model.detail = model.gamut = None
             if not detail and hasattr(model, "residual"):
                 model.residual = None
+            if not detail:
+                for key in ("codec_grid", "deblocked"):
+                    model.info.pop(key, None)
             w.put_method(TEXTURE, method, model)
         out[method] = path
     return out

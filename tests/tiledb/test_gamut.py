@@ -11,7 +11,7 @@ from dynatex.analyzer.gamut import learn_gamut
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.metrics.gamut import colour_bins
 from dynatex.tiledb import DatabaseWriter, TileDB, TileDBFormatError
-from dynatex.tiledb.gamut import local_bits
+from dynatex.tiledb.gamut import MAX_REGIONS, local_bits
 
 from ..conftest import wave_clip
 from .conftest import edited_copy, replace_dataset
@@ -162,3 +162,19 @@ def test_a_frame_smaller_than_a_region_is_one_region(tmp_path):
         w.put_texture("w", clip.source_info())
         w.put_method("w", "lds", lds)
     np.testing.assert_array_equal(_read(path).gamut.local.nearest, lds.gamut.local.nearest)
+
+
+def test_local_sets_stating_more_regions_than_a_reader_lays_out_are_refused(tmp_path):
+    """A damaged ``block`` must not make the player lay out per-region and per-quad sets beyond the
+    analyzer's bound (the datasets could be stored compressed, far smaller than they unpack)."""
+    clip = load_clip(wave_clip(20, h=36, w=36))
+    path = tmp_path / "regions.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("w", clip.source_info())
+        w.put_method("w", "lds", learn_lds(clip, n=3))
+
+    def one_pixel_regions(g):
+        g["gamut/local"].attrs["block"] = 1  # 1296 regions over 36 x 36
+
+    with pytest.raises(TileDBFormatError, match=f"1296 regions \\(at most {MAX_REGIONS}\\)"):
+        _read(edited_copy(path, tmp_path, "textures/w/lds", one_pixel_regions))
