@@ -16,10 +16,10 @@ smooth ramp.
 - :func:`detect_grid` measures, at each phase of an 8-pixel period, the median over the period's
   pixel pairs of the log ratio of the mean absolute step there (across frames and rows) to the
   steps beside it (three each side). A codec's grid puts the boundary phase well above the other
-  seven (a ratio of 1.2 to 3 on the DynTex MPEG-4 clips and an H.264 flame clip); a natural texture,
-  whose statistics do not depend on the position, puts every phase near 1 (0.9 to 1.08 on the
-  shared FFV1 and GIF clips). The luma is also looked at with a 16-pixel period: an H.264 clip's
-  flat areas are coded as whole 16 x 16 macroblocks, whose steps a 16-pixel pass smooths first.
+  seven (CHANGELOG.md has the ratios of the shared clips); a natural texture, whose statistics do
+  not depend on the position, puts every phase near 1. The luma is also looked at with a 16-pixel
+  period: an H.264 clip's flat areas are coded as whole 16 x 16 macroblocks, whose steps a
+  16-pixel pass smooths first.
 - :func:`deblock` maps the magnitude of each boundary's excess step through a quantile map that
   takes its distribution (over the sampled frames, per class of activity beside the pair: a flat
   dark patch has its own map) to the inside pairs', never growing it, scaled so that the
@@ -29,7 +29,7 @@ smooth ramp.
   in the distribution's tail, where the two agree) keeps most of its step.
 
 The model learns from the smoothed values in float (through the tone map interpolated between
-levels, so that a one-level step in a flame clip's dark, 60 tone units, becomes a ramp); the
+levels, so that a one-level step where the tone map spreads the levels apart becomes a ramp); the
 detail part measures its residual against them rounded. The player is unchanged.
 """
 
@@ -61,6 +61,8 @@ SIDE = 3
 MIN_RATIO = 1.15
 #: ... and exceeds every other phase's by this factor.
 MARGIN = 1.1
+#: The largest ratio a description shows (a perfect synthetic grid's ratio is its steps over ~0).
+MAX_SHOWN = 99.0
 #: Frames the detection looks at (evenly spread over the clip).
 SAMPLE_FRAMES = 32
 #: Most of the maps' removal taken away (more than all of it: where the inside's steps are the
@@ -99,7 +101,7 @@ class Grid:
         for plane, side in (("luma16", 2 * PERIOD), ("luma", PERIOD), ("chroma", 2 * PERIOD)):
             axes = [a for a in "xy" if self.found[f"{plane}_{a}"]]
             if axes:
-                ratios = "/".join(f"{self.ratios[f'{plane}_{a}']:.2f}" for a in axes)
+                ratios = "/".join(f"{min(self.ratios[f'{plane}_{a}'], MAX_SHOWN):.2f}" for a in axes)
                 parts.append(f"{plane} {side} px {'+'.join(axes)} ({ratios})")
         return ", ".join(parts) or "none"
 
@@ -225,7 +227,7 @@ def _table(plane: np.ndarray, period: int) -> Table:
     boundaries of ``period``: per class of activity (:data:`CLASSES`, equally many boundaries
     each) the boundaries' and the inside's quantiles, and the share of the maps' removal that
     brings the boundaries' mean absolute step to the inside's (the maps alone overshoot on a fine
-    texture: grass)."""
+    texture)."""
     e, act = excess_activity(plane, period - 1, period)
     edges = np.quantile(act, np.linspace(0.0, 1.0, CLASSES + 1))
     edges[0], edges[-1] = -np.inf, np.inf
@@ -315,7 +317,8 @@ def _plane_correction(plane: np.ndarray, grid: Grid, name: str, keys: list[str])
 def choose(frames: np.ndarray | None, mode: str) -> tuple[Grid | None, dict]:
     """The grid to smooth away for the ``deblock`` parameter ``mode`` ("auto": where one is
     found, "on": every plane and axis, "off": none) and the facts a model's info records:
-    ``codec_grid`` (what :meth:`Grid.describe` says, "not measured" when off) and ``deblocked``.
+    ``codec_grid`` (what :meth:`Grid.describe` says of the grid found, with "on" too; "not
+    measured" when off) and ``deblocked``.
     ``frames`` None (a streamed clip): nothing smoothed, and "on" is refused."""
     if frames is None:
         if mode == "on":
@@ -325,9 +328,10 @@ def choose(frames: np.ndarray | None, mode: str) -> tuple[Grid | None, dict]:
         return None, {"codec_grid": "not measured", "deblocked": False}
     grid = detect_grid(frames, every=mode == "on")
     smooth = mode == "on" or grid.any
+    info = {"codec_grid": grid.describe(), "deblocked": bool(smooth)}  # what was found, even where forced
     if mode == "on":
         grid = Grid(dict.fromkeys(KEYS, True), grid.ratios, grid.maps)
-    return (grid if smooth else None), {"codec_grid": grid.describe(), "deblocked": bool(smooth)}
+    return (grid if smooth else None), info
 
 
 def learning_values(frames: np.ndarray, grid: Grid | None, tone: ToneModel | None) -> tuple[np.ndarray, np.ndarray]:
@@ -343,7 +347,7 @@ def learning_values(frames: np.ndarray, grid: Grid | None, tone: ToneModel | Non
     rounded = np.empty_like(frames)
     levels = np.arange(256, dtype=np.float32)
     for lo in range(0, t, CHUNK):
-        chunk = np.clip(deblock(frames[lo : lo + CHUNK], grid), 0.0, 255.0, out=None)
+        chunk = np.clip(deblock(frames[lo : lo + CHUNK], grid), 0.0, 255.0)
         np.rint(chunk, out=rounded[lo : lo + CHUNK], casting="unsafe")
         if tone is not None:
             for ch in range(chunk.shape[-1]):

@@ -97,9 +97,25 @@ def test_smoothing_forced_on_frames_without_a_grid_changes_them_little():
     frames = smooth_clip()
     grid, info = deblock.choose(frames, "on")
     assert info["deblocked"] and grid is not None
+    assert info["codec_grid"] == "none"  # what was found, though every plane and axis is smoothed
     change = np.abs(deblock.deblock(frames, grid) - frames)
     assert change.mean() < 0.2
     assert np.quantile(change, 0.99) < 2.0
+
+
+@pytest.mark.parametrize(
+    "shape", [(3, 1, 1, 3), (3, 4, 4, 3), (2, 9, 9, 3), (3, 17, 17, 1), (4, 8, 40, 1), (3, 15, 33, 3)]
+)
+@pytest.mark.parametrize("mode", ["auto", "on"])
+def test_small_short_and_grey_frames_are_learned_from(shape, mode):
+    """Frames smaller than two blocks along an axis, short clips and grey ones: nothing to measure
+    there, and the values come out whole and finite; a grey clip states no chroma grid."""
+    frames = np.random.default_rng(3).integers(0, 256, shape).astype(np.uint8)
+    grid, info = deblock.choose(frames, mode)
+    values, learned = deblock.learning_values(frames, grid, None)
+    assert values.shape == (shape[0], int(np.prod(shape[1:]))) and np.isfinite(values).all()
+    assert learned.shape == frames.shape and learned.dtype == np.uint8
+    assert "chroma" not in info["codec_grid"] or shape[-1] == 3
 
 
 def test_lds_and_mixture_record_the_grid_and_learn_without_it():
