@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvalidArgumentError
-from ..framestats import CHUNK
+from ..framestats import CHUNK, LUMA
 from ..tiledb.tone import ToneModel
 from .tone import to_tone
 
@@ -72,8 +72,6 @@ MAX_SHARE = 2.0
 TABLE_PIXELS = 8 << 20
 #: Quantiles of the map between the boundaries' excess steps and the inside's.
 QUANTILES = np.concatenate([np.linspace(0.0, 0.99, 100), np.linspace(0.991, 1.0, 10)])
-#: Luma weights of R, G and B (ITU-R BT.601, the codecs' own).
-_LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 #: The plane-axis pairs, as ``Grid`` keys.
 KEYS = ("luma16_x", "luma16_y", "luma_x", "luma_y", "chroma_x", "chroma_y")
 #: Quantile maps per class of activity: the classes' edges, the boundaries' excess steps' quantiles
@@ -113,7 +111,7 @@ def planes(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     f = frames if frames.dtype == np.float32 else frames.astype(np.float32)
     if f.shape[-1] == 1:
         return f[..., 0], None
-    y = _LUMA[0] * f[..., 0] + _LUMA[1] * f[..., 1] + _LUMA[2] * f[..., 2]
+    y = LUMA[0] * f[..., 0] + LUMA[1] * f[..., 1] + LUMA[2] * f[..., 2]
     t, h, w = y.shape
     c = np.empty((t, h // 2, w // 2, 2), np.float32)
     for k, ch in enumerate((2, 0)):
@@ -296,7 +294,7 @@ def deblock(frames: np.ndarray, grid: Grid, *, every: bool = False) -> np.ndarra
         cells = f[:, : 2 * h2, : 2 * w2].reshape(t, h2, 2, w2, 2, 3)
         d_cb, d_cr = d_chroma[:, :, None, :, None, 0], d_chroma[:, :, None, :, None, 1]
         cells[..., 0] += d_cr
-        cells[..., 1] -= (_LUMA[0] * d_cr + _LUMA[2] * d_cb) / _LUMA[1]
+        cells[..., 1] -= (LUMA[0] * d_cr + LUMA[2] * d_cb) / LUMA[1]
         cells[..., 2] += d_cb
     return out
 

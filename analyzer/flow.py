@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..framestats import LUMA
 from ..player.engines.warp import warp_reference
 from ..tiledb.turnpoints import FLOW_FRACTION_BITS, FlowModel, flow_grid
 from .metrics import DoubleImages
@@ -47,7 +48,7 @@ def luma(frames: np.ndarray) -> np.ndarray:
     """``(T, H, W)`` uint8 luma of ``(T, H, W, C)`` uint8 frames (C = 1 or 3)."""
     if frames.shape[-1] == 1:
         return np.ascontiguousarray(frames[..., 0])
-    y = frames.astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
+    y = frames.astype(np.float32) @ LUMA
     return np.clip(np.rint(y), 0, 255).astype(np.uint8)
 
 

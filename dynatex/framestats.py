@@ -17,6 +17,8 @@ import numpy as np
 
 #: frames converted to float at a time (bounds memory on long clips)
 CHUNK = 32
+#: weights of R, G and B in a frame's luma (ITU-R BT.601, the video codecs' own)
+LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 
 
 def float_chunks(frames: np.ndarray, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:

@@ -9,9 +9,8 @@ import numpy as np
 
 from ...checks import Range, check_int
 from ...errors import ArgumentTypeError, InvalidArgumentError
-from ...framestats import float_chunks, median_step
+from ...framestats import LUMA, float_chunks, median_step
 
-LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 THUMB = 32  # longer side of the thumbnails used by coverage and repetition
 
 

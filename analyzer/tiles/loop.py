@@ -10,6 +10,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ...errors import InvalidArgumentError
+from ...framestats import LUMA
 from ..video import Progress
 
 DEFAULT_MIN_TILE = 32
@@ -24,7 +25,7 @@ STEP_PAIRS = 64  # frame pairs in the stored median frame step (its cost does no
 # -- 1. tile size ------------------------------------------------------------------------------
 def grey(frames: np.ndarray) -> np.ndarray:
     f = frames.astype(np.float32)
-    return f @ np.array([0.299, 0.587, 0.114], np.float32) if f.shape[-1] == 3 else f[..., 0]
+    return f @ LUMA if f.shape[-1] == 3 else f[..., 0]
 
 
 def tile_period(
