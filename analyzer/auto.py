@@ -189,33 +189,35 @@ def rank(
     """
     from ..errors import DynatexError
     from .metrics import evaluate
+    from .metrics.memo import remembering
     from .verdicts import judge, score, worst
 
     entries: list[dict[str, Any]] = []
-    for i, mode in enumerate(modes):
-        try:
-            n = min(frames, len(source)) if mode in TIME_LAPSE_MODES else frames
-            out = play_mode(db, texture, mode, n, seed=seed)
-        except DynatexError as exc:  # e.g. no verified OpenCL device the mode insists on
-            entries.append({"mode": mode, "verdict": "failed", "score": None, "why": f"cannot play: {exc}"})
-            continue
-        report = evaluate(out, source, seed=seed, n_samples=300)
-        v = judge(report)
-        figures = {x["figure"]: [_rounded(x["value"]), x["verdict"]] for x in v if x["verdict"] != "n/a"}
-        entries.append(
-            {
-                "mode": mode,
-                "verdict": worst(v),
-                "score": score(v),
-                "figures": figures,
-                "spectrum_distance_db": _rounded(report.get("spectrum_distance_db")),
-                "patch_coherence": _rounded(report.get("patch_coherence")),
-                "why": _why(v),
-                "reason": (reasons or {}).get(mode, ""),
-            }
-        )
-        if progress is not None:
-            progress(i + 1, len(modes))
+    with remembering(source):  # the source side of every metric, once for all the modes
+        for i, mode in enumerate(modes):
+            try:
+                n = min(frames, len(source)) if mode in TIME_LAPSE_MODES else frames
+                out = play_mode(db, texture, mode, n, seed=seed)
+            except DynatexError as exc:  # e.g. no verified OpenCL device the mode insists on
+                entries.append({"mode": mode, "verdict": "failed", "score": None, "why": f"cannot play: {exc}"})
+                continue
+            report = evaluate(out, source, seed=seed, n_samples=300)
+            v = judge(report)
+            figures = {x["figure"]: [_rounded(x["value"]), x["verdict"]] for x in v if x["verdict"] != "n/a"}
+            entries.append(
+                {
+                    "mode": mode,
+                    "verdict": worst(v),
+                    "score": score(v),
+                    "figures": figures,
+                    "spectrum_distance_db": _rounded(report.get("spectrum_distance_db")),
+                    "patch_coherence": _rounded(report.get("patch_coherence")),
+                    "why": _why(v),
+                    "reason": (reasons or {}).get(mode, ""),
+                }
+            )
+            if progress is not None:
+                progress(i + 1, len(modes))
     entries.sort(key=_order)
     for i, e in enumerate(entries):
         e["rank"] = i + 1

@@ -10,6 +10,7 @@ import numpy as np
 from ...checks import Range, check_int
 from ...errors import ArgumentTypeError, InvalidArgumentError
 from ...framestats import LUMA, float_chunks, median_step
+from .memo import remembered
 
 THUMB = 32  # longer side of the thumbnails used by coverage and repetition
 
@@ -36,6 +37,7 @@ def same_size(a: np.ndarray, b: np.ndarray, what: str) -> None:
         )
 
 
+@remembered
 def luma(frames: np.ndarray, factor: int = 1, size: tuple[int, int] | None = None) -> np.ndarray:
     """``(T, H', W')`` float32 luma, area-downscaled by ``factor`` (or to ``size`` = (H', W'))."""
     import cv2
@@ -66,6 +68,7 @@ def thumb_size(shape: tuple[int, ...]) -> tuple[int, int]:
     return max(1, round(h * s)), max(1, round(w * s))
 
 
+@remembered
 def reference_step(frames: np.ndarray, name: str) -> float:
     """The typical frame step of ``frames`` (:func:`~dynatex.framestats.median_step`), which
     measures divide by: an error naming ``name`` when it is 0 (the clip is still)."""

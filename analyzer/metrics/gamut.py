@@ -10,6 +10,7 @@ from ...checks import check_frames
 from ...errors import InvalidArgumentError
 from ...framestats import CHUNK
 from ...tiledb.gamut import BIN_BITS
+from .memo import remembered
 
 # -- colours the source never had -----------------------------------------------------------
 #: bits per channel of the colour bins (bins 8 levels wide): the stored gamut part's
@@ -30,6 +31,7 @@ def colour_bins(frames: np.ndarray) -> np.ndarray:
     return (f[:, 0].astype(np.int32) * n + f[:, 1]) * n + f[:, 2]
 
 
+@remembered
 def colour_set(frames: np.ndarray) -> np.ndarray:
     """The colour bins ``frames`` occupy, grown by one bin in every direction (26 neighbours):
     a bool per bin of :func:`colour_bins` (``32**3``), the set :func:`out_of_gamut_share` tests against."""
@@ -76,6 +78,7 @@ def out_of_gamut_share(output: np.ndarray, source: np.ndarray) -> float:
     return 0.5 * sum(_share_outside(output, colour_set(part)) for part in (source[:half], source[half:]))
 
 
+@remembered
 def source_gamut_share(source: np.ndarray) -> float:
     """The source's own out-of-gamut level: each half of its frames measured against the other
     (:func:`out_of_gamut_share`), averaged. Colours that appear in one half only count."""

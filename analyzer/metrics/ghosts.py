@@ -9,6 +9,7 @@ import numpy as np
 from ...checks import Range, check_frames
 from ...errors import InvalidArgumentError
 from ._common import luma
+from .memo import remembered
 
 _GHOST_SIDE = 96  # longer side of the luma frames the double-image measure compares
 _GHOST_MOVING = 0.75  # the moving region: pixels whose temporal deviation is above this quantile
@@ -138,8 +139,25 @@ def local_novelty(output: np.ndarray, source: np.ndarray) -> float | None:
     s = min(1.0, _LOCAL_SIDE / max(h, w))
     size = max(1, round(h * s)), max(1, round(w * s))
     g = luma(source, size=size)
+    reference = _novelty_reference(g)
+    if reference is None:
+        return None
+    cells, step, level = reference
     o = luma(output[:: max(1, -(-len(output) // _LOCAL_FRAMES))], size=size)
+    p = _LOCAL_PATCH
+    out = np.empty((len(o), len(cells)))
+    for k, (y, x) in enumerate(cells):
+        out[:, k] = _nearest(o[:, y : y + p, x : x + p].reshape(len(o), -1), _bank(g, y, x).reshape(-1, p * p))
+    return float(np.median(np.median(out, axis=1))) / step / level
+
+
+@remembered
+def _novelty_reference(g: np.ndarray) -> tuple[np.ndarray, float, float] | None:
+    """:func:`local_novelty`'s source side from the source's luma ``g``: the moving patches' corners
+    ``(k, 2)``, the median frame step over them, and the source's own level (its second half's
+    patches against its first half's, in frame steps); None when no patch fits the frame."""
     p, r = _LOCAL_PATCH, _LOCAL_REACH
+    size = g.shape[1:]
     grid = [(y, x) for y in range(r, size[0] - p - r + 1, p) for x in range(r, size[1] - p - r + 1, p)]
     if not grid:
         return None
@@ -154,15 +172,19 @@ def local_novelty(output: np.ndarray, source: np.ndarray) -> float | None:
         raise InvalidArgumentError("source does not change from frame to frame (median frame difference is 0)")
     half = len(g) // 2
     later = g[half:][:: max(1, -(-(len(g) - half) // _LOCAL_FRAMES))]
-    shifts = [(dy, dx) for dy in range(-r, r + 1, 2) for dx in range(-r, r + 1, 2)]
-    out = np.empty((len(o), len(cells)))
     ref = np.empty((len(later), len(cells)))
     for k, (y, x) in enumerate(cells):
-        bank = np.stack([g[:, y + dy : y + dy + p, x + dx : x + dx + p].reshape(len(g), -1) for dy, dx in shifts], 1)
-        out[:, k] = _nearest(o[:, y : y + p, x : x + p].reshape(len(o), -1), bank.reshape(-1, p * p))
-        ref[:, k] = _nearest(later[:, y : y + p, x : x + p].reshape(len(later), -1), bank[:half].reshape(-1, p * p))
+        patches = later[:, y : y + p, x : x + p].reshape(len(later), -1)
+        ref[:, k] = _nearest(patches, _bank(g, y, x)[:half].reshape(-1, p * p))
     level = max(float(np.median(np.median(ref, axis=1))) / step, _LOCAL_FLOOR)
-    return float(np.median(np.median(out, axis=1))) / step / level
+    return np.array(cells, np.intp).reshape(-1, 2), step, level
+
+
+def _bank(g: np.ndarray, y: int, x: int) -> np.ndarray:
+    """The source patches at ``(y, x)`` shifted up to the reach either way: ``(T, shifts, p * p)``."""
+    p, r = _LOCAL_PATCH, _LOCAL_REACH
+    shifts = [(dy, dx) for dy in range(-r, r + 1, 2) for dx in range(-r, r + 1, 2)]
+    return np.stack([g[:, y + dy : y + dy + p, x + dx : x + dx + p].reshape(len(g), -1) for dy, dx in shifts], 1)
 
 
 def _nearest(q: np.ndarray, bank: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ import numpy as np
 from ...checks import check_frames, check_int
 from ...errors import InvalidArgumentError
 from ._common import POSITIVE, auto_downscale, int_pair, luma
+from .memo import remembered
 
 
 # -- likeness: spatio-temporal power spectrum ------------------------------------------------
@@ -42,6 +43,7 @@ def st_power_spectrum(frames: np.ndarray, *, cuboid: Sequence[int] = (16, 32), d
     return _spectrum(grey, ct, cs)
 
 
+@remembered
 def _spectrum(grey: np.ndarray, ct: int, cs: int) -> np.ndarray:
     from numpy.lib.stride_tricks import sliding_window_view
 
@@ -163,6 +165,26 @@ def _project(view: np.ndarray, idx: np.ndarray | None, mean: np.ndarray, basis: 
     return out
 
 
+@remembered
+def _source_patches(
+    grey: np.ndarray, pt: int, ps: int, st: int, ss: int, n_components: int, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """:func:`patch_distances`' source side from the source's luma ``grey``: the mean patch, the
+    principal axes, every source patch projected on them, and the random state after the fit's draw."""
+    vs, gs = _patches(grey, pt, ps, st, ss)
+    d = pt * ps * ps
+    rng = np.random.default_rng(seed)
+    n_src = int(np.prod(gs))
+    fit_idx = rng.choice(n_src, size=min(n_src, 20000), replace=False)
+    fit = vs[np.unravel_index(fit_idx, gs)].reshape(-1, d).astype(np.float64)
+    mean = fit.mean(axis=0)
+    cov = np.cov(fit - mean, rowvar=False) if len(fit) > 1 else np.zeros((d, d))
+    vals, vecs = np.linalg.eigh(np.atleast_2d(cov))
+    basis = np.ascontiguousarray(vecs[:, ::-1][:, : min(n_components, d)]).astype(np.float32)
+    mean32 = mean.astype(np.float32)
+    return mean32, basis, _project(vs, None, mean32, basis), rng.bit_generator.state
+
+
 def _nn_dist(q: np.ndarray, db: np.ndarray) -> np.ndarray:
     """Euclidean distance from each row of ``q`` to its nearest row of ``db`` (brute force, chunked).
 
@@ -221,21 +243,11 @@ def patch_distances(
     seed = check_int("seed", seed, 0)
     f = auto_downscale(source, downscale)
     vo, go = _patches(luma(output, f), pt, ps, st, ss)
-    vs, gs = _patches(luma(source, f), pt, ps, st, ss)
+    mean32, basis, src_all, state = _source_patches(luma(source, f), pt, ps, st, ss, n_components, seed)
     d = pt * ps * ps
     rng = np.random.default_rng(seed)
-    n_src, n_out = int(np.prod(gs)), int(np.prod(go))
-    fit_idx = rng.choice(n_src, size=min(n_src, 20000), replace=False)
-    sel = np.unravel_index(fit_idx, gs)
-    fit = vs[sel].reshape(-1, d).astype(np.float64)
-    mean = fit.mean(axis=0)
-    cov = np.cov(fit - mean, rowvar=False) if len(fit) > 1 else np.zeros((d, d))
-    cov = np.atleast_2d(cov)
-    vals, vecs = np.linalg.eigh(cov)
-    k = min(n_components, d)
-    basis = np.ascontiguousarray(vecs[:, ::-1][:, :k]).astype(np.float32)
-    mean32 = mean.astype(np.float32)
-    src_all = _project(vs, None, mean32, basis)
+    rng.bit_generator.state = state
+    n_src, n_out = len(src_all), int(np.prod(go))
     out_all = _project(vo, None, mean32, basis)
     q_out = out_all[rng.choice(n_out, size=min(n_out, n_samples), replace=False)]
     q_src = src_all[rng.choice(n_src, size=min(n_src, n_samples), replace=False)]

@@ -12,6 +12,7 @@ from ...checks import check_frames, check_int
 from ...errors import ArgumentTypeError, InvalidArgumentError
 from ...framestats import CHUNK, float_chunks
 from ._common import json_float
+from .memo import remembered
 
 
 def count_nonfinite(frames: Any) -> int:
@@ -128,11 +129,7 @@ def stability(output: np.ndarray | Iterable[np.ndarray], source: np.ndarray, *, 
     """
     window = check_int("window", window, 1)
     source = check_frames(source, name="source", min_frames=2)
-    mean = np.zeros(source.shape[1:], np.float64)
-    for _, chunk in float_chunks(source):
-        mean += chunk.sum(axis=0, dtype=np.float64)
-    mean = (mean / source.shape[0]).astype(np.float32)
-    src_energies = _energies(source, mean)
+    mean, src_energies = _source_energies(source)
     src_e = float(np.mean(src_energies))
     if src_e <= 0:
         raise InvalidArgumentError("source has no temporal variation (every frame equals the mean frame)")
@@ -163,6 +160,16 @@ def stability(output: np.ndarray | Iterable[np.ndarray], source: np.ndarray, *, 
         source_min_ratio=min(own),
         source_max_ratio=max(own),
     )
+
+
+@remembered
+def _source_energies(source: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The source's mean frame (float32) and each of its frames' dynamic energy about it."""
+    mean = np.zeros(source.shape[1:], np.float64)
+    for _, chunk in float_chunks(source):
+        mean += chunk.sum(axis=0, dtype=np.float64)
+    mean = (mean / source.shape[0]).astype(np.float32)
+    return mean, _energies(source, mean)
 
 
 def _energies(frames: np.ndarray, mean: np.ndarray) -> np.ndarray:
