@@ -156,10 +156,11 @@ def learn_chosen(
 def play_mode(db: str | os.PathLike, texture: str, mode: str, frames: int, *, seed: int = 0) -> np.ndarray:
     """``frames`` frames of ``mode`` from the database, at the source's size where the mode plays any size."""
     from ..player import open_player, player_class
+    from ..tiledb import open_db
 
     opts: dict[str, Any] = {"seed": seed}
-    with open_player(db, texture, mode=mode, **opts) as probe:
-        src = probe.texture.source
+    with open_db(db) as opened:  # the source's size, without building a player for it
+        src = opened.texture(texture).source
         shape = (int(src.height), int(src.width))
     if player_class(mode).capabilities.any_size:  # evolve plays its stored canvas, not any size
         opts["size"] = shape
