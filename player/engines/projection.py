@@ -114,6 +114,8 @@ WEIGHT_BITS = 8
 #: Passes of the local colour sets' blend: a blend of colours from different sets can lie in none
 #: of them (CHANGELOG.md has the measurement); a second pass blends such a pixel again.
 LOCAL_PASSES = 2
+#: Pixels numpy's :func:`snap_local` treats at once: its temporaries stay in a core's cache
+LOCAL_CHUNK = 1 << 17
 
 
 def region_axis(n: int, block: int, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -167,7 +169,7 @@ class LocalColours:
 
     @functools.cached_property
     def quad_base(self) -> np.ndarray:
-        """Each pixel's quad times the bins per quad (a key's base into :attr:`quad_bits`):
+        """Each pixel's quad times the bins per quad (a key's base into :attr:`quad_lacks`):
         int32 ``(height * width,)`` (numpy's alone, as the rest)."""
         (y0, y1, _), (x0, x1, _) = self._y, self._x
         qy, qx = y0 + (y1 != 0), x0 + (x1 != 0)  # quad q lies between regions q - 1 and q, clamped
@@ -186,16 +188,16 @@ class LocalColours:
             | wx[None, :]
         ).reshape(-1)
 
-    def regions_and_weights(self, pixels: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    def regions_and_weights(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The four regions (upper-left, upper-right, lower-left, lower-right) of the flat
-        ``pixels`` and their weights, out of ``2**(2 * WEIGHT_BITS)`` (each int32 ``(len,)``)."""
+        ``pixels`` and their weights, out of ``2**(2 * WEIGHT_BITS)`` (each int32 ``(4, len)``)."""
         p = self.packed[pixels]
         r = (p >> 20).astype(np.int32)
         down, right = (p >> 19 & 1).astype(np.int32) * self.cols, (p >> 18 & 1).astype(np.int32)
         one = 1 << WEIGHT_BITS
         wy, wx = (p >> 9 & 511).astype(np.int32), (p & 511).astype(np.int32)
-        regions = [r, r + right, r + down, r + down + right]
-        return regions, [(one - wy) * (one - wx), (one - wy) * wx, wy * (one - wx), wy * wx]
+        regions = np.stack([r, r + right, r + down, r + down + right])
+        return regions, np.stack([(one - wy) * (one - wx), (one - wy) * wx, wy * (one - wx), wy * wx])
 
     @functools.cached_property
     def bits(self) -> np.ndarray:
@@ -203,10 +205,10 @@ class LocalColours:
         return local_bits(self.model).reshape(-1)
 
     @functools.cached_property
-    def quad_bits(self) -> np.ndarray:
-        """The bins all four regions of each quad hold (:attr:`quads`), one bool per quad and bin,
-        flat (numpy's alone)."""
-        return np.unpackbits(self.quads[:, 0], axis=1, bitorder="little").astype(bool).reshape(-1)
+    def quad_lacks(self) -> np.ndarray:
+        """The bins one of the four regions of each quad lacks (not all hold: :attr:`quads`), one
+        bool per quad and bin, flat (numpy's alone)."""
+        return ~np.unpackbits(self.quads[:, 0], axis=1, bitorder="little").astype(bool).reshape(-1)
 
     def quad_any(self, keys: np.ndarray) -> np.ndarray:
         """Whether one of the four regions holds each key (a pixel's :attr:`quad_base` + its bin)."""
@@ -235,43 +237,60 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     [[[200, 7, 7]]]
     """
     flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
-    pixels = np.flatnonzero(~local.quad_bits[local.quad_base + colour_bins(flat, rgb)])
+    for start in range(0, len(flat), LOCAL_CHUNK):
+        snap_local_run(flat[start : start + LOCAL_CHUNK], start, local, rgb)
+
+
+def snap_local_run(flat: np.ndarray, start: int, local: LocalColours, rgb: tuple[int, int, int]) -> None:
+    """:func:`snap_local` on the pixels ``flat`` (len, bytes), the first the frame's pixel ``start``."""
+    bins = colour_bins(flat, rgb)
+    pixels = np.flatnonzero(local.quad_lacks[local.quad_base[start : start + len(flat)] + bins])
     if not len(pixels):
         return
-    quad = local.quad_base[pixels]
-    ch = [flat[pixels, i].astype(np.int32) for i in rgb]
-    regions, weights = local.regions_and_weights(pixels)
+    rows = flat[pixels]
+    colour = rows.T[list(rgb)].astype(np.int32)  # (3, len): r, g, b
+    bins = bins[pixels].astype(np.int32)
+    regions, weights = local.regions_and_weights(pixels + start)
     for step in range(LOCAL_PASSES):
-        c, rs, ws = ch, regions, weights
-        bins = (c[0] >> 3 << 10) | (c[1] >> 3 << 5) | (c[2] >> 3)
         if step:  # the pixels the blend left in none of the four sets
-            todo = np.flatnonzero(~local.quad_any(quad + bins))
+            bins = (colour[0] >> 3 << 10) | (colour[1] >> 3 << 5) | (colour[2] >> 3)
+            todo = np.flatnonzero(~local.quad_any(local.quad_base[pixels + start] + bins))
             if not len(todo):
                 break
-            c, rs, ws, bins = ([a[todo] for a in arrays] for arrays in (ch, regions, weights, [bins]))
-            bins = bins[0]
-        # the pixels one of the four holds (none after the first pass)
-        some = np.flatnonzero(local.quad_any(quad + bins)) if not step else bins[:0]
-        held_bins = bins[some]
-        cells = (c[0] >> 4 << 8) | (c[1] >> 4 << 4) | (c[2] >> 4)
-        acc = [np.full(len(bins), 1 << (2 * WEIGHT_BITS - 1), np.int32) for _ in rgb]
-        for r, w in zip(rs, ws):
-            t = local.nearest[(r << 12) + cells].astype(np.int32)
-            # a held colour's own bin clamps it to itself
-            t[some] = np.where(local.bits[(r[some] << 15) + held_bins], held_bins, t[some])
-            # lo: the target's level (bits 8..12) per channel
-            for a, v, lo in zip(acc, c, (t >> 2 & 0x1F00, t << 3 & 0x1F00, t << 8 & 0x1F00)):
-                lo |= v
-                CLAMP.take(lo, out=lo)
-                lo *= w
-                a += lo
-        if step:
-            for v, a in zip(ch, acc):
-                v[todo] = a >> (2 * WEIGHT_BITS)
+            colour[:, todo] = blend_sets(colour[:, todo], bins[todo], regions[:, todo], weights[:, todo], local)
         else:
-            ch = [a >> (2 * WEIGHT_BITS) for a in acc]
-    for i, v in zip(rgb, ch):
-        flat[pixels, i] = v
+            colour = blend_sets(colour, bins, regions, weights, local)
+    rows[:, list(rgb)] = colour.T
+    flat[pixels] = rows
+
+
+def blend_sets(colour: np.ndarray, bins: np.ndarray, regions: np.ndarray, weights: np.ndarray, local: LocalColours):
+    """One pass of :func:`snap_local`'s blend: ``colour`` (3, len) int32 levels, ``bins`` their
+    colour bins, ``regions`` and ``weights`` (4, len) (:meth:`LocalColours.regions_and_weights`);
+    the blended colours (3, len) int32. Each region clamps a colour, channel by channel, into the
+    bin its map names for the colour's 16-level cell, or into the colour's own bin (no change)
+    where the region holds it."""
+    cells = (colour[0] >> 4 << 8) | (colour[1] >> 4 << 4) | (colour[2] >> 4)
+    regions = regions << 12
+    target = local.nearest.take(regions + cells, mode="clip").astype(np.int32)
+    regions <<= 3
+    regions += bins
+    np.copyto(target, bins, where=local.bits.take(regions, mode="clip"))
+    out = np.empty_like(colour)
+    lo, value = regions, np.empty_like(target)  # regions' memory reused
+    for i, shift in enumerate((10, 5, 0)):
+        # the target's levels in the channel: lo .. lo + 7
+        np.right_shift(target, shift, out=lo)
+        lo &= 31
+        lo <<= 3
+        np.maximum(lo, colour[i], out=value)
+        lo += 7
+        np.minimum(value, lo, out=value)
+        value *= weights
+        np.add.reduce(value, axis=0, dtype=np.int32, out=out[i])
+    out += 1 << (2 * WEIGHT_BITS - 1)
+    out >>= 2 * WEIGHT_BITS
+    return out
 
 
 def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:

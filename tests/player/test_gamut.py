@@ -167,7 +167,7 @@ def test_local_quads_hold_what_all_four_regions_hold(size):
     regions = np.stack(loc.regions_and_weights(np.arange(h * w))[0])
     bins = np.flatnonzero(nearest == np.arange(32**3))[::7]
     four = bits[(regions[:, :, None] << 15) + bins].all(axis=0)
-    quad = loc.quad_bits[loc.quad_base[:, None] + bins]
+    quad = ~loc.quad_lacks[loc.quad_base[:, None] + bins]
     np.testing.assert_array_equal(quad, four)
     one = bits[(regions[:, :, None] << 15) + bins].any(axis=0)
     np.testing.assert_array_equal(loc.quad_any(loc.quad_base[:, None] + bins), one)
