@@ -136,6 +136,18 @@ def region_axis(n: int, block: int, count: int) -> tuple[np.ndarray, np.ndarray,
 CLAMP = np.clip(np.arange(256), 8 * np.arange(32)[:, None], 8 * np.arange(32)[:, None] + 7).astype(np.int32).ravel()
 
 
+def cell_sub(r: Any, g: Any, b: Any) -> Any:
+    """The index (0..7) of a colour's bin among the 8 bins of its 16-level cell."""
+    return ((r >> 1) & 4) | ((g >> 2) & 2) | ((b >> 3) & 1)
+
+
+def cell_sets(model) -> np.ndarray:
+    """:attr:`LocalColours.sets` of a model's local colour sets."""
+    bits = local_bits(model).reshape(-1, 16, 2, 16, 2, 16, 2).transpose(0, 1, 3, 5, 2, 4, 6)
+    held = np.packbits(bits.reshape(-1, 4096, 8), axis=2, bitorder="little")[..., 0]
+    return (model.nearest.astype(np.uint32) | held.astype(np.uint32) << 16).reshape(-1)
+
+
 class LocalColours:
     """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
     ``height`` x ``width`` frame: each pixel's four nearest regions and their weights along each
@@ -166,6 +178,10 @@ class LocalColours:
         self.quads = np.stack(
             [four[0] & four[1] & four[2] & four[3], four[0] | four[1] | four[2] | four[3]], axis=2
         ).reshape(-1, 2, inside.shape[-1])
+        #: per region and 16-level cell, one lookup for the blend: bits 0..14 the bin the region's
+        #: map names for the cell, bit 16 + k whether the region holds the cell's k-th bin
+        #: (:func:`cell_sub`): uint32 ``(regions * 4096,)`` (both backends)
+        self.sets = cell_sets(model)
 
     @functools.cached_property
     def quad_base(self) -> np.ndarray:
@@ -198,11 +214,6 @@ class LocalColours:
         wy, wx = (p >> 9 & 511).astype(np.int32), (p & 511).astype(np.int32)
         regions = np.stack([r, r + right, r + down, r + down + right])
         return regions, np.stack([(one - wy) * (one - wx), (one - wy) * wx, wy * (one - wx), wy * wx])
-
-    @functools.cached_property
-    def bits(self) -> np.ndarray:
-        """The sets as one bool per region and bin, flat (8 times the packed bytes: numpy's alone)."""
-        return local_bits(self.model).reshape(-1)
 
     @functools.cached_property
     def quad_lacks(self) -> np.ndarray:
@@ -272,12 +283,13 @@ def blend_sets(colour: np.ndarray, bins: np.ndarray, regions: np.ndarray, weight
     where the region holds it."""
     cells = (colour[0] >> 4 << 8) | (colour[1] >> 4 << 4) | (colour[2] >> 4)
     regions = regions << 12
-    target = local.nearest.take(regions + cells, mode="clip").astype(np.int32)
-    regions <<= 3
-    regions += bins
-    np.copyto(target, bins, where=local.bits.take(regions, mode="clip"))
+    regions += cells
+    target = local.sets.take(regions, mode="clip").view(np.int32)
+    held = (target >> (cell_sub(*colour) + 16)) & 1
+    target &= 0x7FFF
+    np.copyto(target, bins, where=held.astype(bool))
     out = np.empty_like(colour)
-    lo, value = regions, np.empty_like(target)  # regions' memory reused
+    lo, value = regions, held  # their memory reused
     for i, shift in enumerate((10, 5, 0)):
         # the target's levels in the channel: lo .. lo + 7
         np.right_shift(target, shift, out=lo)
@@ -482,8 +494,7 @@ class ProjectorOpenCL(Projector):
             arrays = {"vol": vol, "gain": d.gain.reshape(-1), "low": d.low, "high": d.high, "colours": d.colours}
         arrays["nearest"] = np.zeros(1, np.uint16) if self.nearest is None else self.nearest
         loc = self.local
-        arrays["local_inside"] = np.zeros(1, np.uint8) if loc is None else loc.model.inside
-        arrays["local_nearest"] = np.zeros(1, np.uint16) if loc is None else loc.model.nearest
+        arrays["local_sets"] = np.zeros(1, np.uint32) if loc is None else loc.sets
         arrays["local_quads"] = np.zeros(1, np.uint8) if loc is None else loc.quads
         t = self.tone
         arrays["tone"] = np.zeros(1, np.float32) if t is None else np.concatenate([t.lo, t.scale])
