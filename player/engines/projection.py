@@ -305,16 +305,29 @@ def blend_sets(colour: np.ndarray, bins: np.ndarray, regions: np.ndarray, weight
     return out
 
 
-def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:
-    """``(n, P)`` -> ``(ceil(P / block), n, block)``, zero-padded: the kernel's streaming layout."""
-    n, p = basis.shape
+def blocked_basis(basis: np.ndarray | tuple[np.ndarray, ...], block: int, out: np.ndarray | None = None) -> np.ndarray:
+    """``(n, P)`` (or row blocks of ``P`` columns stacked) -> ``(ceil(P / block), n, block)``,
+    zero-padded: the kernel's streaming layout, into ``out`` where given."""
+    parts = row_blocks(basis)
+    n, p = sum(len(b) for b in parts), parts[0].shape[1]
     blocks = -(-p // block)
-    out = np.zeros((blocks, n, block), basis.dtype)
+    if out is None:
+        out = np.zeros((blocks, n, block), parts[0].dtype)
     full = p // block
-    out[:full] = basis[:, : full * block].reshape(n, full, block).transpose(1, 0, 2)
-    if blocks != full:
-        out[full, :, : p - full * block] = basis[:, full * block :]
+    i = 0
+    for part in parts:
+        rows = slice(i, i + len(part))
+        out[:full, rows] = part[:, : full * block].reshape(len(part), full, block).transpose(1, 0, 2)
+        if blocks != full:
+            out[full, rows, : p - full * block] = part[:, full * block :]
+            out[full, rows, p - full * block :] = 0
+        i += len(part)
     return out
+
+
+def row_blocks(basis: np.ndarray | tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """A basis given as one ``(n, P)`` array or as row blocks stacked (a tuple): the blocks."""
+    return tuple(basis) if isinstance(basis, (tuple, list)) else (basis,)
 
 
 class Projector:
@@ -326,8 +339,9 @@ class Projector:
 
     Parameters
     ----------
-    basis : (n, P) float32 or float16
-        Rows to combine; ``P = H * W * channels``. float16 halves the bytes read per frame.
+    basis : (n, P) float32 or float16, or a tuple of such row blocks
+        Rows to combine (a tuple: its blocks' rows in turn, so that a caller need not copy them
+        into one array); ``P = H * W * channels``. float16 halves the bytes read per frame.
     mean : (P,) float32
         Added to every frame.
     shape : (H, W, bytes)
@@ -364,11 +378,12 @@ class Projector:
         tone: ToneModel | None = None,
     ) -> None:
         self.format = pixel_format(format)
-        self.n, self.values = basis.shape
+        parts = row_blocks(basis)
+        self.n, self.values = sum(len(b) for b in parts), parts[0].shape[1]
         self.shape = tuple(shape)
         self.channels = channels
-        self.half = basis.dtype == np.float16
-        self.basis_bytes = basis.nbytes
+        self.half = parts[0].dtype == np.float16
+        self.basis_bytes = sum(b.nbytes for b in parts)
         self.frames = int(frames)
         self.coefs = np.zeros((self.frames, max(self.n, 1)), np.float32)
         self.coef = self.coefs[0]
@@ -420,6 +435,8 @@ class ProjectorReference(Projector):
 
     def __init__(self, basis: np.ndarray, mean: np.ndarray, **kwargs: Any) -> None:
         super().__init__(basis, mean, **kwargs)
+        parts = row_blocks(basis)
+        basis = parts[0] if len(parts) == 1 else np.concatenate(parts)  # one GEMM reads one array
         self._basis = basis.astype(np.float32) if self.half else basis
         self._mean = mean
 
@@ -472,17 +489,15 @@ class ProjectorOpenCL(Projector):
         self.coefs = self._upload[:, :width]
         self.coef = self.coefs[0]
         group = PIXELS * self.channels
-        blocked = blocked_basis(basis, group)
-        groups = blocked.shape[0]
+        groups = -(-self.values // group)
         mean_p = np.zeros(groups * group, np.float32)
         mean_p[: self.values] = mean
         mf = cl.mem_flags
         self._bufs: dict[str, Any] = {
-            "basis": cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blocked),
+            "basis": self._blocked_buffer(basis, groups, group),
             "mean": cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p),
             "coef": cl.Buffer(ctx, mf.READ_ONLY, self._upload.nbytes),
         }
-        del blocked
         d = self.detail
         if d is None:
             dummy = np.zeros(1, np.uint8)
@@ -507,6 +522,25 @@ class ProjectorOpenCL(Projector):
         self._lsize = (LOCAL,)
         self.out = None
         self._kernel(self.detail is not None)
+
+    def _blocked_buffer(self, basis, groups: int, group: int):
+        """The device's copy of the basis in the kernel's layout (:func:`blocked_basis`), written
+        through a mapping, so that the host holds no blocked copy beside the caller's rows."""
+        import pyopencl as cl
+
+        dtype = np.float16 if self.half else np.float32
+        shape = (groups, self.n, group)
+        mf = cl.mem_flags
+        buf = cl.Buffer(self.ctx, mf.READ_ONLY | mf.ALLOC_HOST_PTR, int(np.prod(shape)) * np.dtype(dtype).itemsize)
+        mapped, _ = cl.enqueue_map_buffer(
+            self.queue, buf, cl.map_flags.WRITE_INVALIDATE_REGION, 0, shape, dtype, is_blocking=True
+        )
+        try:
+            blocked_basis(basis, group, out=mapped)
+        finally:
+            mapped.base.release(self.queue)
+            self.queue.finish()
+        return buf
 
     def _kernel(self, detail: bool):
         """The kernel with or without the detail, built and bound on first use; binds :attr:`out` to it."""
