@@ -7,7 +7,9 @@ every ratio comes from one run.
 Variants: ``full`` (as stored); ``plain`` (no ``tone``, ``residual`` or ``gamut`` part: the
 projection, and the detail where the model has one, as the player drew before them; the whole
 colour set goes too, because a model learned on tone values projects to tone values, and its
-colour stage would then work on frames that are no real frames); ``global`` (no ``gamut/local``:
+colour stage would then work on frames that are no real frames; without the tone part, the mean
+is clipped into the levels' range, as a reader wants it: the cost does not depend on its values);
+``global`` (no ``gamut/local``:
 the clip's colour set alone, on real frames); ``notone`` and ``nores`` on request.
 
     python benchmarks/bench_player_cost.py DB.h5 [--mode lds] [--lookahead 1] [--frames 24]
@@ -48,6 +50,9 @@ def without(db: str, folder: str, variant: str) -> str:
                 for part in STRIP[variant]:
                     if method in texture and part in texture[method]:
                         del texture[method][part]
+                        if part == "tone":  # a model on levels has its mean in their range
+                            mean = texture[method]["mean"]
+                            mean[...] = np.clip(mean[...], 0, 255)
     return out
 
 
