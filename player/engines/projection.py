@@ -207,7 +207,7 @@ class LocalColours:
     def regions_and_weights(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The four regions (upper-left, upper-right, lower-left, lower-right) of the flat
         ``pixels`` and their weights, out of ``2**(2 * WEIGHT_BITS)`` (each int32 ``(4, len)``)."""
-        p = self.packed[pixels]
+        p = self.packed.take(pixels)
         r = (p >> 20).astype(np.int32)
         down, right = (p >> 19 & 1).astype(np.int32) * self.cols, (p >> 18 & 1).astype(np.int32)
         one = 1 << WEIGHT_BITS
@@ -221,9 +221,14 @@ class LocalColours:
         bool per quad and bin, flat (numpy's alone)."""
         return ~np.unpackbits(self.quads[:, 0], axis=1, bitorder="little").astype(bool).reshape(-1)
 
+    @functools.cached_property
+    def _quad_any(self) -> np.ndarray:
+        """:attr:`quads`' second half (the bins one of the four regions holds), contiguous."""
+        return np.ascontiguousarray(self.quads[:, 1]).reshape(-1)
+
     def quad_any(self, keys: np.ndarray) -> np.ndarray:
         """Whether one of the four regions holds each key (a pixel's :attr:`quad_base` + its bin)."""
-        return (self.quads[:, 1].reshape(-1)[keys >> 3] >> (keys & 7) & 1).astype(bool)
+        return (self._quad_any.take(keys >> 3, mode="clip") >> (keys & 7) & 1).astype(bool)
 
 
 def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
@@ -258,8 +263,7 @@ def snap_local_run(flat: np.ndarray, start: int, local: LocalColours, rgb: tuple
     pixels = np.flatnonzero(local.quad_lacks[local.quad_base[start : start + len(flat)] + bins])
     if not len(pixels):
         return
-    rows = flat[pixels]
-    colour = rows.T[list(rgb)].astype(np.int32)  # (3, len): r, g, b
+    colour = np.take(flat, pixels, axis=0).T[list(rgb)].astype(np.int32)  # (3, len): r, g, b
     bins = bins[pixels].astype(np.int32)
     regions, weights = local.regions_and_weights(pixels + start)
     for step in range(LOCAL_PASSES):
@@ -271,8 +275,8 @@ def snap_local_run(flat: np.ndarray, start: int, local: LocalColours, rgb: tuple
             colour[:, todo] = blend_sets(colour[:, todo], bins[todo], regions[:, todo], weights[:, todo], local)
         else:
             colour = blend_sets(colour, bins, regions, weights, local)
-    rows[:, list(rgb)] = colour.T
-    flat[pixels] = rows
+    for i, v in zip(rgb, colour):
+        flat[pixels, i] = v
 
 
 def blend_sets(colour: np.ndarray, bins: np.ndarray, regions: np.ndarray, weights: np.ndarray, local: LocalColours):
