@@ -132,10 +132,6 @@ def region_axis(n: int, block: int, count: int) -> tuple[np.ndarray, np.ndarray,
     return np.clip(lower, 0, count - 1), np.clip(lower + 1, 0, count - 1), weight
 
 
-#: ``CLAMP[(t << 8) | v]``: level ``v`` clamped into the 8 levels of colour bin ``t`` (``8 t .. 8 t + 7``).
-CLAMP = np.clip(np.arange(256), 8 * np.arange(32)[:, None], 8 * np.arange(32)[:, None] + 7).astype(np.int32).ravel()
-
-
 def cell_sub(r: Any, g: Any, b: Any) -> Any:
     """The index (0..7) of a colour's bin among the 8 bins of its 16-level cell."""
     return ((r >> 1) & 4) | ((g >> 2) & 2) | ((b >> 3) & 1)
@@ -152,8 +148,8 @@ class LocalColours:
     """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
     ``height`` x ``width`` frame: each pixel's four nearest regions and their weights along each
     axis (:func:`region_axis`); per quad, the bins all four of its regions hold and those one of
-    them holds (:attr:`quads`, both backends); and (numpy, on first use) each pixel's quad and
-    regions and the sets unpacked.
+    them holds (:attr:`quads`, both backends); per region and 16-level cell, one entry for the
+    blend (:attr:`sets`, both backends); and (numpy, on first use) each pixel's quad and regions.
 
     A quad is the four regions around a corner where four region centres meet: the pixels between
     those centres blend those four regions' sets, so a pixel whose colour its quad's regions all

@@ -60,4 +60,6 @@ class ToneLookup:
             np.copyto(index, run, casting="unsafe")  # truncation, as astype
             index += offset
             np.take(self._flat, index, out=run, mode="clip")  # intp and in range: no copy, no buffer
+        if not np.shares_memory(flat, values):  # values were not contiguous: flat is a copy
+            values[...] = flat.reshape(values.shape)
         return values
