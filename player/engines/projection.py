@@ -114,6 +114,8 @@ WEIGHT_BITS = 8
 #: Passes of the local colour sets' blend: a blend of colours from different sets can lie in none
 #: of them (CHANGELOG.md has the measurement); a second pass blends such a pixel again.
 LOCAL_PASSES = 2
+#: Pixels numpy's :func:`snap_local` treats at once: its temporaries stay in a core's cache
+LOCAL_CHUNK = 1 << 17
 
 
 def region_axis(n: int, block: int, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -130,16 +132,24 @@ def region_axis(n: int, block: int, count: int) -> tuple[np.ndarray, np.ndarray,
     return np.clip(lower, 0, count - 1), np.clip(lower + 1, 0, count - 1), weight
 
 
-#: ``CLAMP[(t << 8) | v]``: level ``v`` clamped into the 8 levels of colour bin ``t`` (``8 t .. 8 t + 7``).
-CLAMP = np.clip(np.arange(256), 8 * np.arange(32)[:, None], 8 * np.arange(32)[:, None] + 7).astype(np.int32).ravel()
+def cell_sub(r: Any, g: Any, b: Any) -> Any:
+    """The index (0..7) of a colour's bin among the 8 bins of its 16-level cell."""
+    return ((r >> 1) & 4) | ((g >> 2) & 2) | ((b >> 3) & 1)
+
+
+def cell_sets(model) -> np.ndarray:
+    """:attr:`LocalColours.sets` of a model's local colour sets."""
+    bits = local_bits(model).reshape(-1, 16, 2, 16, 2, 16, 2).transpose(0, 1, 3, 5, 2, 4, 6)
+    held = np.packbits(bits.reshape(-1, 4096, 8), axis=2, bitorder="little")[..., 0]
+    return (model.nearest.astype(np.uint32) | held.astype(np.uint32) << 16).reshape(-1)
 
 
 class LocalColours:
     """A model's local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) laid out for a
     ``height`` x ``width`` frame: each pixel's four nearest regions and their weights along each
     axis (:func:`region_axis`); per quad, the bins all four of its regions hold and those one of
-    them holds (:attr:`quads`, both backends); and (numpy, on first use) each pixel's quad and
-    regions and the sets unpacked.
+    them holds (:attr:`quads`, both backends); per region and 16-level cell, one entry for the
+    blend (:attr:`sets`, both backends); and (numpy, on first use) each pixel's quad and regions.
 
     A quad is the four regions around a corner where four region centres meet: the pixels between
     those centres blend those four regions' sets, so a pixel whose colour its quad's regions all
@@ -164,10 +174,14 @@ class LocalColours:
         self.quads = np.stack(
             [four[0] & four[1] & four[2] & four[3], four[0] | four[1] | four[2] | four[3]], axis=2
         ).reshape(-1, 2, inside.shape[-1])
+        #: per region and 16-level cell, one lookup for the blend: bits 0..14 the bin the region's
+        #: map names for the cell, bit 16 + k whether the region holds the cell's k-th bin
+        #: (:func:`cell_sub`): uint32 ``(regions * 4096,)`` (both backends)
+        self.sets = cell_sets(model)
 
     @functools.cached_property
     def quad_base(self) -> np.ndarray:
-        """Each pixel's quad times the bins per quad (a key's base into :attr:`quad_bits`):
+        """Each pixel's quad times the bins per quad (a key's base into :attr:`quad_lacks`):
         int32 ``(height * width,)`` (numpy's alone, as the rest)."""
         (y0, y1, _), (x0, x1, _) = self._y, self._x
         qy, qx = y0 + (y1 != 0), x0 + (x1 != 0)  # quad q lies between regions q - 1 and q, clamped
@@ -186,31 +200,31 @@ class LocalColours:
             | wx[None, :]
         ).reshape(-1)
 
-    def regions_and_weights(self, pixels: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    def regions_and_weights(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The four regions (upper-left, upper-right, lower-left, lower-right) of the flat
-        ``pixels`` and their weights, out of ``2**(2 * WEIGHT_BITS)`` (each int32 ``(len,)``)."""
-        p = self.packed[pixels]
+        ``pixels`` and their weights, out of ``2**(2 * WEIGHT_BITS)`` (each int32 ``(4, len)``)."""
+        p = self.packed.take(pixels)
         r = (p >> 20).astype(np.int32)
         down, right = (p >> 19 & 1).astype(np.int32) * self.cols, (p >> 18 & 1).astype(np.int32)
         one = 1 << WEIGHT_BITS
         wy, wx = (p >> 9 & 511).astype(np.int32), (p & 511).astype(np.int32)
-        regions = [r, r + right, r + down, r + down + right]
-        return regions, [(one - wy) * (one - wx), (one - wy) * wx, wy * (one - wx), wy * wx]
+        regions = np.stack([r, r + right, r + down, r + down + right])
+        return regions, np.stack([(one - wy) * (one - wx), (one - wy) * wx, wy * (one - wx), wy * wx])
 
     @functools.cached_property
-    def bits(self) -> np.ndarray:
-        """The sets as one bool per region and bin, flat (8 times the packed bytes: numpy's alone)."""
-        return local_bits(self.model).reshape(-1)
+    def quad_lacks(self) -> np.ndarray:
+        """The bins one of the four regions of each quad lacks (not all hold: :attr:`quads`), one
+        bool per quad and bin, flat (numpy's alone)."""
+        return ~np.unpackbits(self.quads[:, 0], axis=1, bitorder="little").astype(bool).reshape(-1)
 
     @functools.cached_property
-    def quad_bits(self) -> np.ndarray:
-        """The bins all four regions of each quad hold (:attr:`quads`), one bool per quad and bin,
-        flat (numpy's alone)."""
-        return np.unpackbits(self.quads[:, 0], axis=1, bitorder="little").astype(bool).reshape(-1)
+    def _quad_any(self) -> np.ndarray:
+        """:attr:`quads`' second half (the bins one of the four regions holds), contiguous."""
+        return np.ascontiguousarray(self.quads[:, 1]).reshape(-1)
 
     def quad_any(self, keys: np.ndarray) -> np.ndarray:
         """Whether one of the four regions holds each key (a pixel's :attr:`quad_base` + its bin)."""
-        return (self.quads[:, 1].reshape(-1)[keys >> 3] >> (keys & 7) & 1).astype(bool)
+        return (self._quad_any.take(keys >> 3, mode="clip") >> (keys & 7) & 1).astype(bool)
 
 
 def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
@@ -235,55 +249,85 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     [[[200, 7, 7]]]
     """
     flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
-    pixels = np.flatnonzero(~local.quad_bits[local.quad_base + colour_bins(flat, rgb)])
+    for start in range(0, len(flat), LOCAL_CHUNK):
+        snap_local_run(flat[start : start + LOCAL_CHUNK], start, local, rgb)
+
+
+def snap_local_run(flat: np.ndarray, start: int, local: LocalColours, rgb: tuple[int, int, int]) -> None:
+    """:func:`snap_local` on the pixels ``flat`` (len, bytes), the first the frame's pixel ``start``."""
+    bins = colour_bins(flat, rgb)
+    pixels = np.flatnonzero(local.quad_lacks[local.quad_base[start : start + len(flat)] + bins])
     if not len(pixels):
         return
-    quad = local.quad_base[pixels]
-    ch = [flat[pixels, i].astype(np.int32) for i in rgb]
-    regions, weights = local.regions_and_weights(pixels)
+    colour = np.take(flat, pixels, axis=0).T[list(rgb)].astype(np.int32)  # (3, len): r, g, b
+    bins = bins[pixels].astype(np.int32)
+    regions, weights = local.regions_and_weights(pixels + start)
     for step in range(LOCAL_PASSES):
-        c, rs, ws = ch, regions, weights
-        bins = (c[0] >> 3 << 10) | (c[1] >> 3 << 5) | (c[2] >> 3)
         if step:  # the pixels the blend left in none of the four sets
-            todo = np.flatnonzero(~local.quad_any(quad + bins))
+            bins = (colour[0] >> 3 << 10) | (colour[1] >> 3 << 5) | (colour[2] >> 3)
+            todo = np.flatnonzero(~local.quad_any(local.quad_base[pixels + start] + bins))
             if not len(todo):
                 break
-            c, rs, ws, bins = ([a[todo] for a in arrays] for arrays in (ch, regions, weights, [bins]))
-            bins = bins[0]
-        # the pixels one of the four holds (none after the first pass)
-        some = np.flatnonzero(local.quad_any(quad + bins)) if not step else bins[:0]
-        held_bins = bins[some]
-        cells = (c[0] >> 4 << 8) | (c[1] >> 4 << 4) | (c[2] >> 4)
-        acc = [np.full(len(bins), 1 << (2 * WEIGHT_BITS - 1), np.int32) for _ in rgb]
-        for r, w in zip(rs, ws):
-            t = local.nearest[(r << 12) + cells].astype(np.int32)
-            # a held colour's own bin clamps it to itself
-            t[some] = np.where(local.bits[(r[some] << 15) + held_bins], held_bins, t[some])
-            # lo: the target's level (bits 8..12) per channel
-            for a, v, lo in zip(acc, c, (t >> 2 & 0x1F00, t << 3 & 0x1F00, t << 8 & 0x1F00)):
-                lo |= v
-                CLAMP.take(lo, out=lo)
-                lo *= w
-                a += lo
-        if step:
-            for v, a in zip(ch, acc):
-                v[todo] = a >> (2 * WEIGHT_BITS)
+            colour[:, todo] = blend_sets(colour[:, todo], bins[todo], regions[:, todo], weights[:, todo], local)
         else:
-            ch = [a >> (2 * WEIGHT_BITS) for a in acc]
-    for i, v in zip(rgb, ch):
+            colour = blend_sets(colour, bins, regions, weights, local)
+    for i, v in zip(rgb, colour):
         flat[pixels, i] = v
 
 
-def blocked_basis(basis: np.ndarray, block: int) -> np.ndarray:
-    """``(n, P)`` -> ``(ceil(P / block), n, block)``, zero-padded: the kernel's streaming layout."""
-    n, p = basis.shape
-    blocks = -(-p // block)
-    out = np.zeros((blocks, n, block), basis.dtype)
-    full = p // block
-    out[:full] = basis[:, : full * block].reshape(n, full, block).transpose(1, 0, 2)
-    if blocks != full:
-        out[full, :, : p - full * block] = basis[:, full * block :]
+def blend_sets(colour: np.ndarray, bins: np.ndarray, regions: np.ndarray, weights: np.ndarray, local: LocalColours):
+    """One pass of :func:`snap_local`'s blend: ``colour`` (3, len) int32 levels, ``bins`` their
+    colour bins, ``regions`` and ``weights`` (4, len) (:meth:`LocalColours.regions_and_weights`);
+    the blended colours (3, len) int32. Each region clamps a colour, channel by channel, into the
+    bin its map names for the colour's 16-level cell, or into the colour's own bin (no change)
+    where the region holds it."""
+    cells = (colour[0] >> 4 << 8) | (colour[1] >> 4 << 4) | (colour[2] >> 4)
+    regions = regions << 12
+    regions += cells
+    target = local.sets.take(regions, mode="clip").view(np.int32)
+    held = (target >> (cell_sub(*colour) + 16)) & 1
+    target &= 0x7FFF
+    np.copyto(target, bins, where=held.astype(bool))
+    out = np.empty_like(colour)
+    lo, value = regions, held  # their memory reused
+    for i, shift in enumerate((10, 5, 0)):
+        # the target's levels in the channel: lo .. lo + 7
+        np.right_shift(target, shift, out=lo)
+        lo &= 31
+        lo <<= 3
+        np.maximum(lo, colour[i], out=value)
+        lo += 7
+        np.minimum(value, lo, out=value)
+        value *= weights
+        np.add.reduce(value, axis=0, dtype=np.int32, out=out[i])
+    out += 1 << (2 * WEIGHT_BITS - 1)
+    out >>= 2 * WEIGHT_BITS
     return out
+
+
+def blocked_basis(basis: np.ndarray | tuple[np.ndarray, ...], block: int, out: np.ndarray | None = None) -> np.ndarray:
+    """``(n, P)`` (or row blocks of ``P`` columns stacked) -> ``(ceil(P / block), n, block)``,
+    zero-padded: the kernel's streaming layout, into ``out`` where given."""
+    parts = row_blocks(basis)
+    n, p = sum(len(b) for b in parts), parts[0].shape[1]
+    blocks = -(-p // block)
+    if out is None:
+        out = np.zeros((blocks, n, block), parts[0].dtype)
+    full = p // block
+    i = 0
+    for part in parts:
+        rows = slice(i, i + len(part))
+        out[:full, rows] = part[:, : full * block].reshape(len(part), full, block).transpose(1, 0, 2)
+        if blocks != full:
+            out[full, rows, : p - full * block] = part[:, full * block :]
+            out[full, rows, p - full * block :] = 0
+        i += len(part)
+    return out
+
+
+def row_blocks(basis: np.ndarray | tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """A basis given as one ``(n, P)`` array or as row blocks stacked (a tuple): the blocks."""
+    return tuple(basis) if isinstance(basis, (tuple, list)) else (basis,)
 
 
 class Projector:
@@ -295,8 +339,9 @@ class Projector:
 
     Parameters
     ----------
-    basis : (n, P) float32 or float16
-        Rows to combine; ``P = H * W * channels``. float16 halves the bytes read per frame.
+    basis : (n, P) float32 or float16, or a tuple of such row blocks
+        Rows to combine (a tuple: its blocks' rows in turn, so that a caller need not copy them
+        into one array); ``P = H * W * channels``. float16 halves the bytes read per frame.
     mean : (P,) float32
         Added to every frame.
     shape : (H, W, bytes)
@@ -333,11 +378,12 @@ class Projector:
         tone: ToneModel | None = None,
     ) -> None:
         self.format = pixel_format(format)
-        self.n, self.values = basis.shape
+        parts = row_blocks(basis)
+        self.n, self.values = sum(len(b) for b in parts), parts[0].shape[1]
         self.shape = tuple(shape)
         self.channels = channels
-        self.half = basis.dtype == np.float16
-        self.basis_bytes = basis.nbytes
+        self.half = parts[0].dtype == np.float16
+        self.basis_bytes = sum(b.nbytes for b in parts)
         self.frames = int(frames)
         self.coefs = np.zeros((self.frames, max(self.n, 1)), np.float32)
         self.coef = self.coefs[0]
@@ -389,6 +435,8 @@ class ProjectorReference(Projector):
 
     def __init__(self, basis: np.ndarray, mean: np.ndarray, **kwargs: Any) -> None:
         super().__init__(basis, mean, **kwargs)
+        parts = row_blocks(basis)
+        basis = parts[0] if len(parts) == 1 else np.concatenate(parts)  # one GEMM reads one array
         self._basis = basis.astype(np.float32) if self.half else basis
         self._mean = mean
 
@@ -441,17 +489,15 @@ class ProjectorOpenCL(Projector):
         self.coefs = self._upload[:, :width]
         self.coef = self.coefs[0]
         group = PIXELS * self.channels
-        blocked = blocked_basis(basis, group)
-        groups = blocked.shape[0]
+        groups = -(-self.values // group)
         mean_p = np.zeros(groups * group, np.float32)
         mean_p[: self.values] = mean
         mf = cl.mem_flags
         self._bufs: dict[str, Any] = {
-            "basis": cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=blocked),
+            "basis": self._blocked_buffer(basis, groups, group),
             "mean": cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=mean_p),
             "coef": cl.Buffer(ctx, mf.READ_ONLY, self._upload.nbytes),
         }
-        del blocked
         d = self.detail
         if d is None:
             dummy = np.zeros(1, np.uint8)
@@ -463,8 +509,7 @@ class ProjectorOpenCL(Projector):
             arrays = {"vol": vol, "gain": d.gain.reshape(-1), "low": d.low, "high": d.high, "colours": d.colours}
         arrays["nearest"] = np.zeros(1, np.uint16) if self.nearest is None else self.nearest
         loc = self.local
-        arrays["local_inside"] = np.zeros(1, np.uint8) if loc is None else loc.model.inside
-        arrays["local_nearest"] = np.zeros(1, np.uint16) if loc is None else loc.model.nearest
+        arrays["local_sets"] = np.zeros(1, np.uint32) if loc is None else loc.sets
         arrays["local_quads"] = np.zeros(1, np.uint8) if loc is None else loc.quads
         t = self.tone
         arrays["tone"] = np.zeros(1, np.float32) if t is None else np.concatenate([t.lo, t.scale])
@@ -477,6 +522,25 @@ class ProjectorOpenCL(Projector):
         self._lsize = (LOCAL,)
         self.out = None
         self._kernel(self.detail is not None)
+
+    def _blocked_buffer(self, basis, groups: int, group: int):
+        """The device's copy of the basis in the kernel's layout (:func:`blocked_basis`), written
+        through a mapping, so that the host holds no blocked copy beside the caller's rows."""
+        import pyopencl as cl
+
+        dtype = np.float16 if self.half else np.float32
+        shape = (groups, self.n, group)
+        mf = cl.mem_flags
+        buf = cl.Buffer(self.ctx, mf.READ_ONLY | mf.ALLOC_HOST_PTR, int(np.prod(shape)) * np.dtype(dtype).itemsize)
+        mapped, _ = cl.enqueue_map_buffer(
+            self.queue, buf, cl.map_flags.WRITE_INVALIDATE_REGION, 0, shape, dtype, is_blocking=True
+        )
+        try:
+            blocked_basis(basis, group, out=mapped)
+        finally:
+            mapped.base.release(self.queue)
+            self.queue.finish()
+        return buf
 
     def _kernel(self, detail: bool):
         """The kernel with or without the detail, built and bound on first use; binds :attr:`out` to it."""

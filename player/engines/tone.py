@@ -16,6 +16,9 @@ import numpy as np
 
 from ...tiledb.tone import BINS, ToneModel, lookup
 
+#: Values :meth:`ToneLookup.levels` maps at once (a multiple of 3)
+CHUNK = 3 << 16
+
 
 class ToneLookup:
     """``lo``, ``scale`` (float32, one per channel) and ``table`` ``(channels, BINS)`` uint8
@@ -34,29 +37,29 @@ class ToneLookup:
         self.scale = (BINS / (fwd[:, -1] - fwd[:, 0])).astype(np.float32)
         self.table = lookup(tone)
         self._flat = self.table.reshape(-1).astype(np.float32)
-        self._rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._index: np.ndarray | None = None
-
-    def _per_value(self, values: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``lo``, ``scale`` and each channel's table offset repeated along a row of ``values``
-        interleaved values: numpy combines rows of one length far faster than it broadcasts a
-        trailing axis of 3."""
-        if self._rows is None or len(self._rows[0]) != values:
-            pixels = values // self.channels
-            offset = np.arange(self.channels, dtype=np.int32) * BINS
-            self._rows = tuple(np.tile(a, pixels) for a in (self.lo, self.scale, offset))
-        return self._rows
+        pixels = CHUNK // self.channels
+        offset = np.arange(self.channels, dtype=np.intp) * BINS
+        # lo, scale and each channel's table offset along a run of CHUNK interleaved values:
+        # numpy combines arrays of one length far faster than it broadcasts a trailing axis of 3
+        self._rows = tuple(np.tile(a, pixels) for a in (self.lo, self.scale, offset))
+        self._index = np.empty(pixels * self.channels, np.intp)
 
     def levels(self, values: np.ndarray) -> np.ndarray:
         """Tone values ``(k, P)`` float32 (``P`` interleaved values of ``channels`` channels a row)
-        replaced by their levels, in place; returns ``values``."""
-        lo, scale, offset = self._per_value(values.shape[-1])
-        values -= lo
-        values *= scale
-        np.fmax(values, 0, out=values)  # fmax/fmin as OpenCL's clamp: NaN (no valid map makes one) -> 0
-        np.fmin(values, BINS - 1, out=values)
-        if self._index is None or self._index.shape != values.shape:
-            self._index = np.empty(values.shape, np.int32)
-        np.copyto(self._index, values, casting="unsafe")  # truncation, as astype
-        self._index += offset
-        return np.take(self._flat, self._index, out=values)
+        replaced by their levels, in place, in runs of :data:`CHUNK` values (the temporaries stay
+        in cache); returns ``values``."""
+        flat = values.reshape(-1)  # a row starts at channel 0, as every run does
+        for start in range(0, len(flat), len(self._index)):
+            run = flat[start : start + len(self._index)]
+            lo, scale, offset = (a[: len(run)] for a in self._rows)
+            index = self._index[: len(run)]
+            run -= lo
+            run *= scale
+            np.fmax(run, 0, out=run)  # fmax/fmin as OpenCL's clamp: NaN (no valid map makes one) -> 0
+            np.fmin(run, BINS - 1, out=run)
+            np.copyto(index, run, casting="unsafe")  # truncation, as astype
+            index += offset
+            np.take(self._flat, index, out=run, mode="clip")  # intp and in range: no copy, no buffer
+        if not np.shares_memory(flat, values):  # values were not contiguous: flat is a copy
+            values[...] = flat.reshape(values.shape)
+        return values

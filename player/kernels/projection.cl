@@ -32,10 +32,11 @@
 //
 // LOCAL (with GAMUT): instead, each pixel moves into the colour sets of its four nearest regions
 // (squares of LOCAL_BLOCK pixels, LOCAL_ROWS x LOCAL_COLS), blended: for each region, the pixel
-// as it is where the region holds its bin (bit bin & 7 of local_inside[region * 4096 + (bin >> 3)]
-// set), else clamped into bin local_nearest[region * 4096 + cell], cell its 16-level one
-// ((r >> 4) * 256 + (g >> 4) * 16 + (b >> 4)); the four colours weighted by the pixel's position
-// between the regions' centres (per axis an integer out of 2^LOCAL_WEIGHT_BITS, the four
+// as it is where the region holds its bin, else clamped into the bin the region's map names for
+// its 16-level cell (cell = (r >> 4) * 256 + (g >> 4) * 16 + (b >> 4)): one lookup,
+// e = local_sets[region * 4096 + cell], bits 0..14 that bin, bit 16 + k set where the region
+// holds the cell's k-th bin (k = ((r >> 3) & 1) * 4 + ((g >> 3) & 1) * 2 + ((b >> 3) & 1)); the
+// four colours weighted by the pixel's position between the regions' centres (per axis an integer out of 2^LOCAL_WEIGHT_BITS, the four
 // products summing to 2^(2 LOCAL_WEIGHT_BITS)), rounded by a shift: integers alone, exact. A
 // colour all four hold stays: the four regions around each corner where region centres meet (a
 // quad, (LOCAL_ROWS + 1) x (LOCAL_COLS + 1), clamped at the frame's edges) have their bins all
@@ -154,29 +155,29 @@ bool quad_holds(const int4 c, __global const uchar *restrict quad, const int any
 
 // One pass of the blend on colour c over regions reg with weights w (LOCAL). A region that holds
 // its colour clamps it into its own bin (no change), so the four are treated alike.
-int4 blend_sets(const int4 c, const int4 reg, const int4 w, __global const uchar *restrict inside,
-                __global const ushort *restrict targets)
+int4 blend_sets(const int4 c, const int4 reg, const int4 w, __global const uint *restrict sets)
 {
     const int bin = bin_of(c);
-    const int4 byte = reg * 4096 + (bin >> 3);
-    const int4 held = ((int4)(inside[byte.s0], inside[byte.s1], inside[byte.s2], inside[byte.s3]) >> (bin & 7)) & 1;
-    const int4 at = reg * 4096 + (((c.s0 >> 4) << 8) | ((c.s1 >> 4) << 4) | (c.s2 >> 4));
-    const int4 t = select((int4)(targets[at.s0], targets[at.s1], targets[at.s2], targets[at.s3]), (int4)(bin), held != 0);
-    // one vector: lane 4 k + i holds channel i (3: unused) of region k
-    const uint16 by_region = (uint16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
-    const int16 shift = (int16)(10, 5, 0, 0, 10, 5, 0, 0, 10, 5, 0, 0, 10, 5, 0, 0);
-    const int16 lo = ((shuffle(t, by_region) >> shift) & 31) << 3;
-    const int16 value = shuffle(c, (uint16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3));
-    const int16 m = shuffle(w, by_region) * clamp(value, lo, lo + 7);
-    const int8 pairs = m.lo + m.hi;
-    return (pairs.lo + pairs.hi + LOCAL_HALF) >> (2 * LOCAL_WEIGHT_BITS);
+    const int cell = ((c.s0 >> 4) << 8) | ((c.s1 >> 4) << 4) | (c.s2 >> 4);
+    const int held = 16 + (((c.s0 >> 1) & 4) | ((c.s1 >> 2) & 2) | ((c.s2 >> 3) & 1));
+    const int r[4] = {reg.s0, reg.s1, reg.s2, reg.s3};
+    const int wk[4] = {w.s0, w.s1, w.s2, w.s3};
+    int s0 = LOCAL_HALF, s1 = LOCAL_HALF, s2 = LOCAL_HALF;
+    for (int k = 0; k < 4; ++k) {
+        const uint e = sets[r[k] * 4096 + cell];
+        const int t = ((e >> held) & 1) ? bin : (int)(e & 0x7FFF);
+        const int lr = (t >> 10) << 3, lg = ((t >> 5) & 31) << 3, lb = (t & 31) << 3;
+        s0 += wk[k] * clamp(c.s0, lr, lr + 7);
+        s1 += wk[k] * clamp(c.s1, lg, lg + 7);
+        s2 += wk[k] * clamp(c.s2, lb, lb + 7);
+    }
+    return (int4)(s0, s1, s2, 0) >> (2 * LOCAL_WEIGHT_BITS);
 }
 
 // The `count` pixels of v, the first at (x, y), moved into their four nearest regions' colour
 // sets, blended (LOCAL).
 void snap_local(uchar *v, const int count, const int x, const int y, const int width,
-                __global const uchar *restrict inside, __global const ushort *restrict targets,
-                __global const uchar *restrict quads)
+                __global const uint *restrict sets, __global const uchar *restrict quads)
 {
     int wy, wx;
     int qy = between(y, &wy);
@@ -196,8 +197,8 @@ void snap_local(uchar *v, const int count, const int x, const int y, const int w
         const int4 reg = (int4)(ry0 + rx0, ry0 + rx1, ry1 + rx0, ry1 + rx1);
         const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx, wy * (LOCAL_ONE - wx), wy * wx);
         for (int pass = 0; pass < LOCAL_PASSES; ++pass) {
-            c = blend_sets(c, reg, w, inside, targets);
-            if (quad_holds(c, quad, 1))
+            c = blend_sets(c, reg, w, sets);
+            if (pass + 1 < LOCAL_PASSES && quad_holds(c, quad, 1))
                 break;  // one of the four holds the blend
         }
         p[0] = (uchar)c.s0;
@@ -288,8 +289,7 @@ __kernel void project(__global const basis_t *restrict basis,
                       __global const uchar *restrict high,
                       __global const uchar *restrict colours,
                       __global const ushort *restrict nearest,
-                      __global const uchar *restrict local_inside,
-                      __global const ushort *restrict local_nearest,
+                      __global const uint *restrict local_sets,
                       __global const uchar *restrict local_quads,
                       __global const float *restrict tone,
                       __global const uchar *restrict tone_table)
@@ -337,7 +337,7 @@ __kernel void project(__global const basis_t *restrict basis,
         add_detail(v, count, x0, y0, p0, first, vol, gain, low, high, colours, c + stride - LAYER_FLOATS, width);
 #endif
 #if LOCAL
-        snap_local(v, count, x0, y0, width, local_inside, local_nearest, local_quads);
+        snap_local(v, count, x0, y0, width, local_sets, local_quads);
 #elif GAMUT
         snap_colours(v, count, nearest);
 #endif

@@ -335,10 +335,11 @@ class SwitchingProcess:
 class ResidualAxes:
     """The residual part's axes played (:class:`~dynatex.tiledb.ResidualProcess`): each an AR
     process of its own, beside a switching process; its vector is the axes' coordinates, which
-    reach every coefficient through the part's ``gain``."""
+    reach every coefficient through the part's ``gain``. It keeps the part's processes, not its
+    rows (the projection engine holds those)."""
 
     def __init__(self, residual: ResidualProcess) -> None:
-        self.part = residual
+        self.gain, self.ar, self.noise = residual.gain, residual.ar, residual.noise
         self.dim, order = residual.ar.shape
         self.hist = np.zeros((order, self.dim))  # y_{t-i}
 
@@ -349,25 +350,24 @@ class ResidualAxes:
 
     def stationary(self, rng: np.random.Generator) -> np.ndarray:
         """One draw of the axes' last ``order`` values from their stationary distribution."""
-        res = self.part
-        order = res.ar.shape[1]
+        order = self.ar.shape[1]
         hist = np.empty((order, self.dim))
         for a in range(self.dim):
-            gamma = scalar_ar_autocov(res.ar[a], order - 1) * res.noise[a] ** 2
+            gamma = scalar_ar_autocov(self.ar[a], order - 1) * self.noise[a] ** 2
             lam, vec = np.linalg.eigh(gamma[np.abs(np.subtract.outer(np.arange(order), np.arange(order)))])
             hist[:, a] = vec @ (np.sqrt(np.maximum(lam, 0.0)) * rng.standard_normal(order))
         return hist
 
     def step(self, rng: np.random.Generator, intensity: float) -> None:
-        res, hist = self.part, self.hist
-        y = np.einsum("ap,pa->a", res.ar, hist) + np.sqrt(intensity) * res.noise * rng.standard_normal(self.dim)
+        hist = self.hist
+        y = np.einsum("ap,pa->a", self.ar, hist) + np.sqrt(intensity) * self.noise * rng.standard_normal(self.dim)
         hist[1:] = hist[:-1]
         hist[0] = y
 
     def coefficients(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The coefficients over the stacked rows and the part's extra rows of components'
         coefficients ``u`` and axis coordinates ``y``."""
-        full = y @ self.part.gain
+        full = y @ self.gain
         full[: len(u)] += u
         return full
 
@@ -431,10 +431,10 @@ class MixturePlayer(ProjectionPlayer):
             self.residual = ResidualAxes(model.residual)
         self._dim = self.process.dim + (self.residual.dim if self.residual is not None else 0)
 
-    def _basis(self, model: MixtureModel) -> np.ndarray:
-        if self.residual is None or not len(self.residual.part.rows):
-            return model.stacked_basis
-        return np.concatenate([model.stacked_basis, self.residual.part.rows])
+    def _basis(self, model: MixtureModel) -> tuple[np.ndarray, ...]:
+        if self.residual is None or not len(model.residual.rows):
+            return (model.stacked_basis,)
+        return (model.stacked_basis, model.residual.rows)
 
     # -- controls ----------------------------------------------------------------
     draws = Control(

@@ -91,10 +91,11 @@ class ProjectionPlayer(Player):
         self.precision = precision
         self._setup(model)
         basis = self._basis(model)
-        case = speed_case(precision, basis.shape[1], lookahead, model.detail is not None, basis.shape[0])
+        rows, values = sum(len(b) for b in basis), basis[0].shape[1]
+        case = speed_case(precision, values, lookahead, model.detail is not None, rows)
         self._prefer_faster(*self._asked, case)
         if precision == "float16":
-            basis = basis.astype(np.float16)
+            basis = tuple(b.astype(np.float16) for b in basis)
         self.engine = open_engine(
             "projection",
             basis,
@@ -131,9 +132,10 @@ class ProjectionPlayer(Player):
     def _setup(self, model) -> None:
         raise NotImplementedError
 
-    def _basis(self, model) -> np.ndarray:
-        """The rows the frames project through: the model's ``basis_name`` attribute."""
-        return getattr(model, self.basis_name)
+    def _basis(self, model) -> tuple[np.ndarray, ...]:
+        """The rows the frames project through, as blocks of rows stacked (the engine takes them
+        so, without a copy into one array): the model's ``basis_name`` attribute."""
+        return (getattr(model, self.basis_name),)
 
     def _vector(self) -> np.ndarray:
         raise NotImplementedError

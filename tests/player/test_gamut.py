@@ -15,7 +15,7 @@ from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.metrics.gamut import colour_bins
 from dynatex.analyzer.mixture import learn_mixture
 from dynatex.player import open_player
-from dynatex.player.engines.projection import LocalColours, open_projector, snap_colours
+from dynatex.player.engines.projection import LocalColours, cell_sub, open_projector, snap_colours
 from dynatex.player.opencl.selftest import random_colour_set
 from dynatex.player.pixels import FORMATS
 from dynatex.tiledb import DatabaseWriter
@@ -167,12 +167,35 @@ def test_local_quads_hold_what_all_four_regions_hold(size):
     regions = np.stack(loc.regions_and_weights(np.arange(h * w))[0])
     bins = np.flatnonzero(nearest == np.arange(32**3))[::7]
     four = bits[(regions[:, :, None] << 15) + bins].all(axis=0)
-    quad = loc.quad_bits[loc.quad_base[:, None] + bins]
+    quad = ~loc.quad_lacks[loc.quad_base[:, None] + bins]
     np.testing.assert_array_equal(quad, four)
     one = bits[(regions[:, :, None] << 15) + bins].any(axis=0)
     np.testing.assert_array_equal(loc.quad_any(loc.quad_base[:, None] + bins), one)
     assert (one & ~four).any() == (loc.rows * loc.cols > 1)  # one region alone: the two alike
     assert 0 < four.mean() < 0.6  # each region holds about half the clip's set, a random half of it
+
+
+def test_local_cell_sets_name_each_regions_bins_and_targets():
+    """The blend's one lookup per region and 16-level cell (:attr:`LocalColours.sets`) names the
+    region's target for the cell and whether the region holds each of the cell's 8 bins, for
+    every colour of a random set's regions."""
+    rng = np.random.default_rng(7)
+    nearest = random_colour_set(rng)
+    loc = LocalColours(random_local(rng, nearest, 20, 30, 8), 20, 30)
+    bits = local_bits(loc.model)
+    levels = np.arange(256)
+    r, g, b = (a.reshape(-1) for a in np.meshgrid(levels, levels, levels, indexing="ij"))
+    pick = rng.choice(len(r), 20000, replace=False)
+    r, g, b = r[pick], g[pick], b[pick]
+    bins = (r >> 3 << 10) | (g >> 3 << 5) | (b >> 3)
+    cells = (r >> 4 << 8) | (g >> 4 << 4) | (b >> 4)
+    sets = loc.sets.reshape(-1, 4096)
+    assert sets.shape[0] == bits.shape[0] == loc.rows * loc.cols
+    for region in range(sets.shape[0]):
+        e = sets[region, cells]
+        np.testing.assert_array_equal(e & 0x7FFF, loc.model.nearest[region, cells])
+        np.testing.assert_array_equal((e >> (16 + cell_sub(r, g, b))) & 1, bits[region, bins])
+    assert 0 < bits.mean() < 1
 
 
 def test_local_sets_blend_across_a_region_border():

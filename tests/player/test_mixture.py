@@ -292,7 +292,7 @@ def test_residual_state_is_checked(mix_db):
 def test_residual_starts_from_its_stationary_distribution(mix_db):
     """The axes' first history is a draw of their stationary process (no warm-up from zero)."""
     with MixturePlayer(mix_db, backend="numpy", seed=3) as p:
-        res = p.residual.part
+        res = p.residual
         assert p.get_state()["residual"].any()
         draws = np.stack([p.residual.stationary(p._rng) for _ in range(4000)])  # (N, order, m)
     stationary = res.noise**2 * np.array([scalar_ar_gain(a) for a in res.ar])
