@@ -396,10 +396,12 @@ class MixturePlayer(ProjectionPlayer):
     method = "mixture"
     basis_name = "stacked_basis"
 
-    checked_first = ("precision", "draws", "lookahead")
+    checked_first = ("precision", "draws", "lookahead", "colours")
 
-    def _open(self, *, seed: int, precision: str, lookahead: int | None, draws: int = DEFAULT_DRAWS) -> None:
-        super()._open(seed=seed, precision=precision, lookahead=lookahead)
+    def _open(
+        self, *, seed: int, precision: str, lookahead: int | None, colours: str, draws: int = DEFAULT_DRAWS
+    ) -> None:
+        super()._open(seed=seed, precision=precision, lookahead=lookahead, colours=colours)
         if not self.process.offers_draws and draws != DEFAULT_DRAWS:
             raise InvalidArgumentError(f"this texture does not offer the control draws: {type(self).draws.unoffered}")
         self._draws = draws

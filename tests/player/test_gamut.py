@@ -14,8 +14,10 @@ from dynatex.analyzer.gamut import learn_gamut
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.metrics.gamut import colour_bins
 from dynatex.analyzer.mixture import learn_mixture
+from dynatex.errors import InvalidArgumentError
 from dynatex.player import open_player
 from dynatex.player.engines.projection import LocalColours, cell_sub, open_projector, snap_colours
+from dynatex.player.modes.projected import COLOURS
 from dynatex.player.opencl.selftest import random_colour_set
 from dynatex.player.pixels import FORMATS
 from dynatex.tiledb import DatabaseWriter
@@ -270,6 +272,24 @@ def test_lamps_on_both_backends(lamps_db, mode, cl_device):
     diff = np.abs(a.astype(int) - b)
     assert (diff > 0).mean() <= 1e-3  # the projection's documented tolerance, then the same colour set
     assert cyan_share(a) == 0.0 and metrics.out_of_gamut_share(a, src) == 0.0
+
+
+@pytest.mark.parametrize("mode", ["lds", "mixture"])
+def test_colours_option_chooses_the_sets(lamps_db, mode):
+    """'local' holds colours to the regions' sets, 'clip' to the clip's set alone, 'off' leaves the
+    projection as it is: the frames of the database without its gamut part."""
+    path, old, src = lamps_db
+    frames = {c: _play(path, mode, frames=60, backend="numpy", colours=c) for c in COLOURS}
+    assert np.array_equal(frames["off"], _play(old, mode, frames=60, backend="numpy"))
+    assert metrics.out_of_gamut_share(frames["off"], src) > 0.01
+    for c in ("local", "clip"):
+        assert cyan_share(frames[c]) == 0.0 and metrics.out_of_gamut_share(frames[c], src) == 0.0
+    assert not np.array_equal(frames["local"], frames["clip"])
+    assert np.array_equal(frames["local"], _play(path, mode, frames=60, backend="numpy"))  # the default
+    with open_player(path, mode=mode, backend="numpy", colours="clip") as p:
+        assert p.colours == "clip" and p.engine.local is None and p.engine.nearest is not None
+    with pytest.raises(InvalidArgumentError, match="colours"):
+        open_player(path, mode=mode, colours="none")
 
 
 def test_older_database_plays_without_it(lamps_db):
