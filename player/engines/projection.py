@@ -227,7 +227,13 @@ class LocalColours:
         return (self._quad_any.take(keys >> 3, mode="clip") >> (keys & 7) & 1).astype(bool)
 
 
-def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
+def snap_local(
+    frame: np.ndarray,
+    local: LocalColours,
+    rgb: tuple[int, int, int] = (0, 1, 2),
+    nearest: np.ndarray | None = None,
+    away: np.ndarray | None = None,
+) -> None:
     """Move, in place, each pixel of ``frame`` (H, W, bytes) uint8 into the colour sets of its
     four nearest regions, blended by its position between their centres, so that the sets change
     smoothly across the frame (no edge where two regions meet).
@@ -239,7 +245,10 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     (:meth:`LocalColours.regions_and_weights`, integers: ``(sum w_k c_k + 2**15) >> 16``). Near
     a region's centre its set weighs most, and past the outermost centres (the frame's edges)
     the regions along that axis are one. Up to :data:`LOCAL_PASSES` passes, each over the pixels
-    the one before left in none of the four sets (:meth:`LocalColours.quad_any`).
+    the one before left in none of the four sets (:meth:`LocalColours.quad_any`). Last, with the
+    clip's ``nearest`` (and ``away``, as :func:`snap_colours` takes them), a blended colour outside
+    the clip's set is clamped into its nearest bin there: a blend of colours from different
+    regions' sets can lie outside every one of them and outside the clip's, which holds them all.
 
     >>> from dynatex.tiledb.gamut import LocalGamut
     >>> held = np.zeros(32768, bool); held[(25 * 32 + 0) * 32 + 0] = True  # red alone
@@ -249,11 +258,20 @@ def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int]
     [[[200, 7, 7]]]
     """
     flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
+    if nearest is not None and away is None:
+        away = nearest != np.arange(len(nearest), dtype=nearest.dtype)
     for start in range(0, len(flat), LOCAL_CHUNK):
-        snap_local_run(flat[start : start + LOCAL_CHUNK], start, local, rgb)
+        snap_local_run(flat[start : start + LOCAL_CHUNK], start, local, rgb, nearest, away)
 
 
-def snap_local_run(flat: np.ndarray, start: int, local: LocalColours, rgb: tuple[int, int, int]) -> None:
+def snap_local_run(
+    flat: np.ndarray,
+    start: int,
+    local: LocalColours,
+    rgb: tuple[int, int, int],
+    nearest: np.ndarray | None = None,
+    away: np.ndarray | None = None,
+) -> None:
     """:func:`snap_local` on the pixels ``flat`` (len, bytes), the first the frame's pixel ``start``."""
     bins = colour_bins(flat, rgb)
     pixels = np.flatnonzero(local.quad_lacks[local.quad_base[start : start + len(flat)] + bins])
@@ -271,6 +289,14 @@ def snap_local_run(flat: np.ndarray, start: int, local: LocalColours, rgb: tuple
             colour[:, todo] = blend_sets(colour[:, todo], bins[todo], regions[:, todo], weights[:, todo], local)
         else:
             colour = blend_sets(colour, bins, regions, weights, local)
+    if nearest is not None:
+        bins = (colour[0] >> 3 << 10) | (colour[1] >> 3 << 5) | (colour[2] >> 3)
+        outside = np.flatnonzero(away.take(bins))
+        if len(outside):
+            t = nearest.take(bins[outside]).astype(np.int32)
+            for c, shift in zip(colour, (10, 5, 0)):
+                lo = (t >> shift & 31) << 3
+                c[outside] = np.clip(c[outside], lo, lo + 7)
     for i, v in zip(rgb, colour):
         flat[pixels, i] = v
 
@@ -464,7 +490,7 @@ class ProjectorReference(Projector):
             else:
                 self.format.from_rgb(np.broadcast_to(frame, (h, w, 3)), o)
             if self.local is not None:
-                snap_local(o, self.local, self.format.rgb)
+                snap_local(o, self.local, self.format.rgb, self.nearest, self._away)
             elif self.nearest is not None:
                 snap_colours(o, self.nearest, self.format.rgb, self._away)
 

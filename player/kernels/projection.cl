@@ -42,8 +42,9 @@
 // quad, (LOCAL_ROWS + 1) x (LOCAL_COLS + 1), clamped at the frame's edges) have their bins all
 // four hold at local_quads[quad * 8192 + (bin >> 3)], bit bin & 7, so that this costs one
 // lookup, and those one of the four holds at local_quads[quad * 8192 + 4096 + (bin >> 3)]: a
-// blend that fell in none of the four sets is blended again (up to LOCAL_PASSES passes). Each
-// region's set lies within the clip's.
+// blend that fell in none of the four sets is blended again (up to LOCAL_PASSES passes); a
+// blend, last, clamped into its nearest[bin] of the clip's set like GAMUT's (a blend of colours
+// from different regions can lie outside the clip's set, which holds each region's).
 //
 // Defines: HALF (1: basis stored as half floats), CHANNELS (1 or 3: values per pixel of the
 // basis; grey is replicated), PIXEL_BYTES (3 or 4: bytes per output pixel), R_AT, G_AT, B_AT
@@ -177,7 +178,8 @@ int4 blend_sets(const int4 c, const int4 reg, const int4 w, __global const uint 
 // The `count` pixels of v, the first at (x, y), moved into their four nearest regions' colour
 // sets, blended (LOCAL).
 void snap_local(uchar *v, const int count, const int x, const int y, const int width,
-                __global const uint *restrict sets, __global const uchar *restrict quads)
+                __global const uint *restrict sets, __global const uchar *restrict quads,
+                __global const ushort *restrict nearest)
 {
     int wy, wx;
     int qy = between(y, &wy);
@@ -204,6 +206,9 @@ void snap_local(uchar *v, const int count, const int x, const int y, const int w
         p[0] = (uchar)c.s0;
         p[1] = (uchar)c.s1;
         p[2] = (uchar)c.s2;
+        const int bin = bin_of(c), t = nearest[bin];
+        if (t != bin)
+            into_bin(p, t);
     }
 }
 #endif
@@ -337,7 +342,7 @@ __kernel void project(__global const basis_t *restrict basis,
         add_detail(v, count, x0, y0, p0, first, vol, gain, low, high, colours, c + stride - LAYER_FLOATS, width);
 #endif
 #if LOCAL
-        snap_local(v, count, x0, y0, width, local_sets, local_quads);
+        snap_local(v, count, x0, y0, width, local_sets, local_quads, nearest);
 #elif GAMUT
         snap_colours(v, count, nearest);
 #endif

@@ -201,15 +201,17 @@ def test_local_cell_sets_name_each_regions_bins_and_targets():
 
 
 def test_local_sets_blend_across_a_region_border():
-    """Red on the left, grey on the right: red projected over the whole frame stays red in the
-    left region's outer half and becomes the right's grey (clamped into the grey bin, 144..151
-    per channel) in the right's, and between the two regions' centres it turns from one into the
-    other a little at a time (the clip's set alone keeps red everywhere)."""
-    src = np.empty((8, 16, 32, 3), np.uint8)
-    src[:, :, :16], src[:, :, 16:] = (200, 30, 30), (150, 150, 145)
+    """Red on the left, grey on the right (and below them the clip's colours between the two):
+    red projected over the whole frame stays red in the left region's outer half and becomes the
+    right's grey (clamped into the grey bin, 144..151 per channel) in the right's, and between the
+    two regions' centres it turns from one into the other a little at a time (the clip's set
+    alone keeps red everywhere)."""
+    src = np.empty((8, 32, 32, 3), np.uint8)
+    src[:, :16, :16], src[:, :16, 16:] = (200, 30, 30), (151, 144, 144)
+    src[:, 16:] = np.rint(np.linspace((200, 30, 30), (151, 144, 144), 32))
     gamut = learn_gamut(src)
     assert gamut.local.block == 16
-    frame = np.full((16, 32, 3), (200, 30, 30), np.uint8)
+    frame = np.full((32, 32, 3), (200, 30, 30), np.uint8)
     basis = np.zeros((1, frame.size), np.float32)
     outs = []
     for model in (gamut, GamutModel(gamut.nearest)):
@@ -217,14 +219,43 @@ def test_local_sets_blend_across_a_region_border():
         outs.append(np.empty_like(frame))
         p.run(outs[-1])
     out, clip_only = outs
-    assert clip_only.reshape(-1, 3).tolist() == [[200, 30, 30]] * 512
-    assert (out == out[:1]).all()  # every row alike
+    assert clip_only.reshape(-1, 3).tolist() == [[200, 30, 30]] * 1024
+    assert (out[:8] == out[:1]).all()  # the rows above the upper regions' centres alike
     row = out[0].astype(int)
     assert row[:8].tolist() == [[200, 30, 30]] * 8  # left of the left region's centre (x = 7.5)
     assert row[24:].tolist() == [[151, 144, 144]] * 8  # right of the right one's (x = 23.5)
     steps = np.diff(row, axis=0)
     assert (steps[:, 0] <= 0).all() and (steps[:, 1:] >= 0).all()  # red falls, green and blue rise
     assert np.abs(steps).max() <= 8  # a hard border would step 114 levels of green at once
+
+
+def _purple_between_red_and_blue(**engine) -> tuple[np.ndarray, GamutModel]:
+    src = np.empty((8, 16, 64, 3), np.uint8)
+    src[:, :, :32], src[:, :, 32:] = (200, 30, 30), (30, 30, 200)
+    gamut = learn_gamut(src)
+    frame = np.full((16, 64, 3), (150, 30, 150), np.uint8)
+    basis, mean = np.zeros((1, frame.size), np.float32), frame.reshape(-1).astype(np.float32)
+    p = open_projector(basis, mean, shape=frame.shape, channels=3, gamut=gamut, **engine)
+    try:
+        p.run(frame)
+    finally:
+        p.close()
+    return frame, gamut
+
+
+def test_a_blend_of_two_regions_sets_stays_in_the_clips_set():
+    """Red regions beside blue ones: a purple frame blended between their sets would run through
+    purples the clip never had; the blend, last, is clamped into the clip's set (red or blue)."""
+    out, gamut = _purple_between_red_and_blue()
+    bins = colour_bins(out[None]).reshape(out.shape[:2])
+    assert (gamut.nearest[bins] == bins).all()
+    assert (out[:, :24] == (200, 30, 31)).all() and (out[:, 40:] == (31, 30, 200)).all()
+    assert (out == (200, 30, 31)).all(axis=2).sum() == (out == (31, 30, 200)).all(axis=2).sum() == 512
+
+
+def test_the_kernels_blend_stays_in_the_clips_set(cl_context):
+    got, _ = _purple_between_red_and_blue(ctx=cl_context, queue=cl.CommandQueue(cl_context))
+    np.testing.assert_array_equal(got, _purple_between_red_and_blue()[0])
 
 
 @pytest.fixture(scope="module")
