@@ -14,10 +14,10 @@ of the frame (squares of ``block`` pixels): a projection's low-rank mix can put 
 clip where the clip never showed it (the flag's green-and-white mix as a teal haze over the
 stone tower). Where a region never held a pixel's bin, the region's bin for it is the one
 ``nearest[region, cell]`` names for its 16-level cell ``(r >> 4) * 256 + (g >> 4) * 16 +
-(b >> 4)``. Each region's set lies within the clip's, so the player applies the sets instead of
-the global map, each pixel those of its four nearest regions blended by its position between
-their centres (``player/engines/projection.py``, ``snap_local``: no edge where two regions meet);
-a reader that predates them plays the global map alone.
+(b >> 4)``. Each region's set lies within the clip's; the player applies the sets, each pixel those of its
+four nearest regions blended by its position between their centres (``player/engines/projection.py``,
+``snap_local``: no edge where two regions meet), then the global map to the blend, which can lie
+outside every one of them; a reader that predates them plays the global map alone.
 """
 
 from __future__ import annotations
