@@ -115,7 +115,7 @@ def lattice_prominence(
     idx = np.unique(np.linspace(0, t - 1, min(max_frames, t)).round().astype(int))
     values = np.empty((len(idx), len(lags)))
     for fi, k in enumerate(idx):
-        g = luma(frames[k : k + 1])[0].astype(np.float64)
+        g = luma.__wrapped__(frames[k : k + 1])[0].astype(np.float64)  # one frame: not worth holding
         g -= g.mean()
         ac = _autocorrelation(g, max_dy, max_dx)
         for li, (dy, dx) in enumerate(lags):

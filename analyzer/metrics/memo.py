@@ -64,9 +64,11 @@ def remembering(*arrays: Any) -> Iterator[None]:
     --------
     >>> clip = np.random.default_rng(0).integers(0, 256, (20, 32, 32, 3)).astype(np.uint8)
     >>> from .likeness import spectrum_distance
-    >>> with remembering(clip):
-    ...     a = spectrum_distance(clip[:10], clip, cuboid=(8, 16))   # the source's spectrum once,
-    ...     b = spectrum_distance(clip[10:], clip, cuboid=(8, 16))   # taken again here
+    >>> halves = clip[:10], clip[10:]
+    >>> with remembering(clip):  # the source's spectrum computed for the first half, reused for the second
+    ...     shared = [spectrum_distance(h, clip, cuboid=(8, 16)) for h in halves]
+    >>> shared == [spectrum_distance(h, clip, cuboid=(8, 16)) for h in halves]
+    True
     """
     block = _Block(_BLOCK.get(), tuple(a for a in arrays if isinstance(a, np.ndarray)))
     token = _BLOCK.set(block)
@@ -77,8 +79,8 @@ def remembering(*arrays: Any) -> Iterator[None]:
 
 
 def remembered(fn: F) -> F:
-    """Mark ``fn`` (arrays and hashable values in, a result that is never changed out) as one
-    whose results :func:`remembering` keeps."""
+    """Mark ``fn`` (arrays and plain values in, a result that is never changed out) as one whose
+    results :func:`remembering` keeps; a call with another kind of argument is not kept."""
     signature = inspect.signature(fn)
 
     @functools.wraps(fn)
@@ -94,13 +96,12 @@ def remembered(fn: F) -> F:
         home = next((b for b in chain if all(any(c.holds(s) for c in b.chain()) for s in spans)), None)
         if home is None:
             return fn(*args, **kwargs)
-        key = (fn.__module__, fn.__qualname__) + tuple((k, _key(v)) for k, v in values)
-        try:
-            if key in home.results:
-                return home.results[key]
-        except TypeError:  # an argument that is not hashable: nothing to look up by
+        if not all(isinstance(v, np.ndarray) or _plain(v) for _, v in values):
             return fn(*args, **kwargs)
-        result = _read_only(fn(*args, **kwargs))
+        key = (fn,) + tuple((k, _key(v)) for k, v in values)
+        if key in home.results:
+            return home.results[key]
+        result = _read_only(fn(*args, **kwargs), spans)
         home.results[key] = result
         for a in _arrays(result):
             home.hold(a)
@@ -119,6 +120,13 @@ def _bounds(a: np.ndarray) -> tuple[int, int]:
     return lo, hi + a.itemsize
 
 
+def _plain(v: Any) -> bool:
+    """Whether ``v`` is a value that keys a result by what it is (not an object by its id)."""
+    if isinstance(v, tuple):
+        return all(_plain(x) for x in v)
+    return v is None or isinstance(v, (bool, int, float, str, np.integer, np.floating))
+
+
 def _key(v: Any) -> Any:
     if isinstance(v, np.ndarray):
         return ("array", v.__array_interface__["data"][0], v.shape, v.strides, v.dtype.str)
@@ -133,7 +141,11 @@ def _arrays(result: Any) -> list[np.ndarray]:
     return []
 
 
-def _read_only(result: Any) -> Any:
+def _read_only(result: Any, spans: list[tuple[int, int]]) -> Any:
+    """``result`` with its arrays made read-only, but for those within an argument's memory (a
+    view of an argument stays as the caller made it)."""
     for a in _arrays(result):
-        a.flags.writeable = False
+        lo, hi = _bounds(a)
+        if not any(s[0] <= lo and hi <= s[1] for s in spans):
+            a.flags.writeable = False
     return result

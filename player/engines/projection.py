@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from ...tiledb.detail import DetailModel
-from ...tiledb.gamut import GamutModel, local_bits
+from ...tiledb.gamut import GamutModel, LocalGamut
 from ...tiledb.tone import BINS as TONE_BINS
 from ...tiledb.tone import ToneModel
 from ..pixels import pixel_format
@@ -102,10 +102,18 @@ def snap_colours(
     if not out.any():
         return
     at = np.nonzero(out)
-    t = nearest.take(bins[at])
-    for i, shift in zip(rgb, (10, 5, 0)):
-        lo = ((t >> shift) & 31).astype(np.uint8) << 3
-        frames[(*at, i)] = np.clip(frames[(*at, i)], lo, lo + 7)
+    for i, v in zip(rgb, into_bins([frames[(*at, i)] for i in rgb], nearest.take(bins[at]))):
+        frames[(*at, i)] = v
+
+
+def into_bins(channels: Any, t: np.ndarray) -> list[np.ndarray]:
+    """The r, g and b values ``channels`` each clamped into the levels colour bins ``t`` span."""
+    return [np.clip(v, lo, lo + 7) for v, lo in zip(channels, ((t >> s & 31) << 3 for s in (10, 5, 0)))]
+
+
+def bin_of(colour: np.ndarray) -> np.ndarray:
+    """The colour bins of ``colour`` (3, len) int32 levels r, g, b."""
+    return (colour[0] >> 3 << 10) | (colour[1] >> 3 << 5) | (colour[2] >> 3)
 
 
 #: Fixed-point bits of a pixel's weight along each axis between two region centres (the local
@@ -114,6 +122,10 @@ WEIGHT_BITS = 8
 #: Passes of the local colour sets' blend: a blend of colours from different sets can lie in none
 #: of them (CHANGELOG.md has the measurement); a second pass blends such a pixel again.
 LOCAL_PASSES = 2
+#: Regions whose local colour sets :func:`cell_sets` lays out at a time
+SETS_AT_ONCE = 64
+#: Bytes of the basis the OpenCL engine lays out on the host at a time on its way to the device
+SLAB_BYTES = 1 << 26
 #: Pixels numpy's :func:`snap_local` treats at once: its temporaries stay in a core's cache
 LOCAL_CHUNK = 1 << 17
 
@@ -137,11 +149,16 @@ def cell_sub(r: Any, g: Any, b: Any) -> Any:
     return ((r >> 1) & 4) | ((g >> 2) & 2) | ((b >> 3) & 1)
 
 
-def cell_sets(model) -> np.ndarray:
-    """:attr:`LocalColours.sets` of a model's local colour sets."""
-    bits = local_bits(model).reshape(-1, 16, 2, 16, 2, 16, 2).transpose(0, 1, 3, 5, 2, 4, 6)
-    held = np.packbits(bits.reshape(-1, 4096, 8), axis=2, bitorder="little")[..., 0]
-    return (model.nearest.astype(np.uint32) | held.astype(np.uint32) << 16).reshape(-1)
+def cell_sets(model: LocalGamut) -> np.ndarray:
+    """:attr:`LocalColours.sets` of a model's local colour sets, laid out :data:`SETS_AT_ONCE`
+    regions at a time (all of them unpacked take 8 bytes a bin)."""
+    out = np.empty(model.nearest.size, np.uint32)
+    for r in range(0, len(model.inside), SETS_AT_ONCE):
+        bits = np.unpackbits(model.inside[r : r + SETS_AT_ONCE], axis=1, bitorder="little")
+        bits = bits.reshape(-1, 16, 2, 16, 2, 16, 2).transpose(0, 1, 3, 5, 2, 4, 6)
+        held = np.packbits(bits.reshape(-1, 4096, 8), axis=2, bitorder="little")[..., 0].astype(np.uint32)
+        out[r * 4096 : r * 4096 + held.size] = model.nearest[r : r + SETS_AT_ONCE].reshape(-1) | held.reshape(-1) << 16
+    return out
 
 
 class LocalColours:
@@ -155,13 +172,16 @@ class LocalColours:
     those centres blend those four regions' sets, so a pixel whose colour its quad's regions all
     hold is left as it is with one lookup, and one whose blend one of them holds is done."""
 
-    def __init__(self, model, height: int, width: int) -> None:
+    def __init__(self, model: LocalGamut, clip: np.ndarray, height: int, width: int) -> None:
         self.model = model
+        #: the clip's map (:class:`~dynatex.tiledb.gamut.GamutModel`'s ``nearest``), applied to a blend
+        #: last, and where it moves a bin (numpy's)
+        self.clip = np.ascontiguousarray(clip, np.uint16)
+        self.away = self.clip != np.arange(len(self.clip), dtype=np.uint16)
         self.block = model.block
         self.rows, self.cols = model.regions(height, width)
         self._y = region_axis(height, self.block, self.rows)
         self._x = region_axis(width, self.block, self.cols)
-        self.nearest = model.nearest.reshape(-1)
         # the quads: (rows + 1) x (cols + 1), quad (qy, qx) between region rows qy - 1 and qy
         # and columns qx - 1 and qx, each clamped (the frame's edges: the regions along that axis are one)
         inside = model.inside.reshape(self.rows, self.cols, -1)
@@ -227,13 +247,7 @@ class LocalColours:
         return (self._quad_any.take(keys >> 3, mode="clip") >> (keys & 7) & 1).astype(bool)
 
 
-def snap_local(
-    frame: np.ndarray,
-    local: LocalColours,
-    rgb: tuple[int, int, int] = (0, 1, 2),
-    nearest: np.ndarray | None = None,
-    away: np.ndarray | None = None,
-) -> None:
+def snap_local(frame: np.ndarray, local: LocalColours, rgb: tuple[int, int, int] = (0, 1, 2)) -> None:
     """Move, in place, each pixel of ``frame`` (H, W, bytes) uint8 into the colour sets of its
     four nearest regions, blended by its position between their centres, so that the sets change
     smoothly across the frame (no edge where two regions meet).
@@ -245,33 +259,25 @@ def snap_local(
     (:meth:`LocalColours.regions_and_weights`, integers: ``(sum w_k c_k + 2**15) >> 16``). Near
     a region's centre its set weighs most, and past the outermost centres (the frame's edges)
     the regions along that axis are one. Up to :data:`LOCAL_PASSES` passes, each over the pixels
-    the one before left in none of the four sets (:meth:`LocalColours.quad_any`). Last, with the
-    clip's ``nearest`` (and ``away``, as :func:`snap_colours` takes them), a blended colour outside
-    the clip's set is clamped into its nearest bin there: a blend of colours from different
-    regions' sets can lie outside every one of them and outside the clip's, which holds them all.
+    the one before left in none of the four sets (:meth:`LocalColours.quad_any`). Last, a blended
+    colour outside the clip's set is clamped into its nearest bin there (:attr:`LocalColours.clip`):
+    a blend of colours from different regions' sets can lie outside every one of them and outside
+    the clip's, which holds them all.
 
     >>> from dynatex.tiledb.gamut import LocalGamut
     >>> held = np.zeros(32768, bool); held[(25 * 32 + 0) * 32 + 0] = True  # red alone
     >>> near = np.full((1, 4096), 25 * 1024, np.uint16)
-    >>> loc = LocalColours(LocalGamut(1, np.packbits(held, bitorder="little")[None], near), 1, 1)
+    >>> clip = np.arange(32768, dtype=np.uint16)  # the clip's set: every colour
+    >>> loc = LocalColours(LocalGamut(1, np.packbits(held, bitorder="little")[None], near), clip, 1, 1)
     >>> px = np.array([[[3, 201, 202]]], np.uint8); snap_local(px, loc); px.tolist()
     [[[200, 7, 7]]]
     """
     flat = frame.reshape(-1, frame.shape[-1])  # a view: the caller's frames are C-contiguous
-    if nearest is not None and away is None:
-        away = nearest != np.arange(len(nearest), dtype=nearest.dtype)
     for start in range(0, len(flat), LOCAL_CHUNK):
-        snap_local_run(flat[start : start + LOCAL_CHUNK], start, local, rgb, nearest, away)
+        snap_local_run(flat[start : start + LOCAL_CHUNK], start, local, rgb)
 
 
-def snap_local_run(
-    flat: np.ndarray,
-    start: int,
-    local: LocalColours,
-    rgb: tuple[int, int, int],
-    nearest: np.ndarray | None = None,
-    away: np.ndarray | None = None,
-) -> None:
+def snap_local_run(flat: np.ndarray, start: int, local: LocalColours, rgb: tuple[int, int, int]) -> None:
     """:func:`snap_local` on the pixels ``flat`` (len, bytes), the first the frame's pixel ``start``."""
     bins = colour_bins(flat, rgb)
     pixels = np.flatnonzero(local.quad_lacks[local.quad_base[start : start + len(flat)] + bins])
@@ -282,21 +288,17 @@ def snap_local_run(
     regions, weights = local.regions_and_weights(pixels + start)
     for step in range(LOCAL_PASSES):
         if step:  # the pixels the blend left in none of the four sets
-            bins = (colour[0] >> 3 << 10) | (colour[1] >> 3 << 5) | (colour[2] >> 3)
+            bins = bin_of(colour)
             todo = np.flatnonzero(~local.quad_any(local.quad_base[pixels + start] + bins))
             if not len(todo):
                 break
             colour[:, todo] = blend_sets(colour[:, todo], bins[todo], regions[:, todo], weights[:, todo], local)
         else:
             colour = blend_sets(colour, bins, regions, weights, local)
-    if nearest is not None:
-        bins = (colour[0] >> 3 << 10) | (colour[1] >> 3 << 5) | (colour[2] >> 3)
-        outside = np.flatnonzero(away.take(bins))
-        if len(outside):
-            t = nearest.take(bins[outside]).astype(np.int32)
-            for c, shift in zip(colour, (10, 5, 0)):
-                lo = (t >> shift & 31) << 3
-                c[outside] = np.clip(c[outside], lo, lo + 7)
+    bins = bin_of(colour)
+    outside = np.flatnonzero(local.away.take(bins))
+    if len(outside):
+        colour[:, outside] = into_bins(colour[:, outside], local.clip.take(bins[outside]).astype(np.int32))
     for i, v in zip(rgb, colour):
         flat[pixels, i] = v
 
@@ -331,22 +333,19 @@ def blend_sets(colour: np.ndarray, bins: np.ndarray, regions: np.ndarray, weight
     return out
 
 
-def blocked_basis(basis: np.ndarray | tuple[np.ndarray, ...], block: int, out: np.ndarray | None = None) -> np.ndarray:
+def blocked_basis(basis: np.ndarray | tuple[np.ndarray, ...], block: int) -> np.ndarray:
     """``(n, P)`` (or row blocks of ``P`` columns stacked) -> ``(ceil(P / block), n, block)``,
-    zero-padded: the kernel's streaming layout, into ``out`` where given."""
+    zero-padded: the kernel's streaming layout."""
     parts = row_blocks(basis)
     n, p = sum(len(b) for b in parts), parts[0].shape[1]
-    blocks = -(-p // block)
-    if out is None:
-        out = np.zeros((blocks, n, block), parts[0].dtype)
-    full = p // block
+    blocks, full = -(-p // block), p // block
+    out = np.zeros((blocks, n, block), parts[0].dtype)
     i = 0
     for part in parts:
         rows = slice(i, i + len(part))
         out[:full, rows] = part[:, : full * block].reshape(len(part), full, block).transpose(1, 0, 2)
         if blocks != full:
             out[full, rows, : p - full * block] = part[:, full * block :]
-            out[full, rows, p - full * block :] = 0
         i += len(part)
     return out
 
@@ -427,7 +426,7 @@ class Projector:
             self.nearest = np.ascontiguousarray(gamut.nearest, np.uint16)
             self._away = self.nearest != np.arange(len(self.nearest), dtype=np.uint16)
             if gamut.local is not None:
-                self.local = LocalColours(gamut.local, *self.shape[:2])
+                self.local = LocalColours(gamut.local, gamut.nearest, *self.shape[:2])
 
     @property
     def bytes_per_frame(self) -> int:
@@ -490,7 +489,7 @@ class ProjectorReference(Projector):
             else:
                 self.format.from_rgb(np.broadcast_to(frame, (h, w, 3)), o)
             if self.local is not None:
-                snap_local(o, self.local, self.format.rgb, self.nearest, self._away)
+                snap_local(o, self.local, self.format.rgb)
             elif self.nearest is not None:
                 snap_colours(o, self.nearest, self.format.rgb, self._away)
 
@@ -549,23 +548,20 @@ class ProjectorOpenCL(Projector):
         self.out = None
         self._kernel(self.detail is not None)
 
-    def _blocked_buffer(self, basis, groups: int, group: int):
+    def _blocked_buffer(self, basis: np.ndarray | tuple[np.ndarray, ...], groups: int, group: int) -> Any:
         """The device's copy of the basis in the kernel's layout (:func:`blocked_basis`), written
-        through a mapping, so that the host holds no blocked copy beside the caller's rows."""
+        in slabs of whole groups, so that the host holds no blocked copy of it beside the caller's rows."""
         import pyopencl as cl
 
-        dtype = np.float16 if self.half else np.float32
-        shape = (groups, self.n, group)
-        mf = cl.mem_flags
-        buf = cl.Buffer(self.ctx, mf.READ_ONLY | mf.ALLOC_HOST_PTR, int(np.prod(shape)) * np.dtype(dtype).itemsize)
-        mapped, _ = cl.enqueue_map_buffer(
-            self.queue, buf, cl.map_flags.WRITE_INVALIDATE_REGION, 0, shape, dtype, is_blocking=True
-        )
-        try:
-            blocked_basis(basis, group, out=mapped)
-        finally:
-            mapped.base.release(self.queue)
-            self.queue.finish()
+        parts = row_blocks(basis)
+        itemsize = parts[0].dtype.itemsize
+        per_group = self.n * group * itemsize
+        buf = cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY, groups * per_group)
+        slab = max(1, SLAB_BYTES // per_group)
+        for g0 in range(0, groups, slab):
+            cols = slice(g0 * group, min(g0 + slab, groups) * group)
+            blocked = blocked_basis(tuple(b[:, cols] for b in parts), group)
+            cl.enqueue_copy(self.queue, buf, blocked, dst_offset=g0 * per_group, is_blocking=True)
         return buf
 
     def _kernel(self, detail: bool):

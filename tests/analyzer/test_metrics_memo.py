@@ -76,6 +76,51 @@ def test_parts_of_parts_are_remembered_and_failures_are_not(clip: np.ndarray) ->
     assert CALLS == [-1, -1]
 
 
+def test_arguments_keep_their_flags_and_objects_are_not_keys(clip: np.ndarray) -> None:
+    @remembered
+    def same(frames: np.ndarray) -> np.ndarray:
+        return frames[:5]
+
+    @remembered
+    def scaled(frames: np.ndarray, by: object) -> float:
+        CALLS.append(0)
+        return float(frames.mean()) * len(str(by))
+
+    CALLS.clear()
+    with remembering(clip):
+        assert same(clip).flags.writeable  # a view of the caller's array stays as the caller made it
+        scaled(clip, 2)
+        scaled(clip, 2)
+        scaled(clip, [2])  # a list: not a value to key by
+        scaled(clip, [2])
+    assert clip.flags.writeable and len(CALLS) == 3
+
+
+def test_evaluate_takes_the_sources_parts_once_across_outputs(clip: np.ndarray, monkeypatch) -> None:
+    from dynatex.analyzer.metrics import _common, likeness
+
+    counts = {"median_step": 0, "_patches": 0}
+    for module, name in ((_common, "median_step"), (likeness, "_patches")):
+        original = getattr(module, name)
+
+        def counted(*a, _original=original, _name=name, **kw):
+            counts[_name] += 1
+            return _original(*a, **kw)
+
+        monkeypatch.setattr(module, name, counted)
+    rng = np.random.default_rng(2)
+    outputs = [np.clip(clip.astype(int) + rng.integers(-30, 30, clip.shape), 0, 255).astype(np.uint8) for _ in range(3)]
+    for o in outputs:
+        evaluate(o, clip, window=10, n_samples=100)
+    alone = dict(counts)
+    counts.update(median_step=0, _patches=0)
+    with remembering(clip):
+        for o in outputs:
+            evaluate(o, clip, window=10, n_samples=100)
+    assert alone == {"median_step": 3, "_patches": 6}  # each report: the source's step, both clips' patches
+    assert counts == {"median_step": 1, "_patches": 4}
+
+
 def test_evaluate_gives_the_same_report_with_the_source_remembered(clip: np.ndarray) -> None:
     rng = np.random.default_rng(1)
     outputs = [np.clip(clip.astype(int) + rng.integers(-30, 30, clip.shape), 0, 255).astype(np.uint8) for _ in range(2)]

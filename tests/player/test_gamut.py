@@ -16,7 +16,7 @@ from dynatex.analyzer.metrics.gamut import colour_bins
 from dynatex.analyzer.mixture import learn_mixture
 from dynatex.errors import InvalidArgumentError
 from dynatex.player import open_player
-from dynatex.player.engines.projection import LocalColours, cell_sub, open_projector, snap_colours
+from dynatex.player.engines.projection import LocalColours, cell_sub, open_projector, snap_colours, snap_local
 from dynatex.player.modes.projected import COLOURS
 from dynatex.player.opencl.selftest import random_colour_set
 from dynatex.player.pixels import FORMATS
@@ -142,7 +142,7 @@ def test_local_kernel_equals_numpy_reference(cl_context, format, detail, size):
     gamut = GamutModel(nearest, local=random_local(rng, nearest, h, w, 8))
     got, want, raw = _kernel_and_references(cl_context, rng, basis, mean, shape, format, detail, 3, gamut, None)
     np.testing.assert_array_equal(got, want)
-    loc = LocalColours(gamut.local, h, w)
+    loc = LocalColours(gamut.local, gamut.nearest, h, w)
     bits = local_bits(gamut.local).reshape(-1)
     base = np.stack(loc.regions_and_weights(np.arange(h * w))[0]) << 15
     held = bits[base[:, None] + colour_bins(raw[..., list(fmt.rgb)]).reshape(3, -1).astype(np.int32)].all(0)
@@ -163,7 +163,7 @@ def test_local_quads_hold_what_all_four_regions_hold(size):
     rng = np.random.default_rng(5)
     h, w = size
     nearest = random_colour_set(rng)
-    loc = LocalColours(random_local(rng, nearest, h, w, 8), h, w)
+    loc = LocalColours(random_local(rng, nearest, h, w, 8), nearest, h, w)
     assert loc.quads.shape == ((loc.rows + 1) * (loc.cols + 1), 2, 4096)
     bits = local_bits(loc.model).reshape(-1)
     regions = np.stack(loc.regions_and_weights(np.arange(h * w))[0])
@@ -177,13 +177,35 @@ def test_local_quads_hold_what_all_four_regions_hold(size):
     assert 0 < four.mean() < 0.6  # each region holds about half the clip's set, a random half of it
 
 
-def test_local_cell_sets_name_each_regions_bins_and_targets():
+def test_the_blend_in_short_runs_is_the_blend_at_once(monkeypatch):
+    """numpy blends a frame in runs of pixels (LOCAL_CHUNK): runs that end anywhere in a row give
+    the frame's bytes of one run."""
+    from dynatex.player.engines import projection
+
+    rng = np.random.default_rng(11)
+    h, w = 23, 41
+    nearest = random_colour_set(rng)
+    loc = LocalColours(random_local(rng, nearest, h, w, 8), nearest, h, w)
+    frame = rng.integers(0, 256, (h, w, 3)).astype(np.uint8)
+    whole = frame.copy()
+    snap_local(whole, loc)
+    monkeypatch.setattr(projection, "LOCAL_CHUNK", 37)
+    runs = frame.copy()
+    snap_local(runs, loc)
+    np.testing.assert_array_equal(runs, whole)
+    assert (whole != frame).any(axis=-1).mean() > 0.5
+
+
+def test_local_cell_sets_name_each_regions_bins_and_targets(monkeypatch):
     """The blend's one lookup per region and 16-level cell (:attr:`LocalColours.sets`) names the
     region's target for the cell and whether the region holds each of the cell's 8 bins, for
-    every colour of a random set's regions."""
+    every colour of a random set's regions (laid out a few regions at a time)."""
+    from dynatex.player.engines import projection
+
+    monkeypatch.setattr(projection, "SETS_AT_ONCE", 4)
     rng = np.random.default_rng(7)
     nearest = random_colour_set(rng)
-    loc = LocalColours(random_local(rng, nearest, 20, 30, 8), 20, 30)
+    loc = LocalColours(random_local(rng, nearest, 20, 30, 8), nearest, 20, 30)
     bits = local_bits(loc.model)
     levels = np.arange(256)
     r, g, b = (a.reshape(-1) for a in np.meshgrid(levels, levels, levels, indexing="ij"))

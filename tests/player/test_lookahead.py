@@ -91,6 +91,37 @@ def test_engine_gemm_equals_one_product_at_a_time(cl_context):
             e.close()
 
 
+def test_basis_in_row_blocks_and_slabs_is_the_basis_at_once(cl_context, monkeypatch):
+    """A basis given as row blocks (the mixture's stacked rows and its residual's) and laid out on
+    the device a few groups at a time gives the bytes of the one array laid out at once, and both
+    backends agree."""
+    import pyopencl as cl
+
+    from dynatex.player.engines import projection
+
+    rng = np.random.default_rng(5)
+    h, w, n = 21, 50, 9  # 1050 pixels: 65 full groups of 16 and a partial one
+    basis = (rng.standard_normal((n, h * w * 3)) * 20).astype(np.float32)
+    mean = rng.uniform(0, 255, h * w * 3).astype(np.float32)
+    coefs = rng.standard_normal((3, n)).astype(np.float32)
+    frames = {}
+    for name, rows, slab in (("whole", basis, 1 << 30), ("blocks", (basis[:5], basis[5:]), 3 * 9 * 48 * 4 + 1)):
+        monkeypatch.setattr(projection, "SLAB_BYTES", slab)
+        for ctx in (None, cl_context):
+            e = open_projector(
+                rows, mean, shape=(h, w, 3), channels=3, ctx=ctx, queue=ctx and cl.CommandQueue(ctx), frames=3
+            )
+            try:
+                e.coefs[:] = coefs
+                frames[name, ctx is None] = out = np.empty((3, h, w, 3), np.uint8)
+                e.run(out, count=3)
+            finally:
+                e.close()
+    np.testing.assert_array_equal(frames["blocks", False], frames["whole", False])
+    np.testing.assert_array_equal(frames["blocks", True], frames["whole", True])
+    assert_close(frames["blocks", False], frames["blocks", True])
+
+
 def check_control_change(path, mode: str, backend: str, device) -> None:
     control, value = ("speed", -0.5) if mode == "lds" else ("intensity", 2.5)
     kw = {"mode": mode, "seed": 1, "backend": backend, "device": device}

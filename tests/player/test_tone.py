@@ -70,6 +70,20 @@ def test_lookup_returns_each_level_from_its_tone_value():
     np.testing.assert_array_equal(lookup.levels(to_tone(clip, tone)), clip.reshape(20, -1))
 
 
+def test_lookup_in_short_runs_gives_the_same_levels(monkeypatch):
+    """numpy looks levels up in runs of CHUNK values: short runs give the levels of one run."""
+    from dynatex.player.engines import tone as engine
+
+    rng = np.random.default_rng(4)
+    clip = np.where(rng.random((6, 8, 8, 3)) < 0.6, 0, rng.integers(0, 256, (6, 8, 8, 3))).astype(np.uint8)
+    tone = learn_tone(clip)
+    values = to_tone(clip, tone)
+    whole = ToneLookup(tone).levels(values.copy())
+    monkeypatch.setattr(engine, "CHUNK", 9)
+    np.testing.assert_array_equal(ToneLookup(tone).levels(values.copy()), whole)
+    np.testing.assert_array_equal(whole, clip.reshape(6, -1))
+
+
 @pytest.fixture(scope="module")
 def flames_db(tmp_path_factory):
     """lds and mixture of the flames clip, learned on tone values (the default) and on levels."""
