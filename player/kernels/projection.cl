@@ -36,8 +36,9 @@
 // its 16-level cell (cell = (r >> 4) * 256 + (g >> 4) * 16 + (b >> 4)): one lookup,
 // e = local_sets[region * 4096 + cell], bits 0..14 that bin, bit 16 + k set where the region
 // holds the cell's k-th bin (k = ((r >> 3) & 1) * 4 + ((g >> 3) & 1) * 2 + ((b >> 3) & 1)); the
-// four colours weighted by the pixel's position between the regions' centres (per axis an integer out of 2^LOCAL_WEIGHT_BITS, the four
-// products summing to 2^(2 LOCAL_WEIGHT_BITS)), rounded by a shift: integers alone, exact. A
+// four colours weighted by the pixel's position between the regions' centres (per axis an
+// integer out of 2^LOCAL_WEIGHT_BITS, the four products summing to 2^(2 LOCAL_WEIGHT_BITS)),
+// rounded by a shift: integers alone, exact. A
 // colour all four hold stays: the four regions around each corner where region centres meet (a
 // quad, (LOCAL_ROWS + 1) x (LOCAL_COLS + 1), clamped at the frame's edges) have their bins all
 // four hold at local_quads[quad * 8192 + (bin >> 3)], bit bin & 7, so that this costs one
@@ -197,7 +198,8 @@ void snap_local(uchar *v, const int count, const int x, const int y, const int w
         const int ry0 = max(qy - 1, 0) * LOCAL_COLS, ry1 = min(qy, LOCAL_ROWS - 1) * LOCAL_COLS;
         const int rx0 = max(qx - 1, 0), rx1 = min(qx, LOCAL_COLS - 1);
         const int4 reg = (int4)(ry0 + rx0, ry0 + rx1, ry1 + rx0, ry1 + rx1);
-        const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx, wy * (LOCAL_ONE - wx), wy * wx);
+        const int4 w = (int4)((LOCAL_ONE - wy) * (LOCAL_ONE - wx), (LOCAL_ONE - wy) * wx,
+                              wy * (LOCAL_ONE - wx), wy * wx);
         for (int pass = 0; pass < LOCAL_PASSES; ++pass) {
             c = blend_sets(c, reg, w, sets);
             if (pass + 1 < LOCAL_PASSES && quad_holds(c, quad, 1))

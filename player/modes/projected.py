@@ -5,7 +5,7 @@ A model with a ``detail`` part (:mod:`dynatex.tiledb.detail`) has the projection
 the fine detail the projection lacks to each frame in the same pass (:mod:`~dynatex.player.engines.detail` schedules
 it) and hold every pixel to the source's colour range; one with a ``gamut`` part
 (:mod:`dynatex.tiledb.gamut`) has it move every colour the source never had to the nearest
-one it had, last.
+one it had, last (the ``colours`` option: the sets of the frame's regions, the clip's, or none).
 
 Look-ahead (option ``lookahead=k``): the player runs its state up to k frames ahead and
 projects them in one pass over the basis (:mod:`~dynatex.player.engines.projection`), then hands them out one by
