@@ -193,6 +193,22 @@ def random_colour_set(rng: np.random.Generator, share: float = 0.5) -> np.ndarra
     return np.where(inside, bins, rng.choice(bins[inside], bins.size)).astype(np.uint16)
 
 
+def random_local(rng: np.random.Generator, nearest: np.ndarray, h: int, w: int, block: int):
+    """Valid local colour sets (:class:`~dynatex.tiledb.gamut.LocalGamut`) within the clip's set
+    ``nearest``: per region a random half of it, each cell mapped to a random bin of that half."""
+    from ...tiledb.gamut import LocalGamut
+
+    regions = -(-h // block) * -(-w // block)
+    clip_set = np.flatnonzero(nearest == np.arange(32**3))
+    held = np.zeros((regions, 32**3), bool)
+    targets = np.empty((regions, 4096), np.uint16)
+    for r in range(regions):
+        mine = clip_set[rng.random(clip_set.size) < 0.5]
+        held[r, mine] = True
+        targets[r] = rng.choice(mine, 4096)
+    return LocalGamut(block=block, inside=np.packbits(held, axis=1, bitorder="little"), nearest=targets)
+
+
 def random_tone(rng: np.random.Generator, channels: int):
     """A valid tone map (:mod:`dynatex.tiledb.tone`): per channel a random increasing curve from
     -100 to about 650, its steps at least two lookup bins wide."""
@@ -204,11 +220,11 @@ def random_tone(rng: np.random.Generator, channels: int):
     return ToneModel(forward=curves.astype(np.float32))
 
 
-def _detail_check(channels: int, format: str, tone: bool = False) -> Callable[[str], str | None]:
+def _detail_check(channels: int, format: str, tone: bool = False, local: bool = False) -> Callable[[str], str | None]:
     """The projection kernel with the detail fused, 3 frames per pass and one at a time, against
     its reference, exactly: a basis and coefficients whose sums are exact in float32 in any
     order, and a random volume, gain and colour range (and, in colour, a random colour set;
-    with ``tone``, a random tone map)."""
+    with ``tone``, a random tone map; with ``local``, random colour sets of 8-pixel regions)."""
 
     def check(device: str) -> str | None:
         import pyopencl as cl
@@ -235,7 +251,8 @@ def _detail_check(channels: int, format: str, tone: bool = False) -> Callable[[s
         shape = (h, w, fmt.bytes)
         kw = {"shape": shape, "channels": channels, "format": format, "frames": 3, "detail": model}
         if channels == 3:
-            kw["gamut"] = GamutModel(random_colour_set(rng))
+            nearest = random_colour_set(rng)
+            kw["gamut"] = GamutModel(nearest, local=random_local(rng, nearest, h, w, 8) if local else None)
         if tone:
             kw["tone"] = random_tone(rng, channels)
         engine = open_projector(basis, mean, ctx=ctx, queue=cl.CommandQueue(ctx), **kw)
@@ -341,6 +358,7 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
     "projection with detail, RGB": _detail_check(3, "RGB"),
     "projection with detail, grey to BGRA": _detail_check(1, "BGRA"),
     "projection with detail and tone map, RGB": _detail_check(3, "RGB", tone=True),
+    "projection with detail and local colour sets, BGRA": _detail_check(3, "BGRA", local=True),
     "mode lds, float32": _mode_check("lds", {"seed": 3}),
     "mode lds, 3 frames per pass": _mode_check("lds", {"seed": 3, "lookahead": 3}, frames=5),
     "mode lds, float16": _mode_check("lds", {"seed": 3, "precision": "float16"}),

@@ -18,10 +18,10 @@ from dynatex.errors import InvalidArgumentError
 from dynatex.player import open_player
 from dynatex.player.engines.projection import LocalColours, cell_sub, open_projector, snap_colours, snap_local
 from dynatex.player.modes.projected import COLOURS
-from dynatex.player.opencl.selftest import random_colour_set
+from dynatex.player.opencl.selftest import random_colour_set, random_local
 from dynatex.player.pixels import FORMATS
 from dynatex.tiledb import DatabaseWriter
-from dynatex.tiledb.gamut import GamutModel, LocalGamut, local_bits
+from dynatex.tiledb.gamut import GamutModel, local_bits
 
 from .test_detail import _model, exact_projection
 
@@ -109,19 +109,6 @@ def test_kernel_equals_numpy_reference(cl_context, format, detail, size):
     assert 0.1 < moved.mean() < 0.9  # about half the bins are outside the set
     bins = colour_bins(want[..., list(fmt.rgb)])
     assert (gamut.nearest[bins] == bins).all()
-
-
-def random_local(rng: np.random.Generator, nearest: np.ndarray, h: int, w: int, block: int) -> LocalGamut:
-    """Per region, a random half of the clip's set and each cell mapped to a random bin of it."""
-    regions = -(-h // block) * -(-w // block)
-    clip_set = np.flatnonzero(nearest == np.arange(32**3))
-    held = np.zeros((regions, 32**3), bool)
-    targets = np.empty((regions, 4096), np.uint16)
-    for r in range(regions):
-        mine = clip_set[rng.random(clip_set.size) < 0.5]
-        held[r, mine] = True
-        targets[r] = rng.choice(mine, 4096)
-    return LocalGamut(block=block, inside=np.packbits(held, axis=1, bitorder="little"), nearest=targets)
 
 
 @pytest.mark.parametrize("format", ["RGB", "BGRA"])
