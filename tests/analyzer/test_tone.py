@@ -55,6 +55,32 @@ def test_flames_keep_their_energy_on_tone_values():
     assert 0.85 < stationary_energy(toned, clip) < 1.2
 
 
+def level_variance(model, states: np.ndarray, shape: tuple[int, int, int]) -> float:
+    """Mean over values of the variance over ``states`` (``(k, n)``) of the frames the player projects."""
+    engine = open_projector(model.basis, model.mean, shape=shape, channels=shape[-1], frames=len(states), tone=model.tone)
+    engine.coefs[:] = states
+    out = np.empty((len(states), *shape), np.uint8)
+    engine.run(out, count=len(states))
+    return float(out.reshape(len(states), -1).astype(np.float64).var(axis=0).mean())
+
+
+def test_tone_mapped_draws_keep_the_training_levels_variance():
+    """A pixel of the flames is dark or bright, at the tone map's flat ends; Gaussian draws with the
+    training states' covariance spend their time in the steep middle and hold less variance in
+    levels. The level gain gives the draws the training reconstructions' variance there."""
+    clip = flames(t=200)
+    model = learn_lds(clip, n=10)
+    gain = model.info["level_gain"]
+    assert gain > 1.2
+    rng = np.random.default_rng(1)
+    draws = rng.multivariate_normal(np.zeros(model.n), model.stationary_cov, 2000)
+    train = level_variance(model, model.states.T, clip.shape[1:])
+    assert 0.96 < level_variance(model, draws, clip.shape[1:]) / train < 1.04
+    assert level_variance(model, draws / np.sqrt(gain), clip.shape[1:]) / train < 0.92
+    assert "level_gain" not in learn_lds(clip, n=10, calibrate=False).info
+    assert "level_gain" not in learn_lds(wave_clip(), n=8).info
+
+
 def test_other_clips_stay_on_their_levels():
     clip = wave_clip()
     assert learn_lds(clip, n=8).tone is None
