@@ -57,7 +57,9 @@ def test_flames_keep_their_energy_on_tone_values():
 
 def level_variance(model, states: np.ndarray, shape: tuple[int, int, int]) -> float:
     """Mean over values of the variance over ``states`` (``(k, n)``) of the frames the player projects."""
-    engine = open_projector(model.basis, model.mean, shape=shape, channels=shape[-1], frames=len(states), tone=model.tone)
+    engine = open_projector(
+        model.basis, model.mean, shape=shape, channels=shape[-1], frames=len(states), tone=model.tone
+    )
     engine.coefs[:] = states
     out = np.empty((len(states), *shape), np.uint8)
     engine.run(out, count=len(states))
