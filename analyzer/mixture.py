@@ -116,7 +116,7 @@ def learn_mixture(
         ``tol`` (relative).
     tone : {"auto", "on", "off"}
         Learn on the clip's levels Gaussianised per channel, as :func:`~dynatex.analyzer.lds.learn_lds`
-        does.
+        does, and calibrate the draws' variance in levels (info ``level_gain``).
     residual : {"auto", "on", "off"}
         Model what the components leave out of each frame inside the reduced PCA space as a process
         of its own (:func:`fit_residual`; the player adds it to each frame): ``auto`` where the
