@@ -28,9 +28,11 @@ smooth ramp.
   the excess. The small steps of the codec's quantisation go; a real edge on a boundary (far out
   in the distribution's tail, where the two agree) keeps most of its step.
 
-The model learns from the smoothed values in float (through the tone map interpolated between
-levels, so that a one-level step where the tone map spreads the levels apart becomes a ramp); the
-detail part measures its residual against them rounded. The player is unchanged.
+The model learns from the smoothed values in float; the detail part measures its residual
+against them rounded. With a tone map the grid is smoothed in tone values, with quantile maps
+measured there: where the map spreads the dark levels apart, a one-level step of the codec is a
+step of tens of tone units to the model, and a channel at level 0 can ramp below the map's first
+value there, where in levels it is held at 0 and the grid stays. The player is unchanged.
 """
 
 from __future__ import annotations
@@ -168,10 +170,17 @@ def _passes(plane_name: str) -> list[tuple[str, int, int]]:
     return out + [(f"{plane_name}_{a}", ax, PERIOD) for a, ax in (("x", 2), ("y", 1))]
 
 
-def detect_grid(frames: np.ndarray, *, every: bool = False) -> Grid:
-    """The block grid of ``frames`` ``(T, H, W, C)`` uint8 (:class:`Grid`), measured on up to
-    :data:`SAMPLE_FRAMES` of them; each pass's quantile maps are measured on the frames as the
-    passes before it (those of a found grid, or all with ``every``) leave them.
+def sample(frames: np.ndarray) -> np.ndarray:
+    """The indices of the up to :data:`SAMPLE_FRAMES` frames, evenly spread, a detection looks at."""
+    t = frames.shape[0]
+    return np.unique(np.linspace(0, t - 1, min(t, SAMPLE_FRAMES)).round().astype(int))
+
+
+def detect_grid(frames: np.ndarray, *, every: bool = False, found: dict[str, bool] | None = None) -> Grid:
+    """The block grid of ``frames`` ``(T, H, W, C)`` uint8 (or float32) (:class:`Grid`), measured
+    on up to :data:`SAMPLE_FRAMES` of them; each pass's quantile maps are measured on the frames as
+    the passes before it (those of a found grid, or all with ``every``) leave them. With ``found``
+    (a grid's :attr:`Grid.found`), those passes are the grid's, whatever these frames' ratios.
 
     >>> rng = np.random.default_rng(0)
     >>> noise = rng.integers(0, 256, (8, 64, 64, 3)).astype(np.uint8)
@@ -181,12 +190,11 @@ def detect_grid(frames: np.ndarray, *, every: bool = False) -> Grid:
     >>> detect_grid(blocks).describe().split(" (")[0]
     'luma 8 px x+y'
     """
-    t = frames.shape[0]
-    pick = np.unique(np.linspace(0, t - 1, min(t, SAMPLE_FRAMES)).round().astype(int))
+    pick = sample(frames)
     luma, chroma = planes(frames[pick])
     # the quantile maps from every few of those frames, at most TABLE_PIXELS of them
     sub = slice(None, None, -(-len(pick) * frames[0, ..., 0].size // TABLE_PIXELS))
-    found, ratios, maps = {}, {}, {}
+    given, found, ratios, maps = found, {}, {}, {}
     identity = (np.array([-np.inf, np.inf]), np.zeros((1, len(QUANTILES))), np.zeros((1, len(QUANTILES))), 0.0)
     for plane_name, values in (("luma", luma), ("chroma", chroma)):
         current = None if values is None else values[sub]
@@ -196,7 +204,7 @@ def detect_grid(frames: np.ndarray, *, every: bool = False) -> Grid:
                 continue
             r = phase_ratios(step_profile(values, axis), period)
             ratios[key] = float(r[period - 1])
-            found[key] = bool(r[-1] >= MIN_RATIO and r[-1] >= MARGIN * r[:-1].max())
+            found[key] = bool(r[-1] >= MIN_RATIO and r[-1] >= MARGIN * r[:-1].max()) if given is None else given[key]
             maps[key] = _table(np.ascontiguousarray(_last(current, axis)), period)
             if found[key] or every:
                 current = current + np.moveaxis(_smoothing(_last(current, axis), maps[key], period), -1, axis)
@@ -275,8 +283,8 @@ def _smoothing(plane: np.ndarray, table: Table, period: int) -> np.ndarray:
 def deblock(frames: np.ndarray, grid: Grid, *, every: bool = False) -> np.ndarray:
     """``frames`` ``(T, H, W, C)`` with the excess steps at ``grid``'s boundaries mapped to the
     inside's (where a grid was found, or on every plane and axis with ``every``), float32 on the
-    0..255 scale (a value may leave it by a fraction of a level); the frames as they are where
-    nothing is smoothed."""
+    frames' scale (levels: a value may leave 0..255 by a fraction of a level; or tone values);
+    the frames as they are where nothing is smoothed."""
     out = frames.astype(np.float32)
     keys = [k for k in KEYS if every or grid.found[k]]
     if not keys:
@@ -332,23 +340,45 @@ def choose(frames: np.ndarray | None, mode: str) -> tuple[Grid | None, dict]:
     return (grid if smooth else None), info
 
 
+def in_tone(frames: np.ndarray, grid: Grid, tone: ToneModel) -> list[Grid]:
+    """Per channel of ``frames`` ``(T, H, W, C)`` uint8, the grid (:class:`Grid`, found in levels)
+    to smooth away in its tone values (:func:`~dynatex.analyzer.tone.to_tone`), each channel a
+    plane of its own with quantile maps measured there. The map is steep where a channel's values
+    pile up, so the luma's grid shows in each channel by its own amount and would leave the
+    chroma's difference planes with an 8-px grid: each channel takes the luma's passes (the 16-px
+    one also where the chroma's 16-px grid was found)."""
+    pick = sample(frames)
+    values = to_tone(frames[pick], tone).reshape(frames[pick].shape)
+    found = dict.fromkeys(KEYS, False)
+    for a in "xy":
+        found[f"luma16_{a}"] = grid.found[f"luma16_{a}"] or grid.found[f"chroma_{a}"]
+        found[f"luma_{a}"] = grid.found[f"luma_{a}"] or grid.found[f"chroma_{a}"]
+    return [
+        Grid(found, grid.ratios, detect_grid(values[..., ch : ch + 1], found=found).maps)
+        for ch in range(values.shape[-1])
+    ]
+
+
 def learning_values(frames: np.ndarray, grid: Grid | None, tone: ToneModel | None) -> tuple[np.ndarray, np.ndarray]:
     """What a projection model learns from: ``frames`` ``(T, H, W, C)`` uint8 smoothed by ``grid``
-    (:func:`deblock`, held to 0..255), through ``tone``'s forward map where given (interpolated
-    between levels), float32 ``(T, H * W * C)``; and the smoothed frames rounded to uint8, which
-    the detail part measures the model's residual against. Where ``grid`` is None: the frames'
-    values (:func:`~dynatex.analyzer.tone.to_tone` with a map) and the frames themselves."""
+    (:func:`deblock`; in levels held to 0..255, or with ``tone`` in its tone values,
+    :func:`in_tone`), float32 ``(T, H * W * C)``; and the smoothed frames as levels rounded to
+    uint8 (smoothed in levels: rounding a ramp in tone values back to levels puts its level step
+    back on the boundary), which the detail part measures the model's residual against. Where ``grid`` is None:
+    the frames' values (:func:`~dynatex.analyzer.tone.to_tone` with a map) and the frames themselves."""
     t = frames.shape[0]
     if grid is None:
         return (frames.reshape(t, -1).astype(np.float32) if tone is None else to_tone(frames, tone)), frames
     out = np.empty((t, frames[0].size), np.float32)
     rounded = np.empty_like(frames)
-    levels = np.arange(256, dtype=np.float32)
+    toned = None if tone is None else in_tone(frames, grid, tone)
     for lo in range(0, t, CHUNK):
-        chunk = np.clip(deblock(frames[lo : lo + CHUNK], grid), 0.0, 255.0)
+        block = frames[lo : lo + CHUNK]
+        chunk = np.clip(deblock(block, grid), 0.0, 255.0)
         np.rint(chunk, out=rounded[lo : lo + CHUNK], casting="unsafe")
-        if tone is not None:
-            for ch in range(chunk.shape[-1]):
-                chunk[..., ch] = np.interp(chunk[..., ch], levels, tone.forward[ch])
+        if toned is not None:
+            chunk = to_tone(block, tone).reshape(block.shape)
+            for ch, g in enumerate(toned):
+                chunk[..., ch : ch + 1] = deblock(chunk[..., ch : ch + 1], g)
         out[lo : lo + CHUNK] = chunk.reshape(len(chunk), -1)
     return out, rounded

@@ -32,7 +32,7 @@ from .methods import check_params
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
 from .tone import choose as choose_tone
-from .tone import levels_of
+from .tone import level_gain, levels_of
 from .video import Clip, Progress, clip_frames
 
 DEFAULT_N = 50
@@ -80,7 +80,9 @@ def learn_lds(
         Largest pole magnitude allowed; least-squares poles beyond it are pulled back to it.
     calibrate : bool
         Scale ``Q`` so that the stationary state variance equals the training states'
-        (stability clipping otherwise changes the texture's energy).
+        (stability clipping otherwise changes the texture's energy); with a tone map, then so
+        that the model's draws mapped back to levels have the variance its training states'
+        reconstructions have there (:func:`.tone.level_gain`; info ``level_gain``).
     tone : {"auto", "on", "off"}
         Learn on the clip's levels Gaussianised per channel (:mod:`.tone`; the model's ``tone``
         part maps them back): "auto" where a Gaussian model would saturate many values. A
@@ -166,6 +168,11 @@ def learn_lds(
     if streamed:
         model.info["column_blocks"] = int(blocks)
     else:
+        if calibrate and tone_map is not None:
+            gain = level_gain(mean, model.basis, model.stationary_cov, x, tone_map)
+            model.B = model.B * np.sqrt(gain)
+            model.stationary_cov = model.stationary_cov * gain
+            model.info["level_gain"] = gain
         basis32, x32 = model.basis, x.T.astype(np.float32)
         attach_detail(model, learned, levels_of(lambda t0, t1: x32[t0:t1] @ basis32 + mean, tone_map), seed=seed)
         model.gamut = learn_gamut(frames)

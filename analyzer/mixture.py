@@ -48,7 +48,7 @@ from .methods import check_params
 from .signs import canonical_signs, orient_rows
 from .stream import DiskClip
 from .tone import choose as choose_tone
-from .tone import levels_of
+from .tone import gain_for, levels_of, pixel_sample
 from .video import Clip, Progress, clip_frames
 
 DEFAULT_COMPONENTS = 3
@@ -116,7 +116,7 @@ def learn_mixture(
         ``tol`` (relative).
     tone : {"auto", "on", "off"}
         Learn on the clip's levels Gaussianised per channel, as :func:`~dynatex.analyzer.lds.learn_lds`
-        does.
+        does, and calibrate the draws' variance in levels (info ``level_gain``).
     residual : {"auto", "on", "off"}
         Model what the components leave out of each frame inside the reduced PCA space as a process
         of its own (:func:`fit_residual`; the player adds it to each frame): ``auto`` where the
@@ -324,10 +324,45 @@ def learn_mixture(
         if not streamed and residual == "on":
             attach_detail(model, learned, levels_of(lambda t0, t1: u32[t0:t1] @ rows32 + mean, tone_map), seed=seed)
     if not streamed:
+        if tone_map is not None:
+            _calibrate_levels(model, r, u32, rows32, tone_map)
         model.gamut = learn_gamut(frames)
         model.tone = tone_map
     step()
     return model
+
+
+def _calibrate_levels(model: MixtureModel, resp: np.ndarray, u: np.ndarray, rows: np.ndarray, tone) -> None:
+    """Scale the variation a switching model draws about its components' means (their local
+    covariances and AR noise, the residual axes' noise) so that its draws, mapped back to levels
+    through ``tone``, have the variance there of its training reconstructions ``u @ rows + mean``
+    (:func:`.tone.gain_for`; each component a Gaussian weighted by its share of the frames); info
+    ``level_gain``. A model without switching dynamics is left as it is."""
+    dyn = model.switching
+    if dyn is None:
+        return
+    cols = pixel_sample(tone, rows.shape[1])
+    m = model.mean[cols].astype(np.float64)
+    sub = rows[:, cols].astype(np.float64)
+    d = model.local_cov.shape[1]
+    res_var = np.zeros(len(cols))
+    if model.residual is not None:
+        res = model.residual
+        var = np.array([scalar_ar_gain(res.ar[a]) for a in range(len(res.ar))]) * res.noise**2
+        along = res.gain @ sub[: res.gain.shape[1]]
+        res_var = var @ along**2
+    means, sds = [], []
+    for s in range(len(model.local_cov)):
+        top = s * (d + 1)
+        load = sub[top + 1 : top + 1 + d]
+        means.append(m + sub[top] + model.decode_offset[s] @ load)
+        sds.append(np.sqrt(np.einsum("ip,ij,jp->p", load, model.local_cov[s], load) + res_var))
+    gain = gain_for(tone, u @ sub + m, np.array(means), np.array(sds), resp.mean(axis=0))
+    model.local_cov = model.local_cov * gain
+    dyn.local_noise = dyn.local_noise * np.sqrt(gain)
+    if model.residual is not None:
+        model.residual.noise = model.residual.noise * np.sqrt(gain)
+    model.info["level_gain"] = gain
 
 
 # -- the residual process ------------------------------------------------------------------

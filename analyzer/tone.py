@@ -15,6 +15,13 @@ out lands on the clip's brightest or darkest levels instead of past them.
 :func:`choose` learns a map where a Gaussian with each value's own mean and variance over the clip
 would put more than :data:`SATURATION_SHARE` of the values outside 0..255 (:func:`saturation_share`);
 on clips that are not so skewed the values stay as they are.
+
+A Gaussian draw seen through the map back to levels holds less variance than the training frames
+with the same tone covariance: a pixel of the clip is dark most of the time and bright now and
+then, at the flat ends of the map, where a Gaussian draw of its mean and variance spends much of
+its time in the steep middle. :func:`gain_for` finds the factor on a model's variances that gives
+its draws, in levels, the variance its training reconstructions have there (:func:`level_gain`
+for an lds; a mixture's components each their own Gaussian).
 """
 
 from __future__ import annotations
@@ -33,6 +40,12 @@ from ..tiledb.tone import BINS, LEVELS, ToneModel
 SATURATION_SHARE = 0.05
 #: The normal quantiles of the map are held to +-Z_MAX standard deviations.
 Z_MAX = 4.0
+#: Equally likely values (normal quantiles) a Gaussian tone value's variance in levels is taken over.
+QUANTILES = 64
+#: Pixels :func:`gain_for` measures on (evenly spaced; all where there are fewer).
+GAIN_PIXELS = 1 << 15
+#: The gain :func:`gain_for` looks for lies in ``1 / MAX_GAIN .. MAX_GAIN``.
+MAX_GAIN = 8.0
 #: Bins the ramp that keeps the map's steps at least a lookup bin wide is sized for (< BINS: a margin).
 _RAMP_BINS = BINS - 512
 
@@ -136,3 +149,84 @@ def levels_of(reconstruct: Reconstruct, tone: ToneModel | None) -> Reconstruct:
         return reconstruct
     lookup = ToneLookup(tone)
     return lambda t0, t1: lookup.levels(reconstruct(t0, t1))
+
+
+def _levels(tone: ToneModel, values: np.ndarray) -> np.ndarray:
+    """``values`` ``(k, P)`` tone values (``P`` interleaved values of ``tone``'s channels a row)
+    as levels, float64, through the map interpolated between levels (held to 0..255): the
+    player's lookup without its rounding, which would make the integral over a Gaussian a sum of steps."""
+    c = tone.channels
+    out = np.empty(values.shape, np.float64)
+    levels = np.arange(LEVELS, dtype=np.float64)
+    for ch in range(c):
+        out[:, ch::c] = np.interp(values[:, ch::c], tone.forward[ch].astype(np.float64), levels)
+    return out
+
+
+def pixel_sample(tone: ToneModel, values: int) -> np.ndarray:
+    """The columns of up to :data:`GAIN_PIXELS` pixels (evenly spaced, each with all of ``tone``'s
+    channels) among ``values`` interleaved values, where :func:`gain_for` measures."""
+    c = tone.channels
+    pixels = values // c
+    pick = np.unique(np.linspace(0, pixels - 1, min(pixels, GAIN_PIXELS)).round().astype(np.int64))
+    return (pick[:, None] * c + np.arange(c)).ravel()
+
+
+def gain_for(
+    tone: ToneModel, train: np.ndarray, means: np.ndarray, sds: np.ndarray, weights: np.ndarray | None = None
+) -> float:
+    """The factor on a model's variances that gives its draws, mapped back to levels, the mean
+    variance per value there that its training reconstructions ``train`` (``(T, P)`` tone values)
+    have: the draws a mixture, per value, of Gaussians ``means`` and ``sds`` (``(S, P)``, their
+    ``weights`` ``(S,)``, equal where None), each spread over :data:`QUANTILES` equally likely
+    values; held to ``1 / MAX_GAIN .. MAX_GAIN``."""
+    target = float(_levels(tone, train).var(axis=0).mean())
+    w = np.full(len(means), 1 / len(means)) if weights is None else np.asarray(weights, np.float64) / np.sum(weights)
+    z = ndtri((np.arange(QUANTILES) + 0.5) / QUANTILES)[:, None]
+    z /= z.std()  # the quantiles' own spread falls short of 1 in the tails
+
+    def variance(gain: float) -> float:
+        first = np.zeros(means.shape[1])
+        second = np.zeros(means.shape[1])
+        for m, sd, ws in zip(means, sds, w):
+            levels = _levels(tone, m + np.sqrt(gain) * z * sd)
+            first += ws * levels.mean(axis=0)
+            second += ws * (levels**2).mean(axis=0)
+        return float((second - first**2).mean())
+
+    if target <= 0.0 or variance(1.0) <= 0.0:
+        return 1.0
+    lo, hi = np.log(1 / MAX_GAIN), np.log(MAX_GAIN)
+    for _ in range(24):
+        mid = (lo + hi) / 2
+        if variance(float(np.exp(mid))) < target:
+            lo = mid
+        else:
+            hi = mid
+    return float(np.exp((lo + hi) / 2))
+
+
+def level_gain(mean: np.ndarray, basis: np.ndarray, cov: np.ndarray, states: np.ndarray, tone: ToneModel) -> float:
+    """The factor on the state covariance ``cov`` (``(n, n)``) of a model ``mean + basis.T @ x``
+    (``basis`` ``(n, P)``, tone values, ``P`` interleaved values of ``tone``'s channels) that gives
+    its Gaussian draws, mapped back to levels, the mean variance there that the reconstructions of
+    its training ``states`` (``(n, T)``) have (:func:`gain_for`, on :func:`pixel_sample`).
+
+    On a linear stretch of the map the gain is 1, where the map's flat ends squeeze a draw it is more:
+
+    >>> rng = np.random.default_rng(0)
+    >>> basis = np.linalg.qr(rng.standard_normal((64, 2)))[0].T.astype(np.float32)
+    >>> states = rng.standard_normal((2, 4000)) * 200
+    >>> cov, mean = states @ states.T / 4000, np.full(64, 150.0, np.float32)
+    >>> linear = ToneModel(np.linspace(-300.0, 600.0, 256, dtype=np.float32)[None])
+    >>> round(level_gain(mean, basis, cov, states, linear), 2)
+    1.0
+    >>> bimodal = (np.sign(states) * np.abs(states) ** 0.25) * 200 / 4
+    >>> steep = ToneModel(np.linspace(100.0, 200.0, 256, dtype=np.float32)[None])
+    >>> level_gain(mean, basis, bimodal @ bimodal.T / 4000, bimodal, steep) > 1.1
+    True
+    """
+    cols = pixel_sample(tone, basis.shape[1])
+    rows, m = basis[:, cols].astype(np.float64), mean[cols].astype(np.float64)
+    sd = np.sqrt(np.maximum(np.einsum("ip,ij,jp->p", rows, cov, rows), 0.0))
+    return gain_for(tone, states.T @ rows + m, m[None], sd[None])

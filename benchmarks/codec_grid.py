@@ -1,9 +1,10 @@
 """The codec's block grid on real clips and in what lds and mixture draw from them.
 
 Per clip: whether :func:`~dynatex.analyzer.deblock.detect_grid` finds a grid (and its ratios), the
-blockiness of the source and of the frames the models learn from (mean absolute step between
-neighbours at the 8-pixel block boundaries over the mean everywhere, x and y, on the mean of the
-channels, the median over frames: ~1.0 on a clip without a grid), and the seconds the detection and
+blockiness of the source and of the values the models learn from (tone values where the clip
+gets a tone map; mean absolute step between neighbours at the 8-pixel block boundaries over the
+mean everywhere, x and y, on the mean of the channels, the median over frames: ~1.0 on a clip
+without a grid), and the seconds the detection and
 the smoothing take. With ``--outputs DIR ...``: the same blockiness of the output frames that
 ``benchmarks/quality_projection.py`` saved there (``NAME_out.npy``), for a before/after table.
 
@@ -50,6 +51,7 @@ def blockiness(frames: np.ndarray, period: int = 8) -> tuple[float, float]:
 
 def main() -> None:
     from dynatex.analyzer import deblock
+    from dynatex.analyzer.tone import choose as choose_tone
     from dynatex.analyzer.video import load_clip_path
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -58,11 +60,13 @@ def main() -> None:
     args = ap.parse_args()
     for name in args.clips.split(","):
         frames = load_clip_path(str(CLIPS / NAMES[name])).frames
+        tone = choose_tone(frames, "auto")
         t0 = time.perf_counter()
         grid = deblock.detect_grid(frames)
         t1 = time.perf_counter()
-        _, learned = deblock.learning_values(frames, grid if grid.any else None, None)
+        values, _ = deblock.learning_values(frames, grid if grid.any else None, tone)
         t2 = time.perf_counter()
+        learned = values.reshape(frames.shape)
         row = {
             "clip": name,
             "grid": grid.describe(),

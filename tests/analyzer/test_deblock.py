@@ -11,6 +11,7 @@ from dynatex.analyzer import deblock
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.mixture import learn_mixture
 from dynatex.analyzer.stream import spill_clip
+from dynatex.analyzer.tone import learn_tone
 from dynatex.analyzer.video import load_clip_path
 from dynatex.errors import InvalidArgumentError
 
@@ -116,6 +117,35 @@ def test_small_short_and_grey_frames_are_learned_from(shape, mode):
     assert values.shape == (shape[0], int(np.prod(shape[1:]))) and np.isfinite(values).all()
     assert learned.shape == frames.shape and learned.dtype == np.uint8
     assert "chroma" not in info["codec_grid"] or shape[-1] == 3
+
+
+def dark_clip(t: int = 40, h: int = 64, w: int = 96) -> np.ndarray:
+    """Waves in dark reds: the blue channel at level 0 on nearly half the pixels and a few levels
+    above it elsewhere, where the tone map spreads its levels apart."""
+    v = smooth_clip(t, h, w)[..., 0].astype(np.float64)
+    return np.clip(np.stack([1.2 * v - 60, 0.5 * v - 50, 0.25 * v - 30], axis=-1), 0, 255).astype(np.uint8)
+
+
+def test_with_a_tone_map_the_grid_is_smoothed_in_tone_values():
+    """A codec's one-level steps in a dark channel are steps of many tone units; smoothed in
+    levels, held at 0, they stay in the values the model learns, smoothed in tone values they go."""
+    coded = block_coded(dark_clip())
+    tone, grid = learn_tone(coded), deblock.detect_grid(coded)
+    assert grid.found["luma_x"] and grid.found["luma_y"]
+
+    def blue_ratios(values: np.ndarray) -> tuple[float, float]:
+        r = deblock.detect_grid(values.reshape(coded.shape)[..., 2:]).ratios
+        return r["luma_x"], r["luma_y"]
+
+    learned, rounded = deblock.learning_values(coded, grid, tone)
+    in_levels = np.clip(deblock.deblock(coded, grid), 0, 255)
+    for ch in range(3):
+        in_levels[..., ch] = np.interp(in_levels[..., ch], np.arange(256), tone.forward[ch])
+    assert min(blue_ratios(deblock.learning_values(coded, None, tone)[0])) > 4.0
+    assert min(blue_ratios(in_levels)) > 3.0
+    assert max(blue_ratios(learned)) < 1.15
+    # the detail part's reference: the frames smoothed in levels, rounded
+    assert np.array_equal(rounded, np.rint(np.clip(deblock.deblock(coded, grid), 0, 255)).astype(np.uint8))
 
 
 def test_lds_and_mixture_record_the_grid_and_learn_without_it():

@@ -6,11 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dynatex.analyzer import load_clip
 from dynatex.analyzer.lds import learn_lds
 from dynatex.analyzer.mixture import learn_mixture
-from dynatex.analyzer.tone import SATURATION_SHARE, saturation_share
+from dynatex.analyzer.tone import SATURATION_SHARE, ToneModel, gain_for, saturation_share
 from dynatex.errors import InvalidArgumentError
 from dynatex.player.engines.projection import open_projector
+from dynatex.player.modes.mixture import MixturePlayer
+from dynatex.tiledb import DatabaseWriter
 
 from ..conftest import wave_clip
 
@@ -53,6 +56,77 @@ def test_flames_keep_their_energy_on_tone_values():
     assert toned.tone.info["saturation_share"] > SATURATION_SHARE
     assert stationary_energy(plain, clip) < 0.7
     assert 0.85 < stationary_energy(toned, clip) < 1.2
+
+
+def level_variance(model, states: np.ndarray, shape: tuple[int, int, int]) -> float:
+    """Mean over values of the variance over ``states`` (``(k, n)``) of the frames the player projects."""
+    engine = open_projector(
+        model.basis, model.mean, shape=shape, channels=shape[-1], frames=len(states), tone=model.tone
+    )
+    engine.coefs[:] = states
+    out = np.empty((len(states), *shape), np.uint8)
+    engine.run(out, count=len(states))
+    return float(out.reshape(len(states), -1).astype(np.float64).var(axis=0).mean())
+
+
+def test_tone_mapped_draws_keep_the_training_levels_variance():
+    """A pixel of the flames is dark or bright, at the tone map's flat ends; Gaussian draws with the
+    training states' covariance spend their time in the steep middle and hold less variance in
+    levels. The level gain gives the draws the training reconstructions' variance there."""
+    clip = flames(t=200)
+    model = learn_lds(clip, n=10)
+    gain = model.info["level_gain"]
+    assert gain > 1.2
+    rng = np.random.default_rng(1)
+    draws = rng.multivariate_normal(np.zeros(model.n), model.stationary_cov, 2000)
+    train = level_variance(model, model.states.T, clip.shape[1:])
+    assert 0.96 < level_variance(model, draws, clip.shape[1:]) / train < 1.04
+    assert level_variance(model, draws / np.sqrt(gain), clip.shape[1:]) / train < 0.92
+    assert "level_gain" not in learn_lds(clip, n=10, calibrate=False).info
+    assert "level_gain" not in learn_lds(wave_clip(), n=8).info
+
+
+def test_a_mixture_of_the_two_ends_needs_no_gain_where_one_gaussian_does():
+    """Values at the two flat ends of a map: one Gaussian of their mean and variance needs its
+    variance raised to reach theirs in levels, two Gaussians at the ends (a mixture's components)
+    hold it as they are."""
+    steep = ToneModel(np.linspace(100.0, 200.0, 256, dtype=np.float32)[None])
+    rng = np.random.default_rng(0)
+    ends = np.where(rng.random((4000, 1)) < 0.5, 110.0, 190.0) + rng.normal(0, 3, (4000, 1))
+    one = gain_for(steep, ends, ends.mean(axis=0)[None], ends.std(axis=0)[None])
+    groups = [ends[ends < 150], ends[ends >= 150]]
+    means, sds = np.array([[g.mean()] for g in groups]), np.array([[g.std()] for g in groups])
+    two = gain_for(steep, ends, means, sds, np.array([len(g) for g in groups]))
+    assert one > 2.0
+    assert 0.95 < two < 1.05
+    assert (
+        round(
+            gain_for(
+                ToneModel(np.linspace(-500.0, 800.0, 256, dtype=np.float32)[None]),
+                ends,
+                ends.mean(axis=0)[None],
+                ends.std(axis=0)[None],
+            ),
+            2,
+        )
+        == 1.0
+    )
+
+
+def test_a_mixture_on_tone_values_is_calibrated_in_levels(tmp_path):
+    clip = load_clip(flames(t=120))
+    kw = dict(components=2, dim=3, pca_dim=8, neighbors=6, pmax=2, residual="on")
+    model = learn_mixture(clip, **kw)
+    assert 0.5 < model.info["level_gain"] < 2.0
+    assert "level_gain" not in learn_mixture(clip, tone="off", **kw).info
+    # the scaled local covariances, noise and residual still pass the format's checks and play
+    path = tmp_path / "m.h5"
+    with DatabaseWriter(path) as w:
+        w.put_texture("f", clip.source_info())
+        w.put_method("f", "mixture", model)
+    with MixturePlayer(path, seed=1, backend="numpy") as p:
+        frames = np.stack([p.next_frame() for _ in range(20)])
+    assert frames.std() > 10
 
 
 def test_other_clips_stay_on_their_levels():
