@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InvalidArgumentError
-from ..framestats import CHUNK, LUMA
+from ..framestats import CHUNK, LUMA, even_sample
 from ..tiledb.tone import ToneModel
 from .tone import to_tone
 
@@ -108,8 +108,8 @@ class Grid:
 
 def planes(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """Luma ``(T, H, W)`` and chroma at half resolution ``(T, H // 2, W // 2, 2)`` (B - Y and
-    R - Y averaged over 2 x 2 pixels) of ``frames`` ``(T, H, W, C)`` (uint8, or float32 on the
-    0..255 scale), float32; grey frames have no chroma."""
+    R - Y averaged over 2 x 2 pixels) of ``frames`` ``(T, H, W, C)`` (uint8, or float32 levels or
+    tone values), float32; grey frames have no chroma."""
     f = frames if frames.dtype == np.float32 else frames.astype(np.float32)
     if f.shape[-1] == 1:
         return f[..., 0], None
@@ -172,8 +172,7 @@ def _passes(plane_name: str) -> list[tuple[str, int, int]]:
 
 def sample(frames: np.ndarray) -> np.ndarray:
     """The indices of the up to :data:`SAMPLE_FRAMES` frames, evenly spread, a detection looks at."""
-    t = frames.shape[0]
-    return np.unique(np.linspace(0, t - 1, min(t, SAMPLE_FRAMES)).round().astype(int))
+    return even_sample(frames.shape[0], SAMPLE_FRAMES)
 
 
 def detect_grid(frames: np.ndarray, *, every: bool = False, found: dict[str, bool] | None = None) -> Grid:
@@ -345,10 +344,10 @@ def in_tone(frames: np.ndarray, grid: Grid, tone: ToneModel) -> list[Grid]:
     to smooth away in its tone values (:func:`~dynatex.analyzer.tone.to_tone`), each channel a
     plane of its own with quantile maps measured there. The map is steep where a channel's values
     pile up, so the luma's grid shows in each channel by its own amount and would leave the
-    chroma's difference planes with an 8-px grid: each channel takes the luma's passes (the 16-px
-    one also where the chroma's 16-px grid was found)."""
-    pick = sample(frames)
-    values = to_tone(frames[pick], tone).reshape(frames[pick].shape)
+    chroma's difference planes with an 8-px grid: each channel takes the luma's passes, and those
+    of the chroma's grid where it was found."""
+    picked = frames[sample(frames)]
+    values = to_tone(picked, tone).reshape(picked.shape)
     found = dict.fromkeys(KEYS, False)
     for a in "xy":
         found[f"luma16_{a}"] = grid.found[f"luma16_{a}"] or grid.found[f"chroma_{a}"]
@@ -362,7 +361,7 @@ def in_tone(frames: np.ndarray, grid: Grid, tone: ToneModel) -> list[Grid]:
 def learning_values(frames: np.ndarray, grid: Grid | None, tone: ToneModel | None) -> tuple[np.ndarray, np.ndarray]:
     """What a projection model learns from: ``frames`` ``(T, H, W, C)`` uint8 smoothed by ``grid``
     (:func:`deblock`; in levels held to 0..255, or with ``tone`` in its tone values,
-    :func:`in_tone`), float32 ``(T, H * W * C)``; and the smoothed frames as levels rounded to
+    :func:`in_tone`, held to the map's range), float32 ``(T, H * W * C)``; and the smoothed frames as levels rounded to
     uint8 (smoothed in levels: rounding a ramp in tone values back to levels puts its level step
     back on the boundary), which the detail part measures the model's residual against. Where ``grid`` is None:
     the frames' values (:func:`~dynatex.analyzer.tone.to_tone` with a map) and the frames themselves."""
@@ -379,6 +378,7 @@ def learning_values(frames: np.ndarray, grid: Grid | None, tone: ToneModel | Non
         if toned is not None:
             chunk = to_tone(block, tone).reshape(block.shape)
             for ch, g in enumerate(toned):
-                chunk[..., ch : ch + 1] = deblock(chunk[..., ch : ch + 1], g)
+                ramp = deblock(chunk[..., ch : ch + 1], g)
+                chunk[..., ch : ch + 1] = np.clip(ramp, tone.forward[ch, 0], tone.forward[ch, -1])
         out[lo : lo + CHUNK] = chunk.reshape(len(chunk), -1)
     return out, rounded

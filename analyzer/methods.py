@@ -118,7 +118,14 @@ LDS_PARAMS = (
     Param("max_radius", _MAX_RADIUS, 0.995, "Largest pole magnitude."),
     Param("tone", _TONE, "auto", _TONE_DOC),
     Param("deblock", _DEBLOCK, "auto", _DEBLOCK_DOC),
-    Param("calibrate", Flag(), True, "Scale the noise so that the states keep the training variance.", None),
+    Param(
+        "calibrate",
+        Flag(),
+        True,
+        "Scale the noise so that the states keep the training variance (with a tone map, so that the "
+        "draws keep in levels the variance the training reconstructions have there).",
+        None,
+    ),
     Param("seed", _SEED, 0, "Seed of the randomized SVD and of the detail's phases.", None),
 )
 

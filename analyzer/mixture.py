@@ -37,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InvalidArgumentError
-from ..tiledb import MixtureModel, ResidualProcess, SwitchingDynamics
+from ..tiledb import MixtureModel, ResidualProcess, SwitchingDynamics, ToneModel
 from ..tiledb.mixture import companion_radius, scalar_ar_gain
 from .deblock import choose as choose_grid
 from .deblock import learning_values
@@ -116,7 +116,8 @@ def learn_mixture(
         ``tol`` (relative).
     tone : {"auto", "on", "off"}
         Learn on the clip's levels Gaussianised per channel, as :func:`~dynatex.analyzer.lds.learn_lds`
-        does, and calibrate the draws' variance in levels (info ``level_gain``).
+        does, and, with switching dynamics, calibrate the draws' variance in levels (info
+        ``level_gain``).
     residual : {"auto", "on", "off"}
         Model what the components leave out of each frame inside the reduced PCA space as a process
         of its own (:func:`fit_residual`; the player adds it to each frame): ``auto`` where the
@@ -332,7 +333,7 @@ def learn_mixture(
     return model
 
 
-def _calibrate_levels(model: MixtureModel, resp: np.ndarray, u: np.ndarray, rows: np.ndarray, tone) -> None:
+def _calibrate_levels(model: MixtureModel, resp: np.ndarray, u: np.ndarray, rows: np.ndarray, tone: ToneModel) -> None:
     """Scale the variation a switching model draws about its components' means (their local
     covariances and AR noise, the residual axes' noise) so that its draws, mapped back to levels
     through ``tone``, have the variance there of its training reconstructions ``u @ rows + mean``
@@ -357,7 +358,7 @@ def _calibrate_levels(model: MixtureModel, resp: np.ndarray, u: np.ndarray, rows
         load = sub[top + 1 : top + 1 + d]
         means.append(m + sub[top] + model.decode_offset[s] @ load)
         sds.append(np.sqrt(np.einsum("ip,ij,jp->p", load, model.local_cov[s], load) + res_var))
-    gain = gain_for(tone, u @ sub + m, np.array(means), np.array(sds), resp.mean(axis=0))
+    gain = gain_for(tone, (u, sub, m), np.array(means), np.array(sds), resp.mean(axis=0))
     model.local_cov = model.local_cov * gain
     dyn.local_noise = dyn.local_noise * np.sqrt(gain)
     if model.residual is not None:

@@ -32,7 +32,7 @@ import numpy as np
 from scipy.special import ndtr, ndtri
 
 from ..errors import InvalidArgumentError
-from ..framestats import CHUNK
+from ..framestats import CHUNK, even_sample
 from ..player.engines.tone import ToneLookup
 from ..tiledb.tone import BINS, LEVELS, ToneModel
 
@@ -46,6 +46,8 @@ QUANTILES = 64
 GAIN_PIXELS = 1 << 15
 #: The gain :func:`gain_for` looks for lies in ``1 / MAX_GAIN .. MAX_GAIN``.
 MAX_GAIN = 8.0
+#: Halvings of that range (in log gain) the search takes: 12 find the gain to 0.1%.
+GAIN_STEPS = 12
 #: Bins the ramp that keeps the map's steps at least a lookup bin wide is sized for (< BINS: a margin).
 _RAMP_BINS = BINS - 512
 
@@ -167,20 +169,24 @@ def pixel_sample(tone: ToneModel, values: int) -> np.ndarray:
     """The columns of up to :data:`GAIN_PIXELS` pixels (evenly spaced, each with all of ``tone``'s
     channels) among ``values`` interleaved values, where :func:`gain_for` measures."""
     c = tone.channels
-    pixels = values // c
-    pick = np.unique(np.linspace(0, pixels - 1, min(pixels, GAIN_PIXELS)).round().astype(np.int64))
-    return (pick[:, None] * c + np.arange(c)).ravel()
+    return (even_sample(values // c, GAIN_PIXELS)[:, None] * c + np.arange(c)).ravel()
 
 
 def gain_for(
-    tone: ToneModel, train: np.ndarray, means: np.ndarray, sds: np.ndarray, weights: np.ndarray | None = None
+    tone: ToneModel,
+    train: tuple[np.ndarray, np.ndarray, np.ndarray],
+    means: np.ndarray,
+    sds: np.ndarray,
+    weights: np.ndarray | None = None,
 ) -> float:
     """The factor on a model's variances that gives its draws, mapped back to levels, the mean
-    variance per value there that its training reconstructions ``train`` (``(T, P)`` tone values)
-    have: the draws a mixture, per value, of Gaussians ``means`` and ``sds`` (``(S, P)``, their
+    variance per value there that its training reconstructions have (``train`` = ``(coefs, rows,
+    offset)``: ``coefs @ rows + offset``, ``(T, P)`` tone values, taken :data:`CHUNK` frames at a
+    time): the draws a mixture, per value, of Gaussians ``means`` and ``sds`` (``(S, P)``, their
     ``weights`` ``(S,)``, equal where None), each spread over :data:`QUANTILES` equally likely
-    values; held to ``1 / MAX_GAIN .. MAX_GAIN``."""
-    target = float(_levels(tone, train).var(axis=0).mean())
+    values. The draws' variance grows with the gain; the search (to 0.1%) is held to
+    ``1 / MAX_GAIN .. MAX_GAIN``, and returns a bound where even it falls short or overshoots."""
+    target = _level_variance(tone, *train)
     w = np.full(len(means), 1 / len(means)) if weights is None else np.asarray(weights, np.float64) / np.sum(weights)
     z = ndtri((np.arange(QUANTILES) + 0.5) / QUANTILES)[:, None]
     z /= z.std()  # the quantiles' own spread falls short of 1 in the tails
@@ -197,7 +203,7 @@ def gain_for(
     if target <= 0.0 or variance(1.0) <= 0.0:
         return 1.0
     lo, hi = np.log(1 / MAX_GAIN), np.log(MAX_GAIN)
-    for _ in range(24):
+    for _ in range(GAIN_STEPS):
         mid = (lo + hi) / 2
         if variance(float(np.exp(mid))) < target:
             lo = mid
@@ -229,4 +235,16 @@ def level_gain(mean: np.ndarray, basis: np.ndarray, cov: np.ndarray, states: np.
     cols = pixel_sample(tone, basis.shape[1])
     rows, m = basis[:, cols].astype(np.float64), mean[cols].astype(np.float64)
     sd = np.sqrt(np.maximum(np.einsum("ip,ij,jp->p", rows, cov, rows), 0.0))
-    return gain_for(tone, states.T @ rows + m, m[None], sd[None])
+    return gain_for(tone, (states.T, rows, m), m[None], sd[None])
+
+
+def _level_variance(tone: ToneModel, coefs: np.ndarray, rows: np.ndarray, offset: np.ndarray) -> float:
+    """The mean over values of the variance in levels of ``coefs @ rows + offset`` over its rows."""
+    first = np.zeros(rows.shape[1])
+    second = np.zeros(rows.shape[1])
+    for t0 in range(0, len(coefs), CHUNK):
+        levels = _levels(tone, coefs[t0 : t0 + CHUNK] @ rows + offset)
+        first += levels.sum(axis=0)
+        second += (levels * levels).sum(axis=0)
+    first /= len(coefs)
+    return float((second / len(coefs) - first * first).mean())

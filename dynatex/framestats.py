@@ -21,6 +21,15 @@ CHUNK = 32
 LUMA = np.array([0.299, 0.587, 0.114], np.float32)
 
 
+def even_sample(length: int, n: int) -> np.ndarray:
+    """Up to ``n`` indices of ``0 .. length - 1``, evenly spread, first and last included.
+
+    >>> even_sample(10, 4).tolist(), even_sample(3, 8).tolist()
+    ([0, 3, 6, 9], [0, 1, 2])
+    """
+    return np.unique(np.linspace(0, length - 1, min(n, length)).round().astype(int))
+
+
 def float_chunks(frames: np.ndarray, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
     """``(first index, float32 frames)`` for the frames ``start:stop``, :data:`CHUNK` at a time."""
     stop = frames.shape[0] if stop is None else stop

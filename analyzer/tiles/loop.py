@@ -10,7 +10,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ...errors import InvalidArgumentError
-from ...framestats import LUMA
+from ...framestats import LUMA, even_sample
 from ..video import Progress
 
 DEFAULT_MIN_TILE = 32
@@ -193,10 +193,6 @@ def flow_magnitude(frames: np.ndarray, start: int, length: int, *, pairs: int = 
         acc += np.sqrt((f * f).sum(axis=2))
     acc /= max(1, len(idx))
     return cv2.resize(acc, (w, h), interpolation=cv2.INTER_LINEAR) / scale
-
-
-def even_sample(length: int, n: int) -> np.ndarray:
-    return np.unique(np.linspace(0, length - 1, min(n, length)).round().astype(int))
 
 
 class Texture:

@@ -192,3 +192,35 @@ def test_real_compressed_clips_are_found_and_grid_free_ones_are_not(clips_dir):
         assert after.ratios["luma_x"] < 1.12 < grid.ratios["luma_x"], name
     for name in ("steam_vapour_pot_128px.avi", "timevarying_rusting_steel.gif", "small_64px/fire_dyntex_64px.avi"):
         assert not deblock.detect_grid(load_clip_path(str(clips_dir / name)).frames).any, name
+
+
+def test_tone_values_smoothed_near_a_dark_grid_stay_in_the_maps_range(tmp_path):
+    """Dark 8-px blocks at levels 0 and 2 beside dark waves: smoothed in tone values a ramp on the
+    level-0 side would fall below the map's first value, and the mean learned from it outside what
+    the format accepts; held to the map's range, both models are written and play."""
+    from dynatex.analyzer import load_clip
+    from dynatex.analyzer.lds import learn_lds
+    from dynatex.analyzer.mixture import learn_mixture
+    from dynatex.player import open_player
+    from dynatex.tiledb import DatabaseWriter
+
+    t, h, w = 40, 64, 96
+    rng = np.random.default_rng(0)
+    clip = np.clip(1.6 * smooth_clip(t, h, w).astype(float) - 120, 0, 255)
+    dark = rng.integers(0, 2, (h // 8, w // 8)).repeat(8, 0).repeat(8, 1)[None] * 2
+    clip[:, :, : w // 2, :] = dark[:, :, : w // 2, None]
+    clip = np.rint(np.clip(clip + rng.normal(0, 0.3, clip.shape), 0, 255)).astype(np.uint8)
+    models = {
+        "lds": learn_lds(clip, n=6, tone="on", deblock="on"),
+        "mixture": learn_mixture(clip, components=2, dim=2, pca_dim=6, neighbors=5, pmax=2, tone="on", deblock="on"),
+    }
+    path = tmp_path / "dark.h5"
+    with DatabaseWriter(path) as writer:
+        writer.put_texture("dark", load_clip(clip).source_info())
+        for method, model in models.items():
+            forward = model.tone.forward
+            assert forward.min() - 1 <= model.mean.min() and model.mean.max() <= forward.max() + 1
+            writer.put_method("dark", method, model)
+    for method in models:
+        with open_player(path, mode=method, backend="numpy") as player:
+            assert player.next_frame().shape == (h, w, 3)

@@ -93,17 +93,18 @@ def test_a_mixture_of_the_two_ends_needs_no_gain_where_one_gaussian_does():
     steep = ToneModel(np.linspace(100.0, 200.0, 256, dtype=np.float32)[None])
     rng = np.random.default_rng(0)
     ends = np.where(rng.random((4000, 1)) < 0.5, 110.0, 190.0) + rng.normal(0, 3, (4000, 1))
-    one = gain_for(steep, ends, ends.mean(axis=0)[None], ends.std(axis=0)[None])
+    train = (ends, np.eye(1), np.zeros(1))  # the reconstructions: ends @ I + 0
+    one = gain_for(steep, train, ends.mean(axis=0)[None], ends.std(axis=0)[None])
     groups = [ends[ends < 150], ends[ends >= 150]]
     means, sds = np.array([[g.mean()] for g in groups]), np.array([[g.std()] for g in groups])
-    two = gain_for(steep, ends, means, sds, np.array([len(g) for g in groups]))
+    two = gain_for(steep, train, means, sds, np.array([len(g) for g in groups]))
     assert one > 2.0
     assert 0.95 < two < 1.05
     assert (
         round(
             gain_for(
                 ToneModel(np.linspace(-500.0, 800.0, 256, dtype=np.float32)[None]),
-                ends,
+                train,
                 ends.mean(axis=0)[None],
                 ends.std(axis=0)[None],
             ),
@@ -127,6 +128,23 @@ def test_a_mixture_on_tone_values_is_calibrated_in_levels(tmp_path):
     with MixturePlayer(path, seed=1, backend="numpy") as p:
         frames = np.stack([p.next_frame() for _ in range(20)])
     assert frames.std() > 10
+    # the same model with the gain undone draws less variance in levels, further from the clip's
+    g = model.info["level_gain"]
+    model.local_cov = model.local_cov / g
+    model.switching.local_noise = model.switching.local_noise / np.sqrt(g)
+    model.residual.noise = model.residual.noise / np.sqrt(g)
+    undone = tmp_path / "undone.h5"
+    with DatabaseWriter(undone) as w:
+        w.put_texture("f", clip.source_info())
+        w.put_method("f", "mixture", model)
+    played = {}
+    for db in (path, undone):
+        with MixturePlayer(db, seed=1, backend="numpy") as p:
+            p.advance(100)
+            played[db] = np.stack([p.next_frame() for _ in range(1400)]).astype(np.float64).var(axis=0).mean()
+    source = clip.frames.astype(np.float64).var(axis=0).mean()
+    assert g > 1.1 and played[path] > 1.03 * played[undone]
+    assert abs(played[path] - source) < abs(played[undone] - source)
 
 
 def test_other_clips_stay_on_their_levels():
@@ -148,3 +166,14 @@ def test_mixture_learns_on_tone_values_where_the_clip_piles_up():
 def test_a_bad_tone_is_named(tone):
     with pytest.raises(InvalidArgumentError, match="tone"):
         learn_lds(wave_clip(), n=4, tone=tone)
+
+
+def test_a_gain_the_search_cannot_reach_is_its_bound():
+    """Draws too narrow to reach the training's variance at any gain in range: the search ends at
+    MAX_GAIN (a model scaled as far as it goes), not at some value in between."""
+    from dynatex.analyzer.tone import MAX_GAIN
+
+    steep = ToneModel(np.linspace(100.0, 200.0, 256, dtype=np.float32)[None])
+    ends = np.where(np.arange(400)[:, None] % 2 == 0, 100.0, 200.0)
+    gain = gain_for(steep, (ends, np.eye(1), np.zeros(1)), np.array([[150.0]]), np.array([[0.5]]))
+    assert MAX_GAIN * 0.999 < gain <= MAX_GAIN
