@@ -108,6 +108,7 @@ def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> DetailModel 
         g, "volume", kind="i", shape=(range(1, MAX_VOLUME_FRAMES + 1), range(1, h + 1), range(1, w + 1), c), read=False
     )
     exact_dtype(check, vol.name, vol, np.int8)
+    check.attr(g, "residual_energy", float, None)  # describe() shows it as a number
     tv, hv, wv = vol.shape[:3]
     model = DetailModel(
         volume=ds(g, "volume", kind="i", shape=(tv, hv, wv, c)),

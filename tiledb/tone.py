@@ -100,6 +100,7 @@ def read(parent: h5py.Group, check: Checker, source: SourceInfo) -> ToneModel | 
     problem = forward_problem(forward)
     if problem:
         check.fail(path, problem)
+    check.attr(g, "saturation_share", float, None)  # describe() shows it as a number
     return ToneModel(forward=np.ascontiguousarray(forward), info=check.info(g, skip=("version",)))
 
 

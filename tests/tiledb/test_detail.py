@@ -60,3 +60,16 @@ def test_newer_version_is_ignored(projection_db, tmp_path):
 def test_damaged_detail_is_refused(projection_db, tmp_path, name, fn, match):
     with pytest.raises(TileDBFormatError, match=match):
         _read(_copy(projection_db, tmp_path, replace_dataset(f"detail/{name}", fn)))
+
+
+@pytest.mark.parametrize("value", ["", "0.2", [0.1, 0.2]])
+def test_the_residual_energy_must_be_a_number(projection_db, tmp_path, value):
+    """``dynatex info`` shows it as a number: anything else is refused in one line, naming it."""
+
+    def bad(g):
+        g["detail"].attrs["residual_energy"] = value
+
+    path = _copy(projection_db, tmp_path, bad)
+    with pytest.raises(TileDBFormatError, match="detail@residual_energy") as e:
+        _read(path)
+    assert "\n" not in str(e.value)

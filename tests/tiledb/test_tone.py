@@ -199,6 +199,17 @@ def test_the_version_must_be_a_positive_integer(tone_db, tmp_path, value):
     _refused(_copy(tone_db, tmp_path, bad), "lds", "@version", where="/tone@version")
 
 
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("value", ["", "0.2", [0.1, 0.2]])
+def test_the_saturation_share_must_be_a_number(tone_db, tmp_path, method, value):
+    """``dynatex info`` shows it as a number (a fuzzed ``""`` raised ValueError there)."""
+
+    def bad(g):
+        g.attrs["saturation_share"] = value
+
+    _refused(_copy(tone_db, tmp_path, bad, method), method, "saturation_share", where="/tone@saturation_share")
+
+
 def test_each_other_part_of_the_model_still_reads_with_tone(tone_db):
     model = _read(tone_db, "mixture")
     assert model.detail is not None and model.gamut is not None and model.switching is not None
