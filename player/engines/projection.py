@@ -337,7 +337,7 @@ def blocked_basis(basis: np.ndarray | tuple[np.ndarray, ...], block: int) -> np.
     """``(n, P)`` (or row blocks of ``P`` columns stacked) -> ``(ceil(P / block), n, block)``,
     zero-padded: the kernel's streaming layout."""
     parts = row_blocks(basis)
-    n, p = sum(len(b) for b in parts), parts[0].shape[1]
+    n, p = basis_shape(parts)
     blocks, full = -(-p // block), p // block
     out = np.zeros((blocks, n, block), parts[0].dtype)
     i = 0
@@ -353,6 +353,12 @@ def blocked_basis(basis: np.ndarray | tuple[np.ndarray, ...], block: int) -> np.
 def row_blocks(basis: np.ndarray | tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
     """A basis given as one ``(n, P)`` array or as row blocks stacked (a tuple): the blocks."""
     return tuple(basis) if isinstance(basis, (tuple, list)) else (basis,)
+
+
+def basis_shape(basis: np.ndarray | tuple[np.ndarray, ...]) -> tuple[int, int]:
+    """``(n, P)`` of a basis given as one array or as row blocks stacked."""
+    parts = row_blocks(basis)
+    return sum(len(b) for b in parts), parts[0].shape[1]
 
 
 class Projector:
@@ -404,7 +410,7 @@ class Projector:
     ) -> None:
         self.format = pixel_format(format)
         parts = row_blocks(basis)
-        self.n, self.values = sum(len(b) for b in parts), parts[0].shape[1]
+        self.n, self.values = basis_shape(parts)
         self.shape = tuple(shape)
         self.channels = channels
         self.half = parts[0].dtype == np.float16

@@ -40,7 +40,7 @@ from ...params import Param
 from ..base import Player
 from ..controls import Control
 from ..engines import open_engine
-from ..engines.projection import speed_case
+from ..engines.projection import basis_shape, speed_case
 
 PRECISIONS = ("float32", "float16")
 #: what the ``colours`` option holds a frame's colours to (the model's gamut part)
@@ -109,7 +109,7 @@ class ProjectionPlayer(Player):
             model.gamut = None if colours == "off" else dataclasses.replace(model.gamut, local=None)
         self._setup(model)
         basis = self._basis(model)
-        rows, values = sum(len(b) for b in basis), basis[0].shape[1]
+        rows, values = basis_shape(basis)
         case = speed_case(precision, values, lookahead, model.detail is not None, rows)
         self._prefer_faster(*self._asked, case)
         if precision == "float16":
